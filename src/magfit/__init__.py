@@ -1,0 +1,46 @@
+"""magfit: magnetometer calibration.
+
+Model (paper, eq. 1): ``B_p = W R B (cos δ, 0, sin δ)ᵀ + V``. Every calibration undoes it as
+``corrected = matrix @ (raw - offset)``, which lies on a sphere of radius ``field_strength``.
+
+>>> import magfit
+>>> sim = magfit.scenario("mpu9250", "steel").simulate(2000, seed=1)
+>>> cal = magfit.fit(sim.samples, method="ellipsoid")
+>>> magfit.evaluate(cal, sim.samples).std < 0.05
+True
+"""
+
+from __future__ import annotations
+
+from .calibration import CONVENTION, Calibration
+from .errors import CalibrationError, DataFileError, MagfitError, OptionError, SampleError
+from .evaluate import Evaluation, evaluate, sphere_distances
+from .fit import fit
+from .methods import METHODS
+from .simulate import DISTURBANCES, SENSORS, Scenario, Simulation, scenario, simulate
+from .statistics import Statistics
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "CONVENTION",
+    "DISTURBANCES",
+    "METHODS",
+    "SENSORS",
+    "Calibration",
+    "CalibrationError",
+    "DataFileError",
+    "Evaluation",
+    "MagfitError",
+    "OptionError",
+    "SampleError",
+    "Scenario",
+    "Simulation",
+    "Statistics",
+    "__version__",
+    "evaluate",
+    "fit",
+    "scenario",
+    "simulate",
+    "sphere_distances",
+]

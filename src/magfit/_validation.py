@@ -1,0 +1,104 @@
+"""Input checks, in one place: every public entry point validates samples through these functions.
+
+Messages say what was received and what to do. Arrays are never transposed behind the user's back:
+(3, N) is an error that suggests ``.T``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import CalibrationError, SampleError
+
+if TYPE_CHECKING:
+    from .statistics import Statistics
+
+#: Below this ratio of the smallest to the largest spread (standard deviation along the principal
+#: directions), the samples are taken to lie on a plane or a line.
+FLATNESS_LIMIT = 1e-3
+_AXIS_NAMES = ("x", "y", "z")
+
+
+def check_shape(samples: ArrayLike) -> NDArray[np.generic]:
+    """Return ``samples`` as a numeric (N, 3) array without copying when possible."""
+    try:
+        array = np.asarray(samples)
+    except (TypeError, ValueError) as error:
+        raise SampleError(f"samples cannot be read as a numeric array: {error}") from None
+    if array.dtype == object or not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+        raise SampleError(f"samples must be numbers, got an array of dtype {array.dtype}")
+    if array.ndim != 2 or array.shape[1] != 3:
+        hint = "rows are samples, columns are x, y, z"
+        if array.ndim == 2 and array.shape[0] == 3:
+            hint = "it looks like one sample per column: pass samples.T"
+        elif array.ndim == 1 and array.shape[0] == 3:
+            hint = "a single sample needs shape (1, 3): use samples[None, :]"
+        raise SampleError(f"samples must have shape (N, 3), got shape {array.shape}; {hint}")
+    return array
+
+
+def check_finite(array: NDArray[np.generic], first_row: int = 0) -> None:
+    """Raise if any value is NaN or infinite, naming the first bad row."""
+    finite = np.isfinite(array)
+    if not finite.all():
+        bad_rows = np.flatnonzero(~finite.all(axis=1))
+        raise SampleError(
+            f"samples contain NaN or inf in {bad_rows.size} row(s), the first is row {first_row + bad_rows[0]}; "
+            "drop them first, e.g. samples[np.isfinite(samples).all(axis=1)]"
+        )
+
+
+def as_samples(samples: ArrayLike) -> NDArray[np.float64]:
+    """Validate and return an (N, 3) float64 array."""
+    array = np.asarray(check_shape(samples), dtype=np.float64)
+    check_finite(array)
+    return array
+
+
+def check_support(statistics: Statistics, method: str, min_samples: int) -> None:
+    """Raise :class:`CalibrationError` when the samples cannot support a fit of ``method``.
+
+    Checks, in order: enough samples, not all identical, spread over three dimensions.
+    """
+    n = statistics.n
+    if n < min_samples:
+        raise CalibrationError(
+            f"method {method!r} needs at least {min_samples} samples, got {n}; "
+            "record more while turning the sensor in all directions"
+        )
+    spreads_squared, directions = np.linalg.eigh(statistics.covariance)
+    spreads = np.sqrt(np.clip(spreads_squared, 0.0, None))
+    largest = spreads[-1]
+    if not largest > 1e-12 * max(1.0, float(np.max(np.abs(statistics.mean)))):
+        raise CalibrationError(
+            f"all {n} samples are identical ({_format_vector(statistics.mean)}): the sensor was not turned "
+            "or not read; record while rotating it"
+        )
+    if spreads[1] < FLATNESS_LIMIT * largest:
+        raise CalibrationError(
+            f"the samples lie on a line along {_format_direction(directions[:, 2])}: they do not span three "
+            "dimensions; rotate the sensor about more axes"
+        )
+    if spreads[0] < FLATNESS_LIMIT * largest:
+        raise CalibrationError(
+            f"the samples lie in a plane: nothing varies along {_format_direction(directions[:, 0])}, so the "
+            "data do not span three dimensions; tilt the sensor so that this direction is also covered "
+            "(a full tumble is best)"
+        )
+
+
+def _format_vector(vector: NDArray[np.float64]) -> str:
+    return "(" + ", ".join(f"{value:.6g}" for value in vector) + ")"
+
+
+def _format_direction(direction: NDArray[np.float64]) -> str:
+    """Name a unit direction, by its sensor axis when it is (nearly) one."""
+    direction = direction / np.linalg.norm(direction)
+    axis = int(np.argmax(np.abs(direction)))
+    if abs(direction[axis]) > 0.99:
+        return f"the sensor {_AXIS_NAMES[axis]} axis"
+    direction = direction * np.sign(direction[axis])
+    return "direction (" + ", ".join(f"{value:+.2f}" for value in direction) + ")"

@@ -1,0 +1,263 @@
+"""The result of every fit: a hard-iron offset, a soft-iron correction matrix and a field strength.
+
+The measurement model (paper, eq. 1) is ``B_p = W R B e + V``: the true field ``B e`` rotated into the
+sensor frame by ``R``, distorted by the soft-iron matrix ``W`` and shifted by the hard-iron offset ``V``.
+A :class:`Calibration` undoes it with one convention, used everywhere in magfit::
+
+    corrected = matrix @ (raw - offset)          # lies on a sphere of radius field_strength
+
+``offset`` is V, ``matrix`` is a (scaled) W⁻¹ and ``field_strength`` is B, all in the input units.
+Only ``A = matrixᵀ matrix / field_strength²`` (paper, eq. 2) is identifiable from the samples: the
+samples fix the ellipsoid ``(x − V)ᵀ A (x − V) = 1`` and nothing distinguishes W from W·Q for a
+rotation Q. magfit picks the symmetric square root (or, on request, the Cholesky factor) and scales
+it so that ``det(matrix) = 1``: the correction then neither shrinks nor grows the field on average,
+and ``field_strength`` is the geometric mean of the ellipsoid's semi-axes.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import MagfitError, SampleError
+
+__all__ = ["CONVENTION", "SCHEMA_VERSION", "Calibration"]
+
+#: The formula every exported calibration states, word for word.
+CONVENTION = "corrected = matrix @ (raw - offset)"
+#: Version of the JSON layout written by :meth:`Calibration.to_dict`.
+SCHEMA_VERSION = 1
+_SCHEMA_NAME = "magfit.calibration"
+
+
+def _frozen_array(values: ArrayLike, shape: tuple[int, ...], name: str) -> NDArray[np.float64]:
+    array = np.array(values, dtype=np.float64)
+    if array.shape != shape:
+        raise SampleError(f"Calibration.{name} must have shape {shape}, got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise SampleError(f"Calibration.{name} contains NaN or inf: {array.tolist()}")
+    array.flags.writeable = False
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """A magnetometer calibration: ``corrected = matrix @ (raw - offset)``.
+
+    Parameters
+    ----------
+    method : str
+        The method that produced it (``"ellipsoid"``, ``"sphere"``, ``"minmax"``, ... or ``"identity"``).
+    offset : array_like, shape (3,)
+        Hard-iron offset V, in input units (µT, gauss, raw counts ...).
+    matrix : array_like, shape (3, 3)
+        Soft-iron correction, dimensionless. Maps the offset-free samples onto a sphere.
+    field_strength : float
+        Radius B of that sphere, in input units: the fitted magnitude of the local field.
+    unit : str or None
+        Name of the input unit, when known (``"uT"``, ``"counts"``, ...). Informational.
+    n_samples : int or None
+        Number of samples the fit used.
+    details : mapping
+        Method-specific, JSON-serialisable facts about the fit (options used, solver status,
+        rejected samples, diagnostics ...). Read-only.
+    """
+
+    method: str
+    offset: NDArray[np.float64]
+    matrix: NDArray[np.float64]
+    field_strength: float
+    unit: str | None = None
+    n_samples: int | None = None
+    details: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "offset", _frozen_array(self.offset, (3,), "offset"))
+        object.__setattr__(self, "matrix", _frozen_array(self.matrix, (3, 3), "matrix"))
+        strength = float(self.field_strength)
+        if not np.isfinite(strength) or strength <= 0:
+            raise SampleError(f"Calibration.field_strength must be a positive number, got {strength}")
+        object.__setattr__(self, "field_strength", strength)
+        if abs(np.linalg.det(self.matrix)) < 1e-12:
+            raise SampleError("Calibration.matrix is singular: it cannot be a soft-iron correction")
+        # Stored as plain JSON types so that a JSON round trip gives back an equal calibration.
+        object.__setattr__(self, "details", MappingProxyType(_jsonable(dict(self.details))))
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def identity(cls, field_strength: float = 1.0, unit: str | None = None) -> Calibration:
+        """The calibration that changes nothing: zero offset, identity matrix."""
+        return cls("identity", np.zeros(3), np.eye(3), field_strength, unit=unit)
+
+    def with_unit(self, unit: str | None) -> Calibration:
+        """The same calibration labelled with another unit name (values unchanged)."""
+        return replace(self, unit=unit)
+
+    # ------------------------------------------------------------------ use
+
+    def apply(self, raw: ArrayLike, normalized: bool = False) -> NDArray[np.float64]:
+        """Correct raw samples: ``matrix @ (raw - offset)`` (paper, eq. 5).
+
+        Parameters
+        ----------
+        raw : array_like, shape (N, 3) or (3,)
+            Raw samples, one per row, in input units.
+        normalized : bool
+            If true, divide by ``field_strength``: the corrected samples then lie on the unit sphere
+            (the space the paper evaluates in).
+
+        Returns
+        -------
+        ndarray, same shape as ``raw``
+            Corrected samples, in input units (or dimensionless when ``normalized``).
+        """
+        array = np.asarray(raw, dtype=np.float64)
+        if array.shape != (3,) and (array.ndim != 2 or array.shape[1] != 3):
+            raise SampleError(
+                f"apply() takes samples of shape (N, 3) or (3,), got shape {array.shape}; rows are samples (x, y, z)"
+            )
+        corrected = (array - self.offset) @ self.matrix.T
+        if normalized:
+            corrected = corrected / self.field_strength
+        return corrected
+
+    # ------------------------------------------------------------------ the fitted ellipsoid
+
+    @property
+    def ellipsoid_matrix(self) -> NDArray[np.float64]:
+        """A of eq. (2) scaled to the unit sphere: ``(x − offset)ᵀ A (x − offset) = 1`` on the ellipsoid."""
+        unit_map = self.matrix / self.field_strength
+        return unit_map.T @ unit_map
+
+    @property
+    def semi_axes(self) -> NDArray[np.float64]:
+        """Semi-axis lengths of the fitted ellipsoid, shape (3,), input units.
+
+        Entry i belongs to the semi-axis whose direction is closest to sensor axis i (x, y, z), so the
+        values read like the paper's table.
+        """
+        return self._ellipsoid_axes()[0]
+
+    @property
+    def axes(self) -> NDArray[np.float64]:
+        """Unit directions of the semi-axes, shape (3, 3): column i goes with ``semi_axes[i]``."""
+        return self._ellipsoid_axes()[1]
+
+    def _ellipsoid_axes(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        eigenvalues, eigenvectors = np.linalg.eigh(self.ellipsoid_matrix)
+        # Assign eigenvector j to the sensor axis it is most aligned with (best of the 6 permutations).
+        best = max(
+            itertools.permutations(range(3)),
+            key=lambda perm: sum(abs(eigenvectors[axis, vec]) for axis, vec in enumerate(perm)),
+        )
+        order = list(best)
+        lengths = 1.0 / np.sqrt(eigenvalues[order])
+        directions = eigenvectors[:, order]
+        directions = directions * np.sign(np.diag(directions) + (np.diag(directions) == 0))
+        lengths.flags.writeable = False
+        directions.flags.writeable = False
+        return lengths, directions
+
+    # ------------------------------------------------------------------ comparison
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Calibration):
+            return NotImplemented
+        return (
+            self.method == other.method
+            and np.array_equal(self.offset, other.offset)
+            and np.array_equal(self.matrix, other.matrix)
+            and self.field_strength == other.field_strength
+            and self.unit == other.unit
+            and self.n_samples == other.n_samples
+            and dict(self.details) == dict(other.details)
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        unit = f" {self.unit}" if self.unit else ""
+        return (
+            f"Calibration(method={self.method!r}, offset={np.array2string(self.offset, precision=5)}{unit}, "
+            f"field_strength={self.field_strength:.6g}{unit}, "
+            f"matrix={np.array2string(self.matrix, precision=5, separator=', ')})"
+        )
+
+    # ------------------------------------------------------------------ serialisation
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict; floats are kept exactly (JSON writes the shortest round-trip repr)."""
+        return {
+            "schema": _SCHEMA_NAME,
+            "schema_version": SCHEMA_VERSION,
+            "convention": CONVENTION,
+            "method": self.method,
+            "unit": self.unit,
+            "offset": self.offset.tolist(),
+            "matrix": self.matrix.tolist(),
+            "field_strength": self.field_strength,
+            "n_samples": self.n_samples,
+            "details": _jsonable(dict(self.details)),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Calibration:
+        """Inverse of :meth:`to_dict`; checks the schema and the convention."""
+        if data.get("schema") != _SCHEMA_NAME:
+            raise MagfitError(f"not a magfit calibration (schema is {data.get('schema')!r}, expected {_SCHEMA_NAME!r})")
+        version = data.get("schema_version")
+        if version != SCHEMA_VERSION:
+            raise MagfitError(
+                f"calibration schema version {version!r} is not supported (this magfit reads "
+                f"{SCHEMA_VERSION}); upgrade magfit or re-run the calibration"
+            )
+        if data.get("convention") != CONVENTION:
+            raise MagfitError(f"calibration convention {data.get('convention')!r} is not {CONVENTION!r}")
+        try:
+            return cls(
+                method=str(data["method"]),
+                offset=np.asarray(data["offset"], dtype=np.float64),
+                matrix=np.asarray(data["matrix"], dtype=np.float64),
+                field_strength=float(data["field_strength"]),
+                unit=data.get("unit"),
+                n_samples=data.get("n_samples"),
+                details=data.get("details") or {},
+            )
+        except KeyError as missing:
+            raise MagfitError(f"calibration file lacks the field {missing}") from None
+
+    def to_json(self, indent: int | None = 2) -> str:
+        """Serialise to JSON text (lossless; see :meth:`from_json`)."""
+        return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
+
+    @classmethod
+    def from_json(cls, text: str) -> Calibration:
+        """Read a calibration written by :meth:`to_json`."""
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as error:
+            raise MagfitError(f"calibration is not valid JSON: {error}") from None
+        if not isinstance(data, dict):
+            raise MagfitError("calibration JSON must be an object")
+        return cls.from_dict(data)
+
+
+def _jsonable(value: Any) -> Any:
+    """Convert numpy scalars and arrays inside ``details`` to plain JSON types."""
+    if isinstance(value, Mapping):
+        return {str(key): _jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value

@@ -1,0 +1,33 @@
+"""The exceptions magfit raises.
+
+All derive from :class:`MagfitError`, itself a :class:`ValueError`, so callers that only know
+"bad value" still catch them. Each message says what is wrong and what to do about it.
+"""
+
+from __future__ import annotations
+
+__all__ = ["CalibrationError", "DataFileError", "MagfitError", "OptionError", "SampleError"]
+
+
+class MagfitError(ValueError):
+    """Base class of every error magfit raises on purpose."""
+
+
+class SampleError(MagfitError):
+    """The samples array itself is malformed: wrong shape, wrong type or non-finite values."""
+
+
+class OptionError(MagfitError):
+    """An unknown method, an unknown option, or an option value out of range."""
+
+
+class CalibrationError(MagfitError):
+    """The data are well-formed but cannot support the requested fit.
+
+    Too few samples, all samples identical, samples that do not span three dimensions, or a fitted
+    quadric that is not an ellipsoid. The message names the reason and suggests a remedy.
+    """
+
+
+class DataFileError(MagfitError):
+    """A data or calibration file cannot be read: missing, empty, malformed cells or rows."""

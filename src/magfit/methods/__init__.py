@@ -1,0 +1,12 @@
+"""Calibration methods. Importing this package registers every built-in method in :data:`METHODS`.
+
+Each module registers its method(s) with :func:`~magfit.methods.registry.register`; to add a method,
+add a module and import it below.
+"""
+
+from __future__ import annotations
+
+from . import ellipsoid, minmax, sphere  # noqa: F401  (registration side effect)
+from .registry import METHODS, FitInput, MethodSpec, get_method, register
+
+__all__ = ["METHODS", "FitInput", "MethodSpec", "get_method", "register"]

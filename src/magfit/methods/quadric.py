@@ -1,0 +1,105 @@
+"""From fitted quadric coefficients to a calibration (paper, section II.B).
+
+Shared by every ellipsoid method: the coefficients θ of eq. (4) in the normalised frame of a
+:class:`~magfit.Statistics` give the centre V and shape A of the ellipsoid (eq. 5 of the paper's
+reference [3]), then the correction ``W⁻¹ = A^½`` (reference [1], eq. 20) or a Cholesky factor.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..calibration import Calibration
+from ..errors import CalibrationError
+from ..statistics import Statistics
+from .registry import check_choice
+
+ROOTS = ("sqrt", "cholesky")
+_SIGN = {True: "+", False: "-"}
+
+
+def quadric_matrix(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Split θ (design order, see :mod:`magfit.statistics`) into M (3x3), b (3,) and d of eq. (3)."""
+    r = 1.0 / math.sqrt(2.0)
+    m = np.array(
+        [
+            [theta[0], r * theta[3], r * theta[4]],
+            [r * theta[3], theta[1], r * theta[5]],
+            [r * theta[4], r * theta[5], theta[2]],
+        ]
+    )
+    return m, np.asarray(theta[6:9], dtype=np.float64), float(theta[9])
+
+
+def ellipsoid_from_quadric(
+    theta: NDArray[np.float64], statistics: Statistics, method: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Centre V and unit-sphere shape A (input units) of the quadric θ fitted in the normalised frame.
+
+    Raises :class:`CalibrationError` when the quadric is not a real ellipsoid: never ``abs()`` of an
+    eigenvalue, never a NaN.
+    """
+    m, b, d = quadric_matrix(theta)
+    if np.trace(m) < 0:  # θ and −θ are the same quadric
+        m, b, d = -m, -b, -d
+    eigenvalues = np.linalg.eigvalsh(m)
+    if not eigenvalues[0] > 1e-12 * abs(eigenvalues[-1]):
+        signs = " ".join(_SIGN[bool(value > 0)] for value in eigenvalues[::-1])
+        kind = "a hyperboloid" if eigenvalues[0] < 0 and eigenvalues[-1] > 0 else "degenerate"
+        raise CalibrationError(
+            f"the {method} fit is not an ellipsoid: the quadric is {kind} (eigenvalue signs of M: {signs}); "
+            "the samples probably cover too few directions: rotate the sensor through more attitudes, "
+            "or use method='sphere' (hard iron only), which needs less coverage"
+        )
+    centre_z = -0.5 * np.linalg.solve(m, b)  # V = −½ M⁻¹ b   (section II.B)
+    level = float(centre_z @ m @ centre_z - d)  # Vᵀ M V − d
+    if not level > 0:
+        raise CalibrationError(
+            f"the {method} fit is not a real ellipsoid (Vᵀ M V − d = {level:.3g} <= 0); "
+            "the samples do not outline an ellipsoid: check that they are magnetometer readings taken while "
+            "turning the sensor"
+        )
+    shape_z = m / level  # A = M / (Vᵀ M V − d)
+    # Back from the normalised frame z = (x − centre) / scale.
+    offset = statistics.centre + statistics.scale * centre_z
+    shape = shape_z / statistics.scale**2
+    return offset, shape
+
+
+def calibration_from_ellipsoid(
+    method: str,
+    offset: NDArray[np.float64],
+    shape: NDArray[np.float64],
+    *,
+    root: str = "sqrt",
+    n_samples: int | None = None,
+    details: Mapping[str, Any] | None = None,
+) -> Calibration:
+    """The calibration of the ellipsoid ``(x − offset)ᵀ shape (x − offset) = 1``.
+
+    ``W⁻¹`` is the symmetric square root of ``shape`` (``root="sqrt"``) or the transpose of its lower
+    Cholesky factor (``root="cholesky"``, the alternative the paper mentions); both satisfy
+    ``W⁻ᵀ W⁻¹ = shape`` and differ by a rotation. The field strength is the geometric mean of the
+    semi-axes, so that ``det(matrix) = 1``.
+    """
+    check_choice("root", root, ROOTS)
+    shape = 0.5 * (shape + shape.T)
+    eigenvalues, eigenvectors = np.linalg.eigh(shape)
+    if root == "sqrt":
+        unit_map = (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T
+    else:
+        unit_map = np.linalg.cholesky(shape).T
+    field_strength = float(np.prod(eigenvalues) ** (-1.0 / 6.0))
+    return Calibration(
+        method=method,
+        offset=offset,
+        matrix=field_strength * unit_map,
+        field_strength=field_strength,
+        n_samples=n_samples,
+        details={"root": root, **(details or {})},
+    )

@@ -1,0 +1,86 @@
+"""The table of calibration methods behind :func:`magfit.fit`.
+
+A method is a function ``f(data: FitInput, *, <options>) -> Calibration`` registered under a name with
+:func:`register`. Its keyword-only parameters are its options: :func:`magfit.fit` rejects any other
+name, listing the valid ones. ``data="statistics"`` methods read only the sufficient statistics (so they
+also accept a :class:`~magfit.Statistics` built in chunks); ``data="samples"`` methods need the samples.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import OptionError
+
+if TYPE_CHECKING:
+    from ..calibration import Calibration
+    from ..statistics import Statistics
+
+__all__ = ["METHODS", "FitInput", "MethodSpec", "get_method", "register"]
+
+
+@dataclass(frozen=True)
+class FitInput:
+    """What a method receives: the statistics always, the samples when the caller gave them."""
+
+    statistics: Statistics
+    samples: NDArray[np.float64] | None
+
+    def require_samples(self, method: str) -> NDArray[np.float64]:
+        if self.samples is None:
+            raise OptionError(f"method {method!r} needs the samples themselves, not Statistics")
+        return self.samples
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """A registered method: its function, the data it needs and its options."""
+
+    name: str
+    function: Callable[..., Calibration]
+    min_samples: int
+    data: Literal["statistics", "samples"]
+    summary: str
+
+    @property
+    def options(self) -> tuple[str, ...]:
+        """Names of the keyword-only options the method accepts."""
+        parameters = inspect.signature(self.function).parameters.values()
+        return tuple(p.name for p in parameters if p.kind is inspect.Parameter.KEYWORD_ONLY)
+
+
+METHODS: dict[str, MethodSpec] = {}
+
+
+def register(
+    name: str, *, min_samples: int, data: Literal["statistics", "samples"], summary: str
+) -> Callable[[Callable[..., Calibration]], Callable[..., Calibration]]:
+    """Decorator that adds a method to :data:`METHODS` under ``name``."""
+
+    def decorate(function: Callable[..., Calibration]) -> Callable[..., Calibration]:
+        if name in METHODS:
+            raise RuntimeError(f"method {name!r} registered twice")
+        METHODS[name] = MethodSpec(name, function, min_samples, data, summary)
+        return function
+
+    return decorate
+
+
+def get_method(name: str) -> MethodSpec:
+    """The method registered as ``name``, or an :class:`OptionError` that lists the valid names."""
+    try:
+        return METHODS[name]
+    except (KeyError, TypeError):
+        raise OptionError(f"unknown method {name!r}; valid methods: {', '.join(METHODS)}") from None
+
+
+def check_choice(option: str, value: object, choices: tuple[str, ...]) -> None:
+    """Raise an :class:`OptionError` when ``value`` is not one of ``choices``."""
+    if value not in choices:
+        raise OptionError(f"{option}={value!r} is not valid; choose one of: {', '.join(choices)}")
