@@ -13,7 +13,7 @@ True
 from __future__ import annotations
 
 from .calibration import CONVENTION, Calibration
-from .errors import CalibrationError, DataFileError, MagfitError, OptionError, SampleError
+from .errors import CalibrationError, DataFileError, ExportError, MagfitError, OptionError, SampleError
 from .evaluate import Evaluation, evaluate, sphere_distances
 from .fit import fit
 from .methods import METHODS
@@ -31,6 +31,7 @@ __all__ = [
     "CalibrationError",
     "DataFileError",
     "Evaluation",
+    "ExportError",
     "MagfitError",
     "OptionError",
     "SampleError",

@@ -6,7 +6,7 @@ All derive from :class:`MagfitError`, itself a :class:`ValueError`, so callers t
 
 from __future__ import annotations
 
-__all__ = ["CalibrationError", "DataFileError", "MagfitError", "OptionError", "SampleError"]
+__all__ = ["CalibrationError", "DataFileError", "ExportError", "MagfitError", "OptionError", "SampleError"]
 
 
 class MagfitError(ValueError):
@@ -31,3 +31,7 @@ class CalibrationError(MagfitError):
 
 class DataFileError(MagfitError):
     """A data or calibration file cannot be read: missing, empty, malformed cells or rows."""
+
+
+class ExportError(MagfitError):
+    """A firmware export cannot represent the calibration (out of the target's range, or no unit to convert)."""
