@@ -60,4 +60,6 @@ def fit(samples: ArrayLike | Statistics, method: str = "ellipsoid", **options: A
         array = as_samples(samples)
         data = FitInput(Statistics.from_samples(array), array)
     check_support(data.statistics, spec.name, spec.min_samples)
+    for check in spec.checks:
+        check(data.statistics, spec.name)
     return spec.function(data, **options)

@@ -13,12 +13,14 @@ import numpy as np
 from ..calibration import Calibration
 from ..errors import CalibrationError
 from .registry import FitInput, check_choice, register
+from .support import check_outlines_ellipsoid
 
 CENTRES = ("mean", "midrange")
 
 
 @register(
     "minmax",
+    checks=(check_outlines_ellipsoid,),
     min_samples=4,
     data="statistics",
     summary="pseudo-calibration: per-axis min/max scaling (paper, section IV)",

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
-from ..errors import CalibrationError
+from ..errors import CalibrationError, OptionError
 from ..statistics import Statistics
 from .registry import check_choice
 
@@ -36,12 +36,12 @@ def quadric_matrix(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDA
     return m, np.asarray(theta[6:9], dtype=np.float64), float(theta[9])
 
 
-def ellipsoid_from_quadric(
-    theta: NDArray[np.float64], statistics: Statistics, method: str
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def quadric_ellipsoid(
+    theta: NDArray[np.float64], statistics: Statistics
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | str:
     """Centre V and unit-sphere shape A (input units) of the quadric θ fitted in the normalised frame.
 
-    Raises :class:`CalibrationError` when the quadric is not a real ellipsoid: never ``abs()`` of an
+    Returns the reason, in words, when the quadric is not a real ellipsoid: never ``abs()`` of an
     eigenvalue, never a NaN.
     """
     m, b, d = quadric_matrix(theta)
@@ -50,25 +50,43 @@ def ellipsoid_from_quadric(
     eigenvalues = np.linalg.eigvalsh(m)
     if not eigenvalues[0] > 1e-12 * abs(eigenvalues[-1]):
         signs = " ".join(_SIGN[bool(value > 0)] for value in eigenvalues[::-1])
-        kind = "a hyperboloid" if eigenvalues[0] < 0 and eigenvalues[-1] > 0 else "degenerate"
-        raise CalibrationError(
-            f"the {method} fit is not an ellipsoid: the quadric is {kind} (eigenvalue signs of M: {signs}); "
-            "the samples probably cover too few directions: rotate the sensor through more attitudes, "
-            "or use method='sphere' (hard iron only), which needs less coverage"
-        )
+        kind = "a hyperboloid" if eigenvalues[0] < 0 < eigenvalues[-1] else "degenerate"
+        return f"the fitted quadric is {kind}, not an ellipsoid (eigenvalue signs of M: {signs})"
     centre_z = -0.5 * np.linalg.solve(m, b)  # V = −½ M⁻¹ b   (section II.B)
     level = float(centre_z @ m @ centre_z - d)  # Vᵀ M V − d
     if not level > 0:
-        raise CalibrationError(
-            f"the {method} fit is not a real ellipsoid (Vᵀ M V − d = {level:.3g} <= 0); "
-            "the samples do not outline an ellipsoid: check that they are magnetometer readings taken while "
-            "turning the sensor"
-        )
+        return f"the fitted quadric is an imaginary ellipsoid (Vᵀ M V − d = {level:.3g} <= 0)"
     shape_z = m / level  # A = M / (Vᵀ M V − d)
     # Back from the normalised frame z = (x − centre) / scale.
     offset = statistics.centre + statistics.scale * centre_z
     shape = shape_z / statistics.scale**2
     return offset, shape
+
+
+def ellipsoid_from_quadric(
+    theta: NDArray[np.float64], statistics: Statistics, method: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`quadric_ellipsoid`, raising :class:`CalibrationError` with a remedy when it is none."""
+    result = quadric_ellipsoid(theta, statistics)
+    if isinstance(result, str):
+        raise CalibrationError(
+            f"the {method} fit failed: {result}; the samples probably cover too few directions: rotate the "
+            "sensor through more attitudes, or use method='sphere' (hard iron only), which needs less coverage"
+        )
+    return result
+
+
+def check_field_strength(field_strength: float | None) -> float | None:
+    """Validate the known-field option: ``None`` or a positive finite number (input units)."""
+    if field_strength is None:
+        return None
+    try:
+        value = float(field_strength)
+    except (TypeError, ValueError):
+        raise OptionError(f"field_strength must be a number (input units) or None, got {field_strength!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise OptionError(f"field_strength must be a positive finite number (input units), got {field_strength!r}")
+    return value
 
 
 def calibration_from_ellipsoid(
@@ -79,6 +97,7 @@ def calibration_from_ellipsoid(
     root: str = "sqrt",
     n_samples: int | None = None,
     details: Mapping[str, Any] | None = None,
+    field_strength: float | None = None,
 ) -> Calibration:
     """The calibration of the ellipsoid ``(x − offset)ᵀ shape (x − offset) = 1``.
 
@@ -86,6 +105,10 @@ def calibration_from_ellipsoid(
     Cholesky factor (``root="cholesky"``, the alternative the paper mentions); both satisfy
     ``W⁻ᵀ W⁻¹ = shape`` and differ by a rotation. The field strength is the geometric mean of the
     semi-axes, so that ``det(matrix) = 1``.
+
+    A known ``field_strength`` (input units; e.g. from the World Magnetic Model) leaves the ellipsoid
+    as fitted but scales ``matrix`` so that corrected samples have that magnitude: then
+    ``det(matrix) = (field_strength / fitted)³`` and the fitted value is kept in ``details``.
     """
     check_choice("root", root, ROOTS)
     shape = 0.5 * (shape + shape.T)
@@ -94,12 +117,16 @@ def calibration_from_ellipsoid(
         unit_map = (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T
     else:
         unit_map = np.linalg.cholesky(shape).T
-    field_strength = float(np.prod(eigenvalues) ** (-1.0 / 6.0))
+    fitted_strength = float(np.prod(eigenvalues) ** (-1.0 / 6.0))
+    extra: dict[str, Any] = {}
+    if field_strength is not None:
+        extra = {"field_strength_given": True, "fitted_field_strength": fitted_strength}
+    strength = fitted_strength if field_strength is None else field_strength
     return Calibration(
         method=method,
         offset=offset,
-        matrix=field_strength * unit_map,
-        field_strength=field_strength,
+        matrix=strength * unit_map,
+        field_strength=strength,
         n_samples=n_samples,
-        details={"root": root, **(details or {})},
+        details={"root": root, **(details or {}), **extra},
     )

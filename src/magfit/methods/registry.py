@@ -47,6 +47,9 @@ class MethodSpec:
     min_samples: int
     data: Literal["statistics", "samples"]
     summary: str
+    #: Checks run by :func:`magfit.fit` before the method, each ``check(statistics, method_name)``
+    #: raising :class:`~magfit.CalibrationError` when the data cannot support this method.
+    checks: tuple[Callable[[Statistics, str], None], ...] = ()
 
     @property
     def options(self) -> tuple[str, ...]:
@@ -59,14 +62,19 @@ METHODS: dict[str, MethodSpec] = {}
 
 
 def register(
-    name: str, *, min_samples: int, data: Literal["statistics", "samples"], summary: str
+    name: str,
+    *,
+    min_samples: int,
+    data: Literal["statistics", "samples"],
+    summary: str,
+    checks: tuple[Callable[[Statistics, str], None], ...] = (),
 ) -> Callable[[Callable[..., Calibration]], Callable[..., Calibration]]:
     """Decorator that adds a method to :data:`METHODS` under ``name``."""
 
     def decorate(function: Callable[..., Calibration]) -> Callable[..., Calibration]:
         if name in METHODS:
             raise RuntimeError(f"method {name!r} registered twice")
-        METHODS[name] = MethodSpec(name, function, min_samples, data, summary)
+        METHODS[name] = MethodSpec(name, function, min_samples, data, summary, checks)
         return function
 
     return decorate
