@@ -1,0 +1,93 @@
+"""The ``magfit`` command line.
+
+Each command lives in its own module and is a thin layer: parse the options, call the library, print.
+Library errors are caught only here, at the boundary (:class:`MagfitGroup`), and turned into one line on
+stderr and an exit status:
+
+- 0: success;
+- 1: a fit failed on the data (:class:`~magfit.CalibrationError`), or ``compare`` found a file on which
+  every method failed;
+- 2: a usage or input error (bad option, unreadable file, malformed samples, refused output path);
+- 3: an unexpected error (a bug: rerun with ``--debug`` for the traceback and report it).
+
+``magfit --debug <command>`` lets every error through with its traceback.
+
+Importing :mod:`magfit` never imports this package (click and rich are the ``cli`` extra).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import click
+
+from .. import __version__
+from ._common import CommandError, as_command_error
+
+__all__ = ["MagfitGroup", "cli", "main"]
+
+
+class MagfitGroup(click.Group):
+    """A click group that reports errors as ``magfit: error: <message>`` with magfit's exit statuses."""
+
+    def make_context(
+        self, info_name: str | None, args: list[str], parent: click.Context | None = None, **extra: Any
+    ) -> click.Context:
+        try:
+            return super().make_context(info_name, args, parent=parent, **extra)
+        except click.exceptions.NoArgsIsHelpError:
+            raise
+        except click.UsageError as error:
+            raise as_command_error(error) from None
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.Exit, click.Abort, CommandError, click.exceptions.NoArgsIsHelpError):
+            raise
+        except Exception as error:
+            if ctx.params.get("debug"):
+                raise
+            raise as_command_error(error) from None
+
+
+@click.group(cls=MagfitGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, "-V", "--version", prog_name="magfit")
+@click.option("--debug", is_flag=True, help="Show the full traceback of any error (for bug reports).")
+def cli(debug: bool) -> None:
+    """Calibrate magnetometers: hard- and soft-iron fits, the paper's comparison, firmware exports.
+
+    Every calibration is applied one way: corrected = matrix @ (raw - offset).
+
+    \b
+    Start with:
+      magfit demo                              the paper's experiment on simulated sensors
+      magfit calibrate mag.csv -o cal.json     fit a recording, save the calibration
+      magfit compare mag.csv                   the paper's three methods side by side
+    """
+
+
+def _register_commands() -> None:
+    from .apply import apply_command
+    from .calibrate import calibrate_command
+    from .compare import compare_command
+    from .demo import demo_command
+    from .simulate import simulate_command
+
+    for command in (demo_command, calibrate_command, compare_command, apply_command, simulate_command):
+        cli.add_command(command)
+
+
+_register_commands()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line on ``argv`` (default: ``sys.argv[1:]``) and return the exit status."""
+    try:
+        cli.main(args=list(argv) if argv is not None else None, prog_name="magfit")
+    except SystemExit as stop:
+        if stop.code is None:
+            return 0
+        return stop.code if isinstance(stop.code, int) else 1
+    return 0

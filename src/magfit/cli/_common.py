@@ -1,0 +1,232 @@
+"""Pieces every command shares: error reporting, option types, consoles and number formatting."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+import click
+import numpy as np
+from numpy.typing import ArrayLike
+from rich.console import Console
+
+from ..errors import CalibrationError, MagfitError, OptionError
+
+#: Exit status of a fit that fails on the data (a CalibrationError).
+EXIT_FIT_FAILED = 1
+#: Exit status of a usage or input error (bad option, unreadable file, malformed samples ...).
+EXIT_USAGE = 2
+#: Exit status of an unexpected error (a bug in magfit: please report it).
+EXIT_INTERNAL = 3
+
+#: Width of the tables when the output is not a terminal (files, pipes, tests): wide enough for the
+#: comparison table, and fixed so that the text does not depend on the environment.
+PIPE_WIDTH = 120
+
+
+class CommandError(click.ClickException):
+    """A usage or input error, reported as the single line ``magfit: error: <message>`` (exit status 2)."""
+
+    exit_code = EXIT_USAGE
+
+    def show(self, file: Any = None) -> None:
+        click.echo(f"magfit: error: {self.format_message()}", file=file, err=file is None)
+
+
+class FitFailedError(CommandError):
+    """A fit that failed on the data (exit status 1)."""
+
+    exit_code = EXIT_FIT_FAILED
+
+
+class InternalError(CommandError):
+    """An unexpected exception: a bug in magfit (exit status 3)."""
+
+    exit_code = EXIT_INTERNAL
+
+
+def one_line(message: str) -> str:
+    """Collapse a message onto one line (file names and solver messages may carry newlines)."""
+    return " ".join(str(message).split())
+
+
+def as_command_error(error: BaseException) -> CommandError:
+    """The :class:`CommandError` (message and exit status) that reports ``error``."""
+    if isinstance(error, CalibrationError):
+        return FitFailedError(one_line(str(error)))
+    if isinstance(error, MagfitError):
+        return CommandError(one_line(str(error)))
+    if isinstance(error, click.UsageError):
+        hint = f" (see '{error.ctx.command_path} --help')" if error.ctx is not None else ""
+        return CommandError(one_line(error.format_message()) + hint)
+    if isinstance(error, click.ClickException):
+        return CommandError(one_line(error.format_message()))
+    if isinstance(error, OSError):
+        target = f"{error.filename}: " if error.filename else ""
+        return CommandError(f"{target}{error.strerror or error}")
+    return InternalError(
+        f"unexpected {type(error).__name__}: {one_line(str(error))} (a bug in magfit: rerun with --debug "
+        "and report the traceback)"
+    )
+
+
+def fail(message: str) -> NoReturn:
+    """Stop the command with ``magfit: error: <message>`` (exit status 2)."""
+    raise CommandError(message)
+
+
+def warn(message: str) -> None:
+    """Print ``magfit: warning: <message>`` on stderr."""
+    click.echo(f"magfit: warning: {one_line(message)}", err=True)
+
+
+# ---------------------------------------------------------------------- output
+
+
+def console(*, stderr: bool = False) -> Console:
+    """A rich console on stdout (or stderr), created per call so that redirected streams are honoured.
+
+    Markup is off (file names may contain brackets); outside a terminal the width is fixed and there
+    is no colour, so piped output is plain, stable text.
+    """
+    stream = sys.stderr if stderr else sys.stdout
+    terminal = stream.isatty()
+    return Console(
+        file=stream,
+        markup=False,
+        highlight=False,
+        emoji=False,
+        width=None if terminal else PIPE_WIDTH,
+        no_color=not terminal or "NO_COLOR" in os.environ,
+    )
+
+
+def fixed(value: float, decimals: int = 4) -> str:
+    """``value`` with ``decimals`` decimals, the paper's style; never prints a negative zero."""
+    text = f"{value:.{decimals}f}"
+    if float(text) == 0.0:
+        text = text.lstrip("-")
+    return text
+
+
+def significant(value: float, digits: int = 4) -> str:
+    """``value`` to ``digits`` significant digits (``262.1``, ``-0.01203``); no negative zero."""
+    text = f"{value:.{digits}g}"
+    return "0" if float(text) == 0.0 else text
+
+
+def vector(values: ArrayLike, formatter: Callable[[float], str] = fixed) -> str:
+    """A 3-vector as ``(a, b, c)``."""
+    return "(" + ", ".join(formatter(float(v)) for v in np.asarray(values, dtype=float).ravel()) + ")"
+
+
+# ---------------------------------------------------------------------- option types
+
+
+class RegistryChoice(click.ParamType):
+    """A choice among names read when the option is used (methods and formats others may register).
+
+    Parameters
+    ----------
+    kind : str
+        What the names are ("method", "format"), for the messages.
+    names : callable
+        Returns the valid names; called at parse time, so late registrations count.
+    """
+
+    def __init__(self, kind: str, names: Callable[[], Iterable[str]]) -> None:
+        self.kind = kind
+        self.names = names
+        self.name = kind
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        try:
+            return "[" + "|".join(self.names()) + "]"
+        except MagfitError:
+            return self.kind.upper()
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> str:
+        names = list(self.names())
+        if value in names:
+            return str(value)
+        self.fail(f"unknown {self.kind} {value!r}; valid {self.kind}s: {', '.join(names)}", param, ctx)
+
+
+def method_names() -> list[str]:
+    """The registered calibration methods, in registration order."""
+    from ..methods import METHODS
+
+    return list(METHODS)
+
+
+def default_method() -> str:
+    """The method ``calibrate`` uses when none is given: ``auto`` when registered, else ``ellipsoid``."""
+    from ..methods import METHODS
+
+    return "auto" if "auto" in METHODS else "ellipsoid"
+
+
+def export_format_names() -> list[str]:
+    """The firmware export formats of :mod:`magfit.export`."""
+    try:
+        from ..export import FORMATS
+    except ImportError as error:  # pragma: no cover - only while magfit.export is being written
+        raise OptionError(f"firmware exports are not available in this installation ({error})") from None
+    return list(FORMATS)
+
+
+def parse_columns(ctx: click.Context, param: click.Parameter, value: str | None) -> list[str | int] | None:
+    """``--columns mx,my,mz`` or ``--columns 0,1,2`` (0-based) into three names or indices."""
+    if value is None:
+        return None
+    items = [item.strip() for item in value.split(",")]
+    if len(items) != 3 or not all(items):
+        raise click.BadParameter(
+            f"expected three comma-separated column names or 0-based numbers (x,y,z), got {value!r}", ctx, param
+        )
+    return [int(item) if item.isdigit() else item for item in items]
+
+
+def float_list(count: int) -> Callable[[click.Context, click.Parameter, str | None], list[float] | None]:
+    """A callback that parses ``count`` comma-separated numbers (``--offset -91.5,104,-274``)."""
+
+    def parse(ctx: click.Context, param: click.Parameter, value: str | None) -> list[float] | None:
+        if value is None:
+            return None
+        items = value.replace(";", ",").split(",")
+        try:
+            numbers = [float(item) for item in items]
+        except ValueError:
+            raise click.BadParameter(f"expected {count} comma-separated numbers, got {value!r}", ctx, param) from None
+        if len(numbers) != count:
+            raise click.BadParameter(f"expected {count} comma-separated numbers, got {len(numbers)}", ctx, param)
+        if not all(np.isfinite(numbers)):
+            raise click.BadParameter(f"the numbers must be finite, got {value!r}", ctx, param)
+        return numbers
+
+    return parse
+
+
+def columns_text(columns: Sequence[object]) -> str:
+    """Column names or indices as ``mx, my, mz``."""
+    return ", ".join(str(column) for column in columns)
+
+
+def same_file(first: Path, second: Path) -> bool:
+    """True when both paths name the same file (also through links, or before either exists)."""
+    try:
+        if first.exists() and second.exists():
+            return os.path.samefile(first, second)
+    except OSError:
+        pass
+    return first.resolve() == second.resolve()
+
+
+def refuse_overwriting_input(output: Path, inputs: Iterable[Path]) -> None:
+    """Stop with a usage error when ``output`` is one of ``inputs`` (it would clobber the data)."""
+    for source in inputs:
+        if same_file(output, source):
+            fail(f"the output {output} is the input file {source}; write to another path")

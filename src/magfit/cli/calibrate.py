@@ -1,0 +1,323 @@
+"""``magfit calibrate``: fit one recording, print the calibration, save it as JSON or a firmware format."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import click
+import numpy as np
+from numpy.typing import NDArray
+from rich.console import Console
+from rich.table import Table
+
+from ..calibration import CONVENTION, Calibration
+from ..errors import DataFileError
+from ..evaluate import Evaluation, evaluate
+from ..fit import fit
+from ..methods import get_method
+from ..statistics import Statistics
+from ._common import (
+    RegistryChoice,
+    columns_text,
+    console,
+    default_method,
+    export_format_names,
+    fixed,
+    method_names,
+    parse_columns,
+    refuse_overwriting_input,
+    significant,
+    vector,
+    warn,
+)
+
+NONFINITE_CHOICES = ("skip", "error")
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationRun:
+    """What ``calibrate`` did: the calibration, its score and what was read from the file.
+
+    Attributes
+    ----------
+    path : Path
+        The recording.
+    calibration : Calibration
+        The fit (labelled with ``--unit`` when given).
+    evaluation : Evaluation
+        The paper's sphere-distance metric over every sample read (dimensionless).
+    columns : tuple
+        The three columns used (names, or 0-based indices for files without a header).
+    n_rows, n_skipped : int
+        Data rows in the file, and rows skipped because a value was NaN or infinite.
+    skipped_lines : tuple of int
+        Line numbers (1-based) of skipped rows, as reported by the reader (possibly only the first few).
+    streamed : bool
+        True when the file was read in chunks (a method that needs only the statistics).
+    """
+
+    path: Path
+    calibration: Calibration
+    evaluation: Evaluation
+    columns: tuple[Any, ...]
+    n_rows: int
+    n_skipped: int
+    skipped_lines: tuple[int, ...]
+    streamed: bool
+
+
+class _ReadResult(Protocol):
+    """The part of magfit.io's SampleTable / ChunkReader that ``calibrate`` reports."""
+
+    n_rows: int
+    n_skipped: int
+    skipped_lines: Sequence[int]
+    columns: Sequence[Any]
+
+
+def run_calibration(
+    path: Path,
+    *,
+    method: str,
+    columns: Sequence[str | int] | None = None,
+    nonfinite: str = "skip",
+    unit: str | None = None,
+) -> CalibrationRun:
+    """Read ``path``, fit ``method`` and score the fit; memory stays bounded for streaming methods.
+
+    Methods whose ``METHODS[method].data`` is ``"statistics"`` read the file in chunks into a
+    :class:`~magfit.Statistics` (a first pass), fit, then score the fit in a second pass over the chunks:
+    only one chunk is ever in memory. Methods that need the samples load the whole file.
+    """
+    spec = get_method(method)
+    if spec.data == "statistics":
+        calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite)
+        streamed = True
+    else:
+        calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite)
+        streamed = False
+    if unit is not None:
+        calibration = calibration.with_unit(unit)
+    return CalibrationRun(
+        path=path,
+        calibration=calibration,
+        evaluation=evaluation,
+        columns=tuple(read.columns),
+        n_rows=int(read.n_rows),
+        n_skipped=int(read.n_skipped),
+        skipped_lines=tuple(int(line) for line in read.skipped_lines),
+        streamed=streamed,
+    )
+
+
+def _fit_in_memory(
+    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: str
+) -> tuple[Calibration, Evaluation, _ReadResult]:
+    from ..io import read_samples
+
+    table = read_samples(path, columns=columns, nonfinite=nonfinite)
+    _require_rows(path, table.samples.shape[0], table)
+    samples = _samples_for_fit(table.samples)
+    calibration = fit(samples, method=method)
+    return calibration, evaluate(calibration, table.samples), table
+
+
+def _samples_for_fit(samples: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The samples a ``data="samples"`` method is fitted to.
+
+    SUBSAMPLING HOOK: for huge files, a spatially even subsample (equal coverage of the sphere of
+    directions, so dense dwell regions do not dominate) belongs here; the fit then runs on it while the
+    score is still computed on every sample. Today every sample is used.
+    """
+    return samples
+
+
+def _fit_streaming(
+    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: str
+) -> tuple[Calibration, Evaluation, _ReadResult]:
+    from ..io import iter_sample_chunks
+
+    def chunks() -> Any:
+        return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite)
+
+    # Pass 1: the sufficient statistics of eq. (4), one chunk at a time.
+    reader = chunks()
+    statistics = Statistics()
+    with _progress(f"reading {path.name}") as advance:
+        for chunk in reader:
+            statistics.update(chunk)
+            advance(len(chunk))
+    _require_rows(path, statistics.n, reader)
+    calibration = fit(statistics, method=method)
+    # Pass 2: the paper's metric needs the final calibration, so the file is read again.
+    from ..compare import evaluate_chunks
+
+    with _progress(f"scoring the fit on {path.name}") as advance:
+        evaluation = evaluate_chunks(calibration, _counted(chunks(), advance))
+    return calibration, evaluation, reader
+
+
+def _counted(chunks: Any, advance: Any) -> Iterator[NDArray[np.float64]]:
+    for chunk in chunks:
+        advance(len(chunk))
+        yield chunk
+
+
+def _require_rows(path: Path, n_samples: int, read: _ReadResult) -> None:
+    if n_samples > 0:
+        return
+    if read.n_skipped:
+        raise DataFileError(
+            f"{path}: all {read.n_skipped} data rows hold NaN or inf values; nothing is left to calibrate"
+        )
+    raise DataFileError(f"{path}: the file holds no data rows")
+
+
+@contextmanager
+def _progress(description: str) -> Iterator[Any]:
+    """A rows-read counter on stderr, shown only when stderr is a terminal; yields ``advance(rows)``."""
+    if not sys.stderr.isatty():
+        yield lambda rows: None
+        return
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        TextColumn("{task.completed:,} rows"),
+        TimeElapsedColumn(),
+        console=console(stderr=True),
+        transient=True,
+    ) as progress:
+        task = progress.add_task(description, total=None)
+        yield lambda rows: progress.advance(task, rows)
+
+
+def write_outputs(
+    run: CalibrationRun, output: Path | None, export_format: str | None, unit: str | None
+) -> tuple[str | None, Path | None]:
+    """Write the calibration JSON or the firmware export; returns (text for stdout, path written)."""
+    from ..io import atomic_write_text
+
+    if export_format is not None:
+        from ..export import export
+
+        text = export(run.calibration, export_format, unit=unit)
+    else:
+        text = run.calibration.to_json() + "\n"
+    if output is None:
+        return (text if export_format is not None else None), None
+    atomic_write_text(output, text)
+    return None, output
+
+
+@click.command("calibrate")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-m",
+    "--method",
+    type=RegistryChoice("method", method_names),
+    default=None,
+    help="Calibration method (default: auto when available, else ellipsoid).",
+)
+@click.option(
+    "--columns",
+    callback=parse_columns,
+    metavar="X,Y,Z",
+    help="The three magnetometer columns: names (mx,my,mz) or 0-based numbers (3,4,5). Default: detected.",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the calibration here (JSON, or the --export format), replacing the file atomically.",
+)
+@click.option(
+    "--export",
+    "export_format",
+    type=RegistryChoice("format", export_format_names),
+    help="Write a firmware format instead of JSON: to -o, or to stdout without -o.",
+)
+@click.option("--unit", help="Name of the input unit (uT, mG, counts ...), stored in the calibration and exports.")
+@click.option(
+    "--nonfinite",
+    type=click.Choice(NONFINITE_CHOICES),
+    default="skip",
+    show_default=True,
+    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
+)
+def calibrate_command(
+    file: Path,
+    method: str | None,
+    columns: list[str | int] | None,
+    output: Path | None,
+    export_format: str | None,
+    unit: str | None,
+    nonfinite: str,
+) -> None:
+    """Fit a calibration to a recording and print it; save it with -o.
+
+    FILE holds raw magnetometer samples recorded while turning the sensor in all directions (CSV, TSV,
+    whitespace-separated text, .npy or .npz). The summary gives the offset, the matrix, the field
+    strength, the ellipsoid semi-axes and the paper's mean/std of the distance to the unit sphere.
+    With --export and no -o the export goes to stdout and the summary to stderr.
+
+    \b
+    Examples:
+      magfit calibrate flight.csv --columns mx,my,mz -o cal.json --unit uT
+      magfit calibrate mag.txt --method sphere
+      magfit calibrate flight.csv --export ardupilot -o mag.parm
+      magfit calibrate flight.csv --export c > mag_cal.h
+    """
+    method = method or default_method()
+    if output is not None:
+        refuse_overwriting_input(output, [file])
+    run = run_calibration(file, method=method, columns=columns, nonfinite=nonfinite, unit=unit)
+    stdout_text, written = write_outputs(run, output, export_format, unit)
+    summary = console(stderr=stdout_text is not None)
+    if run.n_skipped:
+        lines = ", ".join(map(str, run.skipped_lines[:5]))
+        more = ", ..." if run.n_skipped > 5 else ""
+        warn(
+            f"{file}: skipped {run.n_skipped} of {run.n_rows} rows with NaN or inf values (lines {lines}{more}); "
+            "pass --nonfinite error to refuse such files"
+        )
+    print_summary(summary, run)
+    if written is not None:
+        what = f"{export_format} export" if export_format else "calibration"
+        summary.print(f"wrote the {what} to {written}")
+    if stdout_text is not None:
+        click.echo(stdout_text, nl=not stdout_text.endswith("\n"))
+
+
+def print_summary(out: Console, run: CalibrationRun) -> None:
+    """The calibration and its score as a two-column table."""
+    calibration = run.calibration
+    unit = f" {calibration.unit}" if calibration.unit else ""
+    table = Table(show_header=False, box=None, pad_edge=False)
+    table.add_column(style="bold")
+    table.add_column()
+    spec = get_method(calibration.method) if calibration.method in method_names() else None
+    method = calibration.method + (f"  ({spec.summary})" if spec is not None else "")
+    read = f"{run.n_rows} rows read, {run.n_skipped} skipped" + (" (streamed)" if run.streamed else "")
+    table.add_row("file", str(run.path))
+    table.add_row("columns", columns_text(run.columns))
+    table.add_row("rows", read)
+    table.add_row("method", method)
+    table.add_row("offset", vector(calibration.offset, lambda v: significant(v, 6)) + unit)
+    rows = [vector(row, lambda v: f"{v: .6f}") for row in calibration.matrix]
+    table.add_row("matrix", "\n".join(rows))
+    table.add_row("field strength", significant(calibration.field_strength, 6) + unit)
+    table.add_row("semi-axes", vector(calibration.semi_axes, lambda v: significant(v, 6)) + unit)
+    table.add_row(
+        "sphere distance",
+        f"mean {fixed(run.evaluation.mean)}  std {fixed(run.evaluation.std)}  "
+        f"(paper, section V; fraction of the field strength, n = {run.evaluation.n})",
+    )
+    table.add_row("convention", CONVENTION)
+    out.print(table)

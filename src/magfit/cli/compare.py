@@ -1,0 +1,232 @@
+"""``magfit compare``: the paper's comparison table (section V) for each recording."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.table import Table
+from rich.text import Text
+
+from ..compare import PAPER_METHODS, Comparison, MethodResult, compare
+from ._common import EXIT_FIT_FAILED, columns_text, console, fixed, method_names, parse_columns, vector, warn
+
+OUTPUT_FORMATS = ("table", "markdown", "csv", "json")
+_CSV_FIELDS = (
+    "file",
+    "method",
+    "status",
+    "mean",
+    "std",
+    "field_strength",
+    "semi_axis_x",
+    "semi_axis_y",
+    "semi_axis_z",
+    "offset_x",
+    "offset_y",
+    "offset_z",
+    "error",
+)
+_CAPTION = (
+    "mean, std: signed distance of the calibrated samples to the unit sphere (paper, section V), a fraction "
+    "of the field strength; field strength, semi-axes and offset in the file's units"
+)
+
+
+@dataclass(frozen=True, eq=False)
+class FileComparison:
+    """One file's comparison and what was read from it."""
+
+    name: str
+    columns: tuple[Any, ...]
+    n_rows: int
+    n_skipped: int
+    comparison: Comparison
+
+
+def parse_methods(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[str, ...]:
+    """``--methods ellipsoid,sphere`` into names, each checked against ``magfit.METHODS``."""
+    if value is None:
+        return PAPER_METHODS
+    names = tuple(item.strip() for item in value.split(",") if item.strip())
+    if not names:
+        raise click.BadParameter("give at least one method", ctx, param)
+    valid = method_names()
+    unknown = [name for name in names if name not in valid]
+    if unknown:
+        raise click.BadParameter(
+            f"unknown method {', '.join(map(repr, unknown))}; valid methods: {', '.join(valid)}", ctx, param
+        )
+    if len(set(names)) != len(names):
+        raise click.BadParameter(f"a method is listed twice in {value!r}", ctx, param)
+    return names
+
+
+@click.command("compare")
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--methods",
+    callback=parse_methods,
+    metavar="M,M,...",
+    help="Comma-separated methods to compare. Default: the paper's ellipsoid,sphere,minmax.",
+)
+@click.option(
+    "--columns",
+    callback=parse_columns,
+    metavar="X,Y,Z",
+    help="The three magnetometer columns of every file: names or 0-based numbers. Default: detected.",
+)
+@click.option(
+    "--format",
+    "output_format",
+    type=click.Choice(OUTPUT_FORMATS),
+    default="table",
+    show_default=True,
+    help="table (terminal), markdown, csv (one row per file and method) or json (with the calibrations).",
+)
+@click.option(
+    "--nonfinite",
+    type=click.Choice(("skip", "error")),
+    default="skip",
+    show_default=True,
+    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
+)
+@click.pass_context
+def compare_command(
+    ctx: click.Context,
+    files: tuple[Path, ...],
+    methods: tuple[str, ...],
+    columns: list[str | int] | None,
+    output_format: str,
+    nonfinite: str,
+) -> None:
+    """Fit several methods to each FILE and compare them as the paper does.
+
+    For each file: the mean and std of the distance of the calibrated samples to the unit sphere, the
+    field strength, the ellipsoid semi-axes and the hard-iron offset per method. A method that cannot
+    fit a file shows its reason in the table instead. Exit status 0 when at least one method succeeded
+    on every file, 1 when every method failed on some file, 2 when a file cannot be read.
+
+    \b
+    Examples:
+      magfit compare mag-readings.txt
+      magfit compare flight1.csv flight2.csv --methods ellipsoid,sphere,minmax --format markdown
+      magfit compare log.txt --columns 0,1,2 --format json > comparison.json
+    """
+    from ..io import read_samples
+
+    results = []
+    for path in files:
+        table = read_samples(path, columns=columns, nonfinite=nonfinite)
+        if table.n_skipped:
+            warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
+        comparison = compare(table.samples, methods)
+        results.append(FileComparison(str(path), tuple(table.columns), table.n_rows, table.n_skipped, comparison))
+    render = {"table": _print_tables, "markdown": _print_markdown, "csv": _print_csv, "json": _print_json}
+    render[output_format](results)
+    if not all(result.comparison.any_succeeded for result in results):
+        ctx.exit(EXIT_FIT_FAILED)
+
+
+def _numbers(result: MethodResult) -> list[str]:
+    """mean, std, field strength, semi-axes, offset of a successful result, 4 decimals as in the paper."""
+    assert result.calibration is not None and result.evaluation is not None
+    calibration = result.calibration
+    return [
+        fixed(result.evaluation.mean),
+        fixed(result.evaluation.std),
+        fixed(calibration.field_strength),
+        vector(calibration.semi_axes),
+        vector(calibration.offset),
+    ]
+
+
+def _heading(result: FileComparison) -> str:
+    skipped = f", {result.n_skipped} skipped" if result.n_skipped else ""
+    return (
+        f"{result.name}: {result.comparison.n_samples} samples "
+        f"({result.n_rows} rows{skipped}; columns {columns_text(result.columns)})"
+    )
+
+
+def _print_tables(results: Sequence[FileComparison]) -> None:
+    out = console()
+    for result in results:
+        table = Table(title=_heading(result), title_justify="left", title_style="bold", caption_justify="left")
+        table.add_column("method")
+        for header in ("mean", "std", "field strength", "semi-axes", "offset"):
+            table.add_column(header, justify="right")
+        table.add_column("failure reason", overflow="fold")
+        for method_result in result.comparison:
+            if method_result.ok:
+                table.add_row(method_result.method, *_numbers(method_result), "")
+            else:
+                table.add_row(
+                    method_result.method,
+                    *(["failed"] + [""] * 4),
+                    Text(str(method_result.error), style="red"),
+                )
+        out.print(table)
+    out.print(Text(_CAPTION, style="dim"))
+
+
+def _markdown_cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def _print_markdown(results: Sequence[FileComparison]) -> None:
+    lines = []
+    for result in results:
+        lines += [f"### {_markdown_cell(_heading(result))}", ""]
+        lines.append("| method | mean | std | field strength | semi-axes | offset | failure reason |")
+        lines.append("|---|---:|---:|---:|---:|---:|---|")
+        for method_result in result.comparison:
+            if method_result.ok:
+                cells = [method_result.method, *_numbers(method_result), ""]
+            else:
+                cells = [method_result.method, "failed", "", "", "", "", str(method_result.error)]
+            lines.append("| " + " | ".join(_markdown_cell(cell) for cell in cells) + " |")
+        lines.append("")
+    lines.append(_CAPTION)
+    click.echo("\n".join(lines))
+
+
+def _print_csv(results: Sequence[FileComparison]) -> None:
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(_CSV_FIELDS)
+    for result in results:
+        for method_result in result.comparison:
+            calibration, evaluation = method_result.calibration, method_result.evaluation
+            if calibration is None or evaluation is None:
+                writer.writerow([result.name, method_result.method, "failed", *[""] * 9, method_result.error])
+                continue
+            numbers = [
+                evaluation.mean,
+                evaluation.std,
+                calibration.field_strength,
+                *calibration.semi_axes,
+                *calibration.offset,
+            ]
+            writer.writerow([result.name, method_result.method, "ok", *(repr(float(v)) for v in numbers), ""])
+    click.echo(buffer.getvalue(), nl=False)
+
+
+def _print_json(results: Sequence[FileComparison]) -> None:
+    document = [
+        {
+            "file": result.name,
+            "columns": list(result.columns),
+            "n_rows": result.n_rows,
+            "n_skipped": result.n_skipped,
+            **result.comparison.to_dict(),
+        }
+        for result in results
+    ]
+    click.echo(json.dumps(document, indent=2, allow_nan=False))
