@@ -1,0 +1,131 @@
+"""Firmware exports: write a :class:`magfit.Calibration` in the convention of the code that will use it.
+
+Every target states its own formula in the file it writes, next to how magfit's
+``corrected = matrix @ (raw - offset)`` maps onto it; ``docs/exports.md`` has the table.
+
+========== ========== ====================================================== ============
+name       extension  convention written                                     values in
+========== ========== ====================================================== ============
+json       .json      magfit's own, lossless (``Calibration.from_json``)     input unit
+c          .h         ``corrected = matrix * (raw - offset)``, C floats       input unit
+ardupilot  .param     ``mag += OFS; mag *= SCALE; mag = [DIA/ODI] * mag``    milligauss
+px4        .params    ``corrected = S * (raw - OFF)``, S from SCALE/ODIAG    gauss
+fusion     .h         ``softIronMatrix * (uncalibrated - hardIronOffset)``   input unit
+magcal     .m         MATLAB ``C = (D - b) * A``                              input unit
+========== ========== ====================================================== ============
+
+>>> import numpy as np, magfit
+>>> from magfit.export import export
+>>> cal = magfit.Calibration("ellipsoid", np.array([28.6, -40.0, -27.4]), np.eye(3), 52.9, unit="uT")
+>>> print(export(cal, "ardupilot").splitlines()[-10])
+COMPASS_OFS_X,-286
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+from ..calibration import Calibration
+from ..errors import MagfitError, OptionError
+from .ardupilot import write_ardupilot
+from .c_header import write_c_header
+from .fusion import write_fusion
+from .jsonfile import write_json
+from .magcal import write_magcal
+from .px4 import write_px4
+
+__all__ = ["FORMATS", "FormatSpec", "export"]
+
+
+@dataclass(frozen=True)
+class FormatSpec:
+    """An export target.
+
+    Attributes
+    ----------
+    name : str
+        The name :func:`export` takes (``"ardupilot"`` ...).
+    extension : str
+        File extension, with the dot (``".param"``).
+    summary : str
+        One line: what the file is and its convention.
+    unit : str or None
+        Unit of the exported values (``"mG"``), or None when they stay in the samples' unit.
+    writer : callable
+        ``writer(calibration, unit) -> str``; use :func:`export`, which checks its arguments.
+    """
+
+    name: str
+    extension: str
+    summary: str
+    unit: str | None
+    writer: Callable[[Calibration, str | None], str]
+
+
+_SPECS = (
+    FormatSpec(
+        "json", ".json", "magfit's own lossless JSON (schema version 1), read back by Calibration.from_json",
+        None, write_json,
+    ),
+    FormatSpec(
+        "c", ".h", "C header: static const float offset, matrix, field strength; corrected = matrix * (raw - offset)",
+        None, write_c_header,
+    ),
+    FormatSpec(
+        "ardupilot", ".param", "ArduPilot COMPASS_OFS/DIA/ODI/SCALE parameters in milligauss (Mission Planner)",
+        "mG", write_ardupilot,
+    ),
+    FormatSpec(
+        "px4", ".params", "PX4 CAL_MAG0_OFF/SCALE/ODIAG parameters in gauss (QGroundControl parameter file)",
+        "G", write_px4,
+    ),
+    FormatSpec(
+        "fusion", ".h", "x-io Fusion softIronMatrix / hardIronOffset (C header) with the imufusion Python names",
+        None, write_fusion,
+    ),
+    FormatSpec(
+        "magcal", ".m", "MATLAB magcal form: A, b, expmfs with C = (D - b) * A",
+        None, write_magcal,
+    ),
+)  # fmt: skip
+
+#: The export targets by name.
+FORMATS: Mapping[str, FormatSpec] = MappingProxyType({spec.name: spec for spec in _SPECS})
+
+
+def export(calibration: Calibration, format: str, *, unit: str | None = None) -> str:
+    """The text of a file that carries ``calibration`` in the convention of ``format``.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        The calibration to write (``corrected = matrix @ (raw - offset)``, input units).
+    format : str
+        A name in :data:`FORMATS`: ``"json"``, ``"c"``, ``"ardupilot"``, ``"px4"``, ``"fusion"``, ``"magcal"``.
+    unit : str or None
+        Unit of the samples the calibration was fitted on (``"uT"``, ``"nT"``, ``"mT"``, ``"mG"``,
+        ``"G"``/``"gauss"``, ``"counts"``; aliases such as ``"µT"`` accepted), overriding
+        ``calibration.unit``. ArduPilot and PX4 need a physical unit to convert to mG / G.
+
+    Returns
+    -------
+    str
+        The file's text, ending with a newline. No date inside: the same input gives the same text.
+
+    Raises
+    ------
+    OptionError
+        Unknown ``format`` (the message lists the valid ones) or unknown ``unit``.
+    ExportError
+        The target cannot represent the calibration (out of its accepted range, or a
+        non-symmetric matrix) or needs a unit conversion that the unit does not allow (counts, none).
+    """
+    spec = FORMATS.get(format) if isinstance(format, str) else None
+    if spec is None:
+        valid = ", ".join(f"{name} ({s.extension})" for name, s in FORMATS.items())
+        raise OptionError(f"unknown export format {format!r}; valid formats: {valid}")
+    if not isinstance(calibration, Calibration):
+        raise MagfitError(f"export() takes a magfit.Calibration, got {type(calibration).__name__}")
+    return spec.writer(calibration, unit)

@@ -1,0 +1,26 @@
+"""magfit's own format: the lossless JSON of :meth:`magfit.Calibration.to_json` (schema version 1).
+
+It records the schema and its version, the method, the unit, the convention
+``corrected = matrix @ (raw - offset)``, the offset, the matrix, the field strength, the number of
+samples and ``details`` (the method's options and fit statistics). Floats are written as their
+shortest round-trip representation, so :meth:`magfit.Calibration.from_json` gives back an equal
+calibration. No conversion, no limits: every calibration can be written.
+"""
+
+from __future__ import annotations
+
+from ..calibration import Calibration
+from ..units import canonical_name
+
+
+def write_json(calibration: Calibration, unit: str | None = None) -> str:
+    """The calibration as magfit JSON; ``unit`` (canonicalised, e.g. ``"µT"`` -> ``"uT"``) replaces the recorded unit.
+
+    Raises
+    ------
+    OptionError
+        ``unit`` is not a unit magfit knows.
+    """
+    if unit is not None:
+        calibration = calibration.with_unit(canonical_name(unit))
+    return calibration.to_json() + "\n"
