@@ -52,7 +52,7 @@ class MagfitGroup(click.Group):
             raise as_command_error(error) from None
 
 
-@click.group(cls=MagfitGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group("magfit", cls=MagfitGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, "-V", "--version", prog_name="magfit")
 @click.option("--debug", is_flag=True, help="Show the full traceback of any error (for bug reports).")
 def cli(debug: bool) -> None:
