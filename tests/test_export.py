@@ -139,8 +139,8 @@ def c_array(text: str, name: str) -> NDArray[np.float64]:
 
 
 def parse_fusion_c(text: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    matrix = re.search(r"FusionMatrix softIronMatrix = \{\.array = \{(.*)\}\};", text)
-    offset = re.search(r"FusionVector hardIronOffset = \{\.array = \{(.*)\}\};", text)
+    matrix = re.search(r"FusionMatrix softIronMatrix = \{(.*)\};", text)
+    offset = re.search(r"FusionVector hardIronOffset = \{(.*)\};", text)
     assert matrix and offset
     m = np.array([float(v) for v in re.findall(rf"({NUMBER})f", matrix.group(1))]).reshape(3, 3)  # row-major
     h = np.array([float(v) for v in re.findall(rf"({NUMBER})f", offset.group(1))])
@@ -254,10 +254,17 @@ def test_magcal_row_form_reproduces_apply(fitted_any_root: tuple[magfit.Calibrat
 # ---------------------------------------------------------------------- compiled C
 
 
-def _compile_and_run(tmp_path: Path, files: dict[str, str], main: str, samples: NDArray[np.float64]) -> NDArray:
-    compiler = shutil.which("cc") or shutil.which("gcc")
+COMPILERS = {"c": (("cc", "gcc", "clang"), "-std=c99"), "c++": (("c++", "g++", "clang++"), "-std=c++11")}
+
+
+def _compile_and_run(
+    tmp_path: Path, language: str, files: dict[str, str], main: str, samples: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Compile ``main`` with the headers ``files`` (warnings are errors), feed it ``samples``, read its output."""
+    names, standard = COMPILERS[language]
+    compiler = next((path for path in map(shutil.which, names) if path), None)
     if compiler is None:
-        pytest.skip("no C compiler")
+        pytest.skip(f"no {language} compiler")
     for name, content in files.items():
         (tmp_path / name).write_text(content)
     (tmp_path / "main.c").write_text(main)
@@ -265,7 +272,10 @@ def _compile_and_run(tmp_path: Path, files: dict[str, str], main: str, samples: 
     subprocess.run(
         [
             compiler,
-            "-std=c99",
+            "-x",
+            language,
+            standard,
+            "-pedantic",
             "-Wall",
             "-Wextra",
             "-Werror",
@@ -284,7 +294,8 @@ def _compile_and_run(tmp_path: Path, files: dict[str, str], main: str, samples: 
     return np.loadtxt(result.stdout.splitlines())
 
 
-def test_c_header_compiles_and_corrects(tmp_path: Path, real_data_dir: Path) -> None:
+@pytest.mark.parametrize("language", ["c", "c++"])
+def test_c_header_compiles_and_corrects(tmp_path: Path, real_data_dir: Path, language: str) -> None:
     samples = _fxos(real_data_dir)
     cal = magfit.fit(samples, method="ellipsoid", root="cholesky").with_unit("uT")  # non-symmetric matrix
     main = """#include <stdio.h>
@@ -299,12 +310,13 @@ int main(void)
     return 0;
 }
 """
-    out = _compile_and_run(tmp_path, {"cal.h": export(cal, "c")}, main, samples)
+    out = _compile_and_run(tmp_path, language, {"cal.h": export(cal, "c")}, main, samples)
     _close(out[:, :3], cal.apply(samples), samples, RTOL_FLOAT32)
     assert out[0, 3] == pytest.approx(cal.field_strength, rel=1e-7)
 
 
-def test_fusion_header_compiles_with_fusions_types(tmp_path: Path, real_data_dir: Path) -> None:
+@pytest.mark.parametrize("language", ["c", "c++"])
+def test_fusion_header_compiles_with_fusions_types(tmp_path: Path, real_data_dir: Path, language: str) -> None:
     samples = _fxos(real_data_dir)
     cal = magfit.fit(samples, method="ellipsoid", root="cholesky").with_unit("uT")  # non-symmetric matrix
     # Fusion's own layouts (FusionMath.h): a row-major union of float array[3][3] and named elements.
@@ -330,7 +342,7 @@ int main(void)
     return 0;
 }
 """
-    out = _compile_and_run(tmp_path, {"cal.h": export(cal, "fusion"), "Fusion.h": fusion_h}, main, samples)
+    out = _compile_and_run(tmp_path, language, {"cal.h": export(cal, "fusion"), "Fusion.h": fusion_h}, main, samples)
     _close(out, cal.apply(samples), samples, RTOL_FLOAT32)
 
 

@@ -8,11 +8,13 @@ Fusion's magnetometer model (``FusionModelMagnetic`` in FusionModel.h, called
 is magfit's ``corrected = matrix @ (raw - offset)`` (paper eq. 5) symbol for symbol:
 ``softIronMatrix = matrix`` (``FusionMatrix`` is row-major: ``.array[i][j]`` is row i, column j) and
 ``hardIronOffset = offset``, in the samples' unit (Fusion normalises the field, so any unit works,
-raw counts included). Fusion releases before the 2023 model change (x-io Fusion PR #121) computed
-``S * uncalibrated - h`` instead; the header gives the offset those releases need, ``matrix @ offset``,
-in a comment. The same numbers appear as the Python names ``soft_iron_matrix`` and
-``hard_iron_offset`` (numpy arrays) for ``imufusion.model_magnetic(uncalibrated, soft_iron_matrix,
-hard_iron_offset)``. No limits: every calibration can be written.
+raw counts included). The initialisers fill the unions' first member, ``.array``, with plain braces
+(no designators), so the header compiles as C99 and as C++. Fusion releases before the 2023 model
+change (x-io Fusion PR #121) computed ``S * uncalibrated - h`` instead; the header gives the offset
+those releases need, ``matrix @ offset``, in a comment. The same numbers appear as the Python
+names ``soft_iron_matrix`` and ``hard_iron_offset`` (numpy arrays) for
+``imufusion.model_magnetic(uncalibrated, soft_iron_matrix, hard_iron_offset)``. No limits: every
+calibration can be written.
 """
 
 from __future__ import annotations
@@ -65,8 +67,8 @@ def write_fusion(calibration: Calibration, unit: str | None = None) -> str:
 
 #include "Fusion.h"
 
-static const FusionMatrix softIronMatrix = {{.array = {{{c_rows}}}}};
-static const FusionVector hardIronOffset = {{.array = {{{c_offset}}}}};
+static const FusionMatrix softIronMatrix = {{{{{c_rows}}}}};
+static const FusionVector hardIronOffset = {{{{{c_offset}}}}};
 
 #endif /* {GUARD} */
 """
