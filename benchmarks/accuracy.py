@@ -1,0 +1,1186 @@
+"""Accuracy benchmark: every magfit method and the peers a user would pick instead, side by side.
+
+Run (from the checkout, in the benchmark's own environment made by ``benchmarks/setup_peers.sh``)::
+
+    benchmarks/.peers-venv/bin/python benchmarks/accuracy.py
+
+It simulates the paper's model (eq. 1), ``B_p = W R B (cos δ, 0, sin δ)ᵀ + V``, with a known truth, fits
+every method to the same samples and scores the fits against the truth; then it fits the real recordings
+in ``../shared/data/real`` and scores them on held-out samples. It writes ``benchmarks/results/accuracy.md``
+(the tables and the targets, PASS/FAIL) and ``accuracy.json`` (every number), headed by the command
+line and the versions. ``--smoke`` runs a tiny grid in seconds (what the test runs).
+
+Metrics (each per trial, then aggregated over the seeded trials of a case)
+--------------------------------------------------------------------------
+calibration heading error
+    The fitted calibration applied to noise-free readings of the true distorted field
+    (``Simulation.distort``) at level attitude (roll = pitch = 0) for 360 headings, 1° apart; the RMS
+    over headings of the difference between the heading ``atan2(y, x)`` of the calibrated vector and of
+    the truly calibrated vector ``sim.truth.apply``. Only ``A = matrixᵀ matrix`` is identifiable: a
+    correct fit may differ from the truth by a rotation Q. Before comparing, the fitted output is
+    turned by the rotation that best maps it onto the true calibrated field over *all* directions,
+    ``Q = polar(M_true M_fit⁻¹)``: for calibrated vectors ``c = M_fit (x − V_fit)`` of a field uniform
+    on the sphere, ``E|Q c − t|²`` is smallest for that Q (orthogonal Procrustes, eq. (P) below), and
+    it does not depend on the test headings, the offset error or the scale. A correct fit scores 0; a
+    constant heading rotation that no magnetometer-only calibration can observe is not counted, every
+    other error is. Aggregated as the RMS over trials (comparable with the Cramér–Rao floor).
+offset error
+    ``|V_fit − V_true| / B`` (dimensionless; RMS over trials).
+shape error
+    ``‖Â − Â_true‖_F / ‖Â_true‖_F`` with ``Â = A / det(A)^(1/3)``, ``A = matrixᵀ matrix``: the soft-iron
+    shape with scale removed (RMS over trials).
+sphere distances
+    The paper's section V metric, ``magfit.evaluate``: mean and std of ``|apply(x, normalized=True)| − 1``
+    on the fitted samples and on held-out samples (10 000 fresh samples of the same simulation, same
+    noise and attitudes, without spikes). Averaged over trials.
+floor
+    The Cramér–Rao bound of the geometric noise model (each sample a point of the true ellipsoid plus
+    isotropic Gaussian noise; the points are nuisance parameters), propagated to the heading error by
+    the delta method; see :func:`cramer_rao_heading_deg`.
+
+(P): with ``t = M_true(x − V_true)`` uniform on the sphere and ``c = M_fit(x − V_fit)``,
+``argmax_Q E tr(Q c tᵀ) = argmax_Q tr(Q M_fit M_true⁻¹) ∝`` the orthogonal polar factor of
+``(M_fit M_true⁻¹)ᵀ``, i.e. ``polar(M_true M_fit⁻¹)`` (Schönemann 1966, orthogonal Procrustes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import time
+import zlib
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+import magfit
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+DEFAULT_REAL_DATA = Path(os.environ.get("MAGFIT_REAL_DATA", ROOT.parent / "shared" / "data" / "real"))
+HELDOUT_SAMPLES = 10_000
+N_HEADINGS = 360
+MAX_TILT_DEG = 20.0
+SPIKE_FRACTION = 0.02
+#: Spike magnitudes, as fractions of the field strength B: a random direction and a length uniform in
+#: this range, added to 2 % of the samples (glitches of a bus read or a passing magnet).
+SPIKE_RANGE = (0.2, 1.0)
+
+# The generic sensor of the noise and N sweeps (B = 1, so noise is a fraction of the field): a moderate
+# soft iron (semi-axes 1.25, 1.0, 0.8, turned 30° about (1, 2, 3)) and a hard iron of about the field.
+_GENERIC_ROTATION = Rotation.from_rotvec(np.radians(30.0) * np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)).as_matrix()
+GENERIC_SOFT_IRON = _GENERIC_ROTATION @ np.diag([1.25, 1.0, 0.8]) @ _GENERIC_ROTATION.T
+GENERIC_HARD_IRON = np.array([0.5, -0.3, 0.8])
+GENERIC_INCLINATION_DEG = 64.0
+
+# ====================================================================== scenarios
+
+
+@dataclass(frozen=True)
+class Case:
+    """One simulated scenario of the grid, run for ``trials`` seeded trials.
+
+    Attributes
+    ----------
+    name : str
+        Row label of the tables.
+    n : int
+        Samples per fit.
+    noise : float
+        Noise standard deviation per axis as a fraction of the field strength B (for a paper scenario,
+        ``None`` keeps the sensor's own noise).
+    orientations : {"uniform", "restricted"}
+        Full tumble, or full yaw with roll and pitch within ±20°.
+    spikes : bool
+        Whether 2 % of the samples carry a spike (see ``SPIKE_RANGE``).
+    paper : tuple of (sensor, disturbance) or None
+        A paper scenario (``magfit.scenario``) instead of the generic sensor.
+    trials : int
+        Number of seeded trials.
+    seed_key : str
+        Cases with the same key draw the same samples trial by trial (the spike case reuses the samples
+        of its spike-free twin, spikes added).
+    heldout : int
+        Number of held-out samples per trial.
+    """
+
+    name: str
+    n: int
+    noise: float | None
+    orientations: str = "uniform"
+    spikes: bool = False
+    paper: tuple[str, str] | None = None
+    trials: int = 10
+    seed_key: str = ""
+    heldout: int = HELDOUT_SAMPLES
+
+    @property
+    def full_tumble(self) -> bool:
+        """Uniform attitudes (every case but the restricted-attitude one)."""
+        return self.orientations == "uniform"
+
+    @property
+    def gaussian(self) -> bool:
+        """Full tumble with Gaussian noise only: the cases the Cramér–Rao floor applies to."""
+        return self.full_tumble and not self.spikes
+
+    def _scenario(self) -> magfit.Scenario | None:
+        return None if self.paper is None else magfit.scenario(*self.paper)
+
+    @property
+    def field_strength(self) -> float:
+        scenario = self._scenario()
+        return 1.0 if scenario is None else scenario.field_strength
+
+    @property
+    def noise_std(self) -> float:
+        """Noise standard deviation per axis, input units."""
+        scenario = self._scenario()
+        if scenario is None:
+            return float(self.noise or 0.0)
+        return scenario.noise if self.noise is None else self.noise * scenario.field_strength
+
+    def simulate(self, n: int, rng: np.random.Generator) -> magfit.Simulation:
+        """``n`` samples of this case's sensor (no spikes)."""
+        scenario = self._scenario()
+        if scenario is not None:
+            return scenario.simulate(
+                n,
+                seed=rng,
+                orientations=self.orientations,
+                max_tilt_deg=MAX_TILT_DEG,
+                noise=None if self.noise is None else self.noise * scenario.field_strength,
+            )
+        return magfit.simulate(
+            n,
+            soft_iron=GENERIC_SOFT_IRON,
+            hard_iron=GENERIC_HARD_IRON,
+            field_strength=1.0,
+            inclination_deg=GENERIC_INCLINATION_DEG,
+            noise=self.noise_std,
+            orientations=self.orientations,
+            max_tilt_deg=MAX_TILT_DEG,
+            seed=rng,
+        )
+
+    def trial_data(
+        self, root_seed: int, trial: int
+    ) -> tuple[magfit.Simulation, NDArray[np.float64], NDArray[np.float64]]:
+        """The simulation, the samples to fit (spikes added if any) and held-out samples of one trial."""
+        key = zlib.crc32((self.seed_key or self.name).encode())
+        streams = np.random.SeedSequence([root_seed, key, trial]).spawn(3)
+        simulation = self.simulate(self.n, np.random.default_rng(streams[0]))
+        heldout = self.simulate(self.heldout, np.random.default_rng(streams[1])).samples
+        samples = simulation.samples
+        if self.spikes:
+            samples = add_spikes(samples, simulation.field_strength, np.random.default_rng(streams[2]))
+        return simulation, samples, heldout
+
+
+def add_spikes(
+    samples: NDArray[np.float64], field_strength: float, rng: np.random.Generator, fraction: float = SPIKE_FRACTION
+) -> NDArray[np.float64]:
+    """A copy of ``samples`` (N, 3) with ``fraction`` of them displaced by a random spike.
+
+    Each spike has a uniformly random direction and a length uniform in ``SPIKE_RANGE`` × ``field_strength``.
+    """
+    spiked = samples.copy()
+    count = round(fraction * len(samples))
+    rows = rng.choice(len(samples), count, replace=False)
+    directions = rng.normal(size=(count, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    lengths = rng.uniform(*SPIKE_RANGE, count) * field_strength
+    spiked[rows] += directions * lengths[:, None]
+    return spiked
+
+
+def full_grid(trials_scale: float = 1.0) -> list[Case]:
+    """The benchmark's grid (see the module docstring of the results for why it is not a full product).
+
+    Noise sweep 0.5, 2, 5, 10 % at N = 10 000; N sweep 100 … 100 000 at 10 % and at 2 % noise; the special
+    scenarios (restricted attitude, 2 % spikes, the paper's steel and smartphone cases) at N = 1000. Trial
+    counts fall with N so that each size costs about the same and the grid runs in about 15 minutes.
+    """
+    trials = {100: 200, 1000: 60, 10_000: 16, 100_000: 6}
+
+    def count(n: int) -> int:
+        return max(2, round(trials[n] * trials_scale))
+
+    cases: list[Case] = []
+    for noise in (0.005, 0.02, 0.05, 0.10):
+        n = 10_000
+        cases.append(Case(f"tumble σ={noise:.1%} N={n}", n, noise, trials=count(n), seed_key=f"generic-{noise}-{n}"))
+    for noise in (0.10, 0.02):
+        for n in (100, 1000, 100_000):
+            cases.append(
+                Case(f"tumble σ={noise:.0%} N={n}", n, noise, trials=count(n), seed_key=f"generic-{noise}-{n}")
+            )
+    n = 1000
+    cases.append(
+        Case(f"restricted ±20° σ=2% N={n}", n, 0.02, orientations="restricted", trials=count(n), seed_key="restricted")
+    )
+    cases.append(
+        Case(f"tumble σ=2% N={n} + 2% spikes", n, 0.02, spikes=True, trials=count(n), seed_key=f"generic-0.02-{n}")
+    )
+    for sensor in ("mpu9250", "ellipse2a"):
+        for disturbance in ("steel", "smartphone"):
+            cases.append(
+                Case(
+                    f"paper {sensor}/{disturbance} N={n}",
+                    n,
+                    None,
+                    paper=(sensor, disturbance),
+                    trials=count(n),
+                    seed_key=f"paper-{sensor}-{disturbance}",
+                )
+            )
+    return _ordered(cases)
+
+
+def smoke_grid() -> list[Case]:
+    """A tiny grid for the test: two cases, two trials each, seconds to run."""
+    return [
+        Case("tumble σ=0.5% N=1000", 1000, 0.005, trials=2, seed_key="smoke-tumble", heldout=2000),
+        Case(
+            "restricted ±20° σ=2% N=300",
+            300,
+            0.02,
+            orientations="restricted",
+            trials=2,
+            seed_key="smoke-restricted",
+            heldout=2000,
+        ),
+    ]
+
+
+def _ordered(cases: list[Case]) -> list[Case]:
+    """Sweeps first (by noise, then N), the special scenarios after."""
+
+    def key(case: Case) -> tuple[int, float, int]:
+        special = case.paper is not None or case.spikes or not case.full_tumble
+        return (int(special), -(case.noise or 0.0) if not special else 0.0, case.n)
+
+    return sorted(cases, key=key)
+
+
+# ====================================================================== metrics
+
+
+def best_rotation(fitted_matrix: NDArray[np.float64], true_matrix: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The rotation Q that best turns ``fitted_matrix @ d`` into ``true_matrix @ d`` over all directions.
+
+    Parameters
+    ----------
+    fitted_matrix, true_matrix : ndarray, shape (3, 3)
+        Soft-iron corrections (any positive scale, det > 0).
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        ``polar(true_matrix @ inv(fitted_matrix))``: the orthogonal factor of its polar decomposition
+        (eq. (P) of the module docstring), a proper rotation.
+    """
+    left, _, right = np.linalg.svd(true_matrix @ np.linalg.inv(fitted_matrix))
+    rotation = left @ right
+    if np.linalg.det(rotation) < 0:  # only for a reflecting fit; keep Q a rotation
+        left[:, -1] *= -1
+        rotation = left @ right
+    return rotation
+
+
+def level_readings(simulation: magfit.Simulation, n_headings: int = N_HEADINGS) -> NDArray[np.float64]:
+    """Noise-free raw readings at roll = pitch = 0 and ``n_headings`` yaws 0 … 360°, shape (n_headings, 3)."""
+    yaw = np.arange(n_headings) * (360.0 / n_headings)
+    attitudes = np.column_stack([np.zeros(n_headings), np.zeros(n_headings), yaw])
+    return simulation.distort(attitudes)
+
+
+def heading_differences_deg(
+    offset: NDArray[np.float64],
+    matrix: NDArray[np.float64],
+    simulation: magfit.Simulation,
+    raw: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Heading of ``Q matrix (raw − offset)`` minus that of the true calibration, degrees, in (−180, 180].
+
+    ``Q = best_rotation(matrix, truth.matrix)``; the heading of a level vector is ``atan2(y, x)``.
+    """
+    rotation = best_rotation(matrix, simulation.truth.matrix)
+    fitted = (raw - offset) @ (rotation @ matrix).T
+    true = simulation.truth.apply(raw)
+    difference = np.degrees(np.arctan2(fitted[:, 1], fitted[:, 0]) - np.arctan2(true[:, 1], true[:, 0]))
+    return (difference + 180.0) % 360.0 - 180.0
+
+
+def heading_error_deg(
+    calibration: magfit.Calibration, simulation: magfit.Simulation, n_headings: int = N_HEADINGS
+) -> float:
+    """Calibration heading error: RMS over level headings of the heading difference, degrees (see module doc)."""
+    raw = level_readings(simulation, n_headings)
+    differences = heading_differences_deg(calibration.offset, calibration.matrix, simulation, raw)
+    return float(np.sqrt(np.mean(differences**2)))
+
+
+def offset_error(calibration: magfit.Calibration, simulation: magfit.Simulation) -> float:
+    """``|V_fit − V_true| / B``, dimensionless."""
+    return float(np.linalg.norm(calibration.offset - simulation.truth.offset) / simulation.field_strength)
+
+
+def normalized_shape(matrix: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``A / det(A)^(1/3)`` with ``A = matrixᵀ matrix``: the ellipsoid's shape without its scale."""
+    shape = matrix.T @ matrix
+    return shape / np.linalg.det(shape) ** (1.0 / 3.0)
+
+
+def shape_error(calibration: magfit.Calibration, simulation: magfit.Simulation) -> float:
+    """``‖Â − Â_true‖_F / ‖Â_true‖_F`` of the scale-free shapes (:func:`normalized_shape`)."""
+    fitted = normalized_shape(calibration.matrix)
+    true = normalized_shape(simulation.truth.matrix)
+    return float(np.linalg.norm(fitted - true) / np.linalg.norm(true))
+
+
+# ====================================================================== the floor
+
+
+def _shape_from_parameters(theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    a = theta[3:]
+    return np.array([[a[0], a[3], a[4]], [a[3], a[1], a[5]], [a[4], a[5], a[2]]])
+
+
+def _parameters(simulation: magfit.Simulation) -> NDArray[np.float64]:
+    """θ = (V, a): the offset and the six entries of A with ``(x − V)ᵀ A (x − V) = 1`` on the true ellipsoid."""
+    shape = simulation.truth.ellipsoid_matrix
+    return np.concatenate([simulation.truth.offset, shape[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]])
+
+
+def geometric_scores(theta: NDArray[np.float64], points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per-point normal sensitivity g = (∂f/∂θ) / |∇ₓf| of ``f = (x − V)ᵀ A (x − V) − 1``, shape (N, 9).
+
+    For a point x on the ellipsoid plus noise ``ε ~ N(0, σ² I)``, with the point's position on the
+    surface a nuisance parameter, the Fisher information about θ is ``g gᵀ / σ²``: the tangential
+    components of ``∂x/∂θ`` are absorbed by the nuisance, only the normal one, ``−(∂f/∂θ)/|∇ₓf|``, is left.
+    """
+    shape = _shape_from_parameters(theta)
+    d = points - theta[:3]
+    gradient = d @ shape  # ½ ∇ₓf (A symmetric)
+    d_offset = -2.0 * gradient  # ∂f/∂V
+    d_shape = np.column_stack(
+        [d[:, 0] ** 2, d[:, 1] ** 2, d[:, 2] ** 2, 2 * d[:, 0] * d[:, 1], 2 * d[:, 0] * d[:, 2], 2 * d[:, 1] * d[:, 2]]
+    )
+    return np.column_stack([d_offset, d_shape]) / (2.0 * np.linalg.norm(gradient, axis=1, keepdims=True))
+
+
+def unit_fisher_information(theta: NDArray[np.float64], points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Expected Fisher information of one sample at noise σ = 1, ``E[g gᵀ]`` over ``points`` (9, 9)."""
+    scores = geometric_scores(theta, points)
+    return scores.T @ scores / len(points)
+
+
+def heading_jacobian(simulation: magfit.Simulation, n_headings: int = N_HEADINGS) -> NDArray[np.float64]:
+    """∂(heading difference, degrees)/∂θ at the truth by central differences, shape (n_headings, 9).
+
+    The heading is computed exactly as the metric does (symmetric root of A, best rotation), so the
+    propagation includes the rotation the metric forgives.
+    """
+    theta = _parameters(simulation)
+    raw = level_readings(simulation, n_headings)
+    steps = 1e-6 * np.concatenate([np.full(3, simulation.field_strength), np.full(6, np.abs(theta[3:6]).max())])
+
+    def headings(parameters: NDArray[np.float64]) -> NDArray[np.float64]:
+        values, vectors = np.linalg.eigh(_shape_from_parameters(parameters))
+        root = (vectors * np.sqrt(values)) @ vectors.T
+        return heading_differences_deg(parameters[:3], root, simulation, raw)
+
+    columns = []
+    for index, step in enumerate(steps):
+        delta = np.zeros(9)
+        delta[index] = step
+        columns.append((headings(theta + delta) - headings(theta - delta)) / (2.0 * step))
+    return np.column_stack(columns)
+
+
+def cramer_rao_heading_deg(case: Case, n_points: int = 200_000, seed: int = 7) -> float:
+    """Cramér–Rao floor of the calibration heading error of ``case``, degrees.
+
+    Fisher information ``F = N E[g gᵀ] / σ²`` of the geometric noise model (:func:`geometric_scores`),
+    expectation over ``n_points`` noise-free samples of the case's attitude distribution; the delta
+    method gives ``E[mean_k δh_k²] ≈ mean_k (J F⁻¹ Jᵀ)_kk`` with J = :func:`heading_jacobian`. It bounds
+    unbiased estimators; quantisation (MPU-9250 counts) is ignored (it adds 1/12 count² to σ² = 41).
+    """
+    simulation = Case(case.name, n_points, 0.0, case.orientations, paper=case.paper).simulate(
+        n_points, np.random.default_rng(seed)
+    )
+    theta = _parameters(simulation)
+    information = unit_fisher_information(theta, simulation.clean)
+    jacobian = heading_jacobian(simulation)
+    covariance = np.linalg.inv(information) * case.noise_std**2 / case.n
+    return float(np.sqrt(np.mean(np.einsum("ki,ij,kj->k", jacobian, covariance, jacobian))))
+
+
+# ====================================================================== running the methods
+
+
+@dataclass
+class Outcome:
+    """The scores of one method on one trial (or the reason it failed)."""
+
+    heading_deg: float | None = None
+    offset_error: float | None = None
+    shape_error: float | None = None
+    fit_mean: float | None = None
+    fit_std: float | None = None
+    heldout_mean: float | None = None
+    heldout_std: float | None = None
+    seconds: float | None = None
+    error: str | None = None
+    details: dict[str, Any] | None = None
+
+
+Fitter = Callable[[NDArray[np.float64], Any], magfit.Calibration]
+#: Column order: the paper's three methods, then the unbiased, restricted, robust and automatic ones.
+PREFERRED_ORDER = ("ellipsoid", "sphere", "minmax", "als", "ml", "diag", "robust", "auto")
+
+
+def method_table(methods: Sequence[str] | None, peers: bool) -> dict[str, Fitter]:
+    """The fitters to run, by column name: magfit's methods (``magfit.METHODS`` order) then the peers."""
+    table: dict[str, Fitter] = {}
+    ordered = [name for name in PREFERRED_ORDER if name in magfit.METHODS]
+    for name in ordered + [name for name in magfit.METHODS if name not in ordered]:
+        if methods is None or name in methods:
+            table[name] = _magfit_fitter(name)
+    if peers:
+        from peers import PEERS  # the sibling module; imported here so that magfit-only runs need no peer
+
+        for name, peer in PEERS.items():
+            if methods is None or name in methods:
+                table[name] = peer.run
+    return table
+
+
+def _magfit_fitter(name: str) -> Fitter:
+    def run(samples: NDArray[np.float64], context: Any) -> magfit.Calibration:
+        return magfit.fit(samples, method=name)
+
+    return run
+
+
+def _failure_message(error: BaseException) -> str:
+    message = str(error).strip().splitlines()[0] if str(error).strip() else ""
+    return f"{type(error).__name__}: {message}" if message else type(error).__name__
+
+
+def fit_once(
+    fitter: Fitter, samples: NDArray[np.float64], context: Any
+) -> tuple[magfit.Calibration | None, str, float]:
+    """Run one fitter; returns (calibration or None, failure message, seconds). Never raises."""
+    start = time.perf_counter()
+    try:
+        calibration = fitter(samples, context)
+    except Exception as error:  # a failing method is a result, recorded with its reason
+        return None, _failure_message(error), time.perf_counter() - start
+    return calibration, "", time.perf_counter() - start
+
+
+def score(
+    calibration: magfit.Calibration,
+    simulation: magfit.Simulation,
+    samples: NDArray[np.float64],
+    heldout: NDArray[np.float64],
+) -> Outcome:
+    """Every metric of one fitted calibration."""
+    fitted = magfit.evaluate(calibration, samples)
+    unseen = magfit.evaluate(calibration, heldout)
+    return Outcome(
+        heading_deg=heading_error_deg(calibration, simulation),
+        offset_error=offset_error(calibration, simulation),
+        shape_error=shape_error(calibration, simulation),
+        fit_mean=fitted.mean,
+        fit_std=fitted.std,
+        heldout_mean=unseen.mean,
+        heldout_std=unseen.std,
+    )
+
+
+def _peer_context(case: Case, simulation: magfit.Simulation) -> Any:
+    from peers import PeerContext
+
+    delta = np.radians(simulation.inclination_deg)
+    field_vector = simulation.field_strength * np.array([np.cos(delta), 0.0, np.sin(delta)])
+    return PeerContext(field_vector=field_vector, noise=case.noise_std)
+
+
+def run_case(
+    case: Case, fitters: Mapping[str, Fitter], root_seed: int, peers: bool, keep_details: Iterable[str] = ()
+) -> dict[str, list[Outcome]]:
+    """Every fitter on every trial of ``case`` (the same samples for all); outcomes by method name."""
+    outcomes: dict[str, list[Outcome]] = {name: [] for name in fitters}
+    keep = set(keep_details)
+    for trial in range(case.trials):
+        simulation, samples, heldout = case.trial_data(root_seed, trial)
+        context = _peer_context(case, simulation) if peers else None
+        for name, fitter in fitters.items():
+            calibration, error, seconds = fit_once(fitter, samples, context)
+            if calibration is None:
+                outcome = Outcome(error=error)
+            else:
+                outcome = score(calibration, simulation, samples, heldout)
+                if name in keep:
+                    outcome.details = dict(calibration.details)
+            outcome.seconds = seconds
+            outcomes[name].append(outcome)
+    return outcomes
+
+
+# ====================================================================== aggregation
+
+
+@dataclass
+class Summary:
+    """One cell: a method on a case, aggregated over its trials."""
+
+    trials: int
+    failed: int
+    heading_deg: float | None
+    heading_sem: float | None
+    offset_error: float | None
+    shape_error: float | None
+    fit_mean: float | None
+    fit_std: float | None
+    heldout_mean: float | None
+    heldout_std: float | None
+    seconds: float
+    first_error: str | None = None
+    errors: dict[str, int] = field(default_factory=dict)
+
+
+def _rms(values: Sequence[float]) -> float | None:
+    return float(np.sqrt(np.mean(np.square(values)))) if len(values) else None
+
+
+def _mean(values: Sequence[float]) -> float | None:
+    return float(np.mean(values)) if len(values) else None
+
+
+def summarise(outcomes: Sequence[Outcome]) -> Summary:
+    """RMS over trials of the errors, mean of the sphere statistics, failures counted by message."""
+    ok = [o for o in outcomes if o.error is None]
+    errors: dict[str, int] = {}
+    for outcome in outcomes:
+        if outcome.error is not None:
+            errors[outcome.error] = errors.get(outcome.error, 0) + 1
+    headings = [o.heading_deg for o in ok if o.heading_deg is not None]
+    rms = _rms(headings)
+    # Standard error of an RMS by the delta method: sd(h²) / (2 rms √n).
+    sem = None
+    if rms and len(headings) > 1:
+        sem = float(np.std(np.square(headings), ddof=1) / (2.0 * rms * np.sqrt(len(headings))))
+    return Summary(
+        trials=len(outcomes),
+        failed=len(outcomes) - len(ok),
+        heading_deg=rms,
+        heading_sem=sem,
+        offset_error=_rms([o.offset_error for o in ok if o.offset_error is not None]),
+        shape_error=_rms([o.shape_error for o in ok if o.shape_error is not None]),
+        fit_mean=_mean([o.fit_mean for o in ok if o.fit_mean is not None]),
+        fit_std=_mean([o.fit_std for o in ok if o.fit_std is not None]),
+        heldout_mean=_mean([o.heldout_mean for o in ok if o.heldout_mean is not None]),
+        heldout_std=_mean([o.heldout_std for o in ok if o.heldout_std is not None]),
+        seconds=float(np.mean([o.seconds or 0.0 for o in outcomes])),
+        first_error=next((o.error for o in outcomes if o.error is not None), None),
+        errors=errors,
+    )
+
+
+def paired_ratio(outcomes: Mapping[str, Sequence[Outcome]], numerator: str, denominator: str) -> float | None:
+    """RMS heading error of ``numerator`` over that of ``denominator``, on the trials both fitted."""
+    pairs = [
+        (a.heading_deg, b.heading_deg)
+        for a, b in zip(outcomes[numerator], outcomes[denominator], strict=True)
+        if a.heading_deg is not None and b.heading_deg is not None
+    ]
+    if not pairs:
+        return None
+    top, bottom = _rms([p[0] for p in pairs]), _rms([p[1] for p in pairs])
+    return None if not bottom else float(top / bottom)  # type: ignore[operator]
+
+
+# ====================================================================== targets
+
+
+@dataclass
+class Target:
+    """One checked target: PASS, FAIL or NOT RUN, with the numbers behind it."""
+
+    name: str
+    status: str
+    detail: str
+    items: list[str] = field(default_factory=list)
+
+
+def _status(ok: bool) -> str:
+    return "PASS" if ok else "FAIL"
+
+
+def weak_direction(details: Mapping[str, Any] | None) -> str | None:
+    """The weakly determined direction named in a calibration's details, if any.
+
+    Looks for a key containing "weak" (or "direction") anywhere in the (nested) details and returns its
+    value as text; ``None`` when the calibration names none.
+    """
+    if not details:
+        return None
+    stack: list[tuple[str, Any]] = list(details.items())
+    while stack:
+        key, value = stack.pop(0)
+        if isinstance(value, Mapping):
+            stack.extend((f"{key}.{k}", v) for k, v in value.items())
+            continue
+        lowered = key.lower()
+        if ("weak" in lowered or "direction" in lowered or "unobserv" in lowered) and value not in (None, "", []):
+            return f"{key} = {value}"
+    return None
+
+
+def check_targets(cases: Sequence[Case], results: Mapping[str, Mapping[str, Sequence[Outcome]]]) -> list[Target]:
+    """Evaluate the issue's targets on the results (``results[case.name][method]``)."""
+    targets: list[Target] = []
+    by_name = {case.name: case for case in cases}
+
+    def have(case_name: str, *methods: str) -> bool:
+        return case_name in results and all(m in results[case_name] for m in methods)
+
+    def absent(what: str, methods: Iterable[str]) -> Target:
+        return Target(what, "NOT RUN", f"needs methods {', '.join(methods)} and the matching case in the grid")
+
+    # 1-2. The bias of the algebraic fit at 10 % noise.
+    for n, limit in ((100_000, 0.5), (10_000, 0.75)):
+        case_name = next((c.name for c in cases if c.gaussian and c.noise == 0.10 and c.n == n and not c.paper), "")
+        for method in ("als", "ml"):
+            what = f"σ=10%, N={n}: {method} ≤ {limit} × ellipsoid"
+            if not have(case_name, method, "ellipsoid"):
+                targets.append(absent(what, (method, "ellipsoid")))
+                continue
+            ratio = paired_ratio(results[case_name], method, "ellipsoid")
+            targets.append(
+                Target(what, _status(ratio is not None and ratio <= limit), f"ratio {_fmt_ratio(ratio)} on {case_name}")
+            )
+    # 3. Nowhere on full-tumble data more than 5 % worse than ellipsoid.
+    for method in ("als", "ml"):
+        what = f"{method} ≤ 1.05 × ellipsoid on every full-tumble case"
+        tumble = [c.name for c in cases if c.full_tumble and have(c.name, method, "ellipsoid")]
+        if not tumble:
+            targets.append(absent(what, (method, "ellipsoid")))
+            continue
+        ratios = {name: paired_ratio(results[name], method, "ellipsoid") for name in tumble}
+        bad = {name: r for name, r in ratios.items() if r is None or r > 1.05}
+        worst = max(ratios.items(), key=lambda item: item[1] if item[1] is not None else np.inf)
+        detail = f"worst ratio {_fmt_ratio(worst[1])} ({worst[0]})"
+        if bad:
+            detail += "; over 1.05 on: " + "; ".join(f"{name} ({_fmt_ratio(r)})" for name, r in bad.items())
+        targets.append(Target(what, _status(not bad), detail))
+    # 4. ml within 15 % of the floor on every full-tumble (Gaussian) case.
+    what = "ml ≤ 1.15 × Cramér–Rao floor on every full-tumble case"
+    gaussian = [c.name for c in cases if c.gaussian and have(c.name, "ml", "floor")]
+    if not gaussian:
+        targets.append(absent(what, ("ml",)))
+    else:
+        ratios = {}
+        for name in gaussian:
+            ml = summarise(results[name]["ml"])
+            floor = results[name]["floor"][0].heading_deg
+            ratios[name] = None if ml.heading_deg is None or not floor else ml.heading_deg / floor
+        bad = {name: r for name, r in ratios.items() if r is None or r > 1.15}
+        worst = max(ratios.items(), key=lambda item: item[1] if item[1] is not None else np.inf)
+        detail = f"worst ml/floor {_fmt_ratio(worst[1])} ({worst[0]})"
+        if bad:
+            detail += "; over 1.15 on: " + "; ".join(f"{name} ({_fmt_ratio(r)})" for name, r in bad.items())
+        targets.append(Target(what, _status(not bad), detail))
+    # 5. robust with 2 % spikes vs the same samples without.
+    what = "robust with 2% spikes ≤ 1.25 × robust on the same samples without spikes"
+    spiked = next((c for c in cases if c.spikes), None)
+    twin = next((c for c in cases if spiked and not c.spikes and c.seed_key == spiked.seed_key), None)
+    if spiked is None or twin is None or not have(spiked.name, "robust") or not have(twin.name, "robust"):
+        targets.append(absent(what, ("robust",)))
+    else:
+        with_spikes = summarise(results[spiked.name]["robust"]).heading_deg
+        without = summarise(results[twin.name]["robust"]).heading_deg
+        ratio = None if with_spikes is None or not without else with_spikes / without
+        targets.append(
+            Target(
+                what,
+                _status(ratio is not None and ratio <= 1.25),
+                f"{_fmt_deg(with_spikes)} vs {_fmt_deg(without)}: ratio {_fmt_ratio(ratio)}",
+            )
+        )
+    # 6. auto on restricted attitude.
+    for case in (c for c in cases if not c.full_tumble):
+        what = f"{case.name}: auto ≤ 1.2 × best of sphere, diag, full; names the weak direction"
+        candidates = [m for m in ("sphere", "diag", "ml", "als", "ellipsoid") if have(case.name, m)]
+        if not have(case.name, "auto") or "diag" not in candidates:
+            targets.append(absent(what, ("auto", "sphere", "diag")))
+            continue
+        auto = summarise(results[case.name]["auto"]).heading_deg
+        best = {m: summarise(results[case.name][m]).heading_deg for m in candidates}
+        best_name, best_value = min(
+            ((m, v) for m, v in best.items() if v is not None), key=lambda item: item[1], default=("none", None)
+        )
+        ratio = None if auto is None or not best_value else auto / best_value
+        named = [weak_direction(o.details) for o in results[case.name]["auto"] if o.error is None]
+        named_count = sum(1 for n in named if n)
+        example = next((n for n in named if n), "none")
+        ok = ratio is not None and ratio <= 1.2 and named_count == len(named) and named_count > 0
+        targets.append(
+            Target(
+                what,
+                _status(ok),
+                f"auto {_fmt_deg(auto)} vs best {best_name} {_fmt_deg(best_value)}: ratio {_fmt_ratio(ratio)}; "
+                f"weak direction named in {named_count}/{len(named)} trials (e.g. {example})",
+            )
+        )
+    # 7. every magfit method at least as accurate as the best peer.
+    targets.append(_peer_target(results, by_name))
+    return targets
+
+
+def _peer_target(results: Mapping[str, Mapping[str, Sequence[Outcome]]], cases: Mapping[str, Case]) -> Target:
+    """Every magfit method at least as accurate as the best peer, case by case.
+
+    A loss smaller than twice the standard error of the difference is listed as within noise and does
+    not fail the target; every loss is listed with the reason the method's model gives for it.
+    """
+    what = "every magfit method ≤ best peer (heading error), on every case"
+    peer_names = {m for per_case in results.values() for m in per_case if "." in m}
+    if not peer_names:
+        return Target(what, "NOT RUN", "no peer ran")
+    losses: dict[str, list[str]] = {}
+    within_noise: list[str] = []
+    for case_name, per_case in results.items():
+        peers = {m: summarise(o) for m, o in per_case.items() if m in peer_names}
+        fitted = [(m, s) for m, s in peers.items() if s.heading_deg is not None and s.failed == 0]
+        if not fitted:
+            continue
+        best_peer, best = min(fitted, key=lambda item: item[1].heading_deg or 0.0)
+        assert best.heading_deg is not None
+        for method in per_case:
+            if method in peer_names or method == "floor":
+                continue
+            mine = summarise(per_case[method])
+            if mine.heading_deg is not None and mine.failed == 0 and mine.heading_deg <= best.heading_deg:
+                continue
+            failed = f", {mine.failed}/{mine.trials} failed" if mine.failed else ""
+            line = f"{case_name} ({_fmt_deg(mine.heading_deg)}{failed} vs {best_peer} {_fmt_deg(best.heading_deg)})"
+            noise = 2.0 * float(np.hypot(mine.heading_sem or 0.0, best.heading_sem or 0.0))
+            if mine.heading_deg is not None and mine.failed == 0 and mine.heading_deg - best.heading_deg <= noise:
+                within_noise.append(f"{method} on {line}: within 2 standard errors ({noise:.2g}°)")
+            else:
+                losses.setdefault(method, []).append(line)
+    items = [
+        f"**{method}** loses on {len(lines)} case(s) — {_why(method)}: " + "; ".join(lines)
+        for method, lines in losses.items()
+    ]
+    items += [f"{line} (not counted as a loss)" for line in within_noise]
+    count = sum(len(lines) for lines in losses.values())
+    detail = (
+        f"{count} loss(es) beyond noise by {', '.join(losses) or 'no method'}; {len(within_noise)} within noise"
+        " (listed below)"
+        if losses or within_noise
+        else "every magfit method at least as accurate as the best peer on every case"
+    )
+    return Target(what, _status(not losses), detail, items=items)
+
+
+#: Why a method's model can make it lose to a peer's full ellipsoid fit (for the report).
+_MODEL_LIMITS = {
+    "sphere": "hard iron only: it cannot correct soft iron",
+    "minmax": "per-axis pseudo-calibration: it ignores rotated soft iron and is biased by uneven coverage",
+    "diag": "axis-aligned soft iron only: the simulated soft iron is rotated",
+    "ellipsoid": "the algebraic fit is biased when the noise is large or the coverage partial",
+}
+
+
+def _why(method: str) -> str:
+    """The reason a method's model gives for losing, or a pointer to its owner when it has none."""
+    return _MODEL_LIMITS.get(method, "its model covers these cases: an accuracy issue for the method's owner")
+
+
+# ====================================================================== real recordings
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A real recording and how to read its x, y, z columns."""
+
+    path: str
+    columns: tuple[int, int, int] | tuple[str, str, str]
+    delimiter: str | None = ","
+    skip_lines: int = 0
+    drop_first: int = 0
+    failure_case: bool = False
+
+
+RECORDINGS = (
+    Recording("fxos8700_magneto/mag-readings.txt", (0, 1, 2), delimiter=None),
+    Recording("unc_qmc5883l/filtered_raw_data.csv", ("mx", "my", "mz"), skip_lines=2, drop_first=3000),
+    Recording("betaflight_apex5_qmc5883/20231014_apex5_mag_on_tpu_03.txt", (0, 1, 2)),
+    Recording("betaflight_apex5_qmc5883/20231008_apex5_mag_on_tpu_00.txt", (0, 1, 2)),
+    Recording("mxl_umich_mpu9250_rm3100/preflight_data_original_imu.csv", ("imu_mx", "imu_my", "imu_mz")),
+    Recording("mxl_umich_mpu9250_rm3100/preflight_data_original_pni.csv", ("mag_x", "mag_y", "mag_z")),
+    Recording("mxl_umich_mpu9250_rm3100/test0_esti_trunc.csv", ("mag_x", "mag_y", "mag_z")),
+    Recording("animaltrack_missionbay/missionbay_calib2_converted.csv", ("mx_raw", "my_raw", "mz_raw")),
+    Recording("animaltrack_missionbay/missionbay2_converted.csv", ("mx_raw", "my_raw", "mz_raw")),
+    Recording("gyrolib_rahrs/calibrationGyroLib_converted.csv", ("Mx", "My", "Mz")),
+    Recording("hamagure_gauss/data-set_1.csv", ("x", "y", "z")),
+    Recording("hamagure_gauss/data-set_2.csv", ("x", "y", "z")),
+    Recording("ensta_tlefloch_imu/mag_data.txt", (0, 1, 2), delimiter=None),
+    Recording("android_phone_kritiksoman/data_mag.txt", ("x", "y", "z"), failure_case=True),
+    Recording("hmc5883l_nliaudat_partial/mag_out_sample.txt", (0, 1, 2), failure_case=True),
+)
+
+
+def read_recording(folder: Path, recording: Recording) -> NDArray[np.float64]:
+    """The (N, 3) samples of ``recording`` under ``folder``, in the file's units."""
+    path = folder / recording.path
+    skip = recording.skip_lines
+    columns = recording.columns
+    if isinstance(columns[0], str):
+        with path.open(encoding="utf-8-sig") as handle:
+            lines = [handle.readline() for _ in range(skip + 1)]
+        header = [name.strip() for name in lines[-1].split(recording.delimiter)]
+        indices = tuple(header.index(str(name)) for name in columns)
+        skip += 1
+    else:
+        indices = tuple(int(index) for index in columns)
+    data = np.loadtxt(
+        path, delimiter=recording.delimiter, skiprows=skip, usecols=indices, encoding="utf-8-sig", ndmin=2
+    )
+    return np.asarray(data[recording.drop_first :], dtype=np.float64)
+
+
+def run_recordings(folder: Path, fitters: Mapping[str, Fitter], seed: int) -> dict[str, dict[str, Any]]:
+    """Fit each method on a random half of each recording; held-out sphere std on the other half."""
+    table: dict[str, dict[str, Any]] = {}
+    for recording in RECORDINGS:
+        try:
+            samples = read_recording(folder, recording)
+        except (OSError, ValueError) as error:
+            table[recording.path] = {"error": f"cannot read: {_failure_message(error)}"}
+            continue
+        order = np.random.default_rng([seed, zlib.crc32(recording.path.encode())]).permutation(len(samples))
+        half = len(samples) // 2
+        fit_part, heldout = samples[order[:half]], samples[order[half:]]
+        row: dict[str, Any] = {"n": len(samples), "failure_case": recording.failure_case, "methods": {}}
+        for name, fitter in fitters.items():
+            calibration, message, seconds = fit_once(fitter, fit_part, None)
+            if calibration is None:
+                row["methods"][name] = {"error": message, "seconds": seconds}
+                continue
+            try:
+                unseen = magfit.evaluate(calibration, heldout)
+                fitted = magfit.evaluate(calibration, fit_part)
+            except magfit.MagfitError as failure:
+                row["methods"][name] = {"error": _failure_message(failure), "seconds": seconds}
+                continue
+            row["methods"][name] = {"heldout_std": unseen.std, "fit_std": fitted.std, "seconds": seconds}
+        table[recording.path] = row
+    return table
+
+
+# ====================================================================== report
+
+
+def _fmt_deg(value: float | None) -> str:
+    return "—" if value is None else f"{value:.3g}°"
+
+
+def _fmt_ratio(value: float | None) -> str:
+    return "—" if value is None else f"{value:.3f}"
+
+
+def _fmt(value: float | None, scale: float = 1.0, digits: int = 3) -> str:
+    return "—" if value is None else f"{value * scale:.{digits}g}"
+
+
+def _cell(summary: Summary, text: str, notes: dict[str, int]) -> str:
+    if summary.failed == summary.trials:
+        return f"fails [{_note(notes, summary.first_error or 'failed')}]"
+    if summary.failed:
+        text += f" ({summary.failed}/{summary.trials} failed [{_note(notes, summary.first_error or 'failed')}])"
+    return text
+
+
+def _note(notes: dict[str, int], message: str) -> int:
+    if message not in notes:
+        notes[message] = len(notes) + 1
+    return notes[message]
+
+
+def _signed(value: float | None) -> str:
+    return "—" if value is None else f"{value:+.2g}"
+
+
+#: The simulated tables: title, cell text of a summary, whether the floor column is shown.
+_TABLES: tuple[tuple[str, Callable[[Summary], str], bool], ...] = (
+    ("Calibration heading error (degrees, RMS over level headings and trials)", lambda s: _fmt(s.heading_deg), True),
+    ("Offset error |V − V_true| / B (%)", lambda s: _fmt(s.offset_error, 100.0), False),
+    ("Shape error of A, scale removed (%)", lambda s: _fmt(s.shape_error, 100.0), False),
+    (
+        "Sphere distances on the fitted samples: mean / std (the paper's section V metric)",
+        lambda s: f"{_signed(s.fit_mean)} / {_fmt(s.fit_std)}",
+        False,
+    ),
+    (
+        "Sphere distances on held-out samples: mean / std",
+        lambda s: f"{_signed(s.heldout_mean)} / {_fmt(s.heldout_std)}",
+        False,
+    ),
+    ("Seconds per fit (mean over trials)", lambda s: _fmt(s.seconds, 1.0, 2), False),
+)
+
+
+def render_markdown(report: Mapping[str, Any]) -> str:
+    """The results file: header, grid, tables, targets, real recordings, footnotes."""
+    cases = report["cases"]
+    methods = report["methods"]
+    summaries = report["summaries"]
+    notes: dict[str, int] = {}
+    lines = [
+        "# magfit accuracy benchmark",
+        "",
+        f"Command: `{report['command']}`  ",
+        f"Date (UTC): {report['date']}; runtime {report['runtime_s']:.0f} s on one core; root seed {report['seed']}  ",
+        "Versions: " + ", ".join(f"{k} {v}" for k, v in report["versions"].items()),
+        "",
+        "Every method is fitted to the same samples in each trial; errors are RMS over the trials "
+        "(`benchmarks/README.md` defines the metrics and explains the grid). "
+        "`floor` is the Cramér–Rao bound of the heading error. `fails [k]`: every trial failed, for the "
+        "reason in footnote k; `(j/n failed [k])`: j of the n trials failed and the number is over the rest.",
+        "",
+        "## Grid",
+        "",
+        "| case | N | noise σ / B | attitudes | trials |",
+        "|---|---|---|---|---|",
+    ]
+    for case in cases:
+        attitudes = "full tumble" if case["orientations"] == "uniform" else "full yaw, roll/pitch ±20°"
+        if case["spikes"]:
+            attitudes += ", 2 % spikes"
+        lines.append(
+            f"| {case['name']} | {case['n']} | {case['noise_fraction']:.4g} | {attitudes} | {case['trials']} |"
+        )
+
+    for title, text, with_floor in _TABLES:
+        header = ["case"] + (["floor"] if with_floor else []) + methods
+        lines.extend(["", f"## {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)])
+        for case in cases:
+            row = [case["name"]]
+            if with_floor:
+                row.append(_fmt(report["floors"].get(case["name"])))
+            for method in methods:
+                summary = summaries[case["name"]].get(method)
+                row.append("not run" if summary is None else _cell(summary, text(summary), notes))
+            lines.append("| " + " | ".join(row) + " |")
+
+    lines.extend(["", "## Targets", "", "| target | result | numbers |", "|---|---|---|"])
+    for target in report["targets"]:
+        lines.append(f"| {target.name} | **{target.status}** | {target.detail} |")
+    for target in report["targets"]:
+        if target.items:
+            lines.extend(["", f"{target.name}:", ""])
+            lines.extend(f"- {item}" for item in target.items)
+
+    if report.get("real"):
+        lines.extend(_real_section(report["real"], methods, notes))
+
+    if notes:
+        lines.extend(["", "## Footnotes (failure reasons)", ""])
+        lines.extend(f"{number}. {message.replace('|', '/')}" for message, number in notes.items())
+    lines.append("")
+    return "\n".join(lines)
+
+
+def _real_section(real: Mapping[str, Any], methods: Sequence[str], notes: dict[str, int]) -> list[str]:
+    lines = [
+        "",
+        "## Real recordings: held-out sphere std",
+        "",
+        "Fitted on a random half of each recording; the std of the sphere distances on the other half "
+        "(dimensionless, a fraction of the fitted field). The two failure cases must be diagnosed, not "
+        "fitted: their diagnoses are listed below the table.",
+        "",
+        "| recording | N | " + " | ".join(methods) + " |",
+        "|---|---|" + "---|" * len(methods),
+    ]
+    for path, row in real.items():
+        label = path + (" (failure case)" if row.get("failure_case") else "")
+        if "error" in row:
+            lines.append(f"| {label} | — | " + " | ".join(row["error"] for _ in methods) + " |")
+            continue
+        cells = []
+        for method in methods:
+            entry = row["methods"].get(method)
+            if entry is None:
+                cells.append("not run")
+            elif "error" in entry:
+                cells.append(f"fails [{_note(notes, entry['error'])}]")
+            else:
+                cells.append(f"{entry['heldout_std']:.3g}")
+        lines.append(f"| {label} | {row['n']} | " + " | ".join(cells) + " |")
+    lines.extend(["", "### Diagnoses on the failure cases", ""])
+    for path, row in real.items():
+        if not row.get("failure_case") or "methods" not in row:
+            continue
+        for method in methods:
+            entry = row["methods"].get(method, {})
+            if "error" in entry:
+                lines.append(f"- `{path}`, {method}: {entry['error']}")
+            else:
+                lines.append(
+                    f"- `{path}`, {method}: **no diagnosis**, returned numbers (held-out std "
+                    f"{entry.get('heldout_std', float('nan')):.3g})"
+                )
+    return lines
+
+
+def versions(peers: bool) -> dict[str, str]:
+    """Python, numpy, scipy, magfit (with its git commit) and the peers' versions."""
+    found = {"python": platform.python_version(), "numpy": np.__version__}
+    for name in ("scipy",):
+        found[name] = importlib.metadata.version(name)
+    commit = "unknown"
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    found["magfit"] = f"{magfit.__version__} (commit {commit})"
+    if peers:
+        from peers import peer_versions
+
+        found.update(peer_versions())
+    return found
+
+
+# ====================================================================== main
+
+
+def run(
+    cases: Sequence[Case],
+    *,
+    methods: Sequence[str] | None = None,
+    peers: bool = True,
+    real_data: Path | None = None,
+    seed: int = 20261121,
+    command: str = "",
+    progress: Callable[[str], None] | None = None,
+    floor_points: int = 200_000,
+) -> dict[str, Any]:
+    """Run the benchmark and return the report (what :func:`render_markdown` and the JSON are made of)."""
+    start = time.perf_counter()
+    fitters = method_table(methods, peers)
+    results: dict[str, dict[str, list[Outcome]]] = {}
+    floors: dict[str, float] = {}
+    for case in cases:
+        case_start = time.perf_counter()
+        results[case.name] = run_case(case, fitters, seed, peers, keep_details=("auto", "diag", "robust"))
+        floors[case.name] = cramer_rao_heading_deg(case, n_points=floor_points)
+        results[case.name]["floor"] = [Outcome(heading_deg=floors[case.name])]
+        if progress:
+            progress(f"{case.name}: {case.trials} trials in {time.perf_counter() - case_start:.1f} s")
+    summaries = {
+        name: {method: summarise(outcomes) for method, outcomes in per_case.items() if method != "floor"}
+        for name, per_case in results.items()
+    }
+    targets = check_targets(cases, results)
+    real = None
+    if real_data is not None and real_data.is_dir():
+        real = run_recordings(real_data, fitters, seed)
+        if progress:
+            progress(f"real recordings: {len(real)} files")
+    case_rows = [
+        {**asdict(case), "noise_fraction": case.noise_std / case.field_strength, "full_tumble": case.full_tumble}
+        for case in cases
+    ]
+    return {
+        "command": command,
+        "date": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
+        "runtime_s": time.perf_counter() - start,
+        "seed": seed,
+        "versions": versions(peers),
+        "methods": list(fitters),
+        "cases": case_rows,
+        "floors": floors,
+        "summaries": summaries,
+        "outcomes": results,
+        "targets": targets,
+        "real": real,
+    }
+
+
+def report_json(report: Mapping[str, Any]) -> str:
+    """Every number of the report as JSON (trial-level outcomes included)."""
+
+    def convert(value: Any) -> Any:
+        if isinstance(value, (Outcome, Summary, Target)):
+            return convert(asdict(value))
+        if isinstance(value, Mapping):
+            return {str(k): convert(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [convert(v) for v in value]
+        if isinstance(value, (np.floating, np.integer)):
+            return value.item()
+        if isinstance(value, float) and not np.isfinite(value):
+            return None
+        return value
+
+    return json.dumps(convert(report), indent=1, allow_nan=False)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line entry point; returns the exit code."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser.add_argument("--output", type=Path, default=HERE / "results", help="folder for accuracy.md / .json")
+    parser.add_argument("--smoke", action="store_true", help="tiny grid (two cases, two trials), no real data")
+    parser.add_argument("--trials-scale", type=float, default=1.0, help="multiply every trial count")
+    parser.add_argument("--no-peers", action="store_true", help="magfit's methods only")
+    parser.add_argument("--methods", help="comma-separated subset of the methods (magfit names, peer names)")
+    parser.add_argument("--real-data", type=Path, default=DEFAULT_REAL_DATA, help="folder of the real recordings")
+    parser.add_argument("--no-real", action="store_true", help="skip the real recordings")
+    parser.add_argument("--seed", type=int, default=20261121)
+    args = parser.parse_args(argv)
+
+    command = shlex.join(["python", "benchmarks/accuracy.py", *(sys.argv[1:] if argv is None else argv)])
+    cases = smoke_grid() if args.smoke else full_grid(args.trials_scale)
+    methods = args.methods.split(",") if args.methods else None
+    report = run(
+        cases,
+        methods=methods,
+        peers=not args.no_peers,
+        real_data=None if (args.no_real or args.smoke) else args.real_data,
+        seed=args.seed,
+        command=command,
+        progress=lambda message: print(message, file=sys.stderr, flush=True),
+        floor_points=20_000 if args.smoke else 200_000,
+    )
+    args.output.mkdir(parents=True, exist_ok=True)
+    (args.output / "accuracy.md").write_text(render_markdown(report), encoding="utf-8")
+    (args.output / "accuracy.json").write_text(report_json(report), encoding="utf-8")
+    print(f"wrote {args.output / 'accuracy.md'} and accuracy.json in {report['runtime_s']:.0f} s", file=sys.stderr)
+    for target in report["targets"]:
+        print(f"{target.status:8} {target.name}: {target.detail}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

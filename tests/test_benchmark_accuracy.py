@@ -1,0 +1,181 @@
+"""The accuracy benchmark's metrics and a tiny run of its harness (benchmarks/accuracy.py), so it cannot rot.
+
+The metric tests assert against closed forms: a correct fit (the truth, rotated and rescaled) scores 0,
+a known offset error gives the heading error of a one-line NumPy formula, the Fisher information of a
+unit sphere is I/3 for the centre.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import magfit
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
+accuracy = importlib.import_module("accuracy")
+peers = importlib.import_module("peers")
+
+
+@pytest.fixture(scope="module")
+def simulation() -> magfit.Simulation:
+    """The generic sensor of the benchmark's sweeps, noise-free."""
+    return accuracy.Case("generic", 500, 0.0, seed_key="test").simulate(500, np.random.default_rng(3))
+
+
+def _truth_variant(simulation: magfit.Simulation, rotation: np.ndarray, scale: float) -> magfit.Calibration:
+    """The true calibration turned by ``rotation`` and rescaled: as correct as the truth itself."""
+    truth = simulation.truth
+    return magfit.Calibration("variant", truth.offset, scale * rotation @ truth.matrix, scale * truth.field_strength)
+
+
+def test_best_rotation_recovers_the_rotation_between_two_correct_matrices(simulation: magfit.Simulation) -> None:
+    rotation = Rotation.from_rotvec([0.3, -0.8, 0.5]).as_matrix()
+    fitted = rotation.T @ simulation.truth.matrix  # calibrated vectors turned by rotationᵀ
+    np.testing.assert_allclose(accuracy.best_rotation(fitted, simulation.truth.matrix), rotation, atol=1e-12)
+
+
+@pytest.mark.parametrize("rotvec", [(0.0, 0.0, 0.0), (0.0, 0.0, 1.2), (0.4, -0.9, 2.0)])
+def test_a_correct_fit_scores_zero_whatever_its_rotation_and_scale(simulation: magfit.Simulation, rotvec) -> None:
+    variant = _truth_variant(simulation, Rotation.from_rotvec(rotvec).as_matrix(), 3.7)
+    assert accuracy.heading_error_deg(variant, simulation) < 1e-9
+    assert accuracy.shape_error(variant, simulation) < 1e-12
+    assert accuracy.offset_error(variant, simulation) == 0.0
+
+
+def test_heading_error_of_an_offset_error_matches_the_closed_form(simulation: magfit.Simulation) -> None:
+    # An offset wrong by W·d shifts every calibrated vector by −d: with d = (ε B, 0, 0) the level vector
+    # B (cos δ cos ψ, cos δ sin ψ, sin δ) has heading atan2(cos δ sin ψ, cos δ cos ψ − ε).
+    epsilon = 0.05
+    shift = np.array([epsilon * simulation.field_strength, 0.0, 0.0])
+    truth = simulation.truth
+    wrong = magfit.Calibration("wrong", truth.offset + simulation.soft_iron @ shift, truth.matrix, 1.0)
+    psi = np.radians(np.arange(360.0))
+    horizontal = np.cos(np.radians(simulation.inclination_deg))
+    expected = np.degrees(np.arctan2(horizontal * np.sin(psi), horizontal * np.cos(psi) - epsilon) - psi)
+    expected = (expected + 180.0) % 360.0 - 180.0
+    assert accuracy.heading_error_deg(wrong, simulation) == pytest.approx(np.sqrt(np.mean(expected**2)), rel=1e-9)
+    assert accuracy.offset_error(wrong, simulation) == pytest.approx(
+        np.linalg.norm(simulation.soft_iron @ shift), rel=1e-12
+    )
+
+
+def test_shape_error_is_the_relative_frobenius_distance_of_the_scale_free_shapes(
+    simulation: magfit.Simulation,
+) -> None:
+    stretch = np.diag([1.1, 1.0, 1.0])
+    fitted = magfit.Calibration("stretched", simulation.truth.offset, stretch @ simulation.truth.matrix, 2.0)
+    a_fit = fitted.matrix.T @ fitted.matrix
+    a_true = simulation.truth.matrix.T @ simulation.truth.matrix
+    a_fit, a_true = a_fit / np.cbrt(np.linalg.det(a_fit)), a_true / np.cbrt(np.linalg.det(a_true))
+    expected = np.linalg.norm(a_fit - a_true) / np.linalg.norm(a_true)
+    assert accuracy.shape_error(fitted, simulation) == pytest.approx(expected, rel=1e-12)
+    assert expected > 0.05  # the check above is not trivially 0
+
+
+def test_fisher_information_of_a_unit_sphere_is_one_third_for_the_centre() -> None:
+    # Unit sphere, zero offset: g_V = −u (the unit normal), so E[g_V g_Vᵀ] = E[u uᵀ] = I/3, and odd
+    # moments vanish so the centre decouples from the shape. Monte Carlo error ~ 1/√200 000 ≈ 0.002.
+    points = Rotation.random(200_000, random_state=5).apply([1.0, 0.0, 0.0])
+    theta = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    information = accuracy.unit_fisher_information(theta, points)
+    np.testing.assert_allclose(information[:3, :3], np.eye(3) / 3.0, atol=0.005)
+    np.testing.assert_allclose(information[:3, 3:], 0.0, atol=0.005)
+
+
+def test_the_floor_scales_as_noise_over_root_n() -> None:
+    low = accuracy.Case("a", 4000, 0.01, seed_key="x")
+    high = accuracy.Case("b", 1000, 0.02, seed_key="x")
+    floor_low = accuracy.cramer_rao_heading_deg(low, n_points=20_000)
+    floor_high = accuracy.cramer_rao_heading_deg(high, n_points=20_000)
+    assert floor_high / floor_low == pytest.approx(4.0, rel=1e-9)
+
+
+def test_the_algebraic_fit_reaches_the_floor_at_low_noise() -> None:
+    # At σ = 0.5 % the bias of the algebraic fit (∝ σ²) is negligible and on a full tumble it is close
+    # to efficient: its RMS heading error over 30 trials must sit near the Cramér–Rao floor. The RMS of
+    # 30 trials has a standard error of about 9 %, hence the [0.75, 1.4] window (−3 and +4 SE).
+    case = accuracy.Case("low noise", 1000, 0.005, trials=30, seed_key="floor-check", heldout=100)
+    outcomes = accuracy.run_case(case, accuracy.method_table(["ellipsoid"], peers=False), 11, peers=False)
+    measured = accuracy.summarise(outcomes["ellipsoid"]).heading_deg
+    assert 0.75 < measured / accuracy.cramer_rao_heading_deg(case, n_points=50_000) < 1.4
+
+
+def test_spikes_displace_two_percent_of_the_samples_by_the_stated_amount() -> None:
+    samples = np.zeros((1000, 3))
+    spiked = accuracy.add_spikes(samples, 2.0, np.random.default_rng(0))
+    lengths = np.linalg.norm(spiked - samples, axis=1)
+    moved = lengths > 0
+    assert moved.sum() == 20
+    low, high = accuracy.SPIKE_RANGE
+    assert np.all((lengths[moved] >= 2.0 * low) & (lengths[moved] <= 2.0 * high))
+
+
+def test_spike_case_reuses_the_samples_of_its_twin() -> None:
+    twin = accuracy.Case("twin", 200, 0.02, seed_key="pair")
+    spiked = accuracy.Case("spiked", 200, 0.02, spikes=True, seed_key="pair")
+    _, clean, _ = twin.trial_data(1, 0)
+    _, dirty, _ = spiked.trial_data(1, 0)
+    assert (np.any(clean != dirty, axis=1)).sum() == 4
+
+
+def test_weak_direction_is_found_in_nested_details() -> None:
+    assert (
+        accuracy.weak_direction({"diagnostics": {"weak_direction": [0, 0, 1]}})
+        == "diagnostics.weak_direction = [0, 0, 1]"
+    )
+    assert accuracy.weak_direction({"root": "sqrt"}) is None
+
+
+def test_peer_results_are_converted_to_the_one_convention(simulation: magfit.Simulation) -> None:
+    # A peer that corrects with 2·W⁻¹ onto a sphere of radius 2B is the truth in another scale.
+    truth = simulation.truth
+    calibration = peers.calibration_from_correction(
+        "peer", truth.offset, 2.0 * truth.matrix, 2.0 * truth.field_strength, simulation.clean
+    )
+    assert np.linalg.det(calibration.matrix) == pytest.approx(1.0)
+    assert accuracy.heading_error_deg(calibration, simulation) < 1e-9
+    np.testing.assert_allclose(magfit.sphere_distances(calibration, simulation.clean), 0.0, atol=1e-12)
+    with pytest.raises(peers.PeerFailure, match="det"):
+        peers.calibration_from_correction("peer", truth.offset, -truth.matrix, 1.0, simulation.clean)
+    with pytest.raises(peers.PeerFailure, match="NaN"):
+        peers.calibration_from_correction("peer", truth.offset, np.full((3, 3), np.nan), 1.0, simulation.clean)
+
+
+def test_smoke_run_of_the_harness_on_magfit_methods(tmp_path: Path) -> None:
+    report = accuracy.run(accuracy.smoke_grid(), peers=False, real_data=None, command="test", floor_points=20_000)
+    tumble = report["summaries"]["tumble σ=0.5% N=1000"]
+    assert set(report["methods"]) == set(magfit.METHODS)
+    # σ = 0.5 %, N = 1000: the floor is 0.054°; 2 trials of the algebraic fit stay well under 0.2°.
+    assert tumble["ellipsoid"].heading_deg < 0.2
+    assert tumble["ellipsoid"].failed == 0
+    assert tumble["sphere"].heading_deg > 1.0  # the soft iron it cannot correct costs degrees
+    text = accuracy.render_markdown(report)
+    assert "## Targets" in text and "floor" in text
+    assert all(f"| {method} " in text or f" {method} |" in text for method in report["methods"])
+    data = json.loads(accuracy.report_json(report))
+    assert data["summaries"]["tumble σ=0.5% N=1000"]["ellipsoid"]["trials"] == 2
+
+
+def test_the_command_line_writes_both_files(tmp_path: Path) -> None:
+    assert accuracy.main(["--smoke", "--no-peers", "--methods", "ellipsoid,sphere", "--output", str(tmp_path)]) == 0
+    assert "Command: `python benchmarks/accuracy.py --smoke" in (tmp_path / "accuracy.md").read_text()
+    assert json.loads((tmp_path / "accuracy.json").read_text())["methods"] == ["ellipsoid", "sphere"]
+
+
+def test_real_recordings_are_read_with_their_documented_shapes(real_data_dir: Path) -> None:
+    by_path = {recording.path: recording for recording in accuracy.RECORDINGS}
+    fxos = accuracy.read_recording(real_data_dir, by_path["fxos8700_magneto/mag-readings.txt"])
+    assert fxos.shape == (324, 3)
+    np.testing.assert_allclose(fxos[0], [28.0, -22.800001, -79.400001])
+    unc = accuracy.read_recording(real_data_dir, by_path["unc_qmc5883l/filtered_raw_data.csv"])
+    assert unc.shape == (22_745 - 3000, 3)  # the first 60 s at 50 Hz are warm-up
+    imu = accuracy.read_recording(real_data_dir, by_path["mxl_umich_mpu9250_rm3100/preflight_data_original_imu.csv"])
+    np.testing.assert_allclose(imu[0], [8.25, 0.15, -22.95])  # the UTF-8 BOM does not hide the header
