@@ -478,8 +478,10 @@ def test_ardupilot_offset_limit() -> None:
 @pytest.mark.parametrize(("strength", "unit"), [(18.4, "uT"), (87.6, "uT"), (0.1, "G"), (52.9, "G")])
 def test_ardupilot_field_strength_limit(strength: float, unit: str) -> None:
     # AP_Arming 'Check mag field' accepts 185-875 mG; 52.9 "G" is the usual µT-labelled-as-gauss mistake.
-    with pytest.raises(ExportError, match="Check mag field"):
-        export(_cal(strength=strength, unit=unit), "ardupilot")
+    with pytest.raises(
+        ExportError, match=rf"Check mag field.*check the unit of the samples \(unit='{unit}' was used\)"
+    ):
+        export(_cal(offset=(28.6, -40.0, -27.4), strength=strength, unit=unit), "ardupilot")
 
 
 def test_ardupilot_field_strength_bounds_are_inclusive() -> None:

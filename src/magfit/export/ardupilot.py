@@ -94,19 +94,20 @@ def ardupilot_parameters(calibration: Calibration, unit: str | None = None) -> d
     """
     source = physical_unit(calibration, unit, "ardupilot", "milligauss")
     k = factor(source, "mG")
-    offsets = -k * calibration.offset  # ArduPilot adds its offsets: mag += OFS
-    length = float(np.linalg.norm(offsets))
-    if length > OFFSET_MAX_MG:
-        raise ExportError(
-            f"ArduPilot would refuse to arm: the compass offset is {length:.0f} mG long, above COMPASS_OFFS_MAX "
-            f"({OFFSET_MAX_MG:.0f} mG by default); mount the compass further from magnetised parts and recalibrate"
-        )
+    # The field first: a wrong unit shows there, before it inflates the offset.
     field = k * calibration.field_strength
     if not FIELD_RANGE_MG[0] <= field <= FIELD_RANGE_MG[1]:
         raise ExportError(
             f"ArduPilot would refuse to arm ('Check mag field'): the corrected field is {field:.4g} mG, outside "
             f"{FIELD_RANGE_MG[0]:.0f}-{FIELD_RANGE_MG[1]:.0f} mG; check the unit of the samples "
             f"(unit={source.name!r} was used)"
+        )
+    offsets = -k * calibration.offset  # ArduPilot adds its offsets: mag += OFS
+    length = float(np.linalg.norm(offsets))
+    if length > OFFSET_MAX_MG:
+        raise ExportError(
+            f"ArduPilot would refuse to arm: the compass offset is {length:.0f} mG long, above COMPASS_OFFS_MAX "
+            f"({OFFSET_MAX_MG:.0f} mG by default); mount the compass further from magnetised parts and recalibrate"
         )
     matrix = symmetric_matrix(calibration, "ardupilot").matrix
     diagonal = np.diag(matrix)
@@ -137,7 +138,7 @@ def write_ardupilot(calibration: Calibration, unit: str | None = None) -> str:
         *(f"# {line}" for line in describe(calibration, source.name)),
         "# ArduPilot corrects each sample (AP_Compass_Backend::correct_field), in milligauss, body frame:",
         "#   mag += (OFS_X, OFS_Y, OFS_Z)",
-        "#   mag *= SCALE",
+        f"#   mag *= SCALE   (only if {SCALE_RANGE[0]} <= SCALE <= {SCALE_RANGE[1]}: Compass::have_scale_factor)",
         "#   mag = [[DIA_X, ODI_X, ODI_Y], [ODI_X, DIA_Y, ODI_Z], [ODI_Y, ODI_Z, DIA_Z]] * mag",
         f"# mapping: OFS = -offset * {float32_text(k)} ({source.name} -> mG), DIA/ODI = magfit's matrix, SCALE = 1;",
         f"#   ArduPilot's corrected field = {float32_text(k)} x magfit's, radius "
