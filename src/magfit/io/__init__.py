@@ -1,0 +1,32 @@
+"""Reading magnetometer samples from files and writing calibrated copies of them.
+
+>>> from magfit.io import read_samples          # doctest: +SKIP
+>>> table = read_samples("flight.csv")          # doctest: +SKIP
+>>> table.samples.shape, table.columns          # doctest: +SKIP
+((26407, 3), ('mx', 'my', 'mz'))
+
+Text files (any common delimiter, header or not, preamble lines, UTF-8 BOM, extra columns), ``.npy`` and
+``.npz`` are accepted; docs/file-formats.md describes how the magnetometer columns are found and every
+error. Reading text needs pandas (the ``cli`` extra); ``import magfit`` does not import this package.
+"""
+
+from __future__ import annotations
+
+from .atomic import atomic_open, atomic_write_text
+from .columns import ColumnTriple, find_magnetometer_columns
+from .readers import ChunkReader, FileFormat, SampleTable, iter_sample_chunks, read_samples, sniff
+from .writers import write_calibrated
+
+__all__ = [
+    "ChunkReader",
+    "ColumnTriple",
+    "FileFormat",
+    "SampleTable",
+    "atomic_open",
+    "atomic_write_text",
+    "find_magnetometer_columns",
+    "iter_sample_chunks",
+    "read_samples",
+    "sniff",
+    "write_calibrated",
+]

@@ -1,0 +1,1016 @@
+"""Reading magnetometer samples from delimited text, ``.npy`` and ``.npz`` files.
+
+The layout of a text file (delimiter, encoding, preamble lines, header, number of columns) is sniffed
+from its first 256 KiB only; the rows are then parsed by pandas' C reader, three columns at a time, in
+blocks whose size bounds the memory whatever the file's length. Every block is also checked for rows with
+a different number of fields: pandas accepts those silently when it reads only some of the columns.
+Which three columns hold the magnetometer is decided by :mod:`magfit.io.columns` (names) or by the
+``columns`` argument (names or 0-based positions, in x, y, z order).
+
+Every problem with a file is a :class:`~magfit.DataFileError` whose one-line message names the file, the
+line and the column when there is one, and says what to do.
+"""
+
+from __future__ import annotations
+
+import codecs
+import csv
+import io
+import os
+import re
+import zipfile
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError, OptionError
+from .columns import _MAG_LETTERS, _MAG_WORDS, find_magnetometer_columns, name_words, normalise_name
+
+if TYPE_CHECKING:
+    import pandas
+
+__all__ = ["ChunkReader", "FileFormat", "SampleTable", "iter_sample_chunks", "read_samples", "sniff"]
+
+#: How many skipped rows are remembered by line number (all of them are counted).
+MAX_REPORTED_LINES = 10
+#: The layout is sniffed from this much of the start of a file.
+HEAD_BYTES = 256 * 1024
+#: Cells read as a missing value (NaN); anything else that is not a number is an error.
+NA_VALUES = ("", "nan", "NaN", "NAN", "-nan", "-NaN", "NA", "N/A", "n/a", "null", "NULL", "None", "#N/A")
+#: Delimiters tried, in this order of preference when several split the rows equally well.
+_DELIMITERS = ("\t", ";", ",", "|", "whitespace")
+_NA_SET = frozenset(NA_VALUES)
+_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^[+-]?(inf|infinity)$", re.IGNORECASE)
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+([eE][+-]?\d+)?$")
+_NPZ_COLUMN_LABEL = re.compile(r"^(.*)\[:,\s*(\d+)\]$")
+_COLUMN_LABEL = re.compile(r"^column (\d+)$")
+_Kind = Literal["text", "npy", "npz"]
+
+
+@dataclass(frozen=True)
+class FileFormat:
+    """The layout of a samples file, as :func:`sniff` found it.
+
+    Attributes
+    ----------
+    kind : {"text", "npy", "npz"}
+        Delimited text, a NumPy array file or a NumPy archive of named arrays.
+    delimiter : str or None
+        ``","``, ``", "`` (comma and space), ``"\\t"``, ``";"``, ``"|"`` or ``"whitespace"`` (runs of spaces
+        or tabs); None for npy/npz and for text with a single column.
+    encoding : str
+        ``"utf-8"``, ``"utf-8-sig"`` when the file starts with a byte-order mark, ``"latin-1"`` when it is
+        not valid UTF-8; ``"binary"`` for npy/npz.
+    preamble_lines : int
+        Lines before the header (or before the data when there is no header), e.g. ``Fs,50.00``.
+    header : tuple of str or None
+        Column names (the keys for npz), None when the file has no header.
+    n_columns : int
+        Fields per row (columns of the array for npy, number of keys for npz).
+    decimal : str
+        Decimal mark of the numbers: ``"."``, or ``","`` for ``1,5;2,25``-style files.
+    data_line : int
+        Lines before the first data row (preamble, header and blank lines).
+    data_offset : int
+        Byte offset of the first data row.
+    """
+
+    kind: _Kind
+    delimiter: str | None
+    encoding: str
+    preamble_lines: int
+    header: tuple[str, ...] | None
+    n_columns: int
+    decimal: str = "."
+    data_line: int = 0
+    data_offset: int = 0
+
+    def column_label(self, index: int) -> str:
+        """The name of column ``index`` (0-based) as messages show it: its header name or ``column N``."""
+        if self.header is not None and index < len(self.header) and self.header[index]:
+            return self.header[index]
+        return f"column {index + 1}"
+
+    def describe(self) -> str:
+        """A short human description, e.g. ``"text, ', '-separated, 6 columns, no header"``."""
+        if self.kind != "text":
+            return f"{self.kind}, {self.n_columns} {'keys' if self.kind == 'npz' else 'columns'}"
+        parts = [f"{self.delimiter!r}-separated" if self.delimiter != "whitespace" else "whitespace-separated"]
+        parts.append(f"{self.n_columns} columns")
+        parts.append("header" if self.header is not None else "no header")
+        if self.preamble_lines:
+            parts.append(f"{self.preamble_lines} preamble line(s)")
+        if self.encoding == "utf-8-sig":
+            parts.append("UTF-8 BOM")
+        return "text, " + ", ".join(parts)
+
+
+@dataclass(frozen=True, eq=False)
+class SampleTable:
+    """The magnetometer samples of one file, with what was read and what was skipped.
+
+    Attributes
+    ----------
+    path : Path
+        The file read.
+    samples : ndarray, shape (N, 3), float64
+        x, y, z in the order of ``columns``, in the file's units; only rows whose three values are finite.
+    columns : tuple of 3 str
+        The columns used: header names, ``"column 1"``-style labels (1-based) when there is no header,
+        NPZ keys, or ``"key[:, 0]"`` for the columns of one 2-D NPZ array. Passing them back as
+        ``columns=`` selects the same data.
+    n_rows : int
+        Data rows read (including the skipped ones).
+    n_skipped : int
+        Rows dropped because a magnetometer value is NaN, infinite or empty.
+    skipped_lines : tuple of int
+        1-based file line numbers (row numbers for npy/npz) of the first few skipped rows.
+    format : FileFormat
+        The file's layout.
+    """
+
+    path: Path
+    samples: NDArray[np.float64]
+    columns: tuple[str, str, str]
+    n_rows: int
+    n_skipped: int
+    skipped_lines: tuple[int, ...]
+    format: FileFormat
+
+
+# ---------------------------------------------------------------------------------------------- small helpers
+
+
+def _error(path: Path, message: str) -> DataFileError:
+    return DataFileError(f"{path}: {message}")
+
+
+def _pandas() -> Any:
+    try:
+        import pandas
+    except ImportError:  # pragma: no cover - pandas is in the cli extra
+        raise ImportError("reading text data files needs pandas: pip install 'magfit[cli]'") from None
+    return pandas
+
+
+def _check_file(path: str | os.PathLike[str]) -> Path:
+    """The path as a Path, after checking that it is a readable regular file."""
+    file = Path(path)
+    if not file.exists():
+        raise _error(file, "no such file; check the path and the current directory")
+    if file.is_dir():
+        raise _error(file, "is a directory, not a data file; give the path of a file inside it")
+    if not os.access(file, os.R_OK):
+        raise _error(file, "permission denied; make the file readable (chmod +r) or copy it")
+    return file
+
+
+def _kind_of(path: Path, head: bytes) -> _Kind:
+    if head.startswith(b"\x93NUMPY"):
+        return "npy"
+    if head.startswith(b"PK\x03\x04") or path.suffix.lower() == ".npz":
+        return "npz"
+    if path.suffix.lower() == ".npy":
+        return "npy"
+    return "text"
+
+
+def _read_head(path: Path) -> tuple[bytes, bool]:
+    """The first HEAD_BYTES of the file and whether the file is longer than that."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(HEAD_BYTES + 1)
+    except OSError as error:
+        raise _error(path, f"cannot be read ({error.strerror}); check the file's permissions") from None
+    return head[:HEAD_BYTES], len(head) > HEAD_BYTES
+
+
+def _cell_kind(cell: str, decimal: str = ".") -> Literal["number", "missing", "text"]:
+    """Classify one stripped, unquoted cell."""
+    if cell in _NA_SET:
+        return "missing"
+    if decimal == ",":
+        cell = cell.replace(",", ".")
+    return "number" if _NUMBER.match(cell) else "text"
+
+
+def _split_fields(line: str, delimiter: str | None) -> list[str]:
+    """The stripped, unquoted fields of one text line (used on the head and on error paths only)."""
+    if delimiter is None:
+        return [line.strip().strip("\"'")]
+    if delimiter == "whitespace":
+        return [cell.strip("\"'") for cell in line.split()]
+    if '"' in line:
+        return [cell.strip() for cell in next(csv.reader([line], delimiter=delimiter[0], skipinitialspace=True))]
+    return [cell.strip() for cell in line.split(delimiter[0])]
+
+
+# ---------------------------------------------------------------------------------------------- sniffing
+
+
+def _mode_count(counts: Sequence[int]) -> tuple[int, float]:
+    """The most common field count (the larger one on a tie) and the fraction of lines that have it."""
+    tally = Counter(counts)
+    best = max(tally.items(), key=lambda item: (item[1], item[0]))
+    return best[0], best[1] / len(counts)
+
+
+def _choose_delimiter(sample: Sequence[str]) -> str | None:
+    """The delimiter that splits the sample lines into the most consistent number (>= 2) of fields."""
+    best: tuple[float, int, str] | None = None
+    for order, delimiter in enumerate(_DELIMITERS):
+        counts = [len(_split_fields(line, delimiter)) for line in sample]
+        mode, share = _mode_count(counts)
+        if mode < 2:
+            continue
+        key = (share, -order, delimiter)
+        if best is None or key[:2] > best[:2]:
+            best = key
+    if best is None:
+        return None
+    if best[2] == ",":
+        # ", " (comma then space) is kept apart so that a calibrated copy is written the same way.
+        spaced = sum(line.count(", ") for line in sample)
+        if spaced and spaced >= 0.9 * sum(line.count(",") for line in sample):
+            return ", "
+    return best[2]
+
+
+def _decode_lines(path: Path, head: bytes, truncated: bool) -> tuple[list[bytes], list[str], str]:
+    """Split the head into raw lines (with their line ends) and decoded lines (without)."""
+    if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        raise _error(path, "is UTF-16 encoded; save it as UTF-8 (or plain ASCII) text")
+    if b"\x00" in head:
+        raise _error(path, "is a binary file, not delimited text, .npy or .npz; export the samples as CSV")
+    pieces = head.split(b"\n")
+    raw_lines = [piece + b"\n" for piece in pieces[:-1]]
+    if pieces[-1]:
+        raw_lines.append(pieces[-1])
+    if truncated and len(raw_lines) > 1 and not raw_lines[-1].endswith(b"\n"):
+        raw_lines.pop()  # cut in the middle by the head size
+    encoding = "utf-8-sig" if head.startswith(codecs.BOM_UTF8) else "utf-8"
+    try:
+        text = b"".join(raw_lines).decode(encoding)
+    except UnicodeDecodeError:
+        encoding = "latin-1"
+        text = b"".join(raw_lines).decode(encoding)
+    lines = [line.rstrip("\r") for line in text.split("\n")]
+    if text.endswith("\n"):
+        lines.pop()
+    return raw_lines, lines, encoding
+
+
+def _sniff_text(path: Path, head: bytes, truncated: bool) -> FileFormat:
+    raw_lines, lines, encoding = _decode_lines(path, head, truncated)
+    filled = [i for i, line in enumerate(lines) if line.strip()]
+    if not filled:
+        raise _error(path, "is empty; record some samples or give another file")
+    # The bottom half of the head is data in any sensible file: it decides delimiter and column count.
+    sample = [lines[i] for i in filled[len(filled) // 2 :][-200:]]
+    delimiter = _choose_delimiter(sample)
+    counts = [len(_split_fields(line, delimiter)) for line in sample]
+    n_columns, _ = _mode_count(counts)
+    rows = [_split_fields(line, delimiter) for line in sample]
+    rows = [row for row in rows if len(row) == n_columns]
+    decimal = "."
+    if delimiter not in (",", ", "):
+        cells = [cell for row in rows for cell in row if cell]
+        if cells and sum(bool(_DECIMAL_COMMA.match(cell)) for cell in cells) >= 0.5 * len(cells):
+            decimal = ","
+    kinds = [[_cell_kind(cell, decimal) for cell in row] for row in rows]
+    numeric = [
+        j
+        for j in range(n_columns)
+        if sum(row[j] != "text" for row in kinds) >= 0.8 * len(kinds) and any(row[j] == "number" for row in kinds)
+    ]
+    if not numeric:
+        shaped = [i for i in filled if len(_split_fields(lines[i], delimiter)) == n_columns]
+        if len(shaped) == 1:
+            raise _error(path, f"has a header but no data rows (line {shaped[0] + 1}: {lines[shaped[0]]!r})")
+        raise _error(path, "has no column of numbers; is it a samples file? Export the magnetometer data as CSV")
+
+    def is_data(fields: list[str]) -> bool:
+        if len(fields) != n_columns:
+            # A line of numbers only is a damaged data row, not a preamble: the reader reports its field count.
+            return all(_cell_kind(cell, decimal) != "text" for cell in fields)
+        return 2 * sum(_cell_kind(fields[j], decimal) == "text" for j in numeric) < len(numeric)
+
+    first_data = next((i for i in filled if is_data(_split_fields(lines[i], delimiter))), None)
+    if first_data is None:
+        raise _error(path, "has a header but no data rows; record some samples or give another file")
+    header: tuple[str, ...] | None = None
+    start = first_data
+    before = [i for i in filled if i < first_data]
+    if before:
+        names = _split_fields(lines[before[-1]], delimiter)
+        # A header has one name per field; trailing empty names (a trailing delimiter) are tolerated.
+        if len(names) >= n_columns and not any(names[n_columns:]):
+            header = tuple(name.lstrip("\ufeff") for name in names[:n_columns])
+            start = before[-1]
+    return FileFormat(
+        kind="text",
+        delimiter=delimiter,
+        encoding=encoding,
+        preamble_lines=start,
+        header=header,
+        n_columns=n_columns,
+        decimal=decimal,
+        data_line=first_data,
+        data_offset=sum(len(raw) for raw in raw_lines[:first_data]),
+    )
+
+
+@dataclass(frozen=True)
+class _NpyInfo:
+    shape: tuple[int, ...]
+    dtype: np.dtype[Any]
+    fortran: bool
+
+
+def _read_npy_header(handle: Any) -> _NpyInfo:
+    version = np.lib.format.read_magic(handle)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(handle)
+    else:
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(handle)
+    return _NpyInfo(tuple(shape), np.dtype(dtype), bool(fortran))
+
+
+def _npz_members(path: Path) -> dict[str, _NpyInfo]:
+    """Shapes and dtypes of the arrays of an npz file, read from their headers only."""
+    members: dict[str, _NpyInfo] = {}
+    try:
+        with zipfile.ZipFile(path) as archive:
+            for info in archive.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with archive.open(info) as handle:
+                    members[info.filename[: -len(".npy")]] = _read_npy_header(handle)
+    except (zipfile.BadZipFile, ValueError, OSError) as error:
+        raise _error(path, f"is not a readable .npz archive ({error}); re-save it with numpy.savez") from None
+    if not members:
+        raise _error(path, "is an .npz archive without arrays; save the samples with numpy.savez")
+    return members
+
+
+def _npy_info(path: Path) -> _NpyInfo:
+    try:
+        with open(path, "rb") as handle:
+            return _read_npy_header(handle)
+    except (ValueError, OSError) as error:
+        raise _error(path, f"is not a readable .npy file ({error}); re-save it with numpy.save") from None
+
+
+def sniff(path: str | os.PathLike[str]) -> FileFormat:
+    """Find the layout of a samples file from its head (text) or its array headers (npy/npz).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A delimited text file, a ``.npy`` or an ``.npz`` file (recognised by content, then by suffix).
+
+    Returns
+    -------
+    FileFormat
+        Delimiter, encoding, preamble, header and column count.
+
+    Raises
+    ------
+    DataFileError
+        Missing, unreadable or empty file, a header without rows, no numeric column, a broken npy/npz.
+    """
+    file = _check_file(path)
+    head, truncated = _read_head(file)
+    kind = _kind_of(file, head)
+    if kind == "npy":
+        info = _npy_info(file)
+        n_columns = info.shape[1] if len(info.shape) == 2 else (info.shape[0] if info.shape else 0)
+        return FileFormat("npy", None, "binary", 0, None, n_columns)
+    if kind == "npz":
+        keys = tuple(_npz_members(file))
+        return FileFormat("npz", None, "binary", 0, keys, len(keys))
+    if not head:
+        raise _error(file, "is empty (0 bytes); record some samples or give another file")
+    return _sniff_text(file, head, truncated)
+
+
+# ---------------------------------------------------------------------------------------------- columns
+
+
+def _ambiguity(path: Path, candidates: Sequence[Any]) -> DataFileError:
+    listed = "; ".join(f"({triple.describe()})" for triple in candidates[:6])
+    return _error(
+        path,
+        f"several magnetometer column triples match: {listed}; choose one with "
+        f"columns=[...] (CLI: --columns {candidates[0].describe()})",
+    )
+
+
+def _check_columns_option(columns: Sequence[str | int]) -> list[str | int]:
+    if isinstance(columns, (str, bytes)):
+        raise OptionError(f"columns must be a sequence of three names or 0-based indices, got the string {columns!r}")
+    chosen = list(columns)
+    for item in chosen:
+        if isinstance(item, bool) or not isinstance(item, (str, int, np.integer)):
+            raise OptionError(f"columns must hold names (str) or 0-based indices (int), got {item!r}")
+    if len(set(chosen)) != len(chosen):
+        raise OptionError(f"columns must name three different columns, got {chosen}")
+    return [int(item) if isinstance(item, np.integer) else item for item in chosen]
+
+
+def _match_name(path: Path, wanted: str, labels: Sequence[str], has_header: bool) -> int:
+    """Index of the column called ``wanted``: exact name, then case-insensitive, then a ``column N`` label."""
+    stripped = wanted.strip()
+    exact = [i for i, label in enumerate(labels) if label == stripped]
+    if len(exact) == 1:
+        return exact[0]
+    folded = [i for i, label in enumerate(labels) if label.casefold() == stripped.casefold()]
+    if len(folded) == 1:
+        return folded[0]
+    if len(exact) > 1 or len(folded) > 1:
+        raise _error(path, f"several columns are named {wanted!r}; choose them by 0-based index instead")
+    label = _COLUMN_LABEL.match(stripped.lower())
+    if label and 1 <= int(label.group(1)) <= len(labels):
+        return int(label.group(1)) - 1
+    seen = ", ".join(labels) if has_header else f"none, the file has no header ({len(labels)} columns)"
+    raise _error(path, f"no column named {wanted!r}; the columns are: {seen}; use one of them or a 0-based index")
+
+
+def _resolve_table_columns(
+    path: Path, fmt: FileFormat, columns: Sequence[str | int] | None, numeric: Sequence[int] | None = None
+) -> tuple[tuple[int, int, int], tuple[str, str, str]]:
+    """The 0-based positions and labels of the x, y, z columns of a text or npy file."""
+    n = fmt.n_columns
+    labels = [fmt.column_label(i) for i in range(n)]
+    where = "columns" if fmt.kind == "npy" else "fields per row"
+    if n < 3:
+        raise _error(
+            path,
+            f"has {n} {where} ({fmt.describe()}); a magnetometer needs three (x, y, z): check the delimiter "
+            "or export all three axes",
+        )
+    if columns is None:
+        if fmt.header is not None:
+            candidates = find_magnetometer_columns(fmt.header)
+            if not candidates:
+                raise _error(
+                    path,
+                    f"no magnetometer columns found among: {', '.join(labels)}; name the x, y, z columns with "
+                    "columns=[...] (CLI: --columns)",
+                )
+            best = [triple for triple in candidates if triple.score == candidates[0].score]
+            if len(best) > 1:
+                raise _ambiguity(path, best)
+            indices = best[0].indices
+        else:
+            # No header: three columns are x, y, z; with more, the first three numeric ones (reported).
+            pool = list(numeric) if numeric is not None and len(numeric) >= 3 else list(range(n))
+            indices = (pool[0], pool[1], pool[2])
+    else:
+        chosen = _check_columns_option(columns)
+        if len(chosen) != 3:
+            raise OptionError(f"columns must give exactly three columns (x, y, z), got {len(chosen)}: {chosen}")
+        positions = []
+        for item in chosen:
+            if isinstance(item, int):
+                if not 0 <= item < n:
+                    raise _error(
+                        path, f"column index {item} is out of range: the file has {n} columns, 0 to {n - 1} (0-based)"
+                    )
+                positions.append(item)
+            else:
+                positions.append(_match_name(path, item, labels, fmt.header is not None))
+        if len(set(positions)) != 3:
+            raise OptionError(f"columns {chosen} name the same column twice; give three different columns")
+        indices = (positions[0], positions[1], positions[2])
+    return indices, (labels[indices[0]], labels[indices[1]], labels[indices[2]])
+
+
+@dataclass(frozen=True)
+class _NpzSelection:
+    """Where the x, y, z values of an npz file are: three 1-D keys, or three columns of one 2-D key."""
+
+    keys: tuple[str, ...]
+    key_columns: tuple[int, int, int] | None
+    n_rows: int
+
+    @property
+    def labels(self) -> tuple[str, str, str]:
+        if self.key_columns is None:
+            return (self.keys[0], self.keys[1], self.keys[2])
+        key = self.keys[0]
+        first, second, third = (f"{key}[:, {i}]" for i in self.key_columns)
+        return (first, second, third)
+
+
+def _is_numeric_dtype(dtype: np.dtype[Any]) -> bool:
+    return bool(np.issubdtype(dtype, np.floating) or np.issubdtype(dtype, np.integer))
+
+
+def _looks_magnetic(key: str) -> bool:
+    words = name_words(normalise_name(key))
+    return any(word in _MAG_WORDS or word in _MAG_LETTERS or word.startswith("mag") for word in words)
+
+
+def _resolve_npz_columns(
+    path: Path, members: dict[str, _NpyInfo], columns: Sequence[str | int] | None
+) -> _NpzSelection:
+    listing = ", ".join(f"{key} {members[key].shape}" for key in members)
+    vectors = {key: info for key, info in members.items() if len(info.shape) == 1 and _is_numeric_dtype(info.dtype)}
+    matrices = {
+        key: info
+        for key, info in members.items()
+        if len(info.shape) == 2 and info.shape[1] >= 3 and _is_numeric_dtype(info.dtype)
+    }
+
+    def from_vectors(keys: Sequence[str]) -> _NpzSelection:
+        lengths = {members[key].shape[0] for key in keys}
+        if len(lengths) != 1:
+            shapes = ", ".join(f"{key} {members[key].shape}" for key in keys)
+            raise _error(path, f"the arrays {shapes} have different lengths; x, y and z need one value per sample")
+        return _NpzSelection(tuple(keys), None, lengths.pop())
+
+    def from_matrix(key: str, cols: tuple[int, int, int]) -> _NpzSelection:
+        return _NpzSelection((key,), cols, members[key].shape[0])
+
+    if columns is None:
+        candidates = find_magnetometer_columns(list(vectors))
+        if candidates:
+            best = [triple for triple in candidates if triple.score == candidates[0].score]
+            if len(best) > 1:
+                raise _ambiguity(path, best)
+            return from_vectors(best[0].names)
+        triples = [key for key, info in matrices.items() if info.shape[1] == 3]
+        if len(triples) > 1:
+            triples = [key for key in triples if _looks_magnetic(key)] or triples
+        if len(triples) == 1:
+            return from_matrix(triples[0], (0, 1, 2))
+        if len(triples) > 1:
+            raise _error(
+                path,
+                f"several (N, 3) arrays could be the samples: {', '.join(triples)}; choose one with columns=['key']",
+            )
+        raise _error(
+            path,
+            f"no magnetometer arrays found among the keys: {listing}; name them with columns=['mag_x', 'mag_y', "
+            "'mag_z'] (three 1-D keys) or columns=['key'] (one (N, 3) key)",
+        )
+    chosen = _check_columns_option(columns)
+    if len(chosen) == 1 and isinstance(chosen[0], str):
+        key = chosen[0]
+        if key not in members:
+            raise _error(path, f"no array named {key!r}; the keys are: {listing}")
+        if key not in matrices or members[key].shape[1] != 3:
+            raise _error(
+                path,
+                f"array {key!r} has shape {members[key].shape}, not (N, 3); give three columns, e.g. "
+                f"columns=['{key}[:, 0]', '{key}[:, 1]', '{key}[:, 2]']",
+            )
+        return from_matrix(key, (0, 1, 2))
+    if len(chosen) != 3:
+        raise OptionError(f"columns must give three keys (x, y, z) or one (N, 3) key, got {len(chosen)}: {chosen}")
+    if all(isinstance(item, int) for item in chosen):
+        if len(matrices) != 1:
+            raise _error(
+                path, f"column indices need exactly one 2-D array in the file; name the keys instead: {listing}"
+            )
+        key = next(iter(matrices))
+        width = members[key].shape[1]
+        for item in chosen:
+            if not 0 <= int(item) < width:
+                raise _error(path, f"column index {item} is out of range: {key!r} has columns 0 to {width - 1}")
+        return from_matrix(key, (int(chosen[0]), int(chosen[1]), int(chosen[2])))
+    labels = [_NPZ_COLUMN_LABEL.match(str(item)) for item in chosen]
+    if all(labels):
+        keys = {label.group(1) for label in labels if label}
+        key = keys.pop()
+        if keys or key not in matrices:
+            raise _error(path, f"columns {chosen} must all be columns of one 2-D array; the keys are: {listing}")
+        cols = [int(label.group(2)) for label in labels if label]
+        width = members[key].shape[1]
+        if max(cols) >= width:
+            raise _error(path, f"column index {max(cols)} is out of range: {key!r} has {width} columns")
+        return from_matrix(key, (cols[0], cols[1], cols[2]))
+    for item in chosen:
+        if not isinstance(item, str) or item not in members:
+            raise _error(path, f"no array named {item!r}; the keys are: {listing}")
+        if item not in vectors:
+            raise _error(path, f"array {item!r} has shape {members[item].shape}; x, y and z keys must be 1-D numbers")
+    return from_vectors([str(item) for item in chosen])
+
+
+# ---------------------------------------------------------------------------------------------- reading
+
+
+def _nonfinite_word(value: float) -> str:
+    return "empty or NaN" if np.isnan(value) else ("inf" if value > 0 else "-inf")
+
+
+class ChunkReader:
+    """Iterate over the magnetometer samples of a file in chunks of at most ``chunk_rows`` rows.
+
+    Created by :func:`iter_sample_chunks`. Each item is an (n, 3) float64 array of finite samples. The
+    layout and the columns are resolved on creation (so errors about them come at once); errors in the
+    rows come during iteration. Memory is bounded by the chunk (and a byte block of at most 64 MiB),
+    never by the file.
+
+    Attributes
+    ----------
+    columns : tuple of 3 str
+        The columns read, in x, y, z order (see :class:`SampleTable`).
+    format : FileFormat
+        The file's layout.
+    n_rows, n_skipped, skipped_lines
+        As in :class:`SampleTable`; complete once the iteration has finished.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        columns: Sequence[str | int] | None = None,
+        nonfinite: Literal["skip", "error"] = "skip",
+        chunk_rows: int = 1_000_000,
+        block_bytes: int | None = None,
+    ) -> None:
+        if nonfinite not in ("skip", "error"):
+            raise OptionError(f"nonfinite must be 'skip' or 'error', got {nonfinite!r}")
+        if isinstance(chunk_rows, bool) or not isinstance(chunk_rows, (int, np.integer)) or chunk_rows < 1:
+            raise OptionError(f"chunk_rows must be a positive integer, got {chunk_rows!r}")
+        self.path = _check_file(path)
+        self.format = sniff(self.path)
+        self.nonfinite = nonfinite
+        self.chunk_rows = int(chunk_rows)
+        self._block_bytes = block_bytes
+        self._npz: _NpzSelection | None = None
+        self._indices: tuple[int, int, int] = (0, 1, 2)
+        self.n_rows = 0
+        self.n_skipped = 0
+        self.skipped_lines: tuple[int, ...] = ()
+        self._skipped: list[int] = []
+        if self.format.kind == "npz":
+            self._npz = _resolve_npz_columns(self.path, _npz_members(self.path), columns)
+            self.columns = self._npz.labels
+        elif self.format.kind == "npy":
+            self._check_npy_shape()
+            self._indices, self.columns = _resolve_table_columns(self.path, self.format, columns)
+        else:
+            numeric = self._numeric_columns() if columns is None and self.format.header is None else None
+            self._indices, self.columns = _resolve_table_columns(self.path, self.format, columns, numeric)
+
+    @property
+    def column_indices(self) -> tuple[int, int, int]:
+        """0-based positions of the x, y, z columns (text and npy; for npz, of the columns of its 2-D key)."""
+        if self._npz is not None:
+            return self._npz.key_columns or (0, 1, 2)
+        return self._indices
+
+    # .................................................................. shared bookkeeping
+
+    def _numeric_columns(self) -> list[int]:
+        """Columns of the first data rows that hold numbers (for the no-header rule)."""
+        head, truncated = _read_head(self.path)
+        _, lines, _ = _decode_lines(self.path, head, truncated)
+        rows = [_split_fields(line, self.format.delimiter) for line in lines[self.format.data_line :][:50]]
+        rows = [row for row in rows if len(row) == self.format.n_columns]
+        return [
+            j
+            for j in range(self.format.n_columns)
+            if rows and all(_cell_kind(row[j], self.format.decimal) != "text" for row in rows)
+        ]
+
+    def _check_npy_shape(self) -> None:
+        info = _npy_info(self.path)
+        if not _is_numeric_dtype(info.dtype):
+            raise _error(self.path, f"holds an array of dtype {info.dtype}, not numbers; save the samples as floats")
+        if len(info.shape) != 2:
+            raise _error(
+                self.path, f"holds an array of shape {info.shape}; save the samples as an (N, 3) array, one per row"
+            )
+        if info.shape[0] == 3 and info.shape[1] > 3:
+            raise _error(
+                self.path, f"holds an array of shape {info.shape}: one sample per column; save its transpose (arr.T)"
+            )
+
+    def _filter(self, values: NDArray[np.float64], where: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Count and drop non-finite rows; ``where`` gives the line (row) number of each row."""
+        self.n_rows += len(values)
+        finite = np.isfinite(values).all(axis=1)
+        if finite.all():
+            return values
+        bad = np.flatnonzero(~finite)
+        if self.nonfinite == "error":
+            row = bad[0]
+            axis = int(np.flatnonzero(~np.isfinite(values[row]))[0])
+            place = "line" if self.format.kind == "text" else "row"
+            raise _error(
+                self.path,
+                f"{place} {int(where[row])}, column {self.columns[axis]!r}: the value is "
+                f"{_nonfinite_word(values[row, axis])}; fix or delete that row, or skip such rows (nonfinite='skip')",
+            )
+        self.n_skipped += bad.size
+        room = MAX_REPORTED_LINES - len(self._skipped)
+        if room > 0:
+            self._skipped.extend(int(line) for line in where[bad[:room]])
+        return np.ascontiguousarray(values[finite])
+
+    def __iter__(self) -> Iterator[NDArray[np.float64]]:
+        self.n_rows = 0
+        self.n_skipped = 0
+        self._skipped = []
+        self.skipped_lines = ()
+        if self.format.kind == "text":
+            chunks = self._iter_text()
+        elif self.format.kind == "npy":
+            chunks = self._iter_npy()
+        else:
+            chunks = self._iter_npz()
+        for chunk in chunks:
+            self.skipped_lines = tuple(self._skipped)
+            if len(chunk):
+                yield chunk
+        self.skipped_lines = tuple(self._skipped)
+        if self.n_rows == 0:
+            raise _error(self.path, "has no data rows; record some samples or give another file")
+
+    # .................................................................. npy / npz
+
+    def _iter_npy(self) -> Iterator[NDArray[np.float64]]:
+        array = np.load(self.path, mmap_mode="r", allow_pickle=False)
+        if array.shape[0] == 0:
+            raise _error(self.path, "holds an array with no rows; record some samples")
+        for start in range(0, array.shape[0], self.chunk_rows):
+            block = np.asarray(array[start : start + self.chunk_rows][:, list(self._indices)], dtype=np.float64)
+            yield self._filter(block, np.arange(start + 1, start + 1 + len(block)))
+
+    def _iter_npz(self) -> Iterator[NDArray[np.float64]]:
+        selection = self._npz
+        assert selection is not None
+        if selection.n_rows == 0:
+            raise _error(self.path, f"the arrays {', '.join(selection.keys)} are empty; record some samples")
+        with zipfile.ZipFile(self.path) as archive:
+            streams = [_NpyStream(archive, key, self.chunk_rows) for key in selection.keys]
+            try:
+                start = 0
+                while start < selection.n_rows:
+                    parts = [stream.next_rows() for stream in streams]
+                    if selection.key_columns is None:
+                        block = np.column_stack([np.asarray(part, dtype=np.float64) for part in parts])
+                    else:
+                        block = np.asarray(parts[0][:, list(selection.key_columns)], dtype=np.float64)
+                    yield self._filter(block, np.arange(start + 1, start + 1 + len(block)))
+                    start += len(block)
+            finally:
+                for stream in streams:
+                    stream.close()
+
+    # .................................................................. text
+
+    def _field_count_error(self, line: int, count: int) -> DataFileError:
+        fmt = self.format
+        rows = "the header and the first rows have" if fmt.header is not None else "the first rows have"
+        return _error(
+            self.path,
+            f"line {line} has {count} fields but {rows} {fmt.n_columns} (delimiter {fmt.delimiter!r}); "
+            "fix or delete that line",
+        )
+
+    def _block_lines(self, block: bytes, first_line: int) -> NDArray[np.int64]:
+        """Line numbers of the rows of a block (blank lines skipped), checking each row's field count."""
+        numbers = []
+        text_lines = block.decode(self._text_encoding, errors="replace").split("\n")
+        if text_lines and text_lines[-1] == "":
+            text_lines.pop()
+        for offset, line in enumerate(text_lines):
+            if not line.strip():
+                continue
+            count = len(_split_fields(line.rstrip("\r"), self.format.delimiter))
+            if count != self.format.n_columns:
+                raise self._field_count_error(first_line + offset, count)
+            numbers.append(first_line + offset)
+        return np.asarray(numbers, dtype=np.int64)
+
+    def _bad_cell_error(self, block: bytes, first_line: int, detail: str) -> DataFileError:
+        """Find the first cell of the magnetometer columns that is not a number, for the message."""
+        for offset, line in enumerate(block.decode(self._text_encoding, errors="replace").split("\n")):
+            if not line.strip():
+                continue
+            fields = _split_fields(line.rstrip("\r"), self.format.delimiter)
+            for axis, index in enumerate(self._indices):
+                cell = fields[index] if index < len(fields) else ""
+                if _cell_kind(cell, self.format.decimal) == "text":
+                    return _error(
+                        self.path,
+                        f"line {first_line + offset}, column {self.columns[axis]!r} (column {index + 1}): "
+                        f"{cell!r} is not a number; fix that cell, or choose other columns with columns=[...]",
+                    )
+        return _error(self.path, f"cannot read the numbers after line {first_line} ({detail}); check the file there")
+
+    @property
+    def _text_encoding(self) -> str:
+        return "utf-8" if self.format.encoding == "utf-8-sig" else self.format.encoding
+
+    def _blocks(self) -> Iterator[tuple[bytes, int]]:
+        """Byte blocks of whole lines after the header, with the 1-based number of each block's first line."""
+        size = self._block_bytes
+        if size is None:
+            # About chunk_rows lines per block (from the head's line length), within 64 KiB .. 64 MiB.
+            size = min(max(self.chunk_rows * 64, 1 << 16), 1 << 26)
+        line = self.format.data_line + 1
+        with open(self.path, "rb") as handle:
+            handle.seek(self.format.data_offset)
+            while True:
+                block = handle.read(size)
+                if not block:
+                    return
+                if not block.endswith(b"\n"):
+                    block += handle.readline()
+                yield block, line
+                line += block.count(b"\n")
+
+    def _iter_text(self) -> Iterator[NDArray[np.float64]]:
+        pandas = _pandas()
+        fmt = self.format
+        assert fmt.delimiter is not None
+        whitespace = fmt.delimiter == "whitespace"
+        separator = r"\s+" if whitespace else fmt.delimiter[0]
+        delimiter_byte = fmt.delimiter[0].encode()
+        used = sorted(set(self._indices))
+        order = [used.index(index) for index in self._indices]
+        for block, first_line in self._blocks():
+            if not block.strip():
+                continue
+            n_lines = block.count(b"\n") + (not block.endswith(b"\n"))
+            # pandas ignores surplus fields and fills missing ones with NaN when it reads only some
+            # columns, so the field count is checked here: one byte count per block in the usual case.
+            if whitespace:
+                consistent = len(block.split()) == fmt.n_columns * n_lines
+            else:
+                consistent = block.count(delimiter_byte) == (fmt.n_columns - 1) * n_lines
+            lines = (
+                np.arange(first_line, first_line + n_lines, dtype=np.int64)
+                if consistent
+                else self._block_lines(block, first_line)
+            )
+            reader = _read_block(pandas, block, separator, used, fmt, self.chunk_rows)
+            row = 0
+            while True:
+                try:
+                    frame = next(reader)
+                except StopIteration:
+                    break
+                except (ValueError, TypeError) as error:
+                    if isinstance(error, DataFileError):
+                        raise
+                    raise self._bad_cell_error(block, first_line, str(error)) from None
+                values = frame.to_numpy(dtype=np.float64)[:, order]
+                yield self._filter(values, lines[row : row + len(values)])
+                row += len(values)
+
+
+def _read_block(
+    pandas: pandas, block: bytes, separator: str, used: list[int], fmt: FileFormat, chunk_rows: int
+) -> Iterator[pandas.DataFrame]:
+    return iter(
+        pandas.read_csv(
+            io.BytesIO(block),
+            sep=separator,
+            header=None,
+            usecols=used,
+            dtype=np.float64,
+            engine="c",
+            encoding="utf-8" if fmt.encoding == "utf-8-sig" else fmt.encoding,
+            decimal=fmt.decimal,
+            skipinitialspace=True,
+            skip_blank_lines=True,
+            na_values=list(NA_VALUES),
+            keep_default_na=False,
+            chunksize=chunk_rows,
+        )
+    )
+
+
+@dataclass
+class _NpyStream:
+    """Rows of one array of an npz archive, read a chunk at a time (C order) or loaded whole (Fortran)."""
+
+    archive: zipfile.ZipFile
+    key: str
+    chunk_rows: int
+    _handle: Any = field(init=False)
+    _info: _NpyInfo = field(init=False)
+    _whole: NDArray[Any] | None = field(init=False, default=None)
+    _position: int = field(init=False, default=0)
+
+    def __post_init__(self) -> None:
+        self._handle = self.archive.open(f"{self.key}.npy")
+        self._info = _read_npy_header(self._handle)
+        if self._info.fortran and len(self._info.shape) > 1:
+            self._handle.close()
+            with self.archive.open(f"{self.key}.npy") as handle:
+                self._whole = np.lib.format.read_array(handle, allow_pickle=False)
+
+    def next_rows(self) -> NDArray[Any]:
+        total = self._info.shape[0]
+        count = min(self.chunk_rows, total - self._position)
+        start = self._position
+        self._position += count
+        if self._whole is not None:
+            return self._whole[start : start + count]
+        row_shape = self._info.shape[1:]
+        row_bytes = self._info.dtype.itemsize * int(np.prod(row_shape, dtype=np.int64))
+        data = self._handle.read(count * row_bytes)
+        return np.frombuffer(data, dtype=self._info.dtype).reshape((count, *row_shape))
+
+    def close(self) -> None:
+        if self._whole is None:
+            self._handle.close()
+
+
+def iter_sample_chunks(
+    path: str | os.PathLike[str],
+    *,
+    columns: Sequence[str | int] | None = None,
+    nonfinite: Literal["skip", "error"] = "skip",
+    chunk_rows: int = 1_000_000,
+) -> ChunkReader:
+    """Read the magnetometer samples of a file chunk by chunk (bounded memory).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Delimited text, ``.npy`` or ``.npz`` (see :func:`read_samples`).
+    columns : sequence of 3 str or int, optional
+        The x, y, z columns, by name or 0-based index, in that order; None finds them by name.
+    nonfinite : {"skip", "error"}
+        Rows with a NaN, infinite or empty magnetometer value are dropped and counted, or an error.
+    chunk_rows : int
+        Maximum rows per chunk.
+
+    Returns
+    -------
+    ChunkReader
+        An iterable of (n, 3) float64 arrays; after the iteration its ``n_rows``, ``n_skipped`` and
+        ``skipped_lines`` are complete.
+    """
+    return ChunkReader(path, columns=columns, nonfinite=nonfinite, chunk_rows=chunk_rows)
+
+
+def read_samples(
+    path: str | os.PathLike[str],
+    *,
+    columns: Sequence[str | int] | None = None,
+    nonfinite: Literal["skip", "error"] = "skip",
+) -> SampleTable:
+    """Read the magnetometer samples of a file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Delimited text (comma, ``", "``, tab, semicolon, pipe or runs of spaces; optional preamble lines,
+        header and UTF-8 BOM; any extra columns), a ``.npy`` array of shape (N, k >= 3), or an ``.npz``
+        archive with three 1-D keys (``mag_x``, ``mag_y``, ``mag_z`` ...) or one (N, 3) key.
+    columns : sequence of 3 str or int, optional
+        The x, y, z columns, by name (case-insensitive) or 0-based index, always in the order x, y, z
+        (for a file whose columns are z, y, x, pass ``[2, 1, 0]``). None finds them by name
+        (:mod:`magfit.io.columns`); without a header, three columns are x, y, z and with more, the first
+        three numeric ones are used (``SampleTable.columns`` says which).
+    nonfinite : {"skip", "error"}
+        Rows with a NaN, infinite or empty magnetometer value are dropped and counted (``"skip"``), or
+        the first one raises (``"error"``).
+
+    Returns
+    -------
+    SampleTable
+        The finite samples, shape (N, 3), in the file's units, and the bookkeeping of the read.
+
+    Raises
+    ------
+    DataFileError
+        Missing, unreadable or empty file; a header without rows; a cell that is not a number; a row with
+        another number of fields; magnetometer columns not found or ambiguous; a column name or index that
+        is not in the file; fewer than three columns; every row non-finite.
+    """
+    reader = ChunkReader(path, columns=columns, nonfinite=nonfinite, chunk_rows=1_000_000)
+    chunks = list(reader)
+    samples = np.concatenate(chunks) if chunks else np.empty((0, 3))
+    if len(samples) == 0:
+        raise _error(
+            reader.path,
+            f"all {reader.n_rows} rows have a NaN, infinite or empty value in {', '.join(reader.columns)} "
+            f"(first at line {reader.skipped_lines[0]}); check the columns (columns=[...])",
+        )
+    return SampleTable(
+        path=reader.path,
+        samples=samples,
+        columns=reader.columns,
+        n_rows=reader.n_rows,
+        n_skipped=reader.n_skipped,
+        skipped_lines=reader.skipped_lines,
+        format=reader.format,
+    )

@@ -1,0 +1,282 @@
+"""Writing a calibrated copy of a samples file.
+
+:func:`write_calibrated` rewrites the input file with the three magnetometer columns replaced by
+``calibration.apply(...)`` (``matrix @ (raw - offset)``, ARCHITECTURE.md) and everything else kept: the
+preamble, the header, the byte-order mark, the delimiter, the line ends, the other columns and every row.
+Text files are rewritten line by line, so a cell that is not a magnetometer value keeps its exact bytes;
+npy/npz files keep their other arrays (an npy array becomes float64 as a whole when it was an integer or
+float32 array). The output is written atomically (:mod:`magfit.io.atomic`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import zipfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError
+from .atomic import atomic_open
+from .readers import NA_VALUES, ChunkReader, SampleTable, _check_file, _error
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from ..calibration import Calibration
+
+__all__ = ["write_calibrated"]
+
+#: Significant digits of the calibrated values written to text files (ample for any magnetometer).
+SIGNIFICANT_DIGITS = 10
+_BLOCK_BYTES = 1 << 24
+_NA_BYTES = frozenset(value.encode() for value in NA_VALUES)
+_NON_SPACE = re.compile(rb"\S+")
+
+
+def _same_file(first: Path, second: Path) -> bool:
+    if first.resolve() == second.resolve():
+        return True
+    try:
+        return os.path.samefile(first, second)
+    except OSError:
+        return False
+
+
+def write_calibrated(
+    source: SampleTable | str | os.PathLike[str],
+    calibration: Calibration,
+    out_path: str | os.PathLike[str],
+    *,
+    columns: Sequence[str | int] | None = None,
+    normalized: bool = False,
+) -> Path:
+    """Write ``source`` again with its magnetometer columns calibrated.
+
+    Parameters
+    ----------
+    source : SampleTable or str or path-like
+        The input file, or the table :func:`~magfit.io.read_samples` returned for it (its columns are
+        then reused unless ``columns`` is given).
+    calibration : magfit.Calibration
+        Applied as ``matrix @ (raw - offset)`` to every row whose three values are finite.
+    out_path : str or path-like
+        The output file; it must not be the input file. Same kind (text, npy, npz) as the input.
+    columns : sequence of 3 str or int, optional
+        The x, y, z columns (names or 0-based indices); None as in :func:`~magfit.io.read_samples`.
+    normalized : bool
+        Write values divided by ``field_strength`` (unit sphere) instead of input units.
+
+    Returns
+    -------
+    Path
+        ``out_path``.
+
+    Raises
+    ------
+    DataFileError
+        ``out_path`` is the input file; any reading error of :func:`~magfit.io.read_samples`.
+
+    Notes
+    -----
+    Text values are written with 10 significant digits. Rows whose magnetometer values are NaN,
+    infinite or empty are copied unchanged.
+    """
+    if isinstance(source, SampleTable):
+        path = source.path
+        chosen: Sequence[str | int] | None = columns if columns is not None else source.columns
+    else:
+        path = _check_file(source)
+        chosen = columns
+    out = Path(out_path)
+    if _same_file(path, out):
+        suggestion = path.with_name(f"{path.stem}_calibrated{path.suffix}")
+        raise DataFileError(
+            f"{out}: this is the input file; refusing to overwrite it, write to another name (e.g. {suggestion})"
+        )
+    reader = ChunkReader(path, columns=chosen)
+    kind = reader.format.kind
+    if kind == "text":
+        _write_text(reader, calibration, out, normalized)
+    elif kind == "npy":
+        _write_npy(reader, calibration, out, normalized)
+    else:
+        _write_npz(reader, calibration, out, normalized)
+    return out
+
+
+def _calibrate_finite(
+    values: NDArray[np.float64], calibration: Calibration, normalized: bool
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Calibrated copy of ``values`` (N, 3): finite rows corrected, the others left as they were."""
+    finite: NDArray[np.bool_] = np.asarray(np.isfinite(values).all(axis=1))
+    result = np.array(values, dtype=np.float64)
+    if finite.any():
+        result[finite] = calibration.apply(values[finite], normalized=normalized)
+    return result, finite
+
+
+# ---------------------------------------------------------------------------------------------- text
+
+
+class _TextRewriter:
+    """Rewrites the data lines of one text file, block by block, keeping every other byte."""
+
+    def __init__(self, reader: ChunkReader, calibration: Calibration, normalized: bool) -> None:
+        fmt = reader.format
+        assert fmt.delimiter is not None
+        self.reader = reader
+        self.fmt = fmt
+        self.calibration = calibration
+        self.normalized = normalized
+        self.indices = reader.column_indices
+        self.whitespace = fmt.delimiter == "whitespace"
+        self.delimiter = b" " if self.whitespace else fmt.delimiter.encode()
+        self.split_byte = self.delimiter[:1]
+        self.encoding = "utf-8" if fmt.encoding == "utf-8-sig" else fmt.encoding
+
+    def _number(self, cell: bytes, line: int, axis: int) -> float:
+        text = cell.strip()
+        if text in _NA_BYTES:
+            return float("nan")
+        try:
+            return float(text.replace(b",", b".") if self.fmt.decimal == "," else text)
+        except ValueError:
+            index = self.indices[axis]
+            shown = cell.strip().decode(self.encoding, errors="replace")
+            raise _error(
+                self.reader.path,
+                f"line {line}, column {self.reader.columns[axis]!r} (column {index + 1}): {shown!r} is not a number; "
+                "fix that cell, or choose other columns with columns=[...]",
+            ) from None
+
+    def _format(self, value: float) -> bytes:
+        text = b"%.*g" % (SIGNIFICANT_DIGITS, value)
+        return text.replace(b".", b",") if self.fmt.decimal == "," else text
+
+    def _fields(self, body: bytes, line: int) -> tuple[list[bytes], list[tuple[int, int]] | None]:
+        """The fields of a line, and for whitespace files their byte spans (to keep the alignment)."""
+        if self.whitespace:
+            spans = [match.span() for match in _NON_SPACE.finditer(body)]
+            fields = [body[start:end] for start, end in spans]
+        elif b'"' in body:
+            return self._quoted_fields(body, line), None
+        else:
+            fields = body.split(self.split_byte)
+            spans = None
+        if len(fields) != self.fmt.n_columns:
+            raise self.reader._field_count_error(line, len(fields))
+        return fields, spans
+
+    def _quoted_fields(self, body: bytes, line: int) -> list[bytes]:
+        import csv
+
+        text = body.decode(self.encoding)
+        fields = next(csv.reader([text], delimiter=self.fmt.delimiter[0], skipinitialspace=True))  # type: ignore[index]
+        if len(fields) != self.fmt.n_columns:
+            raise self.reader._field_count_error(line, len(fields))
+        quoted = []
+        for cell in fields:
+            if any(char in cell for char in (self.fmt.delimiter[0], '"', "\n")):  # type: ignore[index]
+                cell = '"' + cell.replace('"', '""') + '"'
+            quoted.append(cell.encode(self.encoding))
+        return quoted
+
+    def rewrite(self, block: bytes, first_line: int) -> bytes:
+        lines = block.split(b"\n")
+        parsed: list[tuple[int, list[bytes], list[tuple[int, int]] | None, bytes, bytes]] = []
+        values: list[tuple[float, float, float]] = []
+        x, y, z = self.indices
+        for offset, raw in enumerate(lines):
+            body = raw[:-1] if raw.endswith(b"\r") else raw
+            if not body.strip():
+                continue
+            line = first_line + offset
+            fields, spans = self._fields(body, line)
+            values.append(
+                (self._number(fields[x], line, 0), self._number(fields[y], line, 1), self._number(fields[z], line, 2))
+            )
+            parsed.append((offset, fields, spans, body, raw[len(body) :]))
+        if not values:
+            return block
+        corrected, finite = _calibrate_finite(np.array(values, dtype=np.float64), self.calibration, self.normalized)
+        for (offset, fields, spans, body, ending), row, keep in zip(parsed, corrected, finite, strict=True):
+            if not keep:
+                continue  # a row with a non-finite magnetometer value is copied as it was
+            if spans is not None:
+                pieces = bytearray(body)
+                for index, value in sorted(zip(self.indices, row, strict=True), reverse=True):
+                    start, end = spans[index]
+                    pieces[start:end] = self._format(value)
+                lines[offset] = bytes(pieces) + ending
+                continue
+            for index, value in zip(self.indices, row, strict=True):
+                cell = fields[index]
+                stripped = cell.strip()
+                lead = cell[: len(cell) - len(cell.lstrip())]
+                trail = cell[len(cell.rstrip()) :] if stripped else b""
+                fields[index] = lead + self._format(value) + trail
+            joiner = self.delimiter if b'"' in body else self.split_byte  # csv-parsed fields lost their spaces
+            lines[offset] = joiner.join(fields) + ending
+        return b"\n".join(lines)
+
+
+def _write_text(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool) -> None:
+    rewriter = _TextRewriter(reader, calibration, normalized)
+    fmt = reader.format
+    with open(reader.path, "rb") as source, atomic_open(out, "wb") as target:
+        target.write(source.read(fmt.data_offset))  # byte-order mark, preamble and header, verbatim
+        line = fmt.data_line + 1
+        while True:
+            block = source.read(_BLOCK_BYTES)
+            if not block:
+                break
+            if not block.endswith(b"\n"):
+                block += source.readline()
+            target.write(rewriter.rewrite(block, line))
+            line += block.count(b"\n")
+
+
+# ---------------------------------------------------------------------------------------------- npy / npz
+
+
+def _write_npy(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool) -> None:
+    array = np.load(reader.path, mmap_mode="r", allow_pickle=False)
+    dtype = np.result_type(array.dtype, np.float64)
+    columns = list(reader.column_indices)
+    header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": array.shape}
+    with atomic_open(out, "wb") as target:
+        np.lib.format.write_array_header_2_0(target, header)
+        for start in range(0, array.shape[0], reader.chunk_rows):
+            block = np.ascontiguousarray(array[start : start + reader.chunk_rows], dtype=dtype)
+            block[:, columns], _ = _calibrate_finite(block[:, columns], calibration, normalized)
+            target.write(block.tobytes(order="C"))
+
+
+def _write_npz(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool) -> None:
+    selection = reader._npz
+    assert selection is not None
+    with zipfile.ZipFile(reader.path) as archive:
+        compressed = any(info.compress_type != zipfile.ZIP_STORED for info in archive.infolist())
+    with np.load(reader.path, allow_pickle=False) as data:
+        arrays: dict[str, NDArray[Any]] = {key: data[key] for key in data.files}
+    if selection.key_columns is None:
+        raw = np.column_stack([np.asarray(arrays[key], dtype=np.float64) for key in selection.keys])
+        corrected, _ = _calibrate_finite(raw, calibration, normalized)
+        for axis, key in enumerate(selection.keys):
+            arrays[key] = np.ascontiguousarray(corrected[:, axis])
+    else:
+        key = selection.keys[0]
+        matrix = np.array(arrays[key], dtype=np.result_type(arrays[key].dtype, np.float64))
+        columns = list(selection.key_columns)
+        matrix[:, columns], _ = _calibrate_finite(matrix[:, columns], calibration, normalized)
+        arrays[key] = matrix
+    method = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
+    # Written member by member (as numpy.savez does) so that any key name works, even "file".
+    with atomic_open(out, "wb") as target, zipfile.ZipFile(target, "w", compression=method, allowZip64=True) as zipped:
+        for key, value in arrays.items():
+            with zipped.open(f"{key}.npy", "w", force_zip64=True) as member:
+                np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
