@@ -519,3 +519,12 @@ def test_px4_large_offset_is_written_with_a_warning() -> None:
     assert "# WARNING: an offset exceeds 1.3 G" in text
     assert parse_px4(text)["CAL_MAG0_YOFF"] == 1.5
     assert "WARNING" not in export(_cal(offset=(0.0, 130.0, 0.0)), "px4")
+
+
+def test_docs_examples_run() -> None:
+    # The Python examples of docs/exports.md must keep working (they assert their own results).
+    doc = Path(__file__).resolve().parents[1] / "docs" / "exports.md"
+    blocks = re.findall(r"```python\n(.*?)```", doc.read_text(encoding="utf-8"), re.S)
+    assert len(blocks) == 3
+    for block in blocks:
+        exec(compile(block, str(doc), "exec"), {})
