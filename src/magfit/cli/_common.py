@@ -6,7 +6,7 @@ import os
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, Literal, NoReturn
 
 import click
 import numpy as np
@@ -14,6 +14,9 @@ from numpy.typing import ArrayLike
 from rich.console import Console
 
 from ..errors import CalibrationError, MagfitError, OptionError
+
+#: What to do with rows holding NaN or inf (the readers' ``nonfinite`` argument).
+Nonfinite = Literal["skip", "error"]
 
 #: Exit status of a fit that fails on the data (a CalibrationError).
 EXIT_FIT_FAILED = 1

@@ -22,6 +22,7 @@ from ..fit import fit
 from ..methods import get_method
 from ..statistics import Statistics
 from ._common import (
+    Nonfinite,
     RegistryChoice,
     columns_text,
     console,
@@ -57,6 +58,8 @@ class CalibrationRun:
         Data rows in the file, and rows skipped because a value was NaN or infinite.
     skipped_lines : tuple of int
         Line numbers (1-based) of skipped rows, as reported by the reader (possibly only the first few).
+    file_format : str
+        The layout the reader found (``FileFormat.describe()``: delimiter, header, preamble ...).
     streamed : bool
         True when the file was read in chunks (a method that needs only the statistics).
     """
@@ -68,16 +71,23 @@ class CalibrationRun:
     n_rows: int
     n_skipped: int
     skipped_lines: tuple[int, ...]
+    file_format: str
     streamed: bool
 
 
 class _ReadResult(Protocol):
     """The part of magfit.io's SampleTable / ChunkReader that ``calibrate`` reports."""
 
-    n_rows: int
-    n_skipped: int
-    skipped_lines: Sequence[int]
-    columns: Sequence[Any]
+    @property
+    def n_rows(self) -> int: ...
+    @property
+    def n_skipped(self) -> int: ...
+    @property
+    def skipped_lines(self) -> Sequence[int]: ...
+    @property
+    def columns(self) -> Sequence[Any]: ...
+    @property
+    def format(self) -> Any: ...
 
 
 def run_calibration(
@@ -85,7 +95,7 @@ def run_calibration(
     *,
     method: str,
     columns: Sequence[str | int] | None = None,
-    nonfinite: str = "skip",
+    nonfinite: Nonfinite = "skip",
     unit: str | None = None,
 ) -> CalibrationRun:
     """Read ``path``, fit ``method`` and score the fit; memory stays bounded for streaming methods.
@@ -111,12 +121,13 @@ def run_calibration(
         n_rows=int(read.n_rows),
         n_skipped=int(read.n_skipped),
         skipped_lines=tuple(int(line) for line in read.skipped_lines),
+        file_format=read.format.describe(),
         streamed=streamed,
     )
 
 
 def _fit_in_memory(
-    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: str
+    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: Nonfinite
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import read_samples
 
@@ -138,7 +149,7 @@ def _samples_for_fit(samples: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _fit_streaming(
-    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: str
+    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: Nonfinite
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import iter_sample_chunks
 
@@ -258,7 +269,7 @@ def calibrate_command(
     output: Path | None,
     export_format: str | None,
     unit: str | None,
-    nonfinite: str,
+    nonfinite: Nonfinite,
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -277,6 +288,8 @@ def calibrate_command(
     method = method or default_method()
     if output is not None:
         refuse_overwriting_input(output, [file])
+        if export_format is not None:
+            _check_extension(output, export_format)
     run = run_calibration(file, method=method, columns=columns, nonfinite=nonfinite, unit=unit)
     stdout_text, written = write_outputs(run, output, export_format, unit)
     summary = console(stderr=stdout_text is not None)
@@ -295,6 +308,15 @@ def calibrate_command(
         click.echo(stdout_text, nl=not stdout_text.endswith("\n"))
 
 
+def _check_extension(output: Path, export_format: str) -> None:
+    """Warn when ``-o`` does not carry the export format's usual extension (a likely mix-up)."""
+    from ..export import FORMATS
+
+    extension = FORMATS[export_format].extension
+    if output.suffix.lower() != extension:
+        warn(f"{output}: writing the {export_format} format, whose files usually end in {extension}")
+
+
 def print_summary(out: Console, run: CalibrationRun) -> None:
     """The calibration and its score as a two-column table."""
     calibration = run.calibration
@@ -305,7 +327,7 @@ def print_summary(out: Console, run: CalibrationRun) -> None:
     spec = get_method(calibration.method) if calibration.method in method_names() else None
     method = calibration.method + (f"  ({spec.summary})" if spec is not None else "")
     read = f"{run.n_rows} rows read, {run.n_skipped} skipped" + (" (streamed)" if run.streamed else "")
-    table.add_row("file", str(run.path))
+    table.add_row("file", f"{run.path} ({run.file_format})")
     table.add_row("columns", columns_text(run.columns))
     table.add_row("rows", read)
     table.add_row("method", method)

@@ -15,7 +15,7 @@ from rich.table import Table
 from rich.text import Text
 
 from ..compare import PAPER_METHODS, Comparison, MethodResult, compare
-from ._common import EXIT_FIT_FAILED, columns_text, console, fixed, method_names, parse_columns, vector, warn
+from ._common import EXIT_FIT_FAILED, Nonfinite, columns_text, console, fixed, method_names, parse_columns, vector, warn
 
 OUTPUT_FORMATS = ("table", "markdown", "csv", "json")
 _CSV_FIELDS = (
@@ -104,7 +104,7 @@ def compare_command(
     methods: tuple[str, ...],
     columns: list[str | int] | None,
     output_format: str,
-    nonfinite: str,
+    nonfinite: Nonfinite,
 ) -> None:
     """Fit several methods to each FILE and compare them as the paper does.
 

@@ -1,0 +1,96 @@
+"""Rewrite the golden outputs of ``magfit compare`` on the real recordings (tests/golden/).
+
+Run it after a deliberate change of a method or of the output layout, then review the diff::
+
+    .venv/bin/python scripts/regenerate_golden.py              # uses ../shared/data/real
+    MAGFIT_REAL_DATA=/path/to/real .venv/bin/python scripts/regenerate_golden.py
+
+tests/test_cli_compare.py imports :data:`CASES` and :func:`run_case` from this file, so the test and
+the script always run the same command lines. Outputs are printed with 4 decimals (like the paper's
+tables): last-digit float noise cannot change them.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+GOLDEN_DIR = ROOT / "tests" / "golden"
+DEFAULT_DATA_DIR = ROOT.parent / "shared" / "data" / "real"
+
+
+@dataclass(frozen=True)
+class GoldenCase:
+    """One golden output: ``magfit compare <path> <args> --format markdown`` run in the data folder."""
+
+    name: str
+    path: str
+    args: tuple[str, ...] = ()
+
+    @property
+    def golden_file(self) -> Path:
+        return GOLDEN_DIR / f"compare_{self.name}.md"
+
+    @property
+    def argv(self) -> list[str]:
+        return ["compare", self.path, *self.args, "--format", "markdown"]
+
+
+CASES: tuple[GoldenCase, ...] = (
+    # Small, clean, full tumble, tab-separated without a header (Magneto's reference data).
+    GoldenCase("fxos8700", "fxos8700_magneto/mag-readings.txt"),
+    # Two preamble lines, strong hard and soft iron, 22 745 samples.
+    GoldenCase("unc_qmc5883l", "unc_qmc5883l/filtered_raw_data.csv"),
+    # A drone log: ", " separators, gyro columns after the magnetometer, no header.
+    GoldenCase("betaflight_tpu03", "betaflight_apex5_qmc5883/20231014_apex5_mag_on_tpu_03.txt", ("--columns", "0,1,2")),
+    # The paper's sensor type (MPU-9250), UTF-8 BOM and CRLF line ends.
+    GoldenCase("mxl_mpu9250", "mxl_umich_mpu9250_rm3100/preflight_data_original_imu.csv"),
+    # Gauss, known field 0.47 G.
+    GoldenCase("hamagure_set1", "hamagure_gauss/data-set_1.csv"),
+    # A failure case: tilting only, no tumble; every method must say why it cannot calibrate.
+    GoldenCase("android_tilt", "android_phone_kritiksoman/data_mag.txt"),
+)
+
+
+def data_dir() -> Path:
+    """The folder of real recordings (``MAGFIT_REAL_DATA`` overrides ../shared/data/real)."""
+    return Path(os.environ.get("MAGFIT_REAL_DATA", DEFAULT_DATA_DIR))
+
+
+def run_case(case: GoldenCase, data: Path) -> tuple[str, int]:
+    """Run the case in-process from ``data`` (so the printed file names are relative); (stdout, exit status)."""
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    previous = Path.cwd()
+    os.chdir(data)
+    try:
+        result = CliRunner().invoke(cli, case.argv)
+    finally:
+        os.chdir(previous)
+    if result.exit_code not in (0, 1):
+        raise RuntimeError(f"{case.name}: magfit {' '.join(case.argv)} exited {result.exit_code}: {result.output}")
+    return result.stdout, result.exit_code
+
+
+def main() -> int:
+    data = data_dir()
+    if not data.is_dir():
+        print(f"the real recordings are not at {data}; set MAGFIT_REAL_DATA", file=sys.stderr)
+        return 2
+    GOLDEN_DIR.mkdir(parents=True, exist_ok=True)
+    for case in CASES:
+        output, status = run_case(case, data)
+        previous = case.golden_file.read_text(encoding="utf-8") if case.golden_file.exists() else None
+        case.golden_file.write_text(output, encoding="utf-8")
+        state = "unchanged" if previous == output else ("new" if previous is None else "CHANGED")
+        print(f"{case.golden_file.relative_to(ROOT)}: exit {status}, {state}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

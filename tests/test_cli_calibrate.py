@@ -1,0 +1,177 @@
+"""``magfit calibrate``: ground-truth fits from files, streaming in bounded chunks, JSON and firmware outputs."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import magfit
+import magfit.io
+from magfit.cli import cli
+from magfit.export import FORMATS, export
+
+
+@pytest.fixture(scope="module")
+def steel(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, magfit.Simulation]:
+    """The paper's Ellipse 2A with the piece of steel, in a CSV with a time column before the magnetometer."""
+    simulation = magfit.scenario("ellipse2a", "steel").simulate(3000, seed=31)
+    path = tmp_path_factory.mktemp("calibrate") / "steel.csv"
+    time = np.arange(3000) * 0.02
+    np.savetxt(
+        path, np.column_stack([time, simulation.samples]), fmt="%.17g", delimiter=",", header="t,mx,my,mz", comments=""
+    )
+    return path, simulation
+
+
+def _assert_close_to_truth(calibration: magfit.Calibration, truth: magfit.Calibration) -> None:
+    # Noise is 1.1 % of the field over 3000 samples: the identifiable ellipsoid A comes out within a few
+    # tenths of a percent; 2 % of its largest entry still catches any axis or sign mix-up.
+    scale = float(np.max(np.abs(truth.ellipsoid_matrix)))
+    np.testing.assert_allclose(calibration.ellipsoid_matrix, truth.ellipsoid_matrix, atol=0.02 * scale)
+    np.testing.assert_allclose(calibration.offset, truth.offset, atol=0.01 * truth.field_strength)
+
+
+def test_calibrate_writes_the_json_and_prints_the_summary(
+    steel: tuple[Path, magfit.Simulation], tmp_path: Path
+) -> None:
+    path, simulation = steel
+    output = tmp_path / "cal.json"
+    result = CliRunner().invoke(
+        cli, ["calibrate", str(path), "--method", "ellipsoid", "-o", str(output), "--unit", "G"]
+    )
+    assert result.exit_code == 0, result.output
+    calibration = magfit.Calibration.from_json(output.read_text())
+    assert calibration.method == "ellipsoid" and calibration.unit == "G" and calibration.n_samples == 3000
+    _assert_close_to_truth(calibration, simulation.truth)
+    text = result.stdout
+    assert re.search(r"columns +mx, my, mz", text)
+    assert re.search(r"rows +3000 rows read, 0 skipped", text)
+    for label in ("offset", "matrix", "field strength", "semi-axes", "sphere distance", "convention"):
+        assert label in text
+    evaluation = magfit.evaluate(calibration, simulation.samples)
+    assert f"mean {evaluation.mean:.4f}  std {evaluation.std:.4f}" in text
+    assert f"wrote the calibration to {output}" in text
+    assert result.stderr == ""  # no warning: nothing was skipped
+
+
+def test_default_method_is_auto_when_registered(steel: tuple[Path, magfit.Simulation], tmp_path: Path) -> None:
+    path, simulation = steel
+    output = tmp_path / "cal.json"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    calibration = magfit.Calibration.from_json(output.read_text())
+    _assert_close_to_truth(calibration, simulation.truth)
+    expected = "auto" if "auto" in magfit.METHODS else "ellipsoid"
+    assert re.search(rf"method +{calibration.method}", result.stdout)
+    if expected == "ellipsoid":
+        assert calibration.method == "ellipsoid"
+
+
+def test_statistics_methods_stream_the_file_in_bounded_chunks(
+    steel: tuple[Path, magfit.Simulation], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path, simulation = steel
+    original = magfit.io.iter_sample_chunks
+    sizes: list[int] = []
+
+    class Recorder:
+        """The reader with 500-row chunks, recording each chunk's size; its counters pass through."""
+
+        def __init__(self, *args: object, **kwargs: object) -> None:
+            self.reader = original(*args, **{**kwargs, "chunk_rows": 500})  # type: ignore[arg-type]
+
+        def __iter__(self):  # type: ignore[no-untyped-def]
+            for chunk in self.reader:
+                sizes.append(len(chunk))
+                yield chunk
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self.reader, name)
+
+    def no_whole_file(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a streaming method must not load the whole file")
+
+    monkeypatch.setattr(magfit.io, "iter_sample_chunks", Recorder)
+    monkeypatch.setattr(magfit.io, "read_samples", no_whole_file)
+    output = tmp_path / "cal.json"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    # Two passes (fit, then the paper's metric), never more than 500 rows at a time.
+    assert sum(sizes) == 2 * 3000 and max(sizes) <= 500
+    streamed = magfit.Calibration.from_json(output.read_text())
+    in_memory = magfit.fit(simulation.samples, method="ellipsoid")
+    np.testing.assert_allclose(streamed.ellipsoid_matrix, in_memory.ellipsoid_matrix, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(streamed.offset, in_memory.offset, rtol=1e-9, atol=1e-12)
+    assert "(streamed)" in result.stdout
+
+
+def test_samples_methods_read_the_whole_file(
+    steel: tuple[Path, magfit.Simulation], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    needs_samples = [name for name, spec in magfit.METHODS.items() if spec.data == "samples"]
+    if not needs_samples:
+        pytest.skip("no registered method needs the samples")
+    path, simulation = steel
+
+    def no_streaming(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a method that needs the samples must read them with read_samples")
+
+    monkeypatch.setattr(magfit.io, "iter_sample_chunks", no_streaming)
+    output = tmp_path / "cal.json"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "-m", needs_samples[0], "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    _assert_close_to_truth(magfit.Calibration.from_json(output.read_text()), simulation.truth)
+    assert "(streamed)" not in result.stdout
+
+
+def test_export_without_output_goes_to_stdout_and_the_summary_to_stderr(
+    steel: tuple[Path, magfit.Simulation], tmp_path: Path
+) -> None:
+    path, _ = steel
+    runner = CliRunner()
+    saved = tmp_path / "cal.json"
+    assert runner.invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "-o", str(saved)]).exit_code == 0
+    calibration = magfit.Calibration.from_json(saved.read_text())
+    result = runner.invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "--export", "c"])
+    assert result.exit_code == 0, result.output
+    assert result.stdout == export(calibration, "c")
+    assert "field strength" in result.stderr
+
+
+def test_export_with_output_writes_the_format_to_that_path(
+    steel: tuple[Path, magfit.Simulation], tmp_path: Path
+) -> None:
+    path, _ = steel
+    runner = CliRunner()
+    saved = tmp_path / "cal.json"
+    assert (
+        runner.invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "-o", str(saved), "--unit", "G"]).exit_code == 0
+    )
+    calibration = magfit.Calibration.from_json(saved.read_text())
+    target = tmp_path / f"mag{FORMATS['ardupilot'].extension}"
+    result = runner.invoke(
+        cli, ["calibrate", str(path), "-m", "ellipsoid", "--export", "ardupilot", "--unit", "G", "-o", str(target)]
+    )
+    assert result.exit_code == 0, result.output
+    assert target.read_text() == export(calibration, "ardupilot", unit="G")
+    assert f"wrote the ardupilot export to {target}" in result.stdout
+
+
+def test_export_needs_a_known_format_and_unit(steel: tuple[Path, magfit.Simulation], tmp_path: Path) -> None:
+    path, _ = steel
+    target = tmp_path / "mag.param"
+    runner = CliRunner()
+    unknown = runner.invoke(cli, ["calibrate", str(path), "--export", "betaflight", "-o", str(target)])
+    assert unknown.exit_code == 2
+    assert "unknown format 'betaflight'; valid formats: " + ", ".join(FORMATS) in unknown.stderr
+    # ArduPilot wants milligauss: without a unit magfit cannot convert, and says so; nothing is written.
+    no_unit = runner.invoke(
+        cli, ["calibrate", str(path), "-m", "ellipsoid", "--export", "ardupilot", "-o", str(target)]
+    )
+    assert no_unit.exit_code == 2
+    assert no_unit.stderr.startswith("magfit: error: ") and "unit" in no_unit.stderr
+    assert not target.exists()
