@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.typing import NDArray
 
 import magfit
@@ -361,6 +363,43 @@ def test_ardupilot_and_px4_recover_the_simulated_field() -> None:
     np.testing.assert_allclose(np.linalg.norm(ap, axis=1), 500.0, rtol=1e-6)
     px = px4_correct(parse_px4(export(truth, "px4")), 0.01 * sim.clean)
     np.testing.assert_allclose(np.linalg.norm(px, axis=1), 0.5, rtol=1e-6)
+
+
+def _random_calibration(seed: int, symmetric: bool) -> tuple[magfit.Calibration, NDArray[np.float64]]:
+    """A calibration inside ArduPilot's and PX4's limits (µT), and raw samples around its ellipsoid."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    spd = q @ np.diag(rng.uniform(0.7, 1.4, 3)) @ q.T  # symmetric positive definite
+    matrix = spd if symmetric else spd @ np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    matrix = matrix * np.sign(np.linalg.det(matrix)) / abs(np.linalg.det(matrix)) ** (1 / 3)  # det = +1
+    cal = magfit.Calibration("test", rng.uniform(-100, 100, 3), matrix, rng.uniform(30, 60), unit="uT")
+    directions = rng.normal(size=(50, 3))
+    field = cal.field_strength * directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    return cal, field @ np.linalg.inv(matrix).T + cal.offset  # raw = matrix⁻¹ field + offset
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_random_symmetric_calibrations_survive_ardupilot_and_px4(seed: int) -> None:
+    cal, raw = _random_calibration(seed, symmetric=True)
+    _close(
+        ardupilot_correct(parse_ardupilot(export(cal, "ardupilot")), 10 * raw), 10 * cal.apply(raw), 10 * raw, RTOL_TEXT
+    )
+    _close(px4_correct(parse_px4(export(cal, "px4")), 0.01 * raw), 0.01 * cal.apply(raw), 0.01 * raw, RTOL_TEXT)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_random_full_matrices_survive_c_fusion_and_magcal(seed: int) -> None:
+    cal, raw = _random_calibration(seed, symmetric=False)
+    expected = cal.apply(raw)
+    text = export(cal, "c")
+    offset, matrix = c_array(text, "magfit_offset"), c_array(text, "magfit_matrix").reshape(3, 3)
+    _close((raw - offset) @ matrix.T, expected, raw, RTOL_TEXT)
+    m, h = parse_fusion_c(export(cal, "fusion"))
+    _close((raw - h) @ m.T, expected, raw, RTOL_TEXT)
+    a, b, _ = parse_magcal(export(cal, "magcal"))
+    _close((raw - b) @ a, expected, raw, 1e-12)
 
 
 def test_cholesky_root_is_exported_as_the_symmetric_root(real_data_dir: Path) -> None:
