@@ -49,7 +49,7 @@ def test_calibrate_writes_the_json_and_prints_the_summary(
     _assert_close_to_truth(calibration, simulation.truth)
     text = result.stdout
     assert re.search(r"columns +mx, my, mz", text)
-    assert re.search(r"rows +3000 rows read, 0 skipped", text)
+    assert re.search(r"rows +3000 read, 0 skipped", text)
     for label in ("offset", "matrix", "field strength", "semi-axes", "sphere distance", "convention"):
         assert label in text
     evaluation = magfit.evaluate(calibration, simulation.samples)

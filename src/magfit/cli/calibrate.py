@@ -13,7 +13,6 @@ import click
 import numpy as np
 from numpy.typing import NDArray
 from rich.console import Console
-from rich.table import Table
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import DataFileError
@@ -318,28 +317,28 @@ def _check_extension(output: Path, export_format: str) -> None:
 
 
 def print_summary(out: Console, run: CalibrationRun) -> None:
-    """The calibration and its score as a two-column table."""
+    """The calibration and its score, one labelled line each (plain text: easy to read and to grep)."""
     calibration = run.calibration
     unit = f" {calibration.unit}" if calibration.unit else ""
-    table = Table(show_header=False, box=None, pad_edge=False)
-    table.add_column(style="bold")
-    table.add_column()
     spec = get_method(calibration.method) if calibration.method in method_names() else None
-    method = calibration.method + (f"  ({spec.summary})" if spec is not None else "")
-    read = f"{run.n_rows} rows read, {run.n_skipped} skipped" + (" (streamed)" if run.streamed else "")
-    table.add_row("file", f"{run.path} ({run.file_format})")
-    table.add_row("columns", columns_text(run.columns))
-    table.add_row("rows", read)
-    table.add_row("method", method)
-    table.add_row("offset", vector(calibration.offset, lambda v: significant(v, 6)) + unit)
-    rows = [vector(row, lambda v: f"{v: .6f}") for row in calibration.matrix]
-    table.add_row("matrix", "\n".join(rows))
-    table.add_row("field strength", significant(calibration.field_strength, 6) + unit)
-    table.add_row("semi-axes", vector(calibration.semi_axes, lambda v: significant(v, 6)) + unit)
-    table.add_row(
-        "sphere distance",
-        f"mean {fixed(run.evaluation.mean)}  std {fixed(run.evaluation.std)}  "
-        f"(paper, section V; fraction of the field strength, n = {run.evaluation.n})",
-    )
-    table.add_row("convention", CONVENTION)
-    out.print(table)
+    matrix_rows = [vector(row, lambda v: f"{v: .6f}") for row in calibration.matrix]
+    lines = [
+        ("file", f"{run.path} ({run.file_format})"),
+        ("columns", columns_text(run.columns)),
+        ("rows", f"{run.n_rows} read, {run.n_skipped} skipped" + (" (streamed)" if run.streamed else "")),
+        ("method", calibration.method + (f": {spec.summary}" if spec is not None else "")),
+        ("offset", vector(calibration.offset, lambda v: significant(v, 6)) + unit),
+        ("matrix", matrix_rows[0]),
+        ("", matrix_rows[1]),
+        ("", matrix_rows[2]),
+        ("field strength", significant(calibration.field_strength, 6) + unit),
+        ("semi-axes", vector(calibration.semi_axes, lambda v: significant(v, 6)) + unit),
+        (
+            "sphere distance",
+            f"mean {fixed(run.evaluation.mean)}  std {fixed(run.evaluation.std)}  "
+            f"(paper, section V: fraction of the field strength, n = {run.evaluation.n})",
+        ),
+        ("convention", CONVENTION),
+    ]
+    for label, value in lines:
+        out.print(f"{label:<16} {value}", soft_wrap=True)

@@ -162,16 +162,15 @@ def _print_tables(results: Sequence[FileComparison]) -> None:
         table.add_column("method")
         for header in ("mean", "std", "field strength", "semi-axes", "offset"):
             table.add_column(header, justify="right")
-        table.add_column("failure reason", overflow="fold")
+        failures = not all(method_result.ok for method_result in result.comparison)
+        if failures:  # the column is there only when it has something to say
+            table.add_column("failure reason", overflow="fold", ratio=1)
         for method_result in result.comparison:
             if method_result.ok:
-                table.add_row(method_result.method, *_numbers(method_result), "")
+                table.add_row(method_result.method, *_numbers(method_result), *([""] if failures else []))
             else:
-                table.add_row(
-                    method_result.method,
-                    *(["failed"] + [""] * 4),
-                    Text(str(method_result.error), style="red"),
-                )
+                reason = Text(str(method_result.error), style="red")
+                table.add_row(method_result.method, "failed", "", "", "", "", reason)
         out.print(table)
     out.print(Text(_CAPTION, style="dim"))
 
