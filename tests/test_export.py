@@ -567,3 +567,12 @@ def test_docs_examples_run() -> None:
     assert len(blocks) == 3
     for block in blocks:
         exec(compile(block, str(doc), "exec"), {})
+
+
+@pytest.mark.parametrize("name", ["c", "fusion", "magcal", "ardupilot", "px4"])
+def test_odd_method_names_cannot_break_out_of_comments(name: str) -> None:
+    cal = magfit.Calibration("evil */\n#define X 1\n", np.zeros(3), np.eye(3), 50.0, unit="uT")
+    text = export(cal, name)
+    assert "#define X" not in text
+    if name in ("c", "fusion"):
+        assert text.index("*/") > text.index("field strength")  # the header comment closes where it should
