@@ -1,0 +1,463 @@
+"""Honest diagnostics for every calibration: coverage, observability, uncertainty and goodness of fit.
+
+``magfit.fit`` attaches them to every calibration (``calibration.details["diagnostics"]``, read back
+typed with ``calibration.diagnostics``); :func:`diagnose` computes them for any calibration and samples.
+
+To keep ``fit`` fast on long logs, the diagnostics run on a capped, spatially even subsample (at most
+:data:`MAX_SAMPLES` samples, the same number from every direction cell where possible, each row
+weighted by how many samples it stands for so that the uncertainty still reflects all of them). See
+``docs/diagnostics.md`` for what each figure means and what to do about it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._validation import as_samples
+from ..errors import CalibrationError, MagfitError
+from ..evaluate import Evaluation
+from ._geometry import Frame, symmetric_unit_map
+from .coverage import Coverage, coverage, partition
+from .uncertainty import DEFAULT_INCLINATION_DEG, Observability, Uncertainty, WeakDirection, analyse
+
+if TYPE_CHECKING:
+    from ..calibration import Calibration
+    from ..statistics import Statistics
+
+__all__ = [
+    "MAX_SAMPLES",
+    "Coverage",
+    "Diagnostics",
+    "Goodness",
+    "Observability",
+    "Uncertainty",
+    "WeakDirection",
+    "attach_diagnostics",
+    "diagnose",
+    "diagnose_statistics",
+    "even_subsample",
+    "thin",
+]
+
+#: The diagnostics of a fit use at most this many samples.
+MAX_SAMPLES = 20_000
+#: Folds of the held-out evaluation.
+FOLDS = 5
+_SCHEMA = 1
+
+
+@dataclass(frozen=True)
+class Goodness:
+    """The paper's section V metric on the fitted samples and on held-out samples.
+
+    Attributes
+    ----------
+    fitted : Evaluation
+        Sphere distances of the samples the calibration was fitted to (``magfit.evaluate``).
+    held_out : Evaluation or None
+        The same for samples left out of the fit: ``folds``-fold cross-validation, each fold evaluated
+        with the method refitted on the other folds (None when a refit failed or is not possible).
+    folds : int
+        Number of folds (0 when there was no held-out evaluation).
+    note : str
+        How it was computed, or why there is no held-out figure.
+    """
+
+    fitted: Evaluation
+    held_out: Evaluation | None
+    folds: int
+    note: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "fitted": self.fitted.to_dict(),
+            "held_out": None if self.held_out is None else self.held_out.to_dict(),
+            "folds": self.folds,
+            "note": self.note,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Goodness:
+        held_out = data.get("held_out")
+        return cls(
+            fitted=Evaluation(**data["fitted"]),
+            held_out=None if held_out is None else Evaluation(**held_out),
+            folds=int(data["folds"]),
+            note=str(data["note"]),
+        )
+
+    def summary(self) -> list[str]:
+        lines = [
+            f"Goodness (distance to the unit sphere, paper section V): fitted samples mean "
+            f"{self.fitted.mean:+.4f}, std {self.fitted.std:.4f}."
+        ]
+        if self.held_out is None:
+            lines.append(f"No held-out evaluation: {self.note}")
+            return lines
+        lines.append(
+            f"Held-out samples ({self.folds}-fold cross-validation): mean {self.held_out.mean:+.4f}, "
+            f"std {self.held_out.std:.4f}."
+        )
+        if self.held_out.std > 1.25 * self.fitted.std:
+            lines.append(
+                "The held-out spread is clearly larger than the fitted one: the model follows the noise of "
+                "these samples (too many parameters for the coverage); prefer a simpler method or record more "
+                "directions."
+            )
+        return lines
+
+
+@dataclass(frozen=True)
+class Diagnostics:
+    """Everything magfit can say about how trustworthy a calibration is.
+
+    Attributes
+    ----------
+    n_samples : int
+        Samples the calibration was fitted to (outliers the fit rejected excluded).
+    n_used : int
+        Samples the diagnostics looked at (a spatially even subsample when more than 20 000).
+    coverage, observability, uncertainty, goodness
+        The four parts (None when the input did not allow them, e.g. a fit from ``Statistics``).
+    warnings : tuple of str
+        The findings that should stop a user from trusting the calibration as it is.
+    notes : tuple of str
+        How the diagnostics were computed (subsample, statistics only ...).
+    """
+
+    n_samples: int
+    n_used: int
+    coverage: Coverage | None
+    observability: Observability | None
+    uncertainty: Uncertainty | None
+    goodness: Goodness | None
+    warnings: tuple[str, ...]
+    notes: tuple[str, ...]
+    unit: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        """True when there is no warning."""
+        return not self.warnings
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (the layout stored in ``calibration.details["diagnostics"]``)."""
+        return {
+            "schema_version": _SCHEMA,
+            "n_samples": self.n_samples,
+            "n_used": self.n_used,
+            "coverage": None if self.coverage is None else self.coverage.to_dict(),
+            "observability": None if self.observability is None else self.observability.to_dict(),
+            "uncertainty": None if self.uncertainty is None else self.uncertainty.to_dict(),
+            "goodness": None if self.goodness is None else self.goodness.to_dict(),
+            "warnings": list(self.warnings),
+            "notes": list(self.notes),
+            "unit": self.unit,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Diagnostics:
+        """Inverse of :meth:`to_dict`."""
+        if data.get("schema_version") != _SCHEMA:
+            raise MagfitError(
+                f"diagnostics schema version {data.get('schema_version')!r} is not supported (expected {_SCHEMA})"
+            )
+        try:
+            return cls(
+                n_samples=int(data["n_samples"]),
+                n_used=int(data["n_used"]),
+                coverage=None if data["coverage"] is None else Coverage.from_dict(data["coverage"]),
+                observability=None if data["observability"] is None else Observability.from_dict(data["observability"]),
+                uncertainty=None if data["uncertainty"] is None else Uncertainty.from_dict(data["uncertainty"]),
+                goodness=None if data["goodness"] is None else Goodness.from_dict(data["goodness"]),
+                warnings=tuple(data["warnings"]),
+                notes=tuple(data["notes"]),
+                unit=data.get("unit"),
+            )
+        except (KeyError, TypeError) as error:
+            raise MagfitError(f"diagnostics are malformed: {error}") from None
+
+    def summary(self) -> list[str]:
+        """Plain-language lines, warnings first."""
+        lines = [f"WARNING: {warning}" for warning in self.warnings]
+        for part in (self.coverage, self.observability):
+            if part is not None:
+                lines.extend(part.summary())
+        if self.uncertainty is not None:
+            lines.extend(self.uncertainty.summary(self.unit))
+        if self.goodness is not None:
+            lines.extend(self.goodness.summary())
+        lines.extend(self.notes)
+        return lines
+
+
+# ---------------------------------------------------------------------- subsample
+
+
+def thin(n: int, cap: int = MAX_SAMPLES) -> NDArray[np.int64]:
+    """At most ``10 cap`` of ``n`` row indices, by a regular stride (cheap on 10⁷ samples)."""
+    return np.arange(0, n, max(1, math.ceil(n / (10 * cap))), dtype=np.int64)
+
+
+def even_subsample(
+    directions: NDArray[np.float64], cap: int = MAX_SAMPLES, total: int | None = None
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Indices of at most ``cap`` rows spread evenly over directions, and the weight of each.
+
+    The rows (already thinned with :func:`thin` when there are many) are binned into 400 equal-area
+    direction cells; every cell gives the same number q of its rows, spread in time (all of them when it
+    has fewer), with q as large as the cap allows. The weight of a row is the number of original rows it
+    stands for: its cell's count over the rows taken there, times ``total / len(directions)``, so the
+    weights sum to ``total`` (default: the number of rows).
+    """
+    m = directions.shape[0]
+    factor = 1.0 if total is None else total / max(m, 1)
+    if m <= cap:
+        return np.arange(m, dtype=np.int64), np.full(m, factor)
+    cells = partition(400).cell(directions)
+    order = np.argsort(cells, kind="stable")  # by cell, in time order within a cell
+    counts = np.bincount(cells, minlength=400)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    low, high = 1, int(counts.max())
+    while low < high:  # the largest q with Σ min(count, q) <= cap
+        middle = (low + high + 1) // 2
+        if int(np.minimum(counts, middle).sum()) <= cap:
+            low = middle
+        else:
+            high = middle - 1
+    taken = np.minimum(counts, low)
+    occupied = np.flatnonzero(counts)
+    positions = np.concatenate(
+        [starts[cell] + np.arange(taken[cell]) * counts[cell] // taken[cell] for cell in occupied]
+    )
+    indices = order[positions]
+    chosen_cells = cells[indices]
+    weights = counts[chosen_cells] / taken[chosen_cells] * factor
+    sort = np.argsort(indices)
+    return np.asarray(indices[sort], dtype=np.int64), np.asarray(weights[sort], dtype=np.float64)
+
+
+# ---------------------------------------------------------------------- diagnose
+
+
+def _model_kind(calibration: Calibration) -> str:
+    """The model family of a calibration, from its structure: sphere, diag (axis-aligned) or full."""
+    shape = calibration.ellipsoid_matrix
+    scale = float(np.max(np.abs(shape)))
+    off_diagonal = shape - np.diag(np.diag(shape))
+    if np.max(np.abs(off_diagonal)) > 1e-9 * scale:
+        return "full"
+    diagonal = np.diag(shape)
+    if np.ptp(diagonal) <= 1e-9 * scale:
+        return "sphere"
+    return "diag"
+
+
+def _inlier_mask(calibration: Calibration, n: int) -> NDArray[np.bool_] | None:
+    """The samples a robust fit kept (None: it rejected none or did not record which)."""
+    stored = calibration.details.get("rejected")
+    if not isinstance(stored, dict) or stored.get("truncated") or calibration.n_samples != n:
+        return None
+    mask = np.ones(n, dtype=bool)
+    for start, stop in stored.get("runs", []):
+        mask[int(start) : int(stop)] = False
+    return mask
+
+
+def diagnose(
+    calibration: Calibration,
+    samples: ArrayLike,
+    *,
+    inclination_deg: float = DEFAULT_INCLINATION_DEG,
+    max_samples: int = MAX_SAMPLES,
+    held_out: bool = True,
+) -> Diagnostics:
+    """Diagnose a calibration on the samples it was fitted to.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        Any calibration (its method is refitted for the held-out evaluation when it is a registered one).
+    samples : array_like, shape (N, 3)
+        The raw samples, input units. Samples a robust fit rejected (``details["rejected"]``) are left out.
+    inclination_deg : float
+        Magnetic inclination assumed for the heading uncertainty, degrees (default 60°).
+    max_samples : int
+        Cap on the samples analysed (a spatially even subsample above it).
+    held_out : bool
+        Also evaluate on held-out samples (k-fold refits of the method).
+
+    Returns
+    -------
+    Diagnostics
+    """
+    array = as_samples(samples)
+    n_total = array.shape[0]
+    mask = _inlier_mask(calibration, n_total)
+    notes: list[str] = []
+    if mask is not None and not mask.all():
+        notes.append(f"{int((~mask).sum())} samples the robust fit rejected are left out of the diagnostics.")
+        array = array[mask]
+    n = array.shape[0]
+    candidates = thin(n, max_samples)
+    z_candidates = Frame.corrected(calibration).normalise(array[candidates])
+    chosen, weights = even_subsample(z_candidates, max_samples, total=n)
+    indices = candidates[chosen]
+    z = z_candidates[chosen]
+    if indices.size < n:
+        notes.append(
+            f"Diagnostics computed on a spatially even subsample of {indices.size} of {n} samples "
+            "(weighted to stand for all of them)."
+        )
+    kind = _model_kind(calibration)
+    cover = coverage(z)
+    observability, uncertainty = analyse(z, weights, kind, symmetric_unit_map(calibration), inclination_deg)
+    goodness = _goodness(calibration, array[indices], z, weights, held_out)
+    warnings = _warnings(cover, observability, goodness)
+    return Diagnostics(
+        n_samples=n,
+        n_used=int(indices.size),
+        coverage=cover,
+        observability=observability,
+        uncertainty=uncertainty,
+        goodness=goodness,
+        warnings=tuple(warnings),
+        notes=tuple(notes),
+        unit=calibration.unit,
+    )
+
+
+def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Diagnostics:
+    """What a :class:`~magfit.Statistics` allows: the sample count and the spread of the raw samples.
+
+    Coverage, uncertainty and goodness need the samples themselves; the result says so.
+    """
+    return Diagnostics(
+        n_samples=statistics.n,
+        n_used=0,
+        coverage=None,
+        observability=None,
+        uncertainty=None,
+        goodness=None,
+        warnings=(),
+        notes=(
+            "Fitted from Statistics: coverage, observability, uncertainty and goodness need the samples; "
+            "run magfit.diagnose(calibration, samples) on (a subsample of) them.",
+        ),
+        unit=calibration.unit,
+    )
+
+
+def attach_diagnostics(
+    calibration: Calibration, samples: NDArray[np.float64] | None, statistics: Statistics
+) -> Calibration:
+    """``calibration`` with its diagnostics in ``details["diagnostics"]`` (what :func:`magfit.fit` returns).
+
+    A diagnosis that fails (a degenerate calibration) is recorded as a warning, never raised: the fit
+    itself succeeded.
+    """
+    from dataclasses import replace
+
+    try:
+        report = diagnose(calibration, samples) if samples is not None else diagnose_statistics(calibration, statistics)
+    except (MagfitError, np.linalg.LinAlgError) as error:
+        n = statistics.n
+        report = Diagnostics(n, 0, None, None, None, None, (f"the diagnostics could not be computed: {error}",), ())
+    return replace(calibration, details={**calibration.details, "diagnostics": report.to_dict()})
+
+
+def _weighted_evaluation(distances: NDArray[np.float64], weights: NDArray[np.float64]) -> Evaluation:
+    total = float(weights.sum())
+    mean = float(np.sum(weights * distances) / total)
+    magnitude = np.abs(distances)
+    return Evaluation(
+        n=round(total),
+        mean=mean,
+        std=float(np.sqrt(np.sum(weights * (distances - mean) ** 2) / total)),
+        mean_abs=float(np.sum(weights * magnitude) / total),
+        rms=float(np.sqrt(np.sum(weights * distances**2) / total)),
+        max_abs=float(magnitude.max()),
+    )
+
+
+def _goodness(
+    calibration: Calibration,
+    raw: NDArray[np.float64],
+    z: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    held_out: bool,
+) -> Goodness:
+    fitted = _weighted_evaluation(np.linalg.norm(z, axis=1) - 1.0, weights)
+    if not held_out:
+        return Goodness(fitted, None, 0, "not requested")
+    refit = _refitter(calibration)
+    if refit is None:
+        return Goodness(fitted, None, 0, f"method {calibration.method!r} cannot be refitted on part of the samples")
+    n = raw.shape[0]
+    if n < 10 * FOLDS:
+        return Goodness(fitted, None, 0, f"too few samples ({n}) for {FOLDS}-fold cross-validation")
+    fold = np.arange(n) % FOLDS  # interleaved folds: each fold spans the whole recording
+    distances = np.empty(n)
+    for k in range(FOLDS):
+        test = fold == k
+        try:
+            model = refit(raw[~test])
+        except MagfitError as error:
+            return Goodness(fitted, None, 0, f"the refit on {FOLDS - 1} of {FOLDS} folds failed: {error}")
+        distances[test] = np.linalg.norm(model.apply(raw[test], normalized=True), axis=1) - 1.0
+    note = (
+        f"{FOLDS}-fold cross-validation on the analysed samples: each fold evaluated with the method refitted "
+        "on the other four."
+    )
+    return Goodness(fitted, _weighted_evaluation(distances, weights), FOLDS, note)
+
+
+def _refitter(calibration: Calibration) -> Any:
+    """A function refitting ``calibration``'s method (with its recorded options) on (n, 3) samples."""
+    from ..methods import METHODS, FitInput
+    from ..statistics import Statistics
+
+    name = calibration.method
+    if name not in METHODS:
+        return None
+    spec = METHODS[name]
+    options = {key: calibration.details[key] for key in spec.options if key in calibration.details}
+    if name == "auto" and "chosen_model" in calibration.details:
+        from ..methods.robust import fit_model
+
+        chosen = str(calibration.details["chosen_model"])
+        return lambda samples: fit_model(chosen, samples)
+
+    def run(samples: NDArray[np.float64]) -> Calibration:
+        statistics = Statistics.from_samples(samples)
+        try:
+            return spec.function(FitInput(statistics, samples), **options)
+        except TypeError as error:  # an option recorded in another form than the method takes
+            raise CalibrationError(f"cannot refit {name!r} with options {options}: {error}") from None
+
+    return run
+
+
+def _warnings(cover: Coverage, observability: Observability, goodness: Goodness) -> list[str]:
+    warnings = []
+    if cover.share < 0.5:
+        warnings.append(
+            f"the samples cover only {100 * cover.share:.0f} % of the directions: the calibration is extrapolated "
+            "over the rest; record a fuller tumble"
+        )
+    undetermined = [w for w in observability.weak if not w.determined]
+    if undetermined:
+        parts = "; ".join(w.description for w in undetermined)
+        turn = f" (the sensor only turned about {observability.turn_axis})" if observability.turn_axis else ""
+        warnings.append(
+            f"the samples do not determine {parts}{turn}: those numbers are noise; record more attitudes or use a "
+            "simpler model (method='auto' falls back by itself)"
+        )
+    if goodness.held_out is not None and goodness.held_out.std > 1.25 * goodness.fitted.std:
+        warnings.append("the fit does much better on its own samples than on held-out ones: it is over-fitted")
+    return warnings

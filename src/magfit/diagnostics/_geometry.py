@@ -1,0 +1,237 @@
+"""The geometric residual shared by the diagnostics, the robust fit and the model choice.
+
+Every calibration maps a raw sample x onto the unit sphere through the symmetric square root L of the
+ellipsoid matrix A of eq. (2) (``A = LᵀL = L²``, ``Calibration.ellipsoid_matrix``)::
+
+    r(x) = |L (x − V)| − 1                                                    (geometric residual)
+
+is the signed distance of the corrected sample to the unit sphere (the paper's section V metric,
+``magfit.sphere_distances``). For samples near the ellipsoid it equals the distance to the ellipsoid
+measured in corrected space, which is what a heading sees, so it is the residual whose Jacobian gives
+the parameter covariance (Gauss-Newton, ``Cov = σ² (JᵀJ)⁻¹``) and whose size decides the model.
+
+Three nested models share it, each a parameter vector p in a normalised frame ``z = (x − c) / s``
+(c and s are the centre and radius of the data, so every entry of p is of order one):
+
+- ``"sphere"``: p = (v₁, v₂, v₃, l), L = l I                     (paper section III, 4 parameters)
+- ``"diag"``:   p = (v₁, v₂, v₃, l₁₁, l₂₂, l₃₃), L diagonal       (offset + axis-aligned scales, 6)
+- ``"full"``:   p = (v₁, v₂, v₃, l₁₁, l₂₂, l₃₃, l₁₂, l₁₃, l₂₃)     (paper section II, 9)
+
+L is kept symmetric: that fixes the rotation W·Q that the data cannot see (see ``Calibration``), so
+the Jacobian has full rank whenever the data determine the ellipsoid.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..calibration import Calibration
+from ..errors import CalibrationError
+
+Kind = Literal["sphere", "diag", "full"]
+KINDS: tuple[Kind, ...] = ("sphere", "diag", "full")
+N_PARAMETERS: dict[str, int] = {"sphere": 4, "diag": 6, "full": 9}
+_AXES = "xyz"
+#: Names of the entries of p, for messages and for the covariance layout in ``details``.
+PARAMETER_NAMES: dict[str, tuple[str, ...]] = {
+    "sphere": ("offset_x", "offset_y", "offset_z", "scale"),
+    "diag": ("offset_x", "offset_y", "offset_z", "scale_x", "scale_y", "scale_z"),
+    "full": (
+        "offset_x",
+        "offset_y",
+        "offset_z",
+        "scale_x",
+        "scale_y",
+        "scale_z",
+        "shear_xy",
+        "shear_xz",
+        "shear_yz",
+    ),
+}
+_OFF_DIAGONAL = ((0, 1), (0, 2), (1, 2))
+
+
+@dataclass(frozen=True)
+class Frame:
+    """An affine normalised frame ``z = T (x − centre)`` (centre in input units, T in 1 / input units).
+
+    :meth:`of` centres and scales the data (``T = I / s``); :meth:`corrected` is the frame in which a
+    calibration maps its samples onto the unit sphere (``T = L``): there its own parameters are
+    ``v = 0, L = I`` and a perturbation of p reads directly in fractions of the field strength.
+    """
+
+    centre: NDArray[np.float64]
+    transform: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, samples: NDArray[np.float64]) -> Frame:
+        centre = samples.mean(axis=0)
+        scale = float(np.sqrt(np.mean(np.sum((samples - centre) ** 2, axis=1))))
+        return cls(centre, np.eye(3) / (scale if scale > 0 else 1.0))
+
+    @classmethod
+    def corrected(cls, calibration: Calibration) -> Frame:
+        return cls(np.array(calibration.offset), symmetric_unit_map(calibration))
+
+    def normalise(self, samples: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray((samples - self.centre) @ self.transform.T, dtype=np.float64)
+
+
+def symmetric_unit_map(calibration: Calibration) -> NDArray[np.float64]:
+    """L = A^½, the symmetric square root of ``calibration.ellipsoid_matrix`` (input units⁻¹)."""
+    return _sqrtm(calibration.ellipsoid_matrix)
+
+
+def _sqrtm(matrix: NDArray[np.float64]) -> NDArray[np.float64]:
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
+    return np.asarray((eigenvectors * np.sqrt(np.clip(eigenvalues, 0.0, None))) @ eigenvectors.T, dtype=np.float64)
+
+
+def unit_map(p: NDArray[np.float64], kind: str) -> NDArray[np.float64]:
+    """L of the parameter vector p (normalised frame)."""
+    if kind == "sphere":
+        return np.eye(3) * p[3]
+    lmat = np.diag(p[3:6])
+    if kind == "full":
+        for value, (j, k) in zip(p[6:9], _OFF_DIAGONAL, strict=True):
+            lmat[j, k] = lmat[k, j] = value
+    return lmat
+
+
+def parameters(calibration: Calibration, kind: str, frame: Frame) -> NDArray[np.float64]:
+    """p of ``calibration`` in ``frame``, projected onto ``kind`` (for a model that is not of that kind,
+    the nearest one: the geometric-mean scale for a sphere, the diagonal for ``diag``)."""
+    inverse = np.linalg.inv(frame.transform)
+    lmat = _sqrtm(inverse.T @ calibration.ellipsoid_matrix @ inverse)  # A_z = T⁻ᵀ A T⁻¹, L_z = A_z^½
+    v = frame.transform @ (calibration.offset - frame.centre)
+    if kind == "sphere":
+        return np.concatenate([v, [float(np.linalg.det(lmat)) ** (1.0 / 3.0)]])
+    diagonal = np.diag(lmat)
+    if kind == "diag":
+        return np.concatenate([v, diagonal])
+    return np.concatenate([v, diagonal, [lmat[j, k] for j, k in _OFF_DIAGONAL]])
+
+
+def residuals(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArray[np.float64]:
+    """r = |L (z − v)| − 1 for every normalised sample, shape (N,)."""
+    return np.asarray(np.linalg.norm((z - p[:3]) @ unit_map(p, kind), axis=1) - 1.0)
+
+
+def jacobian(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArray[np.float64]:
+    """∂r/∂p, shape (N, k): ∂r/∂v = −L u, ∂r/∂l_jk = u_j y_k + u_k y_j (u = L y / |L y|, y = z − v)."""
+    lmat = unit_map(p, kind)
+    y = z - p[:3]
+    w = y @ lmat  # L symmetric: row i is (L y_i)ᵀ
+    norm = np.linalg.norm(w, axis=1)
+    u = w / np.where(norm > 0, norm, 1.0)[:, None]
+    columns = [-(u @ lmat)]
+    if kind == "sphere":
+        columns.append(np.sum(u * y, axis=1)[:, None])
+    else:
+        columns.append(u * y)
+        if kind == "full":
+            columns.append(np.column_stack([u[:, j] * y[:, k] + u[:, k] * y[:, j] for j, k in _OFF_DIAGONAL]))
+    return np.hstack(columns)
+
+
+def refine(
+    z: NDArray[np.float64],
+    kind: str,
+    start: NDArray[np.float64],
+    weights: NDArray[np.float64] | None = None,
+    iterations: int = 20,
+) -> NDArray[np.float64]:
+    """Weighted Gauss-Newton on Σ wᵢ rᵢ² from ``start`` (normalised frame); returns p.
+
+    A Levenberg-style damping keeps each step from increasing the cost, so a poor start cannot
+    diverge; it stops when a step changes p by less than 1e-10.
+    """
+    p = np.array(start, dtype=np.float64)
+    sqrt_w = np.ones(z.shape[0]) if weights is None else np.sqrt(weights)
+    cost = float(np.sum((sqrt_w * residuals(p, z, kind)) ** 2))
+    damping = 1e-6
+    for _ in range(iterations):
+        jac = jacobian(p, z, kind) * sqrt_w[:, None]
+        res = residuals(p, z, kind) * sqrt_w
+        normal = jac.T @ jac
+        gradient = jac.T @ res
+        while True:
+            try:
+                step = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-12), -gradient)
+            except np.linalg.LinAlgError:
+                step = np.zeros_like(p)
+            candidate = p + step
+            new_cost = float(np.sum((sqrt_w * residuals(candidate, z, kind)) ** 2))
+            if new_cost <= cost or damping > 1e6:
+                break
+            damping *= 10.0
+        if new_cost > cost:
+            break
+        p, cost = candidate, new_cost
+        damping = max(damping / 10.0, 1e-9)
+        if float(np.max(np.abs(step))) < 1e-10:
+            break
+    return p
+
+
+def calibration_from_parameters(
+    p: NDArray[np.float64],
+    kind: str,
+    frame: Frame,
+    method: str,
+    *,
+    n_samples: int | None = None,
+    details: Mapping[str, Any] | None = None,
+) -> Calibration:
+    """The calibration of p: offset ``c + T⁻¹ v``, ellipsoid matrix ``Tᵀ L² T``, ``det(matrix) = 1``."""
+    from ..methods.quadric import calibration_from_ellipsoid
+
+    lmat = unit_map(p, kind)
+    eigenvalues = np.linalg.eigvalsh(lmat)
+    if not eigenvalues[0] > 1e-9 * abs(eigenvalues[-1]):
+        raise CalibrationError(
+            f"the {kind} model degenerated during the fit (a scale went to zero or below): the samples do "
+            "not outline an ellipsoid; rotate the sensor through more attitudes"
+        )
+    offset = frame.centre + np.linalg.solve(frame.transform, p[:3])
+    shape = frame.transform.T @ lmat @ lmat @ frame.transform  # A_x = Tᵀ L² T
+    return calibration_from_ellipsoid(method, offset, shape, n_samples=n_samples, details=details)
+
+
+def describe_parameter_direction(vector: NDArray[np.float64], kind: str) -> str:
+    """Name the combination of parameters an eigenvector of the information matrix moves.
+
+    E.g. ``"the offset along z together with the scale along z"``: the parameters whose share of the
+    (unit) vector is at least 20 %, largest first.
+    """
+    names = PARAMETER_NAMES[kind]
+    weights = vector**2 / float(np.sum(vector**2))
+    order = [int(i) for i in np.argsort(weights)[::-1] if weights[i] >= 0.2] or [int(np.argmax(weights))]
+    return " together with ".join(_parameter_words(names[i]) for i in order)
+
+
+def _parameter_words(name: str) -> str:
+    if name == "scale":
+        return "the field strength (overall scale)"
+    family, axis = name.split("_")
+    if family == "offset":
+        return f"the offset along {axis}"
+    if family == "scale":
+        return f"the scale along {axis}"
+    return f"the {axis[0]}-{axis[1]} cross-coupling of the soft-iron matrix"
+
+
+def axis_words(direction: NDArray[np.float64]) -> str:
+    """Name a unit direction by its sensor axis, e.g. ``"−z"`` or ``"+x−y"`` (components >= 0.4)."""
+    direction = np.asarray(direction, dtype=np.float64) / float(np.linalg.norm(direction))
+    parts = [
+        ("+" if direction[i] > 0 else "−") + _AXES[i]
+        for i in np.argsort(-np.abs(direction))
+        if abs(direction[i]) >= 0.4
+    ]
+    return "".join(parts)

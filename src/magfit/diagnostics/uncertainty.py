@@ -1,0 +1,391 @@
+"""How well the samples determine a calibration: observability and parameter uncertainty.
+
+Both come from the Jacobian J of the geometric residual ``r = |L (x − V)| − 1`` (see
+:mod:`magfit.diagnostics._geometry`) at the fitted calibration, in the calibration's corrected frame,
+where its parameters are ``v = 0, L = I``: an offset there is a fraction of the field strength along
+the corrected axes, a change of L a relative change of scale.
+
+- Gauss-Newton covariance (e.g. Seber & Wild, *Nonlinear Regression*, 1989, eq. 2.8):
+  ``Cov(p) = σ² (Jᵀ W J)⁻¹`` with ``σ² = Σ wᵢ rᵢ² / (Σ wᵢ − k)`` and wᵢ the weight of sample i
+  (the inverse of its selection probability when the analysis runs on a subsample). It assumes
+  independent samples: with time-correlated noise (sample-and-hold, slow drifts) the true spread is
+  larger.
+- Observability: the eigenvectors of the per-sample information ``F = Jᵀ W J / Σ wᵢ``. A direction u
+  is weakly determined when ``uᵀ F u`` is small compared with what a full, uniform tumble gives
+  (``uᵀ F_tumble u``); it is not determined when its one-sigma ``σ / √(Σwᵢ uᵀ F u)`` exceeds 5 % of the
+  field.
+- Heading: at level attitude the corrected field is ``f(ψ) = (cos δ cos ψ, cos δ sin ψ, sin δ)`` and
+  a parameter error dp moves it by ``dw = dL f − dv``; the heading moves by
+  ``dψ = h⊥ · dw / cos δ`` (h⊥ the horizontal unit vector at right angles to the field), so
+  ``σ_ψ² = gᵀ Cov g`` with ``g = h⊥ᵀ ∂w/∂p / cos δ``, averaged over ψ. The inclination δ is an
+  assumption (default 60°): the error grows as ``1 / cos δ`` towards the magnetic poles.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._geometry import N_PARAMETERS, describe_parameter_direction, jacobian
+
+__all__ = ["Observability", "Uncertainty", "WeakDirection", "analyse"]
+
+#: A direction carrying less than this share of a full tumble's information is weakly determined.
+WEAK_INFORMATION = 0.05
+#: A direction whose one-sigma exceeds this fraction of the field strength is not determined.
+UNDETERMINED_SIGMA = 0.05
+#: Default magnetic inclination assumed for the heading uncertainty, degrees.
+DEFAULT_INCLINATION_DEG = 60.0
+
+
+@dataclass(frozen=True)
+class WeakDirection:
+    """A combination of parameters the samples pin down poorly.
+
+    Attributes
+    ----------
+    description : str
+        The parameters it moves, in words ("the offset along z together with the scale along z").
+    relative_information : float
+        Its information per sample divided by what a full uniform tumble gives (1 = as good).
+    sigma : float or None
+        Its one-sigma, as a fraction of the field strength (None: not determined at all).
+    determined : bool
+        False when ``sigma`` exceeds 5 % of the field or is None.
+    vector : tuple of float
+        The unit direction in parameter space (corrected frame; layout of ``parameter_names``).
+    """
+
+    description: str
+    relative_information: float
+    sigma: float | None
+    determined: bool
+    vector: tuple[float, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "description": self.description,
+            "relative_information": self.relative_information,
+            "sigma": self.sigma,
+            "determined": self.determined,
+            "vector": list(self.vector),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> WeakDirection:
+        return cls(
+            description=str(data["description"]),
+            relative_information=float(data["relative_information"]),
+            sigma=None if data["sigma"] is None else float(data["sigma"]),
+            determined=bool(data["determined"]),
+            vector=tuple(float(v) for v in data["vector"]),
+        )
+
+    def sentence(self) -> str:
+        share = self.relative_information
+        amount = (
+            f"{share:.2g} of the information a full tumble gives"
+            if share >= 0.01
+            else f"1/{1 / max(share, 1e-12):.0f} of the information a full tumble gives"
+        )
+        if not self.determined:
+            sigma = "unbounded" if self.sigma is None else f"one-sigma {100 * self.sigma:.1f} % of the field"
+            return f"{_capital(self.description)} is not determined ({sigma}; the samples carry {amount})."
+        return (
+            f"{_capital(self.description)} is weakly determined (one-sigma {100 * (self.sigma or 0):.2f} % of the "
+            f"field; the samples carry {amount})."
+        )
+
+
+def _capital(text: str) -> str:
+    return text[:1].upper() + text[1:]
+
+
+@dataclass(frozen=True)
+class Observability:
+    """How well the samples determine each part of the model.
+
+    Attributes
+    ----------
+    model : {"sphere", "diag", "full"}
+        The parameterisation analysed (from the calibration's structure).
+    condition : float
+        Largest over smallest eigenvalue of the per-sample information (corrected frame); a full tumble
+        gives about 3, larger is worse, inf when a direction is not determined at all.
+    weak : tuple of WeakDirection
+        The weakly or not determined directions, weakest first.
+    turn_axis : str or None
+        When the field direction in the sensor frame moved only on a cone (the sensor turned about one
+        axis), that axis ("+z", "+x−y" ...); else None.
+    """
+
+    model: str
+    condition: float | None
+    weak: tuple[WeakDirection, ...]
+    turn_axis: str | None
+
+    @property
+    def determined(self) -> bool:
+        """True when every direction is determined (weak ones included)."""
+        return all(w.determined for w in self.weak)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.model,
+            "condition": self.condition,
+            "weak": [w.to_dict() for w in self.weak],
+            "turn_axis": self.turn_axis,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Observability:
+        return cls(
+            model=str(data["model"]),
+            condition=None if data["condition"] is None else float(data["condition"]),
+            weak=tuple(WeakDirection.from_dict(w) for w in data["weak"]),
+            turn_axis=data.get("turn_axis"),
+        )
+
+    def summary(self) -> list[str]:
+        condition = "unbounded" if self.condition is None else f"{self.condition:.3g}"
+        if not self.weak:
+            return [
+                f"Observability: every parameter of the {self.model} model is well determined (condition {condition})."
+            ]
+        lines = [f"Observability: condition {condition} for the {self.model} model (a full tumble gives about 3)."]
+        if self.turn_axis is not None:
+            lines.append(
+                f"The sensor only turned about its {self.turn_axis} axis: directions off that cone were never seen."
+            )
+        lines.extend(w.sentence() for w in self.weak)
+        return lines
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """One-sigma uncertainty of the calibration implied by the residuals and the sample geometry.
+
+    Attributes
+    ----------
+    offset_sigma : tuple of 3 float or None
+        One-sigma of the hard-iron offset along x, y, z, input units (None: not determined).
+    scale_sigma : tuple of 3 float or None
+        Relative one-sigma of the correction's scale along x, y, z (0.01 = 1 %).
+    field_strength_sigma : float or None
+        Relative one-sigma of the field strength.
+    heading_sigma_deg : float or None
+        RMS over all headings of the heading one-sigma at level attitude, degrees.
+    heading_sigma_max_deg : float or None
+        The worst heading's one-sigma, degrees.
+    inclination_deg : float
+        The inclination assumed for the heading figures.
+    residual_sigma : float
+        Standard deviation of the geometric residual, fraction of the field strength.
+    n_samples : int
+        Samples the information was scaled to (all samples the fit used, assumed independent).
+    """
+
+    offset_sigma: tuple[float, float, float] | None
+    scale_sigma: tuple[float, float, float] | None
+    field_strength_sigma: float | None
+    heading_sigma_deg: float | None
+    heading_sigma_max_deg: float | None
+    inclination_deg: float
+    residual_sigma: float
+    n_samples: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "offset_sigma": None if self.offset_sigma is None else list(self.offset_sigma),
+            "scale_sigma": None if self.scale_sigma is None else list(self.scale_sigma),
+            "field_strength_sigma": self.field_strength_sigma,
+            "heading_sigma_deg": self.heading_sigma_deg,
+            "heading_sigma_max_deg": self.heading_sigma_max_deg,
+            "inclination_deg": self.inclination_deg,
+            "residual_sigma": self.residual_sigma,
+            "n_samples": self.n_samples,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Uncertainty:
+        def triple(value: Any) -> tuple[float, float, float] | None:
+            return None if value is None else (float(value[0]), float(value[1]), float(value[2]))
+
+        def number(value: Any) -> float | None:
+            return None if value is None else float(value)
+
+        return cls(
+            offset_sigma=triple(data["offset_sigma"]),
+            scale_sigma=triple(data["scale_sigma"]),
+            field_strength_sigma=number(data["field_strength_sigma"]),
+            heading_sigma_deg=number(data["heading_sigma_deg"]),
+            heading_sigma_max_deg=number(data["heading_sigma_max_deg"]),
+            inclination_deg=float(data["inclination_deg"]),
+            residual_sigma=float(data["residual_sigma"]),
+            n_samples=int(data["n_samples"]),
+        )
+
+    def summary(self, unit: str | None = None) -> list[str]:
+        label = f" {unit}" if unit else ""
+        if self.offset_sigma is None or self.heading_sigma_deg is None:
+            return [
+                "Uncertainty: not available: part of the model is not determined by the samples "
+                "(see observability), so any number would be noise."
+            ]
+        offset = ", ".join(f"{value:.3g}" for value in self.offset_sigma)
+        lines = [f"Uncertainty (one-sigma): offset ± ({offset}){label} along x, y, z."]
+        if self.scale_sigma is not None:
+            scales = ", ".join(f"{100 * value:.2g}" for value in self.scale_sigma)
+            lines.append(f"Scale ± ({scales}) % along x, y, z.")
+        lines.append(
+            f"Heading at level attitude: ± {self.heading_sigma_deg:.2g}° (RMS over headings; worst "
+            f"± {self.heading_sigma_max_deg:.2g}°), for an inclination of {self.inclination_deg:.0f}°."
+        )
+        return lines
+
+
+def _parameter_field_map(kind: str, field: NDArray[np.float64]) -> NDArray[np.float64]:
+    """∂w/∂p at a corrected field vector f (corrected frame, L = I): shape (3, k)."""
+    columns = [-np.eye(3)]
+    if kind == "sphere":
+        columns.append(field[:, None])
+    else:
+        columns.append(np.diag(field))
+        if kind == "full":
+            cross = np.zeros((3, 3))
+            for column, (j, k) in enumerate(((0, 1), (0, 2), (1, 2))):
+                cross[j, column] += field[k]
+                cross[k, column] += field[j]
+            columns.append(cross)
+    return np.hstack(columns)
+
+
+@functools.lru_cache(maxsize=4)
+def _tumble_information(kind: str) -> NDArray[np.float64]:
+    """Per-sample information of a full uniform tumble on the unit sphere (Fibonacci lattice, 4000 points)."""
+    n = 4000
+    index = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * index / n
+    longitude = math.pi * (1.0 + math.sqrt(5.0)) * index
+    radius = np.sqrt(1.0 - z**2)
+    points = np.column_stack([radius * np.cos(longitude), radius * np.sin(longitude), z])
+    jac = jacobian(_identity_parameters(kind), points, kind)
+    return np.asarray(jac.T @ jac / n)
+
+
+def _identity_parameters(kind: str) -> NDArray[np.float64]:
+    p = np.zeros(N_PARAMETERS[kind])
+    p[3 : 4 if kind == "sphere" else 6] = 1.0
+    return p
+
+
+def _turn_axis(z: NDArray[np.float64], weights: NDArray[np.float64]) -> str | None:
+    """The axis the field direction turned about, when it stayed on a cone (spread < 0.05 along it)."""
+    from ._geometry import axis_words
+
+    directions = z / np.linalg.norm(z, axis=1)[:, None]
+    mean = np.average(directions, axis=0, weights=weights)
+    centred = directions - mean
+    covariance = (centred * weights[:, None]).T @ centred / weights.sum()
+    spreads, axes = np.linalg.eigh(covariance)
+    if spreads[0] < 0.05**2 and spreads[1] > 0.2**2:
+        return axis_words(axes[:, 0] * (1.0 if axes[np.argmax(np.abs(axes[:, 0])), 0] > 0 else -1.0))
+    return None
+
+
+def analyse(
+    z: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    kind: str,
+    unit_map: NDArray[np.float64],
+    inclination_deg: float,
+) -> tuple[Observability, Uncertainty]:
+    """Observability and uncertainty from calibrated, normalised samples z (corrected frame).
+
+    Parameters
+    ----------
+    z : ndarray, shape (n, 3)
+        ``calibration.apply(x, normalized=True)`` with the symmetric root (see ``Frame.corrected``).
+    weights : ndarray, shape (n,)
+        How many of the fitted samples each row stands for (sum = samples the fit used).
+    kind : {"sphere", "diag", "full"}
+    unit_map : ndarray, shape (3, 3)
+        L of the calibration, input units⁻¹: maps the offset covariance back to input units.
+    inclination_deg : float
+        Inclination assumed for the heading uncertainty, degrees.
+    """
+    p = _identity_parameters(kind)
+    k = p.size
+    jac = jacobian(p, z, kind)
+    residual = np.linalg.norm(z, axis=1) - 1.0
+    total = float(weights.sum())
+    information = (jac * weights[:, None]).T @ jac  # Jᵀ W J
+    dof = max(total - k, 1.0)
+    residual_variance = float(np.sum(weights * residual**2) / dof)
+    per_sample = information / total
+    eigenvalues, eigenvectors = np.linalg.eigh(per_sample)
+    tumble = _tumble_information(kind)
+    largest = float(eigenvalues[-1])
+    null = eigenvalues <= 1e-10 * largest
+    condition = None if null.any() else float(largest / eigenvalues[0])
+    weak: list[WeakDirection] = []
+    for i in range(k):
+        vector = eigenvectors[:, i]
+        relative = float(eigenvalues[i] / (vector @ tumble @ vector))
+        if relative >= WEAK_INFORMATION:
+            continue
+        sigma = None if null[i] else math.sqrt(residual_variance / (total * float(eigenvalues[i])))
+        weak.append(
+            WeakDirection(
+                description=describe_parameter_direction(vector, kind),
+                relative_information=max(relative, 0.0),
+                sigma=sigma,
+                determined=sigma is not None and sigma <= UNDETERMINED_SIGMA,
+                vector=tuple(float(v) for v in vector),
+            )
+        )
+    observability = Observability(kind, condition, tuple(weak), _turn_axis(z, weights))
+    n_samples = round(total)
+    if null.any():
+        return observability, Uncertainty(
+            None, None, None, None, None, float(inclination_deg), math.sqrt(residual_variance), n_samples
+        )
+    covariance = residual_variance * np.linalg.inv(information)  # Cov(p) = σ² (Jᵀ W J)⁻¹
+    # Offset: v = L (V − c), so Cov(V) = L⁻¹ Cov(v) L⁻ᵀ (input units²).
+    inverse = np.linalg.inv(unit_map)
+    offset_covariance = inverse @ covariance[:3, :3] @ inverse.T
+    offset_sigma = tuple(float(s) for s in np.sqrt(np.diag(offset_covariance)))
+    scale_sigma: tuple[float, ...]
+    if kind == "sphere":
+        scale_sigma = (math.sqrt(covariance[3, 3]),) * 3
+        strength_gradient = np.zeros(k)
+        strength_gradient[3] = 1.0
+    else:
+        scale_sigma = tuple(math.sqrt(covariance[i, i]) for i in range(3, 6))
+        strength_gradient = np.zeros(k)
+        strength_gradient[3:6] = 1.0 / 3.0  # B ∝ det(L)^(−1/3): relative change = mean of the scale changes
+    strength_sigma = math.sqrt(float(strength_gradient @ covariance @ strength_gradient))
+    delta = math.radians(inclination_deg)
+    heading_variances = []
+    for psi in np.radians(np.arange(0.0, 360.0, 5.0)):
+        field = np.array([math.cos(delta) * math.cos(psi), math.cos(delta) * math.sin(psi), math.sin(delta)])
+        across = np.array([-math.sin(psi), math.cos(psi), 0.0])  # h⊥
+        gradient = across @ _parameter_field_map(kind, field) / math.cos(delta)  # dψ = h⊥·dw / cos δ
+        heading_variances.append(float(gradient @ covariance @ gradient))
+    heading = np.degrees(np.sqrt(np.array(heading_variances)))
+    uncertainty = Uncertainty(
+        offset_sigma=(offset_sigma[0], offset_sigma[1], offset_sigma[2]),
+        scale_sigma=(float(scale_sigma[0]), float(scale_sigma[1]), float(scale_sigma[2])),
+        field_strength_sigma=strength_sigma,
+        heading_sigma_deg=float(np.sqrt(np.mean(heading**2))),
+        heading_sigma_max_deg=float(heading.max()),
+        inclination_deg=float(inclination_deg),
+        residual_sigma=math.sqrt(residual_variance),
+        n_samples=n_samples,
+    )
+    return observability, uncertainty

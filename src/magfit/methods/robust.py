@@ -1,0 +1,247 @@
+"""Outlier-robust calibration: an M-estimator with a redescending loss on the geometric residual.
+
+Spikes, saturated readings and a magnet passing by put samples far from the ellipsoid. A least-squares
+fit (algebraic or geometric) gives each of them a weight that grows with its distance, so 2 % of spikes
+can move the offset by more than the noise. ``robust`` fits any inner model (``model=``: sphere, diag or
+the full ellipsoid) by iteratively reweighted least squares with Talwar's hard-redescending loss
+
+    ρ(r) = r²  for |r| <= c σ,   c² σ²  otherwise        (weights 1 or 0)
+
+on the geometric residual ``r = |L (x − V)| − 1`` (the sphere distance of ``magfit.sphere_distances``),
+with the scale σ re-estimated at every iteration from the median absolute deviation
+(σ = 1.4826 MAD, consistent for Gaussian noise). Weights of 0 or 1 mean every iteration is an ordinary
+fit of the inner model on the current inliers, so the inner model keeps its own estimator (and its
+statistics path). The iteration starts from a fit on the samples whose distance to the coordinate-wise
+median lies within the bulk of the distances, so that far spikes never enter the first fit.
+
+Reference: Huber & Ronchetti, *Robust Statistics* (2nd ed., 2009), section 7.8 (IRLS) and 4.8
+(redescending M-estimators); Talwar's loss is their "skipped" least squares.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validation import check_support
+from ..calibration import Calibration
+from ..errors import CalibrationError, OptionError
+from ..statistics import Statistics
+from .registry import METHODS, FitInput, register
+
+__all__ = ["MODELS", "fit_model", "fit_robust", "rejected_indices", "resolve_model"]
+
+#: Inner models ``robust`` and ``auto`` accept; ``"full"`` is the best full-ellipsoid estimator registered.
+MODELS = ("full", "sphere", "diag", "ellipsoid", "als", "ml")
+#: Cut-off c of the loss, in units of σ: a Gaussian inlier is rejected with probability 5e-4.
+DEFAULT_THRESHOLD = 3.5
+#: At most this many runs of rejected samples are stored in ``details`` (see :func:`encode_indices`).
+MAX_STORED_RUNS = 10_000
+_MAD_TO_SIGMA = 1.4826
+
+
+def resolve_model(model: str) -> tuple[str, Callable[[NDArray[np.float64]], Calibration]]:
+    """The method that fits ``model`` and the function fitting it on (n, 3) samples.
+
+    ``"full"`` is the consistent ``"als"`` when it is registered, else the paper's ``"ellipsoid"``;
+    ``"diag"`` is the registered ``"diag"`` method, else an axis-aligned algebraic fit (eq. 4 without
+    the cross terms).
+    """
+    if model not in MODELS:
+        raise OptionError(f"model={model!r} is not valid; choose one of: {', '.join(MODELS)}")
+    name = model
+    if model == "full":
+        name = "als" if "als" in METHODS else "ellipsoid"
+    if name not in METHODS:
+        if name == "diag":
+            return "diag (algebraic, axis-aligned)", _fit_diag_algebraic
+        raise OptionError(f"model={model!r} needs the method {name!r}, which this magfit does not have")
+    spec = METHODS[name]
+
+    def run(samples: NDArray[np.float64]) -> Calibration:
+        statistics = Statistics.from_samples(samples)
+        check_support(statistics, spec.name, spec.min_samples)
+        for check in getattr(spec, "checks", ()):  # the method's own refusals, as magfit.fit runs them
+            check(statistics, spec.name)
+        return spec.function(FitInput(statistics, samples))
+
+    return name, run
+
+
+def fit_model(model: str, samples: NDArray[np.float64]) -> Calibration:
+    """Fit ``model`` (a name in :data:`MODELS`) to (n, 3) samples, without diagnostics."""
+    return resolve_model(model)[1](samples)
+
+
+def _fit_diag_algebraic(samples: NDArray[np.float64]) -> Calibration:
+    """Offset + axis-aligned scales: eq. (4) with m₂ = m₃ = m₅ = 0, least squares under |θ| = 1."""
+    from .quadric import calibration_from_ellipsoid, ellipsoid_from_quadric
+
+    statistics = Statistics.from_samples(samples)
+    check_support(statistics, "diag", 7)
+    keep = [0, 1, 2, 6, 7, 8, 9]  # z₁², z₂², z₃², z₁, z₂, z₃, 1 (no cross terms)
+    scatter = statistics.scatter[np.ix_(keep, keep)] / statistics.n
+    _, eigenvectors = np.linalg.eigh(scatter)
+    theta = np.zeros(10)
+    theta[keep] = eigenvectors[:, 0]
+    offset, shape = ellipsoid_from_quadric(theta, statistics, "diag")
+    return calibration_from_ellipsoid("diag", offset, shape, n_samples=statistics.n)
+
+
+def geometric_residuals(calibration: Calibration, samples: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``|apply(x, normalized=True)| − 1`` for each sample, shape (N,), dimensionless."""
+    corrected = calibration.apply(samples, normalized=True)
+    return np.asarray(np.linalg.norm(corrected, axis=1) - 1.0)
+
+
+def robust_scale(residuals: NDArray[np.float64]) -> tuple[float, float]:
+    """Median and σ = 1.4826 MAD of the residuals (a Gaussian's standard deviation, robustly)."""
+    centre = float(np.median(residuals))
+    return centre, _MAD_TO_SIGMA * float(np.median(np.abs(residuals - centre)))
+
+
+def _initial_inliers(samples: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Samples whose distance to the coordinate-wise median lies within the bulk of the distances.
+
+    The median ignores up to half of the samples, so spikes cannot drag the centre; the band (median
+    ± 4 σ_MAD of the distances, widened to ± 60 % of the median for eccentric ellipsoids) removes the far
+    spikes before the first least-squares fit sees them.
+    """
+    distances = np.linalg.norm(samples - np.median(samples, axis=0), axis=1)
+    centre, sigma = robust_scale(distances)
+    half_width = max(4.0 * sigma, 0.6 * centre)
+    return np.asarray(np.abs(distances - centre) <= half_width)
+
+
+@register(
+    "robust",
+    min_samples=12,
+    data="samples",
+    summary="outlier-robust fit: redescending M-estimator (IRLS, MAD scale) around sphere/diag/full models",
+)
+def fit_robust(
+    data: FitInput,
+    *,
+    model: str = "full",
+    threshold: float = DEFAULT_THRESHOLD,
+    max_iterations: int = 30,
+) -> Calibration:
+    """Fit ``model`` while rejecting samples far from the fitted ellipsoid (spikes, saturation, a magnet).
+
+    Parameters
+    ----------
+    model : {"full", "sphere", "diag", "ellipsoid", "als", "ml"}
+        The inner model; ``"full"`` is ``"als"`` when registered, else ``"ellipsoid"``.
+    threshold : float
+        Cut-off c of the loss in units of the robust scale σ (> 2): samples with
+        ``|r − median(r)| > c σ`` get weight 0.
+    max_iterations : int
+        Upper bound on reweighting steps; the loop stops as soon as the inlier set repeats.
+
+    Returns
+    -------
+    Calibration
+        The inner model fitted on the inliers. ``details``: ``model`` (the inner method used),
+        ``n_rejected``, ``rejected`` (run-length encoded indices, see :func:`rejected_indices`),
+        ``residual_sigma`` (σ, fraction of the field strength), ``threshold``, ``iterations``,
+        ``converged`` and ``inner`` (the inner fit's own details).
+    """
+    samples = data.require_samples("robust")
+    if not threshold > 2.0:
+        raise OptionError(f"threshold={threshold!r} is not valid: it must exceed 2 (units of the robust σ)")
+    if max_iterations < 1:
+        raise OptionError(f"max_iterations={max_iterations!r} is not valid: it must be at least 1")
+    name, run = resolve_model(model)
+    n = samples.shape[0]
+    inliers = _initial_inliers(samples)
+    calibration = _fit_subset(run, samples, inliers, name)
+    converged = False
+    iterations = 0
+    sigma = 0.0
+    for iterations in range(1, max_iterations + 1):  # noqa: B007  (the count is reported)
+        residuals = geometric_residuals(calibration, samples)
+        centre, sigma = robust_scale(residuals)
+        new_inliers = np.abs(residuals - centre) <= threshold * max(sigma, 1e-12)
+        if np.array_equal(new_inliers, inliers):
+            converged = True
+            break
+        inliers = new_inliers
+        calibration = _fit_subset(run, samples, inliers, name)
+    rejected = np.flatnonzero(~inliers)
+    details: dict[str, Any] = {
+        "model": name,
+        "n_rejected": int(rejected.size),
+        "rejected": encode_indices(rejected),
+        "residual_sigma": sigma,
+        "threshold": float(threshold),
+        "iterations": iterations,
+        "converged": converged,
+        "inner": dict(calibration.details),
+    }
+    return Calibration(
+        method="robust",
+        offset=calibration.offset,
+        matrix=calibration.matrix,
+        field_strength=calibration.field_strength,
+        n_samples=n,
+        details=details,
+    )
+
+
+def _fit_subset(
+    run: Callable[[NDArray[np.float64]], Calibration], samples: NDArray[np.float64], mask: NDArray[np.bool_], name: str
+) -> Calibration:
+    subset = samples[mask]
+    try:
+        return run(subset)
+    except CalibrationError as error:
+        raise CalibrationError(
+            f"robust fit of {name!r} failed on the {subset.shape[0]} samples kept as inliers "
+            f"({samples.shape[0] - subset.shape[0]} rejected): {error}"
+        ) from None
+
+
+def encode_indices(indices: NDArray[np.integer[Any]]) -> dict[str, Any]:
+    """Run-length encode sorted sample indices: ``{"runs": [[start, stop], ...], "truncated": bool}``.
+
+    A run ``[start, stop]`` stands for ``range(start, stop)`` (stop exclusive), so a passing magnet that
+    spoils 5 000 consecutive samples costs one pair. At most :data:`MAX_STORED_RUNS` runs are kept (the
+    first ones); ``truncated`` says when more existed (``n_rejected`` always counts them all).
+    """
+    indices = np.asarray(indices, dtype=np.int64)
+    if indices.size == 0:
+        return {"encoding": "runs", "runs": [], "truncated": False}
+    breaks = np.flatnonzero(np.diff(indices) != 1) + 1
+    starts = indices[np.concatenate([[0], breaks])]
+    stops = indices[np.concatenate([breaks - 1, [indices.size - 1]])] + 1
+    runs = np.column_stack([starts, stops])
+    return {
+        "encoding": "runs",
+        "runs": runs[:MAX_STORED_RUNS].tolist(),
+        "truncated": bool(runs.shape[0] > MAX_STORED_RUNS),
+    }
+
+
+def rejected_indices(calibration: Calibration) -> NDArray[np.int64]:
+    """The indices of the samples a robust fit rejected, sorted, shape (n_rejected,).
+
+    Reads ``details["rejected"]`` of a ``robust`` (or ``auto`` with a robust choice) calibration;
+    raises :class:`~magfit.errors.MagfitError` when the list was truncated or the calibration has none.
+    """
+    from ..errors import MagfitError
+
+    stored = calibration.details.get("rejected")
+    if stored is None:
+        raise MagfitError(f"a {calibration.method!r} calibration records no rejected samples")
+    if stored.get("truncated"):
+        raise MagfitError(
+            f"the list of rejected samples was truncated to its first {MAX_STORED_RUNS} runs "
+            f"({calibration.details.get('n_rejected')} samples were rejected); refit with fewer outliers"
+        )
+    runs = stored.get("runs", [])
+    if not runs:
+        return np.zeros(0, dtype=np.int64)
+    return np.concatenate([np.arange(start, stop, dtype=np.int64) for start, stop in runs])
