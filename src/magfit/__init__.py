@@ -13,6 +13,7 @@ True
 from __future__ import annotations
 
 from .calibration import CONVENTION, Calibration
+from .diagnostics import Diagnostics, diagnose
 from .errors import CalibrationError, DataFileError, ExportError, MagfitError, OptionError, SampleError
 from .evaluate import Evaluation, evaluate, sphere_distances
 from .fit import fit
@@ -30,6 +31,7 @@ __all__ = [
     "Calibration",
     "CalibrationError",
     "DataFileError",
+    "Diagnostics",
     "Evaluation",
     "ExportError",
     "MagfitError",
@@ -39,6 +41,7 @@ __all__ = [
     "Simulation",
     "Statistics",
     "__version__",
+    "diagnose",
     "evaluate",
     "fit",
     "scenario",

@@ -21,12 +21,15 @@ import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import MagfitError, SampleError
+
+if TYPE_CHECKING:
+    from .diagnostics import Diagnostics
 
 __all__ = ["CONVENTION", "SCHEMA_VERSION", "Calibration"]
 
@@ -128,6 +131,18 @@ class Calibration:
         if normalized:
             corrected = corrected / self.field_strength
         return corrected
+
+    # ------------------------------------------------------------------ diagnostics
+
+    @property
+    def diagnostics(self) -> Diagnostics | None:
+        """The typed :class:`~magfit.Diagnostics` that :func:`magfit.fit` attached, or None."""
+        stored = self.details.get("diagnostics")
+        if stored is None:
+            return None
+        from .diagnostics import Diagnostics  # lazy: the diagnostics import this module
+
+        return Diagnostics.from_dict(stored)
 
     # ------------------------------------------------------------------ the fitted ellipsoid
 

@@ -15,7 +15,9 @@ from .statistics import Statistics
 __all__ = ["fit"]
 
 
-def fit(samples: ArrayLike | Statistics, method: str = "ellipsoid", **options: Any) -> Calibration:
+def fit(
+    samples: ArrayLike | Statistics, method: str = "ellipsoid", *, diagnostics: bool = True, **options: Any
+) -> Calibration:
     """Fit a calibration to magnetometer samples.
 
     Parameters
@@ -26,6 +28,10 @@ def fit(samples: ArrayLike | Statistics, method: str = "ellipsoid", **options: A
     method : str
         A name in ``magfit.METHODS``: ``"ellipsoid"`` (hard + soft iron, paper section II),
         ``"sphere"`` (hard iron only, section III), ``"minmax"`` (pseudo-calibration, section IV), ...
+    diagnostics : bool
+        Attach :func:`magfit.diagnose`'s report as ``details["diagnostics"]`` (read it typed with
+        ``calibration.diagnostics``). It runs on at most 20 000 spatially even samples; from
+        ``Statistics`` only what statistics allow is attached.
     **options
         Keyword options of the method (see ``magfit.METHODS[method].options``); an unknown name is an
         :class:`OptionError` that lists the valid ones.
@@ -62,4 +68,9 @@ def fit(samples: ArrayLike | Statistics, method: str = "ellipsoid", **options: A
     check_support(data.statistics, spec.name, spec.min_samples)
     for check in spec.checks:
         check(data.statistics, spec.name)
-    return spec.function(data, **options)
+    calibration = spec.function(data, **options)
+    if not diagnostics:
+        return calibration
+    from .diagnostics import attach_diagnostics  # lazy: the diagnostics import the methods
+
+    return attach_diagnostics(calibration, data.samples, data.statistics)
