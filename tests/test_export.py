@@ -573,6 +573,6 @@ def test_docs_examples_run() -> None:
 def test_odd_method_names_cannot_break_out_of_comments(name: str) -> None:
     cal = magfit.Calibration("evil */\n#define X 1\n", np.zeros(3), np.eye(3), 50.0, unit="uT")
     text = export(cal, name)
-    assert "#define X" not in text
+    assert not any(line.startswith("#define X") for line in text.splitlines())  # stays inside one comment line
     if name in ("c", "fusion"):
         assert text.index("*/") > text.index("field strength")  # the header comment closes where it should
