@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..calibration import Calibration
-from .quadric import calibration_from_ellipsoid, ellipsoid_from_quadric
+from .quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
 from .registry import FitInput, register
 
 
@@ -20,14 +20,19 @@ from .registry import FitInput, register
     data="statistics",
     summary="hard + soft iron: algebraic least-squares ellipsoid fit (paper, section II)",
 )
-def fit_ellipsoid(data: FitInput, *, root: str = "sqrt") -> Calibration:
+def fit_ellipsoid(data: FitInput, *, root: str = "sqrt", field_strength: float | None = None) -> Calibration:
     """Fit eq. (4) by least squares, then ``V = −½ M⁻¹ b``, ``A = M / (Vᵀ M V − d)``, ``W⁻¹ = A^½``.
 
     Parameters
     ----------
     root : {"sqrt", "cholesky"}
         Which square root of A becomes the correction matrix.
+    field_strength : float, optional
+        Known magnitude of the local field (e.g. from the World Magnetic Model), input units. The fitted
+        ellipsoid is unchanged; ``matrix`` is scaled so that corrected samples have this magnitude
+        (then ``det(matrix) != 1``).
     """
+    known_field = check_field_strength(field_strength)
     statistics = data.statistics
     eigenvalues, eigenvectors = np.linalg.eigh(statistics.scatter / statistics.n)
     theta = eigenvectors[:, 0]  # argmin |Dθ|² subject to |θ| = 1
@@ -38,6 +43,7 @@ def fit_ellipsoid(data: FitInput, *, root: str = "sqrt") -> Calibration:
         shape,
         root=root,
         n_samples=statistics.n,
+        field_strength=known_field,
         # How sharply the data single out one quadric: near 1 means a second quadric fits almost as well.
         details={"eigenvalue_ratio": float(eigenvalues[0] / eigenvalues[1])},
     )

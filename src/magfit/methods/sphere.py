@@ -2,34 +2,60 @@
 
 With W = I the model (6) is a sphere ``|x − V|² = B²``, linear in ``(2V, B² − |V|²)``:
 ``[x y z 1] · (2Vx, 2Vy, 2Vz, B² − |V|²) = x² + y² + z²`` (eq. 7, with the factor 2 the text lost).
+
+With a known field strength B (option ``field_strength``, as ArduPilot and PX4 take it from the World
+Magnetic Model) only V is unknown: it minimises the same algebraic residual of eq. (6),
+``Σ (|x − V|² − B²)²``, now a quartic in V whose coefficients are sample moments of degree <= 4, so the
+fit still reads only the :class:`~magfit.Statistics`. Pinning B matters when the samples cover only
+part of the sphere: the free fit then trades centre against radius, the pinned fit cannot.
 """
 
 from __future__ import annotations
 
+from math import comb
+
 import numpy as np
+from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
+from ..statistics import Statistics
+from .quadric import check_field_strength
 from .registry import FitInput, register
+from .support import check_outlines_ellipsoid, solve_sphere
 
 
 @register(
     "sphere",
+    checks=(check_outlines_ellipsoid,),
     min_samples=4,
     data="statistics",
     summary="hard iron only: least-squares sphere fit (paper, section III)",
 )
-def fit_sphere(data: FitInput) -> Calibration:
-    """Solve eq. (7) by least squares; the calibration is ``raw − V`` on a sphere of radius B (eq. 8)."""
+def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibration:
+    """Solve eq. (7) by least squares; the calibration is ``raw − V`` on a sphere of radius B (eq. 8).
+
+    Parameters
+    ----------
+    field_strength : float, optional
+        Known magnitude B of the local field, input units (e.g. from the World Magnetic Model). The
+        offset is then fitted with the radius pinned to B (``details["field_strength_given"]``), starting
+        from the free fit's centre; the free fit's radius is kept in ``details["fitted_field_strength"]``.
+    """
+    known_field = check_field_strength(field_strength)
     statistics = data.statistics
-    scatter = statistics.scatter
-    # Normal equations of eq. (7) read off the scatter: u = (z, 1) is design entries 6..9 and
-    # |z|² the sum of entries 0..2.
-    normal = scatter[6:10, 6:10]
-    right = scatter[6:10, 0:3].sum(axis=1)
-    solution = np.linalg.solve(normal, right)
-    centre_z = 0.5 * solution[:3]
-    radius_squared_z = float(solution[3] + centre_z @ centre_z)
+    centre_z, radius_squared_z, _ = solve_sphere(statistics)
+    if known_field is not None:
+        centre_z, iterations = _pinned_centre(statistics, centre_z, known_field / statistics.scale)
+        fitted = statistics.scale * float(np.sqrt(max(radius_squared_z, 0.0)))
+        return Calibration(
+            method="sphere",
+            offset=statistics.centre + statistics.scale * centre_z,
+            matrix=np.eye(3),
+            field_strength=known_field,
+            n_samples=statistics.n,
+            details={"field_strength_given": True, "fitted_field_strength": fitted, "iterations": iterations},
+        )
     if not radius_squared_z > 0:
         raise CalibrationError(
             "the sphere fit found no real sphere (B² <= 0): the samples do not outline a sphere; "
@@ -42,3 +68,78 @@ def fit_sphere(data: FitInput) -> Calibration:
         field_strength=statistics.scale * np.sqrt(radius_squared_z),
         n_samples=statistics.n,
     )
+
+
+def _shifted_moment(statistics: Statistics, exponent: tuple[int, int, int], shift: NDArray[np.float64]) -> float:
+    """``Σ Π_k (z_k − shift_k)^(exponent_k)`` over the normalised samples, by binomial expansion."""
+    total = 0.0
+    for a in range(exponent[0] + 1):
+        for b in range(exponent[1] + 1):
+            for c in range(exponent[2] + 1):
+                weight = (
+                    comb(exponent[0], a) * (-shift[0]) ** (exponent[0] - a)
+                    * comb(exponent[1], b) * (-shift[1]) ** (exponent[1] - b)
+                    * comb(exponent[2], c) * (-shift[2]) ** (exponent[2] - c)
+                )  # fmt: skip
+                total += weight * statistics.moment((a, b, c))
+    return total
+
+
+def _pinned_objective(
+    statistics: Statistics, centre: NDArray[np.float64], radius: float
+) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+    """``f(c) = Σ (|z − c|² − r²)²``, its gradient and Hessian, from moments of y = z − c."""
+
+    def moment(*axes: int) -> float:
+        exponent = [0, 0, 0]
+        for axis in axes:
+            exponent[axis] += 1
+        return _shifted_moment(statistics, (exponent[0], exponent[1], exponent[2]), centre)
+
+    n = statistics.n
+    sum_y = np.array([moment(i) for i in range(3)])
+    outer = np.array([[moment(i, j) for j in range(3)] for i in range(3)])  # Σ y yᵀ
+    sum_r2 = float(np.trace(outer))  # Σ |y|²
+    sum_r2_y = np.array([sum(moment(i, k, k) for k in range(3)) for i in range(3)])  # Σ |y|² y
+    sum_r4 = sum(moment(k, k, m, m) for k in range(3) for m in range(3))  # Σ |y|⁴
+    value = sum_r4 - 2.0 * radius**2 * sum_r2 + n * radius**4
+    gradient = -4.0 * (sum_r2_y - radius**2 * sum_y)  # ∇_c Σ q², q = |y|² − r², ∇q = −2y
+    hessian = 8.0 * outer + 4.0 * (sum_r2 - n * radius**2) * np.eye(3)
+    return value, gradient, hessian
+
+
+def _pinned_centre(
+    statistics: Statistics, start: NDArray[np.float64], radius: float, max_iterations: int = 50
+) -> tuple[NDArray[np.float64], int]:
+    """Newton's method with backtracking on ``Σ (|z − c|² − r²)²`` (eq. 6 with B known), normalised frame.
+
+    Returns the centre and the number of iterations; raises :class:`CalibrationError` unless it ends
+    at a minimum (positive-definite Hessian).
+    """
+    centre = np.asarray(start, dtype=np.float64)
+    value, gradient, hessian = _pinned_objective(statistics, centre, radius)
+    iteration = 0
+    while iteration < max_iterations:
+        iteration += 1
+        eigenvalues, eigenvectors = np.linalg.eigh(hessian)
+        # Newton step; along directions of negative curvature the step is scaled as a gradient step.
+        safe = np.maximum(np.abs(eigenvalues), 1e-9 * max(float(np.abs(eigenvalues).max()), 1e-300))
+        step = -eigenvectors @ ((eigenvectors.T @ gradient) / safe)
+        for _ in range(60):
+            trial = centre + step
+            trial_value, trial_gradient, trial_hessian = _pinned_objective(statistics, trial, radius)
+            if trial_value <= value:
+                break
+            step = 0.5 * step
+        else:
+            break  # no decrease along the step: at a minimum to round-off
+        moved = float(np.linalg.norm(trial - centre))
+        centre, value, gradient, hessian = trial, trial_value, trial_gradient, trial_hessian
+        if moved <= 1e-12 * max(1.0, float(np.linalg.norm(centre))):
+            break
+    if not np.all(np.linalg.eigvalsh(hessian) > 0):
+        raise CalibrationError(
+            "the sphere fit with a known field_strength found no minimum: the samples do not outline a sphere "
+            "of that radius; check the field_strength and its unit, or record while turning the sensor"
+        )
+    return centre, iteration
