@@ -173,5 +173,5 @@ def test_export_needs_a_known_format_and_unit(steel: tuple[Path, magfit.Simulati
         cli, ["calibrate", str(path), "-m", "ellipsoid", "--export", "ardupilot", "-o", str(target)]
     )
     assert no_unit.exit_code == 2
-    assert no_unit.stderr.startswith("magfit: error: ") and "unit" in no_unit.stderr
+    assert no_unit.stderr.startswith("magfit: error: ") and "--unit" in no_unit.stderr
     assert not target.exists()

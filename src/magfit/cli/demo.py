@@ -61,12 +61,10 @@ def demo_command(seed: int, n_samples: int) -> None:
 
 def print_distance_tables(out: Console, experiment: Experiment) -> None:
     """The paper's first three tables: mean and std of the sphere distances, per disturbance."""
+    out.print(Text("Distance of the calibrated samples to the unit sphere (paper, section V)", style="bold"))
     out.print(
-        Text(
-            f"Distance of the calibrated samples to the unit sphere (paper, section V): {experiment.n_samples} "
-            f"simulated samples per case, seed {experiment.seed}; the paper's values in parentheses",
-            style="bold",
-        )
+        f"{experiment.n_samples} simulated samples per case, seed {experiment.seed}; "
+        "the paper's measured values in parentheses"
     )
     for disturbance in DISTURBANCES:
         table = Table(title=DISTURBANCE_LABELS[disturbance], title_justify="left", title_style="bold")
@@ -100,13 +98,8 @@ def print_distance_tables(out: Console, experiment: Experiment) -> None:
 
 def print_ellipsoid_tables(out: Console, experiment: Experiment) -> None:
     """The paper's last two tables: the soft + hard iron fit's semi-axes and offsets, above the truth."""
-    out.print(
-        Text(
-            "Ellipsoid semi-axes and hard-iron offsets, soft and hard-iron calibration (input units); "
-            "truth: the paper's values, which the simulation uses",
-            style="bold",
-        )
-    )
+    out.print(Text("Ellipsoid semi-axes and hard-iron offsets (soft and hard-iron calibration)", style="bold"))
+    out.print("Input units; truth: the paper's values, which the simulation uses")
     for sensor in SENSORS:
         table = Table(title=SENSOR_LABELS[sensor], title_justify="left", title_style="bold")
         table.add_column("Case")
