@@ -73,9 +73,19 @@ def _register_commands() -> None:
     from .calibrate import calibrate_command
     from .compare import compare_command
     from .demo import demo_command
+    from .plot import plot_command
+    from .report import report_command
     from .simulate import simulate_command
 
-    for command in (demo_command, calibrate_command, compare_command, apply_command, simulate_command):
+    for command in (
+        demo_command,
+        calibrate_command,
+        compare_command,
+        apply_command,
+        simulate_command,
+        plot_command,
+        report_command,
+    ):
         cli.add_command(command)
 
 

@@ -1,0 +1,150 @@
+"""``magfit plot``: one PNG that shows a recording before and after calibration, for each method."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Literal
+
+import click
+from numpy.typing import ArrayLike
+
+from ..compare import PAPER_METHODS, Comparison, compare
+from ..errors import CalibrationError
+from ._common import (
+    RegistryChoice,
+    console,
+    default_method,
+    fixed,
+    method_names,
+    parse_columns,
+    refuse_overwriting_input,
+    warn,
+)
+from .compare import parse_methods
+
+#: Figure formats ``-o`` accepts (matplotlib's Agg canvas writes them all).
+FIGURE_EXTENSIONS = (".png", ".svg", ".pdf")
+
+
+def methods_in_order(main: str, others: Sequence[str]) -> tuple[str, ...]:
+    """The main method first, then the others in their order, each once."""
+    return (main, *(name for name in others if name != main))
+
+
+def fit_for_plot(samples: ArrayLike, methods: Sequence[str], path: Path) -> Comparison:
+    """Compare ``methods`` on ``samples``; warn about each failed method, raise when the main one failed."""
+    comparison = compare(samples, methods)
+    main = comparison.results[0]
+    if not main.ok:
+        raise CalibrationError(f"{path}: the {main.method} fit failed, nothing to plot: {main.error}")
+    for result in comparison.results[1:]:
+        if not result.ok:
+            warn(f"{path}: {result.method} could not fit these samples and is left out of the plot: {result.error}")
+    return comparison
+
+
+def check_figure_path(output: Path) -> None:
+    """Refuse an output whose extension is not a figure format, before any work is done."""
+    if output.suffix.lower() not in FIGURE_EXTENSIONS:
+        raise click.BadParameter(
+            f"{output.name!r} has no figure extension; use one of {', '.join(FIGURE_EXTENSIONS)}",
+            param_hint="'-o' / '--output'",
+        )
+
+
+@click.command("plot")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="The figure to write: .png (default size 1600 x 1200 pixels), .svg or .pdf.",
+)
+@click.option(
+    "-m",
+    "--method",
+    type=RegistryChoice("method", method_names),
+    default=None,
+    help="The main method: its ellipsoid, calibrated samples and coverage map are drawn "
+    "(default: auto when available, else ellipsoid).",
+)
+@click.option(
+    "--methods",
+    callback=parse_methods,
+    metavar="M,M,...",
+    help="Methods compared in the projections and the histogram. Default: the paper's ellipsoid,sphere,minmax.",
+)
+@click.option(
+    "--columns",
+    callback=parse_columns,
+    metavar="X,Y,Z",
+    help="The three magnetometer columns: names (mx,my,mz) or 0-based numbers (3,4,5). Default: detected.",
+)
+@click.option("--unit", help="Name of the input unit for the axis labels (uT, mG, counts ...).")
+@click.option("--title", help="What the data are, leading the figure title. Default: the file name.")
+@click.option(
+    "--max-points",
+    type=click.IntRange(min=100),
+    default=4000,
+    show_default=True,
+    help="Samples drawn per scatter panel; longer recordings are subsampled evenly over directions.",
+)
+@click.option("--dpi", type=click.IntRange(min=20, max=600), default=100, show_default=True, help="Pixels per inch.")
+@click.option(
+    "--nonfinite",
+    type=click.Choice(("skip", "error")),
+    default="skip",
+    show_default=True,
+    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
+)
+def plot_command(
+    file: Path,
+    output: Path,
+    method: str | None,
+    methods: tuple[str, ...],
+    columns: list[str | int] | None,
+    unit: str | None,
+    title: str | None,
+    max_points: int,
+    dpi: int,
+    nonfinite: Literal["skip", "error"],
+) -> None:
+    """Draw a recording before and after calibration, in one figure.
+
+    Panels: the raw samples with the fitted ellipsoid and the calibrated samples on the unit sphere (3-D),
+    a map of the directions visited, the XY, XZ and YZ projections before and after, the distance to the
+    unit sphere for each method (the paper's metric) and a table of the fitted parameters. The title gives
+    the field strength and each method's mean and std of the distance to the unit sphere.
+
+    \b
+    Examples:
+      magfit plot mag-readings.txt -o mag.png --unit uT
+      magfit plot flight.csv --columns mx,my,mz --method ellipsoid --methods sphere,minmax -o flight.png
+    """
+    from ..io import read_samples
+    from ..plot import calibration_figure, save_figure
+
+    check_figure_path(output)
+    refuse_overwriting_input(output, [file])
+    table = read_samples(file, columns=columns, nonfinite=nonfinite)
+    if table.n_skipped:
+        warn(f"{file}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
+    comparison = fit_for_plot(
+        table.samples, methods_in_order(method or default_method(), methods or PAPER_METHODS), file
+    )
+    calibrations = [result.calibration for result in comparison if result.calibration is not None]
+    figure = calibration_figure(
+        table.samples, calibrations, unit=unit, title=title or file.name, max_points=max_points, dpi=dpi
+    )
+    save_figure(figure, output)
+    out = console()
+    for result in comparison:
+        if result.evaluation is not None:
+            out.print(
+                f"{result.method:<12} sphere distance mean {fixed(result.evaluation.mean)}  "
+                f"std {fixed(result.evaluation.std)}",
+                soft_wrap=True,
+            )
+    out.print(f"{figure.get_supxlabel()} Wrote the figure to {output}", soft_wrap=True)

@@ -1,0 +1,125 @@
+"""``magfit report``: one self-contained HTML file with the comparison, diagnostics and plots of recordings."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import click
+
+from ..compare import PAPER_METHODS
+from ._common import (
+    RegistryChoice,
+    console,
+    default_method,
+    method_names,
+    parse_columns,
+    refuse_overwriting_input,
+    warn,
+)
+from .compare import parse_methods
+from .plot import fit_for_plot, methods_in_order
+
+
+def check_html_path(output: Path) -> None:
+    """Refuse an output that does not end in .html or .htm, before any work is done."""
+    if output.suffix.lower() not in (".html", ".htm"):
+        raise click.BadParameter(f"{output.name!r} is not an .html file name", param_hint="'-o' / '--output'")
+
+
+@click.command("report")
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="The HTML file to write (self-contained: it opens offline, in any browser).",
+)
+@click.option(
+    "-m",
+    "--method",
+    type=RegistryChoice("method", method_names),
+    default=None,
+    help="The main method of each file: its ellipsoid, 3-D views and coverage map are shown "
+    "(default: auto when available, else ellipsoid).",
+)
+@click.option(
+    "--methods",
+    callback=parse_methods,
+    metavar="M,M,...",
+    help="Methods compared for each file. Default: the paper's ellipsoid,sphere,minmax.",
+)
+@click.option(
+    "--columns",
+    callback=parse_columns,
+    metavar="X,Y,Z",
+    help="The three magnetometer columns of every file: names or 0-based numbers. Default: detected.",
+)
+@click.option("--unit", help="Name of the input unit of every file, for the labels (uT, mG, counts ...).")
+@click.option("--title", default="magfit calibration report", show_default=True, help="Title of the report.")
+@click.option(
+    "--max-points",
+    type=click.IntRange(min=100),
+    default=4000,
+    show_default=True,
+    help="Samples drawn per panel of the static figures (an even subsample of longer recordings).",
+)
+@click.option(
+    "--max-points-3d",
+    type=click.IntRange(min=100),
+    default=2000,
+    show_default=True,
+    help="Samples drawn in each interactive 3-D view (keeps the file at a few MB).",
+)
+@click.option(
+    "--nonfinite",
+    type=click.Choice(("skip", "error")),
+    default="skip",
+    show_default=True,
+    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
+)
+def report_command(
+    files: tuple[Path, ...],
+    output: Path,
+    method: str | None,
+    methods: tuple[str, ...],
+    columns: list[str | int] | None,
+    unit: str | None,
+    title: str,
+    max_points: int,
+    max_points_3d: int,
+    nonfinite: Literal["skip", "error"],
+) -> None:
+    """Write an HTML report of the calibration of each FILE.
+
+    For each file: the paper's comparison table for every method, the offsets and semi-axes, the
+    diagnostics of each fit (coverage, uncertainty, what the data could not determine), the figure of
+    'magfit plot' and an interactive 3-D view of the raw and calibrated samples. Everything is inside the
+    one file (no network access, no CDN), so it can be mailed or archived as it is.
+
+    \b
+    Examples:
+      magfit report mag-readings.txt -o report.html --unit uT
+      magfit report flight1.csv flight2.csv --methods ellipsoid,sphere -o flights.html
+    """
+    from ..io import atomic_write_text, read_samples
+    from ..report import ReportSection, report_html, section_from_comparison
+
+    check_html_path(output)
+    refuse_overwriting_input(output, files)
+    compared = methods_in_order(method or default_method(), methods or PAPER_METHODS)
+    sections: list[ReportSection] = []
+    out = console()
+    for path in files:
+        table = read_samples(path, columns=columns, nonfinite=nonfinite)
+        notes = [f"Columns {', '.join(map(str, table.columns))}; {table.n_rows:,} data rows."]
+        if table.n_skipped:
+            warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
+            notes.append(f"{table.n_skipped:,} rows with NaN or inf values were skipped.")
+        comparison = fit_for_plot(table.samples, compared, path)
+        sections.append(section_from_comparison(path.name, table.samples, comparison, unit=unit, notes=notes))
+        out.print(f"{path}: {len(table.samples):,} samples, {len(comparison)} methods compared", soft_wrap=True)
+    text = report_html(sections, title=title, max_points=max_points, max_points_3d=max_points_3d)
+    atomic_write_text(output, text)
+    out.print(f"Wrote the report to {output} ({len(text.encode('utf-8')) / 1e6:.1f} MB)", soft_wrap=True)

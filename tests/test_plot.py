@@ -1,0 +1,215 @@
+"""Figures of a calibration (magfit.plot): geometry against closed forms, then the rendered PNG itself."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import magfit
+from magfit.errors import OptionError, SampleError
+
+plot = pytest.importorskip("magfit.plot")  # needs the plot extra (matplotlib)
+PIL_Image = pytest.importorskip("PIL.Image")
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def steel():
+    """The paper's MPU-9250 with a piece of steel (strong, rotated soft iron), and the three paper fits."""
+    simulation = magfit.scenario("mpu9250", "steel").simulate(3000, seed=7)
+    fits = [magfit.fit(simulation.samples, method=method) for method in ("ellipsoid", "sphere", "minmax")]
+    return simulation, fits
+
+
+def test_importing_magfit_loads_no_plotting_library() -> None:
+    code = (
+        "import sys, magfit, magfit.plot, magfit.report; "
+        "print(sorted(m for m in ('matplotlib', 'plotly') if m in sys.modules))"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert result.stdout.strip() == "[]"
+
+
+# ---------------------------------------------------------------------- geometry (closed forms)
+
+
+def test_ellipse_outline_of_an_axis_aligned_ellipsoid_is_its_xy_ellipse() -> None:
+    # An ellipsoid with semi-axes (a, b, c) along x, y, z seen along z is the ellipse of semi-axes (a, b).
+    a, b, c = 300.0, 200.0, 100.0
+    strength = (a * b * c) ** (1 / 3)
+    offset = np.array([10.0, -20.0, 30.0])
+    calibration = magfit.Calibration("test", offset, np.diag(strength / np.array([a, b, c])), strength)
+    outline = plot.ellipse_outline(calibration, (0, 1))
+    x, y = outline[:, 0] - offset[0], outline[:, 1] - offset[1]
+    np.testing.assert_allclose((x / a) ** 2 + (y / b) ** 2, 1.0, rtol=1e-12)
+    np.testing.assert_allclose([x.max(), y.max()], [a, b], rtol=1e-3)  # 181 points: max within 0.1%
+
+
+@pytest.mark.parametrize("plane", [(0, 1), (0, 2), (1, 2)])
+def test_ellipse_outline_is_the_shadow_of_a_rotated_ellipsoid(steel, plane) -> None:
+    # Every point of the true ellipsoid projects inside the outline, and the densest sampling touches it.
+    simulation, _ = steel
+    truth = simulation.truth
+    outline = plot.ellipse_outline(truth, plane)
+    surface = np.vstack(plot.ellipsoid_wireframe(truth, n_lines=60, n_points=241))
+    block = np.linalg.inv(truth.ellipsoid_matrix)[np.ix_(plane, plane)]
+    inside = np.einsum(
+        "ni,ij,nj->n",
+        surface[:, plane] - truth.offset[list(plane)],
+        np.linalg.inv(block),
+        surface[:, plane] - truth.offset[list(plane)],
+    )
+    on_outline = np.einsum(
+        "ni,ij,nj->n", outline - truth.offset[list(plane)], np.linalg.inv(block), outline - truth.offset[list(plane)]
+    )
+    np.testing.assert_allclose(on_outline, 1.0, rtol=1e-10)
+    assert inside.max() <= 1.0 + 1e-9
+    assert inside.max() > 0.99  # a 60-line wireframe reaches the silhouette to within 1%
+
+
+def test_ellipsoid_wireframe_lies_on_the_fitted_ellipsoid(steel) -> None:
+    _, fits = steel
+    for calibration in fits:
+        points = np.vstack(plot.ellipsoid_wireframe(calibration))
+        radii = np.linalg.norm(calibration.apply(points, normalized=True), axis=1)
+        np.testing.assert_allclose(radii, 1.0, rtol=1e-12)
+
+
+def test_coverage_of_a_full_tumble_visits_every_cell() -> None:
+    # 30 000 uniform directions over 648 equal-area cells: about 46 per cell, P(an empty cell) ~ 648 e^-46.
+    directions = magfit.simulate(30_000, seed=3).samples
+    cover = plot.coverage(directions)
+    assert cover.counts.shape == (18, 36)
+    assert cover.fraction_visited == 1.0
+    # Equal areas: the counts of a uniform sample are Poisson(46); their spread matches, no band is favoured.
+    assert abs(cover.counts.mean() - 30_000 / 648) < 1e-9
+    assert cover.counts.std() < 1.3 * np.sqrt(30_000 / 648)
+    np.testing.assert_allclose(np.sin(cover.elevation_edges), np.linspace(-1, 1, 19), atol=1e-12)
+
+
+def test_coverage_of_level_turns_is_one_band_at_the_inclination() -> None:
+    # Yaw-only turns keep the field's vertical component B sin(δ): every direction sits at elevation δ = 64°,
+    # so only the band holding sin(64°) = 0.899 (band 17 of 18, sin in [0.889, 1]) is visited.
+    simulation = magfit.simulate(5000, orientations="yaw", inclination_deg=64.0, seed=4)
+    cover = plot.coverage(simulation.samples)
+    visited_rows = np.flatnonzero(cover.counts.sum(axis=1))
+    assert visited_rows.tolist() == [17]
+    assert cover.fraction_visited == pytest.approx(36 / 648)
+
+
+def test_even_subsample_thins_a_dwell_and_keeps_rare_directions() -> None:
+    rng = np.random.default_rng(5)
+    spread = rng.normal(size=(2_000, 3))  # a full tumble ...
+    dwell = np.array([1.0, 0.0, 0.0]) + 0.01 * rng.normal(size=(98_000, 3))  # ... and a long rest facing +x
+    samples = np.vstack([dwell, spread])
+    chosen = plot.even_subsample(samples, 1_000, seed=1)
+    assert chosen.size == 1_000
+    assert np.all(np.diff(chosen) > 0)  # unique and in recording order
+    full = np.bincount(plot.direction_cells(samples), minlength=648)
+    kept = np.bincount(plot.direction_cells(samples[chosen]), minlength=648)
+    # Water filling: every cell keeps min(count, q) or q + 1; cells that could give more than q differ by <= 1.
+    quota = kept[full > kept].min()
+    assert np.all((kept == full) | (kept == quota) | (kept == quota + 1))
+    assert kept.max() <= quota + 1
+    # The dwell cell, 98% of the recording, is a small share of the picture; no visited direction is lost.
+    assert kept.max() / 1_000 < 0.02
+    assert np.count_nonzero(kept) == np.count_nonzero(full)
+
+
+def test_even_subsample_returns_everything_when_small_and_is_repeatable() -> None:
+    samples = magfit.simulate(500, seed=6).samples
+    np.testing.assert_array_equal(plot.even_subsample(samples, 500), np.arange(500))
+    big = magfit.simulate(5_000, seed=6).samples
+    np.testing.assert_array_equal(plot.even_subsample(big, 300, seed=2), plot.even_subsample(big, 300, seed=2))
+    with pytest.raises(OptionError, match="max_points must be at least 1"):
+        plot.even_subsample(big, 0)
+
+
+# ---------------------------------------------------------------------- the rendered figure
+
+
+def _png_pixels(path: Path) -> np.ndarray:
+    assert path.read_bytes()[:8] == PNG_SIGNATURE
+    with PIL_Image.open(path) as image:
+        return np.asarray(image.convert("RGB"), dtype=np.float64)
+
+
+def test_calibration_figure_png_has_the_requested_size_and_is_not_blank(steel, tmp_path) -> None:
+    simulation, fits = steel
+    figure = plot.calibration_figure(simulation.samples, fits, title="steel", max_points=800, size=(16, 12), dpi=50)
+    path = plot.save_figure(figure, tmp_path / "steel.png")
+    pixels = _png_pixels(path)
+    assert pixels.shape == (600, 800, 3)  # 16 x 12 inches at 50 dpi
+    assert pixels.std() > 20  # a white page has 0; the panels, points and text give tens of grey levels
+    # Not one colour repeated: the three method colours are in the picture (tab blue, red, green).
+    colours = {tuple(c) for c in pixels.reshape(-1, 3)[::7].astype(int)}
+    assert len(colours) > 200
+
+
+def test_calibration_figure_panels_carry_units_methods_and_the_papers_metric(steel) -> None:
+    simulation, fits = steel
+    figure = plot.calibration_figure(simulation.samples, fits, unit="counts", title="steel", max_points=800)
+    panels = {axes.get_label(): axes for axes in figure.axes}
+    expected = {"raw-3d", "calibrated-3d", "coverage", "histogram", "parameters"} | {
+        f"{when}-{plane}" for when in ("before", "after") for plane in ("xy", "xz", "yz")
+    }
+    assert expected <= set(panels)
+    assert panels["raw-3d"].get_xlabel() == "x (counts)"
+    assert panels["raw-3d"].get_zlabel() == "z (counts)"
+    assert panels["calibrated-3d"].get_ylabel() == "y / B"
+    assert (panels["before-xz"].get_xlabel(), panels["before-xz"].get_ylabel()) == ("x (counts)", "z (counts)")
+    assert panels["after-yz"].get_xlabel().startswith("y / B")
+    assert "distance to the unit sphere" in panels["histogram"].get_xlabel()
+    cover = plot.coverage(fits[0].apply(simulation.samples))
+    visited = np.count_nonzero(cover.counts)
+    assert 600 < visited < 648  # 3000 samples, ~4.6 per cell: a few cells stay empty by chance (e^-4.6 each)
+    assert (
+        panels["coverage"]
+        .get_title()
+        .startswith(f"Directions visited: {visited / 648:.0%} of the sphere ({visited} of 648 equal-area cells")
+    )
+    # Methods named in the histogram legend with the paper's mean/std, equal to magfit.evaluate's.
+    legend = [text.get_text() for text in panels["histogram"].get_legend().get_texts()]
+    title = figure.get_suptitle()
+    for calibration, entry in zip(fits, legend, strict=True):
+        score = magfit.evaluate(calibration, simulation.samples)
+        assert entry.startswith(f"{calibration.method}: mean {score.mean:+.4f}, std {score.std:.4f}")
+        assert f"{calibration.method} {score.mean:+.4f} / {score.std:.4f}" in title
+    assert f"B = {fits[0].field_strength:.4g} counts" in title
+    assert figure.get_supxlabel() == "800 of 3,000 samples shown, spread evenly over the directions visited."
+
+
+def test_scatter_panels_draw_at_most_max_points(steel) -> None:
+    simulation, fits = steel
+    figure = plot.calibration_figure(simulation.samples, fits[:1], max_points=500)
+    panels = {axes.get_label(): axes for axes in figure.axes}
+    points = [len(collection.get_offsets()) for collection in panels["before-xy"].collections]
+    assert points == [500]
+    assert figure.get_supxlabel().startswith("500 of 3,000 samples shown")
+    # The unit falls back to the calibration's, then to "raw units".
+    assert panels["before-xy"].get_xlabel() == "x (raw units)"
+    labelled = plot.calibration_figure(simulation.samples, fits[0].with_unit("uT"), max_points=100)
+    assert {a.get_label(): a for a in labelled.axes}["before-xy"].get_xlabel() == "x (uT)"
+
+
+def test_calibration_figure_refuses_bad_input(steel, tmp_path) -> None:
+    simulation, fits = steel
+    with pytest.raises(OptionError, match="at least one calibration"):
+        plot.calibration_figure(simulation.samples, [])
+    with pytest.raises(SampleError, match=r"shape \(N, 3\)"):
+        plot.calibration_figure(simulation.samples.T, fits)
+    figure = plot.calibration_figure(simulation.samples[:200], fits[0], max_points=100, size=(4, 3), dpi=30)
+    with pytest.raises(OptionError, match="use one of the extensions"):
+        plot.save_figure(figure, tmp_path / "figure.xyz")
+    with pytest.raises(OptionError, match="does not exist"):
+        plot.save_figure(figure, tmp_path / "missing" / "figure.png")
+
+
+def test_method_labels_number_repeated_methods() -> None:
+    identity = magfit.Calibration.identity()
+    assert plot.method_labels([identity, identity, identity]) == ("identity", "identity #2", "identity #3")
