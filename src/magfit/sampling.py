@@ -1,0 +1,353 @@
+"""Even sampling: thin the samples so that every direction of the field weighs the same.
+
+A least-squares fit weighs each sample equally, so a recording that stays long in one attitude (the
+vehicle parked before take-off, the phone lying on the desk) weighs that one direction like thousands
+of others, and any error there (noise bias, a slightly disturbed field, soft iron that a sphere fit
+does not model) pulls the whole fit. That pull is the most cited complaint about the compass
+calibrations of PX4, ArduPilot and phone apps. Thinning first removes it.
+
+The direction of each sample from a centre (``u = shape (x − centre) / |...|``) is binned on ``cells``
+cells of equal area on the unit sphere, and every cell keeps at most ``cap`` of its samples, drawn at
+random. The cells are the zonal equal-area partition (Leopardi, "A partition of the unit sphere into
+regions of equal area and small diameter", ETNA 25, 2006, in its simple form): bands of latitude whose
+areas are whole multiples of the cell area, each split into equal longitude sectors. By Archimedes'
+hat-box theorem the area between heights ``z₀ < z₁`` is ``2π (z₁ − z₀)``, so exact equal areas only
+need the band edges in z.
+
+Within a cell the kept samples are those with the smallest of independent uniform random keys (a
+bottom-k sample). That choice makes the sampler streamable and exact: :class:`EvenSampler` fed chunk
+by chunk keeps precisely the samples :func:`even_subsample` keeps from the whole array with the same
+seed, while holding at most ``max_samples`` of them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._validation import as_samples
+from .errors import OptionError, SampleError
+
+__all__ = ["DEFAULT_CELLS", "EvenSampler", "SphereCells", "even_subsample"]
+
+#: Cells of about 10 degrees across (4π / 400 sr each): fine enough to separate attitudes a calibration
+#: needs apart, coarse enough that a few thousand samples fill them.
+DEFAULT_CELLS = 400
+#: Per-axis quantiles whose mid-point and half-distance give the default centre and scale: a few
+#: outliers do not move them, and neither does the time spent in any one attitude.
+_CENTRE_QUANTILES = (0.001, 0.999)
+#: In that fallback frame, no axis is scaled up by more than 1 / (2 · this) relative to the widest.
+_FLAT_AXIS = 0.05
+
+
+@dataclass(frozen=True)
+class SphereCells:
+    """A partition of the unit sphere into ``count`` cells of equal area (zonal equal-area partition).
+
+    Attributes
+    ----------
+    z_edges : ndarray, shape (bands + 1,)
+        Heights ``z = cos(colatitude)`` of the band edges, from 1 (north pole) down to -1.
+    sectors : ndarray, shape (bands,)
+        Number of longitude sectors of each band (1 for the polar caps).
+    first : ndarray, shape (bands,)
+        Index of each band's first cell.
+    """
+
+    z_edges: NDArray[np.float64]
+    sectors: NDArray[np.int64]
+    first: NDArray[np.int64]
+
+    @classmethod
+    def make(cls, count: int) -> SphereCells:
+        """The partition into ``count`` cells (``count`` >= 2), as square as the count allows."""
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 2:
+            raise OptionError(f"cells must be an integer >= 2, got {count!r}")
+        area = 4.0 * math.pi / count
+        # Polar caps of one cell each: a cap of area `area` has colatitude radius θc with 2π(1 − cos θc) = area.
+        cap = math.acos(1.0 - area / (2.0 * math.pi))
+        side = math.sqrt(area)  # ideal side of a square cell
+        bands = max(1, round((math.pi - 2.0 * cap) / side)) if count > 2 else 0
+        counts = [1]
+        if bands:
+            height = (math.pi - 2.0 * cap) / bands
+            ideal = []
+            for k in range(bands):
+                top, bottom = cap + k * height, cap + (k + 1) * height
+                ideal.append(2.0 * math.pi * (math.cos(top) - math.cos(bottom)) / area)
+            # Round the ideal cell counts of the bands so that they sum to count − 2 (carry the remainders).
+            carry = 0.0
+            for value in ideal:
+                whole = max(1, round(value + carry))
+                carry += value - whole
+                counts.append(whole)
+            counts[-1] += count - 2 - sum(counts[1:])
+            if counts[-1] < 1:
+                raise OptionError(f"cannot partition the sphere into {count} equal cells; use more cells")
+        counts.append(1)
+        sectors = np.asarray(counts, dtype=np.int64)
+        # Band edges: the area above edge j is (cells above) · area = 2π (1 − z_j).
+        cumulative = np.concatenate([[0], np.cumsum(sectors)])
+        z_edges = 1.0 - cumulative * area / (2.0 * math.pi)
+        z_edges[-1] = -1.0
+        return cls(z_edges=z_edges, sectors=sectors, first=cumulative[:-1])
+
+    @property
+    def count(self) -> int:
+        """Number of cells."""
+        return int(self.sectors.sum())
+
+    def index(self, directions: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Cell of each direction, shape (N,); rows of ``directions`` (N, 3) need not be unit length."""
+        norm = np.sqrt(np.einsum("ij,ij->i", directions, directions))
+        norm[norm == 0] = 1.0  # a sample exactly at the centre has no direction: it goes to the north cap
+        z = directions[:, 2] / norm
+        # Bands run from the north pole down; searchsorted needs increasing edges.
+        band = len(self.sectors) - np.searchsorted(self.z_edges[::-1], z, side="left")
+        band = np.clip(band, 0, len(self.sectors) - 1)
+        longitude = np.arctan2(directions[:, 1], directions[:, 0])  # (−π, π]
+        sectors = self.sectors[band]
+        sector = np.floor((longitude + math.pi) * (sectors / (2.0 * math.pi))).astype(np.int64)
+        np.minimum(sector, sectors - 1, out=sector)
+        return self.first[band] + sector
+
+
+def _water_level(counts: NDArray[np.int64], budget: int) -> int:
+    """The largest cap with ``Σ min(counts, cap) <= budget`` (``budget`` itself when every count fits)."""
+    if counts.sum() <= budget:
+        return budget
+    ordered = np.sort(counts[counts > 0])
+    below = np.concatenate([[0], np.cumsum(ordered)[:-1]])  # Σ of the counts smaller than ordered[i]
+    # With the cap at ordered[i], the total kept is below[i] + cap · (number of cells from i on).
+    remaining = ordered.size - np.arange(ordered.size)
+    fits = below + ordered * remaining <= budget
+    i = int(np.argmin(fits)) if not fits.all() else ordered.size  # first level that does not fit
+    return int((budget - below[i]) // remaining[i])
+
+
+class EvenSampler:
+    """Stream samples through an even thinning, keeping at most ``max_samples`` of them.
+
+    Feed chunks with :meth:`update`; :attr:`samples` and :attr:`indices` hold the kept samples and
+    their row numbers in the stream. The result equals :func:`even_subsample` on the whole array with
+    the same ``centre``, ``shape``, ``cells`` and ``seed``.
+
+    Parameters
+    ----------
+    max_samples : int
+        The most samples kept; each cell keeps at most ``cap`` of its own, the largest cap that fits.
+    centre : array_like, shape (3,)
+        Where the directions start, input units: the hard-iron offset, or an estimate of it (a first
+        fit, or the mid-range of the samples).
+    shape : array_like, shape (3, 3), optional
+        Applied to ``x − centre`` before taking directions, e.g. ``Calibration.matrix`` so that the
+        cells are equal areas of the corrected sphere rather than of the distorted ellipsoid.
+    cells : int
+        Number of equal-area cells on the sphere.
+    seed : int or numpy Generator or None
+        Seed of the random keys that choose which samples of a full cell are kept.
+    """
+
+    def __init__(
+        self,
+        max_samples: int,
+        *,
+        centre: ArrayLike,
+        shape: ArrayLike | None = None,
+        cells: int = DEFAULT_CELLS,
+        seed: int | np.random.Generator | None = 0,
+    ) -> None:
+        if isinstance(max_samples, bool) or not isinstance(max_samples, (int, np.integer)) or max_samples < 1:
+            raise OptionError(f"max_samples must be a positive integer, got {max_samples!r}")
+        self.max_samples = int(max_samples)
+        self.centre = _vector(centre, "centre")
+        self.shape = None if shape is None else _matrix(shape)
+        self.cells = SphereCells.make(cells)
+        self._rng = np.random.default_rng(seed)
+        self._seen = 0
+        self._counts = np.zeros(self.cells.count, dtype=np.int64)
+        self._cap = self.max_samples
+        self._samples = np.empty((0, 3))
+        self._indices = np.empty(0, dtype=np.int64)
+        self._cell = np.empty(0, dtype=np.int64)
+        self._keys = np.empty(0)
+
+    def update(self, chunk: ArrayLike) -> EvenSampler:
+        """Offer the next (n, 3) samples of the stream; returns ``self``."""
+        array = as_samples(chunk)
+        n = array.shape[0]
+        keys = np.asarray(self._rng.random(n))  # one per row: the stream of keys never depends on chunking
+        cell = self.cells.index(self._directions(array))
+        return self._offer(array, cell, keys)
+
+    def _offer(self, array: NDArray[np.float64], cell: NDArray[np.int64], keys: NDArray[np.float64]) -> EvenSampler:
+        n = array.shape[0]
+        self._counts += np.bincount(cell, minlength=self.cells.count)
+        self._cap = min(self._cap, _water_level(self._counts, self.max_samples))
+        indices = np.arange(self._seen, self._seen + n, dtype=np.int64)
+        self._seen += n
+        # A newcomer whose key exceeds every key a full cell holds can never enter it (the cap only
+        # shrinks): dropping those first keeps the sort below small once the cells have filled.
+        candidate = keys < self._thresholds()[cell]
+        self._keep(
+            np.concatenate([self._samples, array[candidate]]),
+            np.concatenate([self._indices, indices[candidate]]),
+            np.concatenate([self._cell, cell[candidate]]),
+            np.concatenate([self._keys, keys[candidate]]),
+        )
+        return self
+
+    def _thresholds(self) -> NDArray[np.float64]:
+        """Per cell, the largest key it holds when it holds ``cap`` samples, else +inf; shape (cells,)."""
+        thresholds = np.full(self.cells.count, np.inf)
+        if self._keys.size:
+            full = np.bincount(self._cell, minlength=self.cells.count) >= self._cap
+            largest = np.zeros(self.cells.count)
+            np.maximum.at(largest, self._cell, self._keys)
+            thresholds[full] = largest[full]
+        return thresholds
+
+    def _directions(self, array: NDArray[np.float64]) -> NDArray[np.float64]:
+        offset_free = array - self.centre
+        return offset_free if self.shape is None else offset_free @ self.shape.T
+
+    def _keep(
+        self,
+        samples: NDArray[np.float64],
+        indices: NDArray[np.int64],
+        cell: NDArray[np.int64],
+        keys: NDArray[np.float64],
+    ) -> None:
+        """Keep, in each cell, the ``cap`` candidates with the smallest keys (bottom-k per cell)."""
+        # Sorted by cell, then by key (= np.lexsort((keys, cell)), 2x faster: the stable sort of small
+        # integers is a radix sort).
+        order = np.argsort(keys)
+        order = order[
+            np.argsort(cell[order].astype(np.uint16 if self.cells.count <= 1 << 16 else np.int64), kind="stable")
+        ]
+        sorted_cell = cell[order]
+        counts = np.bincount(sorted_cell, minlength=self.cells.count)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        rank = np.arange(sorted_cell.size) - starts[sorted_cell]  # position within its cell, by increasing key
+        chosen = order[rank < self._cap]
+        chosen.sort()  # back to stream order
+        self._samples = samples[chosen]
+        self._indices = indices[chosen]
+        self._cell = cell[chosen]
+        self._keys = keys[chosen]
+
+    @property
+    def samples(self) -> NDArray[np.float64]:
+        """The kept samples, in stream order, shape (m, 3), input units."""
+        return self._samples.copy()
+
+    @property
+    def indices(self) -> NDArray[np.int64]:
+        """Row numbers of the kept samples in the stream (0-based, increasing), shape (m,)."""
+        return self._indices.copy()
+
+    @property
+    def seen(self) -> int:
+        """Number of samples offered so far."""
+        return self._seen
+
+    @property
+    def cap(self) -> int:
+        """The most samples any cell keeps (so far)."""
+        return self._cap
+
+    @property
+    def occupied_cells(self) -> int:
+        """Number of cells that received at least one sample."""
+        return int(np.count_nonzero(self._counts))
+
+
+def even_subsample(
+    samples: ArrayLike,
+    *,
+    max_samples: int | None = None,
+    cells: int = DEFAULT_CELLS,
+    centre: ArrayLike | None = None,
+    shape: ArrayLike | None = None,
+    seed: int | np.random.Generator | None = 0,
+) -> NDArray[np.int64]:
+    """Indices of a subsample in which every direction weighs (about) the same.
+
+    Use it before any fit: ``magfit.fit(samples[even_subsample(samples)])``.
+
+    Parameters
+    ----------
+    samples : array_like, shape (N, 3)
+        Raw samples, any unit.
+    max_samples : int, optional
+        Keep at most this many: every cell keeps at most ``cap`` samples, the largest cap that fits.
+        By default ``cap`` is the median number of samples of the cells that have any, so a cell
+        visited for a long time is cut down to a typical cell while the rest are kept as they are.
+    cells : int
+        Number of equal-area cells of the sphere of directions (default 400, about 10° across).
+    centre : array_like, shape (3,), optional
+        Where directions start, input units. By default the offset of a first ellipsoid fit, whose
+        ``matrix`` is then also the default ``shape``; when the samples support no ellipsoid, the
+        mid-point of each axis's 0.1 % and 99.9 % quantiles (unmoved by how long the sensor stayed
+        anywhere), with each axis divided by their half-distance (at least a tenth of the widest one).
+    shape : array_like, shape (3, 3), optional
+        Applied to ``x − centre`` before taking directions (identity when only ``centre`` is given),
+        e.g. ``calibration.matrix`` so that the cells are equal areas of the corrected sphere.
+    seed : int or numpy Generator or None
+        Seed of the random choice of the samples kept in a full cell (default 0: repeatable).
+
+    Returns
+    -------
+    ndarray of int, shape (m,)
+        Increasing row numbers into ``samples``.
+    """
+    array = as_samples(samples)
+    if array.shape[0] == 0:
+        raise SampleError("samples must hold at least one row, got shape (0, 3)")
+    if centre is None:
+        centre, shape = _default_frame(array)
+    # The sampler is built with a provisional budget so that it validates the options and holds the cells.
+    sampler = EvenSampler(1 if max_samples is None else max_samples, centre=centre, shape=shape, cells=cells, seed=seed)
+    cell = sampler.cells.index(sampler._directions(array))
+    if max_samples is None:
+        counts = np.bincount(cell, minlength=sampler.cells.count)
+        median = math.ceil(float(np.median(counts[counts > 0])))
+        sampler.max_samples = sampler._cap = int(np.minimum(counts, median).sum())
+    return sampler._offer(array, cell, np.asarray(sampler._rng.random(array.shape[0]))).indices
+
+
+def _default_frame(array: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Centre and shape for the directions: a first ellipsoid fit, or the quantile box when that fails.
+
+    The fit is pulled by a long stay, but only by a fraction of the radius: directions from its centre,
+    through its matrix, are those of the corrected sphere to within a few degrees, so its cells cover
+    equal areas of the true field sphere, not of the distorted ellipsoid.
+    """
+    from .errors import CalibrationError
+    from .fit import fit  # late import: magfit.fit imports the methods, which may use this module
+
+    try:
+        calibration = fit(array, "ellipsoid")
+        return calibration.offset, calibration.matrix
+    except CalibrationError:
+        low, high = np.quantile(array, _CENTRE_QUANTILES, axis=0)
+        # An axis that hardly varies (level turns only) must not let its noise pick the cells: floor it.
+        half = np.maximum(0.5 * (high - low), _FLAT_AXIS * float(np.max(high - low)))
+        return 0.5 * (low + high), np.diag(1.0 / np.where(half > 0, half, 1.0))
+
+
+def _vector(value: ArrayLike, name: str) -> NDArray[np.float64]:
+    vector = np.asarray(value, dtype=np.float64)
+    if vector.shape != (3,) or not np.all(np.isfinite(vector)):
+        raise OptionError(f"{name} must be 3 finite numbers (x, y, z), got {np.asarray(value).tolist()!r}")
+    return vector
+
+
+def _matrix(value: ArrayLike) -> NDArray[np.float64]:
+    matrix = np.asarray(value, dtype=np.float64)
+    if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)) or abs(np.linalg.det(matrix)) == 0:
+        raise OptionError(f"shape must be an invertible, finite 3x3 matrix, got shape {matrix.shape}")
+    return matrix

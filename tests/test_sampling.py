@@ -1,0 +1,188 @@
+"""Even sampling: equal-area cells, the cap, streaming == in memory, and the pull of a long stay removed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+import magfit
+from magfit import OptionError, SampleError
+from magfit.sampling import EvenSampler, SphereCells, even_subsample
+
+
+def stay_simulation(seed: int, n: int = 5000, stay: float = 0.8) -> magfit.Simulation:
+    """The paper's steel scenario, but ``stay`` of the samples taken in one attitude (parked, then tumbled)."""
+    rng = np.random.default_rng(seed)
+    attitudes = np.degrees(Rotation.random(n, random_state=rng).as_euler("XYZ"))
+    attitudes[: int(stay * n)] = attitudes[0]
+    return magfit.scenario("mpu9250", "steel").simulate(n, seed=seed, orientations=attitudes)
+
+
+# ---------------------------------------------------------------------- the cells
+
+
+@pytest.mark.parametrize("count", [2, 3, 4, 10, 100, 400, 1000, 5000])
+def test_cells_have_exactly_equal_areas(count: int) -> None:
+    cells = SphereCells.make(count)
+    assert cells.count == count
+    # Archimedes: the area between heights z₁ < z₀ is 2π (z₀ − z₁); a band's sectors share it equally.
+    areas = 2.0 * math.pi * -np.diff(cells.z_edges) / cells.sectors
+    np.testing.assert_allclose(areas, 4.0 * math.pi / count, rtol=1e-12)
+    assert cells.z_edges[0] == 1.0 and cells.z_edges[-1] == -1.0
+
+
+def test_cells_are_roughly_square() -> None:
+    # Leopardi's construction keeps each cell about as tall (in colatitude) as it is wide.
+    cells = SphereCells.make(400)
+    colatitude = np.arccos(np.clip(cells.z_edges, -1, 1))
+    middle = 0.5 * (colatitude[1:-2] + colatitude[2:-1])
+    height = np.diff(colatitude)[1:-1]
+    width = 2 * math.pi * np.sin(middle) / cells.sectors[1:-1]
+    assert np.all((width / height > 0.5) & (width / height < 2.0))
+
+
+def test_uniform_directions_fill_the_cells_evenly() -> None:
+    cells = SphereCells.make(400)
+    counts = np.bincount(cells.index(np.random.default_rng(0).normal(size=(400_000, 3))), minlength=400)
+    # 1000 per cell expected, Poisson standard deviation 32: all within 5 sigma.
+    assert counts.min() > 1000 - 5 * 32 and counts.max() < 1000 + 5 * 32
+
+
+def test_index_puts_each_direction_in_its_band_and_sector() -> None:
+    cells = SphereCells.make(100)
+    directions = np.random.default_rng(1).normal(size=(5000, 3)) * 7.5  # any length
+    index = cells.index(directions)
+    band = np.searchsorted(cells.first, index, side="right") - 1
+    unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    assert np.all(unit[:, 2] <= cells.z_edges[band] + 1e-15)
+    assert np.all(unit[:, 2] >= cells.z_edges[band + 1] - 1e-15)
+    longitude = np.arctan2(unit[:, 1], unit[:, 0]) + math.pi
+    sector = index - cells.first[band]
+    width = 2 * math.pi / cells.sectors[band]
+    assert np.all((longitude >= sector * width - 1e-12) & (longitude <= (sector + 1) * width + 1e-12))
+
+
+@pytest.mark.parametrize("count", [1, 0, 2.5, True])
+def test_bad_cell_count(count: object) -> None:
+    with pytest.raises(OptionError, match="cells must be an integer >= 2"):
+        SphereCells.make(count)  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------------- the pull of a long stay
+
+
+def test_thinning_removes_the_pull_of_a_long_stay() -> None:
+    # 80 % of the samples in one attitude. Ground truth: the simulated offset. Over 8 recordings the
+    # thinned fits land closer to it: the ellipsoid fit by a factor 2.6 on average (0.0114 -> 0.0043 of
+    # the field over 10 seeds), the sphere fit (whose model error the stay amplifies) by a factor 13.
+    # The bounds below leave room for the spread between seeds (about 30 % of the mean).
+    raw = {"ellipsoid": [], "sphere": []}
+    thinned = {"ellipsoid": [], "sphere": []}
+    for seed in range(8):
+        sim = stay_simulation(seed)
+        kept = even_subsample(sim.samples)
+        assert np.count_nonzero(kept < 4000) < 60  # the 4000 samples of the stay share one or two cells
+        for method in raw:
+            raw[method].append(np.linalg.norm(magfit.fit(sim.samples, method).offset - sim.hard_iron))
+            thinned[method].append(np.linalg.norm(magfit.fit(sim.samples[kept], method).offset - sim.hard_iron))
+    radius = magfit.scenario("mpu9250", "steel").field_strength
+    assert np.mean(thinned["ellipsoid"]) < 0.6 * np.mean(raw["ellipsoid"])
+    assert np.mean(thinned["ellipsoid"]) < 0.007 * radius
+    assert np.mean(thinned["sphere"]) < 0.2 * np.mean(raw["sphere"])
+
+
+def test_an_even_recording_is_hardly_thinned_and_fits_as_well() -> None:
+    sim = magfit.scenario("mpu9250", "steel").simulate(5000, seed=4)
+    kept = even_subsample(sim.samples)
+    # Cell counts of a uniform tumble scatter (Poisson, about 12 per cell) around their median: capping
+    # at the median drops the excess of the fuller half only.
+    assert kept.size > 0.8 * 5000
+    whole = np.linalg.norm(magfit.fit(sim.samples).offset - sim.hard_iron)
+    part = np.linalg.norm(magfit.fit(sim.samples[kept]).offset - sim.hard_iron)
+    # The offset's noise std is about 0.001 of the field (1.6 counts) here; thinning must not add more.
+    assert part < whole + 0.003 * sim.field_strength
+
+
+# ---------------------------------------------------------------------- the cap and the budget
+
+
+def test_max_samples_caps_every_cell_with_the_largest_cap_that_fits() -> None:
+    sim = stay_simulation(1)
+    centre, shape = sim.truth.offset, sim.truth.matrix
+    kept = even_subsample(sim.samples, max_samples=700, centre=centre, shape=shape, cells=200)
+    assert kept.size <= 700
+    cells = SphereCells.make(200)
+    cell = cells.index((sim.samples - centre) @ shape.T)
+    counts = np.bincount(cell, minlength=200)
+    taken = np.bincount(cell[kept], minlength=200)
+    cap = taken.max()
+    np.testing.assert_array_equal(taken, np.minimum(counts, cap))  # cells below the cap keep everything
+    assert np.minimum(counts, cap + 1).sum() > 700  # one more per cell would not fit
+
+
+def test_everything_is_kept_when_the_budget_allows() -> None:
+    samples = magfit.scenario("ellipse2a", "none").simulate(300, seed=2).samples
+    np.testing.assert_array_equal(even_subsample(samples, max_samples=300), np.arange(300))
+
+
+def test_indices_are_increasing_unique_and_repeatable() -> None:
+    samples = stay_simulation(2).samples
+    first = even_subsample(samples, seed=5)
+    assert np.all(np.diff(first) > 0) and first[0] >= 0 and first[-1] < len(samples)
+    np.testing.assert_array_equal(first, even_subsample(samples, seed=5))
+    assert not np.array_equal(first, even_subsample(samples, seed=6))  # the stay cell's picks change
+
+
+@settings(max_examples=10, deadline=None)
+@given(chunk=st.integers(min_value=1, max_value=3000), budget=st.integers(min_value=1, max_value=3000))
+def test_streaming_keeps_exactly_what_the_whole_array_keeps(chunk: int, budget: int) -> None:
+    samples = stay_simulation(3, n=3000).samples
+    centre = np.array([-130.0, -177.0, -175.0])
+    sampler = EvenSampler(budget, centre=centre, cells=100, seed=9)
+    for start in range(0, len(samples), chunk):
+        sampler.update(samples[start : start + chunk])
+    expected = even_subsample(samples, max_samples=budget, centre=centre, cells=100, seed=9)
+    np.testing.assert_array_equal(sampler.indices, expected)
+    np.testing.assert_array_equal(sampler.samples, samples[expected])
+    assert sampler.seen == 3000 and len(sampler.indices) <= budget
+
+
+def test_planar_samples_fall_back_to_the_quantile_frame() -> None:
+    # Level turns only: no ellipsoid fit, so the directions start from the mid-range of the samples.
+    attitudes = np.zeros((2000, 3))
+    attitudes[:, 2] = np.linspace(-180, 180, 2000)
+    attitudes[:1500, 2] = 30.0  # a long stay at one heading
+    sim = magfit.simulate(2000, hard_iron=[50.0, -20.0, 5.0], noise=0.01, orientations=attitudes, seed=0)
+    with pytest.raises(magfit.CalibrationError):
+        magfit.fit(sim.samples)
+    kept = even_subsample(sim.samples, cells=100)
+    # The stay weighed 75 % of the samples; the noise across the flat axis still spreads it over a few
+    # cells, so it keeps a few caps' worth, but no longer dominates.
+    assert np.count_nonzero(kept < 1500) < 0.25 * kept.size
+    assert np.count_nonzero(kept >= 1500) > 0.6 * 500
+
+
+# ---------------------------------------------------------------------- errors
+
+
+def test_bad_arguments_are_refused() -> None:
+    samples = np.random.default_rng(0).normal(size=(50, 3))
+    with pytest.raises(OptionError, match="max_samples must be a positive integer, got 0"):
+        even_subsample(samples, max_samples=0)
+    with pytest.raises(OptionError, match=r"centre must be 3 finite numbers \(x, y, z\), got \[1.0, 2.0\]"):
+        even_subsample(samples, centre=[1.0, 2.0])
+    with pytest.raises(OptionError, match="shape must be an invertible, finite 3x3 matrix"):
+        even_subsample(samples, centre=[0.0, 0.0, 0.0], shape=np.zeros((3, 3)))
+    with pytest.raises(SampleError, match=r"at least one row, got shape \(0, 3\)"):
+        even_subsample(np.empty((0, 3)))
+    with pytest.raises(SampleError, match="pass samples.T"):
+        even_subsample(samples.T)
+    bad = samples.copy()
+    bad[7, 0] = np.nan
+    with pytest.raises(SampleError, match="the first is row 7"):
+        even_subsample(bad)
