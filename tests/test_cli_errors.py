@@ -111,6 +111,7 @@ def test_nonfinite_error_refuses_the_file(with_nans: Path, tmp_path: Path) -> No
         _run("calibrate", str(with_nans), "--nonfinite", "error", "-o", str(output)), 2, str(with_nans), "12"
     )
     assert "nan" in message.lower()
+    assert "--nonfinite skip" in message  # the library's hint, worded as the command line's option
     assert not output.exists()
 
 

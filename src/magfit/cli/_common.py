@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -56,12 +57,21 @@ def one_line(message: str) -> str:
     return " ".join(str(message).split())
 
 
+#: Library hints that name a keyword argument (``nonfinite='skip'``) and the options that set it.
+_KEYWORD_HINT = re.compile(r"\b(nonfinite|unit|method|columns)='([^']*)'")
+
+
+def option_wording(message: str) -> str:
+    """Rewrite the library's keyword hints as the command line's options: ``unit='uT'`` -> ``--unit uT``."""
+    return _KEYWORD_HINT.sub(lambda match: f"--{match.group(1)} {match.group(2)}", message)
+
+
 def as_command_error(error: BaseException) -> CommandError:
     """The :class:`CommandError` (message and exit status) that reports ``error``."""
     if isinstance(error, CalibrationError):
-        return FitFailedError(one_line(str(error)))
+        return FitFailedError(option_wording(one_line(str(error))))
     if isinstance(error, MagfitError):
-        return CommandError(one_line(str(error)))
+        return CommandError(option_wording(one_line(str(error))))
     if isinstance(error, click.UsageError):
         hint = f" (see '{error.ctx.command_path} --help')" if error.ctx is not None else ""
         return CommandError(one_line(error.format_message()) + hint)

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from rich.console import Console
 
 from ..calibration import CONVENTION, Calibration
-from ..errors import DataFileError, MagfitError
+from ..errors import DataFileError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
 from ..methods import get_method
@@ -217,12 +217,7 @@ def write_outputs(
     if export_format is not None:
         from ..export import export
 
-        try:
-            text = export(run.calibration, export_format, unit=unit)
-        except MagfitError as error:
-            if unit is None and "unit" in str(error):  # the library's hint names its argument, not the option
-                raise type(error)(f"{error} (on the command line: --unit)") from None
-            raise
+        text = export(run.calibration, export_format, unit=unit)
     else:
         text = run.calibration.to_json() + "\n"
     if output is None:
