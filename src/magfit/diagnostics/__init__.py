@@ -450,6 +450,12 @@ def _warnings(cover: Coverage, observability: Observability, goodness: Goodness)
             f"the samples cover only {100 * cover.share:.0f} % of the directions: the calibration is extrapolated "
             "over the rest; record a fuller tumble"
         )
+    for axis in cover.unseen_axes:
+        warnings.append(
+            f"no samples with the field near +{axis} or −{axis}: the sensor only turned about {axis}, so the offset "
+            f"and scale along {axis} are not determined by the samples; tilt the sensor so both ends of {axis} face "
+            "the field"
+        )
     undetermined = [w for w in observability.weak if not w.determined]
     if undetermined:
         parts = "; ".join(w.description for w in undetermined)

@@ -134,6 +134,15 @@ class Coverage:
     missing: tuple[str, ...]
     sparse: tuple[str, ...]
 
+    @property
+    def unseen_axes(self) -> tuple[str, ...]:
+        """Sensor axes ("x", "y", "z") along which the field was seen at neither end (both half-axes missing).
+
+        The samples then lie in a band around that axis: nothing in them fixes the offset or the scale along
+        it, whatever a fit returns.
+        """
+        return tuple(axis for axis in "xyz" if f"+{axis}" in self.missing and f"−{axis}" in self.missing)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "cells": self.cells,

@@ -86,7 +86,9 @@ def fit_auto(data: FitInput, *, outliers: str = "detect") -> Calibration:
             failed[model] = str(error)
     if not fits:
         raise CalibrationError(
-            "no model could be fitted to these samples: "
+            "no model could be fitted to these samples"
+            + _flatness(samples)
+            + ": "
             + "; ".join(f"{model}: {reason}" for model, reason in failed.items())
         )
     if robust:  # the common inliers: kept by every robust candidate
@@ -184,6 +186,7 @@ def _observable_choice(
     over, why.
     """
     from ..diagnostics import Frame, even_subsample, thin
+    from ..diagnostics.coverage import coverage
     from ..diagnostics._geometry import symmetric_unit_map
     from ..diagnostics.uncertainty import analyse
 
@@ -194,8 +197,16 @@ def _observable_choice(
         candidates = thin(kept.shape[0])
         z_candidates = Frame.corrected(calibration).normalise(kept[candidates])
         chosen, weights = even_subsample(z_candidates, total=kept.shape[0])
-        observability, _ = analyse(z_candidates[chosen], weights, model, symmetric_unit_map(calibration), 60.0)
+        z = z_candidates[chosen]
+        observability, _ = analyse(z, weights, model, symmetric_unit_map(calibration), 60.0)
         undetermined = [w.description for w in observability.weak if not w.determined]
+        # A band of directions around an axis (both ends unseen) fixes neither the offset nor the scale
+        # along it, even where the linearisation at a drifted solution says otherwise.
+        undetermined += [
+            f"the offset and scale along {axis} (no samples with the field near +{axis} or −{axis}: the sensor "
+            f"only turned about {axis})"
+            for axis in coverage(z).unseen_axes
+        ]
         if not undetermined:
             return model, [w.description for w in observability.weak], passed_over
         turn = f" (the sensor only turned about {observability.turn_axis})" if observability.turn_axis else ""
@@ -206,6 +217,21 @@ def _observable_choice(
         "the samples determine no calibration model: "
         + "; ".join(passed_over)
         + "; record again turning the sensor through more attitudes (a full tumble is best)"
+    )
+
+
+def _flatness(samples: NDArray[np.float64]) -> str:
+    """Words for the direction the samples hardly extend along, when they lie near a plane."""
+    from ..diagnostics._geometry import axis_words
+
+    spreads, directions = np.linalg.eigh(np.cov(samples.T))
+    ratio = math.sqrt(max(spreads[0], 0.0) / spreads[2])
+    if ratio > 0.25:
+        return ""
+    axis = axis_words(directions[:, 0] * np.sign(directions[np.argmax(np.abs(directions[:, 0])), 0]))
+    return (
+        f" (they lie close to a plane: their spread along {axis} is {100 * ratio:.0f} % of the largest, so the "
+        f"sensor turned mostly about {axis} and the offset and scale along {axis} are not determined)"
     )
 
 
