@@ -9,6 +9,7 @@ allow 1e-9 relative, far below any real difference (a wrongly weighted or droppe
 
 from __future__ import annotations
 
+import pickle
 import tracemalloc
 
 import numpy as np
@@ -238,6 +239,15 @@ def test_merging_with_empty_changes_nothing(steel: magfit.Simulation) -> None:
         assert_same_statistics(merged, full, rtol=0)
         np.testing.assert_array_equal(merged.scatter, full.scatter)
     assert (Statistics() + Statistics()).n == 0
+
+
+def test_pickle_round_trip_for_processes_and_clusters(steel: magfit.Simulation) -> None:
+    # Dask's process scheduler, Spark and Ray ship Statistics between processes by pickling them.
+    stats = Statistics.from_samples(steel.samples)
+    _ = stats.scatter  # a cached canonical frame must travel (or be rebuilt) consistently
+    copy = pickle.loads(pickle.dumps(stats))
+    np.testing.assert_array_equal(copy.scatter, stats.scatter)
+    assert_same_fit(magfit.fit(copy + stats), magfit.fit(np.vstack([steel.samples] * 2)), steel.field_strength)
 
 
 def test_copy_is_independent(steel: magfit.Simulation) -> None:
