@@ -136,12 +136,20 @@ class Coverage:
 
     @property
     def unseen_axes(self) -> tuple[str, ...]:
-        """Sensor axes ("x", "y", "z") along which the field was seen at neither end (both half-axes missing).
+        """Sensor axes ("x", "y", "z") the samples form a band around: the field was seen at neither end of
+        the axis (both half-axes missing) but along the four half-axes at right angles to it.
 
-        The samples then lie in a band around that axis: nothing in them fixes the offset or the scale along
-        it, whatever a fit returns.
+        Nothing in such samples fixes the offset or the scale along that axis, whatever a fit returns.
+        (A cap of directions, as from a vehicle that only tilts a little, misses more than that and is
+        left to the observability analysis.)
         """
-        return tuple(axis for axis in "xyz" if f"+{axis}" in self.missing and f"−{axis}" in self.missing)
+        unseen = []
+        for axis in "xyz":
+            others = [f"{sign}{other}" for other in "xyz" if other != axis for sign in ("+", "−")]
+            ends_missing = f"+{axis}" in self.missing and f"−{axis}" in self.missing
+            if ends_missing and not any(half in self.missing for half in others):
+                unseen.append(axis)
+        return tuple(unseen)
 
     def to_dict(self) -> dict[str, Any]:
         return {

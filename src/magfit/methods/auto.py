@@ -186,8 +186,8 @@ def _observable_choice(
     over, why.
     """
     from ..diagnostics import Frame, even_subsample, thin
-    from ..diagnostics.coverage import coverage
     from ..diagnostics._geometry import symmetric_unit_map
+    from ..diagnostics.coverage import coverage
     from ..diagnostics.uncertainty import analyse
 
     passed_over: list[str] = []

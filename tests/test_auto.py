@@ -1,0 +1,109 @@
+"""auto against ground truth: the model it picks for known distortions, its fallback on restricted
+attitudes (heading error within 1.2x of the best fixed model), its refusals, and outlier handling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import magfit
+from magfit.simulate import rotation_matrices
+
+
+def _heading_error_deg(calibration: magfit.Calibration, simulation: magfit.Simulation, attitudes: np.ndarray) -> float:
+    """RMS heading error, degrees, tilt-compensated with the true roll and pitch."""
+    raw = simulation.distort(attitudes)
+    tilt = attitudes.copy()
+    tilt[:, 2] = 0.0
+    level = rotation_matrices(tilt)  # R_x R_y of eq. (1): undo it to get the horizontal field
+    fitted = np.einsum("nji,nj->ni", level, calibration.apply(raw))
+    truth = np.einsum("nji,nj->ni", level, simulation.truth.apply(raw))
+    error = np.arctan2(fitted[:, 1], fitted[:, 0]) - np.arctan2(truth[:, 1], truth[:, 0])
+    error = (error + np.pi) % (2 * np.pi) - np.pi
+    return float(np.degrees(np.sqrt(np.mean(error**2))))
+
+
+def test_pure_hard_iron_picks_the_sphere() -> None:
+    sim = magfit.simulate(2000, hard_iron=[30.0, -12.0, 7.0], field_strength=50.0, noise=0.5, seed=1)
+    cal = magfit.fit(sim.samples, "auto")
+    assert cal.details["chosen"] == "sphere"
+    assert set(cal.details["criterion"]["values"]) == {"sphere", "diag", "full"}
+    values = cal.details["criterion"]["values"]
+    assert values["sphere"] == min(v for v in values.values() if v is not None)
+    np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=0.1)  # σ ≈ 0.5 / √(2000/3) ≈ 0.02
+
+
+def test_steel_picks_the_full_ellipsoid() -> None:
+    sim = magfit.scenario("mpu9250", "steel").simulate(2000, seed=2)
+    cal = magfit.fit(sim.samples, "auto")
+    assert cal.details["chosen"] == "full"
+    assert "lowest BIC: full" in cal.details["reason"]
+    np.testing.assert_allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, rtol=0.03, atol=3e-8)
+
+
+def test_axis_aligned_scale_picks_diag() -> None:
+    sim = magfit.simulate(3000, soft_iron=np.diag([1.15, 0.9, 1.0]), hard_iron=[0.2, -0.1, 0.3], noise=0.01, seed=3)
+    cal = magfit.fit(sim.samples, "auto")
+    assert cal.details["chosen"] == "diag"
+    np.testing.assert_allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, rtol=0.01, atol=1e-3)
+
+
+@pytest.mark.parametrize(("sensor", "disturbance"), [("mpu9250", "none"), ("ellipse2a", "steel")])
+def test_restricted_attitude_names_the_weak_direction_and_stays_near_the_best(sensor: str, disturbance: str) -> None:
+    scenario = magfit.scenario(sensor, disturbance)
+    rng = np.random.default_rng(4)
+    attitudes = np.column_stack([rng.uniform(-20, 20, (720, 2)), np.linspace(-180, 180, 720, endpoint=False)])
+    errors: dict[str, list[float]] = {"auto": [], "sphere": [], "diag": [], "full": []}
+    for seed in range(3):
+        sim = scenario.simulate(2000, seed=seed, orientations="restricted")
+        auto = magfit.fit(sim.samples, "auto", diagnostics=False)
+        weak = " ".join(auto.details["weak"]) + auto.details["reason"]
+        assert "along z" in weak, auto.details["reason"]
+        errors["auto"].append(_heading_error_deg(auto, sim, attitudes))
+        for name, method in (("sphere", "sphere"), ("diag", "diag"), ("full", "als")):
+            try:
+                fixed = magfit.fit(sim.samples, method, diagnostics=False)
+            except magfit.CalibrationError:
+                continue
+            errors[name].append(_heading_error_deg(fixed, sim, attitudes))
+    best = min(np.mean(v) for name, v in errors.items() if name != "auto" and len(v) == 3)
+    assert np.mean(errors["auto"]) <= 1.2 * best, errors
+
+
+def test_yaw_only_is_refused_naming_the_axis() -> None:
+    sim = magfit.scenario("mpu9250", "none").simulate(2000, seed=1, orientations="yaw")
+    with pytest.raises(magfit.CalibrationError, match="turned .*about z"):
+        magfit.fit(sim.samples, "auto")
+
+
+def test_spikes_switch_auto_to_robust() -> None:
+    sim = magfit.scenario("ellipse2a", "smartphone").simulate(2000, seed=5)
+    spiked = sim.samples.copy()
+    index = np.arange(10, 2000, 50)  # 2 %
+    spiked[index] = sim.samples.mean(axis=0) + 3.0 * (sim.samples[index] - sim.samples.mean(axis=0))
+    cal = magfit.fit(spiked, "auto")
+    assert cal.details["robust"] and cal.details["chosen"].startswith("robust ")
+    assert cal.details["n_rejected"] >= index.size
+    np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=0.01)  # σ ≈ 0.011 / √(2000/3) ≈ 4e-4
+    clean = magfit.fit(sim.samples, "auto")
+    assert not clean.details["robust"]
+
+
+def test_real_recordings_fall_back_or_refuse_with_a_reason(real_data_dir) -> None:
+    mag = np.loadtxt(real_data_dir / "android_phone_kritiksoman" / "data_mag.txt", delimiter=",", skiprows=1)
+    planar = np.loadtxt(real_data_dir / "hmc5883l_nliaudat_partial" / "mag_out_sample.txt", delimiter=",")
+    for samples in (mag[:, :3], planar):
+        with pytest.raises(magfit.CalibrationError, match="not an ellipsoid|do not outline"):
+            magfit.fit(samples, "ellipsoid")
+        try:
+            cal = magfit.fit(samples, "auto")
+        except magfit.CalibrationError as error:
+            assert "record again" in str(error).lower() or "rotate the sensor" in str(error)
+        else:  # a fallback must say why and carry a diagnosis that warns
+            assert cal.details["reason"]
+            assert cal.diagnostics is not None and not cal.diagnostics.ok
+
+
+def test_bad_option_is_refused() -> None:
+    with pytest.raises(magfit.OptionError, match="detect, reject, keep"):
+        magfit.fit(magfit.simulate(100, noise=0.01, seed=6).samples, "auto", outliers="sometimes")
