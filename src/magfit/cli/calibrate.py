@@ -281,7 +281,7 @@ def calibrate_command(
     Examples:
       magfit calibrate flight.csv --columns mx,my,mz -o cal.json --unit uT
       magfit calibrate mag.txt --method sphere
-      magfit calibrate flight.csv --export ardupilot -o mag.parm
+      magfit calibrate flight.csv --unit uT --export ardupilot -o mag.param
       magfit calibrate flight.csv --export c > mag_cal.h
     """
     method = method or default_method()

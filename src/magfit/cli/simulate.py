@@ -126,7 +126,7 @@ def simulate_command(
     out.print(f"wrote {n_samples} samples to {output} ({sensor}, {disturbance}, {orientations} orientations)")
     out.print(f"true offset     {vector(cal.offset, lambda v: significant(v, 6))}")
     out.print(f"true semi-axes  {vector(cal.semi_axes, lambda v: significant(v, 6))}")
-    out.print(f"field strength  {significant(cal.field_strength, 6)}")
+    out.print(f"true field B    {significant(cal.field_strength, 6)}")
     if truth is not None:
         out.print(f"wrote the true calibration to {truth}")
 
