@@ -24,11 +24,15 @@ ellipsoid to second order in σ (σ from the ALS start, or from the distances wh
 remaining bias is O(σ⁴); the fit keeps the efficiency of the geometric fit at low noise.
 
 Parameters: the offset V and the Cholesky factor L of ``A = L Lᵀ`` (log-diagonal), so that every
-iterate is a real ellipsoid (positive definite); with a known ``field_strength`` B the determinant is
-pinned, ``det A = B⁻⁶`` (the geometric mean of the semi-axes is B), leaving 8 parameters. Solved by
+iterate is a real ellipsoid (positive definite): 9 parameters. Solved by
 Levenberg–Marquardt (analytic Jacobian, normal equations: see :func:`_levenberg_marquardt` for why not
 :func:`scipy.optimize.least_squares`) in the normalised frame of the statistics, started from ``als``
 (or ``ellipsoid`` when the ALS fit is not an ellipsoid).
+
+Known field strength: unlike the sphere's radius, the size of a general ellipsoid is fitted from the
+data, and B cannot be pinned inside the fit without assuming ``det W = 1`` (soft iron that keeps the
+volume), which real iron breaks (the paper's steel case: semi-axes 0.70 B on geometric average). So,
+as for ``ellipsoid``, a given ``field_strength`` scales the correction matrix only.
 """
 
 from __future__ import annotations
@@ -158,34 +162,29 @@ class _Evaluation:
 class _Model:
     """Residuals and Jacobian of the (bias-corrected) orthogonal distances, in the normalised frame."""
 
-    def __init__(self, zt: NDArray[np.float64], variance: float, log_det_l: float | None) -> None:
+    size = 9  # offset (3), log-diagonal (3) and off-diagonal (3) of the Cholesky factor L of A
+
+    def __init__(self, zt: NDArray[np.float64], variance: float) -> None:
         self.zt = zt  # samples, (3, N)
         self.variance = variance  # σ² of the bias correction (normalised frame), 0 for none
-        self.log_det_l = log_det_l  # Σ log L_kk pinned (known field strength) or None (free)
-        self.size = 9 if log_det_l is None else 8
 
     def unpack(self, params: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Centre (3,) and lower-triangular L (3, 3) from the parameter vector."""
-        logs = params[3:6] if self.log_det_l is None else np.append(params[3:5], self.log_det_l - params[3:5].sum())
-        lower = np.diag(np.exp(logs))
+        lower = np.diag(np.exp(params[3:6]))
         for k, (i, j) in enumerate(_L_OFF_DIAGONAL):
-            lower[i, j] = params[self.size - 3 + k]
+            lower[i, j] = params[6 + k]
         return params[:3].copy(), lower
 
     def pack(self, centre: NDArray[Any], lower: NDArray[Any]) -> NDArray[np.float64]:
-        logs = np.log(np.diag(lower))
-        shape_logs = logs if self.log_det_l is None else logs[:2]
-        return np.concatenate([centre, shape_logs, [lower[i, j] for i, j in _L_OFF_DIAGONAL]])
+        return np.concatenate([centre, np.log(np.diag(lower)), [lower[i, j] for i, j in _L_OFF_DIAGONAL]])
 
     def shape_jacobian(self, lower: NDArray[np.float64]) -> NDArray[np.float64]:
-        """d(A entries, order of ``_A_ENTRIES``) / d(shape parameters): (6, 6) or (6, 5)."""
+        """d(A entries, order of ``_A_ENTRIES``) / d(shape parameters), (6, 6)."""
         directions = []
         for k in range(3):
             unit = np.zeros((3, 3))
             unit[k, k] = lower[k, k]  # d exp(l_k) = exp(l_k) dl_k
             directions.append(unit)
-        if self.log_det_l is not None:  # l₃ = const − l₁ − l₂
-            directions = [directions[0] - directions[2], directions[1] - directions[2]]
         for i, j in _L_OFF_DIAGONAL:
             unit = np.zeros((3, 3))
             unit[i, j] = 1.0
@@ -336,8 +335,9 @@ def fit_ml(
     Parameters
     ----------
     field_strength : float, optional
-        Known magnitude B of the local field (e.g. from the World Magnetic Model), input units. Pinned
-        inside the fit: the ellipsoid's semi-axes then have geometric mean B, and ``det(matrix) = 1``.
+        Known magnitude of the local field (e.g. from the World Magnetic Model), input units. The fitted
+        ellipsoid is unchanged; ``matrix`` is scaled so that corrected samples have this magnitude
+        (then ``det(matrix) != 1``). See the module docstring for why it is not pinned inside the fit.
     bias_correction : bool
         Subtract the mean-curvature bias ``σ² H`` from each distance (see the module docstring), so that
         the fit stays close to consistent at high noise. ``False`` gives the plain geometric (ML) fit.
@@ -363,13 +363,9 @@ def fit_ml(
     zt = (samples.T - statistics.centre[:, None]) / scale  # normalised frame, (3, N)
     start, centre_z, shape_z, variance = _start(statistics)
     if variance is None:  # algebraic start: σ² from the distances to it
-        plain = _Model(zt, 0.0, None)
+        plain = _Model(zt, 0.0)
         variance = 2.0 * plain.evaluate(plain.pack(centre_z, np.linalg.cholesky(shape_z))).cost / zt.shape[1]
-    log_det_l = None
-    if known_field is not None:  # det A_z = (scale / B)⁶, i.e. Σ log L_kk = 3 log(scale / B)
-        log_det_l = 3.0 * math.log(scale / known_field)
-        shape_z = shape_z * (math.exp(2.0 * log_det_l) / np.linalg.det(shape_z)) ** (1.0 / 3.0)
-    model = _Model(zt, variance if bias_correction else 0.0, log_det_l)
+    model = _Model(zt, variance if bias_correction else 0.0)
     solution = _levenberg_marquardt(model, model.pack(centre_z, np.linalg.cholesky(shape_z)), int(max_iterations))
     if solution.status <= 0 or not np.all(np.isfinite(solution.params)):
         raise CalibrationError(
@@ -392,9 +388,6 @@ def fit_ml(
         "covariance_parameters": list(COVARIANCE_PARAMETERS),
         "covariance": _covariance(model, solution, residual_variance, scale),
     }
-    if known_field is not None:
-        # Pinned inside the fit: calibration_from_ellipsoid's geometric mean of the semi-axes is B already.
-        details["field_strength_given"] = True
     return calibration_from_ellipsoid(
         "ml",
         statistics.centre + scale * centre_z,
@@ -402,6 +395,7 @@ def fit_ml(
         root=root,
         n_samples=statistics.n,
         details=details,
+        field_strength=known_field,
     )
 
 
