@@ -97,7 +97,12 @@ class FileFormat:
         """A short human description, e.g. ``"text, ', '-separated, 6 columns, no header"``."""
         if self.kind != "text":
             return f"{self.kind}, {self.n_columns} {'keys' if self.kind == 'npz' else 'columns'}"
-        parts = [f"{self.delimiter!r}-separated" if self.delimiter != "whitespace" else "whitespace-separated"]
+        if self.delimiter is None:
+            parts = ["no delimiter found"]
+        elif self.delimiter == "whitespace":
+            parts = ["whitespace-separated"]
+        else:
+            parts = [f"{self.delimiter!r}-separated"]
         parts.append(f"{self.n_columns} columns")
         parts.append("header" if self.header is not None else "no header")
         if self.preamble_lines:
@@ -444,7 +449,11 @@ def _resolve_table_columns(
     """The 0-based positions and labels of the x, y, z columns of a text or npy file."""
     n = fmt.n_columns
     labels = [fmt.column_label(i) for i in range(n)]
-    where = "columns" if fmt.kind == "npy" else "fields per row"
+    where = (
+        ("column" if fmt.kind == "npy" else "field")
+        + ("" if n == 1 else "s")
+        + ("" if fmt.kind == "npy" else " per row")
+    )
     if n < 3:
         raise _error(
             path,
