@@ -116,6 +116,11 @@ def calibration_from_correction(
     correction = np.real(correction).astype(np.float64).reshape(3, 3)
     determinant = float(np.linalg.det(correction))
     if not determinant > 0:
+        symmetric = np.allclose(correction, correction.T, rtol=1e-9, atol=1e-12 * np.abs(correction).max())
+        if symmetric and np.all(np.linalg.eigvalsh(correction) < 0):
+            # The quadric's sign was not normalised: applied as documented, every corrected vector
+            # points backwards (a 180° heading error).
+            raise PeerFailure("returned a negative-definite soft-iron matrix: the corrected field points backwards")
         raise PeerFailure(f"returned a soft-iron matrix with det = {determinant:.3g} <= 0 (not an ellipsoid)")
     if radius is None:
         radius = float(np.median(np.linalg.norm((samples - offset) @ correction.T, axis=1)))

@@ -131,7 +131,9 @@ def test_weak_direction_is_found_in_nested_details() -> None:
         accuracy.weak_direction({"diagnostics": {"weak_direction": [0, 0, 1]}})
         == "diagnostics.weak_direction = [0, 0, 1]"
     )
-    assert accuracy.weak_direction({"root": "sqrt"}) is None
+    reason = "the full model was passed over: the samples do not determine the scale along z"
+    assert accuracy.weak_direction({"weak": [], "reason": reason}) == f"reason: {reason}"
+    assert accuracy.weak_direction({"root": "sqrt", "weak": []}) is None
 
 
 def test_peer_results_are_converted_to_the_one_convention(simulation: magfit.Simulation) -> None:
@@ -143,8 +145,10 @@ def test_peer_results_are_converted_to_the_one_convention(simulation: magfit.Sim
     assert np.linalg.det(calibration.matrix) == pytest.approx(1.0)
     assert accuracy.heading_error_deg(calibration, simulation) < 1e-9
     np.testing.assert_allclose(magfit.sphere_distances(calibration, simulation.clean), 0.0, atol=1e-12)
-    with pytest.raises(peers.PeerFailure, match="det"):
+    with pytest.raises(peers.PeerFailure, match="points backwards"):
         peers.calibration_from_correction("peer", truth.offset, -truth.matrix, 1.0, simulation.clean)
+    with pytest.raises(peers.PeerFailure, match="det = "):  # a reflection: two axes swapped
+        peers.calibration_from_correction("peer", truth.offset, truth.matrix[[1, 0, 2]], 1.0, simulation.clean)
     with pytest.raises(peers.PeerFailure, match="NaN"):
         peers.calibration_from_correction("peer", truth.offset, np.full((3, 3), np.nan), 1.0, simulation.clean)
 
