@@ -1,0 +1,551 @@
+"""How fast is magfit at any size? Ratios measured in one run, on one machine, against floors and peers.
+
+    .venv/bin/python benchmarks/speed.py                      # the full run (about 15 min on 2 cores)
+    .venv/bin/python benchmarks/speed.py --smoke --no-peers   # a minute: small sizes, same tables
+
+Four parts, each a ratio to a baseline timed in the same run (absolute times depend on the machine):
+
+1. ``magfit.fit(samples, "ellipsoid")`` on N in-memory samples (10 million) against the bare floor, one
+   chunked NumPy pass that builds the 10-column design matrix of eq. (4) and sums ``XᵀX`` (target: at
+   most 3x), and against ``numpy.linalg.lstsq`` on the full design matrix (target: at least 10x
+   faster); the fit's peak extra memory (tracemalloc, and RSS in a fresh process; target < 64 MB).
+2. ``magfit calibrate`` on a CSV of N rows, as a subprocess, against the fastest reader alone (pandas'
+   C engine, pandas' pyarrow engine, pyarrow.csv; each a subprocess reading the three columns; target
+   at most 1.5x) and its peak RSS (target < 300 MB, the samples alone are 24 bytes a row).
+3. ``magfit.fit(samples, "ml")`` on 1 million samples (target under 2 s).
+4. The peers (magyc's ellipsoid fit, magcal, circuitpython-mag-cal) on the same samples at growing
+   sizes, each size in its own process with a one-minute limit (run from ``benchmarks/.peers-venv``,
+   see ``setup_peers.sh``); a size a peer cannot finish, or crashes on, is reported with the reason.
+
+Times are the best of ``--repeat`` runs (the least disturbed by other processes); the machine's load
+average is recorded with the results, since other work on the machine slows every row alike.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+import magfit
+
+ROOT = Path(__file__).resolve().parents[1]
+PEERS_PYTHON = ROOT / "benchmarks" / ".peers-venv" / "bin" / "python"
+#: The samples: the paper's MPU-9250 beside a steel plate (strong, rotated soft iron), raw counts.
+SCENARIO = ("mpu9250", "steel")
+#: µT per count of the MPU-9250 magnetometer: the CSV holds µT with up to 3 decimals, like a real log.
+MICROTESLA_PER_COUNT = 0.15
+PEER_TIME_LIMIT = 60.0
+TARGETS = {
+    "fit_vs_floor": 3.0,
+    "lstsq_vs_fit": 10.0,
+    "fit_memory_mb": 64.0,
+    "cli_vs_reader": 1.5,
+    "cli_rss_mb": 300.0,
+    "ml_seconds": 2.0,
+}
+
+
+# ---------------------------------------------------------------------- data
+
+
+def make_samples(n: int, seed: int = 0) -> NDArray[np.float64]:
+    """N samples of the scenario, simulated a million at a time (bounded temporaries), shape (n, 3)."""
+    scenario = magfit.scenario(*SCENARIO)
+    samples = np.empty((n, 3))
+    block = 1_000_000
+    for i, start in enumerate(range(0, n, block)):
+        size = min(block, n - start)
+        samples[start : start + size] = scenario.simulate(size, seed=seed + i).samples
+    return samples
+
+
+def write_csv(samples: NDArray[np.float64], path: Path) -> None:
+    """``time_ms,mx,my,mz`` in µT (3 decimals), written in blocks."""
+    with open(path, "w", encoding="ascii") as handle:
+        handle.write("time_ms,mx,my,mz\n")
+        block = 500_000
+        for start in range(0, len(samples), block):
+            part = np.round(samples[start : start + block] * MICROTESLA_PER_COUNT, 3)
+            times = np.arange(start, start + len(part)) * 10
+            rows = zip(times.tolist(), part.tolist(), strict=True)
+            lines = [f"{t},{x:.3f},{y:.3f},{z:.3f}\n" for t, (x, y, z) in rows]
+            handle.writelines(lines)
+
+
+# ---------------------------------------------------------------------- timing helpers
+
+
+def best_time(function: Callable[[], Any], repeat: int) -> tuple[float, Any]:
+    """Best wall time of ``repeat`` calls (seconds) and the last result."""
+    best, result = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = function()
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+@dataclass
+class ProcessRun:
+    """One subprocess: wall time (s), peak RSS (MB), exit status and the tail of its output."""
+
+    seconds: float
+    rss_mb: float
+    status: int
+    output: str
+
+
+#: GNU time reports the peak RSS of the command it runs. (``wait4`` from this process would not do:
+#: Linux counts in a forked child's peak the parent's memory at fork time.)
+GNU_TIME = Path("/usr/bin/time")
+
+
+def run_process(command: Sequence[str], timeout: float | None = None) -> ProcessRun:
+    """Run ``command`` in its own session; its peak RSS comes from GNU time (NaN when absent)."""
+    with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss_file:
+        wrapped = list(command)
+        if GNU_TIME.exists():
+            wrapped = [str(GNU_TIME), "-f", "%M", "-o", rss_file.name, *wrapped]
+        start = time.perf_counter()
+        process = subprocess.Popen(wrapped, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            output_bytes, _ = process.communicate(timeout=timeout)
+            status = process.returncode
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, 9)  # the whole session: GNU time and the command under it
+            output_bytes, _ = process.communicate()
+            status = -9
+        seconds = time.perf_counter() - start
+        rss_text = rss_file.read().strip().splitlines()
+    rss_mb = float(rss_text[-1]) / 1024 if rss_text and rss_text[-1].isdigit() else float("nan")
+    return ProcessRun(seconds, rss_mb, status, output_bytes.decode(errors="replace")[-2000:])
+
+
+def best_process(command: Sequence[str], repeat: int) -> ProcessRun:
+    runs = [run_process(command) for _ in range(repeat)]
+    for run in runs:
+        if run.status != 0:
+            raise RuntimeError(f"{shlex.join(command)} failed ({run.status}):\n{run.output}")
+    fastest = min(runs, key=lambda run: run.seconds)
+    return ProcessRun(fastest.seconds, max(run.rss_mb for run in runs), 0, fastest.output)
+
+
+# ---------------------------------------------------------------------- part 1: in-memory ellipsoid fit
+
+
+def floor_scatter(samples: NDArray[np.float64], chunk: int = 1 << 16) -> NDArray[np.float64]:
+    """The bare floor: one chunked pass, the (n, 10) design matrix of eq. (4), ``XᵀX`` summed."""
+    scatter = np.zeros((10, 10))
+    for start in range(0, len(samples), chunk):
+        x = samples[start : start + chunk]
+        design = np.empty((len(x), 10))
+        design[:, 0:3] = x * x
+        design[:, 3] = x[:, 0] * x[:, 1]
+        design[:, 4] = x[:, 0] * x[:, 2]
+        design[:, 5] = x[:, 1] * x[:, 2]
+        design[:, 6:9] = x
+        design[:, 9] = 1.0
+        scatter += design.T @ design
+    return scatter
+
+
+def lstsq_fit(samples: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The usual ellipsoid fit of the peers: ``lstsq`` of ``[x² y² z² 2xy 2xz 2yz 2x 2y 2z] θ = 1``."""
+    x, y, z = samples.T
+    design = np.column_stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z])
+    solution: NDArray[np.float64] = np.linalg.lstsq(design, np.ones(len(samples)), rcond=None)[0]
+    return solution
+
+
+def fit_memory(samples: NDArray[np.float64]) -> float:
+    """Peak bytes NumPy allocates during ``magfit.fit(samples, "ellipsoid")`` (tracemalloc), in MB."""
+    tracemalloc.start()
+    try:
+        magfit.fit(samples, "ellipsoid")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    return peak / 1e6
+
+
+_RSS_SCRIPT = """
+import sys, numpy as np, magfit
+def status(key):
+    for line in open("/proc/self/status"):
+        if line.startswith(key):
+            return int(line.split()[1]) / 1024
+samples = np.load(sys.argv[1])
+magfit.fit(samples[:1000], "ellipsoid")  # import and warm up everything the fit touches
+open("/proc/self/clear_refs", "w").write("5")  # reset the peak RSS (VmHWM) to the current RSS
+before = status("VmRSS")
+magfit.fit(samples, "ellipsoid")
+print(status("VmHWM") - before)
+"""
+
+
+def part_fit(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -> dict[str, Any]:
+    print(f"[fit] {n:,} in-memory samples", flush=True)
+    floor, _ = best_time(lambda: floor_scatter(samples), repeat)
+    statistics, _ = best_time(lambda: magfit.Statistics.from_samples(samples), repeat)
+    fit, calibration = best_time(lambda: magfit.fit(samples, "ellipsoid"), repeat)
+    lstsq, _ = best_time(lambda: lstsq_fit(samples), 1)
+    memory = fit_memory(samples)
+    npy = workdir / f"samples_{n}.npy"
+    if not npy.exists():
+        np.save(npy, samples)
+    rss = float(run_process([sys.executable, "-c", _RSS_SCRIPT, str(npy)]).output.strip().splitlines()[-1])
+    truth = magfit.scenario(*SCENARIO).simulate(1).truth
+    return {
+        "n": n,
+        "floor_s": floor,
+        "statistics_s": statistics,
+        "fit_s": fit,
+        "lstsq_s": lstsq,
+        "fit_vs_floor": fit / floor,
+        "lstsq_vs_fit": lstsq / fit,
+        "fit_tracemalloc_mb": memory,
+        "fit_rss_extra_mb": rss,
+        "offset_error": float(np.linalg.norm(calibration.offset - truth.offset)),
+    }
+
+
+# ---------------------------------------------------------------------- part 2: the command line on a CSV
+
+_READERS = {
+    "pandas (C engine)": "import pandas as pd, sys; "
+    "a = pd.read_csv(sys.argv[1], usecols=['mx', 'my', 'mz'], engine='c', dtype='float64').to_numpy()",
+    "pandas (pyarrow engine)": "import pandas as pd, sys; "
+    "a = pd.read_csv(sys.argv[1], usecols=['mx', 'my', 'mz'], engine='pyarrow', dtype='float64').to_numpy()",
+    "pyarrow.csv": "import pyarrow.csv as c, numpy as np, sys; "
+    "t = c.read_csv(sys.argv[1], convert_options=c.ConvertOptions(include_columns=['mx', 'my', 'mz'])); "
+    "a = np.column_stack([t.column(k).to_numpy() for k in ('mx', 'my', 'mz')])",
+}
+
+
+def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -> dict[str, Any]:
+    csv = workdir / f"samples_{n}.csv"
+    if not csv.exists():
+        print(f"[cli] writing {csv}", flush=True)
+        write_csv(samples, csv)
+    print(f"[cli] {n:,}-row CSV ({csv.stat().st_size / 1e6:.0f} MB)", flush=True)
+    readers: dict[str, dict[str, Any]] = {}
+    for name, code in _READERS.items():
+        try:
+            run = best_process([sys.executable, "-c", code, str(csv)], repeat)
+            readers[name] = {"seconds": run.seconds, "rss_mb": run.rss_mb}
+        except RuntimeError as error:
+            readers[name] = {"error": str(error).splitlines()[-1]}
+    magfit_command = [str(Path(sys.executable).parent / "magfit"), "calibrate", str(csv)]
+    runs: dict[str, dict[str, Any]] = {}
+    for method in ("ellipsoid", "ml"):
+        command = [*magfit_command, "--columns", "mx,my,mz", "-m", method]
+        try:
+            run = best_process(command, repeat if method == "ellipsoid" else 1)
+            streamed = "(streamed)" in run.output
+            runs[method] = {"seconds": run.seconds, "rss_mb": run.rss_mb, "streamed": streamed}
+        except RuntimeError as error:
+            runs[method] = {"error": str(error)[-300:]}
+    timed = [value["seconds"] for value in readers.values() if "seconds" in value]
+    fastest = min(timed) if timed else float("nan")
+    ellipsoid = runs["ellipsoid"]
+    return {
+        "n": n,
+        "csv_mb": csv.stat().st_size / 1e6,
+        "readers": readers,
+        "fastest_reader_s": fastest,
+        "calibrate": runs,
+        "command": shlex.join([*magfit_command, "--columns", "mx,my,mz", "-m", "ellipsoid"]),
+        "cli_vs_reader": ellipsoid.get("seconds", float("nan")) / fastest,
+        "cli_rss_mb": ellipsoid.get("rss_mb", float("nan")),
+    }
+
+
+# ---------------------------------------------------------------------- part 3: ml
+
+
+def part_ml(n: int, repeat: int, samples: NDArray[np.float64]) -> dict[str, Any]:
+    print(f"[ml] {n:,} samples", flush=True)
+    subset = samples[:n]
+    if "ml" not in magfit.METHODS:
+        return {"n": n, "error": "method 'ml' is not registered"}
+    magfit.fit(subset[:2000], "ml")  # imports and caches outside the timing
+    seconds, calibration = best_time(lambda: magfit.fit(subset, "ml"), repeat)
+    truth = magfit.scenario(*SCENARIO).simulate(1).truth
+    return {"n": n, "ml_seconds": seconds, "offset_error": float(np.linalg.norm(calibration.offset - truth.offset))}
+
+
+# ---------------------------------------------------------------------- part 4: peers
+
+_PEER_SCRIPT = """
+import sys, time, json, numpy as np
+sys.path.insert(0, sys.argv[1])
+import peers
+name, path, n = sys.argv[2], sys.argv[3], int(sys.argv[4])
+samples = np.ascontiguousarray(np.load(path, mmap_mode="r")[:n])
+start = time.perf_counter()
+try:
+    cal = peers.PEERS[name].run(samples, None)
+    print(json.dumps({"seconds": time.perf_counter() - start, "offset": cal.offset.tolist()}))
+except Exception as error:
+    print(json.dumps({"error": f"{type(error).__name__}: {error}"[:200]}))
+"""
+
+
+def part_peers(sizes: Sequence[int], workdir: Path, samples: NDArray[np.float64], python: Path) -> dict[str, Any]:
+    npy = workdir / f"samples_{len(samples)}.npy"
+    if not npy.exists():
+        np.save(npy, samples)
+    names = ["magyc.ellipsoid_fit", "magcal.ellipsoid", "mag_cal.ellipsoid"]
+    table: dict[str, dict[str, Any]] = {"magfit.ellipsoid": {}}
+    for n in sizes:
+        part = samples[:n]
+        seconds, _ = best_time(lambda: magfit.fit(part, "ellipsoid"), 1)  # noqa: B023 (called at once)
+        table["magfit.ellipsoid"][str(n)] = {"seconds": seconds}
+    for name in names:
+        table[name] = {}
+        for n in sizes:
+            print(f"[peers] {name} n={n:,}", flush=True)
+            command = [str(python), "-c", _PEER_SCRIPT, str(ROOT / "benchmarks"), name, str(npy), str(n)]
+            run = run_process(command, timeout=PEER_TIME_LIMIT)
+            if run.status == -9:
+                entry: dict[str, Any] = {"error": f"not done after {PEER_TIME_LIMIT:.0f} s (stopped)"}
+            elif run.status != 0:
+                last = run.output.strip().splitlines()[-1] if run.output.strip() else ""
+                entry = {"error": f"crashed (exit {run.status}, peak RSS {run.rss_mb:.0f} MB): {last[:150]}"}
+            else:
+                entry = json.loads(run.output.strip().splitlines()[-1])
+            entry["rss_mb"] = run.rss_mb
+            table[name][str(n)] = entry
+            if "error" in entry:
+                break  # larger sizes will not do better
+    return {"sizes": list(sizes), "table": table}
+
+
+# ---------------------------------------------------------------------- report
+
+
+def _fmt(seconds: float) -> str:
+    return f"{seconds:.3g} s" if seconds >= 0.01 else f"{seconds * 1e3:.3g} ms"
+
+
+def _verdict(ok: bool) -> str:
+    return "met" if ok else "**missed**"
+
+
+def machine() -> dict[str, Any]:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "magfit": magfit.__version__,
+        "load_average": os.getloadavg(),
+    }
+
+
+def report(results: dict[str, Any]) -> str:
+    lines = [
+        "# Speed benchmark",
+        "",
+        f"Command: `{results['command']}`  ",
+        f"Date: {results['date']}, runtime {results['runtime_s'] / 60:.1f} min  ",
+        f"Machine: {results['machine']['cpu']}, {results['machine']['cores']} cores; Python "
+        f"{results['machine']['python']}, NumPy {results['machine']['numpy']}, magfit {results['machine']['magfit']}  ",
+        "Load average (1, 5, 15 min) at the start: "
+        + ", ".join(f"{v:.1f}" for v in results["machine"]["load_average"])
+        + " and at the end: "
+        + ", ".join(f"{v:.1f}" for v in results["load_average_end"])
+        + " (other processes shared the cores: absolute times are pessimistic, the ratios less so)",
+        "",
+        f"Samples: `magfit.scenario{SCENARIO}` (raw counts, soft iron with semi-axes 193-1362 counts); "
+        f"times are the best of {results['repeat']} runs.",
+        "",
+    ]
+    fit = results.get("fit")
+    if fit:
+        lines += [
+            f"## 1. Ellipsoid fit of {fit['n']:,} in-memory samples",
+            "",
+            "| what | time | ratio | target |",
+            "|---|---|---|---|",
+            f"| floor: chunked NumPy design matrix (10 columns) and XᵀX | {_fmt(fit['floor_s'])} | 1 | |",
+            f"| `magfit.Statistics.from_samples` | {_fmt(fit['statistics_s'])} | "
+            f"{fit['statistics_s'] / fit['floor_s']:.2f} x floor | |",
+            f'| `magfit.fit(samples, "ellipsoid")` (with diagnostics) | {_fmt(fit["fit_s"])} | '
+            f"{fit['fit_vs_floor']:.2f} x floor | <= {TARGETS['fit_vs_floor']:g} x: "
+            f"{_verdict(fit['fit_vs_floor'] <= TARGETS['fit_vs_floor'])} |",
+            f"| `numpy.linalg.lstsq` on the full 9-column design matrix | {_fmt(fit['lstsq_s'])} | "
+            f"fit is {fit['lstsq_vs_fit']:.0f} x faster | >= {TARGETS['lstsq_vs_fit']:g} x: "
+            f"{_verdict(fit['lstsq_vs_fit'] >= TARGETS['lstsq_vs_fit'])} |",
+            "",
+            f"Peak extra memory of the fit: {fit['fit_tracemalloc_mb']:.1f} MB allocated (tracemalloc), "
+            f"{fit['fit_rss_extra_mb']:.1f} MB of RSS growth in a fresh process (the samples themselves: "
+            f"{fit['n'] * 24 / 1e6:.0f} MB); target < {TARGETS['fit_memory_mb']:g} MB: "
+            f"{_verdict(max(fit['fit_tracemalloc_mb'], fit['fit_rss_extra_mb']) < TARGETS['fit_memory_mb'])}. "
+            f"Offset error against the simulation truth: {fit['offset_error']:.3f} counts.",
+            "",
+        ]
+    cli = results.get("cli")
+    if cli:
+        lines += [
+            f"## 2. `magfit calibrate` on a {cli['n']:,}-row CSV ({cli['csv_mb']:.0f} MB)",
+            "",
+            "Each row is a separate process (interpreter start and imports included), as a user runs it.",
+            "",
+            "| what | time | peak RSS |",
+            "|---|---|---|",
+        ]
+        for name, value in cli["readers"].items():
+            if "seconds" in value:
+                lines.append(
+                    f"| reader alone: {name}, three columns | {_fmt(value['seconds'])} | {value['rss_mb']:.0f} MB |"
+                )
+            else:
+                lines.append(f"| reader alone: {name} | failed: {value['error']} | |")
+        for method, value in cli["calibrate"].items():
+            if "seconds" in value:
+                how = "streamed in chunks" if value["streamed"] else "whole file in memory"
+                lines.append(
+                    f"| `magfit calibrate -m {method}` ({how}) | {_fmt(value['seconds'])} | {value['rss_mb']:.0f} MB |"
+                )
+            else:
+                lines.append(f"| `magfit calibrate -m {method}` | failed: {value['error']} | |")
+        lines += [
+            "",
+            f"`{cli['command']}`: {cli['cli_vs_reader']:.2f} x the fastest reader (target <= "
+            f"{TARGETS['cli_vs_reader']:g} x: {_verdict(cli['cli_vs_reader'] <= TARGETS['cli_vs_reader'])}); "
+            f"peak RSS {cli['cli_rss_mb']:.0f} MB (target < {TARGETS['cli_rss_mb']:g} MB: "
+            f"{_verdict(cli['cli_rss_mb'] < TARGETS['cli_rss_mb'])}).",
+            "",
+        ]
+    ml = results.get("ml")
+    if ml:
+        lines += [f"## 3. `ml` on {ml['n']:,} samples", ""]
+        if "error" in ml:
+            lines.append(f"Not run: {ml['error']}.")
+        else:
+            lines.append(
+                f'`magfit.fit(samples, "ml")`: {_fmt(ml["ml_seconds"])} (target < {TARGETS["ml_seconds"]:g} s: '
+                f"{_verdict(ml['ml_seconds'] < TARGETS['ml_seconds'])}); offset error {ml['offset_error']:.3f} counts."
+            )
+        lines.append("")
+    peers = results.get("peers")
+    if peers:
+        sizes = peers["sizes"]
+        lines += [
+            "## 4. Peers on the same samples",
+            "",
+            f"Each cell is one process with a {PEER_TIME_LIMIT:.0f} s limit; after a failure the larger sizes "
+            "are not tried. Peers run from `benchmarks/.peers-venv` (their own pinned NumPy).",
+            "",
+            "| method | " + " | ".join(f"N = {n:,}" for n in sizes) + " |",
+            "|---|" + "---|" * len(sizes),
+        ]
+        for name, row in peers["table"].items():
+            cells = []
+            for n in sizes:
+                entry = row.get(str(n))
+                if entry is None:
+                    cells.append("not tried")
+                elif "error" in entry:
+                    cells.append(f"fails: {entry['error']}")
+                else:
+                    rss = f", {entry['rss_mb']:.0f} MB" if "rss_mb" in entry else ""
+                    cells.append(_fmt(entry["seconds"]) + rss)
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines += [
+            "",
+            "Peer times are the fit alone (the samples already loaded); magfit's row is `magfit.fit` in this "
+            "process, peak RSS of a peer's process includes its interpreter and imports.",
+            "",
+        ]
+    elif results.get("peers_skipped"):
+        lines += ["## 4. Peers", "", f"Not run: {results['peers_skipped']}.", ""]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------- main
+
+
+@dataclass
+class Options:
+    n_fit: int
+    n_cli: int
+    n_ml: int
+    peer_sizes: list[int] = field(default_factory=list)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--smoke", action="store_true", help="small sizes (1e5-1e6): a minute")
+    parser.add_argument("--no-peers", action="store_true", help="skip the peers (part 4)")
+    parser.add_argument("--no-cli", action="store_true", help="skip the command line (part 2)")
+    parser.add_argument("--repeat", type=int, default=3, help="runs per timing; the best counts (default 3)")
+    parser.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "magfit-speed")
+    parser.add_argument("--output", type=Path, default=ROOT / "benchmarks" / "results" / "speed.md")
+    parser.add_argument("--peers-python", type=Path, default=PEERS_PYTHON)
+    args = parser.parse_args(argv)
+    if args.smoke:
+        options = Options(n_fit=1_000_000, n_cli=200_000, n_ml=100_000, peer_sizes=[1_000, 10_000])
+    else:
+        options = Options(
+            n_fit=10_000_000,
+            n_cli=10_000_000,
+            n_ml=1_000_000,
+            peer_sizes=[1_000, 10_000, 100_000, 1_000_000, 10_000_000],
+        )
+    args.workdir.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    results: dict[str, Any] = {
+        "command": shlex.join(["python", "benchmarks/speed.py", *(argv if argv is not None else sys.argv[1:])]),
+        "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": machine(),
+        "repeat": args.repeat,
+    }
+    samples = make_samples(max(options.n_fit, options.n_cli, options.n_ml, *options.peer_sizes))
+    results["fit"] = part_fit(options.n_fit, args.repeat, args.workdir, samples[: options.n_fit])
+    results["ml"] = part_ml(options.n_ml, args.repeat, samples)
+    if not args.no_cli:
+        results["cli"] = part_cli(options.n_cli, min(args.repeat, 2), args.workdir, samples[: options.n_cli])
+    if args.no_peers:
+        results["peers_skipped"] = "--no-peers"
+    elif not args.peers_python.exists():
+        results["peers_skipped"] = f"no peers environment at {args.peers_python} (run benchmarks/setup_peers.sh)"
+    else:
+        results["peers"] = part_peers(options.peer_sizes, args.workdir, samples, args.peers_python)
+    results["runtime_s"] = time.perf_counter() - start
+    results["load_average_end"] = os.getloadavg()
+    text = report(results)
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(text + "\n", encoding="utf-8")
+    args.output.with_suffix(".json").write_text(json.dumps(results, indent=2, default=float) + "\n", encoding="utf-8")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
