@@ -450,6 +450,8 @@ class Outcome:
 
 
 Fitter = Callable[[NDArray[np.float64], Any], magfit.Calibration]
+#: The entries of a calibration's ``details`` kept in the results (auto's choice and its reasons).
+KEPT_DETAILS = ("chosen", "method_used", "weak", "reason", "n_rejected")
 #: Column order: the paper's three methods, then the unbiased, restricted, robust and automatic ones.
 PREFERRED_ORDER = ("ellipsoid", "sphere", "minmax", "als", "ml", "diag", "robust", "auto")
 
@@ -538,7 +540,7 @@ def run_case(
             else:
                 outcome = score(calibration, simulation, samples, heldout)
                 if name in keep:
-                    outcome.details = dict(calibration.details)
+                    outcome.details = {k: v for k, v in calibration.details.items() if k in KEPT_DETAILS}
             outcome.seconds = seconds
             outcomes[name].append(outcome)
     return outcomes
@@ -1168,7 +1170,7 @@ def run(
 
 
 def report_json(report: Mapping[str, Any]) -> str:
-    """Every number of the report as JSON (trial-level outcomes included)."""
+    """Every number of the report as compact JSON (trial-level outcomes included, 6 significant digits)."""
 
     def convert(value: Any) -> Any:
         if isinstance(value, (Outcome, Summary, Target)):
@@ -1178,12 +1180,26 @@ def report_json(report: Mapping[str, Any]) -> str:
         if isinstance(value, (list, tuple)):
             return [convert(v) for v in value]
         if isinstance(value, (np.floating, np.integer)):
-            return value.item()
-        if isinstance(value, float) and not np.isfinite(value):
-            return None
+            return convert(value.item())
+        if isinstance(value, float):
+            # Six significant digits: far below the trial-to-trial spread, and a file a third the size.
+            return float(f"{value:.6g}") if np.isfinite(value) else None
         return value
 
-    return json.dumps(convert(report), indent=1, allow_nan=False)
+    return json.dumps(convert(report), separators=(",", ":"), allow_nan=False)
+
+
+def _command_line(arguments: list[str]) -> str:
+    """The command as typed from the checkout: thread settings, interpreter, script, arguments."""
+    interpreter = Path(sys.executable)
+    try:
+        shown = str(interpreter.relative_to(ROOT))
+    except ValueError:
+        shown = "python"
+    threads = [
+        f"{name}={os.environ[name]}" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS") if name in os.environ
+    ]
+    return shlex.join([*threads, shown, "benchmarks/accuracy.py", *arguments])
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -1199,7 +1215,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=20261121)
     args = parser.parse_args(argv)
 
-    command = shlex.join(["python", "benchmarks/accuracy.py", *(sys.argv[1:] if argv is None else argv)])
+    command = _command_line(sys.argv[1:] if argv is None else list(argv))
     cases = smoke_grid() if args.smoke else full_grid(args.trials_scale)
     methods = args.methods.split(",") if args.methods else None
     report = run(
