@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import io
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +14,7 @@ from click.testing import CliRunner
 import magfit
 import magfit.io
 from magfit.cli import cli
+from magfit.cli.calibrate import run_calibration
 from magfit.export import FORMATS, export
 
 
@@ -175,3 +178,26 @@ def test_export_needs_a_known_format_and_unit(steel: tuple[Path, magfit.Simulati
     assert no_unit.exit_code == 2
     assert no_unit.stderr.startswith("magfit: error: ") and "--unit" in no_unit.stderr
     assert not target.exists()
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_is_shown_only_on_a_terminal(
+    steel: tuple[Path, magfit.Simulation], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path, simulation = steel
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    run = run_calibration(path, method="ellipsoid")
+    assert f"reading {path.name}" in terminal.getvalue() and f"scoring the fit on {path.name}" in terminal.getvalue()
+    assert run.evaluation.n == 3000 and run.streamed
+    piped = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", piped)
+    again = run_calibration(path, method="ellipsoid")
+    assert piped.getvalue() == ""
+    assert again.evaluation == run.evaluation
+    whole = magfit.evaluate(run.calibration, simulation.samples)
+    assert (run.evaluation.mean, run.evaluation.std) == pytest.approx((whole.mean, whole.std), rel=1e-12)

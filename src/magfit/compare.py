@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ._validation import as_samples
 from .calibration import Calibration
@@ -182,6 +182,20 @@ def compare(
     return Comparison(int(array.shape[0]), tuple(results))
 
 
+#: Rows scored at a time: the temporaries of one slice stay at a few MB whatever the reader's chunk size.
+EVALUATION_SLICE = 1 << 16
+
+
+def _slices(chunks: Iterable[ArrayLike]) -> Iterator[NDArray[np.float64]]:
+    for chunk in chunks:
+        array = np.asarray(chunk)
+        if array.ndim != 2:  # let sphere_distances name the wrong shape
+            yield array
+            continue
+        for start in range(0, max(array.shape[0], 1), EVALUATION_SLICE):
+            yield array[start : start + EVALUATION_SLICE]
+
+
 def evaluate_chunks(calibration: Calibration, chunks: Iterable[ArrayLike]) -> Evaluation:
     """The paper's metric (:func:`magfit.evaluate`) over a stream of sample chunks, in bounded memory.
 
@@ -209,7 +223,7 @@ def evaluate_chunks(calibration: Calibration, chunks: Iterable[ArrayLike]) -> Ev
     abs_sum = 0.0
     square_sum = 0.0
     max_abs = 0.0
-    for chunk in chunks:
+    for chunk in _slices(chunks):
         distances = sphere_distances(calibration, chunk)
         k = int(distances.size)
         if k == 0:

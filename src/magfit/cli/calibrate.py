@@ -37,6 +37,9 @@ from ._common import (
 )
 
 NONFINITE_CHOICES = ("skip", "error")
+#: Rows per chunk when streaming. Measured on a 4-million-row CSV: peak memory 204 MB with 250 000 rows
+#: against 329 MB with the reader's default of 1 000 000 (153 MB for a tiny file), at the same CPU time.
+STREAM_CHUNK_ROWS = 250_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,7 +156,7 @@ def _fit_streaming(
     from ..io import iter_sample_chunks
 
     def chunks() -> Any:
-        return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite)
+        return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
 
     # Pass 1: the sufficient statistics of eq. (4), one chunk at a time.
     reader = chunks()
