@@ -18,8 +18,20 @@ polynomial in σ² whose coefficients are moments of degree <= 4 of the samples,
 Unknown noise variance ([3], noise variance estimation): the true ``E ψ_als(σ²)`` is positive
 semi-definite with a zero eigenvalue exactly at the true σ², so σ̂² is the smallest ``s > 0`` at which
 ``λ_min(ψ_als(s)) = 0`` (``λ_min`` is positive at ``s = 0``, where ψ_als is the scatter, and decreases
-through zero there). Everything runs in the normalised frame ``z = (x − centre) / scale`` of the
-statistics, where the noise standard deviation is ``σ / scale``.
+through zero there). The authors' own implementation bisects on the sign of ``λ_min`` below the bound
+``s <= tr(cov) / 3``; here a scan of s brackets the first sign change and Brent's method refines it.
+Where their code projects a fitted A that is not positive-definite onto the positive semi-definite
+cone, magfit refuses the fit (:class:`~magfit.CalibrationError`), as for every method.
+
+Correspondence with the algorithm of [3]: the values ``t_k(x_il)`` form its tensor T; the exponent
+bookkeeping of its matrices M and R is :data:`~magfit.statistics.DESIGN_EXPONENTS` summed pairwise;
+``ψ_als`` (with the factor 2 of the off-diagonal parameters) is :func:`als_matrices` with the √2 design
+weights; its smallest eigenvector gives ``V = −½ M⁻¹ b`` and ``A = M / (Vᵀ M V − d)`` (the paper's
+eq. 5, shared with ``ellipsoid``). The article's own equation numbers could not be checked for this
+implementation, so the steps are named instead of numbered.
+
+Everything runs in the normalised frame ``z = (x − centre) / scale`` of the statistics, where the
+noise standard deviation is ``σ / scale`` (isotropic noise stays isotropic under that map).
 """
 
 from __future__ import annotations
