@@ -13,6 +13,7 @@ from click.testing import CliRunner, Result
 
 import magfit
 from magfit.cli import cli
+from magfit.cli._common import option_wording
 
 
 def _run(*args: str) -> Result:
@@ -181,3 +182,25 @@ def test_debug_shows_the_traceback(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["--debug", "calibrate", str(path), "-m", "ellipsoid"])
     assert result.exit_code == 1
     assert isinstance(result.exception, magfit.CalibrationError)
+
+
+def test_a_file_of_only_nan_rows_is_an_input_error(tmp_path: Path) -> None:
+    path = tmp_path / "allnan.csv"
+    path.write_text("mx,my,mz\nnan,1,2\n3,nan,4\n")
+    message = _assert_error(_run("calibrate", str(path)), 2, str(path), "line 2")
+    assert "--columns X,Y,Z" in message  # the reader's hint, worded as the option
+
+
+@pytest.mark.parametrize(
+    ("library", "command_line"),
+    [
+        ("skip such rows (nonfinite='skip')", "skip such rows (--nonfinite skip)"),
+        ("pass unit='uT' (or 'nT')", "pass --unit uT (or 'nT')"),
+        ("or use method='sphere' (hard iron only)", "or use --method sphere (hard iron only)"),
+        ("check the columns (columns=[...])", "check the columns (--columns X,Y,Z)"),
+        ("give columns=['mx', 'my', 'mz']", "give --columns mx,my,mz"),
+        ("the unit of the samples is unknown", "the unit of the samples is unknown"),
+    ],
+)
+def test_library_hints_are_worded_as_options(library: str, command_line: str) -> None:
+    assert option_wording(library) == command_line

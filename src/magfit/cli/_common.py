@@ -57,13 +57,21 @@ def one_line(message: str) -> str:
     return " ".join(str(message).split())
 
 
-#: Library hints that name a keyword argument (``nonfinite='skip'``) and the options that set it.
-_KEYWORD_HINT = re.compile(r"\b(nonfinite|unit|method|columns)='([^']*)'")
+#: Library hints that name a keyword argument (``nonfinite='skip'``, ``columns=[...]``): the options that set them.
+_KEYWORD_HINT = re.compile(r"\b(nonfinite|unit|method|columns)=(?:'([^']*)'|\[([^\]]*)\])")
 
 
 def option_wording(message: str) -> str:
     """Rewrite the library's keyword hints as the command line's options: ``unit='uT'`` -> ``--unit uT``."""
-    return _KEYWORD_HINT.sub(lambda match: f"--{match.group(1)} {match.group(2)}", message)
+
+    def option(match: re.Match[str]) -> str:
+        name, text, items = match.groups()
+        if text is not None:
+            return f"--{name} {text}"
+        value = "X,Y,Z" if items.strip() in ("", "...") else ",".join(i.strip().strip("'\"") for i in items.split(","))
+        return f"--{name} {value}"
+
+    return _KEYWORD_HINT.sub(option, message)
 
 
 def as_command_error(error: BaseException) -> CommandError:

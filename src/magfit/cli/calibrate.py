@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import click
 import numpy as np
@@ -35,6 +35,12 @@ from ._common import (
     vector,
     warn,
 )
+
+if TYPE_CHECKING:
+    from ..io import ChunkReader
+
+#: Reports progress: called with the number of rows just processed.
+Advance = Callable[[int], None]
 
 NONFINITE_CHOICES = ("skip", "error")
 #: Rows per chunk when streaming. Measured on a 4-million-row CSV: peak memory 204 MB with 250 000 rows
@@ -155,7 +161,7 @@ def _fit_streaming(
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import iter_sample_chunks
 
-    def chunks() -> Any:
+    def chunks() -> ChunkReader:
         return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
 
     # Pass 1: the sufficient statistics of eq. (4), one chunk at a time.
@@ -175,7 +181,7 @@ def _fit_streaming(
     return calibration, evaluation, reader
 
 
-def _counted(chunks: Any, advance: Any) -> Iterator[NDArray[np.float64]]:
+def _counted(chunks: Iterable[NDArray[np.float64]], advance: Advance) -> Iterator[NDArray[np.float64]]:
     for chunk in chunks:
         advance(len(chunk))
         yield chunk
@@ -192,10 +198,10 @@ def _require_rows(path: Path, n_samples: int, read: _ReadResult) -> None:
 
 
 @contextmanager
-def _progress(description: str) -> Iterator[Any]:
+def _progress(description: str) -> Iterator[Advance]:
     """A rows-read counter on stderr, shown only when stderr is a terminal; yields ``advance(rows)``."""
     if not sys.stderr.isatty():
-        yield lambda rows: None
+        yield lambda rows: None  # no terminal to draw on: a log or a pipe gets no progress noise
         return
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
