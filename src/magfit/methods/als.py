@@ -26,9 +26,9 @@ cone, magfit refuses the fit (:class:`~magfit.CalibrationError`), as for every m
 Correspondence with the algorithm of [3]: the values ``t_k(x_il)`` form its tensor T; the exponent
 bookkeeping of its matrices M and R is :data:`~magfit.statistics.DESIGN_EXPONENTS` summed pairwise;
 ``ψ_als`` (with the factor 2 of the off-diagonal parameters) is :func:`als_matrices` with the √2 design
-weights; its smallest eigenvector gives ``V = −½ M⁻¹ b`` and ``A = M / (Vᵀ M V − d)`` (the paper's
-eq. 5, shared with ``ellipsoid``). The article's own equation numbers could not be checked for this
-implementation, so the steps are named instead of numbered.
+weights; its smallest eigenvector gives ``V = −½ M⁻¹ b`` and ``A = M / (Vᵀ M V − d)`` ([3], eq. 5,
+as the magfit paper quotes it; shared with ``ellipsoid``). The other equation numbers of the article
+could not be checked for this implementation, so its steps are named instead of numbered.
 
 Everything runs in the normalised frame ``z = (x − centre) / scale`` of the statistics, where the
 noise standard deviation is ``σ / scale`` (isotropic noise stays isotropic under that map).
@@ -128,6 +128,7 @@ def als_theta(statistics: Statistics, noise_std: float | None = None) -> tuple[N
         variance = estimate_noise_variance(statistics, psi)
     else:
         variance = (noise_std / statistics.scale) ** 2
+    # [3]: θ_als is the eigenvector of the smallest eigenvalue of ψ_als(σ²), i.e. argmin θᵀψ_als θ, |θ| = 1.
     eigenvalues, eigenvectors = np.linalg.eigh(psi[0] + variance * psi[1] + variance**2 * psi[2])
     return eigenvectors[:, 0], math.sqrt(variance) * statistics.scale, float(eigenvalues[0] / eigenvalues[-1])
 
@@ -171,7 +172,7 @@ def fit_als(
     known_field = check_field_strength(field_strength)
     statistics = data.statistics
     theta, sigma, ratio = als_theta(statistics, noise)
-    offset, shape = ellipsoid_from_quadric(theta, statistics, "als")
+    offset, shape = ellipsoid_from_quadric(theta, statistics, "als")  # V, A of [3] eq. (5); refused unless A > 0
     return calibration_from_ellipsoid(
         "als",
         offset,
