@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 import magfit
 from magfit import OptionError, SampleError
-from magfit.sampling import EvenSampler, SphereCells, even_subsample
+from magfit.sampling import EvenSampler, SphereCells, even_subsample, even_subsample_chunks
 
 
 def stay_simulation(seed: int, n: int = 5000, stay: float = 0.8) -> magfit.Simulation:
@@ -150,6 +150,33 @@ def test_streaming_keeps_exactly_what_the_whole_array_keeps(chunk: int, budget: 
     np.testing.assert_array_equal(sampler.indices, expected)
     np.testing.assert_array_equal(sampler.samples, samples[expected])
     assert sampler.seen == 3000 and len(sampler.indices) <= budget
+
+
+@pytest.mark.parametrize("max_samples", [None, 150])
+def test_chunked_stream_keeps_what_the_whole_array_keeps(max_samples: int | None) -> None:
+    samples = stay_simulation(4, n=3000).samples
+    centre, shape = np.array([-130.0, -177.0, -175.0]), np.diag([1 / 200, 1 / 700, 1 / 1300])
+
+    def chunks() -> list[np.ndarray]:
+        return [samples[start : start + 700] for start in range(0, 3000, 700)]
+
+    sampler = even_subsample_chunks(chunks, centre=centre, shape=shape, max_samples=max_samples, cells=100)
+    expected = even_subsample(samples, centre=centre, shape=shape, cells=100)
+    if max_samples is not None:  # the median cap, then at most 150: the densest cells give way first
+        assert len(expected) > 150
+        within = even_subsample(samples, max_samples=150, centre=centre, shape=shape, cells=100)
+        np.testing.assert_array_equal(sampler.indices, within)
+    else:
+        np.testing.assert_array_equal(sampler.indices, expected)
+    np.testing.assert_array_equal(sampler.samples, samples[sampler.indices])
+
+
+def test_chunked_stream_without_the_median_cap_keeps_everything_that_fits() -> None:
+    samples = stay_simulation(5, n=2000).samples
+    sampler = even_subsample_chunks(lambda: [samples], centre=np.zeros(3), max_samples=2000, cap_at_median=False)
+    np.testing.assert_array_equal(sampler.indices, np.arange(2000))
+    with pytest.raises(OptionError, match="max_samples is required when cap_at_median is false"):
+        even_subsample_chunks(lambda: [samples], centre=np.zeros(3), cap_at_median=False)
 
 
 def test_planar_samples_fall_back_to_the_quantile_frame() -> None:

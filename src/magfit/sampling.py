@@ -23,6 +23,7 @@ seed, while holding at most ``max_samples`` of them.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 from ._validation import as_samples
 from .errors import OptionError, SampleError
 
-__all__ = ["DEFAULT_CELLS", "EvenSampler", "SphereCells", "even_subsample"]
+__all__ = ["DEFAULT_CELLS", "EvenSampler", "SphereCells", "even_subsample", "even_subsample_chunks"]
 
 #: Cells of about 10 degrees across (4π / 400 sr each): fine enough to separate attitudes a calibration
 #: needs apart, coarse enough that a few thousand samples fill them.
@@ -317,6 +318,56 @@ def even_subsample(
         median = math.ceil(float(np.median(counts[counts > 0])))
         sampler.max_samples = sampler._cap = int(np.minimum(counts, median).sum())
     return sampler._offer(array, cell, np.asarray(sampler._rng.random(array.shape[0]))).indices
+
+
+def even_subsample_chunks(
+    chunks: Callable[[], Iterable[ArrayLike]],
+    *,
+    centre: ArrayLike,
+    shape: ArrayLike | None = None,
+    max_samples: int | None = None,
+    cap_at_median: bool = True,
+    cells: int = DEFAULT_CELLS,
+    seed: int | np.random.Generator | None = 0,
+) -> EvenSampler:
+    """:func:`even_subsample` of a stream too large for memory: at most ``max_samples`` samples are held.
+
+    Parameters
+    ----------
+    chunks : callable
+        Returns a fresh iterable of (n, 3) arrays each time it is called (e.g. a file read in chunks); it
+        is called twice when ``cap_at_median`` is true (once to count the cells, once to sample), else once.
+    centre, shape, cells, seed
+        As in :func:`even_subsample`; here ``centre`` is required (e.g. the offset of a first fit of the
+        stream's :class:`~magfit.Statistics`).
+    max_samples : int, optional
+        The most samples kept (memory: 24 bytes each plus bookkeeping); required without ``cap_at_median``.
+    cap_at_median : bool
+        Also cap every cell at the median count of the cells that have samples (what :func:`even_subsample`
+        does by default). Without it, cells are capped only as far as ``max_samples`` requires: the
+        densest cells lose samples first, and a stream that fits keeps every sample.
+
+    Returns
+    -------
+    EvenSampler
+        Its ``samples`` and ``indices`` (row numbers in the stream) are the subsample; ``seen`` the rows read.
+    """
+    if not cap_at_median and max_samples is None:
+        raise OptionError("max_samples is required when cap_at_median is false")
+    sampler = EvenSampler(max_samples or 1, centre=centre, shape=shape, cells=cells, seed=seed)
+    if cap_at_median:
+        counts = np.zeros(sampler.cells.count, dtype=np.int64)
+        for chunk in chunks():
+            array = as_samples(chunk)
+            counts += np.bincount(sampler.cells.index(sampler._directions(array)), minlength=sampler.cells.count)
+        if not counts.any():
+            raise SampleError("the stream holds no samples")
+        median = math.ceil(float(np.median(counts[counts > 0])))
+        budget = int(np.minimum(counts, median).sum())
+        sampler.max_samples = sampler._cap = budget if max_samples is None else min(budget, max_samples)
+    for chunk in chunks():
+        sampler.update(chunk)
+    return sampler
 
 
 def _default_frame(array: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
