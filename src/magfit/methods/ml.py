@@ -82,6 +82,8 @@ def _foot_points(
     smallest = int(np.argmin(semi_squared))
     a_min = math.sqrt(semi_squared[smallest])
     lower = a_min * np.abs(w[smallest]) - semi_squared[smallest]  # g(lower) >= 0: the root lies above
+    # A sample on the principal plane deep inside (w_min = 0) would put the bound on the pole at −a_min².
+    np.maximum(lower, -semi_squared[smallest] * (1.0 - 1e-12), out=lower)
     if t_start is None:
         # First order: t ≈ 2 F / |∇F|², F = Σ w²/a² − 1, |∇F|² = 4 Σ w²/a⁴.
         level = np.einsum("k,kn->n", eigenvalues**2, weighted) - 1.0
@@ -290,6 +292,11 @@ def _levenberg_marquardt(model: _Model, params: NDArray[np.float64], max_iterati
     step moves every parameter by less than 1e-3 of its standard error (a change no data could show).
     """
     current = model.evaluate(params)
+    if not np.isfinite(current.cost):
+        raise CalibrationError(
+            "the ml fit cannot measure the distances of the samples to the starting ellipsoid (non-finite); "
+            "use method='als'"
+        )
     damping = 1e-3
     n = model.zt.shape[1]
     for iteration in range(1, max_iterations + 1):
