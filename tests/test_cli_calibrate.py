@@ -201,3 +201,20 @@ def test_progress_is_shown_only_on_a_terminal(
     assert again.evaluation == run.evaluation
     whole = magfit.evaluate(run.calibration, simulation.samples)
     assert (run.evaluation.mean, run.evaluation.std) == pytest.approx((whole.mean, whole.std), rel=1e-12)
+
+
+def test_diagnostic_warnings_and_autos_choice_are_shown(tmp_path: Path) -> None:
+    # Roll and pitch within ±40°: about half of the directions are never seen.
+    simulation = magfit.scenario("mpu9250", "none").simulate(2000, seed=1, orientations="restricted", max_tilt_deg=40)
+    path = tmp_path / "restricted.csv"
+    np.savetxt(path, simulation.samples, fmt="%.10g", delimiter=",", header="mx,my,mz", comments="")
+    method = "auto" if "auto" in magfit.METHODS else "ellipsoid"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--method", method])
+    assert result.exit_code == 0, result.output
+    calibration = magfit.fit(simulation.samples, method=method)
+    warnings = calibration.details.get("diagnostics", {}).get("warnings", [])
+    assert any("cover only" in message for message in warnings)  # the diagnostics saw the gap
+    for message in warnings:
+        assert f"magfit: warning: {message}" in result.stderr
+    if "method_used" in calibration.details:
+        assert re.search(rf"chose +{calibration.details['method_used']} \(", result.stdout)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -308,12 +308,22 @@ def calibrate_command(
             f"{file}: skipped {run.n_skipped} of {run.n_rows} rows with NaN or inf values (lines {lines}{more}); "
             "pass --nonfinite error to refuse such files"
         )
+    for message in _fit_warnings(run.calibration):
+        warn(message)
     print_summary(summary, run)
     if written is not None:
         what = f"{export_format} export" if export_format else "calibration"
         summary.print(f"wrote the {what} to {written}")
     if stdout_text is not None:
         click.echo(stdout_text, nl=not stdout_text.endswith("\n"))
+
+
+def _fit_warnings(calibration: Calibration) -> list[str]:
+    """The warnings the fit's diagnostics attached (poor coverage, weak directions ...), if any."""
+    diagnostics = calibration.details.get("diagnostics")
+    if not isinstance(diagnostics, Mapping):
+        return []
+    return [str(message) for message in diagnostics.get("warnings") or []]
 
 
 def _check_extension(output: Path, export_format: str) -> None:
@@ -323,6 +333,15 @@ def _check_extension(output: Path, export_format: str) -> None:
     extension = FORMATS[export_format].extension
     if output.suffix.lower() != extension:
         warn(f"{output}: writing the {export_format} format, whose files usually end in {extension}")
+
+
+def _choice(calibration: Calibration) -> list[tuple[str, str]]:
+    """For a method that chooses among others (``auto``): the method it used and why."""
+    used = calibration.details.get("method_used")
+    if used is None:
+        return []
+    reason = calibration.details.get("reason")
+    return [("chose", f"{used}" + (f" ({reason})" if reason else ""))]
 
 
 def print_summary(out: Console, run: CalibrationRun) -> None:
@@ -336,6 +355,7 @@ def print_summary(out: Console, run: CalibrationRun) -> None:
         ("columns", columns_text(run.columns)),
         ("rows", f"{run.n_rows} read, {run.n_skipped} skipped" + (" (streamed)" if run.streamed else "")),
         ("method", calibration.method + (f": {spec.summary}" if spec is not None else "")),
+        *_choice(calibration),
         ("offset", vector(calibration.offset, lambda v: significant(v, 6)) + unit),
         ("matrix", matrix_rows[0]),
         ("", matrix_rows[1]),
