@@ -89,6 +89,31 @@ def test_reversed_columns_and_decimal_commas(tmp_path: Path, calibration, raw) -
     np.testing.assert_allclose(back.samples, calibration.apply(raw), rtol=RTOL)
 
 
+def test_blank_lines_quotes_and_spaced_cells_take_the_line_by_line_path(tmp_path: Path, calibration, raw) -> None:
+    lines = ["time,mx,my,mz,note"]
+    for i, row in enumerate(raw):
+        x, y, z = map(float, row)
+        if i % 7 == 0:
+            lines.append(f'{i},{x!r},{y!r},{z!r},"turn, {i}"')
+        else:
+            lines.append(f"{i}, {x!r} ,{y!r},{z!r},plain" if i == 1 else f"{i},{x!r},{y!r},{z!r},plain")
+        if i in (3, 20):
+            lines.append("")
+    text = "\n".join(lines) + "\n"
+    path = tmp_path / "in.csv"
+    path.write_text(text)
+    out = write_calibrated(path, calibration, tmp_path / "out.csv")
+    written = out.read_text().split("\n")
+    blank = [i for i, line in enumerate(text.split("\n")) if not line]
+    assert [i for i, line in enumerate(written) if not line] == blank
+    for before, after in zip(text.split("\n"), written, strict=True):
+        assert before.split(",")[0] == after.split(",")[0]  # time column, spacing included
+        assert before.rsplit(",", 1)[-1] == after.rsplit(",", 1)[-1]  # note column, quotes included
+    assert written[2].startswith("1, ") and written[2].split(",")[1].endswith(" ")  # spaces around mx are kept
+    back = read_samples(out)
+    np.testing.assert_allclose(back.samples, calibration.apply(raw), rtol=RTOL)
+
+
 def test_npy_copy(tmp_path: Path, calibration, raw) -> None:
     array = np.column_stack([np.arange(len(raw)), raw[:, ::-1] * 10, np.full(len(raw), 3)]).astype(np.int32)
     array[4, 2] = 0

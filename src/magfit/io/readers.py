@@ -809,6 +809,30 @@ class ChunkReader:
                         )
         return _error(self.path, f"cannot read the numbers ({detail}); check the file's format")
 
+    def _parse_block(self, block: bytes) -> NDArray[np.float64]:
+        """The x, y, z values of a block of whole data lines (blank lines skipped), as the reader parses them."""
+        used = sorted(set(self._indices))
+        frame = _pandas().read_csv(io.BytesIO(block), **self._read_options(used))
+        return np.asarray(frame.to_numpy(dtype=np.float64)[:, [used.index(i) for i in self._indices]])
+
+    def _read_options(self, used: list[int]) -> dict[str, Any]:
+        """pandas.read_csv options for the data lines: C engine, only the magnetometer columns, float64."""
+        fmt = self.format
+        assert fmt.delimiter is not None
+        return {
+            "sep": r"\s+" if fmt.delimiter == "whitespace" else fmt.delimiter[0],
+            "header": None,
+            "usecols": used,
+            "dtype": np.float64,
+            "engine": "c",
+            "encoding": self._text_encoding,
+            "decimal": fmt.decimal,
+            "skipinitialspace": True,
+            "skip_blank_lines": True,
+            "na_values": list(NA_VALUES),
+            "keep_default_na": False,
+        }
+
     @property
     def _text_encoding(self) -> str:
         return "utf-8" if self.format.encoding == "utf-8-sig" else self.format.encoding
@@ -822,21 +846,7 @@ class ChunkReader:
         with open(self.path, "rb") as handle:
             handle.seek(fmt.data_offset)
             source = _CheckedSource(self, handle, self._block_bytes)
-            reader = pandas.read_csv(
-                source,
-                sep=r"\s+" if fmt.delimiter == "whitespace" else fmt.delimiter[0],
-                header=None,
-                usecols=used,
-                dtype=np.float64,
-                engine="c",
-                encoding=self._text_encoding,
-                decimal=fmt.decimal,
-                skipinitialspace=True,
-                skip_blank_lines=True,
-                na_values=list(NA_VALUES),
-                keep_default_na=False,
-                chunksize=self.chunk_rows,
-            )
+            reader = pandas.read_csv(source, chunksize=self.chunk_rows, **self._read_options(used))
             with reader:
                 while True:
                     try:

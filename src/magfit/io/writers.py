@@ -32,7 +32,8 @@ __all__ = ["write_calibrated"]
 
 #: Significant digits of the calibrated values written to text files (ample for any magnetometer).
 SIGNIFICANT_DIGITS = 10
-_BLOCK_BYTES = 1 << 24
+_VALUE_FORMAT = b"%%.%dg" % SIGNIFICANT_DIGITS
+_BLOCK_BYTES = 1 << 20
 _NA_BYTES = frozenset(value.encode() for value in NA_VALUES)
 _NON_SPACE = re.compile(rb"\S+")
 
@@ -153,9 +154,12 @@ class _TextRewriter:
                 "fix that cell, or choose other columns with columns=[...]",
             ) from None
 
-    def _format(self, value: float) -> bytes:
-        text = b"%.*g" % (SIGNIFICANT_DIGITS, value)
-        return text.replace(b".", b",") if self.fmt.decimal == "," else text
+    def _format_all(self, values: NDArray[np.float64]) -> list[bytes]:
+        """The text of every value, row by row (one pass: formatting is most of the writer's time)."""
+        texts = list(map(_VALUE_FORMAT.__mod__, values.ravel().tolist()))
+        if self.fmt.decimal == ",":
+            texts = [text.replace(b".", b",") for text in texts]
+        return texts
 
     def _fields(self, body: bytes, line: int) -> tuple[list[bytes], list[tuple[int, int]] | None]:
         """The fields of a line, and for whitespace files their byte spans (to keep the alignment)."""
@@ -185,40 +189,111 @@ class _TextRewriter:
             quoted.append(cell.encode(self.encoding))
         return quoted
 
-    def rewrite(self, block: bytes, first_line: int) -> bytes:
-        lines = block.split(b"\n")
-        parsed: list[tuple[int, list[bytes], list[tuple[int, int]] | None, bytes, bytes]] = []
-        values: list[tuple[float, float, float]] = []
+    def _parse(self, block: bytes, kept: list[tuple[int, list[bytes], list[tuple[int, int]] | None, bytes, bytes]],
+               first_line: int) -> NDArray[np.float64]:  # fmt: skip
+        """The magnetometer values of the kept lines: pandas' C parser, as the reader; per cell on trouble."""
+        try:
+            values = self.reader._parse_block(block)
+        except ValueError:
+            values = None  # a cell that is not a number: found and named below
+        if values is not None and len(values) == len(kept):
+            return values
         x, y, z = self.indices
+        return np.array(
+            [
+                (
+                    self._number(fields[x], first_line + offset, 0),
+                    self._number(fields[y], first_line + offset, 1),
+                    self._number(fields[z], first_line + offset, 2),
+                )
+                for offset, fields, _, _, _ in kept
+            ],
+            dtype=np.float64,
+        )
+
+    def _rewrite_fast(self, block: bytes) -> bytes | None:
+        """The common case in a few list passes: one-byte delimiter, no quotes, no blank lines, regular spacing.
+
+        Returns None when the block is not that simple; :meth:`rewrite` then goes line by line.
+        """
+        if self.whitespace or b'"' in block:
+            return None
+        crlf = b"\r" in block
+        if crlf and block.count(b"\r") != block.count(b"\r\n"):
+            return None
+        eol = b"\r\n" if crlf else b"\n"
+        ended = block.endswith(eol)
+        lines = (block[: -len(eol)] if ended else block).split(eol)
+        delimiter, n = self.split_byte, self.fmt.n_columns
+        codes = np.frombuffer(block, dtype=np.uint8)
+        if int(np.count_nonzero(codes == delimiter[0])) != (n - 1) * len(lines):
+            return None  # blank lines or a bad row: the slow path skips the former and names the latter
+        x, y, z = self.indices
+        # Split only up to the last magnetometer column: the rest of the line stays one piece, untouched.
+        parts = [line.split(delimiter, max(x, y, z) + 1) for line in lines]
+        first = parts[0]
+        # The spaces before a magnetometer cell (", " files) are those of the first row, in every row.
+        leads = [first[i][: len(first[i]) - len(first[i].lstrip())] for i in (x, y, z)]
+        lx, ly, lz = leads
+        if any(
+            not (f[x].startswith(lx) and f[y].startswith(ly) and f[z].startswith(lz))
+            or f[x][-1:].isspace()
+            or f[y][-1:].isspace()
+            or f[z][-1:].isspace()
+            for f in parts
+        ):
+            return None
+        try:
+            values = self.reader._parse_block(block)
+        except ValueError:
+            return None
+        if len(values) != len(parts):
+            return None
+        corrected, finite = _calibrate_finite(values, self.calibration, self.normalized)
+        texts = self._format_all(corrected[finite])
+        for k, row in enumerate(np.flatnonzero(finite).tolist()):
+            fields = parts[row]
+            fields[x] = lx + texts[3 * k]
+            fields[y] = ly + texts[3 * k + 1]
+            fields[z] = lz + texts[3 * k + 2]
+        return eol.join([delimiter.join(fields) for fields in parts]) + (eol if ended else b"")
+
+    def rewrite(self, block: bytes, first_line: int) -> bytes:
+        fast = self._rewrite_fast(block)
+        if fast is not None:
+            return fast
+        lines = block.split(b"\n")
+        kept: list[tuple[int, list[bytes], list[tuple[int, int]] | None, bytes, bytes]] = []
         for offset, raw in enumerate(lines):
             body = raw[:-1] if raw.endswith(b"\r") else raw
             if not body.strip():
                 continue
-            line = first_line + offset
-            fields, spans = self._fields(body, line)
-            values.append(
-                (self._number(fields[x], line, 0), self._number(fields[y], line, 1), self._number(fields[z], line, 2))
-            )
-            parsed.append((offset, fields, spans, body, raw[len(body) :]))
-        if not values:
+            fields, spans = self._fields(body, first_line + offset)
+            kept.append((offset, fields, spans, body, raw[len(body) :]))
+        if not kept:
             return block
-        corrected, finite = _calibrate_finite(np.array(values, dtype=np.float64), self.calibration, self.normalized)
-        for (offset, fields, spans, body, ending), row, keep in zip(parsed, corrected, finite, strict=True):
+        corrected, finite = _calibrate_finite(self._parse(block, kept, first_line), self.calibration, self.normalized)
+        texts = self._format_all(corrected[finite])
+        position = 0
+        for (offset, fields, spans, body, ending), keep in zip(kept, finite.tolist(), strict=True):
             if not keep:
                 continue  # a row with a non-finite magnetometer value is copied as it was
+            new = texts[position : position + 3]
+            position += 3
             if spans is not None:
                 pieces = bytearray(body)
-                for index, value in sorted(zip(self.indices, row, strict=True), reverse=True):
+                for index, text in sorted(zip(self.indices, new, strict=True), reverse=True):
                     start, end = spans[index]
-                    pieces[start:end] = self._format(value)
+                    pieces[start:end] = text
                 lines[offset] = bytes(pieces) + ending
                 continue
-            for index, value in zip(self.indices, row, strict=True):
+            for index, text in zip(self.indices, new, strict=True):
                 cell = fields[index]
-                stripped = cell.strip()
-                lead = cell[: len(cell) - len(cell.lstrip())]
-                trail = cell[len(cell.rstrip()) :] if stripped else b""
-                fields[index] = lead + self._format(value) + trail
+                if cell[:1].isspace() or cell[-1:].isspace():  # keep the spaces around a cell (", " files)
+                    stripped = cell.strip()
+                    lead = cell[: cell.find(stripped)] if stripped else cell
+                    text = lead + text + (cell[len(lead) + len(stripped) :] if stripped else b"")
+                fields[index] = text
             joiner = self.delimiter if b'"' in body else self.split_byte  # csv-parsed fields lost their spaces
             lines[offset] = joiner.join(fields) + ending
         return b"\n".join(lines)
