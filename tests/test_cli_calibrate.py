@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 import magfit
 import magfit.io
+from magfit.cli import calibrate as calibrate_module
 from magfit.cli import cli
 from magfit.cli.calibrate import run_calibration
 from magfit.export import FORMATS, export
@@ -218,3 +219,24 @@ def test_diagnostic_warnings_and_autos_choice_are_shown(tmp_path: Path) -> None:
         assert f"magfit: warning: {message}" in result.stderr
     if "method_used" in calibration.details:
         assert re.search(rf"chose +{calibration.details['method_used']} \(", result.stdout)
+
+
+def test_streamed_fits_are_diagnosed_on_a_bounded_subsample(
+    steel: tuple[Path, magfit.Simulation], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path, simulation = steel
+    output = tmp_path / "cal.json"
+    assert CliRunner().invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "-o", str(output)]).exit_code == 0
+    diagnostics = magfit.Calibration.from_json(output.read_text()).diagnostics
+    assert diagnostics is not None and diagnostics.coverage is not None  # not the Statistics-only report
+    # Under the cap every row is used: the same report as the in-memory fit's.
+    in_memory = magfit.fit(simulation.samples, method="ellipsoid").diagnostics
+    assert in_memory is not None and diagnostics.to_dict() == in_memory.to_dict()
+    # Over the cap, every k-th row: 3000 rows with a cap of 1000 keep rows 0, 3, 6 ...
+    monkeypatch.setattr(calibrate_module, "DIAGNOSE_SAMPLES", 1000)
+    assert CliRunner().invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "-o", str(output)]).exit_code == 0
+    capped = magfit.Calibration.from_json(output.read_text()).diagnostics
+    assert capped is not None and capped.n_samples == 1000
+    assert "Streamed: diagnosed on one row in 3 (1000 of 3000)" in capped.notes[-1]
+    reference = magfit.diagnose(magfit.Calibration.from_json(output.read_text()), simulation.samples[::3])
+    assert capped.coverage == reference.coverage
