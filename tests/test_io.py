@@ -338,3 +338,12 @@ def test_options_are_checked() -> None:
         ChunkReader(__file__, nonfinite="drop")  # type: ignore[arg-type]
     with pytest.raises(OptionError, match="chunk_rows must be a positive integer, got 0"):
         iter_sample_chunks(__file__, chunk_rows=0)
+
+
+def test_the_file_formats_page_examples_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import doctest
+
+    page = Path(__file__).resolve().parents[1] / "docs" / "file-formats.md"
+    monkeypatch.chdir(tmp_path)  # the examples write their files in the current directory
+    result = doctest.testfile(str(page), module_relative=False, optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 10 and result.failed == 0
