@@ -170,7 +170,7 @@ def test_two_magnetometers_are_an_ambiguity_not_a_guess(tmp_path: Path) -> None:
         read_samples(path)
     message = str(error.value)
     assert "(imu_mx,imu_my,imu_mz)" in message and "(mag_x,mag_y,mag_z)" in message
-    assert "--columns" in message and str(path) in message and "\n" not in message
+    assert "columns=['imu_mx', 'imu_my', 'imu_mz']" in message and str(path) in message and "\n" not in message
     np.testing.assert_array_equal(read_samples(path, columns=["mag_x", "mag_y", "mag_z"]).samples, [[4, 5, 6]] * 2)
 
 

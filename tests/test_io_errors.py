@@ -94,12 +94,16 @@ def test_whitespace_row_with_another_number_of_fields(tmp_path: Path) -> None:
     )
 
 
+def test_header_that_does_not_match_the_rows(tmp_path: Path) -> None:
+    path = write(tmp_path, "time,mx,my,mz,temp\n" + "\n".join(rows(3)) + "\n")
+    assert "line 1 looks like a header with 5 names, but the rows have 4 fields; make them match" in error_of(path)
+
+
 def test_magnetometer_columns_not_found(tmp_path: Path) -> None:
     path = write(tmp_path, "time,ax,ay,az,gx,gy,gz\n" + "\n".join(rows(3, "{i},1,2,3,4,5,6")) + "\n")
     message = error_of(path)
     assert message.endswith(
-        "no magnetometer columns found among: time, ax, ay, az, gx, gy, gz; name the x, y, z columns with "
-        "columns=[...] (CLI: --columns)"
+        "no magnetometer columns found among: time, ax, ay, az, gx, gy, gz; name the x, y, z columns with columns=[...]"
     )
 
 

@@ -91,7 +91,7 @@ def test_two_magnetometers_in_one_file_ask_for_columns(real_data_dir: Path) -> N
         read_samples(path)
     assert str(caught.value) == (
         f"{path}: several magnetometer column triples match: (imu_mx,imu_my,imu_mz); (mag_x,mag_y,mag_z); "
-        "choose one with columns=[...] (CLI: --columns imu_mx,imu_my,imu_mz)"
+        "choose one with columns=['imu_mx', 'imu_my', 'imu_mz']"
     )
 
 

@@ -314,6 +314,14 @@ def _sniff_text(path: Path, head: bytes, truncated: bool) -> FileFormat:
         if len(names) >= n_columns and not any(names[n_columns:]):
             header = tuple(name.lstrip("\ufeff") for name in names[:n_columns])
             start = before[-1]
+        elif len(names) >= 3 and all(_cell_kind(name, decimal) == "text" for name in names):
+            # A line of names that does not match the rows: reading on without it would silently number
+            # the columns, and the no-header rule could then take the wrong three.
+            raise _error(
+                path,
+                f"line {before[-1] + 1} looks like a header with {len(names)} names, but the rows have {n_columns} "
+                "fields; make them match (one name per column)",
+            )
     return FileFormat(
         kind="text",
         delimiter=delimiter,
@@ -406,11 +414,8 @@ def sniff(path: str | os.PathLike[str]) -> FileFormat:
 
 def _ambiguity(path: Path, candidates: Sequence[Any]) -> DataFileError:
     listed = "; ".join(f"({triple.describe()})" for triple in candidates[:6])
-    return _error(
-        path,
-        f"several magnetometer column triples match: {listed}; choose one with "
-        f"columns=[...] (CLI: --columns {candidates[0].describe()})",
-    )
+    example = ", ".join(repr(name) for name in candidates[0].names)
+    return _error(path, f"several magnetometer column triples match: {listed}; choose one with columns=[{example}]")
 
 
 def _check_columns_option(columns: Sequence[str | int]) -> list[str | int]:
@@ -467,7 +472,7 @@ def _resolve_table_columns(
                 raise _error(
                     path,
                     f"no magnetometer columns found among: {', '.join(labels)}; name the x, y, z columns with "
-                    "columns=[...] (CLI: --columns)",
+                    "columns=[...]",
                 )
             best = [triple for triple in candidates if triple.score == candidates[0].score]
             if len(best) > 1:
