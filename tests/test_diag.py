@@ -93,3 +93,11 @@ def test_tilting_only_recording_is_refused(real_data_dir: Path) -> None:
     samples = pd.read_csv(real_data_dir / "android_phone_kritiksoman" / "data_mag.txt")[["x", "y", "z"]]
     with pytest.raises(magfit.CalibrationError):
         magfit.fit(samples.to_numpy(), method="diag")
+
+
+def test_strongly_turned_iron_is_refused_with_the_model_named() -> None:
+    # The paper's steel case: semi-axes 193 : 1362 turned 20° off the axes. No axis-aligned ellipsoid
+    # fits; the best 7-term quadric is a hyperboloid, and the message points to the full model.
+    sim = magfit.scenario("mpu9250", "steel").simulate(5000, seed=7)
+    with pytest.raises(magfit.CalibrationError, match="turned off the sensor axes.*method='als'"):
+        magfit.fit(sim.samples, method="diag")

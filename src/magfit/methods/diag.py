@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..calibration import Calibration
-from .quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
+from ..errors import CalibrationError
+from .quadric import calibration_from_ellipsoid, check_field_strength, quadric_ellipsoid
 from .registry import FitInput, register
 
 __all__ = ["DIAGONAL_TERMS", "fit_diag"]
@@ -51,7 +52,14 @@ def fit_diag(data: FitInput, *, field_strength: float | None = None) -> Calibrat
     eigenvalues, eigenvectors = np.linalg.eigh(scatter)
     theta = np.zeros(10)
     theta[terms] = eigenvectors[:, 0]  # argmin |Dθ|² over the 7 terms, |θ| = 1; cross terms m₂ = m₃ = m₅ = 0
-    offset, shape = ellipsoid_from_quadric(theta, statistics, "diag")
+    ellipsoid = quadric_ellipsoid(theta, statistics)  # V = −½ M⁻¹ b, A = M / (Vᵀ M V − d), or the reason
+    if isinstance(ellipsoid, str):
+        raise CalibrationError(
+            f"the diag fit failed: {ellipsoid}; either the soft iron is turned off the sensor axes, which the "
+            "axis-aligned model cannot represent (use method='als'), or the samples cover too few directions "
+            "(rotate the sensor through more attitudes)"
+        )
+    offset, shape = ellipsoid
     shape = np.diag(np.diag(shape))  # exactly diagonal (the off-diagonal entries are zeros already)
     return calibration_from_ellipsoid(
         "diag",
