@@ -40,11 +40,12 @@ def test_directory_instead_of_file(tmp_path: Path) -> None:
     assert "is a directory, not a data file" in error_of(tmp_path)
 
 
-@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root can read any file")
-def test_unreadable_file(tmp_path: Path) -> None:
+def test_unreadable_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = write(tmp_path, "mx,my,mz\n1,2,3\n")
     path.chmod(0)
-    assert "permission denied; make the file readable" in error_of(path)
+    if hasattr(os, "geteuid") and os.geteuid() == 0:  # root reads anything: make the permission check say no
+        monkeypatch.setattr(os, "access", lambda *args, **kwargs: False)
+    assert "permission denied; make the file readable (chmod +r) or copy it" in error_of(path)
 
 
 @pytest.mark.parametrize("content", [b"", b"\n\n  \n", b"\xef\xbb\xbf"])

@@ -798,8 +798,9 @@ class ChunkReader:
     def _bad_cell_error(self, detail: str) -> DataFileError:
         """Find the first magnetometer cell that is not a number (rescanning the file), for the message."""
         fmt = self.format
-        with open(self.path, encoding=self._text_encoding, errors="replace", newline="") as handle:
-            handle.seek(fmt.data_offset)
+        with open(self.path, "rb") as raw:
+            raw.seek(fmt.data_offset)
+            handle = io.TextIOWrapper(raw, encoding=self._text_encoding, errors="replace", newline="")
             for number, line in enumerate(handle, start=fmt.data_line + 1):
                 if not line.strip():
                     continue
