@@ -234,7 +234,7 @@ class _Model:
             residual = feet.distance - self.variance * feet.mean_curvature if self.variance > 0 else feet.distance
             jacobian_t = self._jacobian_transposed(lower, feet)
             cost += 0.5 * float(np.einsum("n,n->", residual, residual))  # no threaded BLAS dot
-            normal += np.einsum("in,jn->ij", jacobian_t, jacobian_t)  # JᵀJ
+            normal += jacobian_t @ jacobian_t.T  # JᵀJ: a 9x9 BLAS product (single-threaded at this shape)
             gradient += np.einsum("in,n->i", jacobian_t, residual)  # Jᵀr
         return _Evaluation(new_roots, cost, normal, gradient)
 
