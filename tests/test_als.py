@@ -13,6 +13,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 import magfit
 from magfit import Calibration, Simulation
@@ -83,8 +86,8 @@ def test_als_is_consistent_where_the_algebraic_fit_is_biased(orientations: str) 
         n, soft_iron=SOFT_IRON, hard_iron=[0.5, -0.3, 0.2], noise=noise, orientations=orientations,
         max_tilt_deg=60.0, seed=3,
     )  # fmt: skip
-    als = magfit.fit(sim.samples, method="als")
-    ellipsoid = magfit.fit(sim.samples, method="ellipsoid")
+    als = magfit.fit(sim.samples, method="als", diagnostics=False)  # the diagnostics are tested elsewhere
+    ellipsoid = magfit.fit(sim.samples, method="ellipsoid", diagnostics=False)
     smallest = float(np.linalg.svd(SOFT_IRON, compute_uv=False).min())
     # The band of a tilt-limited recording inflates the variance about 3x (seen over seeds).
     tol = 20 * noise / smallest / np.sqrt(n) * (1 if orientations == "uniform" else 3)
@@ -161,3 +164,24 @@ def test_tilting_only_recording_is_refused(real_data_dir: Path) -> None:
     samples = pd.read_csv(real_data_dir / "android_phone_kritiksoman" / "data_mag.txt")[["x", "y", "z"]]
     with pytest.raises(magfit.CalibrationError):
         magfit.fit(samples.to_numpy(), method="als")
+
+
+@settings(max_examples=10, deadline=None)
+@given(
+    angles=st.tuples(*[st.floats(-180.0, 180.0)] * 3),
+    shift=st.tuples(*[st.floats(-1000.0, 1000.0)] * 3),
+)
+def test_als_is_equivariant_under_rotation_and_translation_of_the_input(
+    angles: tuple[float, float, float], shift: tuple[float, float, float]
+) -> None:
+    # Turning the sensor frame by R and shifting by t must turn the fit: V → R V + t, A → R A Rᵀ.
+    samples = magfit.scenario("ellipse2a", "steel").simulate(1500, seed=10).samples
+    rotation = Rotation.from_euler("xyz", angles, degrees=True).as_matrix()
+    moved = samples @ rotation.T + np.asarray(shift)
+    base = magfit.fit(samples, method="als", diagnostics=False)
+    turned = magfit.fit(moved, method="als", diagnostics=False)
+    np.testing.assert_allclose(turned.offset, rotation @ base.offset + shift, atol=1e-7 * (1 + np.abs(shift).max()))
+    np.testing.assert_allclose(
+        turned.ellipsoid_matrix, rotation @ base.ellipsoid_matrix @ rotation.T, rtol=1e-6, atol=1e-9
+    )
+    assert turned.details["noise_std"] == pytest.approx(base.details["noise_std"], rel=1e-6)

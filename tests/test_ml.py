@@ -75,7 +75,7 @@ def test_ml_is_at_least_as_good_as_als_at_the_sensors_noise() -> None:
     for seed in range(8):
         sim = scenario.simulate(2000, seed=100 + seed)
         for method, found in errors.items():
-            cal = magfit.fit(sim.samples, method=method)
+            cal = magfit.fit(sim.samples, method=method, diagnostics=False)  # tested elsewhere
             found.append((shape_error(cal, sim.truth), offset_error(cal, sim)))
     rms = {method: np.sqrt(np.mean(np.square(found), axis=0)) for method, found in errors.items()}
     assert rms["ml"][0] <= 1.05 * rms["als"][0]  # shape
@@ -86,8 +86,8 @@ def test_bias_correction_removes_most_of_the_geometric_fits_bias() -> None:
     # At 10 % noise the plain orthogonal-distance fit grows the ellipsoid by about σ²/B (~1 % in A).
     n, noise = 50_000, 0.1
     sim = magfit.simulate(n, soft_iron=SOFT_IRON, hard_iron=[0.5, -0.3, 0.2], noise=noise, seed=2)
-    corrected = magfit.fit(sim.samples, method="ml")
-    plain = magfit.fit(sim.samples, method="ml", bias_correction=False)
+    corrected = magfit.fit(sim.samples, method="ml", diagnostics=False)
+    plain = magfit.fit(sim.samples, method="ml", bias_correction=False, diagnostics=False)
     tol = 20 * noise / 0.7 / np.sqrt(n)  # 0.7: the smallest semi-axis of SOFT_IRON, rounded down
     assert shape_error(corrected, sim.truth) < tol
     assert shape_error(plain, sim.truth) > 1.5 * shape_error(corrected, sim.truth)
@@ -100,7 +100,7 @@ def test_details_report_the_solver_and_a_calibrated_covariance() -> None:
     squared_z_scores = []
     for seed in range(10):
         sim = scenario.simulate(2000, seed=200 + seed)
-        cal = magfit.fit(sim.samples, method="ml")
+        cal = magfit.fit(sim.samples, method="ml", diagnostics=False)
         covariance = np.array(cal.details["covariance"])
         assert covariance.shape == (9, 9) and cal.details["covariance_parameters"] == list(COVARIANCE_PARAMETERS)
         np.testing.assert_allclose(covariance, covariance.T, rtol=1e-9, atol=1e-30)
