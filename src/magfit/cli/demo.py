@@ -57,6 +57,7 @@ def demo_command(seed: int, n_samples: int) -> None:
     print_distance_tables(out, experiment)
     print_ellipsoid_tables(out, experiment)
     print_findings(out, experiment)
+    # Other renderings of the same `experiment` (e.g. an HTML report behind an option) belong after this.
 
 
 def print_distance_tables(out: Console, experiment: Experiment) -> None:
