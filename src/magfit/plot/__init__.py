@@ -22,20 +22,31 @@ from ._figure import (
     save_figure,
     shown_caption,
 )
-from ._geometry import Coverage, coverage, direction_cells, ellipse_outline, ellipsoid_wireframe, even_subsample
+from ._geometry import (
+    Coverage,
+    corrected_unit,
+    coverage,
+    direction_cells,
+    ellipse_outline,
+    ellipsoid_wireframe,
+    scan,
+    subsample_for_plot,
+)
 
 __all__ = [
     "DEFAULT_MAX_POINTS",
     "METHOD_COLOURS",
     "Coverage",
     "calibration_figure",
+    "corrected_unit",
     "coverage",
     "direction_cells",
     "ellipse_outline",
     "ellipsoid_wireframe",
-    "even_subsample",
     "figure_png",
     "method_labels",
     "save_figure",
+    "scan",
     "shown_caption",
+    "subsample_for_plot",
 ]

@@ -18,8 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._validation import as_samples
 from ..calibration import Calibration
 from ..errors import OptionError
-from ..evaluate import sphere_distances
-from ._geometry import coverage, ellipse_outline, ellipsoid_wireframe, even_subsample, sphere_wireframe
+from ._geometry import Coverage, ellipse_outline, ellipsoid_wireframe, scan, sphere_wireframe, subsample_for_plot
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -55,6 +54,7 @@ class _Prepared:
     unit: str
     shown: NDArray[np.intp]
     distances: tuple[NDArray[np.float64], ...]
+    coverage: Coverage
 
 
 def method_labels(calibrations: Sequence[Calibration]) -> tuple[str, ...]:
@@ -87,14 +87,16 @@ def _prepare(
     array = as_samples(samples)
     items = _as_calibrations(calibrations)
     # Spread the shown points evenly over the directions the main calibration sees (the field's direction).
-    shown = even_subsample(items[0].apply(array), max_points, seed=seed)
+    shown = subsample_for_plot(array, items[0], max_points, seed=seed)
+    distances, cover = scan(array, items, *_grid_for(array.shape[0]))
     return _Prepared(
         samples=array,
         calibrations=items,
         labels=method_labels(items),
         unit=unit or items[0].unit or "raw units",
         shown=shown,
-        distances=tuple(sphere_distances(item, array) for item in items),
+        distances=distances,
+        coverage=cover,
     )
 
 
@@ -251,8 +253,7 @@ def _draw_calibrated_3d(axes: Any, prepared: _Prepared) -> None:
 def _draw_coverage(figure: Figure, axes: Axes, prepared: _Prepared) -> None:
     from matplotlib.colors import LogNorm
 
-    azimuth_bins, elevation_bins = _grid_for(prepared.samples.shape[0])
-    cover = coverage(prepared.calibrations[0].apply(prepared.samples), azimuth_bins, elevation_bins)
+    cover = prepared.coverage
     counts = np.ma.masked_equal(cover.counts, 0)
     axes.set_label("coverage")
     axes.set_facecolor("#f6c9c4")  # cells never visited show this pale red through the masked mesh
@@ -270,7 +271,7 @@ def _draw_coverage(figure: Figure, axes: Axes, prepared: _Prepared) -> None:
     axes.set_ylabel("elevation, asin(z / |m|)")
     axes.set_title(
         f"Directions visited: {cover.fraction_visited:.0%} of the sphere "
-        f"({np.count_nonzero(cover.counts)} of {cover.n_cells} equal-area cells {360 // azimuth_bins}° wide; "
+        f"({np.count_nonzero(cover.counts)} of {cover.n_cells} equal-area cells {360 // cover.counts.shape[1]}° wide; "
         "pale red: never visited)",
         fontsize=11,
     )
@@ -327,14 +328,14 @@ def _draw_after(axes: Axes, prepared: _Prepared, plane: tuple[int, int]) -> None
 
 
 def _draw_histogram(axes: Axes, prepared: _Prepared) -> None:
-    everything = np.concatenate(prepared.distances)
-    low, high = np.percentile(everything, [0.5, 99.5])
+    # The range from at most ~1 million of the distances: quantiles of a regular stride are as good.
+    stride = max(1, prepared.samples.shape[0] // 1_000_000)
+    low, high = np.percentile(np.concatenate([d[::stride] for d in prepared.distances]), [0.5, 99.5])
     span = max(high - low, 1e-9)
     low, high = low - 0.05 * span, high + 0.05 * span
-    edges = np.linspace(low, high, 81)
     axes.set_label("histogram")
     for index, (label, distances) in enumerate(zip(prepared.labels, prepared.distances, strict=True)):
-        counts, _ = np.histogram(distances, bins=edges)
+        counts, edges = np.histogram(distances, bins=80, range=(low, high))  # equal bins: NumPy's fast path
         outside = int(np.count_nonzero((distances < low) | (distances > high)))
         note = f", {outside:,} outside" if outside else ""
         axes.stairs(

@@ -19,12 +19,14 @@ from ..errors import OptionError
 
 __all__ = [
     "Coverage",
+    "corrected_unit",
     "coverage",
     "direction_cells",
     "ellipse_outline",
     "ellipsoid_wireframe",
-    "even_subsample",
+    "scan",
     "sphere_wireframe",
+    "subsample_for_plot",
 ]
 
 #: Default equal-area grid: 36 azimuth steps of 10° times 18 bands of equal height in sin(elevation).
@@ -39,6 +41,50 @@ def _directions(vectors: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDAr
     azimuth = np.arctan2(vectors[:, 1], vectors[:, 0])
     sin_elevation = np.clip(vectors[:, 2] / norm, -1.0, 1.0)
     return azimuth, sin_elevation
+
+
+#: Rows per block when a pass over every sample is made (bounded memory on long logs: ~24 MB a block).
+CHUNK_ROWS = 1 << 20
+
+
+def corrected_unit(calibration: Calibration, samples: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``calibration.apply(samples, normalized=True)`` for an (N, 3) float array, on the unit sphere.
+
+    The same formula, ``matrix @ (raw - offset) / field_strength``, written with ``einsum``: on an (N, 3)
+    array it runs several times faster than the ``@`` of ``apply`` (no BLAS threads for a 3x3 product),
+    which matters for the passes over every sample of a 10-million-sample log.
+    """
+    unit_map = calibration.matrix / calibration.field_strength
+    return np.einsum("nj,ij->ni", samples - calibration.offset, unit_map)
+
+
+def scan(
+    samples: NDArray[np.float64],
+    calibrations: tuple[Calibration, ...],
+    azimuth_bins: int = AZIMUTH_BINS,
+    elevation_bins: int = ELEVATION_BINS,
+) -> tuple[tuple[NDArray[np.float64], ...], Coverage]:
+    """One pass over every sample, in blocks: each calibration's sphere distances and the first one's coverage.
+
+    Returns
+    -------
+    distances : tuple of ndarray, each shape (N,)
+        ``|apply(x, normalized=True)| − 1`` per calibration (the paper's section V metric), dimensionless.
+    coverage : Coverage
+        Directions of the first calibration's corrected samples on the equal-area grid.
+    """
+    n = samples.shape[0]
+    distances = tuple(np.empty(n) for _ in calibrations)
+    counts = np.zeros(azimuth_bins * elevation_bins, dtype=np.int64)
+    for start in range(0, n, CHUNK_ROWS):
+        block = samples[start : start + CHUNK_ROWS]
+        for index, calibration in enumerate(calibrations):
+            corrected = corrected_unit(calibration, block)
+            distances[index][start : start + block.shape[0]] = np.sqrt(np.einsum("ni,ni->n", corrected, corrected)) - 1
+            if index == 0:
+                cells = direction_cells(corrected, azimuth_bins, elevation_bins)
+                counts += np.bincount(cells, minlength=counts.size)
+    return distances, _coverage_from_counts(counts, azimuth_bins, elevation_bins)
 
 
 def direction_cells(
@@ -97,34 +143,41 @@ class Coverage:
 def coverage(vectors: ArrayLike, azimuth_bins: int = AZIMUTH_BINS, elevation_bins: int = ELEVATION_BINS) -> Coverage:
     """Count the directions of ``vectors`` (N, 3) in the equal-area cells (see :func:`direction_cells`)."""
     cells = direction_cells(vectors, azimuth_bins, elevation_bins)
-    counts = np.bincount(cells, minlength=azimuth_bins * elevation_bins).reshape(elevation_bins, azimuth_bins)
+    counts = np.bincount(cells, minlength=azimuth_bins * elevation_bins)
+    return _coverage_from_counts(counts, azimuth_bins, elevation_bins)
+
+
+def _coverage_from_counts(counts: NDArray[np.intp], azimuth_bins: int, elevation_bins: int) -> Coverage:
     return Coverage(
-        counts=counts.astype(np.int64),
+        counts=counts.reshape(elevation_bins, azimuth_bins).astype(np.int64),
         azimuth_edges=np.linspace(-np.pi, np.pi, azimuth_bins + 1),
         elevation_edges=np.arcsin(np.linspace(-1.0, 1.0, elevation_bins + 1)),
     )
 
 
-def even_subsample(
-    vectors: ArrayLike,
-    max_points: int,
-    *,
-    seed: int | np.random.Generator | None = 0,
-    azimuth_bins: int = AZIMUTH_BINS,
-    elevation_bins: int = ELEVATION_BINS,
-) -> NDArray[np.intp]:
-    """Indices of at most ``max_points`` rows spread evenly over the directions of ``vectors``.
+#: Long recordings are first cut to this many candidates per point drawn, by a regular stride in time,
+#: so that the even subsample of a 10-million-sample log takes a fraction of a second. A direction the
+#: sensor held for fewer than ``N / (CANDIDATES_PER_POINT * max_points)`` consecutive samples can be
+#: missed by the picture (never by the coverage map or the metrics, which use every sample).
+CANDIDATES_PER_POINT = 50
 
-    Every equal-area cell gets the same quota ``q`` (cells with fewer samples keep them all), with ``q``
-    the largest that fits in ``max_points`` ("water filling"); the few points left over go to random
-    cells that still have samples. Dense regions of a long recording are thinned, sparse ones kept, so
-    a plot of the subsample shows where the sensor pointed, not how long it stayed there. Runs in
-    O(N) (one permutation and one radix sort of small cell indices): about a second for 10 million rows.
+
+def subsample_for_plot(
+    samples: ArrayLike, calibration: Calibration, max_points: int, *, seed: int | np.random.Generator | None = 0
+) -> NDArray[np.intp]:
+    """Indices of at most ``max_points`` samples spread evenly over the directions of the calibrated field.
+
+    Uses :func:`magfit.sampling.even_subsample` (equal-area direction cells, each capped at the same
+    count) in the frame of ``calibration``, so that a plot shows where the sensor pointed, not how long it
+    stayed there. Recordings longer than ``CANDIDATES_PER_POINT * max_points`` are first thinned by a
+    regular stride.
 
     Parameters
     ----------
-    vectors : array_like, shape (N, 3)
-        Vectors whose directions decide the spread (calibrated samples, or raw samples minus their centre).
+    samples : array_like, shape (N, 3)
+        Raw samples, input units.
+    calibration : Calibration
+        Its offset and matrix define the directions (``matrix @ (raw - offset)``).
     max_points : int
         Largest number of indices returned (at least 1).
     seed : int, numpy Generator or None
@@ -132,49 +185,34 @@ def even_subsample(
 
     Returns
     -------
-    ndarray of int, shape (min(N, max_points),)
-        Increasing row indices into ``vectors`` (the recording's order is kept).
+    ndarray of int, shape (m,), m <= min(N, max_points)
+        Increasing row indices into ``samples`` (the recording's order is kept).
     """
+    from ..sampling import DEFAULT_CELLS
+    from ..sampling import even_subsample as sample_evenly
+
     if max_points < 1:
         raise OptionError(f"max_points must be at least 1, got {max_points}")
-    array = np.asarray(vectors, dtype=np.float64)
+    array = np.asarray(samples, dtype=np.float64)
     n = array.shape[0]
     if n <= max_points:
         return np.arange(n, dtype=np.intp)
-    rng = np.random.default_rng(seed)
-    n_cells = azimuth_bins * elevation_bins
-    cells = direction_cells(array, azimuth_bins, elevation_bins)
-    counts = np.bincount(cells, minlength=n_cells)
-    quota = _water_fill(counts, max_points, rng)
-    # Random order first, then a stable sort by cell: each cell's samples come out in random order, and
-    # a sample's rank inside its cell decides whether it is kept. int16 cells let NumPy radix-sort.
-    order = rng.permutation(n)
-    cell_dtype = np.int16 if n_cells < np.iinfo(np.int16).max else np.int32
-    by_cell = order[np.argsort(cells[order].astype(cell_dtype), kind="stable")]
-    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
-    sorted_cells = cells[by_cell]
-    rank = np.arange(n) - starts[sorted_cells]
-    keep = by_cell[rank < quota[sorted_cells]]
-    return np.sort(keep)
-
-
-def _water_fill(counts: NDArray[np.intp], total: int, rng: np.random.Generator) -> NDArray[np.intp]:
-    """Per-cell quotas ``min(count, q)`` (+1 for a few cells) summing to exactly ``total`` <= counts.sum()."""
-    levels = np.sort(counts)
-    # kept(q) = Σ min(count, q) is increasing in q; find the largest integer q with kept(q) <= total.
-    low, high = 0, int(levels[-1])
-    while low < high:
-        middle = (low + high + 1) // 2
-        if int(np.minimum(counts, middle).sum()) <= total:
-            low = middle
-        else:
-            high = middle - 1
-    quota = np.minimum(counts, low)
-    spare = total - int(quota.sum())
-    if spare > 0:
-        candidates = np.flatnonzero(counts > quota)
-        quota[rng.choice(candidates, size=spare, replace=False)] += 1
-    return quota
+    stride = max(1, n // (CANDIDATES_PER_POINT * max_points))
+    candidates = np.arange(0, n, stride, dtype=np.intp)
+    # About four points per cell: the sampler caps every cell at the same whole count, so with more
+    # cells than points it could keep nothing, and with one point per cell it would waste the budget.
+    cells = int(np.clip(max_points // 4, 2, DEFAULT_CELLS))
+    chosen = sample_evenly(
+        array[candidates],
+        max_samples=max_points,
+        cells=cells,
+        centre=calibration.offset,
+        shape=calibration.matrix,
+        seed=seed,
+    )
+    if chosen.size == 0:  # a budget of a handful of points: a regular stride is as good as anything
+        return np.linspace(0, n - 1, max_points).round().astype(np.intp)
+    return candidates[chosen]
 
 
 def sphere_wireframe(n_lines: int = 12, n_points: int = 61) -> list[NDArray[np.float64]]:

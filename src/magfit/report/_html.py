@@ -22,10 +22,9 @@ from numpy.typing import ArrayLike, NDArray
 from .. import __version__
 from .._validation import as_samples
 from ..calibration import CONVENTION, Calibration
-from ..errors import OptionError
-from ..evaluate import sphere_distances
+from ..errors import MagfitError, OptionError
 from ..plot._figure import DEFAULT_MAX_POINTS, METHOD_COLOURS, method_labels, shown_caption
-from ..plot._geometry import even_subsample
+from ..plot._geometry import scan, subsample_for_plot
 
 __all__ = [
     "CONTENT_SECURITY_POLICY",
@@ -227,7 +226,7 @@ def _section_html(
         "bottom: the XY, XZ and YZ projections before and after calibration, each method's distance to the "
         "unit sphere and its fitted parameters.</figcaption></figure>"
     )
-    shown_3d = even_subsample(section.calibrations[0].apply(samples), max_points_3d, seed=seed)
+    shown_3d = subsample_for_plot(samples, section.calibrations[0], max_points_3d, seed=seed)
     view = interactive_figure(samples[shown_3d], section.calibrations, labels, unit=unit)
     view_json = view.to_json(validate=False, pretty=False).replace("</", "<\\/")  # cannot close the <script>
     view_html = (
@@ -252,8 +251,10 @@ def _comparison_table(section: ReportSection, labels: Sequence[str]) -> str:
     if truth is not None:
         head += [f"offset error ({section.display_unit})", "shape error"]
     rows = []
-    for index, (calibration, label) in enumerate(zip(section.calibrations, labels, strict=True)):
-        distances = sphere_distances(calibration, section.samples)
+    all_distances, _ = scan(section.samples, section.calibrations) if section.calibrations else ((), None)
+    for index, (calibration, label, distances) in enumerate(
+        zip(section.calibrations, labels, all_distances, strict=True)
+    ):
         magnitude = np.abs(distances)
         cells = [
             _method_cell(label, index),
@@ -318,16 +319,49 @@ def _parameter_table(section: ReportSection, labels: Sequence[str], unit: str) -
 
 
 def _diagnostics_html(section: ReportSection, labels: Sequence[str]) -> str:
+    """Each fit's diagnostics (``details["diagnostics"]``, see :mod:`magfit.diagnostics`), warnings first.
+
+    The main fit's are open, the others folded. Diagnostics in a layout this magfit cannot read are shown
+    as they are stored.
+    """
     blocks = []
     if section.diagnostics:
-        blocks.append(f"<h4>The data</h4>{_mapping_html(section.diagnostics)}")
-    for label, calibration in zip(labels, section.calibrations, strict=True):
-        found = calibration.details.get("diagnostics")
-        if found:
-            blocks.append(f"<h4>{_e(label)}</h4>{_mapping_html(found)}")
+        blocks.append(f"<details open><summary>The data</summary>{_mapping_html(section.diagnostics)}</details>")
+    for index, (label, calibration) in enumerate(zip(labels, section.calibrations, strict=True)):
+        stored = calibration.details.get("diagnostics")
+        if not stored:
+            continue
+        lines = _diagnostic_lines(stored)
+        warned = any(line.startswith("WARNING") for line in lines)
+        status = "<span class='warn'>warnings</span>" if warned else "no warning"
+        body = (
+            "<ul>" + "".join(f"<li class='{_line_class(line)}'>{_e(line)}</li>" for line in lines) + "</ul>"
+            if lines
+            else _mapping_html(stored)
+        )
+        opened = " open" if index == 0 or warned else ""
+        blocks.append(f"<details{opened}><summary>{_e(label)}: {status}</summary>{body}</details>")
     if not blocks:
         return ""
-    return "<div class='diagnostics'><h3>Diagnostics</h3>" + "".join(blocks) + "</div>"
+    return (
+        "<div class='diagnostics'><h3>Diagnostics: coverage, uncertainty, what the data could not determine</h3>"
+        + "".join(blocks)
+        + "</div>"
+    )
+
+
+def _diagnostic_lines(stored: Mapping[str, Any]) -> list[str]:
+    """The plain-language summary of stored diagnostics, or [] when their layout is not readable here."""
+    try:
+        from ..diagnostics import Diagnostics
+
+        return list(Diagnostics.from_dict(dict(stored)).summary())
+    except (ImportError, MagfitError, KeyError, TypeError, ValueError):
+        return []
+
+
+def _line_class(line: str) -> str:
+    return "warning" if line.startswith("WARNING") else "finding"
 
 
 def _mapping_html(value: Any) -> str:
@@ -408,6 +442,8 @@ div.view-3d { height: 540px; width: 100%; }
 figcaption { color: #555; font-size: 0.92em; margin-top: 6px; }
 .diagnostics dl { display: grid; grid-template-columns: max-content auto; gap: 2px 16px; margin: 4px 0; }
 .diagnostics dt { font-weight: 600; } .diagnostics dd { margin: 0; }
+.diagnostics summary { font-weight: 600; cursor: pointer; margin: 6px 0; }
+.diagnostics li.warning, .warn { color: #a00; font-weight: 600; }
 p.failure { color: #a00; font-weight: 600; }
 """
 

@@ -1,0 +1,311 @@
+"""The HTML report (magfit.report) and the ``magfit plot`` / ``magfit report`` commands, without a browser.
+
+The browser test (tests/test_report_browser.py) opens the same kind of report in headless Chromium.
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import io
+import json
+import re
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import magfit
+from magfit.errors import OptionError
+
+report = pytest.importorskip("magfit.report")  # needs the plot extra (matplotlib, plotly)
+PIL_Image = pytest.importorskip("PIL.Image")
+
+
+class _Page(HTMLParser):
+    """Collects what the tests look at: every src/href, the tables' cells, the <script> blocks, the images."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.links: list[str] = []
+        self.images: list[str] = []
+        self.tables: dict[str, list[list[str]]] = {}
+        self.scripts: list[tuple[dict[str, str | None], str]] = []
+        self.meta: list[dict[str, str | None]] = []
+        self._table: str | None = None
+        self._cell: list[str] | None = None
+        self._script: dict[str, str | None] | None = None
+        self._script_text: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        attributes = dict(attrs)
+        for name in ("src", "href"):
+            if attributes.get(name):
+                self.links.append(str(attributes[name]))
+        if tag == "img":
+            self.images.append(str(attributes.get("src")))
+        if tag == "meta":
+            self.meta.append(attributes)
+        if tag == "table":
+            self._table = str(attributes.get("class"))
+            self.tables[self._table] = []
+        if tag == "tr" and self._table is not None:
+            self.tables[self._table].append([])
+        if tag in ("td", "th") and self._table is not None:
+            self._cell = []
+        if tag == "script":
+            self._script, self._script_text = attributes, []
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag in ("td", "th") and self._cell is not None and self._table is not None:
+            self.tables[self._table][-1].append("".join(self._cell).strip())
+            self._cell = None
+        if tag == "table":
+            self._table = None
+        if tag == "script" and self._script is not None:
+            self.scripts.append((self._script, "".join(self._script_text)))
+            self._script = None
+
+    def handle_data(self, data: str) -> None:
+        if self._cell is not None:
+            self._cell.append(data)
+        if self._script is not None:
+            self._script_text.append(data)
+
+
+def _parse(html: str) -> _Page:
+    page = _Page()
+    page.feed(html)
+    return page
+
+
+@pytest.fixture(scope="module")
+def steel_section():
+    """The paper's MPU-9250 with the piece of steel, as ``magfit demo --report`` shows it, plus a failed method."""
+    from magfit.experiment import run_experiment
+
+    experiment = run_experiment(2000, seed=11, sensors=("mpu9250",), disturbances=("steel",))
+    (section,) = report.experiment_sections(experiment)
+    section = dataclasses.replace(section, failures={"robust": "the samples outline no ellipsoid"})
+    return experiment.cases[0].simulation, section
+
+
+@pytest.fixture(scope="module")
+def steel_page(steel_section):
+    _, section = steel_section
+    html = report.report_html([section], title="Steel test", max_points=600, max_points_3d=500)
+    return html, _parse(html)
+
+
+def test_report_is_self_contained_and_forbids_network_access(steel_page) -> None:
+    html, page = steel_page
+    # Every src/href is in the page itself: in-page anchors or data: URIs; no CDN, no http(s), no file path.
+    assert page.links, "the report has images"
+    for link in page.links:
+        assert link.startswith(("#", "data:")), link
+    policy = [m for m in page.meta if (m.get("http-equiv") or "").lower() == "content-security-policy"]
+    assert len(policy) == 1
+    assert "default-src 'none'" in str(policy[0]["content"])
+    assert "connect-src" not in str(policy[0]["content"])  # falls back to 'none': no fetch, no XHR
+    # plotly.js itself is inline (no <script src=...>), once.
+    inline = [text for attributes, text in page.scripts if "src" not in attributes and "Plotly" in text]
+    assert any(len(text) > 1_000_000 for text in inline)
+    assert sum(1 for attributes, _ in page.scripts if attributes.get("src")) == 0
+    assert html.count("<script>") == 2  # plotly.js and the viewer; the figures are inert JSON blocks
+    # A few MB: plotly.js (~4.8 MB) and one section's PNG and 3-D data.
+    assert len(html.encode()) < 6.5e6
+
+
+def test_comparison_table_holds_the_papers_metric_and_the_error_to_the_truth(steel_section, steel_page) -> None:
+    simulation, section = steel_section
+    _, page = steel_page
+    rows = page.tables["comparison"]
+    header, body, failed = rows[0], rows[1:-1], rows[-1]
+    assert header == [
+        "method", "mean", "std", "mean |d|", "RMS", "max |d|", "published mean", "published std",
+        "offset error (counts)", "shape error",
+    ]  # fmt: skip
+    assert [row[0] for row in body] == ["ellipsoid", "sphere", "minmax"]
+    # The paper's own numbers for this case (section V, MPU-9250, piece of steel), beside the simulated ones.
+    assert [row[6:8] for row in body] == [["0.0088", "0.0462"], ["0.0079", "0.1254"], ["0.0469", "0.1550"]]
+    # A method that failed is listed with its reason.
+    assert failed == ["robust", "could not fit: the samples outline no ellipsoid"]
+    for row, calibration in zip(body, section.calibrations, strict=True):
+        score = magfit.evaluate(calibration, simulation.samples)
+        assert row[1:6] == [
+            f"{score.mean:+.4f}",
+            f"{score.std:.4f}",
+            f"{score.mean_abs:.4f}",
+            f"{score.rms:.4f}",
+            f"{score.max_abs:.4f}",
+        ]
+        offset_error = np.linalg.norm(calibration.offset - simulation.truth.offset)
+        assert row[-2] == f"{offset_error:.4g}"
+    # The ground truth of the steel case: the ellipsoid fit finds the offset to ~1 count (noise 6.4 counts
+    # over 2000 samples) and A within 1 %; the sphere and min/max fits cannot model the steel's soft iron.
+    ellipsoid, sphere, minmax = body
+    assert float(ellipsoid[-2]) < 3.0 and float(ellipsoid[-1].rstrip("%")) < 1.0
+    assert float(sphere[-1].rstrip("%")) > 50 and float(minmax[-1].rstrip("%")) > 50
+
+
+def test_parameter_table_has_offsets_semi_axes_and_the_truth(steel_section, steel_page) -> None:
+    simulation, _ = steel_section
+    _, page = steel_page
+    rows = page.tables["parameters"]
+    assert rows[0][:4] == ["method", "B (counts)", "offset V (counts)", "semi-axes (counts)"]
+    assert [row[0] for row in rows[1:]] == ["ellipsoid", "sphere", "minmax", "truth"]
+    truth_row = rows[-1]
+    assert truth_row[2] == "(" + ", ".join(f"{v:.5g}" for v in simulation.truth.offset) + ")"
+    assert truth_row[3] == "(" + ", ".join(f"{v:.5g}" for v in simulation.truth.semi_axes) + ")"
+    # The paper's steel ellipsoid: semi-axes 193, 714, 1362 counts.
+    np.testing.assert_allclose(simulation.truth.semi_axes, [193, 714, 1362], rtol=1e-9)
+
+
+def test_report_embeds_the_figure_as_a_png_and_the_3d_view_as_data(steel_page) -> None:
+    html, page = steel_page
+    (image,) = page.images
+    assert image.startswith("data:image/png;base64,")
+    png = base64.b64decode(image.split(",", 1)[1])
+    with PIL_Image.open(io.BytesIO(png)) as picture:
+        assert picture.size == (1600, 1200)
+        pixels = np.asarray(picture.convert("RGB"), dtype=np.float64)
+    assert pixels.std() > 20
+    assert "600 of 2,000 samples shown" in html or re.search(r"\d{3} of 2,000 samples shown", html)
+    (figure_json,) = [text for attributes, text in page.scripts if attributes.get("type") == "application/json"]
+    figure = json.loads(figure_json)
+    kinds = [(trace["type"], trace.get("mode"), trace["name"]) for trace in figure["data"]]
+    assert ("scatter3d", "markers", "raw samples") in kinds
+    assert ("scatter3d", "lines", "fitted ellipsoid (ellipsoid)") in kinds
+    assert [name for _, mode, name in kinds if name.startswith("calibrated by")] == [
+        "calibrated by ellipsoid",
+        "calibrated by sphere",
+        "calibrated by minmax",
+    ]
+    raw = next(trace for trace in figure["data"] if trace["name"] == "raw samples")
+    n_points = len(base64.b64decode(raw["x"]["bdata"])) // 4  # float32
+    assert raw["x"]["dtype"] == "f4" and 300 <= n_points <= 500
+    assert figure["layout"]["scene"]["xaxis"]["title"]["text"] == "x (counts)"
+
+
+def test_diagnostics_of_each_fit_are_shown(steel_section, steel_page) -> None:
+    html, _ = steel_page
+    _, section = steel_section
+    if "diagnostics" not in section.calibrations[0].details:
+        pytest.skip("this magfit does not attach diagnostics to its fits")
+    assert "Diagnostics: coverage, uncertainty, what the data could not determine" in html
+    assert "Coverage: the samples reach" in html
+    assert "Uncertainty (one-sigma)" in html
+
+
+def test_report_html_refuses_bad_input(tmp_path) -> None:
+    with pytest.raises(OptionError, match="at least one section"):
+        report.report_html([])
+    samples = magfit.simulate(100, seed=1).samples
+    with pytest.raises(OptionError, match="no calibration and no failure"):
+        report.ReportSection("empty", samples, ())
+    section = report.ReportSection("ok", samples, (magfit.Calibration.identity(),))
+    with pytest.raises(OptionError, match="does not exist"):
+        report.write_report(tmp_path / "missing" / "report.html", [section])
+
+
+def test_experiment_sections_name_each_case_and_carry_its_truth(steel_section) -> None:
+    simulation, section = steel_section
+    assert section.title == "MPU-9250, 0.8 kg piece of steel (simulated)"
+    assert section.truth is simulation.truth
+    assert section.display_unit == "counts"
+
+
+# ---------------------------------------------------------------------- the commands
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """A CSV with a time column and the paper's MPU-9250 next to a smartphone (strong hard iron)."""
+    simulation = magfit.scenario("mpu9250", "smartphone").simulate(1500, seed=13)
+    path = tmp_path_factory.mktemp("report") / "phone.csv"
+    time = np.arange(1500) * 0.01
+    np.savetxt(path, np.column_stack([time, simulation.samples]), fmt="%.10g", delimiter=",", header="t,mx,my,mz")
+    return path, simulation
+
+
+def test_plot_command_writes_the_png(recording, tmp_path) -> None:
+    from magfit.cli import cli
+
+    path, simulation = recording
+    output = tmp_path / "phone.png"
+    result = CliRunner().invoke(
+        cli,
+        [
+            "plot",
+            str(path),
+            "--method",
+            "ellipsoid",
+            "--methods",
+            "sphere",
+            "--unit",
+            "counts",
+            "--dpi",
+            "40",
+            "-o",
+            str(output),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    with PIL_Image.open(output) as picture:
+        assert picture.size == (640, 480)  # 16 x 12 inches at 40 dpi
+    fitted = magfit.fit(simulation.samples, method="ellipsoid")
+    score = magfit.evaluate(fitted, simulation.samples)
+    assert re.search(rf"ellipsoid +sphere distance mean {score.mean:.4f}  std {score.std:.4f}", result.output)
+    assert "sphere " in result.output and "minmax" not in result.output
+    assert f"All 1,500 samples shown. Wrote the figure to {output}" in result.output
+
+
+def test_plot_command_refuses_a_non_figure_output_and_its_own_input(recording, tmp_path) -> None:
+    from magfit.cli import cli
+
+    path, _ = recording
+    result = CliRunner().invoke(cli, ["plot", str(path), "-o", str(tmp_path / "figure.txt")])
+    assert result.exit_code == 2
+    assert "'figure.txt' has no figure extension; use one of .png, .svg, .pdf" in result.output
+    result = CliRunner().invoke(cli, ["plot", str(path), "-o", str(path.with_suffix(".csv"))])
+    assert result.exit_code == 2
+
+
+def test_report_command_writes_one_html_for_several_files(recording, tmp_path) -> None:
+    from magfit.cli import cli
+
+    path, _ = recording
+    second = tmp_path / "tumble.txt"
+    np.savetxt(second, magfit.simulate(800, field_strength=50.0, hard_iron=[5.0, -3.0, 2.0], noise=0.3, seed=2).samples)
+    output = tmp_path / "report.html"
+    result = CliRunner().invoke(
+        cli,
+        ["report", str(path), str(second), "--method", "ellipsoid", "--max-points", "300", "--max-points-3d", "200",
+         "-o", str(output)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    page = _parse(output.read_text(encoding="utf-8"))
+    assert len(page.images) == 2  # one figure per file
+    assert [link for link in page.links if link.startswith("#")] == ["#section-0", "#section-1"]
+    assert all(link.startswith(("#", "data:")) for link in page.links)
+    assert "Wrote the report to" in result.output
+    bad = CliRunner().invoke(cli, ["report", str(path), "-o", str(tmp_path / "report.pdf")])
+    assert bad.exit_code == 2 and "'report.pdf' is not an .html file name" in bad.output
+
+
+def test_report_example_from_the_docs_on_a_real_recording(real_data_dir: Path, tmp_path: Path) -> None:
+    from magfit.cli import cli
+
+    recording = real_data_dir / "fxos8700_magneto" / "mag-readings.txt"
+    output = tmp_path / "fxos.html"
+    result = CliRunner().invoke(cli, ["report", str(recording), "--unit", "uT", "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    page = _parse(output.read_text(encoding="utf-8"))
+    rows = page.tables["parameters"]
+    # Magneto v1.2's published offset for this file: (28.557, -39.981, -27.428) µT; the ellipsoid fit
+    # agrees to a few tenths of a µT (324 samples, noise ~1 µT on a 53 µT field).
+    ellipsoid = next(row for row in rows if row[0] == "ellipsoid")
+    offset = [float(value) for value in ellipsoid[2].strip("()").split(",")]
+    np.testing.assert_allclose(offset, [28.557458, -39.981060, -27.428035], atol=0.5)
