@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -213,3 +215,29 @@ def test_bad_arguments_are_refused() -> None:
     bad[7, 0] = np.nan
     with pytest.raises(SampleError, match="the first is row 7"):
         even_subsample(bad)
+
+
+# ---------------------------------------------------------------------- docs/scaling.md
+
+
+def test_the_scaling_guide_examples_run_and_print_what_it_says(capsys: pytest.CaptureFixture[str]) -> None:
+    guide = Path(__file__).resolve().parents[1] / "docs" / "scaling.md"
+    blocks = re.findall(r"```python\n(.*?)```", guide.read_text(encoding="utf-8"), flags=re.DOTALL)
+    assert len(blocks) >= 4
+    namespace: dict[str, object] = {}
+    for block in blocks:
+        exec(compile(block, str(guide), "exec"), namespace)
+    printed = capsys.readouterr().out.splitlines()
+    # Each print carries its output in a comment: the guide must show what the code prints.
+    expected = [
+        "[-130.  -176.9 -174.9]",
+        "30000",
+        "30000 [-130.  -176.9 -174.9]",
+        "851 7",
+        "all 0.0362",
+        "even 0.0031",
+    ]
+    assert printed == expected
+    text = guide.read_text(encoding="utf-8")
+    for line in expected:
+        assert line in text, f"docs/scaling.md does not show the printed {line!r}"
