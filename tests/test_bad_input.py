@@ -55,6 +55,12 @@ def test_flat_samples_name_the_missing_direction() -> None:
         magfit.fit(tilted)
 
 
+def test_too_few_distinct_samples_for_an_ellipsoid() -> None:
+    distinct = magfit.scenario("ellipse2a", "none").simulate(6, seed=3).samples
+    with pytest.raises(CalibrationError, match="do not single out one ellipsoid"):
+        magfit.fit(np.vstack([distinct, distinct]))  # 12 samples, but only 6 distinct
+
+
 def test_samples_on_a_line() -> None:
     line = np.outer(np.linspace(-1, 1, 100), [1.0, 2.0, 3.0])
     with pytest.raises(CalibrationError, match=r"lie on a line along direction \(\+0.27, \+0.53, \+0.80\)"):

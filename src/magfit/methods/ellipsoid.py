@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..calibration import Calibration
+from ..errors import CalibrationError
 from .quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
 from .registry import FitInput, register
 
@@ -35,6 +36,12 @@ def fit_ellipsoid(data: FitInput, *, root: str = "sqrt", field_strength: float |
     known_field = check_field_strength(field_strength)
     statistics = data.statistics
     eigenvalues, eigenvectors = np.linalg.eigh(statistics.scatter / statistics.n)
+    if not eigenvalues[1] > 1e-12 * eigenvalues[-1]:
+        # A second quadric fits as well as the first: fewer distinct samples than the 9 parameters need.
+        raise CalibrationError(
+            "the samples do not single out one ellipsoid: several fit them exactly (too few distinct samples "
+            "for the 9 parameters); record more samples while turning the sensor in all directions"
+        )
     theta = eigenvectors[:, 0]  # argmin |Dθ|² subject to |θ| = 1
     offset, shape = ellipsoid_from_quadric(theta, statistics, "ellipsoid")
     return calibration_from_ellipsoid(
