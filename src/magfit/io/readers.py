@@ -224,23 +224,24 @@ def _mode_count(counts: Sequence[int]) -> tuple[int, float]:
 
 def _choose_delimiter(sample: Sequence[str]) -> str | None:
     """The delimiter that splits the sample lines into the most consistent number (>= 2) of fields."""
-    best: tuple[float, int, str] | None = None
+    best: tuple[bool, float, int, str] | None = None
     for order, delimiter in enumerate(_DELIMITERS):
         counts = [len(_split_fields(line, delimiter)) for line in sample]
         mode, share = _mode_count(counts)
         if mode < 2:
             continue
-        key = (share, -order, delimiter)
-        if best is None or key[:2] > best[:2]:
+        # Three fields or more first (a magnetometer has three axes), then the most consistent split.
+        key = (mode >= 3, share, -order, delimiter)
+        if best is None or key[:3] > best[:3]:
             best = key
     if best is None:
         return None
-    if best[2] == ",":
+    if best[3] == ",":
         # ", " (comma then space) is kept apart so that a calibrated copy is written the same way.
         spaced = sum(line.count(", ") for line in sample)
         if spaced and spaced >= 0.9 * sum(line.count(",") for line in sample):
             return ", "
-    return best[2]
+    return best[3]
 
 
 def _decode_lines(path: Path, head: bytes, truncated: bool) -> tuple[list[bytes], list[str], str]:
