@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 import magfit
 from magfit import OptionError, SampleError
-from magfit.sampling import EvenSampler, SphereCells, even_subsample, even_subsample_chunks
+from magfit.sampling import EvenSampler, SphereCells, direction_frame, even_subsample, even_subsample_chunks
 
 
 def stay_simulation(seed: int, n: int = 5000, stay: float = 0.8) -> magfit.Simulation:
@@ -241,3 +241,20 @@ def test_the_scaling_guide_examples_run_and_print_what_it_says(capsys: pytest.Ca
     text = guide.read_text(encoding="utf-8")
     for line in expected:
         assert line in text, f"docs/scaling.md does not show the printed {line!r}"
+
+
+def test_direction_frame_from_statistics() -> None:
+    # A tumble: the frame is the ellipsoid fit's. Level turns only: the min/max box, flat axis floored.
+    sim = magfit.scenario("mpu9250", "steel").simulate(3000, seed=6)
+    centre, shape = direction_frame(magfit.Statistics.from_samples(sim.samples))
+    fitted = magfit.fit(sim.samples)
+    np.testing.assert_allclose(centre, fitted.offset, rtol=1e-12)
+    np.testing.assert_allclose(shape, fitted.matrix, rtol=1e-12)
+    attitudes = np.zeros((500, 3))
+    attitudes[:, 2] = np.linspace(-180, 180, 500)
+    level = magfit.simulate(500, hard_iron=[5.0, 0.0, 0.0], orientations=attitudes, seed=1).samples
+    centre, shape = direction_frame(magfit.Statistics.from_samples(level))
+    low, high = level.min(axis=0), level.max(axis=0)
+    np.testing.assert_allclose(centre, 0.5 * (low + high))
+    widest = 0.5 * float(np.max(high - low))
+    np.testing.assert_allclose(np.diag(shape), 1.0 / np.maximum(0.5 * (high - low), 0.1 * widest))

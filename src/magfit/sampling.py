@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,7 +33,10 @@ from numpy.typing import ArrayLike, NDArray
 from ._validation import as_samples
 from .errors import OptionError, SampleError
 
-__all__ = ["DEFAULT_CELLS", "EvenSampler", "SphereCells", "even_subsample", "even_subsample_chunks"]
+if TYPE_CHECKING:
+    from .statistics import Statistics
+
+__all__ = ["DEFAULT_CELLS", "EvenSampler", "SphereCells", "direction_frame", "even_subsample", "even_subsample_chunks"]
 
 #: Cells of about 10 degrees across (4π / 400 sr each): fine enough to separate attitudes a calibration
 #: needs apart, coarse enough that a few thousand samples fill them.
@@ -370,6 +374,35 @@ def even_subsample_chunks(
     return sampler
 
 
+def direction_frame(statistics: Statistics) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A centre and shape for :class:`EvenSampler` from the :class:`~magfit.Statistics` of a stream.
+
+    The offset and matrix of the stream's ellipsoid fit; when the samples support no ellipsoid, the
+    mid-range of each axis with each axis divided by its half-range (at least a tenth of the widest one).
+
+    Returns
+    -------
+    centre : ndarray, shape (3,)
+        Input units.
+    shape : ndarray, shape (3, 3)
+        Dimensionless up to a common scale (only directions matter).
+    """
+    from .errors import CalibrationError
+    from .fit import fit  # late import: magfit.fit imports the methods
+
+    try:
+        calibration = fit(statistics, "ellipsoid")
+        return calibration.offset, calibration.matrix
+    except CalibrationError:
+        return _box_frame(statistics.minimum, statistics.maximum)
+
+
+def _box_frame(low: NDArray[np.float64], high: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    # An axis that hardly varies (level turns only) must not let its noise pick the cells: floor it.
+    half = np.maximum(0.5 * (high - low), _FLAT_AXIS * float(np.max(high - low)))
+    return 0.5 * (low + high), np.diag(1.0 / np.where(half > 0, half, 1.0))
+
+
 def _default_frame(array: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Centre and shape for the directions: a first ellipsoid fit, or the quantile box when that fails.
 
@@ -385,9 +418,7 @@ def _default_frame(array: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDA
         return calibration.offset, calibration.matrix
     except CalibrationError:
         low, high = np.quantile(array, _CENTRE_QUANTILES, axis=0)
-        # An axis that hardly varies (level turns only) must not let its noise pick the cells: floor it.
-        half = np.maximum(0.5 * (high - low), _FLAT_AXIS * float(np.max(high - low)))
-        return 0.5 * (low + high), np.diag(1.0 / np.where(half > 0, half, 1.0))
+        return _box_frame(low, high)
 
 
 def _vector(value: ArrayLike, name: str) -> NDArray[np.float64]:
