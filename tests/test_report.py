@@ -309,3 +309,42 @@ def test_report_example_from_the_docs_on_a_real_recording(real_data_dir: Path, t
     ellipsoid = next(row for row in rows if row[0] == "ellipsoid")
     offset = [float(value) for value in ellipsoid[2].strip("()").split(",")]
     np.testing.assert_allclose(offset, [28.557458, -39.981060, -27.428035], atol=0.5)
+
+
+def test_calibrate_plot_draws_the_fit_it_saved(recording, tmp_path) -> None:
+    from magfit.cli import cli
+
+    path, _ = recording
+    figure, saved = tmp_path / "fit.png", tmp_path / "fit.json"
+    result = CliRunner().invoke(
+        cli, ["calibrate", str(path), "--method", "sphere", "--unit", "counts", "-o", str(saved), "--plot", str(figure)]
+    )
+    assert result.exit_code == 0, result.output
+    assert f"All 1,500 samples shown. Wrote the figure to {figure}" in result.output
+    with PIL_Image.open(figure) as picture:
+        assert picture.size == (1600, 1200)
+        assert np.asarray(picture.convert("L"), dtype=np.float64).std() > 20
+    refused = CliRunner().invoke(cli, ["calibrate", str(path), "--plot", str(tmp_path / "fit.txt")])
+    assert refused.exit_code == 2 and "Invalid value for '--plot': 'fit.txt' has no figure extension" in refused.output
+
+
+def test_demo_report_is_refused_before_the_experiment_runs_and_written_by_write_demo_report(tmp_path) -> None:
+    from magfit.cli import cli
+    from magfit.cli.report import write_demo_report
+    from magfit.experiment import run_experiment
+
+    refused = CliRunner().invoke(cli, ["demo", "--report", str(tmp_path / "demo.pdf")])
+    assert (
+        refused.exit_code == 2
+        and "Invalid value for '--report': 'demo.pdf' is not an .html file name" in refused.output
+    )
+    assert "Distance of the calibrated samples" not in refused.output  # nothing ran
+    # What `magfit demo --report` writes, on one case of the experiment to keep the test fast.
+    experiment = run_experiment(800, seed=5, sensors=("ellipse2a",), disturbances=("none",))
+    output = tmp_path / "demo.html"
+    line = write_demo_report(output, experiment)
+    assert line.startswith(f"Wrote the report to {output} (") and line.endswith(" MB)")
+    page = _parse(output.read_text(encoding="utf-8"))
+    assert page.tables["comparison"][1][6:8] == ["0.0003", "0.0108"]  # the paper's Ellipse 2A, no perturbation
+    text = output.read_text(encoding="utf-8")
+    assert "The paper&#x27;s findings on this run: holds: SBG Ellipse 2A, no perturbation" in text

@@ -319,6 +319,12 @@ def write_outputs(
     show_default=True,
     help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
 )
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also draw the samples before and after the fit into this figure (.png, .svg, .pdf), as 'magfit plot'.",
+)
 def calibrate_command(
     file: Path,
     method: str | None,
@@ -327,6 +333,7 @@ def calibrate_command(
     export_format: str | None,
     unit: str | None,
     nonfinite: Nonfinite,
+    plot_path: Path | None,
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -341,7 +348,13 @@ def calibrate_command(
       magfit calibrate mag.txt --method sphere
       magfit calibrate flight.csv --unit uT --export ardupilot -o mag.param
       magfit calibrate flight.csv --export c > mag_cal.h
+      magfit calibrate mag.txt --unit uT --plot mag.png
     """
+    from .plot import check_figure_path, plot_calibration
+
+    if plot_path is not None:
+        check_figure_path(plot_path, "'--plot'")
+        refuse_overwriting_input(plot_path, [file])
     method = method or default_method()
     if output is not None:
         refuse_overwriting_input(output, [file])
@@ -363,6 +376,8 @@ def calibrate_command(
     if written is not None:
         what = f"{export_format} export" if export_format else "calibration"
         summary.print(f"wrote the {what} to {written}")
+    if plot_path is not None:
+        summary.print(plot_calibration(file, run.calibration, plot_path, columns=columns, nonfinite=nonfinite))
     if stdout_text is not None:
         click.echo(stdout_text, nl=not stdout_text.endswith("\n"))
 

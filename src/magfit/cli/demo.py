@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 from rich.console import Console
 from rich.table import Table
@@ -37,7 +39,13 @@ MIN_DEMO_SAMPLES = 100
     show_default=True,
     help="Samples simulated per sensor and disturbance.",
 )
-def demo_command(seed: int, n_samples: int) -> None:
+@click.option(
+    "--report",
+    "report_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the experiment as a self-contained HTML report (tables, plots, 3-D views).",
+)
+def demo_command(seed: int, n_samples: int, report_path: Path | None) -> None:
     """Re-run the paper's experiment on simulated sensors and print its tables.
 
     Two sensors (MPU-9250 in raw counts, SBG Ellipse 2A in normalised units) in three situations (no
@@ -51,13 +59,19 @@ def demo_command(seed: int, n_samples: int) -> None:
     Example:
       magfit demo
       magfit demo --seed 7 -n 20000
+      magfit demo --report demo.html
     """
+    from .report import check_html_path, write_demo_report
+
+    if report_path is not None:
+        check_html_path(report_path, "'--report'")
     experiment = run_experiment(n_samples, seed=seed)
     out = console()
     print_distance_tables(out, experiment)
     print_ellipsoid_tables(out, experiment)
     print_findings(out, experiment)
-    # Other renderings of the same `experiment` (e.g. an HTML report behind an option) belong after this.
+    if report_path is not None:
+        out.print(write_demo_report(report_path, experiment), soft_wrap=True)
 
 
 def print_distance_tables(out: Console, experiment: Experiment) -> None:

@@ -9,6 +9,7 @@ from typing import Literal
 import click
 from numpy.typing import ArrayLike
 
+from ..calibration import Calibration
 from ..compare import PAPER_METHODS, Comparison, compare
 from ..errors import CalibrationError
 from ._common import (
@@ -44,12 +45,11 @@ def fit_for_plot(samples: ArrayLike, methods: Sequence[str], path: Path) -> Comp
     return comparison
 
 
-def check_figure_path(output: Path) -> None:
+def check_figure_path(output: Path, option: str = "'-o' / '--output'") -> None:
     """Refuse an output whose extension is not a figure format, before any work is done."""
     if output.suffix.lower() not in FIGURE_EXTENSIONS:
         raise click.BadParameter(
-            f"{output.name!r} has no figure extension; use one of {', '.join(FIGURE_EXTENSIONS)}",
-            param_hint="'-o' / '--output'",
+            f"{output.name!r} has no figure extension; use one of {', '.join(FIGURE_EXTENSIONS)}", param_hint=option
         )
 
 
@@ -148,3 +148,27 @@ def plot_command(
                 soft_wrap=True,
             )
     out.print(f"{figure.get_supxlabel()} Wrote the figure to {output}", soft_wrap=True)
+
+
+def plot_calibration(
+    file: Path,
+    calibration: Calibration,
+    output: Path,
+    *,
+    columns: Sequence[str | int] | None,
+    nonfinite: Literal["skip", "error"],
+) -> str:
+    """Draw ``file``'s samples before and after ``calibration`` into ``output`` (``calibrate --plot``).
+
+    Returns
+    -------
+    str
+        The line to print: how many samples are shown and where the figure went.
+    """
+    from ..io import read_samples
+    from ..plot import calibration_figure, save_figure
+
+    table = read_samples(file, columns=columns, nonfinite=nonfinite)
+    figure = calibration_figure(table.samples, calibration, title=file.name)
+    save_figure(figure, output)
+    return f"{figure.get_supxlabel()} Wrote the figure to {output}"
