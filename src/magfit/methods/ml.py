@@ -289,7 +289,7 @@ def _levenberg_marquardt(model: _Model, params: NDArray[np.float64], max_iterati
     normal equations lose no accuracy that matters, and they accumulate chunk by chunk.
 
     Stops when the gradient vanishes, when the cost changes by less than 1e-12 of itself, or when the
-    step moves every parameter by less than 1e-3 of its standard error (a change no data could show).
+    step is shorter than 1e-3 standard errors of the fit in its own direction (a change no data could show).
     """
     current = model.evaluate(params)
     if not np.isfinite(current.cost):
@@ -313,8 +313,11 @@ def _levenberg_marquardt(model: _Model, params: NDArray[np.float64], max_iterati
             if damping > 1e10:
                 return _Solution(params, current, 3, "no step lowers the cost: at a minimum", iteration)
         reduction = current.cost - trial.cost
-        # |δ_i| / standard error_i, the standard error taken as σ / sqrt((JᵀJ)_ii) with σ² = 2 cost / n.
-        step_in_errors = float(np.max(np.abs(step) * np.sqrt(diagonal))) / (residual_norm / math.sqrt(n))
+        # The step's length in standard errors: sqrt(δᵀ JᵀJ δ) / σ, σ² = 2 cost / (n − 9). That is the
+        # Mahalanobis length in the parameters' covariance σ² (JᵀJ)⁻¹, so a slow crawl along a direction the
+        # data barely determine counts in that direction's own (large) uncertainty.
+        sigma = residual_norm / math.sqrt(max(n - model.size, 1))
+        step_in_errors = math.sqrt(max(float(step @ current.normal @ step), 0.0)) / sigma
         params, current = params + step, trial
         damping = max(damping / 10.0, 1e-12)
         if reduction <= 1e-12 * current.cost:
@@ -335,7 +338,7 @@ def fit_ml(
     *,
     field_strength: float | None = None,
     bias_correction: bool = True,
-    max_iterations: int = 50,
+    max_iterations: int = 200,
     root: str = "sqrt",
 ) -> Calibration:
     """Refine the ellipsoid by least squares on the orthogonal distances of the samples (Gaussian ML).
