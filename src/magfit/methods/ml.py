@@ -31,8 +31,9 @@ Levenberg–Marquardt (analytic Jacobian, normal equations: see :func:`_levenber
 
 Known field strength: unlike the sphere's radius, the size of a general ellipsoid is fitted from the
 data, and B cannot be pinned inside the fit without assuming ``det W = 1`` (soft iron that keeps the
-volume), which real iron breaks (the paper's steel case: semi-axes 0.70 B on geometric average). So,
-as for ``ellipsoid``, a given ``field_strength`` scales the correction matrix only.
+volume), which real iron breaks (the paper's steel cases as ``magfit.scenario`` simulates them: semi-axes
+of geometric mean 2.1 B and 0.70 B). So, as for ``ellipsoid``, a given ``field_strength`` scales the
+correction matrix only.
 """
 
 from __future__ import annotations
