@@ -12,6 +12,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 import magfit
 from magfit import Calibration, Simulation
@@ -149,3 +152,37 @@ def test_tilting_only_recording_is_refused(real_data_dir: Path) -> None:
     samples = pd.read_csv(real_data_dir / "android_phone_kritiksoman" / "data_mag.txt")[["x", "y", "z"]]
     with pytest.raises(magfit.CalibrationError):
         magfit.fit(samples.to_numpy(), method="ml")
+
+
+def test_falls_back_to_the_algebraic_start_when_als_has_no_ellipsoid(monkeypatch: pytest.MonkeyPatch) -> None:
+    from magfit.methods import ml
+
+    def no_als(*args: object, **kwargs: object) -> None:
+        raise magfit.CalibrationError("the als fit failed: stand-in for a hyperboloid")
+
+    monkeypatch.setattr(ml, "als_theta", no_als)
+    scenario = magfit.scenario("ellipse2a", "steel")
+    n = 3000
+    sim = scenario.simulate(n, seed=40)
+    cal = magfit.fit(sim.samples, method="ml", diagnostics=False)
+    assert cal.details["start"] == "ellipsoid"
+    tol = 20 * scenario.noise / min(scenario.semi_axes) / np.sqrt(n)
+    assert shape_error(cal, sim.truth) < 3 * tol
+    assert offset_error(cal, sim) < tol
+
+
+@settings(max_examples=5, deadline=None)
+@given(angles=st.tuples(*[st.floats(-180.0, 180.0)] * 3), shift=st.tuples(*[st.floats(-100.0, 100.0)] * 3))
+def test_ml_is_equivariant_under_rotation_and_translation_of_the_input(
+    angles: tuple[float, float, float], shift: tuple[float, float, float]
+) -> None:
+    samples = magfit.scenario("ellipse2a", "smartphone").simulate(1500, seed=41).samples
+    rotation = Rotation.from_euler("xyz", angles, degrees=True).as_matrix()
+    base = magfit.fit(samples, method="ml", diagnostics=False)
+    turned = magfit.fit(samples @ rotation.T + np.asarray(shift), method="ml", diagnostics=False)
+    # Both stop within 1e-3 standard errors of the same optimum, so they agree far inside the noise.
+    scale = np.linalg.norm(base.ellipsoid_matrix)
+    np.testing.assert_allclose(turned.offset, rotation @ base.offset + shift, atol=1e-5 + 1e-9 * max(map(abs, shift)))
+    np.testing.assert_allclose(
+        turned.ellipsoid_matrix, rotation @ base.ellipsoid_matrix @ rotation.T, atol=1e-5 * scale
+    )
