@@ -217,6 +217,11 @@ def test_scatter_panels_draw_at_most_max_points(steel) -> None:
     points = [len(collection.get_offsets()) for collection in panels["before-xy"].collections]
     assert len(points) == 1 and 400 <= points[0] <= 500
     assert figure.get_supxlabel().startswith(f"{points[0]} of 3,000 samples shown")
+    # All 3000 in the 2-D panels; the 3-D panels, where a dense cloud hides the wireframe, one in two.
+    everything = plot.calibration_figure(simulation.samples, fits[0], max_points=3000)
+    assert everything.get_supxlabel() == "All 3,000 samples shown. The 3-D panels show one in 2 of them."
+    cloud = {a.get_label(): a for a in everything.axes}["raw-3d"].collections[0]
+    assert len(cloud.get_offsets()) == 1500
     # The unit falls back to the calibration's, then to "raw units".
     assert panels["before-xy"].get_xlabel() == "x (raw units)"
     labelled = plot.calibration_figure(simulation.samples[:300], fits[0].with_unit("uT"), max_points=100)

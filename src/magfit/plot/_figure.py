@@ -170,7 +170,11 @@ def calibration_figure(
     _draw_histogram(figure.add_subplot(grid[1, 3]), prepared)
     _draw_parameters(figure.add_subplot(grid[2, 3]), prepared)
     figure.suptitle(_title(prepared, title), fontsize=13)
-    figure.supxlabel(shown_caption(prepared.shown.size, prepared.samples.shape[0]), fontsize=10)
+    caption = shown_caption(prepared.shown.size, prepared.samples.shape[0])
+    step = _thin_3d(prepared)
+    if step > 1:
+        caption += f" The 3-D panels show one in {step} of them."
+    figure.supxlabel(caption, fontsize=10)
     return figure
 
 
