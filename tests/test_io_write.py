@@ -199,3 +199,13 @@ def test_atomic_open_rejects_append_and_missing_directory(tmp_path: Path) -> Non
     with pytest.raises(DataFileError, match=re.escape(f"{missing}: the directory {missing.parent} does not exist")):
         atomic_write_text(missing, "x")
     assert not os.path.exists(missing.parent)
+
+
+def test_bom_before_headerless_data_is_kept(tmp_path: Path, calibration, raw) -> None:
+    # Found by the property test: the byte-order mark sat in the first data line and was lost.
+    path = tmp_path / "in.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + "".join(",".join(map(repr, map(float, row))) + "\n" for row in raw).encode())
+    assert read_samples(path).format.data_offset == 3
+    out = write_calibrated(path, calibration, tmp_path / "out.csv")
+    assert out.read_bytes().startswith(b"\xef\xbb\xbf") and out.read_bytes()[3:4] != b"\xef"
+    np.testing.assert_allclose(read_samples(out).samples, calibration.apply(raw), rtol=RTOL)

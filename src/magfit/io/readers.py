@@ -332,7 +332,8 @@ def _sniff_text(path: Path, head: bytes, truncated: bool) -> FileFormat:
         n_columns=n_columns,
         decimal=decimal,
         data_line=first_data,
-        data_offset=sum(len(raw) for raw in raw_lines[:first_data]),
+        # Past the byte-order mark even when the data start on the first line (no header, no preamble).
+        data_offset=max(sum(len(raw) for raw in raw_lines[:first_data]), 3 if encoding == "utf-8-sig" else 0),
     )
 
 
