@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import shutil
 import sys
+import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import IO, TYPE_CHECKING, Any, Protocol
 
 import click
 import numpy as np
@@ -37,7 +40,7 @@ from ._common import (
 )
 
 if TYPE_CHECKING:
-    from ..io import ChunkReader
+    from ..io import ChunkReader, FileFormat
 
 #: Reports progress: called with the number of rows just processed.
 Advance = Callable[[int], None]
@@ -48,6 +51,11 @@ NONFINITE_CHOICES = ("skip", "error")
 STREAM_CHUNK_ROWS = 250_000
 #: Most rows a streamed fit keeps for its diagnostics (2.4 MB); more only sharpen the uncertainty figures.
 DIAGNOSE_SAMPLES = 100_000
+#: Memory an iterative fit (ml, robust, auto) needs per sample, all told: the float64 samples (24 bytes),
+#: the reader's parse of the whole file (about 60 with pandas) and the method's working arrays (up to
+#: about 90, robust on 1 M samples). A file estimated above half the available memory at this rate is
+#: fitted on an even subsample (docs/scaling.md).
+BYTES_PER_FIT_SAMPLE = 256
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,6 +80,9 @@ class CalibrationRun:
         The layout the reader found (``FileFormat.describe()``: delimiter, header, preamble ...).
     streamed : bool
         True when the file was read in chunks (a method that needs only the statistics).
+    subsample : str or None
+        None when the fit used every sample; else why it used an even subsample (``--even``, or a file
+        too large for memory), ``calibration.n_samples`` being how many.
     """
 
     path: Path
@@ -83,6 +94,7 @@ class CalibrationRun:
     skipped_lines: tuple[int, ...]
     file_format: str
     streamed: bool
+    subsample: str | None = None
 
 
 class _ReadResult(Protocol):
@@ -107,20 +119,37 @@ def run_calibration(
     columns: Sequence[str | int] | None = None,
     nonfinite: Nonfinite = "skip",
     unit: str | None = None,
+    even: bool = False,
+    max_samples: int | None = None,
 ) -> CalibrationRun:
     """Read ``path``, fit ``method`` and score the fit; memory stays bounded for streaming methods.
 
     Methods whose ``METHODS[method].data`` is ``"statistics"`` read the file in chunks into a
     :class:`~magfit.Statistics` (a first pass), fit, then score the fit in a second pass over the chunks:
-    only one chunk is ever in memory. Methods that need the samples load the whole file.
+    only one chunk is ever in memory. Methods that need the samples load the whole file when it fits in
+    memory (at most ``max_samples`` rows, default :func:`memory_sample_limit`), and otherwise stream it
+    and fit a spatially even subsample of ``max_samples`` rows. ``even`` fits the even subsample of
+    :func:`magfit.sampling.even_subsample` (every direction weighs the same) with any method.
     """
     spec = get_method(method)
-    if spec.data == "statistics":
+    limit = memory_sample_limit() if max_samples is None else max_samples
+    subsample = "--even" if even else None
+    if spec.data == "statistics" and not even:
         calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite)
         streamed = True
-    else:
-        calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite)
+    elif _estimated_rows(path) <= limit:
+        calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite, even=even)
         streamed = False
+    else:
+        calibration, evaluation, read, limited = _fit_subsample(
+            path, method, columns, nonfinite, even=even, limit=limit
+        )
+        streamed = True
+        if limited:
+            bound = f"the file has more rows than --max-samples {limit}"
+            if max_samples is None:
+                bound += ", the default: half the available memory"
+            subsample = f"--even; {bound}" if even else bound
     if unit is not None:
         calibration = calibration.with_unit(unit)
     return CalibrationRun(
@@ -133,29 +162,157 @@ def run_calibration(
         skipped_lines=tuple(int(line) for line in read.skipped_lines),
         file_format=read.format.describe(),
         streamed=streamed,
+        subsample=subsample,
     )
 
 
+def memory_sample_limit() -> int:
+    """Most samples an iterative fit holds: half the available memory at :data:`BYTES_PER_FIT_SAMPLE` each."""
+    available = 4 << 30  # when the system does not say
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    available = int(line.split()[1]) * 1024
+                    break
+    except (OSError, ValueError):
+        try:
+            available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            pass
+    return max(100_000, available // 2 // BYTES_PER_FIT_SAMPLE)
+
+
+def _estimated_rows(path: Path) -> int:
+    """Data rows in ``path``, estimated without reading it all: exact for npy, from the line lengths for text."""
+    from ..io import sniff
+
+    return _rows_in(path, sniff(path))
+
+
+def _rows_in(path: Path, fmt: FileFormat) -> int:
+    """:func:`_estimated_rows` for a file whose layout is known."""
+    if fmt.kind == "npy":
+        return int(np.load(path, mmap_mode="r").shape[0])
+    if fmt.kind == "npz":  # an upper bound: every member, uncompressed, as float64 triples
+        import zipfile
+
+        with zipfile.ZipFile(path) as archive:
+            return sum(info.file_size for info in archive.infolist()) // 24
+    size = path.stat().st_size - fmt.data_offset
+    with open(path, "rb") as handle:
+        handle.seek(fmt.data_offset)
+        head = handle.read(1 << 20)
+    return int(size * max(head.count(b"\n"), 1) / max(len(head), 1))
+
+
 def _fit_in_memory(
-    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: Nonfinite
+    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: Nonfinite, *, even: bool = False
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import read_samples
 
     table = read_samples(path, columns=columns, nonfinite=nonfinite)
     _require_rows(path, table.samples.shape[0], table)
-    samples = _samples_for_fit(table.samples)
+    samples = _samples_for_fit(table.samples, even)
     calibration = fit(samples, method=method)
     return calibration, evaluate(calibration, table.samples), table
 
 
-def _samples_for_fit(samples: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The samples a ``data="samples"`` method is fitted to.
+def _samples_for_fit(samples: NDArray[np.float64], even: bool) -> NDArray[np.float64]:
+    """The samples the fit uses: all of them, or with ``--even`` the even subsample (docs/scaling.md).
 
-    SUBSAMPLING HOOK: for huge files, a spatially even subsample (equal coverage of the sphere of
-    directions, so dense dwell regions do not dominate) belongs here; the fit then runs on it while the
-    score is still computed on every sample. Today every sample is used.
+    The score is still computed on every sample.
     """
-    return samples
+    if not even:
+        return samples
+    from ..sampling import even_subsample
+
+    return samples[even_subsample(samples)]
+
+
+def _fit_subsample(
+    path: Path,
+    method: str,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    *,
+    even: bool,
+    limit: int,
+) -> tuple[Calibration, Evaluation, _ReadResult, bool]:
+    """Stream a file too large for memory: statistics, an even subsample of at most ``limit`` rows, fit, score.
+
+    The last item returned is true when ``limit`` thinned the samples (not only ``even``).
+
+    The directions of the subsample start from the ellipsoid fit of the whole file's statistics
+    (:func:`magfit.sampling.direction_frame`); without ``even`` the cells are capped only as far as
+    ``limit`` requires, so the densest directions give way first (:func:`magfit.sampling.even_subsample_chunks`).
+    """
+    from ..compare import evaluate_chunks
+    from ..io import iter_sample_chunks
+    from ..sampling import direction_frame, even_subsample_chunks
+
+    def chunks() -> ChunkReader:
+        return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
+
+    reader = chunks()
+    statistics = Statistics()
+    with _Spill(reader) as spill:
+        with _progress(f"reading {path.name}") as advance:
+            for chunk in reader:
+                statistics.update(chunk)
+                spill.write(chunk)
+                advance(len(chunk))
+        _require_rows(path, statistics.n, reader)
+        source = spill.chunks if spill.complete else chunks
+        centre, shape = direction_frame(statistics)
+        with _progress(f"sampling {path.name} evenly") as advance:
+            sampler = even_subsample_chunks(
+                lambda: _counted(source(), advance), centre=centre, shape=shape, max_samples=limit, cap_at_median=even
+            )
+        calibration = fit(sampler.samples, method=method)
+        with _progress(f"scoring the fit on {path.name}") as advance:
+            evaluation = evaluate_chunks(calibration, _counted(source(), advance))
+    limited = sampler.max_samples == limit and len(sampler.indices) < statistics.n
+    return calibration, evaluation, reader, limited
+
+
+class _Spill:
+    """The samples of a first pass over a text file, kept as raw float64 in a temporary file.
+
+    Later passes (scoring, sampling) read 24 bytes a row back instead of parsing the text again, which is
+    most of the time of a pass. Only for text files (npy/npz are read as fast as the spill), and only
+    while the temporary folder has room for it: when a write fails the passes read the file again.
+    """
+
+    def __init__(self, reader: ChunkReader) -> None:
+        self.complete = reader.format.kind == "text"
+        self._file: IO[bytes] | None = None
+        if self.complete:
+            room = shutil.disk_usage(tempfile.gettempdir()).free
+            self.complete = _rows_in(reader.path, reader.format) * 24 < room // 2
+        if self.complete:
+            self._file = tempfile.TemporaryFile()
+
+    def __enter__(self) -> _Spill:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._file is not None:
+            self._file.close()
+
+    def write(self, chunk: NDArray[np.float64]) -> None:
+        if not self.complete or self._file is None:
+            return
+        try:
+            self._file.write(np.ascontiguousarray(chunk, dtype=np.float64).tobytes())
+        except OSError:  # the disk filled up: the later passes read the file again
+            self.complete = False
+
+    def chunks(self) -> Iterator[NDArray[np.float64]]:
+        assert self._file is not None
+        self._file.seek(0)
+        while block := self._file.read(STREAM_CHUNK_ROWS * 24):
+            yield np.frombuffer(block, dtype=np.float64).reshape(-1, 3)
 
 
 def _fit_streaming(
@@ -166,22 +323,26 @@ def _fit_streaming(
     def chunks() -> ChunkReader:
         return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
 
-    # Pass 1: the sufficient statistics of eq. (4), one chunk at a time.
+    # Pass 1: the sufficient statistics of eq. (4), one chunk at a time (a text file's samples are spilled
+    # to a temporary binary file on the way, so that pass 2 does not parse the text again).
     reader = chunks()
     statistics = Statistics()
-    with _progress(f"reading {path.name}") as advance:
-        for chunk in reader:
-            statistics.update(chunk)
-            advance(len(chunk))
-    _require_rows(path, statistics.n, reader)
-    calibration = fit(statistics, method=method)
-    # Pass 2: the paper's metric needs the final calibration, so the file is read again; on the way, keep
-    # an evenly strided subsample (bounded) for the diagnostics, which need samples, not statistics.
-    from ..compare import evaluate_chunks
+    with _Spill(reader) as spill:
+        with _progress(f"reading {path.name}") as advance:
+            for chunk in reader:
+                statistics.update(chunk)
+                spill.write(chunk)
+                advance(len(chunk))
+        _require_rows(path, statistics.n, reader)
+        calibration = fit(statistics, method=method)
+        # Pass 2: the paper's metric needs the final calibration, so the samples are read again; on the way,
+        # keep an evenly strided subsample (bounded) for the diagnostics, which need samples, not statistics.
+        from ..compare import evaluate_chunks
 
-    subsample = _Strided(statistics.n, DIAGNOSE_SAMPLES)
-    with _progress(f"scoring the fit on {path.name}") as advance:
-        evaluation = evaluate_chunks(calibration, subsample.collect(_counted(chunks(), advance)))
+        subsample = _Strided(statistics.n, DIAGNOSE_SAMPLES)
+        again = spill.chunks() if spill.complete else chunks()
+        with _progress(f"scoring the fit on {path.name}") as advance:
+            evaluation = evaluate_chunks(calibration, subsample.collect(_counted(again, advance)))
     return _with_diagnostics(calibration, subsample.samples(), statistics.n), evaluation, reader
 
 
@@ -320,6 +481,19 @@ def write_outputs(
     help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
 )
 @click.option(
+    "--even",
+    is_flag=True,
+    help="Fit an even subsample: every direction weighs the same, so a long stay in one attitude does not "
+    "pull the fit (see docs/scaling.md). The score still uses every sample.",
+)
+@click.option(
+    "--max-samples",
+    type=click.IntRange(min=10),
+    default=None,
+    help="Most samples an iterative method (ml, robust, auto) holds in memory; a larger file is fitted on an "
+    "even subsample of this many. Default: from the available memory.",
+)
+@click.option(
     "--plot",
     "plot_path",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -333,6 +507,8 @@ def calibrate_command(
     export_format: str | None,
     unit: str | None,
     nonfinite: Nonfinite,
+    even: bool,
+    max_samples: int | None,
     plot_path: Path | None,
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
@@ -349,6 +525,7 @@ def calibrate_command(
       magfit calibrate flight.csv --unit uT --export ardupilot -o mag.param
       magfit calibrate flight.csv --export c > mag_cal.h
       magfit calibrate mag.txt --unit uT --plot mag.png
+      magfit calibrate parked_then_tumbled.csv --even
     """
     from .plot import check_figure_path, plot_calibration
 
@@ -360,7 +537,9 @@ def calibrate_command(
         refuse_overwriting_input(output, [file])
         if export_format is not None:
             _check_extension(output, export_format)
-    run = run_calibration(file, method=method, columns=columns, nonfinite=nonfinite, unit=unit)
+    run = run_calibration(
+        file, method=method, columns=columns, nonfinite=nonfinite, unit=unit, even=even, max_samples=max_samples
+    )
     stdout_text, written = write_outputs(run, output, export_format, unit)
     summary = console(stderr=stdout_text is not None)
     if run.n_skipped:
@@ -408,6 +587,14 @@ def _choice(calibration: Calibration) -> list[tuple[str, str]]:
     return [("chose", f"{used}" + (f" ({reason})" if reason else ""))]
 
 
+def _fitted_on(run: CalibrationRun) -> list[tuple[str, str]]:
+    """When the fit used an even subsample: how many samples, and why."""
+    if run.subsample is None:
+        return []
+    used = run.calibration.n_samples
+    return [("fitted on", f"an even subsample: {used} of {run.n_rows - run.n_skipped} samples ({run.subsample})")]
+
+
 def print_summary(out: Console, run: CalibrationRun) -> None:
     """The calibration and its score, one labelled line each (plain text: easy to read and to grep)."""
     calibration = run.calibration
@@ -420,6 +607,7 @@ def print_summary(out: Console, run: CalibrationRun) -> None:
         ("rows", f"{run.n_rows} read, {run.n_skipped} skipped" + (" (streamed)" if run.streamed else "")),
         ("method", calibration.method + (f": {spec.summary}" if spec is not None else "")),
         *_choice(calibration),
+        *_fitted_on(run),
         ("offset", vector(calibration.offset, lambda v: significant(v, 6)) + unit),
         ("matrix", matrix_rows[0]),
         ("", matrix_rows[1]),
