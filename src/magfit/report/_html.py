@@ -108,7 +108,7 @@ def report_html(
     *,
     title: str = "magfit calibration report",
     intro: Sequence[str] = (),
-    max_points: int | None = None,
+    max_points: int = DEFAULT_MAX_POINTS,
     max_points_3d: int = DEFAULT_MAX_POINTS_3D,
     seed: int | None = 0,
 ) -> str:
@@ -122,7 +122,7 @@ def report_html(
         Page title and heading.
     intro : sequence of str
         Paragraphs under the heading (plain text).
-    max_points : int, optional
+    max_points : int
         Samples drawn in each panel of the static figure (see :func:`magfit.plot.calibration_figure`).
     max_points_3d : int
         Samples drawn in each interactive 3-D scene.
@@ -183,9 +183,7 @@ def write_report(path: str | Path, sections: Iterable[ReportSection], **options:
 # ---------------------------------------------------------------------------------------------- a section
 
 
-def _section_html(
-    index: int, section: ReportSection, *, max_points: int | None, max_points_3d: int, seed: int | None
-) -> str:
+def _section_html(index: int, section: ReportSection, *, max_points: int, max_points_3d: int, seed: int | None) -> str:
     from ..plot import calibration_figure, figure_png
     from ._interactive import interactive_figure
 
@@ -213,7 +211,7 @@ def _section_html(
         unit=unit,
         title=section.title,
         seed=seed,
-        max_points=DEFAULT_MAX_POINTS if max_points is None else max_points,
+        max_points=max_points,
     )
     png = _compact_png(figure_png(figure))
     caption = figure.get_supxlabel()  # "N of M samples shown ..."
