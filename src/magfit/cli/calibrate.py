@@ -304,7 +304,7 @@ class _Spill:
         if not self.complete or self._file is None:
             return
         try:
-            self._file.write(np.ascontiguousarray(chunk, dtype=np.float64).tobytes())
+            self._file.write(np.ascontiguousarray(chunk, dtype=np.float64).data)  # no copy to bytes
         except OSError:  # the disk filled up: the later passes read the file again
             self.complete = False
 
