@@ -186,3 +186,24 @@ def test_ml_is_equivariant_under_rotation_and_translation_of_the_input(
     np.testing.assert_allclose(
         turned.ellipsoid_matrix, rotation @ base.ellipsoid_matrix @ rotation.T, atol=1e-5 * scale
     )
+
+
+def test_gauss_newton_polish_reaches_the_bias_corrected_solution_from_the_plain_one() -> None:
+    # The polish that guards Levenberg–Marquardt's stop: started from the plain geometric optimum (about
+    # σ²/B away), it must land where the full bias-corrected fit lands.
+    from magfit.methods import ml
+
+    sim = magfit.simulate(20_000, soft_iron=SOFT_IRON, hard_iron=[0.5, -0.3, 0.2], noise=0.1, seed=5)
+    statistics = magfit.Statistics.from_samples(sim.samples)
+    zt = (sim.samples.T - statistics.centre[:, None]) / statistics.scale
+    _, centre, shape, variance = ml._start(statistics)
+    assert variance is not None
+    plain = ml._levenberg_marquardt(ml._Model(zt, 0.0), ml._Model(zt, 0.0).pack(centre, np.linalg.cholesky(shape)), 200)
+    corrected_model = ml._Model(zt, variance)
+    start = ml._Solution(plain.params, corrected_model.evaluate(plain.params), plain.status, "", plain.iterations)
+    polished = ml._solve_estimating_equation(corrected_model, start, 50)
+    assert polished.status > 0 and polished.iterations > plain.iterations
+    full = magfit.fit(sim.samples, method="ml", diagnostics=False)
+    centre_z, lower = corrected_model.unpack(polished.params)
+    np.testing.assert_allclose(statistics.centre + statistics.scale * centre_z, full.offset, atol=1e-5)
+    np.testing.assert_allclose(lower @ lower.T / statistics.scale**2, full.ellipsoid_matrix, rtol=1e-4)

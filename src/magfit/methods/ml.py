@@ -328,6 +328,47 @@ def _levenberg_marquardt(model: _Model, params: NDArray[np.float64], max_iterati
     return _Solution(params, current, 0, "the iteration limit was reached", max_iterations)
 
 
+def _score_length(evaluation: _Evaluation, size: int) -> tuple[float, NDArray[np.float64]]:
+    """The undamped Gauss–Newton step ``δ = −(JᵀJ)⁻¹ Jᵀr`` and its length in standard errors, ``√(δᵀJᵀJδ)/σ``."""
+    step = np.asarray(np.linalg.solve(evaluation.normal, -evaluation.gradient), dtype=np.float64)
+    n = evaluation.roots.shape[0]
+    sigma = math.sqrt(2.0 * evaluation.cost / max(n - size, 1)) + 1e-300
+    return math.sqrt(max(float(-step @ evaluation.gradient), 0.0)) / sigma, step
+
+
+def _solve_estimating_equation(model: _Model, solution: _Solution, max_iterations: int) -> _Solution:
+    """Drive the bias-corrected estimating equation ``Jᵀ r = 0`` to zero by Gauss–Newton steps.
+
+    With the correction, ``r = d − σ² H`` and the Jacobian leaves out ``σ² ∂H/∂θ``, so the least-squares
+    cost that Levenberg–Marquardt watches is not exactly the function whose stationary point is wanted:
+    near the solution its steps can stop lowering that cost and shrink without reaching ``Jᵀ r = 0``
+    (seen on tilt-limited coverage at 10 % noise). This polish accepts a step (halved up to 20 times)
+    when it shortens the Gauss–Newton step itself, and stops when that step is below 1e-3 standard
+    errors: then ``Jᵀ r = 0`` holds far inside the noise.
+    """
+    params, current = solution.params, solution.evaluation
+    length, step = _score_length(current, model.size)
+    if length <= 1e-3:  # the usual case: Levenberg–Marquardt already ended on the solution
+        return solution
+    for iteration in range(1, max_iterations + 1):
+        if length <= 1e-3:
+            return _Solution(
+                params, current, max(solution.status, 1), "the estimating equation holds to 1e-3 standard errors",
+                solution.iterations + iteration - 1,
+            )  # fmt: skip
+        fraction = 1.0
+        for _ in range(20):
+            trial = model.evaluate(params + fraction * step, current.roots)
+            trial_length, trial_step = _score_length(trial, model.size)
+            if np.isfinite(trial.cost) and trial_length < length:
+                break
+            fraction *= 0.5
+        else:
+            return _Solution(params, current, 0, "the bias-corrected equation has no nearby solution", iteration)
+        params, current, length, step = params + fraction * step, trial, trial_length, trial_step
+    return _Solution(params, current, 0, "the iteration limit was reached", solution.iterations + max_iterations)
+
+
 @register(
     "ml",
     min_samples=10,
@@ -379,6 +420,8 @@ def fit_ml(
         variance = 2.0 * plain.evaluate(plain.pack(centre_z, np.linalg.cholesky(shape_z))).cost / zt.shape[1]
     model = _Model(zt, variance if bias_correction else 0.0)
     solution = _levenberg_marquardt(model, model.pack(centre_z, np.linalg.cholesky(shape_z)), int(max_iterations))
+    if solution.status > 0 and model.variance > 0:
+        solution = _solve_estimating_equation(model, solution, int(max_iterations))
     if solution.status <= 0 or not np.all(np.isfinite(solution.params)):
         raise CalibrationError(
             f"the ml fit did not converge ({solution.message}, after {solution.iterations} iterations); "
