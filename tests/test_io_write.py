@@ -209,3 +209,11 @@ def test_bom_before_headerless_data_is_kept(tmp_path: Path, calibration, raw) ->
     out = write_calibrated(path, calibration, tmp_path / "out.csv")
     assert out.read_bytes().startswith(b"\xef\xbb\xbf") and out.read_bytes()[3:4] != b"\xef"
     np.testing.assert_allclose(read_samples(out).samples, calibration.apply(raw), rtol=RTOL)
+
+
+def test_quoted_cells_keep_their_quotes(tmp_path: Path) -> None:
+    path = tmp_path / "in.csv"
+    path.write_text('time,mx,my,mz,note\n"2024-01-01, 00:00",1,2,3,"a, ""b"""\n"x", "4" ,5,6,plain\n')
+    shift = magfit.Calibration("shift", [1.0, 2.0, 3.0], np.eye(3), 50.0)
+    out = write_calibrated(path, shift, tmp_path / "out.csv")
+    assert out.read_text() == 'time,mx,my,mz,note\n"2024-01-01, 00:00",0,0,0,"a, ""b"""\n"x", "3" ,3,3,plain\n'

@@ -286,6 +286,8 @@ def _sniff_text(path: Path, head: bytes, truncated: bool) -> FileFormat:
         if cells and sum(bool(_DECIMAL_COMMA.match(cell)) for cell in cells) >= 0.5 * len(cells):
             decimal = ","
     kinds = [[_cell_kind(cell, decimal) for cell in row] for row in rows]
+    # A header in a short sample would outvote the few data rows: lines without any number do not vote.
+    kinds = [row for row in kinds if "number" in row] or kinds
     numeric = [
         j
         for j in range(n_columns)

@@ -137,10 +137,13 @@ class _TextRewriter:
         self.whitespace = fmt.delimiter == "whitespace"
         self.delimiter = b" " if self.whitespace else fmt.delimiter.encode()
         self.split_byte = self.delimiter[:1]
+        # One field: quoted parts ("a, b" with "" for a quote) and other bytes, up to the next delimiter.
+        other = re.escape(self.split_byte)
+        self._quoted_field = re.compile(rb'(?:"(?:[^"]|"")*"|[^"' + other + rb"])*")
         self.encoding = "utf-8" if fmt.encoding == "utf-8-sig" else fmt.encoding
 
     def _number(self, cell: bytes, line: int, axis: int) -> float:
-        text = cell.strip()
+        text = cell.strip().strip(b'"').strip()
         if text in _NA_BYTES:
             return float("nan")
         try:
@@ -176,18 +179,22 @@ class _TextRewriter:
         return fields, spans
 
     def _quoted_fields(self, body: bytes, line: int) -> list[bytes]:
-        import csv
-
-        text = body.decode(self.encoding)
-        fields = next(csv.reader([text], delimiter=self.fmt.delimiter[0], skipinitialspace=True))  # type: ignore[index]
-        if len(fields) != self.fmt.n_columns:
-            raise self.reader._field_count_error(line, len(fields))
-        quoted = []
-        for cell in fields:
-            if any(char in cell for char in (self.fmt.delimiter[0], '"', "\n")):  # type: ignore[index]
-                cell = '"' + cell.replace('"', '""') + '"'
-            quoted.append(cell.encode(self.encoding))
-        return quoted
+        """The raw fields of a line with quoted cells (a quoted cell may hold the delimiter), quotes kept."""
+        fields, position = [], 0
+        while True:
+            match = self._quoted_field.match(body, position)
+            assert match is not None  # the pattern also matches an empty field
+            fields.append(match.group(0))
+            position = match.end()
+            if position == len(body):
+                return fields
+            if body[position : position + 1] != self.split_byte:
+                raise _error(
+                    self.reader.path,
+                    f"line {line}: a quote is not closed or is followed by text ({body[position:][:20]!r}); "
+                    "fix the quotes of that line",
+                )
+            position += 1
 
     def _parse(self, block: bytes, kept: list[tuple[int, list[bytes], list[tuple[int, int]] | None, bytes, bytes]],
                first_line: int) -> NDArray[np.float64]:  # fmt: skip
@@ -289,13 +296,14 @@ class _TextRewriter:
                 continue
             for index, text in zip(self.indices, new, strict=True):
                 cell = fields[index]
+                stripped = cell.strip()
+                if stripped[:1] == b'"':  # a quoted number stays quoted
+                    text = b'"' + text + b'"'
                 if cell[:1].isspace() or cell[-1:].isspace():  # keep the spaces around a cell (", " files)
-                    stripped = cell.strip()
                     lead = cell[: cell.find(stripped)] if stripped else cell
                     text = lead + text + (cell[len(lead) + len(stripped) :] if stripped else b"")
                 fields[index] = text
-            joiner = self.delimiter if b'"' in body else self.split_byte  # csv-parsed fields lost their spaces
-            lines[offset] = joiner.join(fields) + ending
+            lines[offset] = self.split_byte.join(fields) + ending
         return b"\n".join(lines)
 
 
