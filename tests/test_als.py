@@ -185,3 +185,12 @@ def test_als_is_equivariant_under_rotation_and_translation_of_the_input(
         turned.ellipsoid_matrix, rotation @ base.ellipsoid_matrix @ rotation.T, rtol=1e-6, atol=1e-9
     )
     assert turned.details["noise_std"] == pytest.approx(base.details["noise_std"], rel=1e-6)
+
+
+def test_no_noise_variance_that_makes_psi_singular_is_an_error() -> None:
+    # A ψ_als whose smallest eigenvalue never reaches 0 (here ψ(s) = I for every s): no ellipsoid plus
+    # isotropic noise explains the moments, and the estimate must say so rather than return the bound.
+    statistics = magfit.Statistics.from_samples(magfit.scenario("ellipse2a", "none").simulate(200, seed=11).samples)
+    never_singular = (np.eye(10), np.zeros((10, 10)), np.zeros((10, 10)))
+    with pytest.raises(magfit.CalibrationError, match="no noise variance"):
+        estimate_noise_variance(statistics, never_singular)

@@ -119,7 +119,7 @@ def estimate_noise_variance(statistics: Statistics, psi: tuple[NDArray[np.float6
 
 
 def als_theta(statistics: Statistics, noise_std: float | None = None) -> tuple[NDArray[np.float64], float, float]:
-    """ALS quadric coefficients θ (normalised frame), the noise σ used (input units) and λ_min of ψ_als(σ̂²).
+    """ALS quadric coefficients θ (normalised frame), the noise σ used (input units) and λ_min / λ_max of ψ_als.
 
     ``noise_std`` (input units) fixes σ; ``None`` estimates it from the data.
     """
