@@ -74,7 +74,7 @@ class FileFormat:
     data_line : int
         Lines before the first data row (preamble, header and blank lines).
     data_offset : int
-        Byte offset of the first data row.
+        Byte offset of the first data row (after the byte-order mark, if any).
     """
 
     kind: _Kind
