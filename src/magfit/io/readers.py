@@ -403,7 +403,7 @@ def sniff(path: str | os.PathLike[str]) -> FileFormat:
     kind = _kind_of(file, head)
     if kind == "npy":
         info = _npy_info(file)
-        n_columns = info.shape[1] if len(info.shape) == 2 else (info.shape[0] if info.shape else 0)
+        n_columns = info.shape[1] if len(info.shape) == 2 else (1 if len(info.shape) == 1 else 0)
         return FileFormat("npy", None, "binary", 0, None, n_columns)
     if kind == "npz":
         keys = tuple(_npz_members(file))
