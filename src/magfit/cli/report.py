@@ -9,6 +9,7 @@ import click
 
 from ..compare import PAPER_METHODS
 from ._common import (
+    EXIT_FIT_FAILED,
     RegistryChoice,
     console,
     default_method,
@@ -18,7 +19,7 @@ from ._common import (
     warn,
 )
 from .compare import parse_methods
-from .plot import fit_for_plot, methods_in_order
+from .plot import methods_in_order
 
 if TYPE_CHECKING:
     from ..experiment import Experiment
@@ -82,7 +83,9 @@ def check_html_path(output: Path, option: str = "'-o' / '--output'") -> None:
     show_default=True,
     help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
 )
+@click.pass_context
 def report_command(
+    ctx: click.Context,
     files: tuple[Path, ...],
     output: Path,
     method: str | None,
@@ -99,13 +102,16 @@ def report_command(
     For each file: the paper's comparison table for every method, the offsets and semi-axes, the
     diagnostics of each fit (coverage, uncertainty, what the data could not determine), the figure of
     'magfit plot' and an interactive 3-D view of the raw and calibrated samples. Everything is inside the
-    one file (no network access, no CDN), so it can be mailed or archived as it is.
+    one file (no network access, no CDN), so it can be mailed or archived as it is. A method that cannot
+    fit a file is listed with its reason; when no method fits a file the report is still written and the
+    exit status is 1.
 
     \b
     Examples:
       magfit report mag-readings.txt -o report.html --unit uT
       magfit report flight1.csv flight2.csv --methods ellipsoid,sphere -o flights.html
     """
+    from ..compare import compare
     from ..io import atomic_write_text, read_samples
     from ..report import ReportSection, report_html, section_from_comparison
 
@@ -113,6 +119,7 @@ def report_command(
     refuse_overwriting_input(output, files)
     compared = methods_in_order(method or default_method(), methods or PAPER_METHODS)
     sections: list[ReportSection] = []
+    unfitted: list[Path] = []
     out = console()
     for path in files:
         table = read_samples(path, columns=columns, nonfinite=nonfinite)
@@ -120,12 +127,24 @@ def report_command(
         if table.n_skipped:
             warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
             notes.append(f"{table.n_skipped:,} rows with NaN or inf values were skipped.")
-        comparison = fit_for_plot(table.samples, compared, path)
+        # A method that fails is listed in the report with its reason; the first that succeeds is the main one.
+        comparison = compare(table.samples, compared)
+        for result in comparison:
+            if not result.ok:
+                warn(f"{path}: {result.method} could not fit these samples: {result.error}")
+        if not comparison.any_succeeded:
+            unfitted.append(path)
         sections.append(section_from_comparison(path.name, table.samples, comparison, unit=unit, notes=notes))
-        out.print(f"{path}: {len(table.samples):,} samples, {len(comparison)} methods compared", soft_wrap=True)
+        fitted = sum(1 for result in comparison if result.ok)
+        out.print(
+            f"{path}: {len(table.samples):,} samples, {fitted} of {len(comparison)} methods fitted", soft_wrap=True
+        )
     text = report_html(sections, title=title, max_points=max_points, max_points_3d=max_points_3d)
     atomic_write_text(output, text)
     out.print(f"Wrote the report to {output} ({len(text.encode('utf-8')) / 1e6:.1f} MB)", soft_wrap=True)
+    if unfitted:  # as `magfit compare`: the report is written, the exit status says a file could not be fitted
+        warn(f"no method could fit {', '.join(map(str, unfitted))}")
+        ctx.exit(EXIT_FIT_FAILED)
 
 
 def write_demo_report(output: Path, experiment: Experiment) -> str:
