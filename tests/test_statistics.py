@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import pickle
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -323,3 +324,28 @@ def test_merge_needs_statistics() -> None:
 def test_methods_that_need_samples_refuse_statistics(steel: magfit.Simulation, method: str) -> None:
     with pytest.raises(OptionError, match=f"method '{method}' needs the samples, not Statistics"):
         magfit.fit(Statistics.from_samples(steel.samples), method)
+
+
+# ---------------------------------------------------------------------- files streamed into Statistics
+
+
+@pytest.mark.parametrize(
+    "row",
+    [
+        "{x},{y},{z}",  # plain: parsed without stripping blanks (the fast path)
+        "{x}, {y}, {z}",  # comma and space
+        "{x},  {y},\t{z}",  # aligned by hand: blanks before some cells
+    ],
+)
+def test_chunked_file_statistics_equal_the_array_statistics(tmp_path: Path, row: str) -> None:
+    from magfit.io import iter_sample_chunks
+
+    samples = magfit.scenario("ellipse2a", "steel").simulate(3000, seed=3).samples
+    lines = [row.format(x=x, y=y, z=z) for x, y, z in samples.tolist()]
+    lines[1234] = row.format(x=1.0, y="nan", z=2.0)  # a missing value, written with the row's blanks
+    path = tmp_path / "samples.csv"
+    path.write_text("mx,my,mz\n" + "\n".join(lines) + "\n")
+    reader = iter_sample_chunks(path, chunk_rows=700)
+    stats = Statistics.from_chunks(reader)
+    assert reader.n_skipped == 1
+    assert_same_statistics(stats, Statistics.from_samples(np.delete(samples, 1234, axis=0)), rtol=1e-12)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import codecs
 import csv
+import functools
 import io
 import os
 import re
@@ -837,11 +838,24 @@ class ChunkReader:
             "engine": "c",
             "encoding": self._text_encoding,
             "decimal": fmt.decimal,
-            "skipinitialspace": True,
+            "skipinitialspace": self._blank_led_cells,
             "skip_blank_lines": True,
             "na_values": list(NA_VALUES),
             "keep_default_na": False,
         }
+
+    @functools.cached_property
+    def _blank_led_cells(self) -> bool:
+        """Whether cells may start with blanks, as in ``1, nan, 3``: pandas must then strip them
+        (``skipinitialspace``), which costs a quarter of the parse. Numbers parse either way; only a missing
+        value written with a blank before it needs the stripping. Decided on the first data lines."""
+        fmt = self.format
+        if fmt.delimiter is None or fmt.delimiter == "whitespace" or len(fmt.delimiter) > 1:
+            return True
+        head, truncated = _read_head(self.path)
+        _, lines, _ = _decode_lines(self.path, head, truncated)
+        blanks = " \t".replace(fmt.delimiter, "")
+        return any(blank in line for line in lines[fmt.data_line :] for blank in blanks)
 
     @property
     def _text_encoding(self) -> str:
@@ -867,7 +881,10 @@ class ChunkReader:
                         if isinstance(error, DataFileError):
                             raise
                         raise self._bad_cell_error(str(error)) from None
-                    yield self._filter(frame.to_numpy(dtype=np.float64)[:, order], source.line_of_rows)
+                    values = frame.to_numpy(dtype=np.float64)
+                    if order != list(range(len(order))):  # columns asked in another order than the file's
+                        values = values[:, order]
+                    yield self._filter(values, source.line_of_rows)
 
 
 def _next_row(rows: NDArray[np.int64]) -> NDArray[np.int64]:
