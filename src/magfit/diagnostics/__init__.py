@@ -428,10 +428,10 @@ def _refitter(calibration: Calibration) -> Any:
     spec = METHODS[name]
     options = {key: calibration.details[key] for key in spec.options if key in calibration.details}
     if name == "auto" and "chosen_model" in calibration.details:
-        from ..methods.robust import fit_model
+        from ..methods.auto import fit_chosen
 
         chosen = str(calibration.details["chosen_model"])
-        return lambda samples: fit_model(chosen, samples)
+        return lambda samples: fit_chosen(chosen, samples)
 
     def run(samples: NDArray[np.float64]) -> Calibration:
         statistics = Statistics.from_samples(samples)

@@ -122,6 +122,54 @@ def residuals(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDAr
     return np.asarray(np.linalg.norm((z - p[:3]) @ unit_map(p, kind), axis=1) - 1.0)
 
 
+def distances(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArray[np.float64]:
+    """First-order distance of each normalised sample to the ellipsoid, in the units of z, shape (N,).
+
+    ``r / |L u|`` (Sampson's approximation: the residual over the norm of its gradient in z, with
+    u = L y / |L y|): unlike r it measures in the sample space, where the noise is isotropic, so it is the
+    residual of the maximum-likelihood fit and cannot shrink by stretching the ellipsoid along a direction
+    the samples do not cover.
+    """
+    lmat = unit_map(p, kind)
+    w = (z - p[:3]) @ lmat
+    norm = np.linalg.norm(w, axis=1)
+    return np.asarray((norm**2 - norm) / np.linalg.norm(w @ lmat, axis=1))  # (n − 1) / |L u|, u = w / n
+
+
+def distance_jacobian(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArray[np.float64]:
+    """∂d/∂p of :func:`distances`, shape (N, k).
+
+    With w = L y, n = |w| and q = L w = L² y, ``d = (n² − n) / |q|``, so
+    ``∂d = ((2n − 1) ∂n − d ∂|q|) / |q|`` where ∂n = ∂r is :func:`jacobian` and
+    ``∂|q| = q̂ · ∂q``: −L² along the offset, ``E w + L E y`` along an entry of L (E = e_j e_kᵀ, symmetrised).
+    """
+    lmat = unit_map(p, kind)
+    y = z - p[:3]
+    w = y @ lmat
+    n = np.linalg.norm(w, axis=1)
+    q = w @ lmat
+    q_norm = np.linalg.norm(q, axis=1)
+    q_hat = q / np.where(q_norm > 0, q_norm, 1.0)[:, None]
+    q_l = q_hat @ lmat  # (q̂ᵀ L) per row
+    columns = [-(q_l @ lmat)]
+    if kind == "sphere":
+        columns.append((2.0 * p[3] * np.linalg.norm(y, axis=1))[:, None])
+    else:
+        columns.append(q_hat * w + q_l * y)
+        if kind == "full":
+            columns.append(
+                np.column_stack(
+                    [
+                        q_hat[:, j] * w[:, k] + q_hat[:, k] * w[:, j] + q_l[:, j] * y[:, k] + q_l[:, k] * y[:, j]
+                        for j, k in _OFF_DIAGONAL
+                    ]
+                )
+            )
+    d_q = np.hstack(columns)
+    d = (n**2 - n) / q_norm
+    return np.asarray(((2.0 * n - 1.0)[:, None] * jacobian(p, z, kind) - d[:, None] * d_q) / q_norm[:, None])
+
+
 def jacobian(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArray[np.float64]:
     """∂r/∂p, shape (N, k): ∂r/∂v = −L u, ∂r/∂l_jk = u_j y_k + u_k y_j (u = L y / |L y|, y = z − v)."""
     lmat = unit_map(p, kind)

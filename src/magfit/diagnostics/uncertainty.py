@@ -293,7 +293,7 @@ def _turn_axis(z: NDArray[np.float64], weights: NDArray[np.float64]) -> str | No
     centred = directions - mean
     covariance = (centred * weights[:, None]).T @ centred / weights.sum()
     spreads, axes = np.linalg.eigh(covariance)
-    if spreads[0] < 0.05**2 and spreads[1] > 0.2**2:
+    if spreads[0] < 0.05**2 and spreads[0] < 0.01 * spreads[1]:
         return axis_words(axes[:, 0] * (1.0 if axes[np.argmax(np.abs(axes[:, 0])), 0] > 0 else -1.0))
     return None
 
