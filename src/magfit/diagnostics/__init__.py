@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._validation import as_samples
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import Evaluation
-from ._geometry import Frame, symmetric_unit_map
+from ._geometry import Frame
 from .coverage import Coverage, coverage, partition
 from .uncertainty import DEFAULT_INCLINATION_DEG, Observability, Uncertainty, WeakDirection, analyse
 
@@ -316,7 +316,7 @@ def diagnose(
         )
     kind = _model_kind(calibration)
     cover = coverage(z)
-    observability, uncertainty = analyse(z, weights, kind, symmetric_unit_map(calibration), inclination_deg)
+    observability, uncertainty = analyse(array[indices], weights, kind, calibration, inclination_deg)
     goodness = _goodness(calibration, array[indices], z, weights, held_out)
     warnings = _warnings(cover, observability, goodness)
     return Diagnostics(

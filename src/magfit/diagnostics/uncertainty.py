@@ -6,16 +6,17 @@ where its parameters are ``v = 0, L = I``: an offset there is a fraction of the 
 the corrected axes, a change of L a relative change of scale.
 
 - Gauss-Newton covariance (e.g. Seber & Wild, *Nonlinear Regression*, 1989, eq. 2.8):
-  ``Cov(p) = σ² (Jᵀ W J)⁻¹`` with ``σ² = Σ wᵢ rᵢ² / (Σ wᵢ − k)`` and wᵢ the weight of sample i
-  (the inverse of its selection probability when the analysis runs on a subsample). It assumes
+  ``Cov(p) = σ² (Jᵀ W J)⁻¹`` with ``σ² = Σ wᵢ dᵢ² / (Σ wᵢ − k)``, dᵢ the distance of sample i to the
+  ellipsoid in the isotropic frame ``(x − V) / B`` (where the sensor noise is isotropic) and wᵢ its
+  weight (how many samples it stands for when the analysis runs on a subsample). It assumes
   independent samples: with time-correlated noise (sample-and-hold, slow drifts) the true spread is
   larger.
 - Observability: the eigenvectors of the per-sample information ``F = Jᵀ W J / Σ wᵢ``. A direction u
   is weakly determined when ``uᵀ F u`` is small compared with what a full, uniform tumble gives
   (``uᵀ F_tumble u``); it is not determined when its one-sigma ``σ / √(Σwᵢ uᵀ F u)`` exceeds 5 % of the
   field.
-- Heading: at level attitude the corrected field is ``f(ψ) = (cos δ cos ψ, cos δ sin ψ, sin δ)`` and
-  a parameter error dp moves it by ``dw = dL f − dv``; the heading moves by
+- Heading: at level attitude the corrected field is ``f(ψ) = (cos δ cos ψ, cos δ sin ψ, sin δ)``, seen
+  at ``y = L⁻¹ f``; a parameter error dp moves it by ``dw = dL y − L dv``; the heading moves by
   ``dψ = h⊥ · dw / cos δ`` (h⊥ the horizontal unit vector at right angles to the field), so
   ``σ_ψ² = gᵀ Cov g`` with ``g = h⊥ᵀ ∂w/∂p / cos δ``, averaged over ψ. The inclination δ is an
   assumption (default 60°): the error grows as ``1 / cos δ`` towards the magnetic poles.
@@ -31,7 +32,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._geometry import N_PARAMETERS, describe_parameter_direction, jacobian
+from ..calibration import Calibration
+from ._geometry import (
+    N_PARAMETERS,
+    Frame,
+    describe_parameter_direction,
+    distance_jacobian,
+    distances,
+    jacobian,
+    parameters,
+    unit_map,
+)
 
 __all__ = ["Observability", "Uncertainty", "WeakDirection", "analyse"]
 
@@ -249,18 +260,18 @@ class Uncertainty:
         return lines
 
 
-def _parameter_field_map(kind: str, field: NDArray[np.float64]) -> NDArray[np.float64]:
-    """∂w/∂p at a corrected field vector f (corrected frame, L = I): shape (3, k)."""
-    columns = [-np.eye(3)]
+def _parameter_field_map(kind: str, y: NDArray[np.float64], lmat: NDArray[np.float64]) -> NDArray[np.float64]:
+    """∂w/∂p of ``w = L (z − v)`` at the point ``y = z − v``: −L along v, ``E y`` along an entry of L; (3, k)."""
+    columns = [-lmat]
     if kind == "sphere":
-        columns.append(field[:, None])
+        columns.append(y[:, None])
     else:
-        columns.append(np.diag(field))
+        columns.append(np.diag(y))
         if kind == "full":
             cross = np.zeros((3, 3))
             for column, (j, k) in enumerate(((0, 1), (0, 2), (1, 2))):
-                cross[j, column] += field[k]
-                cross[k, column] += field[j]
+                cross[j, column] += y[k]
+                cross[k, column] += y[j]
             columns.append(cross)
     return np.hstack(columns)
 
@@ -299,26 +310,26 @@ def _turn_axis(z: NDArray[np.float64], weights: NDArray[np.float64]) -> str | No
 
 
 def analyse(
-    z: NDArray[np.float64],
+    raw: NDArray[np.float64],
     weights: NDArray[np.float64],
     kind: str,
-    unit_map: NDArray[np.float64],
+    calibration: Calibration,
     inclination_deg: float,
 ) -> tuple[Observability, Uncertainty]:
-    """Observability and uncertainty from calibrated, normalised samples z (corrected frame).
+    """Observability and uncertainty of ``calibration`` (a model of ``kind``) on raw samples.
 
     Parameters
     ----------
-    z : ndarray, shape (n, 3)
-        ``calibration.apply(x, normalized=True)`` with the symmetric root (see ``Frame.corrected``).
+    raw : ndarray, shape (n, 3)
+        The samples (or a subsample), input units.
     weights : ndarray, shape (n,)
         How many of the fitted samples each row stands for (sum = samples the fit used).
     kind : {"sphere", "diag", "full"}
-    unit_map : ndarray, shape (3, 3)
-        L of the calibration, input units⁻¹: maps the offset covariance back to input units.
+    calibration : Calibration
     inclination_deg : float
         Inclination assumed for the heading uncertainty, degrees.
     """
+    z = Frame.corrected(calibration).normalise(raw)
     p = _identity_parameters(kind)
     k = p.size
     jac = jacobian(p, z, kind)
@@ -355,31 +366,60 @@ def analyse(
         return observability, Uncertainty(
             None, None, None, None, None, float(inclination_deg), math.sqrt(residual_variance), n_samples
         )
+    return observability, _uncertainty(raw, weights, kind, calibration, inclination_deg, n_samples)
+
+
+def _uncertainty(
+    raw: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    kind: str,
+    calibration: Calibration,
+    inclination_deg: float,
+    n_samples: int,
+) -> Uncertainty:
+    """The Gauss-Newton covariance of the distances to the ellipsoid, in the isotropic frame (x − V) / B.
+
+    The noise is isotropic on the raw samples, so the residual whose covariance formula holds is the
+    distance to the ellipsoid measured there (``_geometry.distances``), not the residual in the corrected
+    space, whose noise is stretched by the soft-iron correction.
+    """
+    strength = calibration.field_strength
+    frame = Frame(np.array(calibration.offset), np.eye(3) / strength)
+    z = frame.normalise(raw)
+    p = parameters(calibration, kind, frame)
+    k = p.size
+    lmat = unit_map(p, kind)
+    distance = distances(p, z, kind)
+    jac = distance_jacobian(p, z, kind)
+    total = float(weights.sum())
+    residual_variance = float(np.sum(weights * distance**2) / max(total - k, 1.0))
+    information = (jac * weights[:, None]).T @ jac  # Jᵀ W J
     covariance = residual_variance * np.linalg.inv(information)  # Cov(p) = σ² (Jᵀ W J)⁻¹
-    # Offset: v = L (V − c), so Cov(V) = L⁻¹ Cov(v) L⁻ᵀ (input units²).
-    inverse = np.linalg.inv(unit_map)
-    offset_covariance = inverse @ covariance[:3, :3] @ inverse.T
-    offset_sigma = tuple(float(s) for s in np.sqrt(np.diag(offset_covariance)))
-    scale_sigma: tuple[float, ...]
+    offset_sigma = strength * np.sqrt(np.diag(covariance[:3, :3]))  # V = centre + B v
+    inverse = np.linalg.inv(lmat)
     if kind == "sphere":
-        scale_sigma = (math.sqrt(covariance[3, 3]),) * 3
+        scale_sigma: tuple[float, ...] = (math.sqrt(covariance[3, 3]) / p[3],) * 3
         strength_gradient = np.zeros(k)
-        strength_gradient[3] = 1.0
+        strength_gradient[3] = -1.0 / p[3]  # B ∝ 1 / l
     else:
-        scale_sigma = tuple(math.sqrt(covariance[i, i]) for i in range(3, 6))
+        scale_sigma = tuple(math.sqrt(covariance[i, i]) / lmat[i - 3, i - 3] for i in range(3, 6))
+        # B ∝ det(L)^(−1/3): d ln B = −⅓ tr(L⁻¹ dL)
         strength_gradient = np.zeros(k)
-        strength_gradient[3:6] = 1.0 / 3.0  # B ∝ det(L)^(−1/3): relative change = mean of the scale changes
+        strength_gradient[3:6] = -np.diag(inverse) / 3.0
+        if kind == "full":
+            strength_gradient[6:9] = [-2.0 * inverse[j, m] / 3.0 for j, m in ((0, 1), (0, 2), (1, 2))]
     strength_sigma = math.sqrt(float(strength_gradient @ covariance @ strength_gradient))
     delta = math.radians(inclination_deg)
     heading_variances = []
     for psi in np.radians(np.arange(0.0, 360.0, 5.0)):
         field = np.array([math.cos(delta) * math.cos(psi), math.cos(delta) * math.sin(psi), math.sin(delta)])
         across = np.array([-math.sin(psi), math.cos(psi), 0.0])  # h⊥
-        gradient = across @ _parameter_field_map(kind, field) / math.cos(delta)  # dψ = h⊥·dw / cos δ
+        field_map = _parameter_field_map(kind, inverse @ field, lmat)
+        gradient = across @ field_map / math.cos(delta)  # dψ = h⊥·dw / cos δ
         heading_variances.append(float(gradient @ covariance @ gradient))
     heading = np.degrees(np.sqrt(np.array(heading_variances)))
-    uncertainty = Uncertainty(
-        offset_sigma=(offset_sigma[0], offset_sigma[1], offset_sigma[2]),
+    return Uncertainty(
+        offset_sigma=(float(offset_sigma[0]), float(offset_sigma[1]), float(offset_sigma[2])),
         scale_sigma=(float(scale_sigma[0]), float(scale_sigma[1]), float(scale_sigma[2])),
         field_strength_sigma=strength_sigma,
         heading_sigma_deg=float(np.sqrt(np.mean(heading**2))),
@@ -388,4 +428,3 @@ def analyse(
         residual_sigma=math.sqrt(residual_variance),
         n_samples=n_samples,
     )
-    return observability, uncertainty

@@ -369,7 +369,6 @@ def _observe(reference: Calibration, model: str, kept: NDArray[np.float64]) -> t
     """
     calibration = reference
     from ..diagnostics import Frame, even_subsample, thin
-    from ..diagnostics._geometry import symmetric_unit_map
     from ..diagnostics.coverage import coverage
     from ..diagnostics.uncertainty import analyse
 
@@ -377,7 +376,7 @@ def _observe(reference: Calibration, model: str, kept: NDArray[np.float64]) -> t
     z_candidates = Frame.corrected(calibration).normalise(kept[candidates])
     chosen, weights = even_subsample(z_candidates, total=kept.shape[0])
     z = z_candidates[chosen]
-    observability, _ = analyse(z, weights, model, symmetric_unit_map(calibration), 60.0)
+    observability, _ = analyse(kept[candidates][chosen], weights, model, calibration, 60.0)
     return observability, coverage(z).unseen_axes
 
 
