@@ -276,7 +276,11 @@ def test_report_command_writes_one_html_for_several_files(recording, tmp_path) -
     page = _parse(output.read_text(encoding="utf-8"))
     assert [link for link in page.links if link.startswith("#")] == ["#section-0", "#section-1"]
     assert all(link.startswith(("#", "data:")) for link in page.links)
-    assert len(page.images) == 1  # the flat file has nothing to plot
+    assert len(page.images) == 1  # the flat file has no calibration to plot ...
+    views = [json.loads(text) for attributes, text in page.scripts if attributes.get("type") == "application/json"]
+    assert len(views) == 2  # ... but its raw samples are shown in 3-D, to see why
+    assert [trace["name"] for trace in views[1]["data"]] == ["raw samples"]
+    assert "No method could fit these samples: the raw samples are shown alone." in output.read_text(encoding="utf-8")
     comparisons = [rows for kind, rows in page.table_list if kind == "comparison"]
     assert [row[0] for row in comparisons[0][1:]] == ["ellipsoid", "sphere", "minmax"]
     failed = comparisons[1][1:]

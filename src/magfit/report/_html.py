@@ -185,7 +185,7 @@ def write_report(path: str | Path, sections: Iterable[ReportSection], **options:
 
 def _section_html(index: int, section: ReportSection, *, max_points: int, max_points_3d: int, seed: int | None) -> str:
     from ..plot import calibration_figure, figure_png
-    from ._interactive import interactive_figure
+    from ._interactive import interactive_figure, raw_figure
 
     unit = section.display_unit
     samples = section.samples
@@ -202,7 +202,17 @@ def _section_html(index: int, section: ReportSection, *, max_points: int, max_po
         parts.append(_parameter_table(section, labels, unit))
     parts.append(_diagnostics_html(section, labels))
     if not section.calibrations:
-        parts.append("<p class='failure'>No method could fit these samples: nothing to plot.</p></section>")
+        # Nothing calibrated to plot, but the raw samples show why: a cap, a ring, a plane, not an ellipsoid.
+        step = max(1, int(np.ceil(samples.shape[0] / max_points_3d)))
+        shown = samples[::step]
+        parts.append("<p class='failure'>No method could fit these samples: the raw samples are shown alone.</p>")
+        caption = (
+            f"All {samples.shape[0]:,} samples shown."
+            if step == 1
+            else f"{shown.shape[0]:,} of {samples.shape[0]:,} samples shown: one in {step}, in recording order."
+        )
+        parts.append(_view_html(index, raw_figure(shown, unit=unit), caption))
+        parts.append("</section>")
         return "\n".join(parts)
 
     figure = calibration_figure(
@@ -226,18 +236,21 @@ def _section_html(index: int, section: ReportSection, *, max_points: int, max_po
     )
     shown_3d = subsample_for_plot(samples, section.calibrations[0], max_points_3d, seed=seed)
     view = interactive_figure(samples[shown_3d], section.calibrations, labels, unit=unit)
-    view_json = view.to_json(validate=False, pretty=False).replace("</", "<\\/")  # cannot close the <script>
-    view_html = (
-        f"<div class='view-3d' id='view-3d-{index}'></div>"
-        f"<script type='application/json' id='view-3d-{index}-figure'>{view_json}</script>"
-    )
-    parts.append(
-        "<figure class='interactive'><h3>Interactive 3-D view (drag to turn, scroll to zoom)</h3>"
-        f"{view_html}<figcaption>{_e(shown_caption(shown_3d.size, samples.shape[0]))} Other methods can be "
-        "switched on in the legend.</figcaption></figure>"
-    )
+    caption = shown_caption(shown_3d.size, samples.shape[0]) + " Other methods can be switched on in the legend."
+    parts.append(_view_html(index, view, caption))
     parts.append("</section>")
     return "\n".join(parts)
+
+
+def _view_html(index: int, view: Any, caption: str) -> str:
+    """A lazily drawn plotly view: an empty div and its figure as inert JSON (see ``_VIEWER``)."""
+    view_json = view.to_json(validate=False, pretty=False).replace("</", "<\\/")  # cannot close the <script>
+    return (
+        "<figure class='interactive'><h3>Interactive 3-D view (drag to turn, scroll to zoom)</h3>"
+        f"<div class='view-3d' id='view-3d-{index}'></div>"
+        f"<script type='application/json' id='view-3d-{index}-figure'>{view_json}</script>"
+        f"<figcaption>{_e(caption)}</figcaption></figure>"
+    )
 
 
 def _comparison_table(section: ReportSection, labels: Sequence[str]) -> str:

@@ -16,7 +16,7 @@ from ..plot._geometry import ellipsoid_wireframe, sphere_wireframe
 if TYPE_CHECKING:
     import plotly.graph_objects as go
 
-__all__ = ["interactive_figure"]
+__all__ = ["interactive_figure", "raw_figure"]
 
 
 def _polyline(lines: Sequence[NDArray[np.float64]]) -> NDArray[np.float32]:
@@ -113,6 +113,42 @@ def interactive_figure(
             "xaxis_title": "x / B",
             "yaxis_title": "y / B",
             "zaxis_title": "z / B",
+        },
+    )
+    return figure
+
+
+def raw_figure(samples: NDArray[np.float64], *, unit: str, height: int = 520) -> go.Figure:
+    """One 3-D scene of the raw samples alone: what there is to see when no method could fit them.
+
+    Parameters
+    ----------
+    samples : ndarray, shape (N, 3)
+        The raw samples to draw (already subsampled by the caller), input units.
+    unit : str
+        Input unit, for the axis titles.
+    height : int
+        Height of the view in CSS pixels.
+    """
+    import plotly.graph_objects as go
+
+    raw = samples.astype(np.float32)
+    figure = go.Figure(
+        go.Scatter3d(
+            x=raw[:, 0], y=raw[:, 1], z=raw[:, 2], mode="markers", name="raw samples",
+            marker={"size": 1.8, "opacity": 0.7, "color": "#555555"},
+        )
+    )  # fmt: skip
+    figure.update_layout(
+        template="none",
+        height=height,
+        margin={"l": 0, "r": 0, "t": 40, "b": 0},
+        title={"text": f"Raw samples ({unit}): a full tumble would outline an ellipsoid", "x": 0.5},
+        scene={
+            "aspectmode": "data",
+            "xaxis_title": f"x ({unit})",
+            "yaxis_title": f"y ({unit})",
+            "zaxis_title": f"z ({unit})",
         },
     )
     return figure
