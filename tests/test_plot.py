@@ -29,7 +29,7 @@ def steel():
 
 def test_importing_magfit_loads_no_plotting_library() -> None:
     code = (
-        "import sys, magfit, magfit.plot, magfit.report; "
+        "import sys, magfit, magfit.plot, magfit.report, magfit.cli; "
         "print(sorted(m for m in ('matplotlib', 'plotly') if m in sys.modules))"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
