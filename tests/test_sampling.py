@@ -29,7 +29,7 @@ def stay_simulation(seed: int, n: int = 5000, stay: float = 0.8) -> magfit.Simul
 # ---------------------------------------------------------------------- the cells
 
 
-@pytest.mark.parametrize("count", [2, 3, 4, 10, 100, 400, 1000, 5000])
+@pytest.mark.parametrize("count", [3, 4, 10, 100, 400, 1000, 5000])
 def test_cells_have_exactly_equal_areas(count: int) -> None:
     cells = SphereCells.make(count)
     assert cells.count == count
@@ -64,15 +64,15 @@ def test_index_puts_each_direction_in_its_band_and_sector() -> None:
     unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
     assert np.all(unit[:, 2] <= cells.z_edges[band] + 1e-15)
     assert np.all(unit[:, 2] >= cells.z_edges[band + 1] - 1e-15)
-    longitude = np.arctan2(unit[:, 1], unit[:, 0]) + math.pi
+    longitude = np.mod(np.arctan2(unit[:, 1], unit[:, 0]), 2 * math.pi)
     sector = index - cells.first[band]
     width = 2 * math.pi / cells.sectors[band]
     assert np.all((longitude >= sector * width - 1e-12) & (longitude <= (sector + 1) * width + 1e-12))
 
 
-@pytest.mark.parametrize("count", [1, 0, 2.5, True])
+@pytest.mark.parametrize("count", [2, 0, 2.5, True])
 def test_bad_cell_count(count: object) -> None:
-    with pytest.raises(OptionError, match="cells must be an integer >= 2"):
+    with pytest.raises(OptionError, match="cells must be an integer >= 3"):
         SphereCells.make(count)  # type: ignore[arg-type]
 
 
@@ -81,8 +81,8 @@ def test_bad_cell_count(count: object) -> None:
 
 def test_thinning_removes_the_pull_of_a_long_stay() -> None:
     # 80 % of the samples in one attitude. Ground truth: the simulated offset. Over 8 recordings the
-    # thinned fits land closer to it: the ellipsoid fit by a factor 2.6 on average (0.0114 -> 0.0043 of
-    # the field over 10 seeds), the sphere fit (whose model error the stay amplifies) by a factor 13.
+    # thinned fits land closer to it: the ellipsoid fit by a factor 2.2 on average (0.0114 -> 0.0051 of
+    # the field over 10 seeds), the sphere fit (whose model error the stay amplifies) by a factor 12.
     # The bounds below leave room for the spread between seeds (about 30 % of the mean).
     raw = {"ellipsoid": [], "sphere": []}
     thinned = {"ellipsoid": [], "sphere": []}
@@ -192,8 +192,8 @@ def test_planar_samples_fall_back_to_the_quantile_frame() -> None:
         magfit.fit(sim.samples)
     kept = even_subsample(sim.samples, cells=100)
     # The stay weighed 75 % of the samples; the noise across the flat axis still spreads it over a few
-    # cells, so it keeps a few caps' worth, but no longer dominates.
-    assert np.count_nonzero(kept < 1500) < 0.25 * kept.size
+    # cells (about a third of the kept samples: a few caps' worth), but it no longer dominates.
+    assert np.count_nonzero(kept < 1500) < 0.35 * kept.size
     assert np.count_nonzero(kept >= 1500) > 0.6 * 500
 
 
@@ -234,9 +234,9 @@ def test_the_scaling_guide_examples_run_and_print_what_it_says(capsys: pytest.Ca
         "[-130.  -176.9 -174.9]",
         "30000",
         "30000 [-130.  -176.9 -174.9]",
-        "851 7",
+        "854 8",
         "all 0.0362",
-        "even 0.0031",
+        "even 0.0039",
     ]
     assert printed == expected
     text = guide.read_text(encoding="utf-8")

@@ -8,11 +8,9 @@ calibrations of PX4, ArduPilot and phone apps. Thinning first removes it.
 
 The direction of each sample from a centre (``u = shape (x − centre) / |...|``) is binned on ``cells``
 cells of equal area on the unit sphere, and every cell keeps at most ``cap`` of its samples, drawn at
-random. The cells are the zonal equal-area partition (Leopardi, "A partition of the unit sphere into
-regions of equal area and small diameter", ETNA 25, 2006, in its simple form): bands of latitude whose
-areas are whole multiples of the cell area, each split into equal longitude sectors. By Archimedes'
-hat-box theorem the area between heights ``z₀ < z₁`` is ``2π (z₁ − z₀)``, so exact equal areas only
-need the band edges in z.
+random. The cells are the zonal equal-area partition of the coverage diagnostics (Leopardi, "A
+partition of the unit sphere into regions of equal area and small diameter", ETNA 25, 2006): bands of
+latitude whose areas are whole multiples of the cell area, each split into equal longitude sectors.
 
 Within a cell the kept samples are those with the smallest of independent uniform random keys (a
 bottom-k sample). That choice makes the sampler streamable and exact: :class:`EvenSampler` fed chunk
@@ -24,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -50,7 +48,10 @@ _FLAT_AXIS = 0.05
 
 @dataclass(frozen=True)
 class SphereCells:
-    """A partition of the unit sphere into ``count`` cells of equal area (zonal equal-area partition).
+    """The unit sphere cut into ``count`` cells of equal area, as the coverage diagnostics cut it.
+
+    The partition is Leopardi's (:func:`magfit.diagnostics.coverage.partition`): two polar caps of one
+    cell and bands of latitude split into equal sectors, each band's area a whole number of cells.
 
     Attributes
     ----------
@@ -65,40 +66,17 @@ class SphereCells:
     z_edges: NDArray[np.float64]
     sectors: NDArray[np.int64]
     first: NDArray[np.int64]
+    _cell: Callable[[NDArray[np.float64]], NDArray[np.int64]] = field(repr=False, compare=False)
 
     @classmethod
     def make(cls, count: int) -> SphereCells:
-        """The partition into ``count`` cells (``count`` >= 2), as square as the count allows."""
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 2:
-            raise OptionError(f"cells must be an integer >= 2, got {count!r}")
-        area = 4.0 * math.pi / count
-        # Polar caps of one cell each: a cap of area `area` has colatitude radius θc with 2π(1 − cos θc) = area.
-        cap = math.acos(1.0 - area / (2.0 * math.pi))
-        side = math.sqrt(area)  # ideal side of a square cell
-        bands = max(1, round((math.pi - 2.0 * cap) / side)) if count > 2 else 0
-        counts = [1]
-        if bands:
-            height = (math.pi - 2.0 * cap) / bands
-            ideal = []
-            for k in range(bands):
-                top, bottom = cap + k * height, cap + (k + 1) * height
-                ideal.append(2.0 * math.pi * (math.cos(top) - math.cos(bottom)) / area)
-            # Round the ideal cell counts of the bands so that they sum to count − 2 (carry the remainders).
-            carry = 0.0
-            for value in ideal:
-                whole = max(1, round(value + carry))
-                carry += value - whole
-                counts.append(whole)
-            counts[-1] += count - 2 - sum(counts[1:])
-            if counts[-1] < 1:
-                raise OptionError(f"cannot partition the sphere into {count} equal cells; use more cells")
-        counts.append(1)
-        sectors = np.asarray(counts, dtype=np.int64)
-        # Band edges: the area above edge j is (cells above) · area = 2π (1 − z_j).
-        cumulative = np.concatenate([[0], np.cumsum(sectors)])
-        z_edges = 1.0 - cumulative * area / (2.0 * math.pi)
-        z_edges[-1] = -1.0
-        return cls(z_edges=z_edges, sectors=sectors, first=cumulative[:-1])
+        """The partition into ``count`` cells (``count`` >= 3), as square as the count allows."""
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 3:
+            raise OptionError(f"cells must be an integer >= 3, got {count!r}")
+        from .diagnostics.coverage import partition  # late import: the diagnostics import the fits
+
+        cells = partition(int(count))
+        return cls(np.cos(cells.boundaries), cells.cells_per_zone, cells.first_cell, cells.cell)
 
     @property
     def count(self) -> int:
@@ -107,17 +85,7 @@ class SphereCells:
 
     def index(self, directions: NDArray[np.float64]) -> NDArray[np.int64]:
         """Cell of each direction, shape (N,); rows of ``directions`` (N, 3) need not be unit length."""
-        norm = np.sqrt(np.einsum("ij,ij->i", directions, directions))
-        norm[norm == 0] = 1.0  # a sample exactly at the centre has no direction: it goes to the north cap
-        z = directions[:, 2] / norm
-        # Bands run from the north pole down; searchsorted needs increasing edges.
-        band = len(self.sectors) - np.searchsorted(self.z_edges[::-1], z, side="left")
-        band = np.clip(band, 0, len(self.sectors) - 1)
-        longitude = np.arctan2(directions[:, 1], directions[:, 0])  # (−π, π]
-        sectors = self.sectors[band]
-        sector = np.floor((longitude + math.pi) * (sectors / (2.0 * math.pi))).astype(np.int64)
-        np.minimum(sector, sectors - 1, out=sector)
-        return self.first[band] + sector
+        return self._cell(directions)
 
 
 def _water_level(counts: NDArray[np.int64], budget: int) -> int:
