@@ -52,7 +52,7 @@ def test_text_copy_keeps_bom_preamble_header_delimiter_and_other_columns(tmp_pat
     for i, row in enumerate(raw):
         x, y, z = map(float, row)
         lines.append(f"{i * 0.02:.2f}, {np.sin(i):.6f}, {x!r}, {y!r}, {z!r}, turn {i % 3}")
-    lines[10] = "0.16, 0.1, nan, 3.0, 4.0, turn 1"  # a skipped row: copied as it was
+    lines[10] = "0.16, 0.1, nan, 3.0, 4.0, turn 1"  # a skipped row: no calibrated value, so nan in all three
     source = b"\xef\xbb\xbf" + "\r\n".join(lines).encode() + b"\r\n"
     path = tmp_path / "in.csv"
     path.write_bytes(source)
@@ -61,7 +61,7 @@ def test_text_copy_keeps_bom_preamble_header_delimiter_and_other_columns(tmp_pat
     output = out.read_bytes()
     assert output.startswith(b"\xef\xbb\xbf")
     assert_kept(source, output, 3, b",", (2, 3, 4))
-    assert output.split(b"\r\n")[10] == source.split(b"\r\n")[10]
+    assert output.split(b"\r\n")[10] == b"0.16, 0.1, nan, nan, nan, turn 1"
     back = read_samples(out)
     assert back.format == table.format and back.columns == ("mx", "my", "mz") and back.n_skipped == 1
     np.testing.assert_allclose(back.samples, calibration.apply(table.samples), rtol=RTOL, atol=0)
@@ -140,7 +140,7 @@ def test_npz_copy_keeps_other_keys_and_compression(tmp_path: Path, calibration, 
         got = np.column_stack([written["mag_x"], written["mag_y"], written["mag_z"]])
     finite = np.isfinite(mag).all(axis=1)
     np.testing.assert_allclose(got[finite], calibration.apply(mag[finite].astype(np.float64)), rtol=1e-14)
-    np.testing.assert_array_equal(got[7], mag[7].astype(np.float64))  # kept as it was (NaN included)
+    assert np.isnan(got[7]).all()  # no calibrated value: NaN in all three, never raw numbers among corrected ones
 
 
 def test_refuses_to_overwrite_the_input(tmp_path: Path, calibration) -> None:
@@ -217,3 +217,13 @@ def test_quoted_cells_keep_their_quotes(tmp_path: Path) -> None:
     shift = magfit.Calibration("shift", [1.0, 2.0, 3.0], np.eye(3), 50.0)
     out = write_calibrated(path, shift, tmp_path / "out.csv")
     assert out.read_text() == 'time,mx,my,mz,note\n"2024-01-01, 00:00",0,0,0,"a, ""b"""\n"x", "3" ,3,3,plain\n'
+
+
+def test_copy_whose_bottom_half_is_missing_values_reads_back(tmp_path: Path, calibration) -> None:
+    # Regression (found by the layout property test): most rows NaN, so the copy's lower half is "nan".
+    path = tmp_path / "in.csv"
+    path.write_text("1,2,3\n" + "nan,nan,nan\n" * 3 + "4,5,6\n" + "7,nan,9\n" * 3)
+    out = write_calibrated(read_samples(path), calibration, tmp_path / "out.csv")
+    assert out.read_text().splitlines()[-1] == "nan,nan,nan"
+    back = read_samples(out)
+    np.testing.assert_allclose(back.samples, calibration.apply(np.array([[1.0, 2, 3], [4, 5, 6]])), rtol=1e-9)

@@ -269,6 +269,18 @@ def _decode_lines(path: Path, head: bytes, truncated: bool) -> tuple[list[bytes]
     return raw_lines, lines, encoding
 
 
+def _numeric_columns_of(rows: list[list[str]], n_columns: int, decimal: str) -> list[int]:
+    """Columns whose cells are numbers or missing values in at least 80 % of the rows (and some number)."""
+    kinds = [[_cell_kind(cell, decimal) for cell in row] for row in rows]
+    # A header in a short sample would outvote the few data rows: lines without any number do not vote.
+    kinds = [row for row in kinds if "number" in row] or kinds
+    return [
+        j
+        for j in range(n_columns)
+        if sum(row[j] != "text" for row in kinds) >= 0.8 * len(kinds) and any(row[j] == "number" for row in kinds)
+    ]
+
+
 def _sniff_text(path: Path, head: bytes, truncated: bool) -> FileFormat:
     raw_lines, lines, encoding = _decode_lines(path, head, truncated)
     filled = [i for i, line in enumerate(lines) if line.strip()]
@@ -286,14 +298,10 @@ def _sniff_text(path: Path, head: bytes, truncated: bool) -> FileFormat:
         cells = [cell for row in rows for cell in row if cell]
         if cells and sum(bool(_DECIMAL_COMMA.match(cell)) for cell in cells) >= 0.5 * len(cells):
             decimal = ","
-    kinds = [[_cell_kind(cell, decimal) for cell in row] for row in rows]
-    # A header in a short sample would outvote the few data rows: lines without any number do not vote.
-    kinds = [row for row in kinds if "number" in row] or kinds
-    numeric = [
-        j
-        for j in range(n_columns)
-        if sum(row[j] != "text" for row in kinds) >= 0.8 * len(kinds) and any(row[j] == "number" for row in kinds)
-    ]
+    numeric = _numeric_columns_of(rows, n_columns, decimal)
+    if not numeric:  # the bottom half may be all missing values (NaN rows): let the whole head vote
+        every_row = [_split_fields(lines[i], delimiter) for i in filled]
+        numeric = _numeric_columns_of([row for row in every_row if len(row) == n_columns], n_columns, decimal)
     if not numeric:
         shaped = [i for i in filled if len(_split_fields(lines[i], delimiter)) == n_columns]
         if len(shaped) == 1:

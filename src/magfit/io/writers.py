@@ -84,7 +84,8 @@ def write_calibrated(
     Notes
     -----
     Text values are written with 10 significant digits. Rows whose magnetometer values are NaN,
-    infinite or empty are copied unchanged.
+    infinite or empty get ``nan`` in all three magnetometer columns (their other columns are kept): their
+    raw numbers are not calibrated values and must not pass for them.
     """
     if isinstance(source, SampleTable):
         path = source.path
@@ -112,9 +113,13 @@ def write_calibrated(
 def _calibrate_finite(
     values: NDArray[np.float64], calibration: Calibration, normalized: bool
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Calibrated copy of ``values`` (N, 3): finite rows corrected, the others left as they were."""
+    """Calibrated copy of ``values`` (N, 3): finite rows corrected, the others all NaN.
+
+    A row with a missing or non-finite value has no corrected value: copying its raw numbers would mix
+    raw and calibrated values in the same columns, so all three become NaN.
+    """
     finite: NDArray[np.bool_] = np.asarray(np.isfinite(values).all(axis=1))
-    result = np.array(values, dtype=np.float64)
+    result = np.full(np.shape(values), np.nan, dtype=np.float64)
     if finite.any():
         result[finite] = calibration.apply(values[finite], normalized=normalized)
     return result, finite
@@ -256,10 +261,9 @@ class _TextRewriter:
             return None
         if len(values) != len(parts):
             return None
-        corrected, finite = _calibrate_finite(values, self.calibration, self.normalized)
-        texts = self._format_all(corrected[finite])
-        for k, row in enumerate(np.flatnonzero(finite).tolist()):
-            fields = parts[row]
+        corrected, _ = _calibrate_finite(values, self.calibration, self.normalized)
+        texts = self._format_all(corrected)
+        for k, fields in enumerate(parts):
             fields[x] = lx + texts[3 * k]
             fields[y] = ly + texts[3 * k + 1]
             fields[z] = lz + texts[3 * k + 2]
@@ -279,12 +283,10 @@ class _TextRewriter:
             kept.append((offset, fields, spans, body, raw[len(body) :]))
         if not kept:
             return block
-        corrected, finite = _calibrate_finite(self._parse(block, kept, first_line), self.calibration, self.normalized)
-        texts = self._format_all(corrected[finite])
+        corrected, _ = _calibrate_finite(self._parse(block, kept, first_line), self.calibration, self.normalized)
+        texts = self._format_all(corrected)
         position = 0
-        for (offset, fields, spans, body, ending), keep in zip(kept, finite.tolist(), strict=True):
-            if not keep:
-                continue  # a row with a non-finite magnetometer value is copied as it was
+        for offset, fields, spans, body, ending in kept:
             new = texts[position : position + 3]
             position += 3
             if spans is not None:
