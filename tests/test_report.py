@@ -343,4 +343,5 @@ def test_demo_report_is_refused_before_the_experiment_runs(tmp_path, steel_page)
     assert "Distance of the calibrated samples" not in refused.output  # nothing ran
     # The report it writes states the paper's findings on the run (steel_page is write_demo_report's output).
     html, _ = steel_page
-    assert "The paper&#x27;s findings on this run: holds: MPU-9250, steel: ellipsoid std" in html
+    assert "The paper&#x27;s findings, checked on this run:</p>" in html
+    assert "<ul><li>holds: MPU-9250, steel: ellipsoid std 3x or more below sphere and minmax" in html

@@ -160,14 +160,15 @@ def write_demo_report(output: Path, experiment: Experiment) -> str:
     from ..report import experiment_sections, report_html
 
     checks = [
-        f"{'holds' if item.holds else 'DIFFERS'}: {item.statement} ({item.evidence})." for item in findings(experiment)
+        f"{'holds' if item.holds else 'DIFFERS'}: {item.statement} ({item.evidence})" for item in findings(experiment)
     ]
-    intro = [
+    intro: list[str | list[str]] = [
         "The paper's experiment (section V) re-run on simulated sensors: two sensors, three situations, "
         f"{experiment.n_samples:,} samples per case (seed {experiment.seed}), simulated from the ellipsoids "
         "and offsets the paper reports. Each case shows the three methods, the paper's published numbers "
         "(measured on the authors' real recordings) and the error of each fit against the known truth.",
-        "The paper's findings on this run: " + " ".join(checks),
+        "The paper's findings, checked on this run:",
+        checks,
     ]
     text = report_html(
         experiment_sections(experiment), title="The paper's experiment on simulated sensors", intro=intro
