@@ -1,17 +1,20 @@
-"""The geometric residual shared by the diagnostics, the robust fit and the model choice.
+"""The residuals shared by the diagnostics, the robust fit and the model choice.
 
 Every calibration maps a raw sample x onto the unit sphere through the symmetric square root L of the
-ellipsoid matrix A of eq. (2) (``A = LᵀL = L²``, ``Calibration.ellipsoid_matrix``)::
+ellipsoid matrix A of eq. (2) (``A = LᵀL = L²``, ``Calibration.ellipsoid_matrix``). Two residuals:
 
-    r(x) = |L (x − V)| − 1                                                    (geometric residual)
+    r(x) = |L (x − V)| − 1                    (corrected-space residual, the paper's section V metric)
+    d(x) = r(x) / |L u|,  u = L(x − V) / |L(x − V)|     (first-order distance to the ellipsoid)
 
-is the signed distance of the corrected sample to the unit sphere (the paper's section V metric,
-``magfit.sphere_distances``). For samples near the ellipsoid it equals the distance to the ellipsoid
-measured in corrected space, which is what a heading sees, so it is the residual whose Jacobian gives
-the parameter covariance (Gauss-Newton, ``Cov = σ² (JᵀJ)⁻¹``) and whose size decides the model.
+r is the signed distance of the corrected sample to the unit sphere (``magfit.sphere_distances``): what a
+heading sees, and what the robust fit and the observability analysis use. d is r divided by the norm of
+its gradient (Sampson's first-order distance): it measures in the sample space, where the sensor noise is
+isotropic, so it is the residual of the maximum-likelihood fit, of the model choice (BIC) and of the
+parameter covariance, and it cannot be made small by stretching the ellipsoid along a direction the
+samples do not cover.
 
-Three nested models share it, each a parameter vector p in a normalised frame ``z = (x − c) / s``
-(c and s are the centre and radius of the data, so every entry of p is of order one):
+Three nested models share them, each a parameter vector p in an affine normalised frame
+``z = T (x − c)`` (:class:`Frame`: the data centred and scaled, or a calibration's corrected frame):
 
 - ``"sphere"``: p = (v₁, v₂, v₃, l), L = l I                     (paper section III, 4 parameters)
 - ``"diag"``:   p = (v₁, v₂, v₃, l₁₁, l₂₂, l₃₃), L diagonal       (offset + axis-aligned scales, 6)
