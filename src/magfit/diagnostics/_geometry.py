@@ -190,46 +190,6 @@ def jacobian(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArr
     return np.hstack(columns)
 
 
-def refine(
-    z: NDArray[np.float64],
-    kind: str,
-    start: NDArray[np.float64],
-    weights: NDArray[np.float64] | None = None,
-    iterations: int = 20,
-) -> NDArray[np.float64]:
-    """Weighted Gauss-Newton on Σ wᵢ rᵢ² from ``start`` (normalised frame); returns p.
-
-    A Levenberg-style damping keeps each step from increasing the cost, so a poor start cannot
-    diverge; it stops when a step changes p by less than 1e-10.
-    """
-    p = np.array(start, dtype=np.float64)
-    sqrt_w = np.ones(z.shape[0]) if weights is None else np.sqrt(weights)
-    cost = float(np.sum((sqrt_w * residuals(p, z, kind)) ** 2))
-    damping = 1e-6
-    for _ in range(iterations):
-        jac = jacobian(p, z, kind) * sqrt_w[:, None]
-        res = residuals(p, z, kind) * sqrt_w
-        normal = jac.T @ jac
-        gradient = jac.T @ res
-        while True:
-            try:
-                step = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-12), -gradient)
-            except np.linalg.LinAlgError:
-                step = np.zeros_like(p)
-            candidate = p + step
-            new_cost = float(np.sum((sqrt_w * residuals(candidate, z, kind)) ** 2))
-            if new_cost <= cost or damping > 1e6:
-                break
-            damping *= 10.0
-        if new_cost > cost:
-            break
-        p, cost = candidate, new_cost
-        damping = max(damping / 10.0, 1e-9)
-        if float(np.max(np.abs(step))) < 1e-10:
-            break
-    return p
-
-
 def calibration_from_parameters(
     p: NDArray[np.float64],
     kind: str,
