@@ -39,7 +39,6 @@ from ._geometry import (
     describe_parameter_direction,
     distance_jacobian,
     distances,
-    jacobian,
     parameters,
     unit_map,
 )
@@ -285,7 +284,7 @@ def _tumble_information(kind: str) -> NDArray[np.float64]:
     longitude = math.pi * (1.0 + math.sqrt(5.0)) * index
     radius = np.sqrt(1.0 - z**2)
     points = np.column_stack([radius * np.cos(longitude), radius * np.sin(longitude), z])
-    jac = jacobian(_identity_parameters(kind), points, kind)
+    jac = distance_jacobian(_identity_parameters(kind), points, kind)
     return np.asarray(jac.T @ jac / n)
 
 
@@ -332,7 +331,9 @@ def analyse(
     z = Frame.corrected(calibration).normalise(raw)
     p = _identity_parameters(kind)
     k = p.size
-    jac = jacobian(p, z, kind)
+    # The distance's Jacobian, not r's: r can also shrink by stretching the ellipsoid along a direction the
+    # samples do not cover, which would count as information the samples do not hold.
+    jac = distance_jacobian(p, z, kind)
     residual = np.linalg.norm(z, axis=1) - 1.0
     total = float(weights.sum())
     information = (jac * weights[:, None]).T @ jac  # Jᵀ W J
