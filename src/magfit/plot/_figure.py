@@ -185,11 +185,14 @@ def _title(prepared: _Prepared, title: str | None) -> str:
     first = (
         f"{head}{n:,} samples, field strength B = {main.field_strength:.4g} {prepared.unit} ({prepared.labels[0]} fit)"
     )
-    metrics = "   ".join(
+    scores = [
         f"{label} {distances.mean():+.4f} / {distances.std():.4f}"
         for label, distances in zip(prepared.labels, prepared.distances, strict=True)
-    )
-    return f"{first}\nDistance to the unit sphere, mean / std (paper, section V):   {metrics}"
+    ]
+    # Four methods per line keep the title inside the figure however many are compared.
+    lines = ["   ".join(scores[start : start + 4]) for start in range(0, len(scores), 4)]
+    lines[0] = f"Distance to the unit sphere, mean / std (paper, section V):   {lines[0]}"
+    return "\n".join([first, *lines])
 
 
 def _equal_3d_limits(axes: Any, points: NDArray[np.float64]) -> None:
