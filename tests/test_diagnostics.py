@@ -153,3 +153,17 @@ def test_real_recordings_get_a_diagnosis_not_numbers(real_data_dir) -> None:
     report = diagnose(magfit.Calibration("guess", centre, np.eye(3), radius), planar, held_out=False)
     assert report.coverage is not None and report.coverage.share < 0.6
     assert not report.ok
+
+
+def test_consistency_exposes_a_biased_fit_and_clears_the_maximum_likelihood_one() -> None:
+    # Restricted attitudes and 2.4 % noise: the algebraic ellipsoid drifts far along the vertical (bias), the
+    # linearised uncertainty at its own solution looks small; the comparison with the maximum-likelihood fit
+    # of the same model must say so. auto returns that maximum-likelihood fit: consistent by construction.
+    sim = magfit.scenario("mpu9250", "smartphone").simulate(3000, seed=2, orientations="restricted")
+    biased = magfit.fit(sim.samples, "ellipsoid").diagnostics
+    assert biased is not None and biased.consistency is not None
+    assert not biased.consistency.consistent
+    assert abs(biased.consistency.offset_difference[2]) > 50  # counts; the truth is ~200 counts away
+    assert any("biased" in warning for warning in biased.warnings)
+    auto = magfit.fit(sim.samples, "auto").diagnostics
+    assert auto is not None and auto.consistency is not None and auto.consistency.consistent

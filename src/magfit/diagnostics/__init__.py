@@ -23,7 +23,15 @@ from ..errors import CalibrationError, MagfitError
 from ..evaluate import Evaluation
 from ._geometry import Frame
 from .coverage import Coverage, coverage, partition
-from .uncertainty import DEFAULT_INCLINATION_DEG, Observability, Uncertainty, WeakDirection, analyse
+from .uncertainty import (
+    DEFAULT_INCLINATION_DEG,
+    Consistency,
+    Observability,
+    Uncertainty,
+    WeakDirection,
+    analyse,
+    consistency,
+)
 
 if TYPE_CHECKING:
     from ..calibration import Calibration
@@ -31,6 +39,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "MAX_SAMPLES",
+    "Consistency",
     "Coverage",
     "Diagnostics",
     "Goodness",
@@ -46,6 +55,8 @@ __all__ = [
 
 #: The diagnostics of a fit use at most this many samples.
 MAX_SAMPLES = 20_000
+#: The consistency check refits on at most this many of the analysed samples.
+CONSISTENCY_SAMPLES = 5_000
 #: Folds of the held-out evaluation.
 FOLDS = 5
 _SCHEMA = 1
@@ -124,6 +135,8 @@ class Diagnostics:
         Samples the diagnostics looked at (a spatially even subsample when more than 20 000).
     coverage, observability, uncertainty, goodness
         The four parts (None when the input did not allow them, e.g. a fit from ``Statistics``).
+    consistency : Consistency or None
+        The distance to the maximum-likelihood fit of the same model (shows an estimator's bias).
     warnings : tuple of str
         The findings that should stop a user from trusting the calibration as it is.
     notes : tuple of str
@@ -139,6 +152,7 @@ class Diagnostics:
     warnings: tuple[str, ...]
     notes: tuple[str, ...]
     unit: str | None = None
+    consistency: Consistency | None = None
 
     @property
     def ok(self) -> bool:
@@ -158,6 +172,7 @@ class Diagnostics:
             "warnings": list(self.warnings),
             "notes": list(self.notes),
             "unit": self.unit,
+            "consistency": None if self.consistency is None else self.consistency.to_dict(),
         }
 
     @classmethod
@@ -178,6 +193,7 @@ class Diagnostics:
                 warnings=tuple(data["warnings"]),
                 notes=tuple(data["notes"]),
                 unit=data.get("unit"),
+                consistency=None if data.get("consistency") is None else Consistency.from_dict(data["consistency"]),
             )
         except (KeyError, TypeError) as error:
             raise MagfitError(f"diagnostics are malformed: {error}") from None
@@ -190,6 +206,8 @@ class Diagnostics:
                 lines.extend(part.summary())
         if self.uncertainty is not None:
             lines.extend(self.uncertainty.summary(self.unit))
+        if self.consistency is not None:
+            lines.extend(self.consistency.summary(self.unit))
         if self.goodness is not None:
             lines.extend(self.goodness.summary())
         lines.extend(self.notes)
@@ -318,7 +336,17 @@ def diagnose(
     cover = coverage(z)
     observability, uncertainty = analyse(array[indices], weights, kind, calibration, inclination_deg)
     goodness = _goodness(calibration, array[indices], z, weights, held_out)
+    check = None
+    if uncertainty.offset_sigma is not None:  # an undetermined model has no maximum-likelihood fit to compare
+        rows = array[indices][:: max(1, indices.size // CONSISTENCY_SAMPLES)]
+        check = consistency(rows, kind, calibration, uncertainty, inclination_deg)
     warnings = _warnings(cover, observability, goodness)
+    if check is not None and not check.consistent:
+        warnings.append(
+            f"the fit is {check.sigmas:.0f} one-sigmas ({check.heading_difference_deg:.2g}° of level heading) away "
+            "from the maximum-likelihood fit of the same model: the method is biased on these samples; prefer "
+            "method='auto' (or 'ml', 'als')"
+        )
     return Diagnostics(
         n_samples=n,
         n_used=int(indices.size),
@@ -329,6 +357,7 @@ def diagnose(
         warnings=tuple(warnings),
         notes=tuple(notes),
         unit=calibration.unit,
+        consistency=check,
     )
 
 

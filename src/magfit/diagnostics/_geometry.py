@@ -190,6 +190,39 @@ def jacobian(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArr
     return np.hstack(columns)
 
 
+def maximum_likelihood(
+    z: NDArray[np.float64], model: str, starts: list[NDArray[np.float64]]
+) -> tuple[float, NDArray[np.float64]]:
+    """Minimum of Σ d² (d: first-order distance to the ellipsoid) over ``model``'s parameters, and its p.
+
+    Levenberg-Marquardt from each start (scipy's MINPACK wrapper); the best result, never worse than the
+    best start.
+    """
+    from scipy.optimize import least_squares  # lazy: only the fits that need it pay for the import
+
+    best: tuple[float, NDArray[np.float64]] | None = None
+    for start in starts:
+        with np.errstate(all="ignore"):  # a degenerate start may overflow on its way; the result is checked
+            solution = least_squares(
+                distances,
+                start,
+                jac=distance_jacobian,
+                args=(z, model),
+                method="lm",
+                xtol=1e-6,
+                ftol=1e-6,
+                max_nfev=20 * start.size,
+            )
+        for candidate in (solution.x, start):
+            with np.errstate(all="ignore"):
+                value = float(np.sum(distances(candidate, z, model) ** 2))
+            if np.isfinite(value) and (best is None or value < best[0]):
+                best = (value, np.asarray(candidate, dtype=np.float64))
+    if best is None:
+        raise CalibrationError(f"the {model} model has no finite distances to these samples")
+    return best
+
+
 def calibration_from_parameters(
     p: NDArray[np.float64],
     kind: str,

@@ -40,10 +40,11 @@ from ._geometry import (
     distance_jacobian,
     distances,
     parameters,
+    symmetric_unit_map,
     unit_map,
 )
 
-__all__ = ["Observability", "Uncertainty", "WeakDirection", "analyse"]
+__all__ = ["Consistency", "Observability", "Uncertainty", "WeakDirection", "analyse", "consistency"]
 
 #: A direction carrying less than this share of a full tumble's information is weakly determined.
 WEAK_INFORMATION = 0.05
@@ -428,4 +429,107 @@ def _uncertainty(
         inclination_deg=float(inclination_deg),
         residual_sigma=math.sqrt(residual_variance),
         n_samples=n_samples,
+    )
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """How far the calibration is from the maximum-likelihood fit of the same model on the same samples.
+
+    The uncertainty describes the noise of the maximum-likelihood estimate, linearised at the calibration.
+    A biased estimator (the algebraic fits under strong noise or poor coverage, min/max) can sit far from
+    it, where the linearisation looks reassuring; this comparison shows that bias.
+
+    Attributes
+    ----------
+    offset_difference : tuple of 3 float
+        Calibration offset minus the maximum-likelihood offset, input units.
+    sigmas : float
+        That difference in units of the offset's one-sigma (Mahalanobis distance with the diagonal
+        one-sigmas; None when the uncertainty is not available).
+    heading_difference_deg : float
+        RMS over level headings of the heading difference between the two, degrees (same inclination as
+        the uncertainty).
+    consistent : bool
+        False when the difference exceeds 3 one-sigmas and 0.1° of heading.
+    """
+
+    offset_difference: tuple[float, float, float]
+    sigmas: float | None
+    heading_difference_deg: float
+    consistent: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "offset_difference": list(self.offset_difference),
+            "sigmas": self.sigmas,
+            "heading_difference_deg": self.heading_difference_deg,
+            "consistent": self.consistent,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Consistency:
+        values = data["offset_difference"]
+        return cls(
+            offset_difference=(float(values[0]), float(values[1]), float(values[2])),
+            sigmas=None if data["sigmas"] is None else float(data["sigmas"]),
+            heading_difference_deg=float(data["heading_difference_deg"]),
+            consistent=bool(data["consistent"]),
+        )
+
+    def summary(self, unit: str | None = None) -> list[str]:
+        label = f" {unit}" if unit else ""
+        offset = ", ".join(f"{value:+.3g}" for value in self.offset_difference)
+        size = "" if self.sigmas is None else f" ({self.sigmas:.1f} one-sigmas)"
+        if self.sigmas is None or self.sigmas <= 3.0:
+            verdict = "within the uncertainty"
+        elif self.consistent:
+            verdict = "beyond the offset's uncertainty, but less than 0.1° of level heading"
+        else:
+            verdict = "beyond the uncertainty: this fit is biased, prefer method='auto' (or 'ml', 'als')"
+        return [
+            f"Consistency: the maximum-likelihood fit of the same model differs by ({offset}){label} in offset"
+            f"{size} and by {self.heading_difference_deg:.2g}° in level heading: {verdict}."
+        ]
+
+
+def consistency(
+    raw: NDArray[np.float64],
+    kind: str,
+    calibration: Calibration,
+    uncertainty: Uncertainty,
+    inclination_deg: float,
+) -> Consistency | None:
+    """Compare ``calibration`` with the maximum-likelihood fit of its model on ``raw`` (None if that fails)."""
+    from ..errors import MagfitError
+    from ._geometry import calibration_from_parameters, maximum_likelihood
+
+    frame = Frame(np.array(calibration.offset), np.eye(3) / calibration.field_strength)
+    z = frame.normalise(raw)
+    try:
+        _, optimum = maximum_likelihood(z, kind, [parameters(calibration, kind, frame)])
+        reference = calibration_from_parameters(optimum, kind, frame, kind)
+    except (MagfitError, np.linalg.LinAlgError):
+        return None
+    difference = np.asarray(calibration.offset - reference.offset, dtype=np.float64)
+    sigmas = None
+    if uncertainty.offset_sigma is not None:
+        sigmas = float(np.sqrt(np.sum((difference / np.maximum(uncertainty.offset_sigma, 1e-300)) ** 2)))
+    # Level headings seen by both: the reference's corrected field f(ψ), mapped back to raw readings.
+    delta = math.radians(inclination_deg)
+    psi = np.radians(np.arange(0.0, 360.0, 2.0))
+    field = np.column_stack(
+        [math.cos(delta) * np.cos(psi), math.cos(delta) * np.sin(psi), np.full(psi.size, math.sin(delta))]
+    )
+    readings = reference.offset + field @ np.linalg.inv(symmetric_unit_map(reference)).T
+    seen = (readings - calibration.offset) @ symmetric_unit_map(calibration).T
+    angle = np.arctan2(seen[:, 1], seen[:, 0]) - np.arctan2(field[:, 1], field[:, 0])
+    angle = (angle + math.pi) % (2.0 * math.pi) - math.pi
+    heading = float(np.degrees(np.sqrt(np.mean(angle**2))))
+    consistent = (sigmas is None or sigmas <= 3.0) or heading <= 0.1
+    return Consistency(
+        offset_difference=(float(difference[0]), float(difference[1]), float(difference[2])),
+        sigmas=sigmas,
+        heading_difference_deg=heading,
+        consistent=consistent,
     )

@@ -160,41 +160,6 @@ def fit_auto(data: FitInput, *, outliers: str = "detect") -> Calibration:
     )
 
 
-def _maximum_likelihood(
-    z: NDArray[np.float64], model: str, starts: list[NDArray[np.float64]]
-) -> tuple[float, NDArray[np.float64]]:
-    """Minimum of Σ d² (d: first-order distance to the ellipsoid) over ``model``'s parameters, and its p.
-
-    Levenberg-Marquardt from each start (scipy's MINPACK wrapper); the best result, never worse than the
-    best start.
-    """
-    from scipy.optimize import least_squares
-
-    from ..diagnostics._geometry import distance_jacobian, distances
-
-    best: tuple[float, NDArray[np.float64]] | None = None
-    for start in starts:
-        with np.errstate(all="ignore"):  # a degenerate start may overflow on its way; the result is checked
-            solution = least_squares(
-                distances,
-                start,
-                jac=distance_jacobian,
-                args=(z, model),
-                method="lm",
-                xtol=1e-6,
-                ftol=1e-6,
-                max_nfev=20 * start.size,
-            )
-        for candidate in (solution.x, start):
-            with np.errstate(all="ignore"):
-                value = float(np.sum(distances(candidate, z, model) ** 2))
-            if np.isfinite(value) and (best is None or value < best[0]):
-                best = (value, np.asarray(candidate, dtype=np.float64))
-    if best is None:
-        raise CalibrationError(f"the {model} model has no finite distances to these samples")
-    return best
-
-
 def _optimal_rss(
     fits: dict[str, Calibration], kept: NDArray[np.float64]
 ) -> tuple[dict[str, float], dict[str, Calibration], dict[str, str]]:
@@ -210,7 +175,7 @@ def _optimal_rss(
     :data:`FLAT_SEMI_AXIS` residual distances is left out (third return value: why).
     """
     from ..diagnostics import thin
-    from ..diagnostics._geometry import Frame, calibration_from_parameters, parameters, unit_map
+    from ..diagnostics._geometry import Frame, calibration_from_parameters, maximum_likelihood, parameters, unit_map
 
     rows = kept[thin(kept.shape[0], 2_000)]
     scale = kept.shape[0] / rows.shape[0]
@@ -226,7 +191,7 @@ def _optimal_rss(
         starts = [parameters(fits[model], model, frame)]
         if previous is not None:
             starts.append(_embed(previous[1], previous[0], model))
-        value, optimum = _maximum_likelihood(z, model, starts)
+        value, optimum = maximum_likelihood(z, model, starts)
         shortest = 1.0 / float(np.max(np.abs(np.linalg.eigvalsh(unit_map(optimum, model)))))
         rms = math.sqrt(value / z.shape[0])
         if shortest < FLAT_SEMI_AXIS * rms:
@@ -249,11 +214,11 @@ def _optimal_rss(
 def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) -> Calibration:
     """The maximum-likelihood ``model`` on (a stride of at most 200 000 of) ``samples``, from ``start``."""
     from ..diagnostics import MAX_SAMPLES, thin
-    from ..diagnostics._geometry import Frame, calibration_from_parameters, parameters
+    from ..diagnostics._geometry import Frame, calibration_from_parameters, maximum_likelihood, parameters
 
     rows = samples[thin(samples.shape[0], MAX_SAMPLES)]
     frame = Frame.of(rows)
-    _, optimum = _maximum_likelihood(frame.normalise(rows), model, [parameters(start, model, frame)])
+    _, optimum = maximum_likelihood(frame.normalise(rows), model, [parameters(start, model, frame)])
     return calibration_from_parameters(optimum, model, frame, model)
 
 
