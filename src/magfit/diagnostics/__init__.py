@@ -490,8 +490,8 @@ def _warnings(cover: Coverage, observability: Observability, goodness: Goodness)
         parts = "; ".join(w.description for w in undetermined)
         turn = f" (the sensor only turned about {observability.turn_axis})" if observability.turn_axis else ""
         warnings.append(
-            f"the samples do not determine {parts}{turn}: those numbers are noise; record more attitudes or use a "
-            "simpler model (method='auto' falls back by itself)"
+            f"the samples do not determine {parts}{turn}: those numbers are noise; record more attitudes (tilt the "
+            "sensor further); the heading uncertainty includes them"
         )
     if goodness.held_out is not None and goodness.held_out.std > 1.25 * goodness.fitted.std:
         warnings.append("the fit does much better on its own samples than on held-out ones: it is over-fitted")
