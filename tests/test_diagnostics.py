@@ -167,3 +167,30 @@ def test_consistency_exposes_a_biased_fit_and_clears_the_maximum_likelihood_one(
     assert any("biased" in warning for warning in biased.warnings)
     auto = magfit.fit(sim.samples, "auto").diagnostics
     assert auto is not None and auto.consistency is not None and auto.consistency.consistent
+
+
+def test_a_subsample_can_stand_for_the_whole_recording() -> None:
+    sim = magfit.scenario("ellipse2a", "none").simulate(8000, seed=12)
+    cal = magfit.fit(sim.samples, "ellipsoid", diagnostics=False)
+    every_fourth = sim.samples[::4]
+    alone = diagnose(cal, every_fourth, held_out=False)
+    scaled = diagnose(cal, every_fourth, held_out=False, represents=8000)
+    assert alone.uncertainty is not None and scaled.uncertainty is not None
+    assert alone.uncertainty.offset_sigma is not None and scaled.uncertainty.offset_sigma is not None
+    # Four times the samples: half the one-sigma (independent samples).
+    np.testing.assert_allclose(np.array(scaled.uncertainty.offset_sigma) * 2, alone.uncertainty.offset_sigma, rtol=0.01)
+    assert scaled.n_samples == 8000
+    with pytest.raises(magfit.SampleError, match="fewer than"):
+        diagnose(cal, every_fourth, represents=10)
+
+
+def test_robust_calibration_diagnosed_on_a_subsample_leaves_the_spikes_out() -> None:
+    sim = magfit.scenario("ellipse2a", "none").simulate(4000, seed=13)
+    spiked = sim.samples.copy()
+    centre = spiked.mean(axis=0)
+    spiked[::50] = centre + 3.0 * (spiked[::50] - centre)  # 2 % spikes
+    cal = magfit.fit(spiked, "robust", diagnostics=False)
+    report = diagnose(cal, spiked[::2], held_out=False)  # indices no longer match: the rule is applied again
+    assert report.goodness is not None
+    assert report.goodness.fitted.std == pytest.approx(0.0108, rel=0.15)
+    assert any("beyond the robust fit's threshold" in note for note in report.notes)

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validation import as_samples
-from ..errors import CalibrationError, MagfitError
+from ..errors import CalibrationError, MagfitError, SampleError
 from ..evaluate import Evaluation
 from ._geometry import Frame
 from .coverage import Coverage, coverage, partition
@@ -276,15 +276,26 @@ def _model_kind(calibration: Calibration) -> str:
     return "diag"
 
 
-def _inlier_mask(calibration: Calibration, n: int) -> NDArray[np.bool_] | None:
-    """The samples a robust fit kept (None: it rejected none or did not record which)."""
+def _inlier_mask(calibration: Calibration, samples: NDArray[np.float64]) -> tuple[NDArray[np.bool_] | None, str]:
+    """The samples a robust fit kept (None: all), and how they were found.
+
+    The recorded indices when they refer to these samples; otherwise (a subsample, a truncated list) the
+    robust fit's own rule applied again: ``|r − median(r)| > threshold · 1.4826 MAD(r)``.
+    """
     stored = calibration.details.get("rejected")
-    if not isinstance(stored, dict) or stored.get("truncated") or calibration.n_samples != n:
-        return None
-    mask = np.ones(n, dtype=bool)
-    for start, stop in stored.get("runs", []):
-        mask[int(start) : int(stop)] = False
-    return mask
+    if not isinstance(stored, dict):
+        return None, ""
+    n = samples.shape[0]
+    if not stored.get("truncated") and calibration.n_samples == n:
+        mask = np.ones(n, dtype=bool)
+        for start, stop in stored.get("runs", []):
+            mask[int(start) : int(stop)] = False
+        return mask, "the robust fit rejected"
+    residuals = np.linalg.norm(calibration.apply(samples, normalized=True), axis=1) - 1.0
+    centre = float(np.median(residuals))
+    sigma = 1.4826 * float(np.median(np.abs(residuals - centre)))
+    threshold = float(calibration.details.get("threshold", 3.5))
+    return np.abs(residuals - centre) <= threshold * max(sigma, 1e-12), "lie beyond the robust fit's threshold"
 
 
 def diagnose(
@@ -294,8 +305,9 @@ def diagnose(
     inclination_deg: float = DEFAULT_INCLINATION_DEG,
     max_samples: int = MAX_SAMPLES,
     held_out: bool = True,
+    represents: int | None = None,
 ) -> Diagnostics:
-    """Diagnose a calibration on the samples it was fitted to.
+    """Diagnose a calibration on the samples it was fitted to (or on a subsample of them).
 
     Parameters
     ----------
@@ -309,22 +321,30 @@ def diagnose(
         Cap on the samples analysed (a spatially even subsample above it).
     held_out : bool
         Also evaluate on held-out samples (k-fold refits of the method).
+    represents : int, optional
+        When ``samples`` is a regular subsample of a longer recording (e.g. a streamed file), how many
+        samples the fit used: the uncertainty is then scaled to all of them (assuming the subsample is
+        representative and the samples independent).
 
     Returns
     -------
     Diagnostics
     """
     array = as_samples(samples)
-    n_total = array.shape[0]
-    mask = _inlier_mask(calibration, n_total)
+    if represents is not None and represents < array.shape[0]:
+        raise SampleError(f"represents={represents} is fewer than the {array.shape[0]} samples given")
+    mask, how = _inlier_mask(calibration, array)
     notes: list[str] = []
     if mask is not None and not mask.all():
-        notes.append(f"{int((~mask).sum())} samples the robust fit rejected are left out of the diagnostics.")
+        notes.append(f"{int((~mask).sum())} samples {how} are left out of the diagnostics.")
         array = array[mask]
     n = array.shape[0]
+    total = n if represents is None else max(1, round(represents * n / max(len(mask) if mask is not None else n, 1)))
+    if represents is not None:
+        notes.append(f"The {n} samples analysed stand for {total} samples: the uncertainty is scaled to those.")
     candidates = thin(n, max_samples)
     z_candidates = Frame.corrected(calibration).normalise(array[candidates])
-    chosen, weights = even_subsample(z_candidates, max_samples, total=n)
+    chosen, weights = even_subsample(z_candidates, max_samples, total=total)
     indices = candidates[chosen]
     z = z_candidates[chosen]
     if indices.size < n:
@@ -348,7 +368,7 @@ def diagnose(
             "method='auto' (or 'ml', 'als')"
         )
     return Diagnostics(
-        n_samples=n,
+        n_samples=total,
         n_used=int(indices.size),
         coverage=cover,
         observability=observability,
