@@ -340,8 +340,22 @@ def analyse(
     information = (jac * weights[:, None]).T @ jac  # Jᵀ W J
     dof = max(total - k, 1.0)
     residual_variance = float(np.sum(weights * residual**2) / dof)
-    per_sample = information / total
-    eigenvalues, eigenvectors = np.linalg.eigh(per_sample)
+    condition, weak, null = _weak_directions(information, residual_variance, total, kind)
+    observability = Observability(kind, condition, weak, _turn_axis(z, weights))
+    n_samples = round(total)
+    if null:
+        return observability, Uncertainty(
+            None, None, None, None, None, float(inclination_deg), math.sqrt(residual_variance), n_samples
+        )
+    return observability, _uncertainty(raw, weights, kind, calibration, inclination_deg, n_samples)
+
+
+def _weak_directions(
+    information: NDArray[np.float64], residual_variance: float, total: float, kind: str
+) -> tuple[float | None, tuple[WeakDirection, ...], bool]:
+    """Condition, weak directions (weakest first) and whether one is not determined at all, from JᵀWJ."""
+    k = information.shape[0]
+    eigenvalues, eigenvectors = np.linalg.eigh(information / total)
     tumble = _tumble_information(kind)
     largest = float(eigenvalues[-1])
     null = eigenvalues <= 1e-10 * largest
@@ -362,13 +376,7 @@ def analyse(
                 vector=tuple(float(v) for v in vector),
             )
         )
-    observability = Observability(kind, condition, tuple(weak), _turn_axis(z, weights))
-    n_samples = round(total)
-    if null.any():
-        return observability, Uncertainty(
-            None, None, None, None, None, float(inclination_deg), math.sqrt(residual_variance), n_samples
-        )
-    return observability, _uncertainty(raw, weights, kind, calibration, inclination_deg, n_samples)
+    return condition, tuple(weak), bool(null.any())
 
 
 def _uncertainty(
@@ -397,12 +405,26 @@ def _uncertainty(
     residual_variance = float(np.sum(weights * distance**2) / max(total - k, 1.0))
     information = (jac * weights[:, None]).T @ jac  # Jᵀ W J
     covariance = residual_variance * np.linalg.inv(information)  # Cov(p) = σ² (Jᵀ W J)⁻¹
-    offset_sigma = strength * np.sqrt(np.diag(covariance[:3, :3]))  # V = centre + B v
+    return _report(covariance, kind, lmat, strength * np.eye(3), inclination_deg, residual_variance, n_samples)
+
+
+def _report(
+    covariance: NDArray[np.float64],
+    kind: str,
+    lmat: NDArray[np.float64],
+    offset_map: NDArray[np.float64],
+    inclination_deg: float,
+    residual_variance: float,
+    n_samples: int,
+) -> Uncertainty:
+    """One-sigma figures from Cov(p) of parameters (v, L) whose offset moves V by ``offset_map @ v``."""
+    k = covariance.shape[0]
+    offset_sigma = np.sqrt(np.diag(offset_map @ covariance[:3, :3] @ offset_map.T))
     inverse = np.linalg.inv(lmat)
     if kind == "sphere":
-        scale_sigma: tuple[float, ...] = (math.sqrt(covariance[3, 3]) / p[3],) * 3
+        scale_sigma: tuple[float, ...] = (math.sqrt(covariance[3, 3]) / lmat[0, 0],) * 3
         strength_gradient = np.zeros(k)
-        strength_gradient[3] = -1.0 / p[3]  # B ∝ 1 / l
+        strength_gradient[3] = -1.0 / lmat[0, 0]  # B ∝ 1 / l
     else:
         scale_sigma = tuple(math.sqrt(covariance[i, i]) / lmat[i - 3, i - 3] for i in range(3, 6))
         # B ∝ det(L)^(−1/3): d ln B = −⅓ tr(L⁻¹ dL)
