@@ -194,3 +194,27 @@ def test_robust_calibration_diagnosed_on_a_subsample_leaves_the_spikes_out() -> 
     assert report.goodness is not None
     assert report.goodness.fitted.std == pytest.approx(0.0108, rel=0.15)
     assert any("beyond the robust fit's threshold" in note for note in report.notes)
+
+
+def test_affine_design_transform_matches_the_design_matrix() -> None:
+    from magfit.diagnostics.moments import affine_design_transform
+    from magfit.statistics import design_matrix
+
+    rng = np.random.default_rng(14)
+    gain, shift, z = rng.normal(size=(3, 3)), rng.normal(size=3), rng.normal(size=(20, 3))
+    expected = design_matrix(z @ gain.T + shift)
+    np.testing.assert_allclose(design_matrix(z) @ affine_design_transform(gain, shift).T, expected, atol=1e-12)
+
+
+def test_statistics_fit_names_the_weak_direction_without_numbers() -> None:
+    sim = magfit.scenario("mpu9250", "smartphone").simulate(3000, seed=3, orientations="restricted")
+    report = magfit.fit(magfit.Statistics.from_samples(sim.samples), "als").diagnostics
+    assert report is not None and report.observability is not None and report.uncertainty is None
+    assert any("offset along z" in w.description and not w.determined for w in report.observability.weak)
+    assert all(w.sigma is None for w in report.observability.weak)
+    assert report.warnings and "do not determine" in report.warnings[0]
+    full = magfit.fit(
+        magfit.Statistics.from_samples(magfit.scenario("mpu9250", "steel").simulate(3000, seed=3).samples)
+    )
+    assert full.diagnostics is not None and full.diagnostics.observability is not None
+    assert full.diagnostics.observability.weak == () and full.diagnostics.ok

@@ -382,21 +382,33 @@ def diagnose(
 
 
 def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Diagnostics:
-    """What a :class:`~magfit.Statistics` allows: the sample count and the spread of the raw samples.
+    """What a :class:`~magfit.Statistics` allows: the weakly determined directions, from the moments.
 
-    Coverage, uncertainty and goodness need the samples themselves; the result says so.
+    See :mod:`magfit.diagnostics.moments`: the directions are named, without one-sigmas (the algebraic
+    residual would understate them); coverage, uncertainty, consistency and held-out goodness need the
+    samples, and the result says so.
     """
+    from .moments import analyse_statistics
+
+    observability, mean, std = analyse_statistics(statistics, calibration, _model_kind(calibration))
+    undetermined = [w.description for w in observability.weak if not w.determined]
+    warnings = (
+        (f"the samples do not determine {'; '.join(undetermined)}: those numbers are noise; record more attitudes",)
+        if undetermined
+        else ()
+    )
     return Diagnostics(
         n_samples=statistics.n,
-        n_used=0,
+        n_used=statistics.n,
         coverage=None,
-        observability=None,
+        observability=observability,
         uncertainty=None,
         goodness=None,
-        warnings=(),
+        warnings=warnings,
         notes=(
-            "Fitted from Statistics: coverage, observability, uncertainty and goodness need the samples; "
-            "run magfit.diagnose(calibration, samples) on (a subsample of) them.",
+            f"Fitted from Statistics: the weak directions come from the moments (algebraic residual: mean "
+            f"{mean:+.4f}, std {std:.4f} of the field); coverage, uncertainty, consistency and held-out goodness "
+            "need the samples: run magfit.diagnose(calibration, samples) on (a subsample of) them.",
         ),
         unit=calibration.unit,
     )

@@ -65,9 +65,11 @@ class WeakDirection:
     relative_information : float
         Its information per sample divided by what a full uniform tumble gives (1 = as good).
     sigma : float or None
-        Its one-sigma, as a fraction of the field strength (None: not determined at all).
+        Its one-sigma, as a fraction of the field strength (None: not determined at all, or not computed:
+        a diagnosis from ``Statistics`` gives none).
     determined : bool
-        False when ``sigma`` exceeds 5 % of the field or is None.
+        False when ``sigma`` exceeds 5 % of the field (without a sigma: when the information is below
+        1/1000 of a tumble's, or zero).
     vector : tuple of float
         The unit direction in parameter space (corrected frame; layout of ``parameter_names``).
     """
@@ -104,11 +106,16 @@ class WeakDirection:
             if share >= 0.01
             else f"1/{1 / max(share, 1e-12):.0f} of the information a full tumble gives"
         )
+        if self.sigma is None:
+            state = "is weakly determined" if self.determined else "is not determined"
+            return f"{_capital(self.description)} {state} (the samples carry {amount})."
         if not self.determined:
-            sigma = "unbounded" if self.sigma is None else f"one-sigma {100 * self.sigma:.1f} % of the field"
-            return f"{_capital(self.description)} is not determined ({sigma}; the samples carry {amount})."
+            return (
+                f"{_capital(self.description)} is not determined (one-sigma {100 * self.sigma:.1f} % of the field; "
+                f"the samples carry {amount})."
+            )
         return (
-            f"{_capital(self.description)} is weakly determined (one-sigma {100 * (self.sigma or 0):.2f} % of the "
+            f"{_capital(self.description)} is weakly determined (one-sigma {100 * self.sigma:.2f} % of the "
             f"field; the samples carry {amount})."
         )
 
