@@ -39,8 +39,9 @@ __all__ = ["DEFAULT_CELLS", "EvenSampler", "SphereCells", "direction_frame", "ev
 #: Cells of about 10 degrees across (4π / 400 sr each): fine enough to separate attitudes a calibration
 #: needs apart, coarse enough that a few thousand samples fill them.
 DEFAULT_CELLS = 400
-#: Per-axis quantiles whose mid-point and half-distance give the default centre and scale: a few
-#: outliers do not move them, and neither does the time spent in any one attitude.
+#: When the samples support no ellipsoid, the directions start from the mid-point of these per-axis
+#: quantiles, each axis scaled by their half-distance: a few outliers do not move them, and neither does
+#: the time spent in any one attitude.
 _CENTRE_QUANTILES = (0.001, 0.999)
 #: In that fallback frame, no axis is scaled up by more than 1 / (2 · this) relative to the widest.
 _FLAT_AXIS = 0.05
@@ -96,8 +97,9 @@ def _water_level(counts: NDArray[np.int64], budget: int) -> int:
     below = np.concatenate([[0], np.cumsum(ordered)[:-1]])  # Σ of the counts smaller than ordered[i]
     # With the cap at ordered[i], the total kept is below[i] + cap · (number of cells from i on).
     remaining = ordered.size - np.arange(ordered.size)
-    fits = below + ordered * remaining <= budget
-    i = int(np.argmin(fits)) if not fits.all() else ordered.size  # first level that does not fit
+    fits = below + ordered * remaining <= budget  # true, then false from some i on (the top never fits)
+    i = int(np.argmin(fits))
+    # The cap lies between ordered[i - 1] (fits) and ordered[i] (does not): share what is left equally.
     return int((budget - below[i]) // remaining[i])
 
 
