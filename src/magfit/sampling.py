@@ -15,7 +15,7 @@ latitude whose areas are whole multiples of the cell area, each split into equal
 Within a cell the kept samples are those with the smallest of independent uniform random keys (a
 bottom-k sample). That choice makes the sampler streamable and exact: :class:`EvenSampler` fed chunk
 by chunk keeps precisely the samples :func:`even_subsample` keeps from the whole array with the same
-seed, while holding at most ``max_samples`` of them.
+seed, while holding at most twice ``max_samples`` of them.
 """
 
 from __future__ import annotations
@@ -108,7 +108,9 @@ class EvenSampler:
 
     Feed chunks with :meth:`update`; :attr:`samples` and :attr:`indices` hold the kept samples and
     their row numbers in the stream. The result equals :func:`even_subsample` on the whole array with
-    the same ``centre``, ``shape``, ``cells`` and ``seed``.
+    the same ``centre``, ``shape``, ``cells`` and ``seed``. While streaming it holds at most twice
+    ``max_samples`` samples (a cell is cut back to its cap once it holds twice as many, so that each
+    sample costs O(1) however long the stream).
 
     Parameters
     ----------
@@ -143,86 +145,84 @@ class EvenSampler:
         self.cells = SphereCells.make(cells)
         self._rng = np.random.default_rng(seed)
         self._seen = 0
-        self._counts = np.zeros(self.cells.count, dtype=np.int64)
+        self._counts = np.zeros(self.cells.count, dtype=np.int64)  # samples offered, per cell
         self._cap = self.max_samples
-        self._samples = np.empty((0, 3))
-        self._indices = np.empty(0, dtype=np.int64)
-        self._cell = np.empty(0, dtype=np.int64)
-        self._keys = np.empty(0)
+        # Per cell: blocks of (keys, row numbers, samples) held, their total, and the key above which a
+        # newcomer can never be kept (the cap-th smallest key held when the cell was last cut back).
+        self._held: list[list[tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]]] = [
+            [] for _ in range(self.cells.count)
+        ]
+        self._held_count = np.zeros(self.cells.count, dtype=np.int64)
+        self._threshold = np.full(self.cells.count, np.inf)
+        self._result: tuple[NDArray[np.float64], NDArray[np.int64]] | None = None
 
     def update(self, chunk: ArrayLike) -> EvenSampler:
         """Offer the next (n, 3) samples of the stream; returns ``self``."""
         array = as_samples(chunk)
-        n = array.shape[0]
-        keys = np.asarray(self._rng.random(n))  # one per row: the stream of keys never depends on chunking
+        keys = np.asarray(self._rng.random(array.shape[0]))  # one per row: the keys never depend on chunking
         cell = self.cells.index(self._directions(array))
         return self._offer(array, cell, keys)
 
     def _offer(self, array: NDArray[np.float64], cell: NDArray[np.int64], keys: NDArray[np.float64]) -> EvenSampler:
         n = array.shape[0]
+        self._result = None
         self._counts += np.bincount(cell, minlength=self.cells.count)
         self._cap = min(self._cap, _water_level(self._counts, self.max_samples))
-        indices = np.arange(self._seen, self._seen + n, dtype=np.int64)
+        rows = np.arange(self._seen, self._seen + n, dtype=np.int64)
         self._seen += n
-        # A newcomer whose key exceeds every key a full cell holds can never enter it (the cap only
-        # shrinks): dropping those first keeps the sort below small once the cells have filled.
-        candidate = keys < self._thresholds()[cell]
-        self._keep(
-            np.concatenate([self._samples, array[candidate]]),
-            np.concatenate([self._indices, indices[candidate]]),
-            np.concatenate([self._cell, cell[candidate]]),
-            np.concatenate([self._keys, keys[candidate]]),
-        )
+        # A newcomer whose key exceeds what its cell was cut back to can never be kept (the cap only
+        # shrinks): most of a long stream stops here.
+        candidate = keys < self._threshold[cell]
+        if candidate.any():
+            cell, keys, rows, array = cell[candidate], keys[candidate], rows[candidate], array[candidate]
+            order = np.argsort(cell.astype(np.uint16 if self.cells.count <= 1 << 16 else np.int64), kind="stable")
+            cell, keys, rows, array = cell[order], keys[order], rows[order], array[order]
+            bounds = np.searchsorted(cell, np.arange(self.cells.count + 1))
+            for c in np.flatnonzero(np.diff(bounds)):
+                lo, hi = bounds[c], bounds[c + 1]
+                self._held[c].append((keys[lo:hi], rows[lo:hi], array[lo:hi]))
+                self._held_count[c] += hi - lo
+        for c in np.flatnonzero(self._held_count > 2 * self._cap):
+            self._cut(int(c))
         return self
 
-    def _thresholds(self) -> NDArray[np.float64]:
-        """Per cell, the largest key it holds when it holds ``cap`` samples, else +inf; shape (cells,)."""
-        thresholds = np.full(self.cells.count, np.inf)
-        if self._keys.size:
-            full = np.bincount(self._cell, minlength=self.cells.count) >= self._cap
-            largest = np.zeros(self.cells.count)
-            np.maximum.at(largest, self._cell, self._keys)
-            thresholds[full] = largest[full]
-        return thresholds
+    def _cut(self, c: int) -> None:
+        """Keep, in cell ``c``, the ``cap`` samples with the smallest keys (a bottom-k sample)."""
+        keys = np.concatenate([block[0] for block in self._held[c]])
+        rows = np.concatenate([block[1] for block in self._held[c]])
+        array = np.concatenate([block[2] for block in self._held[c]])
+        if keys.size > self._cap:
+            kept = np.argpartition(keys, self._cap - 1)[: self._cap] if self._cap else np.empty(0, dtype=np.int64)
+            keys, rows, array = keys[kept], rows[kept], array[kept]
+            self._threshold[c] = keys.max(initial=-np.inf)  # a cap of 0 (a tiny budget) admits nothing
+        self._held[c] = [(keys, rows, array)]
+        self._held_count[c] = keys.size
+
+    def _finish(self) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Every cell cut back to the cap; the kept samples and rows in stream order."""
+        if self._result is None:
+            for c in np.flatnonzero(self._held_count > self._cap):
+                self._cut(int(c))
+            blocks = [block for held in self._held for block in held]
+            rows = np.concatenate([block[1] for block in blocks]) if blocks else np.empty(0, dtype=np.int64)
+            array = np.concatenate([block[2] for block in blocks]) if blocks else np.empty((0, 3))
+            order = np.argsort(rows)
+            self._result = (array[order], rows[order])
+        return self._result
 
     def _directions(self, array: NDArray[np.float64]) -> NDArray[np.float64]:
         offset_free = array - self.centre
         return offset_free if self.shape is None else offset_free @ self.shape.T
 
-    def _keep(
-        self,
-        samples: NDArray[np.float64],
-        indices: NDArray[np.int64],
-        cell: NDArray[np.int64],
-        keys: NDArray[np.float64],
-    ) -> None:
-        """Keep, in each cell, the ``cap`` candidates with the smallest keys (bottom-k per cell)."""
-        # Sorted by cell, then by key (= np.lexsort((keys, cell)), 2x faster: the stable sort of small
-        # integers is a radix sort).
-        order = np.argsort(keys)
-        order = order[
-            np.argsort(cell[order].astype(np.uint16 if self.cells.count <= 1 << 16 else np.int64), kind="stable")
-        ]
-        sorted_cell = cell[order]
-        counts = np.bincount(sorted_cell, minlength=self.cells.count)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        rank = np.arange(sorted_cell.size) - starts[sorted_cell]  # position within its cell, by increasing key
-        chosen = order[rank < self._cap]
-        chosen.sort()  # back to stream order
-        self._samples = samples[chosen]
-        self._indices = indices[chosen]
-        self._cell = cell[chosen]
-        self._keys = keys[chosen]
-
     @property
     def samples(self) -> NDArray[np.float64]:
         """The kept samples, in stream order, shape (m, 3), input units."""
-        return self._samples.copy()
+        return self._finish()[0].copy()
 
     @property
     def indices(self) -> NDArray[np.int64]:
         """Row numbers of the kept samples in the stream (0-based, increasing), shape (m,)."""
-        return self._indices.copy()
+        return self._finish()[1].copy()
 
     @property
     def seen(self) -> int:
@@ -304,7 +304,7 @@ def even_subsample_chunks(
     cells: int = DEFAULT_CELLS,
     seed: int | np.random.Generator | None = 0,
 ) -> EvenSampler:
-    """:func:`even_subsample` of a stream too large for memory: at most ``max_samples`` samples are held.
+    """:func:`even_subsample` of a stream too large for memory: it keeps at most ``max_samples`` samples.
 
     Parameters
     ----------
@@ -315,7 +315,8 @@ def even_subsample_chunks(
         As in :func:`even_subsample`; here ``centre`` is required (e.g. the offset of a first fit of the
         stream's :class:`~magfit.Statistics`).
     max_samples : int, optional
-        The most samples kept (memory: 24 bytes each plus bookkeeping); required without ``cap_at_median``.
+        The most samples kept (memory while streaming: up to twice that many, at about 40 bytes each);
+        required without ``cap_at_median``.
     cap_at_median : bool
         Also cap every cell at the median count of the cells that have samples (what :func:`even_subsample`
         does by default). Without it, cells are capped only as far as ``max_samples`` requires: the
