@@ -219,7 +219,9 @@ def test_diagnostic_warnings_and_autos_choice_are_shown(tmp_path: Path) -> None:
     for message in warnings:
         assert f"magfit: warning: {message}" in result.stderr
     if "method_used" in calibration.details:
-        assert re.search(rf"chose +{calibration.details['method_used']} \(", result.stdout)
+        details = calibration.details
+        chose = rf"chose +{details['chosen']} model, maximum-likelihood fit started from {details['method_used']} \("
+        assert re.search(chose, result.stdout)
 
 
 def test_streamed_fits_are_diagnosed_on_a_bounded_subsample(

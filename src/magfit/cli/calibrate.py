@@ -580,11 +580,13 @@ def _check_extension(output: Path, export_format: str) -> None:
 
 def _choice(calibration: Calibration) -> list[tuple[str, str]]:
     """For a method that chooses among others (``auto``): the method it used and why."""
-    used = calibration.details.get("method_used")
-    if used is None:
+    chosen = calibration.details.get("chosen")
+    if chosen is None:
         return []
+    used = calibration.details.get("method_used")
+    model = f"{chosen} model" + (f", maximum-likelihood fit started from {used}" if used else "")
     reason = calibration.details.get("reason")
-    return [("chose", f"{used}" + (f" ({reason})" if reason else ""))]
+    return [("chose", model + (f" ({reason})" if reason else ""))]
 
 
 def _fitted_on(run: CalibrationRun) -> list[tuple[str, str]]:

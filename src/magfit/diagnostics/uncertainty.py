@@ -543,7 +543,11 @@ def consistency(
     difference = np.asarray(calibration.offset - reference.offset, dtype=np.float64)
     sigmas = None
     if uncertainty.offset_sigma is not None:
-        sigmas = float(np.sqrt(np.sum((difference / np.maximum(uncertainty.offset_sigma, 1e-300)) ** 2)))
+        # The reference is fitted on a subset of the samples the uncertainty stands for: its own noise,
+        # larger by sqrt(N / n), must not read as a bias of the calibration.
+        subset = math.sqrt(max(float(uncertainty.n_samples) / max(raw.shape[0], 1), 1.0))
+        scale = np.maximum(np.asarray(uncertainty.offset_sigma) * subset, 1e-300)
+        sigmas = float(np.sqrt(np.sum((difference / scale) ** 2)))
     # Level headings seen by both: the reference's corrected field f(ψ), mapped back to raw readings.
     delta = math.radians(inclination_deg)
     psi = np.radians(np.arange(0.0, 360.0, 2.0))
