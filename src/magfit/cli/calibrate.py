@@ -121,6 +121,7 @@ def run_calibration(
     unit: str | None = None,
     even: bool = False,
     max_samples: int | None = None,
+    options: Mapping[str, Any] | None = None,
 ) -> CalibrationRun:
     """Read ``path``, fit ``method`` and score the fit; memory stays bounded for streaming methods.
 
@@ -129,20 +130,22 @@ def run_calibration(
     only one chunk is ever in memory. Methods that need the samples load the whole file when it fits in
     memory (at most ``max_samples`` rows, default :func:`memory_sample_limit`), and otherwise stream it
     and fit a spatially even subsample of ``max_samples`` rows. ``even`` fits the even subsample of
-    :func:`magfit.sampling.even_subsample` (every direction weighs the same) with any method.
+    :func:`magfit.sampling.even_subsample` (every direction weighs the same) with any method. ``options``
+    are the method's keyword options (e.g. ``field_strength``), passed to :func:`magfit.fit`.
     """
     spec = get_method(method)
+    options = dict(options or {})
     limit = memory_sample_limit() if max_samples is None else max_samples
     subsample = "--even" if even else None
     if spec.data == "statistics" and not even:
-        calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite)
+        calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite, options)
         streamed = True
     elif _estimated_rows(path) <= limit:
-        calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite, even=even)
+        calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite, options, even=even)
         streamed = False
     else:
         calibration, evaluation, read, limited = _fit_subsample(
-            path, method, columns, nonfinite, even=even, limit=limit
+            path, method, columns, nonfinite, options, even=even, limit=limit
         )
         streamed = True
         if limited:
@@ -207,14 +210,20 @@ def _rows_in(path: Path, fmt: FileFormat) -> int:
 
 
 def _fit_in_memory(
-    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: Nonfinite, *, even: bool = False
+    path: Path,
+    method: str,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    options: Mapping[str, Any],
+    *,
+    even: bool = False,
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import read_samples
 
     table = read_samples(path, columns=columns, nonfinite=nonfinite)
     _require_rows(path, table.samples.shape[0], table)
     samples = _samples_for_fit(table.samples, even)
-    calibration = fit(samples, method=method)
+    calibration = fit(samples, method=method, **options)
     return calibration, evaluate(calibration, table.samples), table
 
 
@@ -235,6 +244,7 @@ def _fit_subsample(
     method: str,
     columns: Sequence[str | int] | None,
     nonfinite: Nonfinite,
+    options: Mapping[str, Any],
     *,
     even: bool,
     limit: int,
@@ -269,7 +279,7 @@ def _fit_subsample(
             sampler = even_subsample_chunks(
                 lambda: _counted(source(), advance), centre=centre, shape=shape, max_samples=limit, cap_at_median=even
             )
-        calibration = fit(sampler.samples, method=method)
+        calibration = fit(sampler.samples, method=method, **options)
         with _progress(f"scoring the fit on {path.name}") as advance:
             evaluation = evaluate_chunks(calibration, _counted(source(), advance))
     limited = sampler.max_samples == limit and len(sampler.indices) < statistics.n
@@ -316,7 +326,7 @@ class _Spill:
 
 
 def _fit_streaming(
-    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: Nonfinite
+    path: Path, method: str, columns: Sequence[str | int] | None, nonfinite: Nonfinite, options: Mapping[str, Any]
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import iter_sample_chunks
 
@@ -334,7 +344,7 @@ def _fit_streaming(
                 spill.write(chunk)
                 advance(len(chunk))
         _require_rows(path, statistics.n, reader)
-        calibration = fit(statistics, method=method)
+        calibration = fit(statistics, method=method, **options)
         # Pass 2: the paper's metric needs the final calibration, so the samples are read again; on the way,
         # keep an evenly strided subsample (bounded) for the diagnostics, which need samples, not statistics.
         from ..compare import evaluate_chunks
@@ -481,6 +491,13 @@ def write_outputs(
     help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
 )
 @click.option(
+    "--field-strength",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Known magnitude of the local field, in the samples' unit (e.g. from the World Magnetic Model): the "
+    "corrected field is scaled to it, and the sphere fit pins its radius to it (see docs/methods.md).",
+)
+@click.option(
     "--even",
     is_flag=True,
     help="Fit an even subsample: every direction weighs the same, so a long stay in one attitude does not "
@@ -507,6 +524,7 @@ def calibrate_command(
     export_format: str | None,
     unit: str | None,
     nonfinite: Nonfinite,
+    field_strength: float | None,
     even: bool,
     max_samples: int | None,
     plot_path: Path | None,
@@ -526,6 +544,7 @@ def calibrate_command(
       magfit calibrate flight.csv --export c > mag_cal.h
       magfit calibrate mag.txt --unit uT --plot mag.png
       magfit calibrate parked_then_tumbled.csv --even
+      magfit calibrate boat.csv --unit uT --field-strength 48.2
     """
     from .plot import check_figure_path, plot_calibration
 
@@ -537,8 +556,16 @@ def calibrate_command(
         refuse_overwriting_input(output, [file])
         if export_format is not None:
             _check_extension(output, export_format)
+    options = {} if field_strength is None else {"field_strength": field_strength}
     run = run_calibration(
-        file, method=method, columns=columns, nonfinite=nonfinite, unit=unit, even=even, max_samples=max_samples
+        file,
+        method=method,
+        columns=columns,
+        nonfinite=nonfinite,
+        unit=unit,
+        even=even,
+        max_samples=max_samples,
+        options=options,
     )
     stdout_text, written = write_outputs(run, output, export_format, unit)
     summary = console(stderr=stdout_text is not None)

@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..errors import CalibrationError, MagfitError
 from ..statistics import Statistics
+from .quadric import check_field_strength, pin_field_strength
 from .registry import FitInput, check_choice, register
 from .robust import encode_indices, fit_model, fit_robust, geometric_residuals, resolve_model, robust_scale
 
@@ -67,7 +68,7 @@ _SCREEN_SIGMAS = 6.0
     summary="chooses sphere, diag or full ellipsoid by BIC, robust when outliers are found, "
     "falls back when the data cannot determine a model",
 )
-def fit_auto(data: FitInput, *, outliers: str = "detect") -> Calibration:
+def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float | None = None) -> Calibration:
     """Fit the simplest model the samples support, robustly when they hold outliers.
 
     Parameters
@@ -75,6 +76,9 @@ def fit_auto(data: FitInput, *, outliers: str = "detect") -> Calibration:
     outliers : {"detect", "reject", "keep"}
         ``"detect"``: screen for outliers and fit robustly when they are found; ``"reject"``: always fit
         robustly; ``"keep"``: never.
+    field_strength : float, optional
+        Known magnitude of the local field (e.g. from the World Magnetic Model), input units: the chosen
+        fit's matrix is scaled so that corrected samples have this magnitude (see ``pin_field_strength``).
 
     Returns
     -------
@@ -87,6 +91,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect") -> Calibration:
         fitted, with the reason) and, when fitted robustly, ``n_rejected`` and ``rejected``.
     """
     check_choice("outliers", outliers, OUTLIER_MODES)
+    known_field = check_field_strength(field_strength)
     samples = data.require_samples("auto")
     n = samples.shape[0]
     robust, inliers, screen_note = _screen(samples, outliers)
@@ -150,7 +155,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect") -> Calibration:
         rejected = np.flatnonzero(~inliers)
         details["n_rejected"] = int(rejected.size)
         details["rejected"] = encode_indices(rejected)
-    return Calibration(
+    chosen_fit = Calibration(
         method="auto",
         offset=calibration.offset,
         matrix=calibration.matrix,
@@ -158,6 +163,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect") -> Calibration:
         n_samples=n,
         details=details,
     )
+    return pin_field_strength(chosen_fit, known_field)
 
 
 def _optimal_rss(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -117,16 +118,34 @@ def calibration_from_ellipsoid(
         unit_map = (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T
     else:
         unit_map = np.linalg.cholesky(shape).T
-    fitted_strength = float(np.prod(eigenvalues) ** (-1.0 / 6.0))
-    extra: dict[str, Any] = {}
-    if field_strength is not None:
-        extra = {"field_strength_given": True, "fitted_field_strength": fitted_strength}
-    strength = fitted_strength if field_strength is None else field_strength
-    return Calibration(
+    strength = float(np.prod(eigenvalues) ** (-1.0 / 6.0))
+    fitted = Calibration(
         method=method,
         offset=offset,
         matrix=strength * unit_map,
         field_strength=strength,
         n_samples=n_samples,
-        details={"root": root, **(details or {}), **extra},
+        details={"root": root, **(details or {})},
+    )
+    return pin_field_strength(fitted, field_strength)
+
+
+def pin_field_strength(calibration: Calibration, field_strength: float | None) -> Calibration:
+    """``calibration`` with its corrected sphere scaled to a known ``field_strength`` (input units).
+
+    The fitted ellipsoid is kept; ``matrix`` is scaled so that corrected samples have the given
+    magnitude (then ``det(matrix) = (field_strength / fitted)³``) and the fitted value is kept in
+    ``details["fitted_field_strength"]``. ``None`` returns the calibration unchanged.
+    """
+    if field_strength is None:
+        return calibration
+    return replace(
+        calibration,
+        matrix=calibration.matrix * (field_strength / calibration.field_strength),
+        field_strength=field_strength,
+        details={
+            **calibration.details,
+            "field_strength_given": True,
+            "fitted_field_strength": calibration.field_strength,
+        },
     )

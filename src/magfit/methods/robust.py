@@ -30,6 +30,7 @@ from .._validation import check_support
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..statistics import Statistics
+from .quadric import check_field_strength, pin_field_strength
 from .registry import METHODS, FitInput, register
 
 __all__ = ["MODELS", "fit_model", "fit_robust", "rejected_indices", "resolve_model"]
@@ -189,6 +190,7 @@ def fit_robust(
     model: str = "full",
     threshold: float = DEFAULT_THRESHOLD,
     max_iterations: int = 30,
+    field_strength: float | None = None,
 ) -> Calibration:
     """Fit ``model`` while rejecting samples far from the fitted ellipsoid (spikes, saturation, a magnet).
 
@@ -201,6 +203,9 @@ def fit_robust(
         ``|r − median(r)| > c σ`` get weight 0.
     max_iterations : int
         Upper bound on reweighting steps; the loop stops as soon as the inlier set repeats.
+    field_strength : float, optional
+        Known magnitude of the local field, input units: the final fit's matrix is scaled so that corrected
+        samples have this magnitude (see ``pin_field_strength``).
 
     Returns
     -------
@@ -211,6 +216,7 @@ def fit_robust(
         ``converged`` and ``inner`` (the inner fit's own details).
     """
     samples = data.require_samples("robust")
+    known_field = check_field_strength(field_strength)
     if not threshold > 2.0:
         raise OptionError(f"threshold={threshold!r} is not valid: it must exceed 2 (units of the robust σ)")
     if max_iterations < 1:
@@ -241,7 +247,7 @@ def fit_robust(
         "converged": converged,
         "inner": dict(calibration.details),
     }
-    return Calibration(
+    robust_fit = Calibration(
         method="robust",
         offset=calibration.offset,
         matrix=calibration.matrix,
@@ -249,6 +255,7 @@ def fit_robust(
         n_samples=n,
         details=details,
     )
+    return pin_field_strength(robust_fit, known_field)
 
 
 def _fit_subset(

@@ -22,12 +22,11 @@ from ..errors import CalibrationError
 from ..statistics import Statistics
 from .quadric import check_field_strength
 from .registry import FitInput, register
-from .support import check_outlines_ellipsoid, solve_sphere
+from .support import check_outlines_ellipsoid, ellipsoid_outline_problem, solve_sphere
 
 
 @register(
     "sphere",
-    checks=(check_outlines_ellipsoid,),
     min_samples=4,
     data="statistics",
     summary="hard iron only: least-squares sphere fit (paper, section III)",
@@ -44,10 +43,25 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
     """
     known_field = check_field_strength(field_strength)
     statistics = data.statistics
+    if known_field is None:
+        # Without a known radius, samples that outline no ellipsoid cannot place a sphere's centre either;
+        # with it, a cap of directions (a vehicle that cannot tilt far) is enough.
+        check_outlines_ellipsoid(statistics, "sphere")
     centre_z, radius_squared_z, _ = solve_sphere(statistics)
     if known_field is not None:
+        free_centre_z = centre_z
         centre_z, iterations = _pinned_centre(statistics, centre_z, known_field / statistics.scale)
         fitted = statistics.scale * float(np.sqrt(max(radius_squared_z, 0.0)))
+        _check_radius(statistics, centre_z, known_field)
+        shift = statistics.scale * float(np.linalg.norm(centre_z - free_centre_z))
+        free_fit_holds = ellipsoid_outline_problem(statistics) is None  # else its centre is no reference
+        if free_fit_holds and shift > RADIUS_TOLERANCE * known_field:
+            # A far centre on a big sphere also passes the radius test: the samples then sit on a small cap.
+            raise CalibrationError(
+                f"the given field strength {known_field:.4g} moves the centre {shift:.4g} away from the free "
+                f"fit's (radius {fitted:.4g}): the samples contradict it; check that it is in the samples' unit, "
+                "or leave it out"
+            )
         return Calibration(
             method="sphere",
             offset=statistics.centre + statistics.scale * centre_z,
@@ -68,6 +82,29 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
         field_strength=statistics.scale * np.sqrt(radius_squared_z),
         n_samples=statistics.n,
     )
+
+
+#: How far the samples' RMS distance from the pinned centre may stray from the given field strength, and
+#: how far pinning may move the centre, as fractions of the given field strength.
+RADIUS_TOLERANCE = 0.25
+
+
+def _check_radius(statistics: Statistics, centre_z: NDArray[np.float64], known_field: float) -> None:
+    """Refuse a given field strength that the samples contradict (most often a unit mix-up).
+
+    With ``matrix = I`` the corrected samples keep the radius they have; the convention (corrected
+    samples on a sphere of radius ``field_strength``) holds only when the given B is near that radius.
+    """
+    scatter = statistics.scatter
+    sum_squares = float(scatter[0:3, 9].sum())  # Σ |z|²
+    sum_z = scatter[6:9, 9]
+    mean_square = (sum_squares - 2.0 * float(centre_z @ sum_z)) / statistics.n + float(centre_z @ centre_z)
+    radius = statistics.scale * float(np.sqrt(max(mean_square, 0.0)))
+    if abs(radius - known_field) > RADIUS_TOLERANCE * known_field:
+        raise CalibrationError(
+            f"the samples lie {radius:.4g} from the best centre, not at the given field strength "
+            f"{known_field:.4g}: check that the field strength is in the samples' unit, or leave it out"
+        )
 
 
 def _shifted_moment(statistics: Statistics, exponent: tuple[int, int, int], shift: NDArray[np.float64]) -> float:

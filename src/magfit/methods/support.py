@@ -45,13 +45,19 @@ def solve_sphere(statistics: Statistics) -> tuple[NDArray[np.float64], float, ND
     return centre_z, radius_squared_z, covariance[:3, :3] / 4.0
 
 
-def check_outlines_ellipsoid(statistics: Statistics, method: str) -> None:
-    """Raise :class:`CalibrationError` when the best algebraic quadric through the samples is no ellipsoid."""
+def ellipsoid_outline_problem(statistics: Statistics) -> str | None:
+    """Why the best algebraic quadric through the samples is no ellipsoid, or None when it is one."""
     from .quadric import quadric_ellipsoid
 
     eigenvectors = np.linalg.eigh(statistics.scatter)[1]
     reason = quadric_ellipsoid(eigenvectors[:, 0], statistics)
-    if isinstance(reason, str):
+    return reason if isinstance(reason, str) else None
+
+
+def check_outlines_ellipsoid(statistics: Statistics, method: str) -> None:
+    """Raise :class:`CalibrationError` when the best algebraic quadric through the samples is no ellipsoid."""
+    reason = ellipsoid_outline_problem(statistics)
+    if reason is not None:
         raise CalibrationError(
             f"the samples do not outline an ellipsoid ({reason}), as "
             "every hard- and soft-iron distortion should: they cover too few directions, or the distortion "
