@@ -318,3 +318,40 @@ def test_calibrate_fits_an_even_subsample_when_the_file_exceeds_max_samples(
     assert "--max-samples 3000)" in out and "(streamed)" in out
     # ml on ~3000 evenly spread samples: the offset's noise std is about 0.2 % of the field here.
     assert np.linalg.norm(cal.offset - sim.hard_iron) / sim.field_strength < 0.01
+
+
+def test_calibrate_reads_a_big_text_file_in_parallel_pieces_with_the_same_result(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Above PARALLEL_BYTES a text file is cut into pieces read on threads (one Statistics each, merged
+    # exactly) and scored piece by piece (metrics pooled). Lowered here so that a small file is cut in 3.
+    calibrate = pytest.importorskip("magfit.cli.calibrate", reason="the cli extra is not installed")
+    sim = magfit.scenario("mpu9250", "steel").simulate(20_000, seed=8)
+    lines = [f"{t},{x:.1f},{y:.1f},{z:.1f}" for t, (x, y, z) in enumerate(sim.samples.tolist())]
+    lines[12_345] = "12345,nan,1.0,2.0"  # a skipped row in a middle piece
+    path = tmp_path / "big.csv"
+    path.write_text("t,mx,my,mz\n" + "\n".join(lines) + "\n")
+    diagnosed: list[np.ndarray] = []
+    original = calibrate._with_diagnostics
+
+    def recorded(calibration: magfit.Calibration, subsample: np.ndarray, n_total: int) -> magfit.Calibration:
+        diagnosed.append(subsample)
+        return original(calibration, subsample, n_total)
+
+    monkeypatch.setattr(calibrate, "_with_diagnostics", recorded)
+    sequential = calibrate.run_calibration(path, method="ellipsoid")
+    monkeypatch.setattr(calibrate, "PARALLEL_BYTES", 1000)
+    monkeypatch.setattr(calibrate.os, "cpu_count", lambda: 3)
+    split = magfit.io.ChunkReader.split
+    pieces: list[int] = []
+    monkeypatch.setattr(magfit.io.ChunkReader, "split", lambda self, n: pieces.append(n) or split(self, n))
+    parallel = calibrate.run_calibration(path, method="ellipsoid")
+    assert pieces == [3]
+    for run in (sequential, parallel):
+        assert (run.n_rows, run.n_skipped, run.skipped_lines) == (20_000, 1, (12_347,))
+    a, b = parallel.calibration, sequential.calibration
+    np.testing.assert_allclose(a.offset, b.offset, rtol=0, atol=1e-9 * b.field_strength)
+    np.testing.assert_allclose(a.ellipsoid_matrix, b.ellipsoid_matrix, rtol=0, atol=1e-9 / b.field_strength**2)
+    for name in ("n", "mean", "std", "mean_abs", "rms", "max_abs"):
+        assert getattr(parallel.evaluation, name) == pytest.approx(getattr(sequential.evaluation, name), rel=1e-9)
+    np.testing.assert_array_equal(diagnosed[1], diagnosed[0])  # the same strided rows were diagnosed

@@ -349,3 +349,24 @@ def test_chunked_file_statistics_equal_the_array_statistics(tmp_path: Path, row:
     stats = Statistics.from_chunks(reader)
     assert reader.n_skipped == 1
     assert_same_statistics(stats, Statistics.from_samples(np.delete(samples, 1234, axis=0)), rtol=1e-12)
+
+
+@pytest.mark.parametrize("parts", [2, 3, 8])
+def test_file_pieces_read_apart_merge_to_the_whole(tmp_path: Path, parts: int) -> None:
+    # ChunkReader.split cuts a text file at line ends; each piece keeps the file's line numbers.
+    from magfit.io import iter_sample_chunks
+
+    samples = magfit.scenario("mpu9250", "smartphone").simulate(5000, seed=4).samples
+    lines = ["Fs,50.00", "mx,my,mz"] + [f"{x:.1f},{y:.1f},{z:.1f}" for x, y, z in samples.tolist()]
+    lines[4002] = "1.0,,2.0"  # file line 4003: a missing value, skipped
+    path = tmp_path / "pieces.csv"
+    path.write_text("\n".join(lines) + "\n")
+    whole = iter_sample_chunks(path, chunk_rows=600)
+    reference = Statistics.from_chunks(whole)
+    pieces = whole.split(parts)
+    assert len(pieces) == parts
+    merged = sum(Statistics.from_chunks(piece) for piece in pieces)
+    assert isinstance(merged, Statistics)
+    assert_same_statistics(merged, reference)
+    assert sum(piece.n_rows for piece in pieces) == 5000
+    assert [line for piece in pieces for line in piece.skipped_lines] == [4003] == list(whole.skipped_lines)

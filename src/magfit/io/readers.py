@@ -14,9 +14,11 @@ line and the column when there is one, and says what to do.
 from __future__ import annotations
 
 import codecs
+import copy
 import csv
 import functools
 import io
+import itertools
 import os
 import re
 import zipfile
@@ -671,6 +673,7 @@ class ChunkReader:
         self.nonfinite = nonfinite
         self.chunk_rows = int(chunk_rows)
         self._block_bytes = block_bytes
+        self._byte_range: tuple[int, int] | None = None  # set by split(): a part of a text file
         self._npz: _NpzSelection | None = None
         self._indices: tuple[int, int, int] = (0, 1, 2)
         self.n_rows = 0
@@ -693,6 +696,31 @@ class ChunkReader:
         if self._npz is not None:
             return self._npz.key_columns or (0, 1, 2)
         return self._indices
+
+    def split(self, parts: int) -> list[ChunkReader]:
+        """Readers of ``parts`` consecutive pieces of a text file, cut at line ends, to read in parallel.
+
+        Each piece is read like the whole file (same layout, columns, checks and error messages, with the
+        file's own line numbers); its ``n_rows`` and ``skipped_lines`` are its own. npy and npz files, and
+        text files too small to cut, give ``[self]``.
+        """
+        if self.format.kind != "text" or parts < 2 or self._byte_range is not None:
+            return [self]
+        start, end = self.format.data_offset, self.path.stat().st_size
+        cuts = [start]
+        with open(self.path, "rb") as handle:
+            for k in range(1, parts):
+                handle.seek(max(start + (end - start) * k // parts - 1, cuts[-1]))
+                handle.readline()  # to the start of the next line
+                cuts.append(max(min(handle.tell(), end), cuts[-1]))
+        cuts.append(end)
+        pieces = []
+        for low, high in itertools.pairwise(cuts):
+            if high > low:
+                piece = copy.copy(self)
+                piece._byte_range = (low, high)
+                pieces.append(piece)
+        return pieces or [self]
 
     # .................................................................. shared bookkeeping
 
@@ -876,8 +904,13 @@ class ChunkReader:
         used = sorted(set(self._indices))
         order = [used.index(index) for index in self._indices]
         with open(self.path, "rb") as handle:
-            handle.seek(fmt.data_offset)
-            source = _CheckedSource(self, handle, self._block_bytes)
+            first_line = fmt.data_line + 1
+            stop = None
+            if self._byte_range is not None:
+                start, stop = self._byte_range
+                first_line += _count_lines(handle, fmt.data_offset, start)
+            handle.seek(self._byte_range[0] if self._byte_range else fmt.data_offset)
+            source = _CheckedSource(self, _Bounded(handle, stop), self._block_bytes, first_line)
             reader = pandas.read_csv(source, chunksize=self.chunk_rows, **self._read_options(used))
             with reader:
                 while True:
@@ -895,6 +928,33 @@ class ChunkReader:
                     yield self._filter(values, source.line_of_rows)
 
 
+class _Bounded:
+    """A binary file read up to byte ``stop`` (None: to its end), as if it ended there."""
+
+    def __init__(self, handle: IO[bytes], stop: int | None) -> None:
+        self._handle = handle
+        self._stop = stop
+
+    def read(self, size: int = -1) -> bytes:
+        if self._stop is None:
+            return self._handle.read(size)
+        left = max(self._stop - self._handle.tell(), 0)
+        return self._handle.read(left if size < 0 else min(size, left))
+
+
+def _count_lines(handle: IO[bytes], start: int, stop: int) -> int:
+    """Line ends between byte offsets ``start`` and ``stop`` of a file (moves the file position)."""
+    handle.seek(start)
+    count, left = 0, stop - start
+    while left > 0:
+        block = handle.read(min(left, 1 << 24))
+        if not block:
+            break
+        count += block.count(b"\n")
+        left -= len(block)
+    return count
+
+
 def _next_row(rows: NDArray[np.int64]) -> NDArray[np.int64]:
     """1-based row numbers (npy/npz have no lines)."""
     return rows + 1
@@ -909,7 +969,9 @@ class _CheckedSource(io.RawIOBase):
     only a piece that does not add up is split into lines, to find the bad line or the blank lines.
     """
 
-    def __init__(self, reader: ChunkReader, handle: IO[bytes], max_read: int | None) -> None:
+    def __init__(
+        self, reader: ChunkReader, handle: _Bounded, max_read: int | None, first_line: int | None = None
+    ) -> None:
         super().__init__()
         fmt = reader.format
         assert fmt.delimiter is not None
@@ -919,7 +981,7 @@ class _CheckedSource(io.RawIOBase):
         self._n = fmt.n_columns
         self._whitespace = fmt.delimiter == "whitespace"
         self._delimiter_code = ord(fmt.delimiter[0])
-        self._first_line = fmt.data_line + 1
+        self._first_line = fmt.data_line + 1 if first_line is None else first_line
         self._line = self._first_line  # number of the line that starts the unchecked tail
         self._tail = b""  # bytes after the last newline seen: the start of a line not yet complete
         self._blank_rows: list[int] = []  # for each blank line, how many rows come before it
