@@ -11,12 +11,15 @@ to each axis of B_p, then the result is optionally quantised (raw counts). The t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 from .calibration import Calibration
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 from .errors import OptionError
 
 __all__ = [
@@ -33,11 +36,18 @@ __all__ = [
 ORIENTATIONS = ("uniform", "restricted", "yaw")
 
 
+def _rotation() -> type[Rotation]:
+    """scipy's Rotation, imported on first use (it is not needed to import magfit)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
+
+
 def rotation_matrices(attitudes_deg: ArrayLike) -> NDArray[np.float64]:
     """``R_x(φ) R_y(θ) R_z(ψ)`` of eq. (1) for each row (roll φ, pitch θ, yaw ψ) in degrees; (N, 3, 3)."""
     angles = np.radians(np.atleast_2d(np.asarray(attitudes_deg, dtype=np.float64)))
     # Intrinsic X-Y-Z Euler angles compose exactly as the product R_x R_y R_z.
-    return Rotation.from_euler("XYZ", angles).as_matrix()
+    return _rotation().from_euler("XYZ", angles).as_matrix()
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,7 +104,7 @@ def _attitudes(
             raise OptionError(f"orientations must be one of {ORIENTATIONS} or an ({n}, 3) array of degrees")
         return attitudes
     if orientations == "uniform":  # uniform over all attitudes (Haar measure on rotations)
-        rotations = Rotation.random(n, random_state=rng)
+        rotations = _rotation().random(n, random_state=rng)
         return np.degrees(rotations.as_euler("XYZ"))
     yaw = rng.uniform(-180.0, 180.0, n)
     if orientations == "restricted":  # a vehicle that cannot turn over: full yaw, limited roll and pitch
@@ -175,7 +185,7 @@ DISTURBANCES = ("none", "steel", "smartphone")
 
 def _axis_rotation(axis: tuple[float, float, float], degrees: float) -> NDArray[np.float64]:
     vector = np.asarray(axis, dtype=np.float64)
-    return Rotation.from_rotvec(np.radians(degrees) * vector / np.linalg.norm(vector)).as_matrix()
+    return _rotation().from_rotvec(np.radians(degrees) * vector / np.linalg.norm(vector)).as_matrix()
 
 
 @dataclass(frozen=True, eq=False)

@@ -40,7 +40,6 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq
 
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
@@ -110,6 +109,8 @@ def estimate_noise_variance(statistics: Statistics, psi: tuple[NDArray[np.float6
     for s in _VARIANCE_GRID[1:] * largest:
         current = _smallest_eigenvalue(psi, s)
         if current <= 0.0:
+            from scipy.optimize import brentq  # lazily: scipy.optimize costs 0.4 s of every CLI start
+
             return float(brentq(lambda v: _smallest_eigenvalue(psi, v), previous, s, xtol=1e-15, rtol=1e-12))
         previous = s
     raise CalibrationError(
