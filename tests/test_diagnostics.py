@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import magfit
-from magfit.diagnostics import Diagnostics, diagnose, even_subsample
+from magfit.diagnostics import Diagnostics, diagnose, weighted_even_subsample
 from magfit.diagnostics.coverage import coverage, partition
 
 
@@ -123,7 +123,7 @@ def test_even_subsample_caps_weights_and_evens_out_directions() -> None:
     crowd[:, 2] = 1.0
     crowd[:, :2] = np.random.default_rng(9).normal(0, 0.05, (540_000, 2))
     everything = np.vstack([directions, crowd])
-    indices, weights = even_subsample(everything, cap=20_000)
+    indices, weights = weighted_even_subsample(everything, cap=20_000)
     assert indices.size <= 20_000
     assert np.all(np.diff(indices) > 0)
     assert weights.sum() == pytest.approx(everything.shape[0])

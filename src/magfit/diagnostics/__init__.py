@@ -49,8 +49,8 @@ __all__ = [
     "attach_diagnostics",
     "diagnose",
     "diagnose_statistics",
-    "even_subsample",
     "thin",
+    "weighted_even_subsample",
 ]
 
 #: The diagnostics of a fit use at most this many samples.
@@ -222,7 +222,7 @@ def thin(n: int, cap: int = MAX_SAMPLES) -> NDArray[np.int64]:
     return np.arange(0, n, max(1, math.ceil(n / (10 * cap))), dtype=np.int64)
 
 
-def even_subsample(
+def weighted_even_subsample(
     directions: NDArray[np.float64], cap: int = MAX_SAMPLES, total: int | None = None
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Indices of at most ``cap`` rows spread evenly over directions, and the weight of each.
@@ -344,7 +344,7 @@ def diagnose(
         notes.append(f"The {n} samples analysed stand for {total} samples: the uncertainty is scaled to those.")
     candidates = thin(n, max_samples)
     z_candidates = Frame.corrected(calibration).normalise(array[candidates])
-    chosen, weights = even_subsample(z_candidates, max_samples, total=total)
+    chosen, weights = weighted_even_subsample(z_candidates, max_samples, total=total)
     indices = candidates[chosen]
     z = z_candidates[chosen]
     if indices.size < n:

@@ -350,13 +350,13 @@ def _observe(reference: Calibration, model: str, kept: NDArray[np.float64]) -> t
     that way.
     """
     calibration = reference
-    from ..diagnostics import Frame, even_subsample, thin
+    from ..diagnostics import Frame, thin, weighted_even_subsample
     from ..diagnostics.coverage import coverage
     from ..diagnostics.uncertainty import analyse
 
     candidates = thin(kept.shape[0])
     z_candidates = Frame.corrected(calibration).normalise(kept[candidates])
-    chosen, weights = even_subsample(z_candidates, total=kept.shape[0])
+    chosen, weights = weighted_even_subsample(z_candidates, total=kept.shape[0])
     z = z_candidates[chosen]
     observability, _ = analyse(kept[candidates][chosen], weights, model, calibration, 60.0)
     return observability, coverage(z).unseen_axes
