@@ -77,6 +77,15 @@ def test_failure_cases_get_a_diagnosis_not_numbers(real_data_dir: Path, name: st
     assert "rotat" in str(caught.value) or "turning" in str(caught.value)  # it says what to do
 
 
+@pytest.mark.parametrize("name", FAILURES)
+@pytest.mark.parametrize("method", sorted(magfit.METHODS))
+def test_failure_cases_get_a_diagnosis_from_every_method(real_data_dir: Path, name: str, method: str) -> None:
+    with pytest.raises(CalibrationError) as caught:
+        magfit.fit(load(real_data_dir, name), method=method)
+    message = str(caught.value)
+    assert any(remedy in message for remedy in ("rotat", "turning", "tilt", "attitudes")), message
+
+
 def test_fxos8700_agrees_with_the_published_magneto_result(real_data_dir: Path) -> None:
     cal = magfit.fit(load(real_data_dir, "fxos"), method="ellipsoid")
     magneto_offset = np.array([28.557458, -39.981060, -27.428035])

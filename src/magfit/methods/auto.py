@@ -55,8 +55,10 @@ __all__ = ["CANDIDATES", "fit_auto", "fit_chosen"]
 CANDIDATES = ("sphere", "diag", "full")
 N_PARAMETERS = {"sphere": 4, "diag": 6, "full": 9}
 OUTLIER_MODES = ("detect", "reject", "keep")
-#: An optimum with a semi-axis shorter than this many RMS residual distances is flattened onto the samples.
+#: An optimum with a semi-axis shorter than this many RMS residual distances, along which the samples
+#: spread less than FLAT_SPREAD times their widest spread, is flattened onto the samples.
 FLAT_SEMI_AXIS = 10.0
+FLAT_SPREAD = 0.25
 #: A sample beyond this many robust standard deviations counts as an outlier when screening.
 _SCREEN_SIGMAS = 6.0
 
@@ -191,6 +193,7 @@ def _optimal_rss(
     optima: dict[str, Calibration] = {}
     degenerate: dict[str, str] = {}
     previous: tuple[str, NDArray[np.float64]] | None = None
+    widest = float(np.sqrt(np.linalg.eigvalsh(np.cov(z.T))[-1]))  # the samples' largest principal spread
     for model in CANDIDATES:  # simplest first: each richer model also starts from the simpler optimum
         if model not in fits:
             continue
@@ -198,9 +201,15 @@ def _optimal_rss(
         if previous is not None:
             starts.append(_embed(previous[1], previous[0], model))
         value, optimum = maximum_likelihood(z, model, starts)
-        shortest = 1.0 / float(np.max(np.abs(np.linalg.eigvalsh(unit_map(optimum, model)))))
+        eigenvalues, axes = np.linalg.eigh(unit_map(optimum, model))
+        strongest = int(np.argmax(np.abs(eigenvalues)))
+        shortest = 1.0 / float(abs(eigenvalues[strongest]))
         rms = math.sqrt(value / z.shape[0])
-        if shortest < FLAT_SEMI_AXIS * rms:
+        # Only the two together mark a flattened fit: a short axis of a few residuals, along which the samples
+        # barely spread compared with their widest direction (they lie in a plane). Noise alone (a short
+        # axis of a few residuals on a full tumble with 10 % noise) is not flatness.
+        spread = float(np.std(z @ axes[:, strongest]))
+        if shortest < FLAT_SEMI_AXIS * rms and spread < FLAT_SPREAD * widest:
             # An ellipsoid flattened onto the samples: they lie in a plane within the noise, and the fit
             # turned the noise across that plane into the ellipsoid's thickness.
             degenerate[model] = (
