@@ -1129,6 +1129,7 @@ def run(
 ) -> dict[str, Any]:
     """Run the benchmark and return the report (what :func:`render_markdown` and the JSON are made of)."""
     start = time.perf_counter()
+    found_versions = versions(peers)  # at the start: the commit the fits ran on
     fitters = method_table(methods, peers)
     results: dict[str, dict[str, list[Outcome]]] = {}
     floors: dict[str, float] = {}
@@ -1158,7 +1159,7 @@ def run(
         "date": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
         "runtime_s": time.perf_counter() - start,
         "seed": seed,
-        "versions": versions(peers),
+        "versions": found_versions,
         "methods": list(fitters),
         "cases": case_rows,
         "floors": floors,
