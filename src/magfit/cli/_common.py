@@ -199,6 +199,17 @@ def export_format_names() -> list[str]:
     return list(FORMATS)
 
 
+#: What to do with rows holding NaN or inf, the --nonfinite option of every command that reads samples.
+NONFINITE_CHOICES = ("skip", "error")
+nonfinite_option = click.option(
+    "--nonfinite",
+    type=click.Choice(NONFINITE_CHOICES),
+    default="skip",
+    show_default=True,
+    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
+)
+
+
 def parse_columns(ctx: click.Context, param: click.Parameter, value: str | None) -> list[str | int] | None:
     """``--columns mx,my,mz`` or ``--columns 0,1,2`` (0-based) into three names or indices."""
     if value is None:

@@ -36,6 +36,7 @@ from ._common import (
     export_format_names,
     fixed,
     method_names,
+    nonfinite_option,
     parse_columns,
     refuse_overwriting_input,
     significant,
@@ -49,7 +50,6 @@ if TYPE_CHECKING:
 #: Reports progress: called with the number of rows just processed.
 Advance = Callable[[int], None]
 
-NONFINITE_CHOICES = ("skip", "error")
 #: Rows per chunk when streaming. Measured on a 4-million-row CSV: peak memory 204 MB with 250 000 rows
 #: against 329 MB with the reader's default of 1 000 000 (153 MB for a tiny file), at the same CPU time.
 STREAM_CHUNK_ROWS = 250_000
@@ -605,13 +605,7 @@ def write_outputs(
     help="Write a firmware format instead of JSON: to -o, or to stdout without -o.",
 )
 @click.option("--unit", help="Name of the input unit (uT, mG, counts ...), stored in the calibration and exports.")
-@click.option(
-    "--nonfinite",
-    type=click.Choice(NONFINITE_CHOICES),
-    default="skip",
-    show_default=True,
-    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
-)
+@nonfinite_option
 @click.option(
     "--field-strength",
     type=click.FloatRange(min=0, min_open=True),

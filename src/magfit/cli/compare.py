@@ -15,7 +15,18 @@ from rich.table import Table
 from rich.text import Text
 
 from ..compare import PAPER_METHODS, Comparison, MethodResult, compare
-from ._common import EXIT_FIT_FAILED, Nonfinite, columns_text, console, fixed, method_names, parse_columns, vector, warn
+from ._common import (
+    EXIT_FIT_FAILED,
+    Nonfinite,
+    columns_text,
+    console,
+    fixed,
+    method_names,
+    nonfinite_option,
+    parse_columns,
+    vector,
+    warn,
+)
 
 OUTPUT_FORMATS = ("table", "markdown", "csv", "json")
 _CSV_FIELDS = (
@@ -90,13 +101,7 @@ def parse_methods(ctx: click.Context, param: click.Parameter, value: str | None)
     show_default=True,
     help="table (terminal), markdown, csv (one row per file and method) or json (with the calibrations).",
 )
-@click.option(
-    "--nonfinite",
-    type=click.Choice(("skip", "error")),
-    default="skip",
-    show_default=True,
-    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
-)
+@nonfinite_option
 @click.pass_context
 def compare_command(
     ctx: click.Context,

@@ -18,6 +18,7 @@ from ._common import (
     default_method,
     fixed,
     method_names,
+    nonfinite_option,
     parse_columns,
     refuse_overwriting_input,
     warn,
@@ -92,13 +93,7 @@ def check_figure_path(output: Path, option: str = "'-o' / '--output'") -> None:
     help="Samples drawn per scatter panel; longer recordings are subsampled evenly over directions.",
 )
 @click.option("--dpi", type=click.IntRange(min=20, max=600), default=100, show_default=True, help="Pixels per inch.")
-@click.option(
-    "--nonfinite",
-    type=click.Choice(("skip", "error")),
-    default="skip",
-    show_default=True,
-    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
-)
+@nonfinite_option
 def plot_command(
     file: Path,
     output: Path,

@@ -14,6 +14,7 @@ from ._common import (
     console,
     default_method,
     method_names,
+    nonfinite_option,
     parse_columns,
     refuse_overwriting_input,
     warn,
@@ -76,13 +77,7 @@ def check_html_path(output: Path, option: str = "'-o' / '--output'") -> None:
     show_default=True,
     help="Samples drawn in each interactive 3-D view (keeps the file at a few MB).",
 )
-@click.option(
-    "--nonfinite",
-    type=click.Choice(("skip", "error")),
-    default="skip",
-    show_default=True,
-    help="Rows with NaN or inf: skip them (with a warning) or refuse the file.",
-)
+@nonfinite_option
 @click.pass_context
 def report_command(
     ctx: click.Context,
