@@ -22,7 +22,22 @@ from ..errors import CalibrationError
 from ..statistics import Statistics
 from .quadric import check_field_strength
 from .registry import FitInput, register
-from .support import check_outlines_ellipsoid, ellipsoid_outline_problem, solve_sphere
+from .support import check_outlines_ellipsoid, ellipsoid_outline_problem
+
+
+def solve_sphere(statistics: Statistics) -> tuple[NDArray[np.float64], float]:
+    """Least-squares sphere of eq. (7) in the normalised frame of ``statistics``: centre and B².
+
+    B² may be <= 0 when the samples outline no sphere.
+    """
+    scatter = statistics.scatter
+    # Normal equations of eq. (7) read off the scatter: u = (z, 1) is design entries 6..9 and
+    # |z|² the sum of entries 0..2.
+    normal = scatter[6:10, 6:10]
+    right = scatter[6:10, 0:3].sum(axis=1)
+    solution = np.linalg.lstsq(normal, right, rcond=None)[0]
+    centre_z = 0.5 * solution[:3]  # eq. (7) solves for 2V
+    return centre_z, float(solution[3] + centre_z @ centre_z)
 
 
 @register(
@@ -47,7 +62,7 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
         # Without a known radius, samples that outline no ellipsoid cannot place a sphere's centre either;
         # with it, a cap of directions (a vehicle that cannot tilt far) is enough.
         check_outlines_ellipsoid(statistics, "sphere")
-    centre_z, radius_squared_z, _ = solve_sphere(statistics)
+    centre_z, radius_squared_z = solve_sphere(statistics)
     if known_field is not None:
         free_centre_z = centre_z
         centre_z, iterations = _pinned_centre(statistics, centre_z, known_field / statistics.scale)
