@@ -243,3 +243,19 @@ def test_streamed_fits_are_diagnosed_on_a_bounded_subsample(
     assert "Streamed: diagnosed on one row in 3 (1000 of 3000)" in capped.notes[-1]
     reference = magfit.diagnose(magfit.Calibration.from_json(output.read_text()), simulation.samples[::3])
     assert capped.coverage == reference.coverage
+
+
+@pytest.mark.parametrize("method", ["ellipsoid", "sphere", "diag"])
+def test_streamed_linear_fits_do_not_import_scipy_optimize(steel: tuple[Path, magfit.Simulation], method: str) -> None:
+    # Importing scipy.optimize costs 0.4 s of CPU, a fifth of a 10-million-row calibrate (benchmarks/speed.py):
+    # the streamed fits, their scoring and their diagnostics must not need it.
+    import subprocess
+
+    path, _ = steel
+    code = (
+        "import sys; from pathlib import Path; from magfit.cli.calibrate import run_calibration; "
+        f"run = run_calibration(Path(sys.argv[1]), method={method!r}); "
+        "assert run.calibration.diagnostics is not None; print(sorted(m for m in sys.modules if 'scipy' in m))"
+    )
+    result = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True)
+    assert "'scipy.optimize'" not in result.stdout, result.stdout

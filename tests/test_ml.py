@@ -198,9 +198,13 @@ def test_gauss_newton_polish_reaches_the_bias_corrected_solution_from_the_plain_
     zt = (sim.samples.T - statistics.centre[:, None]) / statistics.scale
     _, centre, shape, variance = ml._start(statistics)
     assert variance is not None
-    plain = ml._levenberg_marquardt(ml._Model(zt, 0.0), ml._Model(zt, 0.0).pack(centre, np.linalg.cholesky(shape)), 200)
+    from magfit._optimize import Solution, levenberg_marquardt
+
+    plain_model = ml._Model(zt, 0.0)
+    start_params = plain_model.pack(centre, np.linalg.cholesky(shape))
+    plain = levenberg_marquardt(plain_model.evaluate, start_params, n_residuals=zt.shape[1], max_iterations=200)
     corrected_model = ml._Model(zt, variance)
-    start = ml._Solution(plain.params, corrected_model.evaluate(plain.params), plain.status, "", plain.iterations)
+    start = Solution(plain.params, corrected_model.evaluate(plain.params), plain.status, "", plain.iterations)
     polished = ml._solve_estimating_equation(corrected_model, start, 50)
     assert polished.status > 0 and polished.iterations > plain.iterations
     full = magfit.fit(sim.samples, method="ml", diagnostics=False)

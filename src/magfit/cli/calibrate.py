@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import importlib
 import itertools
 import os
 import shutil
 import sys
 import tempfile
-import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
@@ -462,9 +460,6 @@ def _fit_streaming(
     def chunks() -> ChunkReader:
         return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
 
-    # The diagnostics at the end need scipy.optimize (half a second to import): import it on a thread while
-    # pass 1 parses the file, so that the two overlap on a multi-core machine.
-    threading.Thread(target=importlib.import_module, args=("scipy.optimize",), daemon=True).start()
     # Pass 1: the sufficient statistics of eq. (4), one chunk at a time (a text file's samples are spilled
     # to a temporary binary file on the way, so that pass 2 does not parse the text again).
     with _FirstPass(chunks) as first:

@@ -195,25 +195,23 @@ def maximum_likelihood(
 ) -> tuple[float, NDArray[np.float64]]:
     """Minimum of Σ d² (d: first-order distance to the ellipsoid) over ``model``'s parameters, and its p.
 
-    Levenberg-Marquardt from each start (scipy's MINPACK wrapper); the best result, never worse than the
+    Levenberg–Marquardt (:mod:`magfit._optimize`) from each start; the best result, never worse than the
     best start.
     """
-    from scipy.optimize import least_squares  # lazy: only the fits that need it pay for the import
+    from .._optimize import Evaluation, levenberg_marquardt
+
+    def evaluate(p: NDArray[np.float64], _: object) -> Evaluation:
+        with np.errstate(all="ignore"):  # a degenerate trial may overflow; its non-finite cost is refused
+            residual = distances(p, z, model)
+            jacobian_matrix = distance_jacobian(p, z, model)
+        return Evaluation(
+            0.5 * float(residual @ residual), jacobian_matrix.T @ jacobian_matrix, jacobian_matrix.T @ residual
+        )
 
     best: tuple[float, NDArray[np.float64]] | None = None
     for start in starts:
-        with np.errstate(all="ignore"):  # a degenerate start may overflow on its way; the result is checked
-            solution = least_squares(
-                distances,
-                start,
-                jac=distance_jacobian,
-                args=(z, model),
-                method="lm",
-                xtol=1e-6,
-                ftol=1e-6,
-                max_nfev=20 * start.size,
-            )
-        for candidate in (solution.x, start):
+        solution = levenberg_marquardt(evaluate, start, n_residuals=z.shape[0], max_iterations=20 * start.size)
+        for candidate in (solution.params, start):
             with np.errstate(all="ignore"):
                 value = float(np.sum(distances(candidate, z, model) ** 2))
             if np.isfinite(value) and (best is None or value < best[0]):

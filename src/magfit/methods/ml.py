@@ -25,7 +25,7 @@ remaining bias is O(σ⁴); the fit keeps the efficiency of the geometric fit at
 
 Parameters: the offset V and the Cholesky factor L of ``A = L Lᵀ`` (log-diagonal), so that every
 iterate is a real ellipsoid (positive definite): 9 parameters. Solved by
-Levenberg–Marquardt (analytic Jacobian, normal equations: see :func:`_levenberg_marquardt` for why not
+Levenberg–Marquardt (analytic Jacobian, normal equations: see :mod:`magfit._optimize` for why not
 :func:`scipy.optimize.least_squares`) in the normalised frame of the statistics, started from ``als``
 (or ``ellipsoid`` when the ALS fit is not an ellipsoid).
 
@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._optimize import Evaluation, Solution, levenberg_marquardt
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..statistics import Statistics
@@ -153,16 +154,6 @@ def orthogonal_distances(calibration: Calibration, samples: NDArray[np.float64])
     return distances
 
 
-@dataclass
-class _Evaluation:
-    """Residuals of all samples at one parameter vector, reduced to what Levenberg–Marquardt needs."""
-
-    roots: NDArray[np.float64]  # foot-point root t of each sample (warm start of the next evaluation), (N,)
-    cost: float  # ½ Σ r²
-    normal: NDArray[np.float64]  # JᵀJ, (size, size)
-    gradient: NDArray[np.float64]  # Jᵀr, (size,)
-
-
 class _Model:
     """Residuals and Jacobian of the (bias-corrected) orthogonal distances, in the normalised frame."""
 
@@ -216,7 +207,7 @@ class _Model:
         jacobian_t[3:] = np.einsum("ki,kn->in", self.shape_jacobian(lower), products)
         return jacobian_t
 
-    def evaluate(self, params: NDArray[np.float64], roots: NDArray[np.float64] | None = None) -> _Evaluation:
+    def evaluate(self, params: NDArray[np.float64], roots: NDArray[np.float64] | None = None) -> Evaluation:
         """Cost, JᵀJ and Jᵀr at ``params``, accumulated over chunks of samples (bounded memory, no page faults).
 
         ``roots`` (N,) warm-starts the foot-point iterations from a nearby parameter vector.
@@ -237,7 +228,7 @@ class _Model:
             cost += 0.5 * float(np.einsum("n,n->", residual, residual))  # no threaded BLAS dot
             normal += jacobian_t @ jacobian_t.T  # JᵀJ: a 9x9 BLAS product (single-threaded at this shape)
             gradient += np.einsum("in,n->i", jacobian_t, residual)  # Jᵀr
-        return _Evaluation(new_roots, cost, normal, gradient)
+        return Evaluation(cost, normal, gradient, warm=new_roots)
 
 
 def _start(statistics: Statistics) -> tuple[str, NDArray[np.float64], NDArray[np.float64], float | None]:
@@ -269,74 +260,15 @@ def _start(statistics: Statistics) -> tuple[str, NDArray[np.float64], NDArray[np
     )
 
 
-@dataclass
-class _Solution:
-    """Outcome of :func:`_levenberg_marquardt`, with the status codes of MINPACK / scipy."""
-
-    params: NDArray[np.float64]
-    evaluation: _Evaluation
-    status: int  # 0: iteration limit; 1: gradient small; 2: cost converged; 3: step small
-    message: str
-    iterations: int
-
-
-def _levenberg_marquardt(model: _Model, params: NDArray[np.float64], max_iterations: int) -> _Solution:
-    """Levenberg–Marquardt with Marquardt's diagonal scaling, solved on the normal equations.
-
-    Why not :func:`scipy.optimize.least_squares`: both its methods factor the (N, 9) Jacobian itself
-    at every iteration (QR in MINPACK, an SVD in ``trf``): 0.8 s for a million samples on the 2-core
-    machine this was measured on, against 0.01 s for ``JᵀJ`` (9x9), and the Jacobian must then be held
-    in memory whole. With 9 parameters in the normalised frame ``JᵀJ`` is well conditioned, so the
-    normal equations lose no accuracy that matters, and they accumulate chunk by chunk.
-
-    Stops when the gradient vanishes, when the cost changes by less than 1e-12 of itself, or when the
-    step is shorter than 1e-3 standard errors of the fit in its own direction (a change no data could show).
-    """
-    current = model.evaluate(params)
-    if not np.isfinite(current.cost):
-        raise CalibrationError(
-            "the ml fit cannot measure the distances of the samples to the starting ellipsoid (non-finite); "
-            "use method='als'"
-        )
-    damping = 1e-3
-    n = model.zt.shape[1]
-    for iteration in range(1, max_iterations + 1):
-        diagonal = np.maximum(np.diag(current.normal), 1e-300)
-        residual_norm = math.sqrt(2.0 * current.cost) + 1e-300
-        if float(np.max(np.abs(current.gradient) / np.sqrt(diagonal))) <= 1e-10 * residual_norm:
-            return _Solution(params, current, 1, "the gradient is zero to tolerance", iteration - 1)
-        while True:
-            step = np.linalg.solve(current.normal + damping * np.diag(diagonal), -current.gradient)
-            trial = model.evaluate(params + step, current.roots)
-            if np.isfinite(trial.cost) and trial.cost <= current.cost:
-                break
-            damping *= 10.0
-            if damping > 1e10:
-                return _Solution(params, current, 3, "no step lowers the cost: at a minimum", iteration)
-        reduction = current.cost - trial.cost
-        # The step's length in standard errors: sqrt(δᵀ JᵀJ δ) / σ, σ² = 2 cost / (n − 9). That is the
-        # Mahalanobis length in the parameters' covariance σ² (JᵀJ)⁻¹, so a slow crawl along a direction the
-        # data barely determine counts in that direction's own (large) uncertainty.
-        sigma = residual_norm / math.sqrt(max(n - model.size, 1))
-        step_in_errors = math.sqrt(max(float(step @ current.normal @ step), 0.0)) / sigma
-        params, current = params + step, trial
-        damping = max(damping / 10.0, 1e-12)
-        if reduction <= 1e-12 * current.cost:
-            return _Solution(params, current, 2, "the cost changed by < 1e-12 of itself", iteration)
-        if step_in_errors <= 1e-3:
-            return _Solution(params, current, 3, "the step is below 1e-3 standard errors", iteration)
-    return _Solution(params, current, 0, "the iteration limit was reached", max_iterations)
-
-
-def _score_length(evaluation: _Evaluation, size: int) -> tuple[float, NDArray[np.float64]]:
+def _score_length(evaluation: Evaluation, size: int) -> tuple[float, NDArray[np.float64]]:
     """The undamped Gauss–Newton step ``δ = −(JᵀJ)⁻¹ Jᵀr`` and its length in standard errors, ``√(δᵀJᵀJδ)/σ``."""
     step = np.asarray(np.linalg.solve(evaluation.normal, -evaluation.gradient), dtype=np.float64)
-    n = evaluation.roots.shape[0]
+    n = evaluation.warm.shape[0]  # one foot-point root per sample
     sigma = math.sqrt(2.0 * evaluation.cost / max(n - size, 1)) + 1e-300
     return math.sqrt(max(float(-step @ evaluation.gradient), 0.0)) / sigma, step
 
 
-def _solve_estimating_equation(model: _Model, solution: _Solution, max_iterations: int) -> _Solution:
+def _solve_estimating_equation(model: _Model, solution: Solution, max_iterations: int) -> Solution:
     """Drive the bias-corrected estimating equation ``Jᵀ r = 0`` to zero by Gauss–Newton steps.
 
     With the correction, ``r = d − σ² H`` and the Jacobian leaves out ``σ² ∂H/∂θ``, so the least-squares
@@ -352,21 +284,21 @@ def _solve_estimating_equation(model: _Model, solution: _Solution, max_iteration
         return solution
     for iteration in range(1, max_iterations + 1):
         if length <= 1e-3:
-            return _Solution(
+            return Solution(
                 params, current, max(solution.status, 1), "the estimating equation holds to 1e-3 standard errors",
                 solution.iterations + iteration - 1,
             )  # fmt: skip
         fraction = 1.0
         for _ in range(20):
-            trial = model.evaluate(params + fraction * step, current.roots)
+            trial = model.evaluate(params + fraction * step, current.warm)
             trial_length, trial_step = _score_length(trial, model.size)
             if np.isfinite(trial.cost) and trial_length < length:
                 break
             fraction *= 0.5
         else:
-            return _Solution(params, current, 0, "the bias-corrected equation has no nearby solution", iteration)
+            return Solution(params, current, 0, "the bias-corrected equation has no nearby solution", iteration)
         params, current, length, step = params + fraction * step, trial, trial_length, trial_step
-    return _Solution(params, current, 0, "the iteration limit was reached", solution.iterations + max_iterations)
+    return Solution(params, current, 0, "the iteration limit was reached", solution.iterations + max_iterations)
 
 
 @register(
@@ -419,7 +351,16 @@ def fit_ml(
         plain = _Model(zt, 0.0)
         variance = 2.0 * plain.evaluate(plain.pack(centre_z, np.linalg.cholesky(shape_z))).cost / zt.shape[1]
     model = _Model(zt, variance if bias_correction else 0.0)
-    solution = _levenberg_marquardt(model, model.pack(centre_z, np.linalg.cholesky(shape_z)), int(max_iterations))
+    params = model.pack(centre_z, np.linalg.cholesky(shape_z))
+    current = model.evaluate(params)
+    if not np.isfinite(current.cost):
+        raise CalibrationError(
+            "the ml fit cannot measure the distances of the samples to the starting ellipsoid (non-finite); "
+            "use method='als'"
+        )
+    solution = levenberg_marquardt(
+        model.evaluate, params, n_residuals=zt.shape[1], max_iterations=int(max_iterations), current=current
+    )
     if solution.status > 0 and model.variance > 0:
         solution = _solve_estimating_equation(model, solution, int(max_iterations))
     if solution.status <= 0 or not np.all(np.isfinite(solution.params)):
@@ -454,7 +395,7 @@ def fit_ml(
     )
 
 
-def _covariance(model: _Model, solution: _Solution, variance: float, scale: float) -> list[list[float]]:
+def _covariance(model: _Model, solution: Solution, variance: float, scale: float) -> list[list[float]]:
     """``σ² (JᵀJ)⁻¹`` mapped to (offset, A entries) in input units, as a nested list (9x9)."""
     parameter_covariance = variance * np.linalg.pinv(solution.evaluation.normal)
     _, lower = model.unpack(solution.params)
