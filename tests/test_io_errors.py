@@ -87,6 +87,21 @@ def test_row_with_another_number_of_fields(tmp_path: Path, bad: str, count: int,
     )
 
 
+def test_pieces_of_a_split_file_name_the_files_own_lines(tmp_path: Path) -> None:
+    # A piece that starts mid-file counts the lines before it only when a message needs a line number.
+    lines = ["# exported by a logger", "time,mx,my,mz", *rows(300)]
+    lines[40] = ""  # a blank line in the first piece shifts every later line number by one
+    lines[250] = "7,1,2"  # file line 251, in the last of three pieces
+    lines[180] = "1,nan,2,3"  # file line 181, in the middle piece: skipped and reported
+    path = write(tmp_path, "\n".join(lines) + "\n")
+    pieces = ChunkReader(path, chunk_rows=20).split(3)
+    assert len(pieces) == 3
+    list(pieces[1])
+    assert (pieces[1].n_skipped, pieces[1].skipped_lines) == (1, (181,))
+    with pytest.raises(DataFileError, match=r": line 251 has 3 fields but the header and the first rows have 4"):
+        list(pieces[2])
+
+
 def test_whitespace_row_with_another_number_of_fields(tmp_path: Path) -> None:
     lines = rows(50, "{x} {y}  {z}")
     lines[20] = "1 2 3 4"
