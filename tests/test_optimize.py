@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from magfit._optimize import Evaluation, levenberg_marquardt
+from magfit._optimize import Evaluation, bracketed_root, levenberg_marquardt
 
 TIMES = np.linspace(0.0, 4.0, 200)
 
@@ -77,3 +77,34 @@ def test_a_parameter_the_residuals_ignore_does_not_break_the_solve() -> None:
     assert solution.status > 0, solution.message
     np.testing.assert_allclose(solution.params[:3], truth, rtol=1e-6)
     assert solution.params[3] == 5.0
+
+
+@pytest.mark.parametrize(
+    ("function", "low", "high", "root", "tolerance"),
+    [
+        (lambda x: np.cos(x) - x, 0.0, 1.0, 0.7390851332151607, 1e-12),
+        (lambda x: np.exp(x) - 2.0, 5.0, -5.0, np.log(2.0), 1e-12),  # ends given in either order
+        (lambda x: np.tanh(50.0 * (x - 0.3)), 0.0, 1.0, 0.3, 1e-12),  # a steep step
+        # Flat at the root (zero to round-off within 1e-2 of it): brentq gives up after 100 iterations here.
+        (lambda x: (x - 0.7) ** 9, 0.0, 1.0, 0.7, 2e-2),
+        (lambda x: x - 1e-13, 0.0, 1e-12, 1e-13, 1e-12),  # a tiny bracket
+    ],
+)
+def test_bracketed_root_finds_the_root_to_the_tolerance(
+    function, low: float, high: float, root: float, tolerance: float
+) -> None:
+    calls = []
+
+    def counted(x: float) -> float:
+        calls.append(x)
+        return float(function(x))
+
+    found = bracketed_root(counted, low, high, xtol=1e-15, rtol=1e-12)
+    assert isinstance(found, float)
+    assert abs(found - root) <= tolerance * abs(root) + 1e-15
+    assert len(calls) < 200
+
+
+def test_bracketed_root_refuses_a_bracket_without_a_sign_change() -> None:
+    with pytest.raises(ValueError, match="no sign change"):
+        bracketed_root(lambda x: x * x + 1.0, -1.0, 1.0)

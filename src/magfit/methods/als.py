@@ -19,7 +19,8 @@ Unknown noise variance ([3], noise variance estimation): the true ``E ψ_als(σ�
 semi-definite with a zero eigenvalue exactly at the true σ², so σ̂² is the smallest ``s > 0`` at which
 ``λ_min(ψ_als(s)) = 0`` (``λ_min`` is positive at ``s = 0``, where ψ_als is the scatter, and decreases
 through zero there). The authors' own implementation bisects on the sign of ``λ_min`` below the bound
-``s <= tr(cov) / 3``; here a scan of s brackets the first sign change and Brent's method refines it.
+``s <= tr(cov) / 3``; here a scan of s brackets the first sign change and a bracketed secant search
+(Illinois) refines it.
 Where their code projects a fitted A that is not positive-definite onto the positive semi-definite
 cone, magfit refuses the fit (:class:`~magfit.CalibrationError`), as for every method.
 
@@ -41,6 +42,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from .._optimize import bracketed_root
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..statistics import DESIGN_EXPONENTS, DESIGN_WEIGHTS, Statistics
@@ -58,7 +60,7 @@ _HERMITE: tuple[tuple[tuple[int, float, int], ...], ...] = (
     ((4, 1.0, 0), (2, -6.0, 1), (0, 3.0, 2)),
 )
 #: Grid of trial noise variances (normalised frame, fraction of the largest possible) scanned for the
-#: first sign change of λ_min; the root is then refined by Brent's method.
+#: first sign change of λ_min; the root is then refined in that bracket (:func:`magfit._optimize.bracketed_root`).
 _VARIANCE_GRID = np.concatenate([[0.0], np.geomspace(1e-12, 1.0, 121)])
 
 
@@ -109,9 +111,7 @@ def estimate_noise_variance(statistics: Statistics, psi: tuple[NDArray[np.float6
     for s in _VARIANCE_GRID[1:] * largest:
         current = _smallest_eigenvalue(psi, s)
         if current <= 0.0:
-            from scipy.optimize import brentq  # lazily: scipy.optimize costs 0.4 s of every CLI start
-
-            return float(brentq(lambda v: _smallest_eigenvalue(psi, v), previous, s, xtol=1e-15, rtol=1e-12))
+            return bracketed_root(lambda v: _smallest_eigenvalue(psi, v), previous, s, xtol=1e-15, rtol=1e-12)
         previous = s
     raise CalibrationError(
         "the als fit found no noise variance at which the data fit an ellipsoid (λ_min of ψ_als never reaches 0); "
