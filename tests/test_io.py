@@ -347,3 +347,33 @@ def test_the_file_formats_page_examples_run(tmp_path: Path, monkeypatch: pytest.
     monkeypatch.chdir(tmp_path)  # the examples write their files in the current directory
     result = doctest.testfile(str(page), module_relative=False, optionflags=doctest.ELLIPSIS)
     assert result.attempted > 10 and result.failed == 0
+
+
+def test_read_samples_in_parallel_pieces_is_one_reader(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Above PARALLEL_BYTES a text file is read in pieces on threads (lowered here so that 3 pieces are cut):
+    # the samples, counts, skipped lines and errors are those of one reader.
+    import magfit.io.readers as readers
+
+    rng = np.random.default_rng(3)
+    values = rng.normal(0.0, 50.0, (3000, 3)).round(3)
+    lines = [f"{i},{x},{y},{z}" for i, (x, y, z) in enumerate(values.tolist())]
+    for row in (5, 1500, 2990):
+        lines[row] = f"{row},nan,1,2"
+    lines[1000:1000] = [""] * 60_000  # a run of blank lines longer than a piece: that piece has no rows
+    path = write(tmp_path, "t,mx,my,mz\n" + "\n".join(lines) + "\n")
+    whole = read_samples(path)
+    monkeypatch.setattr(readers, "PARALLEL_BYTES", 100)
+    monkeypatch.setattr(readers.os, "cpu_count", lambda: 16)  # capped at MAX_PIECES
+    pieces = ChunkReader(path).parallel_pieces()
+    assert len(pieces) == readers.MAX_PIECES
+    assert min(len(list(piece)) for piece in pieces) == 0
+    parallel = read_samples(path)
+    np.testing.assert_array_equal(parallel.samples, whole.samples)
+    expected = (3000, 3, (7, 61_502, 62_992))  # file lines: header, then rows shifted by the blank run
+    assert (parallel.n_rows, parallel.n_skipped, parallel.skipped_lines) == expected
+    assert (whole.n_rows, whole.n_skipped, whole.skipped_lines) == expected
+    lines[60_800] = "1,2,3"  # the first error of the file, in the third piece ...
+    lines[62_000] = "x,y"  # ... and a later one in the fourth, which may fail first on its thread
+    bad = write(tmp_path, "t,mx,my,mz\n" + "\n".join(lines) + "\n", "bad.csv")
+    with pytest.raises(DataFileError, match=r"line 60802 has 3 fields"):
+        read_samples(bad)

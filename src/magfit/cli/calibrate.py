@@ -58,9 +58,6 @@ DIAGNOSE_SAMPLES = 100_000
 #: about 90, robust on 1 M samples). A file estimated above half the available memory at this rate is
 #: fitted on an even subsample (docs/scaling.md).
 BYTES_PER_FIT_SAMPLE = 256
-#: Text files from this size are parsed on several threads (see ``_FirstPass``); below it the threads
-#: would cost more than they save.
-PARALLEL_BYTES = 32 << 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -287,18 +284,15 @@ def _fit_subsample(
 class _FirstPass:
     """Pass 1 over a file: its :class:`~magfit.Statistics`, and the samples spilled for the later passes.
 
-    A text file larger than :data:`PARALLEL_BYTES` is cut into pieces at line ends, one per core (up to
-    four), read on threads: pandas parses without holding the GIL, and the pieces' statistics merge
-    exactly (``Statistics.merge``), so the result is that of one reader, in about half the time on two
-    cores. Errors come as one reader would raise them: the first piece's first.
+    A large text file is cut into pieces at line ends, one per core (``ChunkReader.parallel_pieces``),
+    read on threads: pandas parses without holding the GIL, and the pieces' statistics merge exactly
+    (``Statistics.merge``), so the result is that of one reader, in about half the time on two cores.
+    Errors come as one reader would raise them: the first piece's first.
     """
 
     def __init__(self, chunks: Callable[[], ChunkReader]) -> None:
         self._chunks = chunks
-        reader = chunks()
-        workers = min(os.cpu_count() or 1, 4)
-        big = reader.format.kind == "text" and reader.path.stat().st_size >= PARALLEL_BYTES
-        self._pieces = reader.split(workers) if big and workers > 1 else [reader]
+        self._pieces = chunks().parallel_pieces()
         self._spills = [_Spill(piece) for piece in self._pieces]
         self.statistics = Statistics()
         self.read = _Pieces(self._pieces)
