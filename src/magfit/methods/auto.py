@@ -101,7 +101,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     fits: dict[str, Calibration] = {}
     for model in CANDIDATES:
         try:
-            fits[model] = _fit_candidate(model, samples, robust)
+            fits[model] = _fit_candidate(model, samples, robust, data.statistics)
         except MagfitError as error:
             failed[model] = str(error)
     if not fits:
@@ -114,7 +114,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     if robust:  # the common inliers: kept by every robust candidate
         for calibration in fits.values():
             inliers &= _kept(calibration, n)
-    kept = samples[inliers]
+    kept = samples if inliers.all() else samples[inliers]  # no copy of a long log without outliers
     rss, optima, degenerate = _optimal_rss(fits, kept)
     failed.update(degenerate)
     if not rss:
@@ -296,10 +296,11 @@ def _kept(calibration: Calibration, n: int) -> NDArray[np.bool_]:
     return mask
 
 
-def _fit_candidate(model: str, samples: NDArray[np.float64], robust: bool) -> Calibration:
+def _fit_candidate(model: str, samples: NDArray[np.float64], robust: bool, statistics: Statistics) -> Calibration:
+    """``model`` fitted to the samples, robustly or not; ``statistics`` are the samples' (one pass saved)."""
     if robust:
-        return fit_robust(FitInput(Statistics.from_samples(samples), samples), model=model)
-    return fit_model(model, samples)
+        return fit_robust(FitInput(statistics, samples), model=model)
+    return fit_model(model, samples, statistics)
 
 
 def _observable_choice(

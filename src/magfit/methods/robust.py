@@ -44,12 +44,13 @@ MAX_STORED_RUNS = 10_000
 _MAD_TO_SIGMA = 1.4826
 
 
-def resolve_model(model: str) -> tuple[str, Callable[[NDArray[np.float64]], Calibration]]:
+def resolve_model(model: str) -> tuple[str, Callable[..., Calibration]]:
     """The method that fits ``model`` and the function fitting it on (n, 3) samples.
 
-    ``"full"`` is the consistent ``"als"`` when it is registered, else the paper's ``"ellipsoid"``;
-    ``"diag"`` is the registered ``"diag"`` method, else an axis-aligned algebraic fit (eq. 4 without
-    the cross terms).
+    The function is ``run(samples, statistics=None)``: ``statistics``, when given, are those of exactly
+    these samples (computed when not). ``"full"`` is the consistent ``"als"`` when it is registered, else
+    the paper's ``"ellipsoid"``; ``"diag"`` is the registered ``"diag"`` method, else an axis-aligned
+    algebraic fit (eq. 4 without the cross terms).
     """
     if model not in MODELS:
         raise OptionError(f"model={model!r} is not valid; choose one of: {', '.join(MODELS)}")
@@ -62,8 +63,8 @@ def resolve_model(model: str) -> tuple[str, Callable[[NDArray[np.float64]], Cali
         raise OptionError(f"model={model!r} needs the method {name!r}, which this magfit does not have")
     spec = METHODS[name]
 
-    def run(samples: NDArray[np.float64]) -> Calibration:
-        statistics = Statistics.from_samples(samples)
+    def run(samples: NDArray[np.float64], statistics: Statistics | None = None) -> Calibration:
+        statistics = Statistics.from_samples(samples) if statistics is None else statistics
         check_support(statistics, spec.name, spec.min_samples)
         for check in getattr(spec, "checks", ()):  # the method's own refusals, as magfit.fit runs them
             check(statistics, spec.name)
@@ -72,16 +73,20 @@ def resolve_model(model: str) -> tuple[str, Callable[[NDArray[np.float64]], Cali
     return name, run
 
 
-def fit_model(model: str, samples: NDArray[np.float64]) -> Calibration:
-    """Fit ``model`` (a name in :data:`MODELS`) to (n, 3) samples, without diagnostics."""
-    return resolve_model(model)[1](samples)
+def fit_model(model: str, samples: NDArray[np.float64], statistics: Statistics | None = None) -> Calibration:
+    """Fit ``model`` (a name in :data:`MODELS`) to (n, 3) samples, without diagnostics.
+
+    ``statistics``: those of exactly these samples, when the caller has them (one pass over a long log
+    saved per model).
+    """
+    return resolve_model(model)[1](samples, statistics)
 
 
-def _fit_diag_algebraic(samples: NDArray[np.float64]) -> Calibration:
+def _fit_diag_algebraic(samples: NDArray[np.float64], statistics: Statistics | None = None) -> Calibration:
     """Offset + axis-aligned scales: eq. (4) with m₂ = m₃ = m₅ = 0, least squares under |θ| = 1."""
     from .quadric import calibration_from_ellipsoid, ellipsoid_from_quadric
 
-    statistics = Statistics.from_samples(samples)
+    statistics = Statistics.from_samples(samples) if statistics is None else statistics
     check_support(statistics, "diag", 7)
     keep = [0, 1, 2, 6, 7, 8, 9]  # z₁², z₂², z₃², z₁, z₂, z₃, 1 (no cross terms)
     scatter = statistics.scatter[np.ix_(keep, keep)] / statistics.n
