@@ -200,6 +200,34 @@ def test_float32_input_is_converted_chunk_by_chunk() -> None:
     assert peak < 12e6, f"update() allocated {peak / 1e6:.1f} MB at peak"
 
 
+def _fit_peak_memory(samples: np.ndarray, method: str) -> tuple[magfit.Calibration, float]:
+    magfit.fit(samples[:2000], method)  # lazy imports outside the measurement
+    tracemalloc.start()
+    try:
+        calibration = magfit.fit(samples, method)
+        return calibration, tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.mark.parametrize("method", ["ellipsoid", "auto"])
+def test_fit_of_float32_samples_makes_no_whole_float64_copy(method: str) -> None:
+    # fit() itself, diagnostics included: the linear methods read float32 through Statistics' chunks and
+    # the diagnostics convert only the rows they analyse, so float32 input costs what float64 input does;
+    # the iterative methods need one float64 copy (24 MB here).
+    sim = magfit.scenario("mpu9250", "steel").simulate(1_000_000, seed=3)
+    single = sim.samples.astype(np.float32)
+    calibration, peak_single = _fit_peak_memory(single, method)
+    _, peak_double = _fit_peak_memory(single.astype(np.float64), method)
+    np.testing.assert_allclose(calibration.offset, sim.hard_iron, atol=0.01 * sim.field_strength)
+    assert calibration.diagnostics is not None and calibration.diagnostics.n_samples == 1_000_000
+    copy = single.size * 8
+    if method == "ellipsoid":
+        assert peak_single < peak_double + 0.2 * copy, f"{peak_single / 1e6:.1f} MB vs {peak_double / 1e6:.1f} MB"
+    else:
+        assert peak_single > peak_double + 0.8 * copy  # the measurement does see a copy when there is one
+
+
 def test_integer_counts_are_accepted() -> None:
     counts = np.round(magfit.scenario("mpu9250", "none").simulate(500, seed=2).samples).astype(np.int16)
     assert_same_statistics(Statistics.from_samples(counts), Statistics.from_samples(counts.astype(np.float64)))

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_samples, check_support
+from ._validation import check_finite, check_shape, check_support
 from .calibration import Calibration
 from .errors import OptionError
 from .methods import METHODS, FitInput, get_method
@@ -63,7 +64,12 @@ def fit(
             )
         data = FitInput(samples, None)
     else:
-        array = as_samples(samples)
+        # Validated in the caller's dtype: float32 (or integer) samples are converted to float64 a chunk
+        # at a time by Statistics, and whole only for the methods that iterate over the samples.
+        array = check_shape(samples)
+        check_finite(array)
+        if spec.data == "samples":
+            array = np.asarray(array, dtype=np.float64)
         data = FitInput(Statistics.from_samples(array), array)
     check_support(data.statistics, spec.name, spec.min_samples)
     for check in spec.checks:

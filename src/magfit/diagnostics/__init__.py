@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._validation import as_samples
+from .._validation import check_finite, check_shape
 from ..errors import CalibrationError, MagfitError, SampleError
 from ..evaluate import Evaluation
 from ._geometry import Frame
@@ -276,7 +276,7 @@ def _model_kind(calibration: Calibration) -> str:
     return "diag"
 
 
-def _inlier_mask(calibration: Calibration, samples: NDArray[np.float64]) -> tuple[NDArray[np.bool_] | None, str]:
+def _inlier_mask(calibration: Calibration, samples: NDArray[Any]) -> tuple[NDArray[np.bool_] | None, str]:
     """The samples a robust fit kept (None: all), and how they were found.
 
     The recorded indices when they refer to these samples; otherwise (a subsample, a truncated list) the
@@ -330,7 +330,8 @@ def diagnose(
     -------
     Diagnostics
     """
-    array = as_samples(samples)
+    array = check_shape(samples)  # in the caller's dtype: only the rows analysed become float64
+    check_finite(array)
     if represents is not None and represents < array.shape[0]:
         raise SampleError(f"represents={represents} is fewer than the {array.shape[0]} samples given")
     mask, how = _inlier_mask(calibration, array)
@@ -343,10 +344,11 @@ def diagnose(
     if represents is not None:
         notes.append(f"The {n} samples analysed stand for {total} samples: the uncertainty is scaled to those.")
     candidates = thin(n, max_samples)
-    z_candidates = Frame.corrected(calibration).normalise(array[candidates])
+    rows = np.asarray(array[candidates], dtype=np.float64)
+    z_candidates = Frame.corrected(calibration).normalise(rows)
     chosen, weights = weighted_even_subsample(z_candidates, max_samples, total=total)
     indices = candidates[chosen]
-    z = z_candidates[chosen]
+    raw, z = rows[chosen], z_candidates[chosen]
     if indices.size < n:
         notes.append(
             f"Diagnostics computed on a spatially even subsample of {indices.size} of {n} samples "
@@ -354,12 +356,13 @@ def diagnose(
         )
     kind = _model_kind(calibration)
     cover = coverage(z)
-    observability, uncertainty = analyse(array[indices], weights, kind, calibration, inclination_deg)
-    goodness = _goodness(calibration, array[indices], z, weights, held_out)
+    observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg)
+    goodness = _goodness(calibration, raw, z, weights, held_out)
     check = None
     if uncertainty.offset_sigma is not None:  # an undetermined model has no maximum-likelihood fit to compare
-        rows = array[indices][:: max(1, indices.size // CONSISTENCY_SAMPLES)]
-        check = consistency(rows, kind, calibration, uncertainty, inclination_deg)
+        check = consistency(
+            raw[:: max(1, indices.size // CONSISTENCY_SAMPLES)], kind, calibration, uncertainty, inclination_deg
+        )
     warnings = _warnings(cover, observability, goodness)
     if check is not None and not check.consistent:
         warnings.append(
@@ -414,9 +417,7 @@ def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Dia
     )
 
 
-def attach_diagnostics(
-    calibration: Calibration, samples: NDArray[np.float64] | None, statistics: Statistics
-) -> Calibration:
+def attach_diagnostics(calibration: Calibration, samples: NDArray[Any] | None, statistics: Statistics) -> Calibration:
     """``calibration`` with its diagnostics in ``details["diagnostics"]`` (what :func:`magfit.fit` returns).
 
     A diagnosis that fails (a degenerate calibration) is recorded as a warning, never raised: the fit

@@ -11,7 +11,7 @@ from __future__ import annotations
 import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,15 +27,19 @@ __all__ = ["METHODS", "FitInput", "MethodSpec", "get_method", "register"]
 
 @dataclass(frozen=True)
 class FitInput:
-    """What a method receives: the statistics always, the samples when the caller gave them."""
+    """What a method receives: the statistics always, the samples when the caller gave them.
+
+    The samples are (N, 3) and finite, in the caller's dtype (float32 stays float32 for the methods that
+    only read the statistics); :meth:`require_samples` gives them as float64 (no copy when they are).
+    """
 
     statistics: Statistics
-    samples: NDArray[np.float64] | None
+    samples: NDArray[Any] | None
 
     def require_samples(self, method: str) -> NDArray[np.float64]:
         if self.samples is None:
             raise OptionError(f"method {method!r} needs the samples themselves, not Statistics")
-        return self.samples
+        return np.asarray(self.samples, dtype=np.float64)
 
 
 @dataclass(frozen=True)
