@@ -197,7 +197,9 @@ def test_progress_is_shown_only_on_a_terminal(
     terminal = _Terminal()
     monkeypatch.setattr(sys, "stderr", terminal)
     run = run_calibration(path, method="ellipsoid")
-    assert f"reading {path.name}" in terminal.getvalue() and f"scoring the fit on {path.name}" in terminal.getvalue()
+    shown = terminal.getvalue()
+    assert f"reading {path.name}" in shown and f"scoring the fit on {path.name}" in shown
+    assert "100%" in shown and "3,000 rows" in shown  # a bar with the share done: the total is known
     assert run.evaluation.n == 3000 and run.streamed
     piped = io.StringIO()
     monkeypatch.setattr(sys, "stderr", piped)

@@ -275,7 +275,7 @@ def _fit_subsample(
                 lambda: _counted(source(), advance), centre=centre, shape=shape, max_samples=limit, cap_at_median=even
             )
         calibration = fit(sampler.samples, method=method, **options)
-        with _progress(f"scoring the fit on {path.name}") as advance:
+        with _progress(f"scoring the fit on {path.name}", statistics.n) as advance:
             evaluation = evaluate_chunks(calibration, _counted(source(), advance))
     limited = sampler.max_samples == limit and len(sampler.indices) < statistics.n
     return calibration, evaluation, reader, limited
@@ -299,7 +299,8 @@ class _FirstPass:
 
     def __enter__(self) -> _FirstPass:
         try:
-            with _progress(f"reading {self._pieces[0].path.name}") as advance:
+            reader = self._pieces[0]
+            with _progress(f"reading {reader.path.name}", _rows_in(reader.path, reader.format)) as advance:
                 if len(self._pieces) == 1:
                     parts = [self._read(self._pieces[0], self._spills[0], advance)]
                 else:
@@ -462,7 +463,7 @@ def _fit_streaming(
         calibration = fit(statistics, method=method, **options)
         # Pass 2: the paper's metric needs the final calibration, so the samples are read again; on the way,
         # keep an evenly strided subsample (bounded) for the diagnostics, which need samples, not statistics.
-        with _progress(f"scoring the fit on {path.name}") as advance:
+        with _progress(f"scoring the fit on {path.name}", statistics.n) as advance:
             evaluation, subsample = first.score(calibration, advance)
     return _with_diagnostics(calibration, subsample, statistics.n), evaluation, reader
 
@@ -529,22 +530,36 @@ def _require_rows(path: Path, n_samples: int, read: _ReadResult) -> None:
 
 
 @contextmanager
-def _progress(description: str) -> Iterator[Advance]:
-    """A rows-read counter on stderr, shown only when stderr is a terminal; yields ``advance(rows)``."""
+def _progress(description: str, total: int | None = None) -> Iterator[Advance]:
+    """A progress bar on stderr, shown only when stderr is a terminal; yields ``advance(rows)``.
+
+    ``total`` (rows, estimated for a text file from its first megabyte) draws a bar with the percentage
+    and the time left; without it, a spinner and the rows counted.
+    """
     if not sys.stderr.isatty():
         yield lambda rows: None  # no terminal to draw on: a log or a pipe gets no progress noise
         return
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+    from rich.progress import (
+        BarColumn,
+        Progress,
+        SpinnerColumn,
+        TaskProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
+    measured = (BarColumn(), TaskProgressColumn(), TimeRemainingColumn()) if total else ()
     with Progress(
         SpinnerColumn(),
         TextColumn("{task.description}"),
+        *measured,
         TextColumn("{task.completed:,} rows"),
         TimeElapsedColumn(),
         console=console(stderr=True),
         transient=True,
     ) as progress:
-        task = progress.add_task(description, total=None)
+        task = progress.add_task(description, total=total or None)
         yield lambda rows: progress.advance(task, rows)
 
 
