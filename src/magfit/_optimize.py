@@ -43,7 +43,8 @@ class Solution:
 
     params: NDArray[np.float64]
     evaluation: Evaluation
-    status: int  # 0: iteration limit; 1: gradient small; 2: cost converged; 3: step small
+    # 0: not converged (iteration limit, non-finite start); 1: gradient small; 2: cost converged; 3: step small
+    status: int
     message: str
     iterations: int
 
@@ -64,9 +65,10 @@ def levenberg_marquardt(
     the caller has it already.
 
     The damping follows the gain ratio (actual over predicted cost reduction) as Nielsen's rule does
-    (Madsen, Nielsen & Tingleff, *Methods for non-linear least squares problems*, 2004, eq. 3.16): it
-    falls by up to 3x after a step the linear model predicted well and grows geometrically after failed
-    ones, so that fewer trial steps are wasted than with the classic divide-or-multiply-by-ten rule.
+    (H. B. Nielsen, *Damping parameter in Marquardt's method*, IMM-REP-1999-05; Madsen, Nielsen &
+    Tingleff, *Methods for non-linear least squares problems*, 2004, section 3.2): it falls by up to 3x
+    after a step the linear model predicted well and grows geometrically after failed ones, so that fewer
+    trial steps are wasted than with the classic divide-or-multiply-by-ten rule.
 
     Stops when the gradient vanishes, when a step lowers the cost by less than ``cost_tolerance`` of
     itself, or when the step is shorter than 1e-3 standard errors of the fit in its own direction (a
