@@ -41,6 +41,19 @@ def test_steel_picks_the_full_ellipsoid() -> None:
     np.testing.assert_allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, rtol=0.03, atol=3e-8)
 
 
+def test_full_model_at_high_noise_is_the_bias_corrected_ml_fit() -> None:
+    # σ = 10 % of the field: the first-order maximum-likelihood fit grows and skews the ellipsoid by O(σ²)
+    # (1.45 % matrix error, whatever N); auto returns the ml fit instead, unbiased to O(σ⁴).
+    soft_iron = np.array([[1.2, 0.1, -0.05], [0.1, 0.9, 0.08], [-0.05, 0.08, 1.05]])
+    sim = magfit.simulate(50_000, soft_iron=soft_iron, hard_iron=[0.3, -0.2, 0.1], noise=0.1, seed=4)
+    cal = magfit.fit(sim.samples, "auto", diagnostics=False)
+    assert cal.details["chosen"] == "full"
+    truth = sim.truth.ellipsoid_matrix
+    error = np.linalg.norm(cal.ellipsoid_matrix - truth) / np.linalg.norm(truth)
+    assert error < 0.008, f"ellipsoid matrix off by {100 * error:.2f} %"
+    np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=0.005)
+
+
 def test_axis_aligned_scale_picks_diag() -> None:
     sim = magfit.simulate(3000, soft_iron=np.diag([1.15, 0.9, 1.0]), hard_iron=[0.2, -0.1, 0.3], noise=0.01, seed=3)
     cal = magfit.fit(sim.samples, "auto")
