@@ -200,6 +200,9 @@ def test_progress_is_shown_only_on_a_terminal(
     shown = terminal.getvalue()
     assert f"reading {path.name}" in shown and f"scoring the fit on {path.name}" in shown
     assert "100%" in shown and "3,000 rows" in shown  # a bar with the share done: the total is known
+    terminal.truncate(0)
+    in_memory = run_calibration(path, method="ml")  # the whole file is loaded: the read shows progress too
+    assert not in_memory.streamed and f"reading {path.name}" in terminal.getvalue()
     assert run.evaluation.n == 3000 and run.streamed
     piped = io.StringIO()
     monkeypatch.setattr(sys, "stderr", piped)

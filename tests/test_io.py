@@ -367,8 +367,10 @@ def test_read_samples_in_parallel_pieces_is_one_reader(tmp_path: Path, monkeypat
     pieces = ChunkReader(path).parallel_pieces()
     assert len(pieces) == readers.MAX_PIECES
     assert min(len(list(piece)) for piece in pieces) == 0
-    parallel = read_samples(path)
+    counted: list[int] = []
+    parallel = read_samples(path, progress=counted.append)
     np.testing.assert_array_equal(parallel.samples, whole.samples)
+    assert sum(counted) == len(parallel.samples) == 2997 and len(counted) >= readers.MAX_PIECES - 1
     expected = (3000, 3, (7, 61_502, 62_992))  # file lines: header, then rows shifted by the blank run
     assert (parallel.n_rows, parallel.n_skipped, parallel.skipped_lines) == expected
     assert (whole.n_rows, whole.n_skipped, whole.skipped_lines) == expected

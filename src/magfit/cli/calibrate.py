@@ -220,9 +220,10 @@ def _fit_in_memory(
     *,
     even: bool = False,
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
-    from ..io import read_samples
+    from ..io import read_samples, sniff
 
-    table = read_samples(path, columns=columns, nonfinite=nonfinite)
+    with _progress(f"reading {path.name}", _rows_in(path, sniff(path))) as advance:
+        table = read_samples(path, columns=columns, nonfinite=nonfinite, progress=advance)
     _require_rows(path, table.samples.shape[0], table)
     samples = _samples_for_fit(table.samples, even)
     calibration = fit(samples, method=method, **options)

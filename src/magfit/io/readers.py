@@ -1141,6 +1141,7 @@ def read_samples(
     *,
     columns: Sequence[str | int] | None = None,
     nonfinite: Literal["skip", "error"] = "skip",
+    progress: Callable[[int], object] | None = None,
 ) -> SampleTable:
     """Read the magnetometer samples of a file.
 
@@ -1158,6 +1159,9 @@ def read_samples(
     nonfinite : {"skip", "error"}
         Rows with a NaN, infinite or empty magnetometer value are dropped and counted (``"skip"``), or
         the first one raises (``"error"``).
+    progress : callable, optional
+        Called with the number of rows of each chunk read (finite ones; from several threads for a large
+        text file), e.g. to advance a progress bar.
 
     Returns
     -------
@@ -1173,11 +1177,20 @@ def read_samples(
     """
     reader = ChunkReader(path, columns=columns, nonfinite=nonfinite, chunk_rows=1_000_000)
     pieces = reader.parallel_pieces()
+
+    def collect(piece: ChunkReader) -> list[NDArray[np.float64]]:
+        chunks = []
+        for chunk in piece:
+            chunks.append(chunk)
+            if progress is not None:
+                progress(len(chunk))
+        return chunks
+
     if len(pieces) == 1:
-        parts = [list(reader)]
+        parts = [collect(reader)]
     else:
         with ThreadPoolExecutor(len(pieces)) as pool:
-            futures = [pool.submit(list, piece) for piece in pieces]
+            futures = [pool.submit(collect, piece) for piece in pieces]
         parts = [future.result() for future in futures]  # the first piece's error first, as one reader
     chunks = [chunk for part in parts for chunk in part]
     samples = np.concatenate(chunks) if chunks else np.empty((0, 3))
