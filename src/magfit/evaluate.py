@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,8 +33,16 @@ def sphere_distances(calibration: Calibration, samples: ArrayLike) -> NDArray[np
         Dimensionless; positive outside the sphere. For a hard-iron-only calibration the corrected
         vector ``x − V`` is divided by the fitted B, as the paper's comparison requires.
     """
-    array = as_samples(samples)
-    n = array.shape[0]
+    return unchecked_sphere_distances(calibration, as_samples(samples))
+
+
+def unchecked_sphere_distances(calibration: Calibration, samples: NDArray[Any]) -> NDArray[np.float64]:
+    """:func:`sphere_distances` of samples already known to be (N, 3) finite numbers (any float dtype).
+
+    For magfit's own loops (the score of a file, the robust fit, the diagnostics), which have checked
+    their samples once.
+    """
+    n = samples.shape[0]
     # |W y| / B as sqrt(yᵀ Q y), Q = WᵀW / B², y = x − V (subtracted first: no cancellation of a large
     # offset): six products on contiguous rows of yᵀ, a slice at a time. Four times faster than the
     # (N, 3) @ (3, 3) product and the row norms, and no BLAS call, whose threads would compete with the
@@ -44,7 +53,7 @@ def sphere_distances(calibration: Calibration, samples: ArrayLike) -> NDArray[np
     distances = np.empty(n)
     scratch = np.empty((4, min(n, _DISTANCE_SLICE)))
     for start in range(0, n, _DISTANCE_SLICE):
-        chunk = array[start : start + _DISTANCE_SLICE]
+        chunk = samples[start : start + _DISTANCE_SLICE]
         y, product = scratch[:3, : chunk.shape[0]], scratch[3, : chunk.shape[0]]
         np.subtract(chunk.T, offset, out=y)
         squared = distances[start : start + chunk.shape[0]]

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._validation import check_finite, check_shape
 from ..errors import CalibrationError, MagfitError, SampleError
-from ..evaluate import Evaluation
+from ..evaluate import Evaluation, unchecked_sphere_distances
 from ._geometry import Frame
 from .coverage import Coverage, coverage, partition
 from .uncertainty import (
@@ -291,7 +291,7 @@ def _inlier_mask(calibration: Calibration, samples: NDArray[Any]) -> tuple[NDArr
         for start, stop in stored.get("runs", []):
             mask[int(start) : int(stop)] = False
         return mask, "the robust fit rejected"
-    residuals = np.linalg.norm(calibration.apply(samples, normalized=True), axis=1) - 1.0
+    residuals = unchecked_sphere_distances(calibration, samples)
     centre = float(np.median(residuals))
     sigma = 1.4826 * float(np.median(np.abs(residuals - centre)))
     threshold = float(calibration.details.get("threshold", 3.5))
@@ -471,7 +471,7 @@ def _goodness(
             model = refit(raw[~test])
         except MagfitError as error:
             return Goodness(fitted, None, 0, f"the refit on {FOLDS - 1} of {FOLDS} folds failed: {error}")
-        distances[test] = np.linalg.norm(model.apply(raw[test], normalized=True), axis=1) - 1.0
+        distances[test] = unchecked_sphere_distances(model, raw[test])
     note = (
         f"{FOLDS}-fold cross-validation on the analysed samples: each fold evaluated with the method refitted "
         "on the other four."

@@ -46,10 +46,11 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import CalibrationError, MagfitError
+from ..evaluate import unchecked_sphere_distances
 from ..statistics import Statistics
 from .quadric import check_field_strength, pin_field_strength
 from .registry import METHODS, FitInput, check_choice, register
-from .robust import encode_indices, fit_model, fit_robust, geometric_residuals, resolve_model, robust_scale
+from .robust import encode_indices, fit_model, fit_robust, resolve_model, robust_scale
 
 __all__ = ["CANDIDATES", "fit_auto", "fit_chosen"]
 
@@ -288,7 +289,7 @@ def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.b
             continue
     if screen is None:
         return mode == "reject", everything, ""
-    residuals = geometric_residuals(screen, rows)
+    residuals = unchecked_sphere_distances(screen, rows)
     centre, sigma = robust_scale(residuals)
     far = int(np.sum(np.abs(residuals - centre) > _SCREEN_SIGMAS * max(sigma, 1e-12)))
     found = far >= max(5, math.ceil(2e-3 * rows.shape[0]))

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from .._validation import check_support
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
+from ..evaluate import unchecked_sphere_distances
 from ..statistics import Statistics
 from .quadric import check_field_strength, pin_field_strength
 from .registry import METHODS, FitInput, register
@@ -97,12 +98,6 @@ def _fit_diag_algebraic(samples: NDArray[np.float64], statistics: Statistics | N
     return calibration_from_ellipsoid("diag", offset, shape, n_samples=statistics.n)
 
 
-def geometric_residuals(calibration: Calibration, samples: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``|apply(x, normalized=True)| − 1`` for each sample, shape (N,), dimensionless."""
-    corrected = calibration.apply(samples, normalized=True)
-    return np.asarray(np.linalg.norm(corrected, axis=1) - 1.0)
-
-
 def robust_scale(residuals: NDArray[np.float64]) -> tuple[float, float]:
     """Median and σ = 1.4826 MAD of the residuals (a Gaussian's standard deviation, robustly)."""
     centre = float(np.median(residuals))
@@ -136,7 +131,7 @@ def _median_start(
             calibration = run(samples[subset])
         except CalibrationError:
             continue
-        median = float(np.median(np.abs(geometric_residuals(calibration, scoring))))
+        median = float(np.median(np.abs(unchecked_sphere_distances(calibration, scoring))))
         if best is None or median < best[0]:
             best = (median, subset)
     if best is None:
@@ -168,14 +163,14 @@ def _start(
         try:
             calibration = run(samples[mask])
             for _ in range(3):
-                residuals = np.abs(geometric_residuals(calibration, samples))
+                residuals = np.abs(unchecked_sphere_distances(calibration, samples))
                 mask = np.zeros(n, dtype=bool)
                 mask[np.argpartition(residuals, keep - 1)[:keep]] = True
                 calibration = run(samples[mask])
         except CalibrationError as error:
             errors.append(str(error))
             continue
-        trimmed = float(np.sum(np.sort(np.abs(geometric_residuals(calibration, samples)))[:keep] ** 2))
+        trimmed = float(np.sum(np.sort(np.abs(unchecked_sphere_distances(calibration, samples)))[:keep] ** 2))
         if best is None or trimmed < best[0]:
             best = (trimmed, calibration, mask)
     if best is None:
@@ -233,7 +228,7 @@ def fit_robust(
     iterations = 0
     sigma = 0.0
     for iterations in range(1, max_iterations + 1):  # noqa: B007  (the count is reported)
-        residuals = geometric_residuals(calibration, samples)
+        residuals = unchecked_sphere_distances(calibration, samples)
         centre, sigma = robust_scale(residuals)
         new_inliers = np.abs(residuals - centre) <= threshold * max(sigma, 1e-12)
         if np.array_equal(new_inliers, inliers):
