@@ -58,7 +58,8 @@ def levenberg_marquardt(
     current: Evaluation | None = None,
     cost_tolerance: float = 1e-12,
 ) -> Solution:
-    """Minimise ``½ Σ r²`` from ``params``, with Marquardt's diagonal scaling of the damping.
+    """Minimise ``½ Σ r²`` from ``params``, with Marquardt's diagonal scaling of the damping (the running
+    maximum of diag(JᵀJ), as MINPACK scales).
 
     ``evaluate(params, warm)`` returns the :class:`Evaluation` at ``params``; ``warm`` is the ``warm`` of
     the evaluation the step starts from (None at first). ``current`` is the evaluation at ``params`` when
@@ -80,14 +81,18 @@ def levenberg_marquardt(
     if not np.isfinite(current.cost):
         return Solution(params, current, 0, "the cost at the start is not finite", 0)
     damping, growth = 1e-3, 2.0
+    scaling = np.zeros(size)
     for iteration in range(1, max_iterations + 1):
         diagonal = np.maximum(np.diag(current.normal), 1e-300)
+        # Damping scaled by the largest diag(JᵀJ) seen so far (MINPACK's choice): a parameter whose column
+        # shrinks on the way keeps its damping, instead of taking huge steps the next trial refuses.
+        scaling = np.maximum(scaling, diagonal)
         residual_norm = math.sqrt(2.0 * current.cost) + 1e-300
         if float(np.max(np.abs(current.gradient) / np.sqrt(diagonal))) <= 1e-10 * residual_norm:
             return Solution(params, current, 1, "the gradient is zero to tolerance", iteration - 1)
         while True:
             try:
-                step = np.linalg.solve(current.normal + damping * np.diag(diagonal), -current.gradient)
+                step = np.linalg.solve(current.normal + damping * np.diag(scaling), -current.gradient)
                 trial = evaluate(params + step, current.warm)
                 if np.isfinite(trial.cost) and trial.cost <= current.cost:
                     break
@@ -99,7 +104,7 @@ def levenberg_marquardt(
                 return Solution(params, current, 3, "no step lowers the cost: at a minimum", iteration)
         reduction = current.cost - trial.cost
         # The quadratic model's reduction, ½ δᵀ(μ D δ − Jᵀr), since (JᵀJ + μ D) δ = −Jᵀr.
-        predicted = 0.5 * float(step @ (damping * diagonal * step - current.gradient))
+        predicted = 0.5 * float(step @ (damping * scaling * step - current.gradient))
         gain = reduction / predicted if predicted > 0 else 0.0
         damping = max(damping * max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3), 1e-12)
         growth = 2.0
