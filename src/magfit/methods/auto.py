@@ -245,8 +245,8 @@ def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) 
     if model == "full" and "ml" in METHODS:
         try:
             return METHODS["ml"].function(FitInput(Statistics.from_samples(rows), rows))
-        except MagfitError:
-            pass  # e.g. no ellipsoid to start from: the first-order fit below
+        except (MagfitError, np.linalg.LinAlgError):
+            pass  # e.g. no ellipsoid to start from, or too few directions: the first-order fit below
     frame = Frame.of(rows)
     _, optimum = maximum_likelihood(frame.normalise(rows), model, [parameters(start, model, frame)])
     return calibration_from_parameters(optimum, model, frame, model)

@@ -215,6 +215,11 @@ class _Model:
         centre, lower = self.unpack(params)
         shape = lower @ lower.T
         n = self.zt.shape[1]
+        # eigh, as _foot_points computes it (eigvalsh may differ in the last bit and pass a non-positive one)
+        if not (np.all(np.isfinite(shape)) and np.linalg.eigh(shape)[0][0] > 1e-12 * np.abs(shape).max()):
+            # A trial step so long that L under- or overflowed: no ellipsoid, so no distances; Levenberg-
+            # Marquardt refuses the step (infinite cost) and damps more.
+            return Evaluation(math.inf, np.zeros((self.size, self.size)), np.zeros(self.size), warm=roots)
         new_roots = np.empty(n)
         cost = 0.0
         normal = np.zeros((self.size, self.size))
@@ -358,11 +363,17 @@ def fit_ml(
             "the ml fit cannot measure the distances of the samples to the starting ellipsoid (non-finite); "
             "use method='als'"
         )
-    solution = levenberg_marquardt(
-        model.evaluate, params, n_residuals=zt.shape[1], max_iterations=int(max_iterations), current=current
-    )
-    if solution.status > 0 and model.variance > 0:
-        solution = _solve_estimating_equation(model, solution, int(max_iterations))
+    try:
+        solution = levenberg_marquardt(
+            model.evaluate, params, n_residuals=zt.shape[1], max_iterations=int(max_iterations), current=current
+        )
+        if solution.status > 0 and model.variance > 0:
+            solution = _solve_estimating_equation(model, solution, int(max_iterations))
+    except np.linalg.LinAlgError as error:  # JᵀJ singular at the optimum: the samples do not fix all 9 parameters
+        raise CalibrationError(
+            f"the ml fit cannot determine the ellipsoid from these samples ({error}); they cover too few "
+            "directions: rotate the sensor through more attitudes, or use method='auto'"
+        ) from None
     if solution.status <= 0 or not np.all(np.isfinite(solution.params)):
         raise CalibrationError(
             f"the ml fit did not converge ({solution.message}, after {solution.iterations} iterations); "
