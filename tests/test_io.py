@@ -379,3 +379,39 @@ def test_read_samples_in_parallel_pieces_is_one_reader(tmp_path: Path, monkeypat
     bad = write(tmp_path, "t,mx,my,mz\n" + "\n".join(lines) + "\n", "bad.csv")
     with pytest.raises(DataFileError, match=r"line 60802 has 3 fields"):
         read_samples(bad)
+
+
+def test_read_pieces_stops_the_pieces_after_a_failure_but_not_those_before(tmp_path: Path) -> None:
+    import time
+
+    import magfit.io.readers as readers
+
+    lines = [f"{i},{i},{2 * i},{3 * i}" for i in range(4000)]
+    path = write(tmp_path, "t,mx,my,mz\n" + "\n".join(lines) + "\n")
+    pieces = ChunkReader(path, chunk_rows=100).split(3)
+    chunks_read = [0, 0, 0]
+
+    def work(fail_at: dict[int, int]):
+        def run(piece: ChunkReader, stopped) -> int:
+            index = pieces.index(piece)
+            for _chunk in piece:
+                if index in fail_at and chunks_read[index] >= fail_at[index]:
+                    raise DataFileError(f"piece {index} failed")
+                if stopped():
+                    break
+                chunks_read[index] += 1
+                time.sleep(0.02)
+            return index
+
+        return run
+
+    # The first piece fails at once: the two after it stop early instead of parsing to their ends.
+    with pytest.raises(DataFileError, match="piece 0 failed"):
+        readers.read_pieces(pieces, work({0: 0}))
+    assert chunks_read[0] == 0 and max(chunks_read[1:]) < 10  # of about 13 chunks each
+    # The last piece fails at once, the first only later (an earlier line of the file): the first piece is
+    # not stopped, and its error is the one raised, as one reader would raise it.
+    chunks_read[:] = [0, 0, 0]
+    with pytest.raises(DataFileError, match="piece 0 failed"):
+        readers.read_pieces(pieces, work({0: 5, 2: 0}))
+    assert chunks_read[0] == 5

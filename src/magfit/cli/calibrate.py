@@ -222,7 +222,7 @@ def _fit_in_memory(
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import read_samples, sniff
 
-    with _progress(f"reading {path.name}", _rows_in(path, sniff(path))) as advance:
+    with _progress(f"reading {path.name}", lambda: _rows_in(path, sniff(path))) as advance:
         table = read_samples(path, columns=columns, nonfinite=nonfinite, progress=advance)
     _require_rows(path, table.samples.shape[0], table)
     samples = _samples_for_fit(table.samples, even)
@@ -299,18 +299,15 @@ class _FirstPass:
         self.read = _Pieces(self._pieces)
 
     def __enter__(self) -> _FirstPass:
+        from ..io.readers import read_pieces
+
         try:
             reader = self._pieces[0]
-            with _progress(f"reading {reader.path.name}", _rows_in(reader.path, reader.format)) as advance:
-                if len(self._pieces) == 1:
-                    parts = [self._read(self._pieces[0], self._spills[0], advance)]
-                else:
-                    with ThreadPoolExecutor(len(self._pieces)) as pool:
-                        futures = [
-                            pool.submit(self._read, piece, spill, advance)
-                            for piece, spill in zip(self._pieces, self._spills, strict=True)
-                        ]
-                    parts = [future.result() for future in futures]  # the first piece's error first
+            spills = dict(zip(map(id, self._pieces), self._spills, strict=True))
+            with _progress(f"reading {reader.path.name}", lambda: _rows_in(reader.path, reader.format)) as advance:
+                parts = read_pieces(
+                    self._pieces, lambda piece, stopped: self._read(piece, spills[id(piece)], advance, stopped)
+                )
         except BaseException:
             self.__exit__()
             raise
@@ -322,9 +319,11 @@ class _FirstPass:
             spill.close()
 
     @staticmethod
-    def _read(piece: ChunkReader, spill: _Spill, advance: Advance) -> Statistics:
+    def _read(piece: ChunkReader, spill: _Spill, advance: Advance, stopped: Callable[[], bool]) -> Statistics:
         statistics = Statistics()
         for chunk in piece:
+            if stopped():  # an earlier piece failed: its error is what the user sees
+                break
             statistics.update(chunk)
             spill.write(chunk)
             advance(len(chunk))
@@ -531,15 +530,17 @@ def _require_rows(path: Path, n_samples: int, read: _ReadResult) -> None:
 
 
 @contextmanager
-def _progress(description: str, total: int | None = None) -> Iterator[Advance]:
+def _progress(description: str, total: int | Callable[[], int] | None = None) -> Iterator[Advance]:
     """A progress bar on stderr, shown only when stderr is a terminal; yields ``advance(rows)``.
 
-    ``total`` (rows, estimated for a text file from its first megabyte) draws a bar with the percentage
-    and the time left; without it, a spinner and the rows counted.
+    ``total`` (rows, or a function that estimates them, called only when a bar is drawn) draws a bar
+    with the percentage and the time left; without it, a spinner and the rows counted.
     """
     if not sys.stderr.isatty():
         yield lambda rows: None  # no terminal to draw on: a log or a pipe gets no progress noise
         return
+    if callable(total):
+        total = total()
     from rich.progress import (
         BarColumn,
         Progress,

@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any, Literal
+from typing import IO, Any, Literal, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -1107,6 +1107,36 @@ class _NpyStream:
             self._handle.close()
 
 
+_Result = TypeVar("_Result")
+
+
+def read_pieces(
+    pieces: Sequence[ChunkReader], work: Callable[[ChunkReader, Callable[[], bool]], _Result]
+) -> list[_Result]:
+    """``work(piece, stopped)`` for each piece of :meth:`ChunkReader.parallel_pieces`, one thread each;
+    the results in the pieces' order.
+
+    Errors come as one reader of the whole file would raise them: the first piece's first. A piece that
+    fails asks the pieces after it to stop (their ``stopped()`` turns true; ``work`` should check it
+    between chunks), since their rows will not be used; the pieces before it go on, as one of them may
+    hold an earlier error.
+    """
+    if len(pieces) == 1:
+        return [work(pieces[0], lambda: False)]
+    first_failed = [len(pieces)]  # index of the first piece known to have failed
+
+    def run(index: int, piece: ChunkReader) -> _Result:
+        try:
+            return work(piece, lambda: first_failed[0] < index)
+        except BaseException:
+            first_failed[0] = min(first_failed[0], index)
+            raise
+
+    with ThreadPoolExecutor(len(pieces)) as pool:
+        futures = [pool.submit(run, index, piece) for index, piece in enumerate(pieces)]
+    return [future.result() for future in futures]  # the first piece's error first
+
+
 def iter_sample_chunks(
     path: str | os.PathLike[str],
     *,
@@ -1178,21 +1208,17 @@ def read_samples(
     reader = ChunkReader(path, columns=columns, nonfinite=nonfinite, chunk_rows=1_000_000)
     pieces = reader.parallel_pieces()
 
-    def collect(piece: ChunkReader) -> list[NDArray[np.float64]]:
+    def collect(piece: ChunkReader, stopped: Callable[[], bool]) -> list[NDArray[np.float64]]:
         chunks = []
         for chunk in piece:
+            if stopped():
+                break
             chunks.append(chunk)
             if progress is not None:
                 progress(len(chunk))
         return chunks
 
-    if len(pieces) == 1:
-        parts = [collect(reader)]
-    else:
-        with ThreadPoolExecutor(len(pieces)) as pool:
-            futures = [pool.submit(collect, piece) for piece in pieces]
-        parts = [future.result() for future in futures]  # the first piece's error first, as one reader
-    chunks = [chunk for part in parts for chunk in part]
+    chunks = [chunk for part in read_pieces(pieces, collect) for chunk in part]
     samples = np.concatenate(chunks) if chunks else np.empty((0, 3))
     n_rows = sum(piece.n_rows for piece in pieces)
     skipped_lines = tuple(line for piece in pieces for line in piece.skipped_lines)[:MAX_REPORTED_LINES]
