@@ -219,7 +219,7 @@ class _Model:
         if not (np.all(np.isfinite(shape)) and np.linalg.eigh(shape)[0][0] > 1e-12 * np.abs(shape).max()):
             # A trial step so long that L under- or overflowed: no ellipsoid, so no distances; Levenberg-
             # Marquardt refuses the step (infinite cost) and damps more.
-            return Evaluation(math.inf, np.zeros((self.size, self.size)), np.zeros(self.size), warm=roots)
+            return Evaluation(math.inf, np.zeros((self.size, self.size)), np.zeros(self.size), warm=None)
         new_roots = np.empty(n)
         cost = 0.0
         normal = np.zeros((self.size, self.size))
@@ -296,9 +296,10 @@ def _solve_estimating_equation(model: _Model, solution: Solution, max_iterations
         fraction = 1.0
         for _ in range(20):
             trial = model.evaluate(params + fraction * step, current.warm)
-            trial_length, trial_step = _score_length(trial, model.size)
-            if np.isfinite(trial.cost) and trial_length < length:
-                break
+            if np.isfinite(trial.cost):  # else no ellipsoid there (see _Model.evaluate): a shorter step
+                trial_length, trial_step = _score_length(trial, model.size)
+                if trial_length < length:
+                    break
             fraction *= 0.5
         else:
             return Solution(params, current, 0, "the bias-corrected equation has no nearby solution", iteration)
