@@ -54,6 +54,15 @@ def test_full_model_at_high_noise_is_the_bias_corrected_ml_fit() -> None:
     np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=0.005)
 
 
+def test_an_eccentric_ellipsoid_in_heavy_noise_is_not_taken_for_flat_samples() -> None:
+    # The paper's steel case (semi-axes 193-1362 counts) at 10 % noise: the shortest semi-axis is only 7
+    # residuals, but the samples spread 4 residuals along it, not the one of samples in a plane.
+    sim = magfit.scenario("mpu9250", "steel").simulate(3000, seed=1, noise=27.0)
+    cal = magfit.fit(sim.samples, "auto", diagnostics=False)
+    assert cal.details["chosen"] == "full"
+    np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=0.02 * sim.field_strength)
+
+
 def test_axis_aligned_scale_picks_diag() -> None:
     sim = magfit.simulate(3000, soft_iron=np.diag([1.15, 0.9, 1.0]), hard_iron=[0.2, -0.1, 0.3], noise=0.01, seed=3)
     cal = magfit.fit(sim.samples, "auto")

@@ -59,9 +59,13 @@ CANDIDATES = ("sphere", "diag", "full")
 N_PARAMETERS = {"sphere": 4, "diag": 6, "full": 9}
 OUTLIER_MODES = ("detect", "reject", "keep")
 #: An optimum with a semi-axis shorter than this many RMS residual distances, along which the samples
-#: spread less than FLAT_SPREAD times their widest spread, is flattened onto the samples.
+#: spread less than FLAT_SPREAD times their widest spread and less than FLAT_NOISE_SPREAD residuals, is
+#: flattened onto the samples. The last condition keeps a real, very eccentric ellipsoid seen through
+#: heavy noise (the paper's steel case at 10 % noise: shortest semi-axis 7 residuals, spread along it 0.15
+#: of the widest but 4.2 residuals), where samples in a plane spread about one residual across it.
 FLAT_SEMI_AXIS = 10.0
 FLAT_SPREAD = 0.25
+FLAT_NOISE_SPREAD = 2.5
 #: A sample beyond this many robust standard deviations counts as an outlier when screening.
 _SCREEN_SIGMAS = 6.0
 
@@ -212,7 +216,7 @@ def _optimal_rss(
         # barely spread compared with their widest direction (they lie in a plane). Noise alone (a short
         # axis of a few residuals on a full tumble with 10 % noise) is not flatness.
         spread = float(np.std(z @ axes[:, strongest]))
-        if shortest < FLAT_SEMI_AXIS * rms and spread < FLAT_SPREAD * widest:
+        if shortest < FLAT_SEMI_AXIS * rms and spread < min(FLAT_SPREAD * widest, FLAT_NOISE_SPREAD * rms):
             # An ellipsoid flattened onto the samples: they lie in a plane within the noise, and the fit
             # turned the noise across that plane into the ellipsoid's thickness.
             degenerate[model] = (
