@@ -4,14 +4,14 @@ Levenberg–Marquardt serves the ``ml`` fit (orthogonal distances, millions of s
 maximum-likelihood reference fits of ``auto`` and of the diagnostics (first-order distances, a bounded
 subsample); the root finder serves the ``als`` noise variance.
 
-Why not :func:`scipy.optimize.least_squares`: both its methods factor the (N, k) Jacobian itself at every
-iteration (QR in MINPACK, an SVD in ``trf``): 0.8 s for a million samples and 9 parameters on the 2-core
-machine this was measured on, against 0.01 s for ``JᵀJ`` (k x k), and the Jacobian must then be held in
-memory whole. With at most 9 parameters in a normalised frame ``JᵀJ`` is well conditioned, so the
-normal equations lose no accuracy that matters, and they accumulate chunk by chunk. Importing
-``scipy.optimize`` also costs 0.4-0.6 s of CPU, a fifth of a ``magfit calibrate`` run on 10 million
-rows and a third of ``auto`` on a million samples: that is why the one-dimensional root of ``als`` is
-found here too, rather than by :func:`scipy.optimize.brentq`.
+Why not :func:`scipy.optimize.least_squares`: its methods factor the (N, k) Jacobian itself at every
+iteration (a QR in MINPACK's ``lm``, an SVD or a dense least squares in the others): 0.8 s for a million
+samples and 9 parameters on the 2-core machine this was measured on, against 0.01 s for ``JᵀJ`` (k x k),
+and the Jacobian must then be held in memory whole. With at most 9 parameters in a normalised frame
+``JᵀJ`` is well conditioned, so the normal equations lose no accuracy that matters, and they accumulate
+chunk by chunk. Importing ``scipy.optimize`` also costs 0.4-0.6 s of CPU, a fifth of a ``magfit
+calibrate`` run on 10 million rows and a third of ``auto`` on a million samples: that is why the
+one-dimensional root of ``als`` is found here too, rather than by :func:`scipy.optimize.brentq`.
 """
 
 from __future__ import annotations

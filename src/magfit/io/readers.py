@@ -648,8 +648,8 @@ class ChunkReader:
 
     Created by :func:`iter_sample_chunks`. Each item is an (n, 3) float64 array of finite samples. The
     layout and the columns are resolved on creation (so errors about them come at once); errors in the
-    rows come during iteration. Memory is bounded by the chunk (and a byte block of at most 64 MiB),
-    never by the file.
+    rows come during iteration. Memory is bounded by the chunk (and pandas' read buffer of a few hundred
+    KiB), never by the file.
 
     Attributes
     ----------
