@@ -415,3 +415,20 @@ def test_read_pieces_stops_the_pieces_after_a_failure_but_not_those_before(tmp_p
     with pytest.raises(DataFileError, match="piece 0 failed"):
         readers.read_pieces(pieces, work({0: 5, 2: 0}))
     assert chunks_read[0] == 5
+
+
+def test_pieces_report_skipped_lines_as_one_reader(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # 40 NaN rows spread over every piece: the split read reports the first MAX_REPORTED_LINES of them, in
+    # file order, as one reader does (read_samples and calibrate's first pass share PiecesRead).
+    import magfit.io.readers as readers
+
+    lines = [f"{i},{'nan' if i % 100 == 7 else i},{2 * i},{3 * i}" for i in range(4000)]
+    path = write(tmp_path, "t,mx,my,mz\n" + "\n".join(lines) + "\n")
+    whole = ChunkReader(path)
+    list(whole)
+    pieces = ChunkReader(path).split(4)
+    for piece in pieces:
+        list(piece)
+    read = readers.PiecesRead(pieces)
+    assert (read.n_rows, read.n_skipped) == (whole.n_rows, whole.n_skipped) == (4000, 40)
+    assert read.skipped_lines == whole.skipped_lines == tuple(range(9, 1000, 100))

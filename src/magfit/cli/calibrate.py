@@ -292,21 +292,23 @@ class _FirstPass:
     """
 
     def __init__(self, chunks: Callable[[], ChunkReader]) -> None:
+        from ..io.readers import PiecesRead
+
         self._chunks = chunks
         self._pieces = chunks().parallel_pieces()
         self._spills = [_Spill(piece) for piece in self._pieces]
         self.statistics = Statistics()
-        self.read = _Pieces(self._pieces)
+        self.read = PiecesRead(self._pieces)
 
     def __enter__(self) -> _FirstPass:
         from ..io.readers import read_pieces
 
         try:
             reader = self._pieces[0]
-            spills = dict(zip(map(id, self._pieces), self._spills, strict=True))
             with _progress(f"reading {reader.path.name}", lambda: _rows_in(reader.path, reader.format)) as advance:
                 parts = read_pieces(
-                    self._pieces, lambda piece, stopped: self._read(piece, spills[id(piece)], advance, stopped)
+                    self._pieces,
+                    lambda piece, stopped: self._read(piece, self._spills[self._pieces.index(piece)], advance, stopped),
                 )
         except BaseException:
             self.__exit__()
@@ -374,33 +376,6 @@ def _pooled(parts: Sequence[Evaluation]) -> Evaluation:
         rms=float(np.sqrt(weights @ np.array([part.rms for part in parts]) ** 2)),
         max_abs=max(part.max_abs for part in parts),
     )
-
-
-@dataclass(frozen=True)
-class _Pieces:
-    """The bookkeeping of the pieces of one file, read as one (the :class:`_ReadResult` of a split read)."""
-
-    pieces: Sequence[ChunkReader]
-
-    @property
-    def n_rows(self) -> int:
-        return sum(piece.n_rows for piece in self.pieces)
-
-    @property
-    def n_skipped(self) -> int:
-        return sum(piece.n_skipped for piece in self.pieces)
-
-    @property
-    def skipped_lines(self) -> Sequence[int]:
-        return tuple(line for piece in self.pieces for line in piece.skipped_lines)
-
-    @property
-    def columns(self) -> Sequence[Any]:
-        return self.pieces[0].columns
-
-    @property
-    def format(self) -> Any:
-        return self.pieces[0].format
 
 
 class _Spill:

@@ -1110,6 +1110,34 @@ class _NpyStream:
 _Result = TypeVar("_Result")
 
 
+@dataclass(frozen=True)
+class PiecesRead:
+    """The bookkeeping of the pieces of one file (:meth:`ChunkReader.parallel_pieces`), read as one reader
+    would report it: rows and skipped rows summed, the first :data:`MAX_REPORTED_LINES` skipped lines."""
+
+    pieces: Sequence[ChunkReader]
+
+    @property
+    def n_rows(self) -> int:
+        return sum(piece.n_rows for piece in self.pieces)
+
+    @property
+    def n_skipped(self) -> int:
+        return sum(piece.n_skipped for piece in self.pieces)
+
+    @property
+    def skipped_lines(self) -> tuple[int, ...]:
+        return tuple(line for piece in self.pieces for line in piece.skipped_lines)[:MAX_REPORTED_LINES]
+
+    @property
+    def columns(self) -> tuple[str, str, str]:
+        return self.pieces[0].columns
+
+    @property
+    def format(self) -> FileFormat:
+        return self.pieces[0].format
+
+
 def read_pieces(
     pieces: Sequence[ChunkReader], work: Callable[[ChunkReader, Callable[[], bool]], _Result]
 ) -> list[_Result]:
@@ -1220,22 +1248,21 @@ def read_samples(
 
     chunks = [chunk for part in read_pieces(pieces, collect) for chunk in part]
     samples = np.concatenate(chunks) if chunks else np.empty((0, 3))
-    n_rows = sum(piece.n_rows for piece in pieces)
-    skipped_lines = tuple(line for piece in pieces for line in piece.skipped_lines)[:MAX_REPORTED_LINES]
-    if n_rows == 0:
+    read = PiecesRead(pieces)
+    if read.n_rows == 0:
         raise _error(reader.path, "has no data rows; record some samples or give another file")
     if len(samples) == 0:
         raise _error(
             reader.path,
-            f"all {n_rows} rows have a NaN, infinite or empty value in {', '.join(reader.columns)} "
-            f"(first at line {skipped_lines[0]}); check the columns (columns=[...])",
+            f"all {read.n_rows} rows have a NaN, infinite or empty value in {', '.join(reader.columns)} "
+            f"(first at line {read.skipped_lines[0]}); check the columns (columns=[...])",
         )
     return SampleTable(
         path=reader.path,
         samples=samples,
         columns=reader.columns,
-        n_rows=n_rows,
-        n_skipped=sum(piece.n_skipped for piece in pieces),
-        skipped_lines=skipped_lines,
+        n_rows=read.n_rows,
+        n_skipped=read.n_skipped,
+        skipped_lines=read.skipped_lines,
         format=reader.format,
     )
