@@ -115,12 +115,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
         except MagfitError as error:
             failed[model] = str(error)
     if not fits:
-        raise CalibrationError(
-            "no model could be fitted to these samples"
-            + _flatness(samples)
-            + ": "
-            + "; ".join(f"{model}: {reason}" for model, reason in failed.items())
-        )
+        raise _refusal("no model could be fitted to these samples", samples, failed)
     if robust:  # the common inliers: kept by every robust candidate
         for calibration in fits.values():
             inliers &= _kept(calibration, n)
@@ -128,12 +123,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     rss, optima, degenerate = _optimal_rss(fits, kept)
     failed.update(degenerate)
     if not rss:
-        raise CalibrationError(
-            "no model fits these samples"
-            + _flatness(kept)
-            + ": "
-            + "; ".join(f"{model}: {reason}" for model, reason in failed.items())
-        )
+        raise _refusal("no model fits these samples", kept, failed)
     m = kept.shape[0]
     bic = {
         model: m * math.log(max(value, 1e-300) / m) + N_PARAMETERS[model] * math.log(m) for model, value in rss.items()
@@ -309,6 +299,12 @@ def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.b
         )
         return True, everything, note
     return False, everything, ""
+
+
+def _refusal(opening: str, samples: NDArray[np.float64], failed: dict[str, str]) -> CalibrationError:
+    """Why no model is left: ``opening``, what the samples' shape says, and each model's reason."""
+    reasons = "; ".join(f"{model}: {reason}" for model, reason in failed.items())
+    return CalibrationError(opening + _flatness(samples) + ": " + reasons)
 
 
 def _kept(calibration: Calibration, n: int) -> NDArray[np.bool_]:
