@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike
 from rich.console import Console
 
 from ..errors import CalibrationError, MagfitError, OptionError
+from ._extras import hint_for
 
 #: What to do with rows holding NaN or inf (the readers' ``nonfinite`` argument).
 Nonfinite = Literal["skip", "error"]
@@ -88,6 +89,8 @@ def as_command_error(error: BaseException) -> CommandError:
     if isinstance(error, OSError):
         target = f"{error.filename}: " if error.filename else ""
         return CommandError(f"{target}{error.strerror or error}")
+    if isinstance(error, ImportError) and (install := hint_for(error)) is not None:
+        return CommandError(install)  # a missing extra: the install command, not "a bug in magfit"
     return InternalError(
         f"unexpected {type(error).__name__}: {one_line(str(error))} (a bug in magfit: rerun with --debug "
         "and report the traceback)"

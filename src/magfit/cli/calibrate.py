@@ -41,6 +41,7 @@ from ._common import (
     vector,
     warn,
 )
+from ._extras import require
 
 if TYPE_CHECKING:
     from ..io import ChunkReader, FileFormat
@@ -646,6 +647,7 @@ def calibrate_command(
     from .plot import check_figure_path, plot_calibration
 
     if plot_path is not None:
+        require("plot", "'magfit calibrate --plot'", ("matplotlib",))  # before the calibration is written
         check_figure_path(plot_path, "'--plot'")
         refuse_overwriting_input(plot_path, [file])
     method = method or default_method()

@@ -23,6 +23,7 @@ from ..experiment import (
 )
 from ..simulate import DISTURBANCES, SENSORS
 from ._common import console, fixed, significant, vector
+from ._extras import require
 
 #: Fewest samples per case: below this the ellipsoid fit of the steel case is not reliably determined.
 MIN_DEMO_SAMPLES = 100
@@ -64,6 +65,7 @@ def demo_command(seed: int, n_samples: int, report_path: Path | None) -> None:
     from .report import check_html_path, write_demo_report
 
     if report_path is not None:
+        require("plot", "'magfit demo --report'")  # matplotlib and plotly, before the experiment runs
         check_html_path(report_path, "'--report'")
     experiment = run_experiment(n_samples, seed=seed)
     out = console()

@@ -23,6 +23,7 @@ from ._common import (
     refuse_overwriting_input,
     warn,
 )
+from ._extras import require
 from .compare import parse_methods
 
 #: Figure formats ``-o`` accepts (matplotlib's Agg canvas writes them all).
@@ -121,6 +122,7 @@ def plot_command(
     from ..io import read_samples
     from ..plot import calibration_figure, save_figure
 
+    require("plot", "magfit plot", ("matplotlib",))
     check_figure_path(output)
     refuse_overwriting_input(output, [file])
     table = read_samples(file, columns=columns, nonfinite=nonfinite)
@@ -152,18 +154,22 @@ def plot_calibration(
     *,
     columns: Sequence[str | int] | None,
     nonfinite: Literal["skip", "error"],
-) -> str:
-    """Draw ``file``'s samples before and after ``calibration`` into ``output`` (``calibrate --plot``).
+) -> tuple[bytes, str]:
+    """Draw ``file``'s samples before and after ``calibration`` for ``output`` (``calibrate --plot``).
 
     Returns
     -------
-    str
-        The line to print: how many samples are shown and where the figure went.
+    (bytes, str)
+        The figure in ``output``'s format (the caller writes it with its other outputs, so that a
+        failure leaves every file as it was), and the line to print.
     """
+    import io
+
     from ..io import read_samples
-    from ..plot import calibration_figure, save_figure
+    from ..plot import calibration_figure
 
     table = read_samples(file, columns=columns, nonfinite=nonfinite)
     figure = calibration_figure(table.samples, calibration, title=file.name)
-    save_figure(figure, output)
-    return f"{figure.get_supxlabel()} Wrote the figure to {output}"
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format=output.suffix.lower().lstrip("."), dpi="figure")
+    return buffer.getvalue(), f"{figure.get_supxlabel()} Wrote the figure to {output}"

@@ -19,6 +19,7 @@ from ._common import (
     refuse_overwriting_input,
     warn,
 )
+from ._extras import require
 from .compare import parse_methods
 from .plot import methods_in_order
 
@@ -110,6 +111,7 @@ def report_command(
     from ..io import atomic_write_text, read_samples
     from ..report import ReportSection, report_html, section_from_comparison
 
+    require("plot", "magfit report")  # matplotlib and plotly, before anything is read or written
     check_html_path(output)
     refuse_overwriting_input(output, files)
     compared = methods_in_order(method or default_method(), methods or PAPER_METHODS)
