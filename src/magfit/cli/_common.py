@@ -257,7 +257,8 @@ def same_file(first: Path, second: Path) -> bool:
             return os.path.samefile(first, second)
     except OSError:
         pass
-    return first.resolve() == second.resolve()
+    # realpath, not resolve(): a symbolic link loop is no error here (check_output names it).
+    return os.path.realpath(first) == os.path.realpath(second)
 
 
 def refuse_overwriting_input(output: Path, inputs: Iterable[Path]) -> None:

@@ -33,7 +33,7 @@ def read_calibration(path: Path) -> Calibration:
     "--output",
     required=True,
     type=click.Path(dir_okay=False, path_type=Path),
-    help="Where to write the corrected file (same format as FILE; replaced atomically).",
+    help="Where to write the corrected file (same format as FILE; replaced atomically); - for stdout.",
 )
 @click.option(
     "--columns",
@@ -59,12 +59,15 @@ def apply_command(
       magfit calibrate flight.csv --columns mx,my,mz -o cal.json
       magfit apply cal.json flight.csv --columns mx,my,mz -o flight_calibrated.csv
     """
-    refuse_overwriting_input(output, [file, calibration_file])
-    calibration = read_calibration(calibration_file)
-    from ..io import write_calibrated
+    from ..io import STDOUT, check_output, write_calibrated
 
+    to_stdout = str(output) == STDOUT
+    if not to_stdout:
+        refuse_overwriting_input(output, [file, calibration_file])
+    check_output(output)
+    calibration = read_calibration(calibration_file)
     written = write_calibrated(file, calibration, output, columns=columns, normalized=normalized)
-    out = console()
+    out = console(stderr=to_stdout)
     scale = "unit sphere" if normalized else f"input units{f' ({calibration.unit})' if calibration.unit else ''}"
     used = f" (columns {columns_text(columns)})" if columns else ""
     out.print(f"wrote {written}: {file}{used} corrected with {calibration_file} ({calibration.method}), {scale}")

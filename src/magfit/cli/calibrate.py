@@ -32,11 +32,13 @@ from ._common import (
     console,
     default_method,
     export_format_names,
+    fail,
     fixed,
     method_names,
     nonfinite_option,
     parse_columns,
     refuse_overwriting_input,
+    same_file,
     significant,
     vector,
     warn,
@@ -541,22 +543,26 @@ def _progress(description: str, total: int | Callable[[], int] | None = None) ->
         yield lambda rows: progress.advance(task, rows)
 
 
-def write_outputs(
-    run: CalibrationRun, output: Path | None, export_format: str | None, unit: str | None
-) -> tuple[str | None, Path | None]:
-    """Write the calibration JSON or the firmware export; returns (text for stdout, path written)."""
-    from ..io import atomic_write_text
-
+def render_output(run: CalibrationRun, export_format: str | None, unit: str | None) -> str:
+    """The text of the calibration: its JSON, or the firmware export."""
     if export_format is not None:
         from ..export import export
 
-        text = export(run.calibration, export_format, unit=unit)
-    else:
-        text = run.calibration.to_json() + "\n"
-    if output is None:
-        return (text if export_format is not None else None), None
-    atomic_write_text(output, text)
-    return None, output
+        return export(run.calibration, export_format, unit=unit)
+    return run.calibration.to_json() + "\n"
+
+
+def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> None:
+    """Refuse, before the fit, outputs that would clobber the input or each other, or cannot be written."""
+    from ..io import STDOUT, check_output
+
+    outputs = [path for path in (output, plot_path) if path is not None]
+    for path in outputs:
+        if str(path) != STDOUT:
+            refuse_overwriting_input(path, [file])
+        check_output(path)
+    if output is not None and plot_path is not None and str(output) != STDOUT and same_file(output, plot_path):
+        fail(f"-o and --plot are the same file {output}; give each its own path")
 
 
 @click.command("calibrate")
@@ -578,7 +584,7 @@ def write_outputs(
     "-o",
     "--output",
     type=click.Path(dir_okay=False, path_type=Path),
-    help="Write the calibration here (JSON, or the --export format), replacing the file atomically.",
+    help="Write the calibration here (JSON, or the --export format), replacing the file atomically; - for stdout.",
 )
 @click.option(
     "--export",
@@ -644,17 +650,16 @@ def calibrate_command(
       magfit calibrate parked_then_tumbled.csv --even
       magfit calibrate boat.csv --unit uT --field-strength 48.2
     """
+    from ..io import STDOUT, write_all
     from .plot import check_figure_path, plot_calibration
 
     if plot_path is not None:
         require("plot", "'magfit calibrate --plot'", ("matplotlib",))  # before the calibration is written
         check_figure_path(plot_path, "'--plot'")
-        refuse_overwriting_input(plot_path, [file])
+    check_outputs(file, output, plot_path)
     method = method or default_method()
-    if output is not None:
-        refuse_overwriting_input(output, [file])
-        if export_format is not None:
-            _check_extension(output, export_format)
+    if output is not None and export_format is not None and str(output) != STDOUT:
+        _check_extension(output, export_format)
     options = {} if field_strength is None else {"field_strength": field_strength}
     run = run_calibration(
         file,
@@ -666,8 +671,18 @@ def calibrate_command(
         max_samples=max_samples,
         options=options,
     )
-    stdout_text, written = write_outputs(run, output, export_format, unit)
-    summary = console(stderr=stdout_text is not None)
+    # Everything is computed before anything is written: a failure leaves every existing file as it was.
+    text = render_output(run, export_format, unit) if output is not None or export_format is not None else None
+    to_stdout = text is not None and (output is None or str(output) == STDOUT)
+    files: list[tuple[Path, bytes]] = []
+    if output is not None and text is not None and not to_stdout:
+        files.append((output, text.encode("utf-8")))
+    plot_line = None
+    if plot_path is not None:
+        figure, plot_line = plot_calibration(file, run.calibration, plot_path, columns=columns, nonfinite=nonfinite)
+        files.append((plot_path, figure))
+    write_all(files)
+    summary = console(stderr=to_stdout)
     if run.n_skipped:
         lines = ", ".join(map(str, run.skipped_lines[:5]))
         more = ", ..." if run.n_skipped > 5 else ""
@@ -678,13 +693,13 @@ def calibrate_command(
     for message in _fit_warnings(run.calibration):
         warn(message)
     print_summary(summary, run)
-    if written is not None:
+    if output is not None and not to_stdout:
         what = f"{export_format} export" if export_format else "calibration"
-        summary.print(f"wrote the {what} to {written}")
-    if plot_path is not None:
-        summary.print(plot_calibration(file, run.calibration, plot_path, columns=columns, nonfinite=nonfinite))
-    if stdout_text is not None:
-        click.echo(stdout_text, nl=not stdout_text.endswith("\n"))
+        summary.print(f"wrote the {what} to {output}")
+    if plot_line is not None:
+        summary.print(plot_line)
+    if to_stdout and text is not None:
+        click.echo(text, nl=not text.endswith("\n"))
 
 
 def _fit_warnings(calibration: Calibration) -> list[str]:

@@ -9,7 +9,7 @@ import click
 
 from ..compare import PAPER_METHODS
 from ._common import (
-    EXIT_FIT_FAILED,
+    FitFailedError,
     RegistryChoice,
     console,
     default_method,
@@ -79,9 +79,12 @@ def check_html_path(output: Path, option: str = "'-o' / '--output'") -> None:
     help="Samples drawn in each interactive 3-D view (keeps the file at a few MB).",
 )
 @nonfinite_option
-@click.pass_context
+@click.option(
+    "--allow-unfitted",
+    is_flag=True,
+    help="Write the report even when no method fits a file (its raw samples are shown alone); exit status 0.",
+)
 def report_command(
-    ctx: click.Context,
     files: tuple[Path, ...],
     output: Path,
     method: str | None,
@@ -92,6 +95,7 @@ def report_command(
     max_points: int,
     max_points_3d: int,
     nonfinite: Literal["skip", "error"],
+    allow_unfitted: bool,
 ) -> None:
     """Write an HTML report of the calibration of each FILE.
 
@@ -99,8 +103,8 @@ def report_command(
     diagnostics of each fit (coverage, uncertainty, what the data could not determine), the figure of
     'magfit plot' and an interactive 3-D view of the raw and calibrated samples. Everything is inside the
     one file (no network access, no CDN), so it can be mailed or archived as it is. A method that cannot
-    fit a file is listed with its reason; when no method fits a file the report is still written and the
-    exit status is 1.
+    fit a file is listed with its reason. When no method fits a file, the exit status is 1 and nothing is
+    written (an existing report is kept), unless --allow-unfitted.
 
     \b
     Examples:
@@ -136,12 +140,16 @@ def report_command(
         out.print(
             f"{path}: {len(table.samples):,} samples, {fitted} of {len(comparison)} methods fitted", soft_wrap=True
         )
+    if unfitted and not allow_unfitted:  # a failed run leaves an existing report as it was
+        raise FitFailedError(
+            f"no method could fit {', '.join(map(str, unfitted))}; the report is not written "
+            "(remove that file, or pass --allow-unfitted to show its raw samples alone)"
+        )
     text = report_html(sections, title=title, max_points=max_points, max_points_3d=max_points_3d)
     atomic_write_text(output, text)
     out.print(f"Wrote the report to {output} ({len(text.encode('utf-8')) / 1e6:.1f} MB)", soft_wrap=True)
-    if unfitted:  # as `magfit compare`: the report is written, the exit status says a file could not be fitted
+    if unfitted:
         warn(f"no method could fit {', '.join(map(str, unfitted))}")
-        ctx.exit(EXIT_FIT_FAILED)
 
 
 def write_demo_report(output: Path, experiment: Experiment) -> str:

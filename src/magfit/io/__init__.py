@@ -12,21 +12,24 @@ error. Reading text needs pandas (the ``cli`` extra); ``import magfit`` does not
 
 from __future__ import annotations
 
-from .atomic import atomic_open, atomic_write_text
+from .atomic import STDOUT, atomic_open, atomic_write_text, check_output, write_all
 from .columns import ColumnTriple, find_magnetometer_columns
 from .readers import ChunkReader, FileFormat, SampleTable, iter_sample_chunks, read_samples, sniff
 from .writers import write_calibrated
 
 __all__ = [
+    "STDOUT",
     "ChunkReader",
     "ColumnTriple",
     "FileFormat",
     "SampleTable",
     "atomic_open",
     "atomic_write_text",
+    "check_output",
     "find_magnetometer_columns",
     "iter_sample_chunks",
     "read_samples",
     "sniff",
+    "write_all",
     "write_calibrated",
 ]

@@ -39,7 +39,7 @@ _NON_SPACE = re.compile(rb"\S+")
 
 
 def _same_file(first: Path, second: Path) -> bool:
-    if first.resolve() == second.resolve():
+    if os.path.realpath(first) == os.path.realpath(second):  # no error on a link loop
         return True
     try:
         return os.path.samefile(first, second)
@@ -336,7 +336,8 @@ def _write_npy(reader: ChunkReader, calibration: Calibration, out: Path, normali
     with atomic_open(out, "wb") as target:
         np.lib.format.write_array_header_2_0(target, header)
         for start in range(0, array.shape[0], reader.chunk_rows):
-            block = np.ascontiguousarray(array[start : start + reader.chunk_rows], dtype=dtype)
+            # A copy: for a float64 file ascontiguousarray would return a view of the read-only memory map.
+            block = np.array(array[start : start + reader.chunk_rows], dtype=dtype, order="C")
             block[:, columns], _ = _calibrate_finite(block[:, columns], calibration, normalized)
             target.write(block.tobytes(order="C"))
 

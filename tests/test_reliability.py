@@ -1,0 +1,182 @@
+"""Issue 11: bad input, faults and interruptions. One regression test per finding, named after it.
+
+The invariants (docs/reliability.md): a MagfitError with a one-line message or a checked calibration;
+exit status 0, 1 or 2, never 3; no traceback; no existing file changed by a failed run; no temporary
+file left behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+
+import magfit
+from magfit.cli import cli
+
+
+def _run(*args: object) -> Result:
+    return CliRunner().invoke(cli, [str(arg) for arg in args])
+
+
+def _assert_error(result: Result, status: int, *fragments: str) -> str:
+    """The run failed with ``status``; its last line, the only error, holds every fragment (after any warnings)."""
+    assert result.exit_code == status, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit), "a traceback escaped"
+    lines = result.stderr.strip().splitlines()
+    assert all(line.startswith(("magfit: error: ", "magfit: warning: ")) for line in lines), result.stderr
+    assert lines[-1].startswith("magfit: error: ") and sum(line.startswith("magfit: error") for line in lines) == 1
+    for fragment in fragments:
+        assert fragment in lines[-1], lines[-1]
+    return lines[-1]
+
+
+def _samples(n: int = 500, seed: int = 1) -> np.ndarray:
+    return magfit.scenario("mpu9250", "steel").simulate(n, seed=seed).samples
+
+
+def _csv(path: Path, samples: np.ndarray) -> Path:
+    np.savetxt(path, samples, fmt="%.10g", delimiter=",", header="mx,my,mz", comments="")
+    return path
+
+
+def _flat(path: Path) -> Path:
+    """Level turns at zero inclination: samples in a plane, which no method can fit (exit status 1)."""
+    flat = magfit.simulate(300, orientations="yaw", inclination_deg=0.0, field_strength=50.0, seed=2).samples
+    return _csv(path, flat)
+
+
+def _no_temporaries(folder: Path) -> None:
+    assert not [p.name for p in folder.iterdir() if p.name.endswith(".tmp")], "a temporary file was left behind"
+
+
+# ---------------------------------------------------------------------- 1. apply on a float64 .npy
+
+
+def test_1_apply_float64_npy_writes_the_calibrated_array(tmp_path: Path) -> None:
+    samples = _samples()
+    np.save(tmp_path / "s.npy", samples)  # float64, C order: np.load's memory map is read-only
+    calibration = magfit.fit(samples, method="ellipsoid", diagnostics=False)
+    (tmp_path / "cal.json").write_text(calibration.to_json())
+    result = _run("apply", tmp_path / "cal.json", tmp_path / "s.npy", "-o", tmp_path / "out.npy")
+    assert result.exit_code == 0, result.output
+    np.testing.assert_allclose(np.load(tmp_path / "out.npy"), calibration.apply(samples), rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(np.load(tmp_path / "s.npy"), samples)  # the input is untouched
+
+
+# ---------------------------------------------------------------------- 2. a failed run overwrites its output
+
+
+def test_2_failed_run_keeps_the_existing_output(tmp_path: Path) -> None:
+    data = _csv(tmp_path / "s.csv", _samples())
+    keep = tmp_path / "keep.json"
+    keep.write_text("OLD\n")
+    # The --plot folder is missing: refused before the fit, -o untouched.
+    _assert_error(_run("calibrate", data, "-o", keep, "--plot", tmp_path / "nodir" / "p.png"), 2, "does not exist")
+    assert keep.read_text() == "OLD\n"
+    # The data cannot support the fit: exit 1, -o untouched.
+    _assert_error(_run("calibrate", _flat(tmp_path / "flat.csv"), "-m", "ellipsoid", "-o", keep), 1, "plane")
+    assert keep.read_text() == "OLD\n"
+    _no_temporaries(tmp_path)
+
+
+def test_2_same_path_for_two_outputs_is_a_usage_error(tmp_path: Path) -> None:
+    data = _csv(tmp_path / "s.csv", _samples())
+    same = tmp_path / "same.png"
+    _assert_error(_run("calibrate", data, "-o", same, "--plot", same), 2, "-o and --plot are the same file")
+    assert not same.exists()
+    same.write_bytes(b"OLD")  # through a link, too
+    os.symlink(same, tmp_path / "link.png")
+    _assert_error(_run("calibrate", data, "-o", tmp_path / "link.png", "--plot", same), 2, "same file")
+    assert same.read_bytes() == b"OLD"
+
+
+def test_2_calibrate_writes_both_outputs_on_success(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    data = _csv(tmp_path / "s.csv", _samples())
+    result = _run("calibrate", data, "-m", "ellipsoid", "-o", tmp_path / "cal.json", "--plot", tmp_path / "p.png")
+    assert result.exit_code == 0, result.output
+    saved = magfit.Calibration.from_json((tmp_path / "cal.json").read_text())
+    assert saved.method == "ellipsoid"
+    assert (tmp_path / "p.png").read_bytes().startswith(b"\x89PNG")
+    _no_temporaries(tmp_path)
+
+
+def test_6_report_that_fails_keeps_the_existing_report(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    flat = _flat(tmp_path / "flat.csv")
+    report = tmp_path / "report.html"
+    report.write_text("OLD")
+    result = _run("report", flat, "--methods", "ellipsoid", "-o", report)
+    _assert_error(result, 1, "no method could fit", "--allow-unfitted")
+    assert report.read_text() == "OLD"
+    result = _run("report", flat, "--methods", "ellipsoid", "--allow-unfitted", "-o", report)
+    assert result.exit_code == 0, result.output
+    assert "No method could fit these samples" in report.read_text(encoding="utf-8")
+
+
+# ---------------------------------------------------------------------- 3. FIFOs, devices, '-' as outputs
+
+
+def test_3_dash_means_stdout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    data = _csv(tmp_path / "s.csv", _samples())
+    result = _run("calibrate", data, "-m", "sphere", "-o", "-")
+    assert result.exit_code == 0, result.output
+    calibration = magfit.Calibration.from_json(result.stdout)  # the JSON alone on stdout, the summary on stderr
+    assert calibration.method == "sphere"
+    assert "offset" in result.stderr
+    result = _run("apply", _saved(tmp_path, calibration), data, "-o", "-")
+    assert result.exit_code == 0, result.output
+    corrected = np.loadtxt(result.stdout.splitlines(), delimiter=",", skiprows=1)
+    np.testing.assert_allclose(corrected, calibration.apply(np.loadtxt(data, delimiter=",", skiprows=1)), rtol=1e-8)
+    assert not (tmp_path / "-").exists()
+
+
+def _saved(folder: Path, calibration: magfit.Calibration) -> Path:
+    path = folder / "cal.json"
+    path.write_text(calibration.to_json())
+    return path
+
+
+@pytest.mark.skipif(not Path("/dev/null").exists(), reason="needs /dev/null")
+def test_3_device_output_is_written_into_not_replaced(tmp_path: Path) -> None:
+    data = _csv(tmp_path / "s.csv", _samples())
+    before = os.stat("/dev/null")
+    result = _run("calibrate", data, "-m", "sphere", "-o", "/dev/null")
+    assert result.exit_code == 0, result.output
+    after = os.stat("/dev/null")
+    assert stat.S_ISCHR(after.st_mode) and after.st_ino == before.st_ino
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs")
+def test_3_fifo_output_is_written_into(tmp_path: Path) -> None:
+    data = _csv(tmp_path / "s.csv", _samples())
+    fifo = tmp_path / "out.fifo"
+    os.mkfifo(fifo)
+    received: list[bytes] = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    result = _run("calibrate", data, "-m", "sphere", "-o", fifo)
+    reader.join(timeout=30)
+    assert result.exit_code == 0, result.output
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert json.loads(received[0])["method"] == "sphere"
+
+
+def test_3_symbolic_links(tmp_path: Path) -> None:
+    data = _csv(tmp_path / "s.csv", _samples())
+    os.symlink("real.json", tmp_path / "link.json")  # dangling: the file it names is created
+    assert _run("calibrate", data, "-m", "sphere", "-o", tmp_path / "link.json").exit_code == 0
+    assert (tmp_path / "link.json").is_symlink()
+    assert magfit.Calibration.from_json((tmp_path / "real.json").read_text()).method == "sphere"
+    os.symlink("loop2", tmp_path / "loop1")
+    os.symlink("loop1", tmp_path / "loop2")
+    _assert_error(_run("calibrate", data, "-o", tmp_path / "loop1"), 2, "symbolic link loop")
+    _assert_error(_run("calibrate", data, "-o", tmp_path), 2)  # a directory
