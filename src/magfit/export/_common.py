@@ -11,6 +11,10 @@ from numpy.typing import NDArray
 from ..calibration import CONVENTION, Calibration
 from ..errors import ExportError, OptionError
 from ..units import Unit, conversion_factor, get_unit
+from ._heading import ASSUMPTION, heading_error_deg
+
+#: Largest finite float32: a C ``float`` literal beyond it is infinity.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 #: Largest relative asymmetry max|M − Mᵀ| / max|M| still treated as a symmetric matrix (rounding only).
 SYMMETRY_TOLERANCE = 1e-9
@@ -34,8 +38,31 @@ def float32_text(value: float) -> str:
     return f"{float(value):.9g}"
 
 
+def check_float32(values: dict[str, NDArray[np.float64] | float], target: str) -> None:
+    """Refuse values a C ``float`` cannot hold: ``1e39f`` is infinity, not the calibration.
+
+    ``values`` maps a name (``"offset"``) to a number or an array; the message names the first
+    element out of range, so the user can see which unit to change.
+    """
+    for name, value in values.items():
+        array = np.atleast_1d(np.asarray(value, dtype=np.float64))
+        with np.errstate(over="ignore"):
+            as_float32 = array.astype(np.float32)
+        bad = np.flatnonzero(~np.isfinite(as_float32))
+        if bad.size:
+            index = np.unravel_index(int(bad[0]), np.shape(value)) if np.ndim(value) else ()
+            where = name + "".join(f"[{i}]" for i in index)
+            raise ExportError(
+                f"the {target} export writes C floats, but {where} = {float(array.flat[bad[0]]):.6g} is outside "
+                f"float32's range (+-{FLOAT32_MAX:.4g}); fit samples in a larger unit (e.g. uT instead of nT)"
+            )
+
+
 def c_float(value: float) -> str:
-    """A C ``float`` literal with 9 significant digits (``1`` becomes ``1.0f``, never the invalid ``1f``)."""
+    """A C ``float`` literal with 9 significant digits (``1`` becomes ``1.0f``, never the invalid ``1f``).
+
+    Check the values with :func:`check_float32` first: this only formats.
+    """
     text = float32_text(value)
     if not any(ch in text for ch in ".en"):
         text += ".0"
@@ -116,7 +143,7 @@ def symmetric_matrix(calibration: Calibration, target: str) -> SymmetricMatrix:
     drop, so it is refused.
     """
     m = calibration.matrix
-    asymmetry = float(np.max(np.abs(m - m.T)) / np.max(np.abs(m)))
+    asymmetry = _asymmetry(m)
     if asymmetry <= SYMMETRY_TOLERANCE:
         return SymmetricMatrix(0.5 * (m + m.T), 0.0, None)
     if calibration.details.get("root") != "cholesky" or np.linalg.det(m) <= 0:
@@ -125,17 +152,54 @@ def symmetric_matrix(calibration: Calibration, target: str) -> SymmetricMatrix:
             f"symmetric (max|M - M^T| / max|M| = {asymmetry:.3g}) and may encode an axis rotation that {target} "
             "cannot represent; refit with root='sqrt' or export to 'c', 'fusion', 'magcal' or 'json'"
         )
-    eigenvalues, eigenvectors = np.linalg.eigh(m.T @ m)
-    root = (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T
-    root = 0.5 * (root + root.T)
-    rotation = m @ np.linalg.inv(root)  # orthogonal, det +1: M = Q S (polar decomposition)
-    angle = math.degrees(math.acos(min(1.0, max(-1.0, (float(np.trace(rotation)) - 1.0) / 2.0))))
+    root, angle = _polar(m)
     note = (
         "magfit's matrix is a Cholesky root (not symmetric); this file holds the symmetric root "
         f"sqrtm(matrix^T matrix): same ellipsoid and same |corrected|, but the corrected vector is rotated "
         f"by {angle:.3f} deg from magfit's apply() (that rotation is an artefact of the Cholesky factor)"
     )
     return SymmetricMatrix(root, angle, note)
+
+
+def _asymmetry(m: NDArray[np.float64]) -> float:
+    return float(np.max(np.abs(m - m.T)) / np.max(np.abs(m)))
+
+
+def _polar(m: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+    """The symmetric root ``S = sqrtm(Mᵀ M)`` and the angle (degrees) of the rotation ``Q = M S⁻¹``."""
+    eigenvalues, eigenvectors = np.linalg.eigh(m.T @ m)
+    root = (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T
+    root = 0.5 * (root + root.T)
+    rotation = m @ np.linalg.inv(root)  # orthogonal: M = Q S (polar decomposition)
+    angle = math.degrees(math.acos(min(1.0, max(-1.0, (float(np.trace(rotation)) - 1.0) / 2.0))))
+    return root, angle
+
+
+def rotated_frame_warning(calibration: Calibration) -> str | None:
+    """A warning for targets that keep the full matrix, when that matrix turns the corrected field.
+
+    A Cholesky root (``root="cholesky"``) fits the same ellipsoid as the symmetric root but turns every
+    corrected vector by a fixed rotation that the samples do not determine (14 deg with strong soft
+    iron): a compass heading made from it is off by up to that angle. These targets keep the matrix
+    as fitted, so the file reproduces ``Calibration.apply`` and the user's explicit choice, and say so.
+    None when the matrix is symmetric (then the rotation is zero by construction).
+    """
+    m = calibration.matrix
+    if _asymmetry(m) <= SYMMETRY_TOLERANCE or np.linalg.det(m) <= 0:
+        return None
+    root, angle = _polar(m)
+    symmetric = Calibration(calibration.method, calibration.offset, root, calibration.field_strength)
+    heading = heading_error_deg(symmetric, m, calibration.offset)
+    if calibration.details.get("root") == "cholesky":
+        return (
+            f"WARNING: the matrix is a Cholesky root (root='cholesky'), not symmetric: it turns the corrected "
+            f"field by {angle:.2f} deg from the symmetric root, a rotation the samples do not determine; headings "
+            f"differ by up to {heading:.2f} deg ({ASSUMPTION}); for a compass, refit with root='sqrt' (the default)"
+        )
+    return (
+        f"NOTE: the matrix is not symmetric: it turns the corrected field by {angle:.2f} deg from the symmetric "
+        "root sqrtm(matrix^T matrix); keep it only if that rotation is a real sensor-to-body alignment"
+    )
 
 
 def describe(calibration: Calibration, unit: str | None) -> list[str]:

@@ -5,12 +5,14 @@ form of paper eq. 5), and provides ``magfit_correct()`` that applies it. ``magfi
 row i, column j of ``Calibration.matrix``. Values keep the input unit (no conversion, so raw
 counts are fine) and are written with 9 significant digits (``%.9g``), enough to round-trip a
 float. The text carries no date, so exporting the same calibration twice gives the same file.
+A value beyond float32's range is refused (the literal would be infinity), and a non-symmetric
+matrix (``root="cholesky"``) is written as fitted with a warning giving the rotation it adds.
 """
 
 from __future__ import annotations
 
 from ..calibration import Calibration
-from ._common import c_float, describe, label_unit, unit_phrase
+from ._common import c_float, check_float32, describe, label_unit, plain, rotated_frame_warning, unit_phrase
 
 GUARD = "MAGFIT_CALIBRATION_H"
 
@@ -29,12 +31,20 @@ def write_c_header(calibration: Calibration, unit: str | None = None) -> str:
     ------
     OptionError
         ``unit`` is not a unit magfit knows.
+    ExportError
+        A value does not fit in a C ``float``.
     """
+    check_float32(
+        {"offset": calibration.offset, "matrix": calibration.matrix, "field_strength": calibration.field_strength}, "c"
+    )
     label = label_unit(calibration, unit)
     units = unit_phrase(label)
+    warning = rotated_frame_warning(calibration)
     offset = ", ".join(c_float(v) for v in calibration.offset)
     rows = "\n".join("    {" + ", ".join(c_float(v) for v in row) + "}," for row in calibration.matrix)
     facts = "\n".join(f" * {line}" for line in describe(calibration, label))
+    if warning:
+        facts += f"\n * {plain(warning)}"
     return f"""/* magfit magnetometer calibration. Generated file: re-export instead of editing.
  *
  *     corrected = matrix * (raw - offset)

@@ -10,13 +10,14 @@ sample gives ``correctedᵀ = (raw - offset)ᵀ matrixᵀ``, hence::
     A = matrixᵀ      b = offset (a 1x3 row)      expmfs = field_strength
 
 in the samples' unit (no conversion; raw counts are fine). Values are written with 17 significant
-digits, so MATLAB's doubles hold exactly magfit's numbers. No limits: every calibration can be written.
+digits, so MATLAB's doubles hold exactly magfit's numbers. No limits: every calibration can be written;
+a non-symmetric matrix (``root="cholesky"``) is written as fitted with a warning giving the rotation it adds.
 """
 
 from __future__ import annotations
 
 from ..calibration import Calibration
-from ._common import describe, label_unit, plain, unit_phrase
+from ._common import describe, label_unit, plain, rotated_frame_warning, unit_phrase
 
 
 def _double(value: float) -> str:
@@ -36,6 +37,9 @@ def write_magcal(calibration: Calibration, unit: str | None = None) -> str:
     rows = ";\n     ".join(", ".join(_double(v) for v in row) for row in a)
     offset = ", ".join(_double(v) for v in calibration.offset)
     facts = "\n".join(f"% {plain(line)}" for line in describe(calibration, label))
+    warning = rotated_frame_warning(calibration)
+    if warning:
+        facts += f"\n% {plain(warning)}"
     return f"""% magfit magnetometer calibration in MATLAB magcal's form. Generated file: re-export instead of editing.
 %
 %     C = (D - b) * A
