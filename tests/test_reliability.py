@@ -180,3 +180,99 @@ def test_3_symbolic_links(tmp_path: Path) -> None:
     os.symlink("loop1", tmp_path / "loop2")
     _assert_error(_run("calibrate", data, "-o", tmp_path / "loop1"), 2, "symbolic link loop")
     _assert_error(_run("calibrate", data, "-o", tmp_path), 2)  # a directory
+
+
+# ---------------------------------------------------------------------- 4. exit 3 on malformed input
+
+
+def _broken_npy_files(folder: Path) -> dict[str, Path]:
+    good = folder / "good.npy"
+    np.save(good, _samples())
+    files = {"truncated": folder / "truncated.npy", "object": folder / "object.npy", "0-d": folder / "zerod.npy"}
+    files["truncated"].write_bytes(good.read_bytes()[:1000])
+    np.save(files["object"], np.array([[1.0, "a", None]] * 5, dtype=object), allow_pickle=True)
+    np.save(files["0-d"], np.array(3.0))
+    return files
+
+
+@pytest.mark.parametrize("command", [["calibrate", "-m", "sphere"], ["calibrate", "-m", "ml"], ["calibrate", "--even"]])
+def test_4_malformed_npy_is_an_input_error(tmp_path: Path, command: list[str]) -> None:
+    for kind, path in _broken_npy_files(tmp_path).items():
+        message = _assert_error(_run(*command, path), 2, str(path))
+        assert {"truncated": "is truncated", "object": "dtype object", "0-d": "shape ()"}[kind] in message
+
+
+def test_4_malformed_npy_through_apply(tmp_path: Path) -> None:
+    calibration = _saved(tmp_path, magfit.Calibration.identity(270.0))
+    for path in _broken_npy_files(tmp_path).values():
+        _assert_error(_run("apply", calibration, path, "-o", tmp_path / "out.npy"), 2, str(path))
+    assert not (tmp_path / "out.npy").exists()
+
+
+def _calibration_dict() -> dict[str, object]:
+    return json.loads(magfit.fit(_samples(), method="ellipsoid").to_json())
+
+
+def _mutated(**fields: object) -> str:
+    return json.dumps({**_calibration_dict(), **fields})
+
+
+#: Calibration files that are no usable calibration, and what the one-line refusal says.
+BROKEN_CALIBRATIONS = {
+    "a number beyond float64": (
+        lambda: _mutated(field_strength=1.0).replace('"field_strength": 1.0', '"field_strength": 1e400'),
+        "'field_strength' is beyond the range of float64",
+    ),
+    "an integer beyond float64": (lambda: _mutated(offset=[10**400, 0, 0]), "'offset[0]' is beyond the range"),
+    "a ragged matrix": (lambda: _mutated(matrix=[[1, 0, 0], [0, 1], [0, 0, 1]]), "'matrix[1]' must be a list of 3"),
+    "strings for numbers": (lambda: _mutated(offset=["1", "2", "3"]), "'offset[0]' must be a number"),
+    "details a list": (lambda: _mutated(details=[]), "'details' must be an object"),
+    "diagnostics a list": (lambda: _mutated(details={"diagnostics": []}), "'details.diagnostics' must be an object"),
+    "malformed diagnostics": (lambda: _mutated(details={"diagnostics": {"a": 1}}), "diagnostics"),
+    "deep nesting": (lambda: _mutated(details={"x": 1}).replace('{"x": 1}', "[" * 100_000 + "]" * 100_000), "deeply"),
+    "deep nesting in details": (lambda: _mutated(details={"x": 1}).replace("1}", "[" * 2000 + "]" * 2000 + "}"), ""),
+    "a mirror matrix": (lambda: _mutated(matrix=[[-1, 0, 0], [0, 1, 0], [0, 0, 1]]), "mirror"),
+    "a singular matrix": (lambda: _mutated(matrix=[[1, 0, 0], [0, 1, 0], [0, 0, 0]]), "singular"),
+    "a denormal field strength": (lambda: _mutated(field_strength=1e-320), "field_strength must lie between"),
+    "an absurd field strength": (lambda: _mutated(field_strength=1e308), "field_strength must lie between"),
+    "a negative field strength": (lambda: _mutated(field_strength=-3.0), "positive"),
+    "NaN": (lambda: _mutated(field_strength=1.0).replace('"field_strength": 1.0', '"field_strength": NaN'), "NaN"),
+    "a boolean": (lambda: _mutated(field_strength=True), "must be a number"),
+    "a count as a string": (lambda: _mutated(n_samples="5"), "'n_samples' must be a count"),
+    "a number as unit": (lambda: _mutated(unit=5), "'unit' must be a string"),
+    "no offset": (lambda: json.dumps({k: v for k, v in _calibration_dict().items() if k != "offset"}), "'offset'"),
+    "an array": (lambda: "[1, 2]", "must be an object"),
+    "not UTF-8 JSON": (lambda: b"\xff\xfe{", "not valid JSON"),  # type: ignore[return-value,dict-item]
+}
+
+
+@pytest.mark.parametrize("case", BROKEN_CALIBRATIONS)
+def test_4_from_json_refuses_what_is_no_calibration(case: str) -> None:
+    make, fragment = BROKEN_CALIBRATIONS[case]
+    with pytest.raises(magfit.MagfitError) as caught:
+        magfit.Calibration.from_json(make())  # type: ignore[arg-type]
+    message = str(caught.value)
+    assert "\n" not in message and fragment in message, message
+    assert len(message) < 400
+
+
+def test_4_broken_calibration_file_through_apply(tmp_path: Path) -> None:
+    data = _csv(tmp_path / "s.csv", _samples())
+    for case, (make, _) in BROKEN_CALIBRATIONS.items():
+        text = make()
+        path = tmp_path / "cal.json"
+        path.write_bytes(text if isinstance(text, bytes) else text.encode())
+        _assert_error(_run("apply", path, data, "--normalized", "-o", tmp_path / "out.csv"), 2, str(path))
+        assert not (tmp_path / "out.csv").exists(), case
+
+
+# ---------------------------------------------------------------------- 6. FIFOs and devices as input
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs")
+def test_6_fifo_input_is_refused_without_waiting(tmp_path: Path) -> None:
+    fifo = tmp_path / "in.fifo"
+    os.mkfifo(fifo)
+    _assert_error(_run("calibrate", fifo), 2, "named pipe", "save the data to a file first")
+    if Path("/dev/zero").exists():
+        _assert_error(_run("calibrate", "/dev/zero"), 2, "a device")

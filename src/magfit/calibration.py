@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
@@ -26,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import MagfitError, SampleError
+from .errors import DataFileError, MagfitError, SampleError
 
 if TYPE_CHECKING:
     from .diagnostics import Diagnostics
@@ -35,6 +36,8 @@ __all__ = ["CONVENTION", "SCHEMA_VERSION", "Calibration"]
 
 #: The formula every exported calibration states, word for word.
 CONVENTION = "corrected = matrix @ (raw - offset)"
+#: Field strengths a calibration can hold: 1/field_strength² (in A of eq. 2) stays a normal float64.
+FIELD_STRENGTH_RANGE = (1e-150, 1e150)
 #: Version of the JSON layout written by :meth:`Calibration.to_dict`.
 SCHEMA_VERSION = 1
 _SCHEMA_NAME = "magfit.calibration"
@@ -87,9 +90,18 @@ class Calibration:
         strength = float(self.field_strength)
         if not np.isfinite(strength) or strength <= 0:
             raise SampleError(f"Calibration.field_strength must be a positive number, got {strength}")
+        low, high = FIELD_STRENGTH_RANGE
+        if not low <= strength <= high:  # A = matrixᵀ matrix / field_strength² would under- or overflow
+            raise SampleError(
+                f"Calibration.field_strength must lie between {low:g} and {high:g} (input units), got {strength:g}; "
+                "rescale the samples"
+            )
         object.__setattr__(self, "field_strength", strength)
-        if abs(np.linalg.det(self.matrix)) < 1e-12:
-            raise SampleError("Calibration.matrix is singular: it cannot be a soft-iron correction")
+        with np.errstate(all="ignore"):  # entries near 1e300: the determinant overflows, refused below
+            determinant = np.linalg.det(self.matrix)
+        if not np.isfinite(determinant) or abs(determinant) < 1e-12:
+            what = "singular" if np.isfinite(determinant) else "too large (its determinant overflows float64)"
+            raise SampleError(f"Calibration.matrix is {what}: it cannot be a soft-iron correction")
         # Stored as plain JSON types so that a JSON round trip gives back an equal calibration.
         object.__setattr__(self, "details", MappingProxyType(_jsonable(dict(self.details))))
 
@@ -230,44 +242,148 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Calibration:
-        """Inverse of :meth:`to_dict`; checks the schema and the convention."""
+        """Inverse of :meth:`to_dict`; checks the schema, the convention and every field.
+
+        Raises
+        ------
+        DataFileError
+            Anything that is not a usable calibration: another schema or version, a missing field, a
+            value of the wrong type (strings for numbers, a ragged matrix, ``details`` that is not an
+            object), a mirror (negative determinant) or singular matrix, a field strength outside
+            ``FIELD_STRENGTH_RANGE`` (1e-150 to 1e150), malformed ``details.diagnostics``.
+        """
+        if not isinstance(data, Mapping):
+            raise DataFileError(f"a calibration must be a JSON object, got {type(data).__name__}")
         if data.get("schema") != _SCHEMA_NAME:
-            raise MagfitError(f"not a magfit calibration (schema is {data.get('schema')!r}, expected {_SCHEMA_NAME!r})")
+            raise DataFileError(
+                f"not a magfit calibration (schema is {_shown(data.get('schema'))}, expected {_SCHEMA_NAME!r})"
+            )
         version = data.get("schema_version")
         if version != SCHEMA_VERSION:
-            raise MagfitError(
-                f"calibration schema version {version!r} is not supported (this magfit reads "
+            raise DataFileError(
+                f"calibration schema version {_shown(version)} is not supported (this magfit reads "
                 f"{SCHEMA_VERSION}); upgrade magfit or re-run the calibration"
             )
         if data.get("convention") != CONVENTION:
-            raise MagfitError(f"calibration convention {data.get('convention')!r} is not {CONVENTION!r}")
-        try:
-            return cls(
-                method=str(data["method"]),
-                offset=np.asarray(data["offset"], dtype=np.float64),
-                matrix=np.asarray(data["matrix"], dtype=np.float64),
-                field_strength=float(data["field_strength"]),
-                unit=data.get("unit"),
-                n_samples=data.get("n_samples"),
-                details=data.get("details") or {},
+            raise DataFileError(f"calibration convention {_shown(data.get('convention'))} is not {CONVENTION!r}")
+        missing = [name for name in ("method", "offset", "matrix", "field_strength") if name not in data]
+        if missing:
+            raise DataFileError(f"calibration file lacks the field {missing[0]!r}")
+        method, unit, n_samples = data["method"], data.get("unit"), data.get("n_samples")
+        if not isinstance(method, str) or not method:
+            raise DataFileError(f"calibration 'method' must be a name, got {_shown(method)}")
+        if unit is not None and not isinstance(unit, str):
+            raise DataFileError(f"calibration 'unit' must be a string or null, got {_shown(unit)}")
+        if n_samples is not None and (not _is_int(n_samples) or n_samples < 0):
+            raise DataFileError(f"calibration 'n_samples' must be a count or null, got {_shown(n_samples)}")
+        details = data.get("details")
+        if details is None:
+            details = {}
+        if not isinstance(details, Mapping):
+            raise DataFileError(f"calibration 'details' must be an object, got {type(details).__name__}")
+        diagnostics = details.get("diagnostics")
+        if diagnostics is not None and not isinstance(diagnostics, Mapping):
+            raise DataFileError(
+                f"calibration 'details.diagnostics' must be an object, got {type(diagnostics).__name__}"
             )
-        except KeyError as missing:
-            raise MagfitError(f"calibration file lacks the field {missing}") from None
+        offset = np.array([_number(v, f"offset[{i}]") for i, v in enumerate(_items(data["offset"], 3, "offset"))])
+        rows = _items(data["matrix"], 3, "matrix")
+        matrix = np.array(
+            [[_number(v, f"matrix[{i}][{j}]") for j, v in enumerate(_items(row, 3, f"matrix[{i}]"))]
+             for i, row in enumerate(rows)]
+        )  # fmt: skip
+        field_strength = _number(data["field_strength"], "field_strength")
+        with np.errstate(all="ignore"):  # a determinant beyond float64 is refused by the constructor
+            determinant = float(np.linalg.det(matrix))
+        if not determinant > 0:
+            what = "a mirror (negative determinant)" if determinant < 0 else "singular"
+            raise DataFileError(f"calibration 'matrix' is {what}: no soft-iron correction is; re-run the calibration")
+        try:
+            calibration = cls(
+                method=method,
+                offset=offset,
+                matrix=matrix,
+                field_strength=field_strength,
+                unit=unit,
+                n_samples=n_samples,
+                details=details,
+            )
+            if diagnostics is not None:
+                calibration.diagnostics  # noqa: B018 - read once, so a malformed report fails here, not later
+        except MagfitError as error:
+            raise DataFileError(f"calibration is not usable: {error}") from None
+        except (TypeError, ValueError, KeyError, AttributeError, IndexError, OverflowError) as error:
+            raise DataFileError(
+                f"calibration 'details.diagnostics' is malformed ({type(error).__name__}: {error}); "
+                "re-run the calibration or delete that entry"
+            ) from None
+        except RecursionError:
+            raise DataFileError("calibration 'details' is nested too deeply to be read") from None
+        return calibration
 
     def to_json(self, indent: int | None = 2) -> str:
         """Serialise to JSON text (lossless; see :meth:`from_json`)."""
         return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
 
     @classmethod
-    def from_json(cls, text: str) -> Calibration:
-        """Read a calibration written by :meth:`to_json`."""
+    def from_json(cls, text: str | bytes) -> Calibration:
+        """Read a calibration written by :meth:`to_json`.
+
+        Raises
+        ------
+        DataFileError
+            Not JSON (or JSON with NaN or Infinity, which :meth:`to_json` never writes, or nested too
+            deeply), or not a usable calibration (see :meth:`from_dict`).
+        """
+        if not isinstance(text, (str, bytes, bytearray)):
+            raise DataFileError(f"from_json() takes the JSON text, got {type(text).__name__}")
         try:
-            data = json.loads(text)
-        except json.JSONDecodeError as error:
-            raise MagfitError(f"calibration is not valid JSON: {error}") from None
+            data = json.loads(text, parse_constant=_refuse_constant)
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
+            raise DataFileError(f"calibration is not valid JSON: {_one_line(str(error))}") from None
+        except RecursionError:
+            raise DataFileError("calibration is not valid JSON: nested too deeply") from None
         if not isinstance(data, dict):
-            raise MagfitError("calibration JSON must be an object")
+            raise DataFileError("calibration JSON must be an object")
         return cls.from_dict(data)
+
+
+def _refuse_constant(name: str) -> float:
+    raise DataFileError(f"calibration is not valid JSON: {name} is no number (magfit never writes it)")
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _shown(value: Any) -> str:
+    """A short repr for a message (a huge value from a broken file must not flood the terminal)."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _items(value: Any, count: int, name: str) -> list[Any]:
+    if not isinstance(value, (list, tuple)) or len(value) != count:
+        size = f"{len(value)} entries" if isinstance(value, (list, tuple)) else type(value).__name__
+        raise DataFileError(f"calibration '{name}' must be a list of {count} entries, got {size}")
+    return list(value)
+
+
+def _number(value: Any, name: str) -> float:
+    """A JSON number as a finite float; strings, booleans and numbers beyond float64 are refused."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DataFileError(f"calibration '{name}' must be a number, got {_shown(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise DataFileError(f"calibration '{name}' is beyond the range of float64 ({_shown(value)})")
+    return number
 
 
 def _jsonable(value: Any) -> Any:

@@ -19,8 +19,10 @@ import csv
 import functools
 import io
 import itertools
+import math
 import os
 import re
+import stat
 import zipfile
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
@@ -176,6 +178,13 @@ def _check_file(path: str | os.PathLike[str]) -> Path:
         raise _error(file, "no such file; check the path and the current directory")
     if file.is_dir():
         raise _error(file, "is a directory, not a data file; give the path of a file inside it")
+    if not file.is_file():  # a FIFO or a device: reading its head would block, and it cannot be read twice
+        kind = "a named pipe (FIFO)" if stat.S_ISFIFO(file.stat().st_mode) else "a device or a socket"
+        raise _error(
+            file,
+            f"is {kind}, not a regular file: magfit reads a file more than once (its layout, then its rows); "
+            "save the data to a file first",
+        )
     if not os.access(file, os.R_OK):
         raise _error(file, "permission denied; make the file readable (chmod +r) or copy it")
     return file
@@ -392,9 +401,30 @@ def _npz_members(path: Path) -> dict[str, _NpyInfo]:
 def _npy_info(path: Path) -> _NpyInfo:
     try:
         with open(path, "rb") as handle:
-            return _read_npy_header(handle)
+            info = _read_npy_header(handle)
+            data_offset = handle.tell()
     except (ValueError, OSError) as error:
         raise _error(path, f"is not a readable .npy file ({error}); re-save it with numpy.save") from None
+    # A truncated copy would otherwise fail inside numpy's memory map, with no word about the file.
+    expected = info.dtype.itemsize * math.prod(info.shape)
+    available = path.stat().st_size - data_offset
+    if info.dtype != object and available < expected:
+        raise _error(
+            path,
+            f"is truncated: its header announces {info.dtype} values of shape {info.shape} ({expected} bytes) but the "
+            f"file holds {max(available, 0)}; copy it again or re-save it with numpy.save",
+        )
+    return info
+
+
+def _check_npy_array(path: Path, info: _NpyInfo) -> None:
+    """Refuse an npy array that cannot hold samples: not numbers, not 2-D, or one sample per column."""
+    if not _is_numeric_dtype(info.dtype):
+        raise _error(path, f"holds an array of dtype {info.dtype}, not numbers; save the samples as floats")
+    if len(info.shape) != 2:
+        raise _error(path, f"holds an array of shape {info.shape}; save the samples as an (N, 3) array, one per row")
+    if info.shape[0] == 3 and info.shape[1] > 3:
+        raise _error(path, f"holds an array of shape {info.shape}: one sample per column; save its transpose (arr.T)")
 
 
 def sniff(path: str | os.PathLike[str]) -> FileFormat:
@@ -420,8 +450,8 @@ def sniff(path: str | os.PathLike[str]) -> FileFormat:
     kind = _kind_of(file, head)
     if kind == "npy":
         info = _npy_info(file)
-        n_columns = info.shape[1] if len(info.shape) == 2 else (1 if len(info.shape) == 1 else 0)
-        return FileFormat("npy", None, "binary", 0, None, n_columns)
+        _check_npy_array(file, info)
+        return FileFormat("npy", None, "binary", 0, None, info.shape[1])
     if kind == "npz":
         keys = tuple(_npz_members(file))
         return FileFormat("npz", None, "binary", 0, keys, len(keys))
@@ -752,17 +782,7 @@ class ChunkReader:
         ]
 
     def _check_npy_shape(self) -> None:
-        info = _npy_info(self.path)
-        if not _is_numeric_dtype(info.dtype):
-            raise _error(self.path, f"holds an array of dtype {info.dtype}, not numbers; save the samples as floats")
-        if len(info.shape) != 2:
-            raise _error(
-                self.path, f"holds an array of shape {info.shape}; save the samples as an (N, 3) array, one per row"
-            )
-        if info.shape[0] == 3 and info.shape[1] > 3:
-            raise _error(
-                self.path, f"holds an array of shape {info.shape}: one sample per column; save its transpose (arr.T)"
-            )
+        _check_npy_array(self.path, _npy_info(self.path))
 
     def _filter(
         self, values: NDArray[np.float64], to_line: Callable[[NDArray[np.int64]], NDArray[np.int64]]
@@ -812,7 +832,10 @@ class ChunkReader:
     # .................................................................. npy / npz
 
     def _iter_npy(self) -> Iterator[NDArray[np.float64]]:
-        array = np.load(self.path, mmap_mode="r", allow_pickle=False)
+        try:
+            array = np.load(self.path, mmap_mode="r", allow_pickle=False)
+        except (ValueError, OSError) as error:  # changed since it was sniffed
+            raise _error(self.path, f"is not a readable .npy file ({error}); re-save it with numpy.save") from None
         if array.shape[0] == 0:
             raise _error(self.path, "holds an array with no rows; record some samples")
         for start in range(0, array.shape[0], self.chunk_rows):
