@@ -60,9 +60,10 @@ def test_every_delimiter_with_and_without_header(tmp_path: Path, delimiter: str,
         assert table.columns == ("mx", "my", "mz")
         np.testing.assert_array_equal(table.samples, VALUES)
     else:
-        # No header and four numeric columns: the first three are taken, and the table says so.
-        assert table.columns == ("column 1", "column 2", "column 3")
-        np.testing.assert_array_equal(table.samples[:, 1:], VALUES[:, :2])
+        # No header: the leading counter (100, 101 ...) is passed over as a time column, and the table says so.
+        assert table.columns == ("column 2", "column 3", "column 4")
+        assert table.column_note == "column 1 is monotonic: time or a counter"
+        np.testing.assert_array_equal(table.samples, VALUES)
     assert (table.n_rows, table.n_skipped, table.skipped_lines) == (10, 0, ())
 
 
@@ -194,9 +195,11 @@ def test_columns_by_name_or_index_in_the_order_given(tmp_path: Path, columns, pi
 def test_no_header_labels_round_trip_through_columns(tmp_path: Path) -> None:
     path = write(tmp_path, table_text("\t", extra=2))
     table = read_samples(path)
-    assert table.columns == ("column 1", "column 2", "column 3")
-    again = read_samples(path, columns=["column 3", "column 4", "column 5"])
+    assert table.columns == ("column 3", "column 4", "column 5")  # two counters before the samples
+    again = read_samples(path, columns=table.columns)
     np.testing.assert_array_equal(again.samples, VALUES)
+    first = read_samples(path, columns=["column 1", "column 2", "column 3"])
+    np.testing.assert_array_equal(first.samples[:, 2], VALUES[:, 0])
 
 
 def test_no_header_skips_a_leading_text_column(tmp_path: Path) -> None:

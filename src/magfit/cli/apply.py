@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import DataFileError, MagfitError
 from ._common import columns_text, console, parse_columns, refuse_overwriting_input
+
+if TYPE_CHECKING:
+    from ..io import FileFormat
 
 
 def read_calibration(path: Path) -> Calibration:
@@ -23,6 +28,24 @@ def read_calibration(path: Path) -> Calibration:
         return Calibration.from_json(text)
     except MagfitError as error:
         raise DataFileError(f"{path}: {error}; write it with 'magfit calibrate FILE -o {path.name}'") from None
+
+
+def remembered_columns(calibration: Calibration, fmt: FileFormat) -> list[str | int] | None:
+    """The x, y, z columns ``magfit calibrate`` fitted (``details["source"]``) as they apply to a file of
+    layout ``fmt``: names when the fitted file had a header; positions only for a file without a header and
+    with as many columns (a position means nothing in a file of another layout); else None (detected)."""
+    source = calibration.details.get("source")
+    if not isinstance(source, Mapping):
+        return None
+    if source.get("header"):
+        names = source.get("columns")
+        if isinstance(names, list) and len(names) == 3 and all(isinstance(name, str) for name in names):
+            return list(names)
+        return None
+    indices = source.get("column_indices")
+    if not (isinstance(indices, list) and len(indices) == 3 and all(isinstance(i, int) for i in indices)):
+        return None
+    return list(indices) if fmt.header is None and source.get("n_columns") == fmt.n_columns else None
 
 
 @click.command("apply")
@@ -59,16 +82,32 @@ def apply_command(
       magfit calibrate flight.csv --columns mx,my,mz -o cal.json
       magfit apply cal.json flight.csv --columns mx,my,mz -o flight_calibrated.csv
     """
-    from ..io import STDOUT, check_output, write_calibrated
+    from ..io import STDOUT, check_output, iter_sample_chunks, sniff, write_calibrated
 
     to_stdout = str(output) == STDOUT
     if not to_stdout:
         refuse_overwriting_input(output, [file, calibration_file])
     check_output(output)
     calibration = read_calibration(calibration_file)
-    written = write_calibrated(file, calibration, output, columns=columns, normalized=normalized)
+    # Without --columns, the columns the calibration was fitted on (details["source"], written by calibrate).
+    remembered = remembered_columns(calibration, sniff(file)) if columns is None else None
+    chosen = columns if columns is not None else remembered
+    try:
+        reader = iter_sample_chunks(file, columns=chosen)
+    except DataFileError as error:
+        if remembered is None:
+            raise
+        raise DataFileError(
+            f"{error} ({calibration_file} was fitted on the columns {columns_text(remembered)}; choose the columns "
+            f"of {file} with --columns)"
+        ) from None
+    written = write_calibrated(file, calibration, output, columns=chosen, normalized=normalized)
     out = console(stderr=to_stdout)
     scale = "unit sphere" if normalized else f"input units{f' ({calibration.unit})' if calibration.unit else ''}"
-    used = f" (columns {columns_text(columns)})" if columns else ""
-    out.print(f"wrote {written}: {file}{used} corrected with {calibration_file} ({calibration.method}), {scale}")
+    how = "--columns" if columns is not None else f"as fitted, {calibration_file}" if remembered else reader.column_note
+    used = f" (columns {columns_text(reader.columns)}{f'; {how}' if how else ''})"
+    out.print(
+        f"wrote {written}: {file}{used} corrected with {calibration_file} ({calibration.method}), {scale}",
+        soft_wrap=True,
+    )
     out.print(f"convention: {CONVENTION}")

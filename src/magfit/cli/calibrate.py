@@ -10,7 +10,7 @@ import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Protocol
 
@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from rich.console import Console
 
 from ..calibration import CONVENTION, Calibration
-from ..errors import DataFileError, MagfitError
+from ..errors import CalibrationError, DataFileError, MagfitError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
 from ..methods import get_method
@@ -88,6 +88,8 @@ class CalibrationRun:
     subsample : str or None
         None when the fit used every sample; else why it used an even subsample (``--even``, or a file
         too large for memory), ``calibration.n_samples`` being how many.
+    column_note : str or None
+        For a file without a header, why these columns (``column 1 is monotonic: time or a counter``).
     """
 
     path: Path
@@ -100,6 +102,7 @@ class CalibrationRun:
     file_format: str
     streamed: bool
     subsample: str | None = None
+    column_note: str | None = None
 
 
 class _ReadResult(Protocol):
@@ -138,28 +141,45 @@ def run_calibration(
     :func:`magfit.sampling.even_subsample` (every direction weighs the same) with any method. ``options``
     are the method's keyword options (e.g. ``field_strength``), passed to :func:`magfit.fit`.
     """
+    from ..io import ChunkReader
+
     spec = get_method(method)
     options = dict(options or {})
     limit = memory_sample_limit() if max_samples is None else max_samples
     subsample = "--even" if even else None
-    if spec.data == "statistics" and not even:
-        calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite, options)
-        streamed = True
-    elif _estimated_rows(path) <= limit:
-        calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite, options, even=even)
-        streamed = False
-    else:
-        calibration, evaluation, read, limited = _fit_subsample(
-            path, method, columns, nonfinite, options, even=even, limit=limit
-        )
-        streamed = True
-        if limited:
-            bound = f"the file has more rows than --max-samples {limit}"
-            if max_samples is None:
-                bound += ", the default: half the available memory"
-            subsample = f"--even; {bound}" if even else bound
+    # The columns first (cheap: the file's head): every message, a refusal too, says which were used.
+    chosen = ChunkReader(path, columns=columns, nonfinite=nonfinite)  # not iterated: layout and columns only
+    try:
+        if spec.data == "statistics" and not even:
+            calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite, options)
+            streamed = True
+        elif _estimated_rows(path) <= limit:
+            calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite, options, even=even)
+            streamed = False
+        else:
+            calibration, evaluation, read, limited = _fit_subsample(
+                path, method, columns, nonfinite, options, even=even, limit=limit
+            )
+            streamed = True
+            if limited:
+                bound = f"the file has more rows than --max-samples {limit}"
+                if max_samples is None:
+                    bound += ", the default: half the available memory"
+                subsample = f"--even; {bound}" if even else bound
+    except CalibrationError as error:
+        raise CalibrationError(f"{path} ({columns_used(chosen.columns, chosen.column_note)}): {error}") from None
     if unit is not None:
         calibration = calibration.with_unit(unit)
+    # Where the samples came from, so that `magfit apply` reads the same columns (details["source"]).
+    source = {
+        "file": path.name,
+        "columns": list(chosen.columns),
+        "column_indices": list(chosen.column_indices),
+        "header": chosen.format.header is not None,
+        "n_columns": chosen.format.n_columns,
+        "unit": unit if unit is not None else calibration.unit,
+    }
+    calibration = replace(calibration, details={**calibration.details, "source": source})
     return CalibrationRun(
         path=path,
         calibration=calibration,
@@ -171,7 +191,13 @@ def run_calibration(
         file_format=read.format.describe(),
         streamed=streamed,
         subsample=subsample,
+        column_note=chosen.column_note,
     )
+
+
+def columns_used(columns: Sequence[object], note: str | None = None) -> str:
+    """``columns column 2, column 3, column 4; column 1 is monotonic: time or a counter``, for messages."""
+    return f"columns {columns_text(columns)}" + (f"; {note}" if note else "")
 
 
 def memory_sample_limit() -> int:
@@ -477,8 +503,6 @@ def _with_diagnostics(calibration: Calibration, subsample: NDArray[np.float64], 
     A fit from Statistics carries no coverage or uncertainty (they need samples); the stream provides
     them. Above :data:`DIAGNOSE_SAMPLES` rows the uncertainty is that of the subsample: conservative.
     """
-    from dataclasses import replace
-
     from ..diagnostics import diagnose
 
     try:
@@ -746,7 +770,7 @@ def print_summary(out: Console, run: CalibrationRun) -> None:
     matrix_rows = [vector(row, lambda v: f"{v: .6f}") for row in calibration.matrix]
     lines = [
         ("file", f"{run.path} ({run.file_format})"),
-        ("columns", columns_text(run.columns)),
+        ("columns", columns_text(run.columns) + (f" ({run.column_note})" if run.column_note else "")),
         ("rows", f"{run.n_rows} read, {run.n_skipped} skipped" + (" (streamed)" if run.streamed else "")),
         ("method", calibration.method + (f": {spec.summary}" if spec is not None else "")),
         *_choice(calibration),

@@ -1,4 +1,5 @@
-"""Finding the magnetometer's x, y, z columns among the names of a file's columns (or an NPZ file's keys).
+"""Finding the magnetometer's x, y, z columns: by the names of a file's columns (or an NPZ file's keys), or,
+in a file without a header, by what the columns hold (:func:`choose_columns_by_content`).
 
 The rule, in words (docs/file-formats.md says the same for users):
 
@@ -26,7 +27,17 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-__all__ = ["ColumnTriple", "find_magnetometer_columns", "name_words"]
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "ColumnTriple",
+    "ContentChoice",
+    "choose_columns_by_content",
+    "ellipsoid_spread",
+    "find_magnetometer_columns",
+    "name_words",
+]
 
 _AXES = ("x", "y", "z")
 #: Words that mark a magnetometer anywhere in the stem (plus any word starting with "mag").
@@ -165,3 +176,147 @@ def find_magnetometer_columns(names: Sequence[str]) -> list[ColumnTriple]:
             if len(set(combo)) == 3 and combo not in triples:
                 triples[combo] = ColumnTriple(combo, (names[combo[0]], names[combo[1]], names[combo[2]]), score)
     return sorted(triples.values(), key=lambda triple: (-triple.score, triple.indices))
+
+
+# ---------------------------------------------------------------------------------------------- by content
+
+#: Rows of a file's head that the content rule looks at: enough for a stable fit, cheap to parse.
+CONTENT_ROWS = 2000
+#: A column is taken for a time or a counter when it never decreases (or never increases) over at least
+#: this many rows of the head and changes in at least half of its steps.
+MONOTONIC_MIN_ROWS = 10
+#: Two disjoint triples both within this factor of the best spread are an ambiguity (an accelerometer
+#: held still has a nearly constant norm too): the caller asks for the columns instead of guessing.
+AMBIGUITY_FACTOR = 2.0
+#: With more candidate columns than this, only neighbouring triples are tried (x, y, z sit side by side).
+MAX_COMBINATION_COLUMNS = 12
+
+
+@dataclass(frozen=True)
+class ContentChoice:
+    """The x, y, z columns of a file without a header, chosen by what they hold.
+
+    Attributes
+    ----------
+    indices : tuple of 3 int
+        0-based positions of the columns chosen, in file order.
+    monotonic : tuple of int
+        Columns passed over because they only grow (or only shrink) over the head: a time or a counter.
+    constant : tuple of int
+        Columns passed over because they hold one value.
+    spread : float or None
+        Relative spread (std / mean) of the chosen columns' norm after an ellipsoid fit to the head, when
+        several triples were compared; None when no choice had to be made.
+    rivals : tuple of tuple of 3 int
+        Other triples whose spread is within :data:`AMBIGUITY_FACTOR` of the best: a non-empty tuple means
+        the content cannot decide (the caller reports it).
+    """
+
+    indices: tuple[int, int, int]
+    monotonic: tuple[int, ...] = ()
+    constant: tuple[int, ...] = ()
+    spread: float | None = None
+    rivals: tuple[tuple[int, int, int], ...] = ()
+
+    def describe(self, labels: Sequence[str]) -> str | None:
+        """Why these columns, in words (``column 1 is monotonic: time or a counter``); None when obvious."""
+        reasons = []
+        if self.monotonic:
+            names = ", ".join(labels[i] for i in self.monotonic)
+            verb = "is" if len(self.monotonic) == 1 else "are"
+            reasons.append(f"{names} {verb} monotonic: time or a counter")
+        if self.constant:
+            reasons.append(f"{', '.join(labels[i] for i in self.constant)} constant")
+        if self.spread is not None:
+            reasons.append(f"the most constant norm under an ellipsoid fit ({100 * self.spread:.2g} % spread)")
+        return "; ".join(reasons) or None
+
+
+def _is_monotonic(column: NDArray[np.float64]) -> bool:
+    values = column[np.isfinite(column)]
+    if values.size < MONOTONIC_MIN_ROWS:
+        return False
+    steps = np.diff(values)
+    moving = np.count_nonzero(steps)
+    return bool(moving >= 0.5 * steps.size and (np.all(steps >= 0) or np.all(steps <= 0)))
+
+
+def ellipsoid_spread(points: NDArray[np.float64]) -> float | None:
+    """Relative spread (std / mean) of the "radius" of ``points`` (N, 3) about their algebraic ellipsoid fit.
+
+    The quadric ``a x² + b y² + c z² + 2d xy + 2e xz + 2f yz + 2g x + 2h y + 2i z = 1`` is fitted by least
+    squares in a centred, scaled frame; None when it is not an ellipsoid (not positive definite) or the
+    points are too few. Small for the three axes of a magnetometer turned about (a near-constant norm
+    once the hard and soft iron are undone), large for columns that hold different quantities.
+    """
+    finite = points[np.isfinite(points).all(axis=1)]
+    if finite.shape[0] < 20:
+        return None
+    scale = finite.std(axis=0)
+    if not np.all(scale > 0):
+        return None
+    z = (finite - finite.mean(axis=0)) / scale
+    x, y, w = z[:, 0], z[:, 1], z[:, 2]
+    design = np.column_stack([x * x, y * y, w * w, 2 * x * y, 2 * x * w, 2 * y * w, 2 * x, 2 * y, 2 * w])
+    p, *_ = np.linalg.lstsq(design, np.ones(len(z)), rcond=None)
+    quadratic = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
+    try:
+        centre = -np.linalg.solve(quadratic, p[6:9])
+    except np.linalg.LinAlgError:
+        return None
+    level = 1.0 + centre @ quadratic @ centre
+    if level <= 0 or np.linalg.eigvalsh(quadratic).min() <= 0:
+        return None
+    shifted = z - centre
+    radius = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", shifted, quadratic / level, shifted), 0.0))
+    mean = float(radius.mean())
+    return float(radius.std() / mean) if mean > 0 else None
+
+
+def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int]) -> ContentChoice:
+    """Choose the magnetometer's three columns of a file without a header from the values of its first rows.
+
+    Rules, in order (docs/file-formats.md says the same for users):
+
+    1. Only ``numeric`` columns count. A column that only grows or only shrinks over the head (at least
+       :data:`MONOTONIC_MIN_ROWS` rows, changing in half of its steps) is a time or a counter; a column
+       with one value holds no axis. Both are passed over.
+    2. Three columns left are x, y, z in file order.
+    3. More than three: every triple (in file order) is fitted with an ellipsoid (:func:`ellipsoid_spread`)
+       and the one whose norm is most constant wins. Another triple, disjoint from it, within
+       :data:`AMBIGUITY_FACTOR` of its spread is a rival (``rivals``): the caller refuses to guess.
+    4. Fewer than three left, or no triple outlining an ellipsoid: the first three of the varying columns,
+       then the constant ones, then time and counters, as a last resort (in file order).
+
+    Parameters
+    ----------
+    head : ndarray, shape (n_rows, n_columns)
+        The first rows of the file as numbers (NaN where a cell is empty or not a number).
+    numeric : sequence of int
+        The columns that hold numbers (0-based).
+    """
+    values = np.asarray(head, dtype=np.float64)
+    numeric = list(numeric)
+    monotonic = [j for j in numeric if _is_monotonic(values[:, j])]
+    constant = [j for j in numeric if j not in monotonic and np.unique(values[np.isfinite(values[:, j]), j]).size <= 1]
+    left = [j for j in numeric if j not in monotonic and j not in constant]
+    if len(left) == 3:
+        return ContentChoice((left[0], left[1], left[2]), tuple(monotonic), tuple(constant))
+    # The last resort prefers columns that vary, then constant ones (a flat recording), time and counters last.
+    fallback = [*left, *constant, *monotonic]
+    if len(left) > 3:
+        if len(left) <= MAX_COMBINATION_COLUMNS:
+            triples = list(itertools.combinations(left, 3))
+        else:
+            triples = [(left[k], left[k + 1], left[k + 2]) for k in range(len(left) - 2)]
+        scored = [(spread, triple) for triple in triples if (spread := ellipsoid_spread(values[:, triple])) is not None]
+        if scored:
+            best_spread, best = min(scored)
+            rivals = tuple(
+                triple
+                for spread, triple in sorted(scored)
+                if not set(triple) & set(best) and spread <= AMBIGUITY_FACTOR * best_spread
+            )
+            return ContentChoice(best, tuple(monotonic), tuple(constant), best_spread, rivals)
+    first = sorted((fallback + [j for j in range(values.shape[1]) if j not in fallback])[:3])
+    return ContentChoice((first[0], first[1], first[2]), tuple(j for j in monotonic if j not in first))

@@ -35,7 +35,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError, OptionError
-from .columns import _MAG_LETTERS, _MAG_WORDS, find_magnetometer_columns, name_words, normalise_name
+from .columns import (
+    _MAG_LETTERS,
+    _MAG_WORDS,
+    CONTENT_ROWS,
+    ContentChoice,
+    choose_columns_by_content,
+    find_magnetometer_columns,
+    name_words,
+    normalise_name,
+)
 
 __all__ = ["ChunkReader", "FileFormat", "SampleTable", "iter_sample_chunks", "read_samples", "sniff"]
 
@@ -145,6 +154,9 @@ class SampleTable:
         1-based file line numbers (row numbers for npy/npz) of the first few skipped rows.
     format : FileFormat
         The file's layout.
+    column_note : str or None
+        For a file without a header, why its columns were chosen (``column 1 is monotonic: time or a
+        counter``); None when there was no choice to make or it was given.
     """
 
     path: Path
@@ -154,6 +166,7 @@ class SampleTable:
     n_skipped: int
     skipped_lines: tuple[int, ...]
     format: FileFormat
+    column_note: str | None = None
 
 
 # ---------------------------------------------------------------------------------------------- small helpers
@@ -500,9 +513,10 @@ def _match_name(path: Path, wanted: str, labels: Sequence[str], has_header: bool
 
 
 def _resolve_table_columns(
-    path: Path, fmt: FileFormat, columns: Sequence[str | int] | None, numeric: Sequence[int] | None = None
+    path: Path, fmt: FileFormat, columns: Sequence[str | int] | None, content: ContentChoice | None = None
 ) -> tuple[tuple[int, int, int], tuple[str, str, str]]:
-    """The 0-based positions and labels of the x, y, z columns of a text or npy file."""
+    """The 0-based positions and labels of the x, y, z columns of a text or npy file (``content``: the
+    choice by content for a file without a header, :func:`magfit.io.columns.choose_columns_by_content`)."""
     n = fmt.n_columns
     labels = [fmt.column_label(i) for i in range(n)]
     where = (
@@ -530,9 +544,18 @@ def _resolve_table_columns(
                 raise _ambiguity(path, best)
             indices = best[0].indices
         else:
-            # No header: three columns are x, y, z; with more, the first three numeric ones (reported).
-            pool = list(numeric) if numeric is not None and len(numeric) >= 3 else list(range(n))
-            indices = (pool[0], pool[1], pool[2])
+            # No header: chosen by what the columns hold (time and counters passed over), and reported.
+            choice = content or ContentChoice((0, 1, 2))
+            if choice.rivals:
+                found = "; ".join(
+                    "(" + ", ".join(labels[i] for i in triple) + ")" for triple in (choice.indices, *choice.rivals)
+                )
+                raise _error(
+                    path,
+                    f"has no header and several column triples look like a magnetometer: {found}; choose one with "
+                    f"columns=[{', '.join(str(i) for i in choice.indices)}] (0-based)",
+                )
+            indices = choice.indices
     else:
         chosen = _check_columns_option(columns)
         if len(chosen) != 3:
@@ -716,6 +739,7 @@ class ChunkReader:
         self.n_skipped = 0
         self.skipped_lines: tuple[int, ...] = ()
         self._skipped: list[int] = []
+        self.column_note: str | None = None
         if self.format.kind == "npz":
             self._npz = _resolve_npz_columns(self.path, _npz_members(self.path), columns)
             self.columns = self._npz.labels
@@ -723,8 +747,11 @@ class ChunkReader:
             self._check_npy_shape()
             self._indices, self.columns = _resolve_table_columns(self.path, self.format, columns)
         else:
-            numeric = self._numeric_columns() if columns is None and self.format.header is None else None
-            self._indices, self.columns = _resolve_table_columns(self.path, self.format, columns, numeric)
+            headerless = columns is None and self.format.header is None and self.format.n_columns >= 3
+            content = self._content_choice() if headerless else None
+            self._indices, self.columns = _resolve_table_columns(self.path, self.format, columns, content)
+            if content is not None:
+                self.column_note = content.describe([self.format.column_label(i) for i in range(self.format.n_columns)])
 
     @property
     def column_indices(self) -> tuple[int, int, int]:
@@ -769,17 +796,29 @@ class ChunkReader:
 
     # .................................................................. shared bookkeeping
 
-    def _numeric_columns(self) -> list[int]:
-        """Columns of the first data rows that hold numbers (for the no-header rule)."""
+    def _content_choice(self) -> ContentChoice:
+        """The x, y, z columns of a text file without a header, chosen from the values of its first rows."""
+        fmt = self.format
         head, truncated = _read_head(self.path)
         _, lines, _ = _decode_lines(self.path, head, truncated)
-        rows = [_split_fields(line, self.format.delimiter) for line in lines[self.format.data_line :][:50]]
-        rows = [row for row in rows if len(row) == self.format.n_columns]
-        return [
+        rows = [_split_fields(line, fmt.delimiter) for line in lines[fmt.data_line :][:CONTENT_ROWS]]
+        rows = [row for row in rows if len(row) == fmt.n_columns]
+        # Columns of numbers in the first 50 rows (a leading date or label column is passed over).
+        numeric = [
             j
-            for j in range(self.format.n_columns)
-            if rows and all(_cell_kind(row[j], self.format.decimal) != "text" for row in rows)
+            for j in range(fmt.n_columns)
+            if rows and all(_cell_kind(row[j], fmt.decimal) != "text" for row in rows[:50])
         ]
+
+        def number(cell: str) -> float:
+            if _cell_kind(cell, fmt.decimal) != "number":
+                return np.nan
+            return float(cell.replace(",", ".") if fmt.decimal == "," else cell)
+
+        values = np.array([[number(row[j]) for j in numeric] for row in rows], dtype=np.float64).reshape(len(rows), -1)
+        head_values = np.full((len(rows), fmt.n_columns), np.nan)
+        head_values[:, numeric] = values
+        return choose_columns_by_content(head_values, numeric)
 
     def _check_npy_shape(self) -> None:
         _check_npy_array(self.path, _npy_info(self.path))
@@ -1288,4 +1327,5 @@ def read_samples(
         n_skipped=read.n_skipped,
         skipped_lines=read.skipped_lines,
         format=reader.format,
+        column_note=reader.column_note,
     )
