@@ -54,14 +54,17 @@ class FormatSpec:
     unit : str or None
         Unit of the exported values (``"mG"``), or None when they stay in the samples' unit.
     writer : callable
-        ``writer(calibration, unit) -> str``; use :func:`export`, which checks its arguments.
+        ``writer(calibration, unit, **options) -> str``; use :func:`export`, which checks its arguments.
+    options : tuple of str
+        The keyword options of :func:`export` this target takes besides ``unit`` (``("system_id",)``).
     """
 
     name: str
     extension: str
     summary: str
     unit: str | None
-    writer: Callable[[Calibration, str | None], str]
+    writer: Callable[..., str]
+    options: tuple[str, ...] = ()
 
 
 _SPECS = (
@@ -79,7 +82,7 @@ _SPECS = (
     ),
     FormatSpec(
         "px4", ".params", "PX4 CAL_MAG0_OFF/SCALE/ODIAG parameters in gauss (QGroundControl parameter file)",
-        "G", write_px4,
+        "G", write_px4, ("system_id",),
     ),
     FormatSpec(
         "fusion", ".h", "x-io Fusion softIronMatrix / hardIronOffset (C header) with the imufusion Python names",
@@ -95,7 +98,7 @@ _SPECS = (
 FORMATS: Mapping[str, FormatSpec] = MappingProxyType({spec.name: spec for spec in _SPECS})
 
 
-def export(calibration: Calibration, format: str, *, unit: str | None = None) -> str:
+def export(calibration: Calibration, format: str, *, unit: str | None = None, system_id: int | None = None) -> str:
     """The text of a file that carries ``calibration`` in the convention of ``format``.
 
     Parameters
@@ -117,7 +120,8 @@ def export(calibration: Calibration, format: str, *, unit: str | None = None) ->
     Raises
     ------
     OptionError
-        Unknown ``format`` (the message lists the valid ones) or unknown ``unit``.
+        Unknown ``format`` (the message lists the valid ones), unknown ``unit``, or an option the
+        format does not take (``system_id`` for anything but ``px4``).
     ExportError
         The target cannot represent the calibration (out of its accepted range, or a
         non-symmetric matrix) or needs a unit conversion that the unit does not allow (counts, none).
@@ -128,4 +132,9 @@ def export(calibration: Calibration, format: str, *, unit: str | None = None) ->
         raise OptionError(f"unknown export format {format!r}; valid formats: {valid}")
     if not isinstance(calibration, Calibration):
         raise MagfitError(f"export() takes a magfit.Calibration, got {type(calibration).__name__}")
-    return spec.writer(calibration, unit)
+    given = {name: value for name, value in (("system_id", system_id),) if value is not None}
+    for name in given:
+        if name not in spec.options:
+            takers = ", ".join(s.name for s in FORMATS.values() if name in s.options)
+            raise OptionError(f"the {format} export takes no {name}; {name} applies to: {takers}")
+    return spec.writer(calibration, unit, **given)

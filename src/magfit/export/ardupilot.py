@@ -32,6 +32,11 @@ Refused, rather than written wrong (ArduPilot would reject, ignore or fail to ar
   (AP_ARMING_COMPASS_MAGFIELD_MIN/MAX, 0.35 and 1.65 x 530 mG) fails; usually a wrong unit;
 - a non-symmetric matrix other than a Cholesky root.
 
+Written with a ``# WARNING`` line: an offset axis beyond +-400 mG, the ``@Range`` of COMPASS_OFS_*
+in AP_Compass.cpp's parameter documentation. ArduPilot itself accepts it, but Mission Planner checks
+the documented range when a value is loaded or edited (ConfigRawParams.cs) and asks "COMPASS_OFS_X
+value is out of range. Do you want to continue?"; answering No keeps the old value.
+
 The file uses Mission Planner's ``NAME,VALUE`` lines (MAVProxy's ``param load`` reads them too),
 ``#`` comments, and writes the first compass only (COMPASS_OFS2_* ... for the others).
 """
@@ -46,6 +51,8 @@ from ._common import describe, factor, float32_text, physical_unit, plain, symme
 
 #: COMPASS_OFFS_MAX default (AP_COMPASS_OFFSETS_MAX_DEFAULT), mG: arming fails when |COMPASS_OFS| exceeds it.
 OFFSET_MAX_MG = 1800.0
+#: The documented @Range of COMPASS_OFS_* (mG); Mission Planner asks before loading a value outside it.
+OFFSET_RANGE_MG = 400.0
 #: CompassCalibrator::fit_acceptable: 0.2 < DIA < 5.0 (exclusive).
 DIAGONAL_RANGE = (0.2, 5.0)
 #: CompassCalibrator::fit_acceptable: |ODI| < 1.0.
@@ -149,5 +156,12 @@ def write_ardupilot(calibration: Calibration, unit: str | None = None) -> str:
     ]
     if note is not None:
         lines.append(f"# NOTE: {plain(note)}")
+    beyond = [name for name in NAMES[:3] if abs(parameters[name]) > OFFSET_RANGE_MG]
+    if beyond:
+        lines += [
+            f"# WARNING: {', '.join(beyond)} beyond +-{OFFSET_RANGE_MG:.0f} mG, the documented range: Mission Planner",
+            "#   asks '<name> value is out of range. Do you want to continue?' when loading this file; answer Yes,",
+            "#   or it keeps the old value (ArduPilot itself accepts offsets up to COMPASS_OFFS_MAX).",
+        ]
     lines += [f"{name},{float32_text(value)}" for name, value in parameters.items()]
     return "\n".join(lines) + "\n"
