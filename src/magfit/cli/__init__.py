@@ -73,6 +73,7 @@ def _register_commands() -> None:
     from .calibrate import calibrate_command
     from .compare import compare_command
     from .demo import demo_command
+    from .live import live_command
     from .plot import plot_command
     from .report import report_command
     from .simulate import simulate_command
@@ -85,6 +86,7 @@ def _register_commands() -> None:
         simulate_command,
         plot_command,
         report_command,
+        live_command,
     ):
         cli.add_command(command)
 
