@@ -135,7 +135,7 @@ def fitted(request: pytest.FixtureRequest, real_data_dir: Path) -> tuple[magfit.
     if request.param == "fxos8700_uT_cholesky":
         samples = _fxos(real_data_dir)
         return magfit.fit(samples, method="ellipsoid", root="cholesky").with_unit("uT"), samples
-    samples = _unc(real_data_dir)[3000:6000]  # after the 60 s warm-up
+    samples = _unc(real_data_dir)[3000:]  # after the 60 s warm-up
     return magfit.fit(samples, method="ellipsoid").with_unit("counts"), samples
 
 

@@ -12,6 +12,15 @@ ardupilot  .param     ``mag += OFS; mag *= SCALE; mag = [DIA/ODI] * mag``    mil
 px4        .params    ``corrected = S * (raw - OFF)``, S from SCALE/ODIAG    gauss
 fusion     .h         ``softIronMatrix * (uncalibrated - hardIronOffset)``   input unit
 magcal     .m         MATLAB ``C = (D - b) * A``                              input unit
+adafruit   .h         ``softiron * (magnetic - hardiron)``, row-major [9]    µT
+adafruit-  .json      the same, Adafruit_Sensor_Calibration_SDFat's file     µT
+json
+inav       .txt       ``(raw - magzero) * 1024 / maggain`` (diagonal only)   raw counts
+betaflight .txt       ``align(raw) - mag_calibration`` (offset only)         raw counts
+rtimulib   .ini       ``compassCalCorr * (compass - compassCalOffset)``      µT
+ros-       .yaml      ``magnetic_field - mag_bias`` (offset only)            tesla
+madgwick
+yaml       .yaml      ``corrected = matrix @ (raw - offset)``, generic        input unit
 ========== ========== ====================================================== ============
 
 >>> import numpy as np, magfit
@@ -29,12 +38,18 @@ from types import MappingProxyType
 
 from ..calibration import Calibration
 from ..errors import MagfitError, OptionError
+from .adafruit import write_adafruit, write_adafruit_json
 from .ardupilot import write_ardupilot
+from .betaflight import write_betaflight
 from .c_header import write_c_header
 from .fusion import write_fusion
+from .inav import write_inav
 from .jsonfile import write_json
 from .magcal import write_magcal
 from .px4 import write_px4
+from .ros_madgwick import write_ros_madgwick
+from .rtimulib import write_rtimulib
+from .yamlfile import write_yaml
 
 __all__ = ["FORMATS", "FormatSpec", "export"]
 
@@ -92,6 +107,34 @@ _SPECS = (
         "magcal", ".m", "MATLAB magcal form: A, b, expmfs with C = (D - b) * A",
         None, write_magcal,
     ),
+    FormatSpec(
+        "adafruit", ".h", "Adafruit_Sensor_Calibration (MotionCal) mag_hardiron/mag_softiron/mag_field in uT, C++",
+        "uT", write_adafruit,
+    ),
+    FormatSpec(
+        "adafruit-json", ".json", "Adafruit_Sensor_Calibration_SDFat JSON file: mag_hardiron, mag_softiron, mag_field",
+        "uT", write_adafruit_json,
+    ),
+    FormatSpec(
+        "inav", ".txt", "INAV CLI set magzero_*/maggain_* in raw counts (diagonal only; the loss is stated)",
+        "counts", write_inav,
+    ),
+    FormatSpec(
+        "betaflight", ".txt", "Betaflight CLI set mag_calibration in raw counts (hard iron only; the loss is stated)",
+        "counts", write_betaflight,
+    ),
+    FormatSpec(
+        "rtimulib", ".ini", "RTIMULib.ini compass keys: compassCalOffset*/compassCalCorr* (ellipsoid stage) in uT",
+        "uT", write_rtimulib,
+    ),
+    FormatSpec(
+        "ros-madgwick", ".yaml", "ROS imu_filter_madgwick mag_bias_x/y/z in tesla (hard iron only; the loss is stated)",
+        "T", write_ros_madgwick,
+    ),
+    FormatSpec(
+        "yaml", ".yaml", "generic YAML: offset, matrix, field strength, unit, corrected = matrix @ (raw - offset)",
+        None, write_yaml,
+    ),
 )  # fmt: skip
 
 #: The export targets by name.
@@ -106,7 +149,9 @@ def export(calibration: Calibration, format: str, *, unit: str | None = None, sy
     calibration : Calibration
         The calibration to write (``corrected = matrix @ (raw - offset)``, input units).
     format : str
-        A name in :data:`FORMATS`: ``"json"``, ``"c"``, ``"ardupilot"``, ``"px4"``, ``"fusion"``, ``"magcal"``.
+        A name in :data:`FORMATS`: ``"json"``, ``"c"``, ``"ardupilot"``, ``"px4"``, ``"fusion"``, ``"magcal"``,
+        ``"adafruit"``, ``"adafruit-json"``, ``"inav"``, ``"betaflight"``, ``"rtimulib"``, ``"ros-madgwick"``,
+        ``"yaml"``.
     unit : str or None
         Unit of the samples the calibration was fitted on (``"uT"``, ``"nT"``, ``"mT"``, ``"mG"``,
         ``"G"``/``"gauss"``, ``"counts"``; aliases such as ``"µT"`` accepted), overriding

@@ -115,6 +115,28 @@ def physical_unit(calibration: Calibration, unit: str | None, target: str, targe
     return resolved
 
 
+def raw_counts(calibration: Calibration, unit: str | None, target: str) -> str | None:
+    """The unit label for targets that store the sensor's raw counts; refuses a physical unit.
+
+    Such targets (INAV, Betaflight) apply their numbers to the integers the driver reads, so a
+    calibration fitted on samples in µT or gauss has no place there: the scale of the counts is not
+    known to magfit. Counts, or no unit recorded, pass.
+    """
+    label = label_unit(calibration, unit)
+    if label is None:
+        return None
+    try:
+        resolved = get_unit(label)
+    except OptionError:
+        return label  # a label magfit does not know: the user's own name for the counts
+    if resolved.is_physical:
+        raise ExportError(
+            f"the {target} export writes the sensor's raw counts, but the samples are in {resolved.name}; fit the "
+            f"counts {target} reads from the sensor (unit='counts'), not a converted field"
+        )
+    return resolved.name
+
+
 def factor(source: Unit, target_unit: str) -> float:
     """The exact conversion factor from ``source`` to ``target_unit`` (both physical)."""
     return conversion_factor(source.name, target_unit)
