@@ -220,8 +220,10 @@ def memory_sample_limit() -> int:
 def _estimated_rows(path: Path) -> int:
     """Data rows in ``path``, estimated without reading it all: exact for npy, from the line lengths for text."""
     from ..io import sniff
+    from ..io.sources import data_file
 
-    return _rows_in(path, sniff(path))
+    file = data_file(path)  # standard input, a pipe or a compressed file: their decompressed copy
+    return _rows_in(file, sniff(file))
 
 
 def _rows_in(path: Path, fmt: FileFormat) -> int:
@@ -249,9 +251,9 @@ def _fit_in_memory(
     *,
     even: bool = False,
 ) -> tuple[Calibration, Evaluation, _ReadResult]:
-    from ..io import read_samples, sniff
+    from ..io import read_samples
 
-    with _progress(f"reading {path.name}", lambda: _rows_in(path, sniff(path))) as advance:
+    with _progress(f"reading {path.name}", lambda: _estimated_rows(path)) as advance:
         table = read_samples(path, columns=columns, nonfinite=nonfinite, progress=advance)
     _require_rows(path, table.samples.shape[0], table)
     samples = _samples_for_fit(table.samples, even)

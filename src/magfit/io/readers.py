@@ -45,6 +45,7 @@ from .columns import (
     name_words,
     normalise_name,
 )
+from .sources import STDIN, data_file, display_name
 
 __all__ = ["ChunkReader", "FileFormat", "SampleTable", "iter_sample_chunks", "read_samples", "sniff"]
 
@@ -173,7 +174,7 @@ class SampleTable:
 
 
 def _error(path: Path, message: str) -> DataFileError:
-    return DataFileError(f"{path}: {message}")
+    return DataFileError(f"{display_name(path)}: {message}")  # a temporary copy is named as the user gave it
 
 
 def _pandas() -> Any:
@@ -185,22 +186,24 @@ def _pandas() -> Any:
 
 
 def _check_file(path: str | os.PathLike[str]) -> Path:
-    """The path as a Path, after checking that it is a readable regular file."""
+    """The regular file to read ``path`` from, after checking that it is readable: the file itself, or the
+    decompressed copy of standard input (``-``), a pipe or a compressed file (:func:`magfit.io.sources.data_file`)."""
+    if str(path) == STDIN:
+        return data_file(path)
     file = Path(path)
     if not file.exists():
         raise _error(file, "no such file; check the path and the current directory")
     if file.is_dir():
         raise _error(file, "is a directory, not a data file; give the path of a file inside it")
-    if not file.is_file():  # a FIFO or a device: reading its head would block, and it cannot be read twice
-        kind = "a named pipe (FIFO)" if stat.S_ISFIFO(file.stat().st_mode) else "a device or a socket"
+    if not file.is_file() and not stat.S_ISFIFO(file.stat().st_mode):  # a pipe is copied, as standard input
         raise _error(
             file,
-            f"is {kind}, not a regular file: magfit reads a file more than once (its layout, then its rows); "
-            "save the data to a file first",
+            "is a device or a socket, not a regular file: magfit reads a file more than once (its layout, then "
+            "its rows); save the data to a file first",
         )
     if not os.access(file, os.R_OK):
         raise _error(file, "permission denied; make the file readable (chmod +r) or copy it")
-    return file
+    return data_file(file)
 
 
 def _kind_of(path: Path, head: bytes) -> _Kind:
@@ -1320,7 +1323,7 @@ def read_samples(
             f"(first at line {read.skipped_lines[0]}); check the columns (columns=[...])",
         )
     return SampleTable(
-        path=reader.path,
+        path=Path(display_name(reader.path)),
         samples=samples,
         columns=reader.columns,
         n_rows=read.n_rows,

@@ -1,0 +1,218 @@
+"""Where a recording's bytes come from: a plain file, a compressed file, standard input or a pipe.
+
+The readers read a file several times (its layout from the head, then its rows, possibly in pieces on
+several threads, and again for an error's line number), so a source that cannot be re-read or seeked is
+first copied, decompressed, to a temporary file: standard input (``-``), a named pipe or process
+substitution (``<(zcat log.gz)``), and files compressed with gzip, bzip2, xz or zstd. The compression is
+recognised by the file's first bytes (its magic number), not by its name. The copy is made once per
+process and source, and removed when the process exits; messages name the source as the user gave it.
+
+zstd needs the ``zstandard`` package (the ``zstd`` extra); gzip, bzip2 and xz come with Python.
+"""
+
+from __future__ import annotations
+
+import atexit
+import bz2
+import gzip
+import lzma
+import os
+import select
+import shutil
+import stat
+import sys
+import tempfile
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import BinaryIO, cast
+
+from ..errors import DataFileError
+
+__all__ = ["COMPRESSIONS", "STDIN", "compression_of", "data_file", "display_name"]
+
+#: The file name that means standard input.
+STDIN = "-"
+#: Magic numbers of the compressed formats read, and their names.
+COMPRESSIONS: dict[bytes, str] = {
+    b"\x1f\x8b": "gzip",
+    b"BZh": "bzip2",
+    b"\xfd7zXZ\x00": "xz",
+    b"\x28\xb5\x2f\xfd": "zstd",
+}
+_SUFFIXES = {".gz": "gzip", ".gzip": "gzip", ".bz2": "bzip2", ".xz": "xz", ".zst": "zstd", ".zstd": "zstd"}
+_COPY_BLOCK = 1 << 20
+#: How long a named pipe may stay silent before it is refused (its writer not started).
+PIPE_WAIT_SECONDS = 2.0
+
+_lock = threading.Lock()
+#: Source key -> the temporary copy; temporary copy -> the name messages use.
+_copies: dict[tuple[object, ...], Path] = {}
+_names: dict[Path, str] = {}
+_stdin_seen: list[object] = []  # kept alive so that their ids, the keys of their copies, are not reused
+
+
+def compression_of(head: bytes) -> str | None:
+    """The compression whose magic number starts ``head`` (``"gzip"``, ``"bzip2"``, ``"xz"``, ``"zstd"``), or None."""
+    for magic, name in COMPRESSIONS.items():
+        if head.startswith(magic):
+            return name
+    return None
+
+
+def display_name(path: Path) -> str:
+    """How messages name ``path``: the source the user gave for a temporary copy, else the path itself."""
+    return _names.get(path, str(path))
+
+
+def data_file(path: str | os.PathLike[str]) -> Path:
+    """The regular file that holds the (decompressed) bytes of ``path``.
+
+    A plain regular file is returned as it is; standard input (``"-"``), a pipe and a compressed file are
+    copied once to a temporary file (see the module docstring). Checks of existence and permissions are
+    the caller's; a broken compressed file is a :class:`~magfit.DataFileError`.
+    """
+    if str(path) == STDIN:
+        # One copy per standard input object (a process that swaps sys.stdin, as tests do, gets a new one).
+        _stdin_seen.append(sys.stdin)
+        return _decompressed(_copy(("stdin", id(sys.stdin)), STDIN, _open_stdin, None), STDIN)
+    file = Path(path)
+    try:
+        status = file.stat()
+    except OSError:
+        return file  # the caller reports a missing or unreadable file
+    if stat.S_ISFIFO(status.st_mode):
+        return _decompressed(_copy(("pipe", str(file)), str(file), lambda: _open_pipe(file), file), str(file))
+    if not stat.S_ISREG(status.st_mode):
+        return file
+    return _decompressed(file, str(file))
+
+
+def _decompressed(file: Path, name: str) -> Path:
+    """``file`` itself, or its decompressed copy when its first bytes are a compression's magic number."""
+    try:
+        with open(file, "rb") as handle:
+            magic = handle.read(8)
+        status = file.stat()
+    except OSError:
+        return file  # the caller reports an unreadable file
+    compression = compression_of(magic)
+    if compression is None:
+        return file
+    original = Path(name) if name != STDIN else None
+    key = ("decompressed", str(file.resolve()), status.st_size, status.st_mtime_ns)
+    return _copy(key, name, lambda: _decompressing(file, compression, name), original, compression)
+
+
+def _open_stdin() -> BinaryIO:
+    if sys.stdin is None or sys.stdin.isatty():
+        raise DataFileError(
+            f"{STDIN}: standard input is a terminal; pipe the samples in (magfit calibrate - < mag.csv)"
+        )
+    return sys.stdin.buffer
+
+
+def _open_pipe(file: Path) -> BinaryIO:
+    """A named pipe opened for reading once something writes into it, within :data:`PIPE_WAIT_SECONDS`.
+
+    Opening a pipe that nothing writes into would wait for ever: it is opened without blocking, and
+    refused when no writer shows up in time.
+    """
+    descriptor = os.open(file, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        if hasattr(select, "poll"):
+            poller = select.poll()
+            poller.register(descriptor, select.POLLIN | select.POLLHUP)
+            if not poller.poll(int(PIPE_WAIT_SECONDS * 1000)):
+                raise DataFileError(
+                    f"{file}: is a named pipe (FIFO) and nothing wrote into it within {PIPE_WAIT_SECONDS:g} s; start "
+                    "its writer first, or save the data to a file first"
+                )
+        os.set_blocking(descriptor, True)
+    except BaseException:
+        os.close(descriptor)
+        raise
+    return os.fdopen(descriptor, "rb")
+
+
+def _decompressing(file: Path, compression: str, name: str) -> BinaryIO:
+    if compression == "gzip":
+        return cast(BinaryIO, gzip.open(file, "rb"))
+    if compression == "bzip2":
+        return cast(BinaryIO, bz2.open(file, "rb"))
+    if compression == "xz":
+        return cast(BinaryIO, lzma.open(file, "rb"))
+    try:
+        import zstandard
+    except ImportError:
+        raise DataFileError(
+            f"{name}: is zstd-compressed, and reading it needs the zstandard package: pip install 'magfit[zstd]' "
+            "(or decompress it first: zstd -d)"
+        ) from None
+    return cast(BinaryIO, zstandard.ZstdDecompressor().stream_reader(open(file, "rb"), closefd=True))
+
+
+def _copy(
+    key: tuple[object, ...], name: str, opener: Callable[[], BinaryIO], original: Path | None, what: str = "input"
+) -> Path:
+    """The temporary copy of a source (made on first use, under a lock: pieces read on threads share it)."""
+    with _lock:
+        existing = _copies.get(key)
+        if existing is not None and existing.exists():
+            return existing
+        suffix = _inner_suffix(original) if original is not None else ""
+        handle, temporary = tempfile.mkstemp(prefix="magfit-", suffix=suffix)
+        target = Path(temporary)
+        atexit.register(_remove, target)
+        try:
+            with os.fdopen(handle, "wb") as out:
+                source = opener()
+                try:
+                    shutil.copyfileobj(source, out, _COPY_BLOCK)
+                finally:
+                    if source is not getattr(sys.stdin, "buffer", None):
+                        source.close()
+        except DataFileError:
+            _remove(target)
+            raise
+        except (OSError, EOFError, lzma.LZMAError, ValueError) as error:
+            _remove(target)
+            raise DataFileError(
+                f"{name}: the {what} data cannot be read to its end ({_reason(error)}); the file is damaged or "
+                "was cut short: copy or download it again"
+            ) from None
+        except BaseException:
+            _remove(target)
+            raise
+        _copies[key] = target
+        _names[target] = name
+        return target
+
+
+def _reason(error: BaseException) -> str:
+    text = " ".join(str(error).split())
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__
+
+
+def _inner_suffix(original: Path) -> str:
+    """``.npy`` for ``samples.npy.gz``: the suffix the decompressed copy keeps (readers look at it)."""
+    suffixes = original.suffixes
+    if suffixes and suffixes[-1].lower() in _SUFFIXES:
+        suffixes = suffixes[:-1]
+    return suffixes[-1] if suffixes and len(suffixes[-1]) <= 8 else ""
+
+
+def _remove(path: Path) -> None:
+    try:
+        path.unlink()
+    except OSError:
+        pass
+
+
+def _forget_all() -> None:
+    """Remove every temporary copy now (tests; a long-running process that read many sources)."""
+    with _lock:
+        for path in list(_copies.values()):
+            _remove(path)
+        _copies.clear()
+        _names.clear()
