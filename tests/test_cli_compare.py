@@ -15,6 +15,7 @@ from click.testing import CliRunner
 
 import magfit
 from magfit.cli import cli
+from magfit.cli._common import significant
 from magfit.compare import compare
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,7 +55,32 @@ def test_table_lists_each_method_with_mean_std_axes_and_offset(steel_file: tuple
         line = next(line for line in result.stdout.splitlines() if line.startswith(f"│ {method_result.method} "))
         assert f"{method_result.evaluation.mean:.4f}" in line
         assert f"{method_result.evaluation.std:.4f}" in line
-        assert f"{method_result.calibration.offset[0]:.4f}" in line
+        assert significant(method_result.calibration.offset[0], 6) in line
+
+
+def test_numbers_in_tesla_keep_their_digits_and_the_unit_is_shown(tmp_path: Path) -> None:
+    """A field of 48 µT written in tesla: 4 fixed decimals printed 0.0000 for everything but mean and std."""
+    directions = np.random.default_rng(2).normal(size=(600, 3))
+    samples = 48e-6 * directions / np.linalg.norm(directions, axis=1, keepdims=True) + (1.5e-5, -2e-6, 3e-6)
+    path = _write_csv(tmp_path / "tesla.csv", samples)
+    runner = CliRunner()
+    table = runner.invoke(cli, ["compare", str(path), "--methods", "sphere", "--unit", "T"])
+    assert table.exit_code == 0, table.output
+    (line,) = [line for line in table.stdout.splitlines() if line.startswith("│ sphere ")]
+    fitted = magfit.fit(samples, method="sphere")
+    assert significant(fitted.field_strength, 6) in line and fitted.field_strength == pytest.approx(48e-6, rel=1e-3)
+    assert significant(fitted.offset[0], 6) in line and "0.0000 │ (" not in line
+    assert "field strength (T)" in table.stdout and "offset in T" in table.stdout
+    markdown = runner.invoke(cli, ["compare", str(path), "--methods", "sphere", "--unit", "T", "--format", "markdown"])
+    assert (
+        "| method | mean | std | field strength (T) | semi-axes (T) | offset (T) | failure reason |" in markdown.stdout
+    )
+    document = json.loads(runner.invoke(cli, ["compare", str(path), "--unit", "T", "--format", "json"]).stdout)
+    assert document[0]["unit"] == "T"
+    rows = list(
+        csv.DictReader(io.StringIO(runner.invoke(cli, ["compare", str(path), "--unit", "T", "--format", "csv"]).stdout))
+    )
+    assert {row["unit"] for row in rows} == {"T"}
 
 
 def test_csv_carries_the_library_numbers_at_full_precision(steel_file: tuple[Path, np.ndarray]) -> None:

@@ -24,6 +24,7 @@ from ._common import (
     method_names,
     nonfinite_option,
     parse_columns,
+    significant,
     vector,
     warn,
 )
@@ -43,11 +44,19 @@ _CSV_FIELDS = (
     "offset_y",
     "offset_z",
     "error",
+    "unit",
 )
-_CAPTION = (
-    "mean, std: signed distance of the calibrated samples to the unit sphere (paper, section V), a fraction "
-    "of the field strength; field strength, semi-axes and offset in the file's units"
-)
+#: Significant digits of the field strength, semi-axes and offsets: any unit (tesla or counts) reads alike.
+DIGITS = 6
+
+
+def caption(unit: str | None) -> str:
+    """The note under the tables: what the numbers are, and their unit."""
+    units = unit if unit else "the file's units"
+    return (
+        "mean, std: signed distance of the calibrated samples to the unit sphere (paper, section V), a fraction "
+        f"of the field strength; field strength, semi-axes and offset in {units}"
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +68,8 @@ class FileComparison:
     n_rows: int
     n_skipped: int
     comparison: Comparison
+    unit: str | None = None
+    column_note: str | None = None
 
 
 def parse_methods(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[str, ...]:
@@ -101,6 +112,7 @@ def parse_methods(ctx: click.Context, param: click.Parameter, value: str | None)
     show_default=True,
     help="table (terminal), markdown, csv (one row per file and method) or json (with the calibrations).",
 )
+@click.option("--unit", help="Name of the samples' unit (uT, mG, counts ...), shown with the numbers.")
 @nonfinite_option
 @click.pass_context
 def compare_command(
@@ -109,12 +121,14 @@ def compare_command(
     methods: tuple[str, ...],
     columns: list[str | int] | None,
     output_format: str,
+    unit: str | None,
     nonfinite: Nonfinite,
 ) -> None:
     """Fit several methods to each FILE and compare them as the paper does.
 
     For each file: the mean and std of the distance of the calibrated samples to the unit sphere, the
-    field strength, the ellipsoid semi-axes and the hard-iron offset per method. A method that cannot
+    field strength, the ellipsoid semi-axes and the hard-iron offset per method (6 significant digits, in
+    the --unit given, else the file's units). A method that cannot
     fit a file shows its reason in the table instead. Exit status 0 when at least one method succeeded
     on every file, 1 when every method failed on some file, 2 when a file cannot be read.
 
@@ -123,6 +137,7 @@ def compare_command(
       magfit compare mag-readings.txt
       magfit compare flight1.csv flight2.csv --methods ellipsoid,sphere,minmax --format markdown
       magfit compare log.txt --columns 0,1,2 --format json > comparison.json
+      magfit compare hamagure.csv --unit G
     """
     from ..io import read_samples
 
@@ -132,7 +147,11 @@ def compare_command(
         if table.n_skipped:
             warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
         comparison = compare(table.samples, methods)
-        results.append(FileComparison(str(path), tuple(table.columns), table.n_rows, table.n_skipped, comparison))
+        results.append(
+            FileComparison(
+                str(path), tuple(table.columns), table.n_rows, table.n_skipped, comparison, unit, table.column_note
+            )
+        )
     render = {"table": _print_tables, "markdown": _print_markdown, "csv": _print_csv, "json": _print_json}
     render[output_format](results)
     if not all(result.comparison.any_succeeded for result in results):
@@ -140,24 +159,35 @@ def compare_command(
 
 
 def _numbers(result: MethodResult) -> list[str]:
-    """mean, std, field strength, semi-axes, offset of a successful result, 4 decimals as in the paper."""
+    """mean, std (4 decimals of a fraction, as in the paper), field strength, semi-axes, offset (in the
+    samples' unit: significant digits, so that data in tesla do not show 0.0000)."""
     assert result.calibration is not None and result.evaluation is not None
     calibration = result.calibration
+
+    def digits(value: float) -> str:
+        return significant(value, DIGITS)
+
     return [
         fixed(result.evaluation.mean),
         fixed(result.evaluation.std),
-        fixed(calibration.field_strength),
-        vector(calibration.semi_axes),
-        vector(calibration.offset),
+        digits(calibration.field_strength),
+        vector(calibration.semi_axes, digits),
+        vector(calibration.offset, digits),
     ]
 
 
 def _heading(result: FileComparison) -> str:
     skipped = f", {result.n_skipped} skipped" if result.n_skipped else ""
+    note = f": {result.column_note}" if result.column_note else ""
     return (
         f"{result.name}: {result.comparison.n_samples} samples "
-        f"({result.n_rows} rows{skipped}; columns {columns_text(result.columns)})"
+        f"({result.n_rows} rows{skipped}; columns {columns_text(result.columns)}{note})"
     )
+
+
+def _headers(unit: str | None) -> tuple[str, ...]:
+    suffix = f" ({unit})" if unit else ""
+    return ("mean", "std", f"field strength{suffix}", f"semi-axes{suffix}", f"offset{suffix}")
 
 
 def _print_tables(results: Sequence[FileComparison]) -> None:
@@ -165,7 +195,7 @@ def _print_tables(results: Sequence[FileComparison]) -> None:
     for result in results:
         table = Table(title=_heading(result), title_justify="left", title_style="bold", caption_justify="left")
         table.add_column("method")
-        for header in ("mean", "std", "field strength", "semi-axes", "offset"):
+        for header in _headers(result.unit):
             table.add_column(header, justify="right")
         failures = not all(method_result.ok for method_result in result.comparison)
         if failures:  # the column is there only when it has something to say
@@ -177,7 +207,7 @@ def _print_tables(results: Sequence[FileComparison]) -> None:
                 reason = Text(str(method_result.error), style="red")
                 table.add_row(method_result.method, "failed", "", "", "", "", reason)
         out.print(table)
-    out.print(Text(_CAPTION, style="dim"))
+    out.print(Text(caption(results[0].unit if results else None), style="dim"))
 
 
 def _markdown_cell(text: str) -> str:
@@ -188,7 +218,7 @@ def _print_markdown(results: Sequence[FileComparison]) -> None:
     lines = []
     for result in results:
         lines += [f"### {_markdown_cell(_heading(result))}", ""]
-        lines.append("| method | mean | std | field strength | semi-axes | offset | failure reason |")
+        lines.append("| method | " + " | ".join(_headers(result.unit)) + " | failure reason |")
         lines.append("|---|---:|---:|---:|---:|---:|---|")
         for method_result in result.comparison:
             if method_result.ok:
@@ -197,7 +227,7 @@ def _print_markdown(results: Sequence[FileComparison]) -> None:
                 cells = [method_result.method, "failed", "", "", "", "", str(method_result.error)]
             lines.append("| " + " | ".join(_markdown_cell(cell) for cell in cells) + " |")
         lines.append("")
-    lines.append(_CAPTION)
+    lines.append(caption(results[0].unit if results else None))
     click.echo("\n".join(lines))
 
 
@@ -209,7 +239,9 @@ def _print_csv(results: Sequence[FileComparison]) -> None:
         for method_result in result.comparison:
             calibration, evaluation = method_result.calibration, method_result.evaluation
             if calibration is None or evaluation is None:
-                writer.writerow([result.name, method_result.method, "failed", *[""] * 9, method_result.error])
+                writer.writerow(
+                    [result.name, method_result.method, "failed", *[""] * 9, method_result.error, result.unit or ""]
+                )
                 continue
             numbers = [
                 evaluation.mean,
@@ -218,7 +250,8 @@ def _print_csv(results: Sequence[FileComparison]) -> None:
                 *calibration.semi_axes,
                 *calibration.offset,
             ]
-            writer.writerow([result.name, method_result.method, "ok", *(repr(float(v)) for v in numbers), ""])
+            row = [result.name, method_result.method, "ok", *(repr(float(v)) for v in numbers), "", result.unit or ""]
+            writer.writerow(row)
     click.echo(buffer.getvalue(), nl=False)
 
 
@@ -229,6 +262,7 @@ def _print_json(results: Sequence[FileComparison]) -> None:
             "columns": list(result.columns),
             "n_rows": result.n_rows,
             "n_skipped": result.n_skipped,
+            "unit": result.unit,
             **result.comparison.to_dict(),
         }
         for result in results
