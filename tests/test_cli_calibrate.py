@@ -173,9 +173,9 @@ def test_export_needs_a_known_format_and_unit(steel: tuple[Path, magfit.Simulati
     path, _ = steel
     target = tmp_path / "mag.param"
     runner = CliRunner()
-    unknown = runner.invoke(cli, ["calibrate", str(path), "--export", "betaflight", "-o", str(target)])
+    unknown = runner.invoke(cli, ["calibrate", str(path), "--export", "mavlink", "-o", str(target)])
     assert unknown.exit_code == 2
-    assert "unknown format 'betaflight'; valid formats: " + ", ".join(FORMATS) in unknown.stderr
+    assert "unknown format 'mavlink'; valid formats: " + ", ".join(FORMATS) in unknown.stderr
     # ArduPilot wants milligauss: without a unit magfit cannot convert, and says so; nothing is written.
     no_unit = runner.invoke(
         cli, ["calibrate", str(path), "-m", "ellipsoid", "--export", "ardupilot", "-o", str(target)]
