@@ -179,3 +179,17 @@ def test_full_matrix_exports_warn_about_a_cholesky_root(name: str, real_data_dir
     if name == "json":
         assert json.loads(text)["warnings"][0].startswith("WARNING: the matrix is a Cholesky root")
         assert magfit.Calibration.from_json(text) == chol  # still lossless
+
+
+def test_px4_loss_of_a_cholesky_root_is_measured_against_the_symmetric_root_it_exports() -> None:
+    # PX4 receives the symmetric root of a Cholesky calibration; what it then ignores is measured against
+    # that root, not against the Cholesky matrix (whose rotation the file's NOTE already states).
+    s = MILD / np.cbrt(np.linalg.det(MILD))
+    upper = np.linalg.cholesky(s @ s).T  # upperᵀ upper = s²: the same ellipsoid
+    offset = np.array([21.0, -33.0, 15.0])
+    sym = magfit.Calibration("test", offset, s, 50.0, unit="uT")
+    chol = magfit.Calibration("test", offset, upper, 50.0, unit="uT", details={"root": "cholesky"})
+    text = export(chol, "px4")
+    assert "NOTE: magfit's matrix is a Cholesky root" in text
+    stated = re.findall(r"heading error of up to ([\d.]+) deg", text)
+    assert stated and stated == re.findall(r"heading error of up to ([\d.]+) deg", export(sym, "px4"))

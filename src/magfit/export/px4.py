@@ -141,7 +141,7 @@ def ignored_vectors(parameters: dict[str, float]) -> list[str]:
 
 def _as_applied(parameters: dict[str, float], ignored: list[str], k: float) -> tuple[np.ndarray, np.ndarray]:
     """The matrix and offset (in the samples' unit) PX4 applies when the ``ignored`` vectors keep their defaults."""
-    p = {name: value for name, value in parameters.items()}
+    p = dict(parameters)
     for group, default in (("OFF", 0.0), ("SCALE", 1.0), ("ODIAG", 0.0)):
         if group in ignored:
             for name in NAMES:
@@ -190,7 +190,10 @@ def write_px4(calibration: Calibration, unit: str | None = None, *, system_id: i
     parameters = px4_parameters(calibration, unit)
     source = physical_unit(calibration, unit, "px4", "gauss")
     k = factor(source, "G")
-    note = symmetric_matrix(calibration, "px4").note
+    symmetric = symmetric_matrix(calibration, "px4")
+    note = symmetric.note
+    # The loss below is measured against what this file holds in full: the symmetric root for a Cholesky one.
+    reference = Calibration(calibration.method, calibration.offset, symmetric.matrix, calibration.field_strength)
     lines = [
         f"# Onboard parameters for Vehicle {system_id}",
         "#",
@@ -217,7 +220,7 @@ def write_px4(calibration: Calibration, unit: str | None = None, *, system_id: i
     )
     ignored = ignored_vectors(parameters)
     matrix, offset = _as_applied(parameters, ignored, k)
-    error = heading_error_deg(calibration, matrix, offset) if ignored else 0.0
+    error = heading_error_deg(reference, matrix, offset) if ignored else 0.0
     if error >= 0.005:  # shown with 2 decimals: below, nothing worth a warning is lost
         names = [name for name in NAMES if name.rsplit("_", 1)[1][1:] in ignored]
         lines += [
