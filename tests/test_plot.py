@@ -192,10 +192,10 @@ def test_calibration_figure_panels_carry_units_methods_and_the_papers_metric(ste
     # 3000 samples: a 24 x 12 grid of 15° cells (~10 samples each), every cell reached (P(empty) ~ e^-10.4).
     cover = plot.coverage(fits[0].apply(simulation.samples), 24, 12)
     assert cover.fraction_visited == 1.0
-    assert (
-        panels["coverage"]
-        .get_title()
-        .startswith("Directions visited: 100% of the sphere (288 of 288 equal-area cells 15° wide")
+    share = fits[0].diagnostics.coverage.share  # the number the CLI prints, not the map's grid
+    assert panels["coverage"].get_title().startswith(
+        f"Directions visited: {share:.0%} of the sphere (the diagnostics' 100 equal-area regions)\n"
+        "map: 288 of 288 cells 15° wide reached"
     )
     # Methods named in the histogram legend with the paper's mean/std, equal to magfit.evaluate's.
     legend = [text.get_text() for text in panels["histogram"].get_legend().get_texts()]
@@ -228,7 +228,7 @@ def test_scatter_panels_draw_at_most_max_points(steel) -> None:
     small = {a.get_label(): a for a in labelled.axes}
     assert small["before-xy"].get_xlabel() == "x (uT)"
     # 300 samples cannot fill 648 cells: the map coarsens to 72 cells of 30°, ~4 samples each.
-    assert "of 72 equal-area cells 30° wide" in small["coverage"].get_title()
+    assert "of 72 cells 30° wide reached" in small["coverage"].get_title()
 
 
 def test_calibration_figure_refuses_bad_input(steel, tmp_path) -> None:
@@ -247,3 +247,24 @@ def test_calibration_figure_refuses_bad_input(steel, tmp_path) -> None:
 def test_method_labels_number_repeated_methods() -> None:
     identity = magfit.Calibration.identity()
     assert plot.method_labels([identity, identity, identity]) == ("identity", "identity #2", "identity #3")
+
+
+def test_the_figure_and_the_cli_give_the_same_coverage(real_data_dir: Path, tmp_path: Path) -> None:
+    """A half-sphere recording: the figure said 8 % (its own fine grid), the CLI 13 %; now one number."""
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+    from magfit.io import read_samples
+
+    path = real_data_dir / "hamagure_gauss" / "data-set_2.csv"
+    samples = read_samples(path).samples
+    calibration = magfit.fit(samples, method="ellipsoid")
+    share = calibration.diagnostics.coverage.share
+    assert 0.1 < share < 0.6  # only the z < 0 half was recorded
+    figure = plot.calibration_figure(samples, calibration)
+    title = {axes.get_label(): axes for axes in figure.axes}["coverage"].get_title()
+    assert title.startswith(f"Directions visited: {share:.0%} of the sphere")
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "--plot", str(tmp_path / "f.png")])
+    assert result.exit_code == 0, result.output
+    assert f"cover only {100 * share:.0f} % of the directions" in result.stderr
+    assert f"{share:.0%}" == f"{100 * share:.0f}%"

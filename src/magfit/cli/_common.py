@@ -16,6 +16,7 @@ from rich.console import Console
 
 from ..errors import CalibrationError, MagfitError, OptionError
 from ._extras import hint_for
+from ._wording import collapse_repeats, unquoted_alternatives
 
 #: What to do with rows holding NaN or inf (the readers' ``nonfinite`` argument).
 Nonfinite = Literal["skip", "error"]
@@ -59,20 +60,24 @@ def one_line(message: str) -> str:
 
 
 #: Library hints that name a keyword argument (``nonfinite='skip'``, ``columns=[...]``): the options that set them.
-_KEYWORD_HINT = re.compile(r"\b(nonfinite|unit|method|columns)=(?:'([^']*)'|\[([^\]]*)\])")
+_KEYWORD_HINT = re.compile(
+    r"\b(nonfinite|unit|method|columns|field_strength|max_samples)=(?:'([^']*)'|\[([^\]]*)\]|(-?\d[\w.+-]*))"
+)
 
 
 def option_wording(message: str) -> str:
     """Rewrite the library's keyword hints as the command line's options: ``unit='uT'`` -> ``--unit uT``."""
 
     def option(match: re.Match[str]) -> str:
-        name, text, items = match.groups()
-        if text is not None:
-            return f"--{name} {text}"
+        name, text, items, number = match.groups()
+        name = name.replace("_", "-")
+        if text is not None or number is not None:
+            return f"--{name} {text if text is not None else number}"
         value = "X,Y,Z" if items.strip() in ("", "...") else ",".join(i.strip().strip("'\"") for i in items.split(","))
         return f"--{name} {value}"
 
-    return _KEYWORD_HINT.sub(option, message)
+    # Each model's reason said once; the alternatives of an option unquoted: --method auto (or ml, als).
+    return unquoted_alternatives(_KEYWORD_HINT.sub(option, collapse_repeats(message)))
 
 
 def as_command_error(error: BaseException) -> CommandError:
@@ -104,7 +109,7 @@ def fail(message: str) -> NoReturn:
 
 def warn(message: str) -> None:
     """Print ``magfit: warning: <message>`` on stderr."""
-    click.echo(f"magfit: warning: {one_line(message)}", err=True)
+    click.echo(f"magfit: warning: {option_wording(one_line(message))}", err=True)
 
 
 # ---------------------------------------------------------------------- output

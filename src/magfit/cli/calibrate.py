@@ -44,6 +44,7 @@ from ._common import (
     warn,
 )
 from ._extras import require
+from ._wording import without_own_advice
 
 if TYPE_CHECKING:
     from ..io import ChunkReader, FileFormat
@@ -717,7 +718,7 @@ def calibrate_command(
             "pass --nonfinite error to refuse such files"
         )
     for message in _fit_warnings(run.calibration):
-        warn(message)
+        warn(without_own_advice(message, run.calibration.method))  # "prefer method='auto'" after auto: no advice
     print_summary(summary, run)
     if output is not None and not to_stdout:
         what = f"{export_format} export" if export_format else "calibration"

@@ -18,7 +18,15 @@ from numpy.typing import ArrayLike, NDArray
 from .._validation import as_samples
 from ..calibration import Calibration
 from ..errors import OptionError
-from ._geometry import Coverage, ellipse_outline, ellipsoid_wireframe, scan, sphere_wireframe, subsample_for_plot
+from ._geometry import (
+    Coverage,
+    coverage_share,
+    ellipse_outline,
+    ellipsoid_wireframe,
+    scan,
+    sphere_wireframe,
+    subsample_for_plot,
+)
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -55,6 +63,7 @@ class _Prepared:
     shown: NDArray[np.intp]
     distances: tuple[NDArray[np.float64], ...]
     coverage: Coverage
+    coverage_share: float  # as the diagnostics count it (the CLI's number), not the map's grid
 
 
 def method_labels(calibrations: Sequence[Calibration]) -> tuple[str, ...]:
@@ -97,6 +106,7 @@ def _prepare(
         shown=shown,
         distances=distances,
         coverage=cover,
+        coverage_share=coverage_share(items[0], array),
     )
 
 
@@ -277,9 +287,9 @@ def _draw_coverage(figure: Figure, axes: Axes, prepared: _Prepared) -> None:
     axes.set_xlabel("azimuth of the calibrated field in the sensor frame, atan2(y, x)")
     axes.set_ylabel("elevation, asin(z / |m|)")
     axes.set_title(
-        f"Directions visited: {cover.fraction_visited:.0%} of the sphere "
-        f"({np.count_nonzero(cover.counts)} of {cover.n_cells} equal-area cells {360 // cover.counts.shape[1]}° wide; "
-        "pale red: never visited)",
+        f"Directions visited: {prepared.coverage_share:.0%} of the sphere (the diagnostics' 100 equal-area regions)\n"
+        f"map: {np.count_nonzero(cover.counts)} of {cover.n_cells} cells {360 // cover.counts.shape[1]}° wide reached; "
+        "pale red: never visited",
         fontsize=11,
     )
     colorbar = figure.colorbar(mesh, ax=axes, shrink=0.8, pad=0.02)

@@ -21,6 +21,7 @@ __all__ = [
     "Coverage",
     "corrected_unit",
     "coverage",
+    "coverage_share",
     "direction_cells",
     "ellipse_outline",
     "ellipsoid_wireframe",
@@ -147,6 +148,22 @@ def _coverage_from_counts(counts: NDArray[np.intp], azimuth_bins: int, elevation
         azimuth_edges=np.linspace(-np.pi, np.pi, azimuth_bins + 1),
         elevation_edges=np.arcsin(np.linspace(-1.0, 1.0, elevation_bins + 1)),
     )
+
+
+def coverage_share(calibration: Calibration, samples: NDArray[np.float64]) -> float:
+    """The share of directions covered, as the diagnostics count it, so that a figure and the CLI agree.
+
+    The diagnostics' own number (``calibration.diagnostics.coverage.share``: MotionCal's 100 equal-area
+    regions, on the samples the diagnostics analysed) when the fit carries it; otherwise the same
+    partition counted on ``samples``. The map's finer grid shows where, not how much: its share of cells
+    is lower for the same samples (324 samples cannot reach 648 cells).
+    """
+    diagnostics = calibration.diagnostics
+    if diagnostics is not None and diagnostics.coverage is not None:
+        return float(diagnostics.coverage.share)
+    from ..diagnostics.coverage import coverage as diagnostics_coverage
+
+    return float(diagnostics_coverage(corrected_unit(calibration, samples)).share)
 
 
 #: Long recordings are first cut to this many candidates per point drawn, by a regular stride in time,
