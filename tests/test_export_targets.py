@@ -6,7 +6,7 @@ magfit/export), applied to the exported text on a real recording, and compared w
 
 - Adafruit_Sensor_Calibration 80dfeba: ``calibrate()`` and ``Adafruit_Sensor_Calibration_SDFat::loadCalibration``;
 - INAV 005b1ee ``compassUpdate`` (integer arithmetic) and settings.yaml's int16 settings;
-- Betaflight 58ae3fd / 0270127 ``compassUpdate`` and cli/settings.c's ``mag_calibration``;
+- Betaflight 58ae3fd / 0270127 ``compassUpdate`` and the CLI settings table's ``mag_calibration`` (settings.c);
 - RTIMULib 6a6e784 ``RTIMUSettings::loadSettings``, ``RTIMU::setCalibrationData`` and ``calibrateAverageCompass``;
 - imu_tools (humble c8a27cd) ``ImuFilterRos::imuMagCallback``.
 """
@@ -242,7 +242,7 @@ def test_betaflight_offset_matches_apply_and_the_flight_controllers_own_result(r
     cal = magfit.fit(samples, method="ellipsoid").with_unit("counts")
     text = export(cal, "betaflight")
     settings = parse_cli(text)
-    zero = np.array([int(v) for v in settings["mag_calibration"].split(",")])  # cli/settings.c: int16 array of 3
+    zero = np.array([int(v) for v in settings["mag_calibration"].split(",")])  # settings.c: int16 array of 3
     np.testing.assert_array_equal(zero, np.rint(cal.offset))
     corrected = samples - zero  # compassUpdate: magADC = align(magADCRaw) - magZero (the samples are magADC)
     np.testing.assert_allclose(corrected, cal.apply(samples) @ np.linalg.inv(cal.matrix).T, atol=0.5 + 1e-9)

@@ -6,9 +6,9 @@ Betaflight's ``compassUpdate`` (src/main/sensors/compass.c, betaflight/betafligh
 
     magADC = align(magADCRaw) - magZero        # no scale, no soft iron
 
-``mag_calibration`` is that magZero: an int16 array of three (``cli/settings.c``: VAR_INT16,
-MODE_ARRAY, ``magZero.raw``). So ``mag_calibration = round(offset)``, with the offset fitted on
-Betaflight's aligned magADC counts (the board frame, as Betaflight logs them). Betaflight holds no
+``mag_calibration`` is that magZero: an int16 array of three (VAR_INT16, MODE_ARRAY,
+``magZero.raw`` in the CLI settings table, settings.c). So ``mag_calibration = round(offset)``, with
+the offset fitted on Betaflight's aligned magADC counts (the board frame, as Betaflight logs them). Betaflight holds no
 soft-iron correction at all: what that costs, and the rounding, is said in the file as a heading
 error computed for the calibration at hand (:func:`._heading.heading_error_deg`). For a soft-iron
 free sensor, ``method="sphere"`` is the fit that matches what Betaflight can hold.
