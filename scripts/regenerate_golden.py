@@ -1,12 +1,14 @@
-"""Rewrite the golden outputs of ``magfit compare`` on the real recordings (tests/golden/).
+"""Rewrite the golden outputs of ``magfit compare`` on the real recordings (tests/golden/), and the README's
+example session (the ``magfit calibrate`` block, run on the real FXOS8700 recording).
 
 Run it after a deliberate change of a method or of the output layout, then review the diff::
 
     .venv/bin/python scripts/regenerate_golden.py              # uses ../shared/data/real
     MAGFIT_REAL_DATA=/path/to/real .venv/bin/python scripts/regenerate_golden.py
 
-tests/test_cli_compare.py imports :data:`CASES` and :func:`run_case` from this file, so the test and
-the script always run the same command lines. Outputs are printed with 4 decimals (the paper's mean and
+tests/test_cli_compare.py imports :data:`CASES` and :func:`run_case` from this file, and tests/test_readme.py
+:data:`README_EXAMPLES`, :func:`run_readme_example` and :func:`readme_block`, so the tests and the script
+always run the same command lines. Outputs are printed with 4 decimals (the paper's mean and
 std) and 6 significant digits (field strength, semi-axes, offsets): last-digit float noise cannot change
 them.
 """
@@ -14,12 +16,17 @@ them.
 from __future__ import annotations
 
 import os
+import re
+import shlex
+import shutil
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN_DIR = ROOT / "tests" / "golden"
+README = ROOT / "README.md"
 DEFAULT_DATA_DIR = ROOT.parent / "shared" / "data" / "real"
 
 
@@ -78,6 +85,53 @@ def run_case(case: GoldenCase, data: Path) -> tuple[str, int]:
     return result.stdout, result.exit_code
 
 
+@dataclass(frozen=True)
+class ReadmeExample:
+    """A ``$ magfit ...`` block of the README: the command, run in a scratch folder holding a copy of ``source``
+    (a real recording, under its own name), and its output as the user sees it (stdout and stderr)."""
+
+    command: str
+    source: str
+
+    @property
+    def argv(self) -> list[str]:
+        return shlex.split(self.command)[1:]
+
+
+README_EXAMPLES: tuple[ReadmeExample, ...] = (
+    ReadmeExample("magfit calibrate mag-readings.txt --unit uT -o cal.json", "fxos8700_magneto/mag-readings.txt"),
+)
+
+
+def run_readme_example(example: ReadmeExample, data: Path) -> str:
+    """The block's text: ``$ <command>`` and the output lines, as the README shows them."""
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    previous = Path.cwd()
+    with tempfile.TemporaryDirectory() as scratch:
+        shutil.copyfile(data / example.source, Path(scratch) / Path(example.source).name)
+        os.chdir(scratch)
+        try:
+            result = CliRunner().invoke(cli, example.argv)
+        finally:
+            os.chdir(previous)
+    if result.exit_code != 0:
+        raise RuntimeError(f"README example {example.command!r} exited {result.exit_code}: {result.output}")
+    lines = [line.rstrip() for line in result.output.rstrip("\n").splitlines()]
+    return "\n".join([f"$ {example.command}", *lines]) + "\n"
+
+
+def readme_block(text: str, example: ReadmeExample) -> re.Match[str]:
+    """The README's ```text block that starts with ``$ <command>``."""
+    pattern = re.compile(r"```text\n(\$ " + re.escape(example.command) + r"\n.*?)```", re.DOTALL)
+    match = pattern.search(text)
+    if match is None:
+        raise LookupError(f"README.md has no ```text block starting with '$ {example.command}'")
+    return match
+
+
 def main() -> int:
     data = data_dir()
     if not data.is_dir():
@@ -90,6 +144,14 @@ def main() -> int:
         case.golden_file.write_text(output, encoding="utf-8")
         state = "unchanged" if previous == output else ("new" if previous is None else "CHANGED")
         print(f"{case.golden_file.relative_to(ROOT)}: exit {status}, {state}")
+    readme = README.read_text(encoding="utf-8")
+    for example in README_EXAMPLES:
+        block = readme_block(readme, example)
+        output = run_readme_example(example, data)
+        state = "unchanged" if block.group(1) == output else "CHANGED"
+        readme = readme[: block.start(1)] + output + readme[block.end(1) :]
+        print(f"README.md, '$ {example.command}': {state}")
+    README.write_text(readme, encoding="utf-8")
     return 0
 
 
