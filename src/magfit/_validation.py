@@ -19,6 +19,11 @@ if TYPE_CHECKING:
 #: Below this ratio of the smallest to the largest spread (standard deviation along the principal
 #: directions), the samples are taken to lie on a plane or a line.
 FLATNESS_LIMIT = 1e-3
+#: Largest magnitude of a sample value: its square, and sums of squares over a chunk, stay finite in float64
+#: (1e150² = 1e300). Real magnetometer data in any unit are many orders of magnitude below.
+MAX_MAGNITUDE = 1e150
+#: Samples spread less than this many ulps of their magnitude are identical: float64 cannot tell them apart.
+_IDENTICAL_ULPS = 16
 _AXIS_NAMES = ("x", "y", "z")
 
 
@@ -51,6 +56,23 @@ def check_finite(array: NDArray[np.generic], first_row: int = 0) -> None:
         )
 
 
+def check_magnitude(array: NDArray[np.generic], first_row: int = 0) -> None:
+    """Raise if any value of a finite (N, 3) array exceeds :data:`MAX_MAGNITUDE`, naming the first row.
+
+    Checked where samples enter (every update of a Statistics), so that whether such a value is refused
+    never depends on how the samples were split into chunks.
+    """
+    too_large = np.abs(array) > MAX_MAGNITUDE
+    if too_large.any():
+        rows = np.flatnonzero(too_large.any(axis=1))
+        value = float(np.asarray(array)[rows[0]][np.argmax(too_large[rows[0]])])
+        raise SampleError(
+            f"samples contain values beyond ±{MAX_MAGNITUDE:g} in {rows.size} row(s), the first is row "
+            f"{first_row + rows[0]} ({value:.3g}); magfit computes with their squares, which float64 cannot hold: "
+            "rescale the samples (e.g. to µT or counts) or drop those rows"
+        )
+
+
 def as_samples(samples: ArrayLike) -> NDArray[np.float64]:
     """Validate and return an (N, 3) float64 array."""
     array = np.asarray(check_shape(samples), dtype=np.float64)
@@ -72,7 +94,9 @@ def check_support(statistics: Statistics, method: str, min_samples: int) -> None
     spreads_squared, directions = np.linalg.eigh(statistics.covariance)
     spreads = np.sqrt(np.clip(spreads_squared, 0.0, None))
     largest = spreads[-1]
-    if not largest > 1e-12 * max(1.0, float(np.max(np.abs(statistics.mean)))):
+    # Identical up to float64's resolution at their magnitude (x near 1e15 varying by ±200 is not identical).
+    resolution = _IDENTICAL_ULPS * np.finfo(np.float64).eps * float(np.max(np.abs(statistics.mean)))
+    if not largest > resolution:
         raise CalibrationError(
             f"all {n} samples are identical ({_format_vector(statistics.mean)}): the sensor was not turned "
             "or not read; record while rotating it"

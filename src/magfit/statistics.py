@@ -33,7 +33,7 @@ from collections.abc import Iterable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validation import check_finite, check_shape
+from ._validation import MAX_MAGNITUDE, check_finite, check_magnitude, check_shape
 from .errors import OptionError, SampleError
 
 __all__ = ["DESIGN_EXPONENTS", "Statistics", "design_matrix"]
@@ -69,6 +69,15 @@ def design_matrix(z: NDArray[np.floating]) -> NDArray[np.float64]:
     design[:, 6:9] = z
     design[:, 9] = 1.0
     return design
+
+
+def _mean_square(deviations: NDArray[np.float64]) -> float:
+    """Σ over rows of the mean over columns of ``deviations`` (3, m) squared, without overflow or underflow."""
+    largest = float(np.max(np.abs(deviations))) if deviations.size else 0.0
+    if largest == 0.0:
+        return 0.0
+    scaled = deviations / largest
+    return largest * largest * float(np.einsum("ij,ij->", scaled, scaled)) / deviations.shape[1]
 
 
 def _polynomial_product(
@@ -169,8 +178,9 @@ class Statistics:
         """Add samples, shape (n, 3), any float or integer dtype; returns ``self`` so calls can be chained.
 
         The samples are converted to float64 one chunk at a time (float32 input is never copied whole).
-        The update is all or nothing: when a row is not finite, a :class:`SampleError` names it and the
-        statistics are left as they were.
+        The update is all or nothing: when a row is not finite, or holds a value beyond ±1e150 (whose
+        square float64 cannot hold), a :class:`SampleError` names it and the statistics are left as they were.
+        Both are checked on every update, so whether a value is refused never depends on the chunking.
         """
         array = check_shape(samples)
         total = array.shape[0]
@@ -196,6 +206,8 @@ class Statistics:
         low, high = z.min(axis=1), z.max(axis=1)
         if not (np.isfinite(low).all() and np.isfinite(high).all()):  # NaN and inf reach the min or max
             check_finite(chunk, first_row=first_row)
+        if max(-float(low.min()), float(high.max())) > MAX_MAGNITUDE:  # whatever the chunking: refused here
+            check_magnitude(chunk, first_row=first_row)
         self._adapt_frame(z, low, high, first_row)
         assert self._centre is not None
         z -= self._centre[:, None]
@@ -230,23 +242,19 @@ class Statistics:
                 return  # the usual case: the chunk lies well inside the frame, nothing to compute
         m = chunk_t.shape[1]
         chunk_mean = chunk_t.mean(axis=1)
-        with np.errstate(over="ignore"):  # an overflow is reported just below, with the rows
-            chunk_ss = float(np.sum((chunk_t - chunk_mean[:, None]) ** 2))  # Σ |x − mean|², input units²
-        if not math.isfinite(chunk_ss):
-            raise SampleError(
-                f"samples in rows {first_row}..{first_row + m - 1} are too large for float64 arithmetic "
-                f"(largest magnitude {float(np.max(np.abs(chunk_t))):.3g}); rescale them, e.g. to µT or counts"
-            )
+        # Mean squares, not sums of squares, each scaled by its largest term: values up to MAX_MAGNITUDE
+        # never overflow, whatever the number of samples (update() has refused larger ones).
+        chunk_var = _mean_square(chunk_t - chunk_mean[:, None])  # mean |x − mean|², input units²
         if self._n == 0:
-            mean, spread = chunk_mean, math.sqrt(chunk_ss / m)
+            mean, spread = chunk_mean, math.sqrt(chunk_var)
         else:
-            own_mean, own_ss = self._stored_mean(), self._spread() ** 2 * self._n
+            own_mean, own_var = self._stored_mean(), self._spread() ** 2
             n = self._n + m
-            mean = (self._n * own_mean + m * chunk_mean) / n
-            total_ss = (
-                own_ss + chunk_ss + self._n * np.sum((own_mean - mean) ** 2) + m * np.sum((chunk_mean - mean) ** 2)
-            )
-            spread = math.sqrt(float(total_ss) / n)
+            own_share, chunk_share = self._n / n, m / n
+            mean = own_share * own_mean + chunk_share * chunk_mean
+            own_part = own_share * (own_var + _mean_square((own_mean - mean)[:, None]))
+            chunk_part = chunk_share * (chunk_var + _mean_square((chunk_mean - mean)[:, None]))
+            spread = math.sqrt(own_part + chunk_part)
         if self._n == 0 or (spread > 0 and (not known or spread > _REFRAME_GROWTH * self._scale)):
             self._move_frame(mean, spread)
 

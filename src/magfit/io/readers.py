@@ -34,6 +34,7 @@ from typing import IO, Any, Literal, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import MAX_MAGNITUDE
 from ..errors import DataFileError, OptionError
 from .columns import (
     _MAG_LETTERS,
@@ -53,6 +54,9 @@ __all__ = ["ChunkReader", "FileFormat", "SampleTable", "iter_sample_chunks", "re
 MAX_REPORTED_LINES = 10
 #: The layout is sniffed from this much of the start of a file.
 HEAD_BYTES = 256 * 1024
+#: The head grows (doubling) until it holds this many lines, up to HEAD_MAX_BYTES.
+HEAD_MIN_LINES = 20
+HEAD_MAX_BYTES = 64 * 1024 * 1024
 #: Text files from this size are parsed in pieces on several threads (:meth:`ChunkReader.parallel_pieces`);
 #: below it the threads would cost more than they save.
 PARALLEL_BYTES = 32 << 20
@@ -217,13 +221,23 @@ def _kind_of(path: Path, head: bytes) -> _Kind:
 
 
 def _read_head(path: Path) -> tuple[bytes, bool]:
-    """The first HEAD_BYTES of the file and whether the file is longer than that."""
+    """The first HEAD_BYTES of the file (more when they hold few lines) and whether the file is longer."""
     try:
         with open(path, "rb") as handle:
-            head = handle.read(HEAD_BYTES + 1)
+            size = HEAD_BYTES
+            head = handle.read(size + 1)
+            # A very long line (a comment, a note column) must not leave the head without data rows.
+            while len(head) > size and head.count(b"\n") < HEAD_MIN_LINES and size < HEAD_MAX_BYTES:
+                head += handle.read(size)
+                size *= 2
     except OSError as error:
         raise _error(path, f"cannot be read ({error.strerror}); check the file's permissions") from None
-    return head[:HEAD_BYTES], len(head) > HEAD_BYTES
+    return head[:size], len(head) > size
+
+
+def _shown(line: str, limit: int = 60) -> str:
+    """A line for a message: quoted, and cut when long (a line may be megabytes)."""
+    return repr(line) if len(line) <= limit else repr(line[:limit]) + f" ... ({len(line)} characters)"
 
 
 def _cell_kind(cell: str, decimal: str = ".") -> Literal["number", "missing", "text"]:
@@ -284,6 +298,12 @@ def _decode_lines(path: Path, head: bytes, truncated: bool) -> tuple[list[bytes]
         raise _error(path, "is UTF-16 encoded; save it as UTF-8 (or plain ASCII) text")
     if b"\x00" in head:
         raise _error(path, "is a binary file, not delimited text, .npy or .npz; export the samples as CSV")
+    if b"\r" in head and b"\n" not in head:
+        raise _error(
+            path,
+            "ends its lines with a carriage return only (classic Mac OS); convert them to newlines, "
+            "e.g. tr '\\r' '\\n' < old.csv > new.csv",
+        )
     pieces = head.split(b"\n")
     raw_lines = [piece + b"\n" for piece in pieces[:-1]]
     if pieces[-1]:
@@ -338,7 +358,7 @@ def _sniff_text(path: Path, head: bytes, truncated: bool) -> FileFormat:
     if not numeric:
         shaped = [i for i in filled if len(_split_fields(lines[i], delimiter)) == n_columns]
         if len(shaped) == 1:
-            raise _error(path, f"has a header but no data rows (line {shaped[0] + 1}: {lines[shaped[0]]!r})")
+            raise _error(path, f"has a header but no data rows (line {shaped[0] + 1}: {_shown(lines[shaped[0]])})")
         raise _error(path, "has no column of numbers; is it a samples file? Export the magnetometer data as CSV")
 
     def is_data(fields: list[str]) -> bool:
@@ -832,6 +852,18 @@ class ChunkReader:
         """Count and drop the non-finite rows of a chunk; ``to_line`` maps its row numbers to line numbers."""
         first_row = self.n_rows
         self.n_rows += len(values)
+        if values.size and -MAX_MAGNITUDE <= values.min() and values.max() <= MAX_MAGNITUDE:
+            return values  # the usual chunk, in two reductions (NaN fails both comparisons)
+        too_large = np.isfinite(values) & (np.abs(values) > MAX_MAGNITUDE)
+        if too_large.any():  # refused here, where the file's line is known, rather than by Statistics
+            row, axis = (int(i) for i in np.argwhere(too_large)[0])
+            place = "line" if self.format.kind == "text" else "row"
+            line = int(to_line(np.array([first_row + row]))[0])
+            raise _error(
+                self.path,
+                f"{place} {line}, column {self.columns[axis]!r}: {values[row, axis]:.3g} is beyond ±{MAX_MAGNITUDE:g}, "
+                "more than float64 can square; fix or delete that row, or rescale the file",
+            )
         finite = np.isfinite(values).all(axis=1)
         if finite.all():
             return values
