@@ -1,5 +1,6 @@
-"""Rewrite the golden outputs of ``magfit compare`` on the real recordings (tests/golden/), and the README's
-example session (the ``magfit calibrate`` block, run on the real FXOS8700 recording).
+"""Rewrite the documented outputs from the program: the golden outputs of ``magfit compare`` on the real
+recordings (tests/golden/), the README's example session (the ``magfit calibrate`` block, run on the real
+FXOS8700 recording) and the outputs docs/cli.md shows in full (its ``$ magfit`` session, run in an empty folder).
 
 Run it after a deliberate change of a method or of the output layout, then review the diff::
 
@@ -27,6 +28,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN_DIR = ROOT / "tests" / "golden"
 README = ROOT / "README.md"
+CLI_DOC = ROOT / "docs" / "cli.md"
+_EXIT = re.compile(r"#\s*exit (\d)")
 DEFAULT_DATA_DIR = ROOT.parent / "shared" / "data" / "real"
 
 
@@ -132,6 +135,106 @@ def readme_block(text: str, example: ReadmeExample) -> re.Match[str]:
     return match
 
 
+@dataclass
+class DocExample:
+    """One ``$ magfit ...`` line of docs/cli.md: its exit status (``# exit N``, else 0), the output lines shown
+    after it (None when shortened with ``...``: not compared) and where they are in the file (line numbers)."""
+
+    command: str
+    status: int
+    shown: list[str] | None
+    first_line: int
+    end_line: int
+
+
+def cli_doc_examples(text: str) -> list[DocExample]:
+    """The ``$ magfit`` examples of docs/cli.md's ```console blocks, in order."""
+    examples: list[DocExample] = []
+    in_console = False
+    current: DocExample | None = None
+    lines: list[str] = []
+
+    def close(end: int) -> None:
+        if current is not None:
+            current.shown = lines[:] if lines and not any("..." in line for line in lines) else None
+            current.end_line = end
+            examples.append(current)
+
+    for number, line in enumerate(text.splitlines()):
+        if line.startswith("```"):
+            if in_console:
+                close(number)
+                current = None
+            in_console = line.strip() == "```console"
+            continue
+        if not in_console:
+            continue
+        if line.startswith("$ "):
+            close(number)
+            current, lines = None, []
+            if line.startswith("$ magfit "):
+                match = _EXIT.search(line)
+                current = DocExample(line[2:], int(match.group(1)) if match else 0, None, number + 1, number + 1)
+        elif current is not None:
+            lines.append(line.rstrip())
+    return examples
+
+
+def run_cli_doc_example(example: DocExample, folder: Path) -> tuple[int, list[str]]:
+    """Run one example in ``folder`` (``> file`` redirects stdout there); (exit status, output lines)."""
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    words = shlex.split(example.command, comments=True)[1:]  # drop "magfit"
+    target = None
+    if ">" in words:
+        position = words.index(">")
+        words, target = words[:position], words[position + 1]
+    previous = Path.cwd()
+    os.chdir(folder)
+    try:
+        result = CliRunner().invoke(cli, words)
+    finally:
+        os.chdir(previous)
+    if target is not None:
+        (folder / target).write_text(result.stdout)
+    return result.exit_code, [line.rstrip() for line in result.output.rstrip("\n").splitlines()]
+
+
+def regenerate_cli_doc() -> int:
+    """Rewrite the outputs docs/cli.md shows in full with the program's; the number of examples changed."""
+    text = CLI_DOC.read_text(encoding="utf-8")
+    lines = text.splitlines()
+    changed = 0
+    with tempfile.TemporaryDirectory() as scratch:
+        replacements = []
+        for example in cli_doc_examples(text):
+            status, produced = run_cli_doc_example(example, Path(scratch))
+            if status != example.status:
+                raise RuntimeError(f"docs/cli.md: {example.command!r} exited {status}, documented {example.status}")
+            if example.shown is not None and produced != example.shown:
+                replacements.append((example, produced))
+    for example, produced in reversed(replacements):  # from the end: earlier line numbers stay valid
+        lines[example.first_line : example.end_line] = produced
+        changed += 1
+    CLI_DOC.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return changed
+
+
+#: Golden outputs that docs/cli.md also shows (a ```text block starting with the golden file's first line).
+DOC_GOLDENS = ("fxos8700",)
+
+
+def golden_doc_block(text: str, case: GoldenCase) -> re.Match[str]:
+    """docs/cli.md's ```text block that shows ``case``'s golden output."""
+    first = case.golden_file.read_text(encoding="utf-8").splitlines()[0]
+    match = re.search(r"```text\n(" + re.escape(first) + r"\n.*?)```", text, flags=re.DOTALL)
+    if match is None:
+        raise LookupError(f"docs/cli.md has no ```text block starting with {first!r}")
+    return match
+
+
 def main() -> int:
     data = data_dir()
     if not data.is_dir():
@@ -152,6 +255,13 @@ def main() -> int:
         readme = readme[: block.start(1)] + output + readme[block.end(1) :]
         print(f"README.md, '$ {example.command}': {state}")
     README.write_text(readme, encoding="utf-8")
+    print(f"docs/cli.md: {regenerate_cli_doc()} example output(s) CHANGED")
+    doc = CLI_DOC.read_text(encoding="utf-8")
+    for case in CASES:
+        if case.name in DOC_GOLDENS:
+            block = golden_doc_block(doc, case)
+            doc = doc[: block.start(1)] + case.golden_file.read_text(encoding="utf-8") + doc[block.end(1) :]
+    CLI_DOC.write_text(doc, encoding="utf-8")
     return 0
 
 

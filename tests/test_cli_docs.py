@@ -6,76 +6,47 @@ command show its output in full (no ``...``), the output must be exactly those l
 
 from __future__ import annotations
 
-import re
+import importlib.util
 import shlex
+import sys
 from pathlib import Path
 
-import pytest
-from click.testing import CliRunner
-
-from magfit.cli import cli
-
-DOC = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
-_EXIT = re.compile(r"#\s*exit (\d)")
+ROOT = Path(__file__).resolve().parents[1]
 
 
-def _examples() -> list[tuple[str, int, list[str] | None]]:
-    """(command line, expected exit status, expected output lines or None) for each ``$ magfit`` line."""
-    examples: list[tuple[str, int, list[str] | None]] = []
-    in_console = False
-    current: list[object] | None = None
-
-    def close() -> None:
-        if current is not None:
-            command, status, lines = current
-            assert isinstance(lines, list)
-            shown = lines if lines and not any("..." in line for line in lines) else None
-            examples.append((str(command), int(str(status)), shown))
-
-    for line in DOC.read_text(encoding="utf-8").splitlines():
-        if line.startswith("```"):
-            if in_console:
-                close()
-                current = None
-            in_console = line.strip() == "```console"
-            continue
-        if not in_console:
-            continue
-        if line.startswith("$ "):
-            close()
-            current = None
-            if line.startswith("$ magfit "):
-                match = _EXIT.search(line)
-                current = [line[2:], int(match.group(1)) if match else 0, []]
-        elif current is not None:
-            lines = current[2]
-            assert isinstance(lines, list)
-            lines.append(line.rstrip())
-    return examples
+def _golden_script():  # type: ignore[no-untyped-def]
+    """scripts/regenerate_golden.py: the parser and runner the documentation is regenerated with."""
+    spec = importlib.util.spec_from_file_location("regenerate_golden", ROOT / "scripts" / "regenerate_golden.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the file executes
+    spec.loader.exec_module(module)
+    return module
 
 
-EXAMPLES = _examples()
+GOLDEN = _golden_script()
+EXAMPLES = GOLDEN.cli_doc_examples(GOLDEN.CLI_DOC.read_text(encoding="utf-8"))
 
 
 def test_the_documentation_has_examples_of_every_command() -> None:
-    commands = {shlex.split(command, comments=True)[1] for command, _, _ in EXAMPLES}
+    commands = {shlex.split(example.command, comments=True)[1] for example in EXAMPLES}
     assert commands >= {"demo", "calibrate", "compare", "apply", "simulate"}
-    assert any(status == 1 for _, status, _ in EXAMPLES) and any(status == 2 for _, status, _ in EXAMPLES)
+    assert any(example.status == 1 for example in EXAMPLES) and any(example.status == 2 for example in EXAMPLES)
 
 
-def test_the_documented_session_runs_as_documented(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.chdir(tmp_path)
-    runner = CliRunner()
-    for command, status, shown in EXAMPLES:
-        words = shlex.split(command, comments=True)[1:]  # drop "magfit"
-        target = None
-        if ">" in words:
-            position = words.index(">")
-            words, target = words[:position], words[position + 1]
-        result = runner.invoke(cli, words)
-        assert result.exit_code == status, f"{command}\n{result.output}"
-        if target is not None:
-            (tmp_path / target).write_text(result.stdout)
-        if shown is not None:
-            produced = [line.rstrip() for line in result.output.rstrip("\n").splitlines()]
-            assert produced == shown, command
+def test_the_documented_session_runs_as_documented(tmp_path: Path) -> None:
+    for example in EXAMPLES:
+        status, produced = GOLDEN.run_cli_doc_example(example, tmp_path)
+        assert status == example.status, f"{example.command}\n{produced}"
+        if example.shown is not None:
+            assert produced == example.shown, (
+                f"{example.command}: docs/cli.md is out of date; run `python scripts/regenerate_golden.py`"
+            )
+
+
+def test_the_golden_outputs_the_documentation_shows_are_the_golden_files() -> None:
+    text = GOLDEN.CLI_DOC.read_text(encoding="utf-8")
+    for case in GOLDEN.CASES:
+        if case.name in GOLDEN.DOC_GOLDENS:
+            shown = GOLDEN.golden_doc_block(text, case).group(1)
+            assert shown == case.golden_file.read_text(encoding="utf-8"), "run `python scripts/regenerate_golden.py`"
