@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import stat
+import subprocess
+import sys
 import threading
+import time
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -395,3 +399,46 @@ def test_7_a_very_long_line_before_the_data(tmp_path: Path) -> None:
     header_only.write_text("mx,my," + "z" * 300_000 + "\n")
     message = _assert_error(_run("calibrate", header_only), 2, "no data rows")
     assert len(message) < 300
+
+
+# ---------------------------------------------------------------------- 6. interruptions
+
+
+@pytest.fixture(scope="module")
+def long_recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """300 000 rows (about a second of 'magfit apply') and a calibration for them."""
+    folder = tmp_path_factory.mktemp("long")
+    samples = _samples(1000)
+    block = "".join(f"{x:.4f},{y:.4f},{z:.4f}\n" for x, y, z in samples)
+    (folder / "long.csv").write_text("mx,my,mz\n" + block * 300)
+    return folder / "long.csv", _saved(folder, magfit.fit(samples, method="ellipsoid", diagnostics=False))
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize(("signum", "status"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_6_a_signal_while_writing_leaves_no_temporary_file(
+    long_recording: tuple[Path, Path], tmp_path: Path, signum: int, status: int
+) -> None:
+    data, calibration = long_recording
+    output = tmp_path / "out.csv"
+    output.write_text("OLD\n")
+    command = [sys.executable, "-c", "import sys; from magfit.cli import main; sys.exit(main())"]
+    process = subprocess.Popen(
+        [*command, "apply", str(calibration), str(data), "-o", str(output)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".out.csv.*.tmp")):  # the temporary output exists: the writing has begun
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == status, stderr
+    assert stderr.strip().splitlines() == [
+        f"magfit: interrupted ({signal.Signals(signum).name}); existing files are left as they were"
+    ]
+    assert output.read_text() == "OLD\n"
+    _no_temporaries(tmp_path)

@@ -8,7 +8,9 @@ stderr and an exit status:
 - 1: a fit failed on the data (:class:`~magfit.CalibrationError`), or ``compare`` found a file on which
   every method failed;
 - 2: a usage or input error (bad option, unreadable file, malformed samples, refused output path);
-- 3: an unexpected error (a bug: rerun with ``--debug`` for the traceback and report it).
+- 3: an unexpected error (a bug: rerun with ``--debug`` for the traceback and report it);
+- 130 on Ctrl-C (SIGINT), 128 + the signal number on SIGTERM (143) or SIGHUP (129): the command stops,
+  its temporary files are removed and no output is left half-written (docs/reliability.md).
 
 ``magfit --debug <command>`` lets every error through with its traceback.
 
@@ -17,7 +19,10 @@ Importing :mod:`magfit` never imports this package (click and rich are the ``cli
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+import signal
+from collections.abc import Iterator, Sequence
+from types import FrameType
 from typing import Any
 
 import click
@@ -26,6 +31,24 @@ from .. import __version__
 from ._common import CommandError, as_command_error
 
 __all__ = ["MagfitGroup", "cli", "main"]
+
+
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP, raised where the program is so that every cleanup (temporary files) runs."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _interrupted(error: BaseException) -> click.exceptions.Exit:
+    """The exit of an interrupted command: one line on stderr, status 130 or 128 + the signal number."""
+    if isinstance(error, Terminated):
+        name, status = signal.Signals(error.signum).name, 128 + error.signum
+    else:
+        name, status = "SIGINT", 128 + signal.SIGINT
+    click.echo(f"magfit: interrupted ({name}); existing files are left as they were", err=True)
+    return click.exceptions.Exit(status)
 
 
 class MagfitGroup(click.Group):
@@ -46,6 +69,8 @@ class MagfitGroup(click.Group):
             return super().invoke(ctx)
         except (click.exceptions.Exit, click.Abort, CommandError, click.exceptions.NoArgsIsHelpError):
             raise
+        except (KeyboardInterrupt, Terminated) as error:  # click would turn Ctrl-C into "Aborted!", status 1
+            raise _interrupted(error) from None
         except Exception as error:
             if ctx.params.get("debug"):
                 raise
@@ -94,12 +119,37 @@ def _register_commands() -> None:
 _register_commands()
 
 
+@contextlib.contextmanager
+def _termination_as_exception() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise :class:`Terminated` while the command runs (by default they kill the process
+    before the temporary file of an output can be removed); the previous handlers come back afterwards."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        raise Terminated(signum)
+
+    previous = {}
+    try:
+        for number in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+            if number is not None:
+                previous[number] = signal.signal(number, handler)
+    except ValueError:  # not the main thread: signals cannot be handled here
+        pass
+    try:
+        yield
+    finally:
+        for number, old in previous.items():
+            signal.signal(number, old)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line on ``argv`` (default: ``sys.argv[1:]``) and return the exit status."""
     try:
-        cli.main(args=list(argv) if argv is not None else None, prog_name="magfit")
+        with _termination_as_exception():
+            cli.main(args=list(argv) if argv is not None else None, prog_name="magfit")
     except SystemExit as stop:
         if stop.code is None:
             return 0
         return stop.code if isinstance(stop.code, int) else 1
+    except (KeyboardInterrupt, Terminated) as error:  # while parsing, before a command runs
+        return _interrupted(error).exit_code
     return 0
