@@ -198,3 +198,13 @@ def test_a_real_imu_log_without_its_header_still_finds_the_magnetometer(real_dat
     assert table.columns == ("column 8", "column 9", "column 10")
     named = read_samples(real_data_dir / "gyrolib_rahrs/calibrationGyroLib_converted.csv")
     np.testing.assert_array_equal(table.samples, named.samples)
+
+
+def test_an_npy_array_with_a_time_column_first(tmp_path: Path) -> None:
+    samples = magnetometer(seed=13)
+    path = tmp_path / "log.npy"
+    np.save(path, np.column_stack([100.0 + np.arange(len(samples)), samples]))
+    table = read_samples(path)
+    assert table.columns == ("column 2", "column 3", "column 4")
+    assert table.column_note == "column 1 is monotonic: time or a counter"
+    np.testing.assert_array_equal(table.samples, samples)

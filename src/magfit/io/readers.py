@@ -768,7 +768,10 @@ class ChunkReader:
             self.columns = self._npz.labels
         elif self.format.kind == "npy":
             self._check_npy_shape()
-            self._indices, self.columns = _resolve_table_columns(self.path, self.format, columns)
+            content = self._npy_content_choice() if columns is None and self.format.n_columns > 3 else None
+            self._indices, self.columns = _resolve_table_columns(self.path, self.format, columns, content)
+            if content is not None:
+                self.column_note = content.describe([self.format.column_label(i) for i in range(self.format.n_columns)])
         else:
             headerless = columns is None and self.format.header is None and self.format.n_columns >= 3
             content = self._content_choice() if headerless else None
@@ -818,6 +821,11 @@ class ChunkReader:
         return self.split(workers)
 
     # .................................................................. shared bookkeeping
+
+    def _npy_content_choice(self) -> ContentChoice:
+        """The x, y, z columns of an (N, k > 3) .npy array, chosen from its first rows (as for headerless text)."""
+        head = np.asarray(np.load(self.path, mmap_mode="r", allow_pickle=False)[:CONTENT_ROWS], dtype=np.float64)
+        return choose_columns_by_content(head, range(self.format.n_columns))
 
     def _content_choice(self) -> ContentChoice:
         """The x, y, z columns of a text file without a header, chosen from the values of its first rows."""
