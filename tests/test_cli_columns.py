@@ -208,3 +208,18 @@ def test_an_npy_array_with_a_time_column_first(tmp_path: Path) -> None:
     assert table.columns == ("column 2", "column 3", "column 4")
     assert table.column_note == "column 1 is monotonic: time or a counter"
     np.testing.assert_array_equal(table.samples, samples)
+
+
+def test_plot_names_its_columns_in_its_output_and_its_refusals(tmp_path: Path) -> None:
+    samples = magnetometer(seed=14)
+    good = write(tmp_path / "txyz.txt", [np.arange(len(samples), dtype=float), samples])
+    result = CliRunner().invoke(cli, ["plot", str(good), "-o", str(tmp_path / "good.png"), "--methods", "sphere"])
+    assert result.exit_code == 0, result.output
+    assert f"{good}: columns column 2, column 3, column 4; column 1 is monotonic: time or a counter" in result.stdout
+    angle = np.linspace(0, 4 * np.pi, 400)
+    ring = np.column_stack([30 * np.cos(angle), 30 * np.sin(angle), np.full_like(angle, 20.0)])
+    flat = write(tmp_path / "yaw.txt", [np.arange(400.0), ring])
+    refused = CliRunner().invoke(cli, ["plot", str(flat), "-o", str(tmp_path / "flat.png")])
+    assert refused.exit_code == 1, refused.output
+    assert refused.stderr.startswith(f"magfit: error: {flat} (columns column 2, column 3, column 4;")
+    assert not (tmp_path / "flat.png").exists()

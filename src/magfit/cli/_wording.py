@@ -13,8 +13,9 @@ rewrites that at its boundary (``_common.option_wording``), without changing the
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 
-__all__ = ["collapse_repeats", "unquoted_alternatives", "without_own_advice"]
+__all__ = ["collapse_repeats", "columns_used", "unquoted_alternatives", "without_own_advice"]
 
 #: The names a refusal lists its reasons by: the models auto chooses among, and the methods.
 _NAMES = ("sphere", "diag", "full", "ellipsoid", "minmax", "als", "ml", "robust", "auto")
@@ -73,3 +74,9 @@ def without_own_advice(message: str, method: str) -> str:
     # A clause emptied of its advice leaves "…; " or ", or " behind.
     text = re.sub(r"(;|,)\s*(or\s*)?(?=$|;)", "", text).rstrip(" ;,:")
     return text
+
+
+def columns_used(columns: Sequence[object], note: str | None = None) -> str:
+    """``columns column 2, column 3, column 4; column 1 is monotonic: time or a counter``: which columns a
+    message is about, and for a file without a header why (every message about a fit names them)."""
+    return "columns " + ", ".join(str(column) for column in columns) + (f"; {note}" if note else "")

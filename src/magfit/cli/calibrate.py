@@ -44,7 +44,7 @@ from ._common import (
     warn,
 )
 from ._extras import require
-from ._wording import without_own_advice
+from ._wording import columns_used, without_own_advice
 
 if TYPE_CHECKING:
     from ..io import ChunkReader, FileFormat
@@ -194,11 +194,6 @@ def run_calibration(
         subsample=subsample,
         column_note=chosen.column_note,
     )
-
-
-def columns_used(columns: Sequence[object], note: str | None = None) -> str:
-    """``columns column 2, column 3, column 4; column 1 is monotonic: time or a counter``, for messages."""
-    return f"columns {columns_text(columns)}" + (f"; {note}" if note else "")
 
 
 def memory_sample_limit() -> int:

@@ -24,6 +24,7 @@ from ._common import (
     warn,
 )
 from ._extras import require
+from ._wording import columns_used
 from .compare import parse_methods
 
 #: Figure formats ``-o`` accepts (matplotlib's Agg canvas writes them all).
@@ -35,12 +36,16 @@ def methods_in_order(main: str, others: Sequence[str]) -> tuple[str, ...]:
     return (main, *(name for name in others if name != main))
 
 
-def fit_for_plot(samples: ArrayLike, methods: Sequence[str], path: Path) -> Comparison:
-    """Compare ``methods`` on ``samples``; warn about each failed method, raise when the main one failed."""
+def fit_for_plot(samples: ArrayLike, methods: Sequence[str], path: Path, columns: str = "") -> Comparison:
+    """Compare ``methods`` on ``samples``; warn about each failed method, raise when the main one failed.
+
+    ``columns`` (``"columns mx, my, mz"``) is named in the refusal: which columns could not be fitted.
+    """
     comparison = compare(samples, methods)
     main = comparison.results[0]
     if not main.ok:
-        raise CalibrationError(f"{path}: the {main.method} fit failed, nothing to plot: {main.error}")
+        where = f"{path} ({columns})" if columns else str(path)
+        raise CalibrationError(f"{where}: the {main.method} fit failed, nothing to plot: {main.error}")
     for result in comparison.results[1:]:
         if not result.ok:
             warn(f"{path}: {result.method} could not fit these samples and is left out of the plot: {result.error}")
@@ -128,8 +133,9 @@ def plot_command(
     table = read_samples(file, columns=columns, nonfinite=nonfinite)
     if table.n_skipped:
         warn(f"{file}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
+    used = columns_used(table.columns, table.column_note)
     comparison = fit_for_plot(
-        table.samples, methods_in_order(method or default_method(), methods or PAPER_METHODS), file
+        table.samples, methods_in_order(method or default_method(), methods or PAPER_METHODS), file, used
     )
     calibrations = [result.calibration for result in comparison if result.calibration is not None]
     figure = calibration_figure(
@@ -137,6 +143,7 @@ def plot_command(
     )
     save_figure(figure, output)
     out = console()
+    out.print(f"{file}: {used}", soft_wrap=True)
     for result in comparison:
         if result.evaluation is not None:
             out.print(
