@@ -94,3 +94,13 @@ def test_the_cli_extra_installs_the_plot_extra() -> None:
     text = (Path(__file__).resolve().parents[1] / "pyproject.toml").read_text(encoding="utf-8")
     (cli_extra,) = [line for line in text.splitlines() if line.startswith("cli = [")]
     assert '"magfit[plot]"' in cli_extra
+
+
+@pytest.mark.usefixtures("without_matplotlib")
+def test_the_library_says_how_to_install_matplotlib() -> None:
+    import magfit
+    from magfit.plot import calibration_figure
+
+    samples = magfit.scenario("mpu9250", "none").simulate(300, seed=1).samples
+    with pytest.raises(ImportError, match=r"^drawing figures needs matplotlib \(.*\): pip install 'magfit\[plot\]'$"):
+        calibration_figure(samples, magfit.fit(samples, method="sphere"))

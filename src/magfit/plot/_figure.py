@@ -164,8 +164,11 @@ def calibration_figure(
         it: ``raw-3d``, ``calibrated-3d``, ``coverage``, ``before-xy`` ... ``after-yz``, ``histogram``,
         ``parameters``.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError as error:  # the plot extra is optional: say how to get it, in one line
+        raise ImportError(f"drawing figures needs matplotlib ({error}): pip install 'magfit[plot]'") from None
 
     prepared = _prepare(samples, calibrations, unit, max_points, seed)
     figure = Figure(figsize=size, dpi=dpi, layout="constrained")
