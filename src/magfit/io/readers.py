@@ -23,6 +23,7 @@ import math
 import os
 import re
 import stat
+import tokenize
 import zipfile
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
@@ -408,6 +409,14 @@ class _NpyInfo:
     fortran: bool
 
 
+#: What numpy's header parser raises on a damaged .npy header (it evaluates the header's Python literal).
+_BROKEN_NPY = (ValueError, OSError, EOFError, SyntaxError, TypeError, RecursionError, tokenize.TokenError)
+
+
+def _one_line(error: BaseException) -> str:
+    return " ".join(str(error).split())[:200]
+
+
 def _read_npy_header(handle: Any) -> _NpyInfo:
     version = np.lib.format.read_magic(handle)
     if version == (1, 0):
@@ -427,8 +436,8 @@ def _npz_members(path: Path) -> dict[str, _NpyInfo]:
                     continue
                 with archive.open(info) as handle:
                     members[info.filename[: -len(".npy")]] = _read_npy_header(handle)
-    except (zipfile.BadZipFile, ValueError, OSError) as error:
-        raise _error(path, f"is not a readable .npz archive ({error}); re-save it with numpy.savez") from None
+    except (zipfile.BadZipFile, *_BROKEN_NPY) as error:
+        raise _error(path, f"is not a readable .npz archive ({_one_line(error)}); re-save it with numpy.savez") from None
     if not members:
         raise _error(path, "is an .npz archive without arrays; save the samples with numpy.savez")
     return members
@@ -439,8 +448,8 @@ def _npy_info(path: Path) -> _NpyInfo:
         with open(path, "rb") as handle:
             info = _read_npy_header(handle)
             data_offset = handle.tell()
-    except (ValueError, OSError) as error:
-        raise _error(path, f"is not a readable .npy file ({error}); re-save it with numpy.save") from None
+    except _BROKEN_NPY as error:
+        raise _error(path, f"is not a readable .npy file ({_one_line(error)}); re-save it with numpy.save") from None
     # A truncated copy would otherwise fail inside numpy's memory map, with no word about the file.
     expected = info.dtype.itemsize * math.prod(info.shape)
     available = path.stat().st_size - data_offset
@@ -916,7 +925,7 @@ class ChunkReader:
     def _iter_npy(self) -> Iterator[NDArray[np.float64]]:
         try:
             array = np.load(self.path, mmap_mode="r", allow_pickle=False)
-        except (ValueError, OSError) as error:  # changed since it was sniffed
+        except _BROKEN_NPY as error:  # changed since it was sniffed
             raise _error(self.path, f"is not a readable .npy file ({error}); re-save it with numpy.save") from None
         if array.shape[0] == 0:
             raise _error(self.path, "holds an array with no rows; record some samples")
