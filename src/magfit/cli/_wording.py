@@ -4,7 +4,7 @@ The library speaks Python (``method='auto'``) and lists one reason per model it 
 rewrites that at its boundary (``_common.option_wording``), without changing the library's messages:
 
 - :func:`collapse_repeats`: ``sphere: <reason>; diag: <the same reason>`` becomes ``sphere: <reason>;
-  diag: as sphere``;
+  diag: as sphere`` (and ``the diag model: ...`` likewise);
 - :func:`unquoted_alternatives`: ``--method auto (or 'ml', 'als')`` becomes ``--method auto (or ml, als)``;
 - :func:`without_own_advice`: a suggestion to use the method that was used is dropped (``prefer
   method='auto' (or 'ml', 'als')`` after an ``auto`` fit becomes ``prefer method='ml' (or 'als')``).
@@ -19,8 +19,11 @@ __all__ = ["collapse_repeats", "columns_used", "unquoted_alternatives", "without
 
 #: The names a refusal lists its reasons by: the models auto chooses among, and the methods.
 _NAMES = ("sphere", "diag", "full", "ellipsoid", "minmax", "als", "ml", "robust", "auto")
-#: Where one ``name: reason`` item of such a list starts (after the message's lead or the previous item).
-_ITEM_START = re.compile(rf"(?:(?<=: )|(?<=; ))({'|'.join(_NAMES)}): ")
+#: Where one item of such a list starts: ``sphere: `` or ``the sphere model: ``, at a clause's start or
+#: after the message's lead (``no model could be fitted: sphere: ...``).
+_ITEM = re.compile(rf"(?:^|(?<=: ))((?:the )?({'|'.join(_NAMES)})(?: model)?): ")
+#: Shorter clauses are said again rather than referred to.
+_MIN_REPEAT = 30
 #: ``--method auto (or 'ml', 'als')`` once the keyword has become an option.
 _ALTERNATIVES = re.compile(r"(--[a-z-]+ [\w.-]+) \(or ('[\w.-]+'(?:, '[\w.-]+')*)\)")
 #: ``prefer method='auto' (or 'ml', 'als')`` and ``use method='als'``.
@@ -30,26 +33,35 @@ _ADVICE = re.compile(
 
 
 def collapse_repeats(message: str) -> str:
-    """Replace each ``name: reason`` item whose reason repeats an earlier one (its own name aside) by ``name: as
-    <earlier name>``: a refusal listing several models does not repeat a long reason word for word."""
-    starts = list(_ITEM_START.finditer(message))
-    if len(starts) < 2:
-        return message
-    pieces = [message[: starts[0].start()]]
-    seen: dict[str, str] = {}
-    for index, start in enumerate(starts):
-        end = starts[index + 1].start() if index + 1 < len(starts) else len(message)
-        item = message[start.start() : end]
-        name = start.group(1)
-        reason = item[len(start.group(0)) :]
-        tail = "; " if reason.endswith("; ") else ""
-        key = re.sub(rf"\b{re.escape(name)}\b", "\0", reason.removesuffix("; "))
-        if len(key) >= 60 and key in seen:
-            item = f"{name}: as {seen[key]}{tail}"
-        else:
-            seen.setdefault(key, name)
-        pieces.append(item)
-    return "".join(pieces)
+    """Say each reason of a refusal once: in a list of items (``sphere: <reasons>; diag: <reasons>`` or ``the
+    sphere model: ...``), a clause (between ``; ``) that an earlier item already gave, the item's own name
+    aside, becomes ``as <that item>`` (``diag: as sphere``), said once for consecutive such clauses."""
+    out: list[str] = []
+    seen: dict[str, str] = {}  # a clause, its item's name blanked -> the item that gave it first
+    item: str | None = None  # the item the clauses belong to (None before the list starts)
+    name = ""
+    referred: str | None = None  # the item the last clause written referred to
+    for clause in message.split("; "):
+        marker = _ITEM.search(clause)
+        head, body = "", clause
+        if marker is not None:
+            item, name = marker.group(1), marker.group(2)
+            head, body = clause[: marker.end()], clause[marker.end() :]
+            referred = None
+        key = re.sub(rf"\b{re.escape(name)}\b", "\0", body) if name else body
+        first = seen.get(key)
+        if item is not None and first is not None and first != item and len(body) >= _MIN_REPEAT:
+            if head:
+                out.append(f"{head}as {first}")
+            elif referred != first:
+                out.append(f"as {first}")
+            referred = first
+            continue
+        if item is not None:
+            seen.setdefault(key, item)
+        out.append(clause)
+        referred = None
+    return "; ".join(out)
 
 
 def unquoted_alternatives(message: str) -> str:
