@@ -42,6 +42,14 @@ def test_compressed_files_read_as_the_plain_file(tmp_path: Path, suffix: str) ->
     np.testing.assert_array_equal(table.samples, ROWS)
 
 
+def test_the_summary_says_the_file_was_decompressed(tmp_path: Path) -> None:
+    path = tmp_path / "flight.csv.xz"
+    path.write_bytes(lzma.compress(TEXT.encode()))
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "sphere"])
+    assert result.exit_code == 0, result.output
+    assert f"file             {path} (xz-compressed; text, ','-separated, 3 columns, header)" in result.stdout
+
+
 def test_compression_is_recognised_by_content_not_by_name(tmp_path: Path) -> None:
     disguised = tmp_path / "flight.csv"  # gzip data under a plain name
     disguised.write_bytes(gzip.compress(TEXT.encode()))
@@ -94,7 +102,8 @@ def test_standard_input(tmp_path: Path, compress: bool) -> None:
     data = gzip.compress(TEXT.encode()) if compress else TEXT.encode()
     result = CliRunner().invoke(cli, ["calibrate", "-", "-m", "sphere", "-o", str(tmp_path / "cal.json")], input=data)
     assert result.exit_code == 0, result.output
-    assert result.stdout.startswith("file             - (text, ','-separated, 3 columns, header)")
+    how = "standard input, gzip-compressed" if compress else "standard input"
+    assert result.stdout.startswith(f"file             - ({how}; text, ','-separated, 3 columns, header)")
     assert "rows             200 read" in result.stdout
 
 

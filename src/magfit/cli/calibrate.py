@@ -189,11 +189,19 @@ def run_calibration(
         n_rows=int(read.n_rows),
         n_skipped=int(read.n_skipped),
         skipped_lines=tuple(int(line) for line in read.skipped_lines),
-        file_format=read.format.describe(),
+        file_format=_how_read(path) + read.format.describe(),
         streamed=streamed,
         subsample=subsample,
         column_note=chosen.column_note,
     )
+
+
+def _how_read(path: Path) -> str:
+    """``"gzip-compressed; "`` (or ``standard input``, ``a pipe``) before the layout; empty for a plain file."""
+    from ..io.sources import describe_source
+
+    how = describe_source(path)
+    return f"{how}; " if how else ""
 
 
 def memory_sample_limit() -> int:

@@ -29,7 +29,7 @@ from typing import BinaryIO, cast
 
 from ..errors import DataFileError
 
-__all__ = ["COMPRESSIONS", "STDIN", "compression_of", "data_file", "display_name"]
+__all__ = ["COMPRESSIONS", "STDIN", "compression_of", "data_file", "describe_source", "display_name"]
 
 #: The file name that means standard input.
 STDIN = "-"
@@ -49,6 +49,7 @@ _lock = threading.Lock()
 #: Source key -> the temporary copy; temporary copy -> the name messages use.
 _copies: dict[tuple[object, ...], Path] = {}
 _names: dict[Path, str] = {}
+_how: dict[str, list[str]] = {}  # a source's name -> how it was read ("standard input", "gzip-compressed")
 _stdin_seen: list[object] = []  # kept alive so that their ids, the keys of their copies, are not reused
 
 
@@ -58,6 +59,12 @@ def compression_of(head: bytes) -> str | None:
         if head.startswith(magic):
             return name
     return None
+
+
+def describe_source(path: str | os.PathLike[str]) -> str | None:
+    """How a source was read, for a summary (``"standard input, gzip-compressed"``); None for a plain file."""
+    how = _how.get(str(path))
+    return ", ".join(how) if how else None
 
 
 def display_name(path: Path) -> str:
@@ -186,6 +193,9 @@ def _copy(
             raise
         _copies[key] = target
         _names[target] = name
+        kind = f"{what}-compressed" if what != "input" else "standard input" if name == STDIN else "a pipe"
+        if kind not in _how.setdefault(name, []):
+            _how[name].append(kind)
         return target
 
 
