@@ -855,9 +855,15 @@ class ChunkReader:
                 return np.nan
             return float(cell.replace(",", ".") if fmt.decimal == "," else cell)
 
-        values = np.array([[number(row[j]) for j in numeric] for row in rows], dtype=np.float64).reshape(len(rows), -1)
         head_values = np.full((len(rows), fmt.n_columns), np.nan)
-        head_values[:, numeric] = values
+        for j in numeric:
+            cells = [row[j] for row in rows]
+            try:  # the usual column of plain numbers, at once
+                if fmt.decimal != ".":
+                    raise ValueError("decimal commas")
+                head_values[:, j] = np.asarray(cells, dtype=np.float64)
+            except ValueError:  # missing values, decimal commas: cell by cell
+                head_values[:, j] = [number(cell) for cell in cells]
         return choose_columns_by_content(head_values, numeric)
 
     def _check_npy_shape(self) -> None:
