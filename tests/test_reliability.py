@@ -442,3 +442,10 @@ def test_6_a_signal_while_writing_leaves_no_temporary_file(
     ]
     assert output.read_text() == "OLD\n"
     _no_temporaries(tmp_path)
+
+
+def test_running_out_of_memory_is_no_bug() -> None:
+    from magfit.cli._common import EXIT_USAGE, as_command_error
+
+    error = as_command_error(MemoryError())
+    assert error.exit_code == EXIT_USAGE and "not enough memory" in error.format_message()

@@ -96,6 +96,11 @@ def as_command_error(error: BaseException) -> CommandError:
         return CommandError(f"{target}{error.strerror or error}")
     if isinstance(error, ImportError) and (install := hint_for(error)) is not None:
         return CommandError(install)  # a missing extra: the install command, not "a bug in magfit"
+    if isinstance(error, MemoryError):  # a file too big for this machine is no bug either
+        return CommandError(
+            "not enough memory for this file; fit it with a linear method (-m ellipsoid, sphere, als), which "
+            "streams, or on a subsample (--max-samples N)"
+        )
     return InternalError(
         f"unexpected {type(error).__name__}: {one_line(str(error))} (a bug in magfit: rerun with --debug "
         "and report the traceback)"
