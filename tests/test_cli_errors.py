@@ -166,7 +166,7 @@ def test_unknown_method_lists_the_valid_ones(tmp_path: Path) -> None:
 
 def test_unknown_export_format_lists_the_valid_ones(tmp_path: Path) -> None:
     path = _csv(tmp_path / "data.csv", _good_samples())
-    message = _assert_error(_run("calibrate", str(path), "--export", "inav"), 2, "unknown format 'inav'")
+    message = _assert_error(_run("calibrate", str(path), "--export", "mavlink"), 2, "unknown format 'mavlink'")
     assert "json" in message and "ardupilot" in message
 
 
@@ -195,7 +195,7 @@ def test_a_file_of_only_nan_rows_is_an_input_error(tmp_path: Path) -> None:
     ("library", "command_line"),
     [
         ("skip such rows (nonfinite='skip')", "skip such rows (--nonfinite skip)"),
-        ("pass unit='uT' (or 'nT')", "pass --unit uT (or 'nT')"),
+        ("pass unit='uT' (or 'nT')", "pass --unit uT (or nT)"),
         ("or use method='sphere' (hard iron only)", "or use --method sphere (hard iron only)"),
         ("check the columns (columns=[...])", "check the columns (--columns X,Y,Z)"),
         ("give columns=['mx', 'my', 'mz']", "give --columns mx,my,mz"),
