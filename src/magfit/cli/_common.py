@@ -16,7 +16,7 @@ from rich.console import Console
 
 from ..errors import CalibrationError, MagfitError, OptionError
 from ._extras import hint_for
-from ._wording import collapse_repeats, unquoted_alternatives
+from ._wording import after_keywords, collapse_repeats
 
 #: What to do with rows holding NaN or inf (the readers' ``nonfinite`` argument).
 Nonfinite = Literal["skip", "error"]
@@ -76,8 +76,8 @@ def option_wording(message: str) -> str:
         value = "X,Y,Z" if items.strip() in ("", "...") else ",".join(i.strip().strip("'\"") for i in items.split(","))
         return f"--{name} {value}"
 
-    # Each model's reason said once; the alternatives of an option unquoted: --method auto (or ml, als).
-    return unquoted_alternatives(_KEYWORD_HINT.sub(option, collapse_repeats(message)))
+    # Each model's reason said once; flags named (--force); alternatives unquoted: --method auto (or ml, als).
+    return after_keywords(_KEYWORD_HINT.sub(option, collapse_repeats(message)))
 
 
 def as_command_error(error: BaseException) -> CommandError:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 
-__all__ = ["collapse_repeats", "columns_used", "unquoted_alternatives", "without_own_advice"]
+__all__ = ["after_keywords", "collapse_repeats", "columns_used", "unquoted_alternatives", "without_own_advice"]
 
 #: The names a refusal lists its reasons by: the models auto chooses among, and the methods.
 _NAMES = ("sphere", "diag", "full", "ellipsoid", "minmax", "als", "ml", "robust", "auto")
@@ -62,6 +62,18 @@ def collapse_repeats(message: str) -> str:
         out.append(clause)
         referred = None
     return "; ".join(out)
+
+
+#: Library keywords whose command-line form is a flag.
+_FLAGS = {"allow_undetermined=True": "--force"}
+
+
+def after_keywords(message: str) -> str:
+    """The last touches once ``name='value'`` hints are options: flags named (``allow_undetermined=True`` ->
+    ``--force``), an option's alternatives unquoted."""
+    for keyword, flag in _FLAGS.items():
+        message = message.replace(keyword, flag)
+    return unquoted_alternatives(message)
 
 
 def unquoted_alternatives(message: str) -> str:

@@ -131,6 +131,7 @@ def run_calibration(
     even: bool = False,
     max_samples: int | None = None,
     options: Mapping[str, Any] | None = None,
+    allow_undetermined: bool = False,
 ) -> CalibrationRun:
     """Read ``path``, fit ``method`` and score the fit; memory stays bounded for streaming methods.
 
@@ -140,12 +141,15 @@ def run_calibration(
     memory (at most ``max_samples`` rows, default :func:`memory_sample_limit`), and otherwise stream it
     and fit a spatially even subsample of ``max_samples`` rows. ``even`` fits the even subsample of
     :func:`magfit.sampling.even_subsample` (every direction weighs the same) with any method. ``options``
-    are the method's keyword options (e.g. ``field_strength``), passed to :func:`magfit.fit`.
+    are the method's keyword options (e.g. ``field_strength``), passed to :func:`magfit.fit`;
+    ``allow_undetermined`` (``--force``) returns a calibration the samples do not support, marked so.
     """
     from ..io import ChunkReader
 
     spec = get_method(method)
     options = dict(options or {})
+    if allow_undetermined:  # fit's own keyword, passed with the method's options
+        options["allow_undetermined"] = True
     limit = memory_sample_limit() if max_samples is None else max_samples
     subsample = "--even" if even else None
     # The columns first (cheap: the file's head): every message, a refusal too, says which were used.
@@ -650,6 +654,12 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     type=click.Path(dir_okay=False, path_type=Path),
     help="Also draw the samples before and after the fit into this figure (.png, .svg, .pdf), as 'magfit plot'.",
 )
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Return the calibration even when the samples do not support it (exit 0): it is marked NOT SUPPORTED "
+    "and the refusal is printed as a warning. To inspect a poor recording, not to use its numbers.",
+)
 def calibrate_command(
     file: Path,
     method: str | None,
@@ -662,6 +672,7 @@ def calibrate_command(
     even: bool,
     max_samples: int | None,
     plot_path: Path | None,
+    force: bool,
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -700,6 +711,7 @@ def calibrate_command(
         even=even,
         max_samples=max_samples,
         options=options,
+        allow_undetermined=force,
     )
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
     text = render_output(run, export_format, unit) if output is not None or export_format is not None else None
@@ -760,6 +772,20 @@ def _choice(calibration: Calibration) -> list[tuple[str, str]]:
     return [("chose", model + (f" ({reason})" if reason else ""))]
 
 
+def _verdict(calibration: Calibration) -> list[tuple[str, str]]:
+    """Whether the samples support the calibration (``details["support"]``, when the fit reached a verdict)."""
+    support = calibration.details.get("support")
+    if not isinstance(support, Mapping) or "verdict" not in support:
+        return []
+    verdict = str(support["verdict"])
+    if verdict == "refused":
+        return [("verdict", "NOT SUPPORTED by the samples, returned because of --force: do not use these numbers")]
+    weaknesses = support.get("weaknesses") or []
+    if verdict == "weak" and weaknesses:
+        return [("verdict", f"weak: {len(weaknesses)} weakness(es), in the warnings above")]
+    return [("verdict", verdict)]
+
+
 def _fitted_on(run: CalibrationRun) -> list[tuple[str, str]]:
     """When the fit used an even subsample: how many samples, and why."""
     if run.subsample is None:
@@ -792,6 +818,7 @@ def print_summary(out: Console, run: CalibrationRun) -> None:
             f"mean {fixed(run.evaluation.mean)}  std {fixed(run.evaluation.std)}  "
             f"(paper, section V: fraction of the field strength, n = {run.evaluation.n})",
         ),
+        *_verdict(calibration),
         ("convention", CONVENTION),
     ]
     for label, value in lines:
