@@ -124,7 +124,8 @@ def report_command(
     out = console()
     for path in files:
         table = read_samples(path, columns=columns, nonfinite=nonfinite)
-        notes = [f"Columns {', '.join(map(str, table.columns))}; {table.n_rows:,} data rows."]
+        why = f" ({table.column_note})" if table.column_note else ""  # a file without a header: why these
+        notes = [f"Columns {', '.join(map(str, table.columns))}{why}; {table.n_rows:,} data rows."]
         if table.n_skipped:
             warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
             notes.append(f"{table.n_skipped:,} rows with NaN or inf values were skipped.")
