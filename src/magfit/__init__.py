@@ -13,10 +13,10 @@ True
 from __future__ import annotations
 
 from .calibration import CONVENTION, Calibration
-from .diagnostics import Diagnostics, diagnose
+from .diagnostics import Diagnostics
 from .errors import CalibrationError, DataFileError, ExportError, MagfitError, OptionError, SampleError
 from .evaluate import Evaluation, evaluate, sphere_distances
-from .fit import fit
+from .fit import diagnose, fit
 from .methods import METHODS
 from .simulate import DISTURBANCES, SENSORS, Scenario, Simulation, scenario, simulate
 from .statistics import Statistics

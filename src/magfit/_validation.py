@@ -6,15 +6,25 @@ Messages say what was received and what to do. Arrays are never transposed behin
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import CalibrationError, SampleError
+from .errors import CalibrationError, OptionError, SampleError
 
-if TYPE_CHECKING:
-    from .statistics import Statistics
+
+class Moments(Protocol):
+    """What :func:`check_support` reads of a :class:`~magfit.Statistics` (this module sits below it)."""
+
+    @property
+    def n(self) -> int: ...
+
+    @property
+    def mean(self) -> NDArray[np.float64]: ...
+
+    @property
+    def covariance(self) -> NDArray[np.float64]: ...
 
 #: Below this ratio of the smallest to the largest spread (standard deviation along the principal
 #: directions), the samples are taken to lie on a plane or a line.
@@ -80,7 +90,7 @@ def as_samples(samples: ArrayLike) -> NDArray[np.float64]:
     return array
 
 
-def check_support(statistics: Statistics, method: str, min_samples: int) -> None:
+def check_support(statistics: Moments, method: str, min_samples: int) -> None:
     """Raise :class:`CalibrationError` when the samples cannot support a fit of ``method``.
 
     Checks, in order: enough samples, not all identical, spread over three dimensions.
@@ -126,3 +136,9 @@ def _format_direction(direction: NDArray[np.float64]) -> str:
         return f"the sensor {_AXIS_NAMES[axis]} axis"
     direction = direction * np.sign(direction[axis])
     return "direction (" + ", ".join(f"{value:+.2f}" for value in direction) + ")"
+
+
+def check_choice(option: str, value: object, choices: tuple[str, ...]) -> None:
+    """Raise an :class:`OptionError` when ``value`` is not one of ``choices``."""
+    if value not in choices:
+        raise OptionError(f"{option}={value!r} is not valid; choose one of: {', '.join(choices)}")

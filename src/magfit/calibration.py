@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import DataFileError, MagfitError, SampleError
 
 if TYPE_CHECKING:
-    from .diagnostics import Diagnostics
+    from .findings import Diagnostics
 
 __all__ = ["CONVENTION", "SCHEMA_VERSION", "Calibration"]
 
@@ -157,7 +157,7 @@ class Calibration:
         stored = self.details.get("diagnostics")
         if stored is None:
             return None
-        from .diagnostics import Diagnostics  # lazy: the diagnostics import this module
+        from .findings import Diagnostics
 
         return Diagnostics.from_dict(stored)
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -10,6 +9,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._validation import as_samples
 from .calibration import Calibration
+from .findings import Evaluation
 
 __all__ = ["Evaluation", "evaluate", "sphere_distances"]
 
@@ -65,31 +65,6 @@ def unchecked_sphere_distances(calibration: Calibration, samples: NDArray[Any]) 
         np.sqrt(squared, out=squared)
         squared -= 1.0
     return distances
-
-
-@dataclass(frozen=True)
-class Evaluation:
-    """Summary of the sphere distances (dimensionless, fractions of the field strength).
-
-    ``mean`` and ``std`` are the paper's two columns (``std`` is the population standard deviation).
-    """
-
-    n: int
-    mean: float
-    std: float
-    mean_abs: float
-    rms: float
-    max_abs: float
-
-    def to_dict(self) -> dict[str, float | int]:
-        return {
-            "n": self.n,
-            "mean": self.mean,
-            "std": self.std,
-            "mean_abs": self.mean_abs,
-            "rms": self.rms,
-            "max_abs": self.max_abs,
-        }
 
 
 def evaluate(calibration: Calibration, samples: ArrayLike) -> Evaluation:

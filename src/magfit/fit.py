@@ -1,38 +1,56 @@
-"""The one public entry point for fitting: :func:`fit`."""
+"""The public entry points for fitting: :func:`fit` (estimate, verdict, diagnostics) and :func:`diagnose`.
+
+The flow is one way: the samples are validated and reduced to :class:`Statistics` and the method runs
+(:func:`magfit.methods.core.estimate`, the one path every method runs by), then the calibration is judged
+in its own frame (:mod:`magfit.diagnostics.verdict`): refused calibrations raise, weak ones carry their
+warnings.
+"""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
-import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import check_finite, check_shape, check_support
 from .calibration import Calibration
-from .errors import OptionError
-from .methods import METHODS, FitInput, get_method
+from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refit, diagnose_statistics
+from .diagnostics import diagnose as diagnose_samples
+from .errors import CalibrationError, MagfitError
+from .methods.auto import refit_first_order
+from .methods.core import estimate, method_spec, prepare, refitter
 from .statistics import Statistics
 
-__all__ = ["fit"]
+__all__ = ["diagnose", "fit"]
 
 
 def fit(
-    samples: ArrayLike | Statistics, method: str = "ellipsoid", *, diagnostics: bool = True, **options: Any
+    samples: ArrayLike | Statistics,
+    method: str = "ellipsoid",
+    *,
+    diagnostics: bool = True,
+    allow_undetermined: bool = False,
+    **options: Any,
 ) -> Calibration:
-    """Fit a calibration to magnetometer samples.
+    """Fit a calibration to magnetometer samples, if the samples support it.
 
     Parameters
     ----------
     samples : array_like, shape (N, 3), or Statistics
-        Raw magnetometer samples, one (x, y, z) per row, any unit, recorded while turning the sensor in
-        all directions. The linear methods also accept a :class:`Statistics` accumulated in chunks.
+        Raw magnetometer samples, one (x, y, z) per row, any unit, in recording order, recorded while
+        turning the sensor in all directions. The linear methods also accept a :class:`Statistics`
+        accumulated in chunks.
     method : str
         A name in ``magfit.METHODS``: ``"ellipsoid"`` (hard + soft iron, paper section II),
         ``"sphere"`` (hard iron only, section III), ``"minmax"`` (pseudo-calibration, section IV), ...
     diagnostics : bool
-        Attach :func:`magfit.diagnose`'s report as ``details["diagnostics"]`` (read it typed with
+        Attach :func:`diagnose`'s full report as ``details["diagnostics"]`` (read it typed with
         ``calibration.diagnostics``). It runs on at most 20 000 spatially even samples; from
-        ``Statistics`` only what statistics allow is attached.
+        ``Statistics`` only what statistics allow is attached. Without it the verdict is still reached
+        (``details["support"]``), on the cheaper checks.
+    allow_undetermined : bool
+        Return a calibration that the samples do not support (see below) instead of raising; its
+        refusal is then the first of its warnings (``--force`` on the command line).
     **options
         Keyword options of the method (see ``magfit.METHODS[method].options``); an unknown name is an
         :class:`OptionError` that lists the valid ones.
@@ -41,42 +59,79 @@ def fit(
     -------
     Calibration
         ``corrected = matrix @ (raw - offset)`` lies on a sphere of radius ``field_strength``.
+        ``details["support"]`` holds the verdict: ``"supported"`` or ``"weak"`` (with the weaknesses
+        named, in words).
 
     Raises
     ------
     SampleError
         The samples are not an (N, 3) array of finite numbers.
     CalibrationError
-        The data cannot support the fit (too few samples, no 3-D spread, not an ellipsoid ...).
+        The data cannot support the fit: too few samples, no 3-D spread, not an ellipsoid, a sensor
+        that barely moved or turned about one axis only, parameters the samples do not determine, a
+        known field strength the samples contradict. The message names what is missing and what to record.
     OptionError
         Unknown method or option, or an option value out of range.
     """
-    spec = get_method(method)
-    unknown = sorted(set(options) - set(spec.options))
-    if unknown:
-        valid = ", ".join(spec.options) or "none"
-        raise OptionError(f"method {spec.name!r} has no option {', '.join(map(repr, unknown))}; valid options: {valid}")
-    if isinstance(samples, Statistics):
-        if spec.data == "samples":
-            raise OptionError(
-                f"method {spec.name!r} needs the samples, not Statistics; methods that accept Statistics: "
-                + ", ".join(name for name, s in METHODS.items() if s.data == "statistics")
-            )
-        data = FitInput(samples, None)
+    spec = method_spec(method, options)
+    data = prepare(samples, spec)
+    calibration = estimate(data, spec.name, options)
+    if data.samples is None:
+        report = diagnose_statistics(calibration, data.statistics)
     else:
-        # Validated in the caller's dtype: float32 (or integer) samples are converted to float64 a chunk
-        # at a time by Statistics, and whole only for the methods that iterate over the samples.
-        array = check_shape(samples)
-        check_finite(array)
-        if spec.data == "samples":
-            array = np.asarray(array, dtype=np.float64)
-        data = FitInput(Statistics.from_samples(array), array)
-    check_support(data.statistics, spec.name, spec.min_samples)
-    for check in spec.checks:
-        check(data.statistics, spec.name)
-    calibration = spec.function(data, **options)
-    if not diagnostics:
-        return calibration
-    from .diagnostics import attach_diagnostics  # lazy: the diagnostics import the methods
+        refit = refit_of(calibration, spec.name, options) if diagnostics else None
+        report = diagnose_samples(calibration, data.samples, refit=refit, thorough=diagnostics)
+    support = report.support
+    assert support is not None  # both diagnoses reach a verdict
+    if support.verdict == "refused":
+        if not allow_undetermined:
+            raise CalibrationError(support.message(spec.name))
+        support = replace(support, forced=True)
+        report = replace(report, support=support, warnings=support.warnings)
+    details: dict[str, Any] = {**calibration.details, "support": support.to_dict()}
+    if diagnostics:
+        details["diagnostics"] = report.to_dict()
+    return replace(calibration, details=details)
 
-    return attach_diagnostics(calibration, data.samples, data.statistics)
+
+def refit_of(calibration: Calibration, method: str, options: dict[str, Any]) -> Refit:
+    """The refit the diagnostics use: the method with the user's options, or ``auto``'s chosen model."""
+    if method == "auto" and "chosen_model" in calibration.details:
+        chosen = str(calibration.details["chosen_model"])
+        known = options.get("field_strength")
+        return lambda samples: refit_first_order(chosen, calibration, samples, field_strength=known)
+    return refitter(method, options)
+
+
+def diagnose(
+    calibration: Calibration,
+    samples: ArrayLike,
+    *,
+    inclination_deg: float = DEFAULT_INCLINATION_DEG,
+    max_samples: int = MAX_SAMPLES,
+    held_out: bool = True,
+    represents: int | None = None,
+) -> Diagnostics:
+    """Diagnose any calibration on samples (its verdict, coverage, observability, uncertainty, goodness).
+
+    The held-out evaluation and the two-halves check refit the calibration's method with the options it
+    recorded (``details["options"]``); a calibration of an unknown method gets the other checks.
+    See :func:`magfit.diagnostics.diagnose` for the parameters.
+    """
+    refit = None
+    options = calibration.details.get("options", {})
+    if isinstance(options, dict):
+        try:
+            method_spec(calibration.method, options)
+            refit = refit_of(calibration, calibration.method, options)
+        except MagfitError:
+            refit = None
+    return diagnose_samples(
+        calibration,
+        samples,
+        inclination_deg=inclination_deg,
+        max_samples=max_samples,
+        held_out=held_out,
+        represents=represents,
+        refit=refit,
+    )

@@ -30,11 +30,23 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._validation import as_samples
 from .errors import OptionError, SampleError
+from .geometry.cells import partition
+from .geometry.quadric import algebraic_ellipsoid
 
 if TYPE_CHECKING:
     from .statistics import Statistics
 
-__all__ = ["DEFAULT_CELLS", "EvenSampler", "SphereCells", "direction_frame", "even_subsample", "even_subsample_chunks"]
+__all__ = [
+    "DEFAULT_CELLS",
+    "MAX_ANALYSED",
+    "EvenSampler",
+    "SphereCells",
+    "direction_frame",
+    "even_subsample",
+    "even_subsample_chunks",
+    "thin",
+    "weighted_even_subsample",
+]
 
 #: Cells of about 10 degrees across (4π / 400 sr each): fine enough to separate attitudes a calibration
 #: needs apart, coarse enough that a few thousand samples fill them.
@@ -51,7 +63,7 @@ _FLAT_AXIS = 0.05
 class SphereCells:
     """The unit sphere cut into ``count`` cells of equal area, as the coverage diagnostics cut it.
 
-    The partition is Leopardi's (:func:`magfit.diagnostics.coverage.partition`): two polar caps of one
+    The partition is Leopardi's (:func:`magfit.geometry.cells.partition`): two polar caps of one
     cell and bands of latitude split into equal sectors, each band's area a whole number of cells.
 
     Attributes
@@ -74,7 +86,6 @@ class SphereCells:
         """The partition into ``count`` cells (``count`` >= 3), as square as the count allows."""
         if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 3:
             raise OptionError(f"cells must be an integer >= 3, got {count!r}")
-        from .diagnostics.coverage import partition  # late import: the diagnostics import the fits
 
         cells = partition(int(count))
         return cls(np.cos(cells.boundaries), cells.cells_per_zone, cells.first_cell, cells.cell)
@@ -358,14 +369,18 @@ def direction_frame(statistics: Statistics) -> tuple[NDArray[np.float64], NDArra
     shape : ndarray, shape (3, 3)
         Dimensionless up to a common scale (only directions matter).
     """
-    from .errors import CalibrationError
-    from .fit import fit  # late import: magfit.fit imports the methods
+    ellipsoid = _ellipsoid_frame(statistics)
+    return ellipsoid if ellipsoid is not None else _box_frame(statistics.minimum, statistics.maximum)
 
-    try:
-        calibration = fit(statistics, "ellipsoid")
-        return calibration.offset, calibration.matrix
-    except CalibrationError:
-        return _box_frame(statistics.minimum, statistics.maximum)
+
+def _ellipsoid_frame(statistics: Statistics) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Centre and shape of the paper's algebraic ellipsoid (section II), or None when there is none."""
+    found = algebraic_ellipsoid(statistics)
+    if isinstance(found, str):
+        return None
+    offset, shape = found
+    eigenvalues, eigenvectors = np.linalg.eigh(shape)
+    return offset, (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T  # A^½: directions of the sphere
 
 
 def _box_frame(low: NDArray[np.float64], high: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -381,15 +396,13 @@ def _default_frame(array: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDA
     through its matrix, are those of the corrected sphere to within a few degrees, so its cells cover
     equal areas of the true field sphere, not of the distorted ellipsoid.
     """
-    from .errors import CalibrationError
-    from .fit import fit  # late import: magfit.fit imports the methods, which may use this module
+    from .statistics import Statistics
 
-    try:
-        calibration = fit(array, "ellipsoid")
-        return calibration.offset, calibration.matrix
-    except CalibrationError:
-        low, high = np.quantile(array, _CENTRE_QUANTILES, axis=0)
-        return _box_frame(low, high)
+    ellipsoid = _ellipsoid_frame(Statistics.from_samples(array)) if array.shape[0] >= 9 else None
+    if ellipsoid is not None:
+        return ellipsoid
+    low, high = np.quantile(array, _CENTRE_QUANTILES, axis=0)
+    return _box_frame(low, high)
 
 
 def _vector(value: ArrayLike, name: str) -> NDArray[np.float64]:
@@ -404,3 +417,50 @@ def _matrix(value: ArrayLike) -> NDArray[np.float64]:
     if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)) or abs(np.linalg.det(matrix)) == 0:
         raise OptionError(f"shape must be an invertible, finite 3x3 matrix, got shape {matrix.shape}")
     return matrix
+
+
+#: The diagnostics and the model choice analyse at most this many samples (see :func:`thin`).
+MAX_ANALYSED = 20_000
+
+
+def thin(n: int, cap: int = MAX_ANALYSED) -> NDArray[np.int64]:
+    """At most ``10 cap`` of ``n`` row indices, by a regular stride (cheap on 10⁷ samples)."""
+    return np.arange(0, n, max(1, math.ceil(n / (10 * cap))), dtype=np.int64)
+
+
+def weighted_even_subsample(
+    directions: NDArray[np.float64], cap: int = MAX_ANALYSED, total: int | None = None
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Indices of at most ``cap`` rows spread evenly over directions, and the weight of each.
+
+    The rows (already thinned with :func:`thin` when there are many) are binned into 400 equal-area
+    direction cells; every cell gives the same number q of its rows, spread in time (all of them when it
+    has fewer), with q as large as the cap allows. The weight of a row is the number of original rows it
+    stands for: its cell's count over the rows taken there, times ``total / len(directions)``, so the
+    weights sum to ``total`` (default: the number of rows).
+    """
+    m = directions.shape[0]
+    factor = 1.0 if total is None else total / max(m, 1)
+    if m <= cap:
+        return np.arange(m, dtype=np.int64), np.full(m, factor)
+    cells = partition(400).cell(directions)
+    order = np.argsort(cells, kind="stable")  # by cell, in time order within a cell
+    counts = np.bincount(cells, minlength=400)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    low, high = 1, int(counts.max())
+    while low < high:  # the largest q with Σ min(count, q) <= cap
+        middle = (low + high + 1) // 2
+        if int(np.minimum(counts, middle).sum()) <= cap:
+            low = middle
+        else:
+            high = middle - 1
+    taken = np.minimum(counts, low)
+    occupied = np.flatnonzero(counts)
+    positions = np.concatenate(
+        [starts[cell] + np.arange(taken[cell]) * counts[cell] // taken[cell] for cell in occupied]
+    )
+    indices = order[positions]
+    chosen_cells = cells[indices]
+    weights = counts[chosen_cells] / taken[chosen_cells] * factor
+    sort = np.argsort(indices)
+    return np.asarray(indices[sort], dtype=np.int64), np.asarray(weights[sort], dtype=np.float64)

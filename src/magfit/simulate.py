@@ -33,7 +33,7 @@ __all__ = [
     "simulate",
 ]
 
-ORIENTATIONS = ("uniform", "restricted", "yaw")
+ORIENTATIONS = ("uniform", "restricted", "yaw", "flight")
 
 
 def _rotation() -> type[Rotation]:
@@ -112,7 +112,29 @@ def _attitudes(
         return np.column_stack([tilt, yaw])
     if orientations == "yaw":  # level turns only
         return np.column_stack([np.zeros(n), np.zeros(n), yaw])
+    if orientations == "flight":
+        return _flight(n, max_tilt_deg, rng)
     raise OptionError(f"orientations={orientations!r} is not valid; choose one of: {', '.join(ORIENTATIONS)}")
+
+
+def _flight(n: int, max_tilt_deg: float, rng: np.random.Generator) -> NDArray[np.float64]:
+    """A recording in time order of level flight with turns: straight legs and banked turns, light turbulence.
+
+    Legs of 4 % of the recording each: straight, or a turn at a random rate (up to three full turns per
+    leg) with the bank that a coordinated turn needs, up to ±``max_tilt_deg``; pitch wanders within a
+    third of that; ±1° of turbulence on both. Roll, pitch and yaw in degrees, shape (n, 3).
+    """
+    legs = max(1, round(n / max(1, n // 25)))
+    rate = np.where(rng.random(legs) < 0.3, 0.0, rng.uniform(-3.0, 3.0, legs) * 360.0 / (n / legs))  # °/sample
+    per_sample = np.repeat(rate, int(np.ceil(n / legs)))[:n]
+    yaw = np.cumsum(per_sample) + rng.uniform(-180.0, 180.0)
+    bank = max_tilt_deg * per_sample / max(float(np.max(np.abs(rate))), 1e-12)
+    pitch = np.cumsum(rng.normal(0.0, 0.2, n))
+    pitch = (max_tilt_deg / 3.0) * np.tanh(pitch / max(float(np.max(np.abs(pitch))), 1e-12) * 2.0)
+    turbulence = rng.normal(0.0, 1.0, (n, 2))
+    roll = np.clip(bank + turbulence[:, 0], -max_tilt_deg, max_tilt_deg)
+    pitch = np.clip(pitch + turbulence[:, 1], -max_tilt_deg, max_tilt_deg)
+    return np.column_stack([roll, pitch, (yaw + 180.0) % 360.0 - 180.0])
 
 
 def simulate(
@@ -126,6 +148,7 @@ def simulate(
     orientations: str | ArrayLike = "uniform",
     max_tilt_deg: float = 20.0,
     resolution: float | None = None,
+    field_drift: float = 0.0,
     seed: int | np.random.Generator | None = None,
 ) -> Simulation:
     """Simulate ``n`` magnetometer samples from eq. (1).
@@ -147,11 +170,17 @@ def simulate(
     orientations : {"uniform", "restricted", "yaw"} or array_like, shape (n, 3)
         ``"uniform"``: all attitudes equally likely (a full tumble). ``"restricted"``: full yaw, roll
         and pitch uniform within ±``max_tilt_deg`` (a vehicle that cannot be turned over). ``"yaw"``:
-        level turns only. Or explicit (roll, pitch, yaw) rows in degrees.
+        level turns only. ``"flight"``: a recording in time order of level flight with banked turns,
+        roll and pitch within ±``max_tilt_deg`` (an aircraft, a car, a boat). Or explicit (roll, pitch,
+        yaw) rows in degrees.
     max_tilt_deg : float
         Roll and pitch limit of ``"restricted"``, degrees.
     resolution : float, optional
         Quantisation step (e.g. 1 for raw integer counts).
+    field_drift : float
+        Relative amplitude of a slow change of the field strength along the recording (0.005: ±0.5 %,
+        as a crustal anomaly or a vehicle's own slowly changing field): a real effect no calibration
+        model holds. The truth keeps the nominal ``field_strength``.
     seed : int or numpy Generator, optional
         Seed of the random draws, for repeatable samples.
     """
@@ -170,6 +199,9 @@ def simulate(
         raise OptionError(f"hard_iron must have shape (3,), got {v.shape}")
     attitudes = _attitudes(n, orientations, max_tilt_deg, rng)
     clean = _model(attitudes, w, v, field_strength, inclination_deg)
+    if field_drift:
+        along = 1.0 + field_drift * np.cos(1.5 * np.pi * np.arange(n) / max(n - 1, 1))  # +drift to −drift
+        clean = (clean - v) * along[:, None] + v  # W is linear: scaling the field scales W R B f
     samples = clean + rng.normal(0.0, noise, clean.shape) if noise > 0 else clean.copy()
     if resolution is not None:
         samples = np.round(samples / resolution) * resolution

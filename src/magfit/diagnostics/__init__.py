@@ -1,28 +1,37 @@
-"""Honest diagnostics for every calibration: coverage, observability, uncertainty and goodness of fit.
+"""Honest diagnostics for every calibration: the support verdict, coverage, observability, uncertainty, fit.
 
-``magfit.fit`` attaches them to every calibration (``calibration.details["diagnostics"]``, read back
-typed with ``calibration.diagnostics``); :func:`diagnose` computes them for any calibration and samples.
+``magfit.fit`` judges every calibration with them before returning it (the verdict:
+:mod:`magfit.diagnostics.verdict`) and attaches them (``calibration.details["diagnostics"]``, read back
+typed with ``calibration.diagnostics``); ``magfit.diagnose`` computes them for any calibration and samples.
+
+This package never imports :mod:`magfit.methods`: the checks that refit the method (held-out samples, the
+two halves of the recording) receive the refit as a function.
 
 To keep ``fit`` fast on long logs, the diagnostics run on a capped, spatially even subsample (at most
 :data:`MAX_SAMPLES` samples, the same number from every direction cell where possible, each row
-weighted by how many samples it stands for so that the uncertainty still reflects all of them). See
+weighted by how many samples it stands for so that the uncertainty still reflects all of them); the
+correlation of samples in time is measured on a regular stride of the recording. See
 ``docs/diagnostics.md`` for what each figure means and what to do about it.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validation import check_finite, check_shape
-from ..errors import CalibrationError, MagfitError, SampleError
+from ..calibration import Calibration
+from ..errors import MagfitError, SampleError
 from ..evaluate import Evaluation, unchecked_sphere_distances
-from ._geometry import Frame
-from .coverage import Coverage, coverage, partition
+from ..findings import Diagnostics, Goodness, Support
+from ..geometry.frame import Frame
+from ..geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
+from ..sampling import MAX_ANALYSED, thin, weighted_even_subsample
+from ..statistics import Statistics
+from .coverage import Coverage, coverage
 from .uncertainty import (
     DEFAULT_INCLINATION_DEG,
     Consistency,
@@ -32,238 +41,43 @@ from .uncertainty import (
     analyse,
     consistency,
 )
-
-if TYPE_CHECKING:
-    from ..calibration import Calibration
-    from ..statistics import Statistics
+from .verdict import NO_ELLIPSOID_RMS, Evidence, judge
 
 __all__ = [
+    "DEFAULT_INCLINATION_DEG",
     "MAX_SAMPLES",
     "Consistency",
     "Coverage",
     "Diagnostics",
     "Goodness",
     "Observability",
+    "Refit",
+    "Support",
     "Uncertainty",
     "WeakDirection",
-    "attach_diagnostics",
     "diagnose",
     "diagnose_statistics",
+    "flat_axis",
+    "model_kind",
     "thin",
     "weighted_even_subsample",
 ]
 
+#: ``refit(samples) -> Calibration``: the method of a calibration with the user's options.
+Refit = Callable[[NDArray[np.float64]], Calibration]
+
 #: The diagnostics of a fit use at most this many samples.
-MAX_SAMPLES = 20_000
+MAX_SAMPLES = MAX_ANALYSED
 #: The consistency check refits on at most this many of the analysed samples.
 CONSISTENCY_SAMPLES = 5_000
 #: Folds of the held-out evaluation.
 FOLDS = 5
-_SCHEMA = 1
-
-
-@dataclass(frozen=True)
-class Goodness:
-    """The paper's section V metric on the fitted samples and on held-out samples.
-
-    Attributes
-    ----------
-    fitted : Evaluation
-        Sphere distances of the samples the calibration was fitted to (``magfit.evaluate``).
-    held_out : Evaluation or None
-        The same for samples left out of the fit: ``folds``-fold cross-validation, each fold evaluated
-        with the method refitted on the other folds (None when a refit failed or is not possible).
-    folds : int
-        Number of folds (0 when there was no held-out evaluation).
-    note : str
-        How it was computed, or why there is no held-out figure.
-    """
-
-    fitted: Evaluation
-    held_out: Evaluation | None
-    folds: int
-    note: str
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "fitted": self.fitted.to_dict(),
-            "held_out": None if self.held_out is None else self.held_out.to_dict(),
-            "folds": self.folds,
-            "note": self.note,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Goodness:
-        held_out = data.get("held_out")
-        return cls(
-            fitted=Evaluation(**data["fitted"]),
-            held_out=None if held_out is None else Evaluation(**held_out),
-            folds=int(data["folds"]),
-            note=str(data["note"]),
-        )
-
-    def summary(self) -> list[str]:
-        lines = [
-            f"Goodness (distance to the unit sphere, paper section V): fitted samples mean "
-            f"{self.fitted.mean:+.4f}, std {self.fitted.std:.4f}."
-        ]
-        if self.held_out is None:
-            lines.append(f"No held-out evaluation: {self.note}")
-            return lines
-        lines.append(
-            f"Held-out samples ({self.folds}-fold cross-validation): mean {self.held_out.mean:+.4f}, "
-            f"std {self.held_out.std:.4f}."
-        )
-        if self.held_out.std > 1.25 * self.fitted.std:
-            lines.append(
-                "The held-out spread is clearly larger than the fitted one: the model follows the noise of "
-                "these samples (too many parameters for the coverage); prefer a simpler method or record more "
-                "directions."
-            )
-        return lines
-
-
-@dataclass(frozen=True)
-class Diagnostics:
-    """Everything magfit can say about how trustworthy a calibration is.
-
-    Attributes
-    ----------
-    n_samples : int
-        Samples the calibration was fitted to (outliers the fit rejected excluded).
-    n_used : int
-        Samples the diagnostics looked at (a spatially even subsample when more than 20 000).
-    coverage, observability, uncertainty, goodness
-        The four parts (None when the input did not allow them, e.g. a fit from ``Statistics``).
-    consistency : Consistency or None
-        The distance to the maximum-likelihood fit of the same model (shows an estimator's bias).
-    warnings : tuple of str
-        The findings that should stop a user from trusting the calibration as it is.
-    notes : tuple of str
-        How the diagnostics were computed (subsample, statistics only ...).
-    """
-
-    n_samples: int
-    n_used: int
-    coverage: Coverage | None
-    observability: Observability | None
-    uncertainty: Uncertainty | None
-    goodness: Goodness | None
-    warnings: tuple[str, ...]
-    notes: tuple[str, ...]
-    unit: str | None = None
-    consistency: Consistency | None = None
-
-    @property
-    def ok(self) -> bool:
-        """True when there is no warning."""
-        return not self.warnings
-
-    def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict (the layout stored in ``calibration.details["diagnostics"]``)."""
-        return {
-            "schema_version": _SCHEMA,
-            "n_samples": self.n_samples,
-            "n_used": self.n_used,
-            "coverage": None if self.coverage is None else self.coverage.to_dict(),
-            "observability": None if self.observability is None else self.observability.to_dict(),
-            "uncertainty": None if self.uncertainty is None else self.uncertainty.to_dict(),
-            "goodness": None if self.goodness is None else self.goodness.to_dict(),
-            "warnings": list(self.warnings),
-            "notes": list(self.notes),
-            "unit": self.unit,
-            "consistency": None if self.consistency is None else self.consistency.to_dict(),
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Diagnostics:
-        """Inverse of :meth:`to_dict`."""
-        if data.get("schema_version") != _SCHEMA:
-            raise MagfitError(
-                f"diagnostics schema version {data.get('schema_version')!r} is not supported (expected {_SCHEMA})"
-            )
-        try:
-            return cls(
-                n_samples=int(data["n_samples"]),
-                n_used=int(data["n_used"]),
-                coverage=None if data["coverage"] is None else Coverage.from_dict(data["coverage"]),
-                observability=None if data["observability"] is None else Observability.from_dict(data["observability"]),
-                uncertainty=None if data["uncertainty"] is None else Uncertainty.from_dict(data["uncertainty"]),
-                goodness=None if data["goodness"] is None else Goodness.from_dict(data["goodness"]),
-                warnings=tuple(data["warnings"]),
-                notes=tuple(data["notes"]),
-                unit=data.get("unit"),
-                consistency=None if data.get("consistency") is None else Consistency.from_dict(data["consistency"]),
-            )
-        except (KeyError, TypeError) as error:
-            raise MagfitError(f"diagnostics are malformed: {error}") from None
-
-    def summary(self) -> list[str]:
-        """Plain-language lines, warnings first."""
-        lines = [f"WARNING: {warning}" for warning in self.warnings]
-        for part in (self.coverage, self.observability):
-            if part is not None:
-                lines.extend(part.summary())
-        if self.uncertainty is not None:
-            lines.extend(self.uncertainty.summary(self.unit))
-        if self.consistency is not None:
-            lines.extend(self.consistency.summary(self.unit))
-        if self.goodness is not None:
-            lines.extend(self.goodness.summary())
-        lines.extend(self.notes)
-        return lines
-
-
-# ---------------------------------------------------------------------- subsample
-
-
-def thin(n: int, cap: int = MAX_SAMPLES) -> NDArray[np.int64]:
-    """At most ``10 cap`` of ``n`` row indices, by a regular stride (cheap on 10⁷ samples)."""
-    return np.arange(0, n, max(1, math.ceil(n / (10 * cap))), dtype=np.int64)
-
-
-def weighted_even_subsample(
-    directions: NDArray[np.float64], cap: int = MAX_SAMPLES, total: int | None = None
-) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """Indices of at most ``cap`` rows spread evenly over directions, and the weight of each.
-
-    The rows (already thinned with :func:`thin` when there are many) are binned into 400 equal-area
-    direction cells; every cell gives the same number q of its rows, spread in time (all of them when it
-    has fewer), with q as large as the cap allows. The weight of a row is the number of original rows it
-    stands for: its cell's count over the rows taken there, times ``total / len(directions)``, so the
-    weights sum to ``total`` (default: the number of rows).
-    """
-    m = directions.shape[0]
-    factor = 1.0 if total is None else total / max(m, 1)
-    if m <= cap:
-        return np.arange(m, dtype=np.int64), np.full(m, factor)
-    cells = partition(400).cell(directions)
-    order = np.argsort(cells, kind="stable")  # by cell, in time order within a cell
-    counts = np.bincount(cells, minlength=400)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    low, high = 1, int(counts.max())
-    while low < high:  # the largest q with Σ min(count, q) <= cap
-        middle = (low + high + 1) // 2
-        if int(np.minimum(counts, middle).sum()) <= cap:
-            low = middle
-        else:
-            high = middle - 1
-    taken = np.minimum(counts, low)
-    occupied = np.flatnonzero(counts)
-    positions = np.concatenate(
-        [starts[cell] + np.arange(taken[cell]) * counts[cell] // taken[cell] for cell in occupied]
-    )
-    indices = order[positions]
-    chosen_cells = cells[indices]
-    weights = counts[chosen_cells] / taken[chosen_cells] * factor
-    sort = np.argsort(indices)
-    return np.asarray(indices[sort], dtype=np.int64), np.asarray(weights[sort], dtype=np.float64)
 
 
 # ---------------------------------------------------------------------- diagnose
 
 
-def _model_kind(calibration: Calibration) -> str:
+def model_kind(calibration: Calibration) -> str:
     """The model family of a calibration, from its structure: sphere, diag (axis-aligned) or full."""
     shape = calibration.ellipsoid_matrix
     scale = float(np.max(np.abs(shape)))
@@ -306,29 +120,40 @@ def diagnose(
     max_samples: int = MAX_SAMPLES,
     held_out: bool = True,
     represents: int | None = None,
+    refit: Refit | None = None,
+    thorough: bool = True,
 ) -> Diagnostics:
-    """Diagnose a calibration on the samples it was fitted to (or on a subsample of them).
+    """Diagnose a calibration on the samples it was fitted to (or on a subsample of them), with its verdict.
 
     Parameters
     ----------
     calibration : Calibration
-        Any calibration (its method is refitted for the held-out evaluation when it is a registered one).
+        Any calibration.
     samples : array_like, shape (N, 3)
-        The raw samples, input units. Samples a robust fit rejected (``details["rejected"]``) are left out.
+        The raw samples, input units, in recording order (the one-sigmas count the correlation of
+        neighbouring samples). Samples a robust fit rejected (``details["rejected"]``) are left out.
     inclination_deg : float
         Magnetic inclination assumed for the heading uncertainty, degrees (default 60°).
     max_samples : int
         Cap on the samples analysed (a spatially even subsample above it).
     held_out : bool
-        Also evaluate on held-out samples (k-fold refits of the method).
+        Also evaluate on held-out samples (k-fold refits with ``refit``).
     represents : int, optional
         When ``samples`` is a regular subsample of a longer recording (e.g. a streamed file), how many
-        samples the fit used: the uncertainty is then scaled to all of them (assuming the subsample is
-        representative and the samples independent).
+        samples the fit used: the uncertainty is then scaled to all of them.
+    refit : callable, optional
+        ``refit(samples) -> Calibration``: the calibration's method with the user's options, for the
+        held-out evaluation and the two halves of the recording (``magfit.diagnose`` passes it; without
+        it those two checks are skipped).
+    thorough : bool
+        Also run the checks that refit the method: held-out goodness and the two halves. Without them
+        (``magfit.fit(..., diagnostics=False)``) the verdict still covers coverage, residuals,
+        observability, the known field and the consistency with the maximum-likelihood fit.
 
     Returns
     -------
     Diagnostics
+        With ``support``, the verdict of :mod:`magfit.diagnostics.verdict`.
     """
     array = check_shape(samples)  # in the caller's dtype: only the rows analysed become float64
     check_finite(array)
@@ -344,7 +169,7 @@ def diagnose(
     if represents is not None:
         notes.append(f"The {n} samples analysed stand for {total} samples: the uncertainty is scaled to those.")
     candidates = thin(n, max_samples)
-    rows = np.asarray(array[candidates], dtype=np.float64)
+    rows = np.asarray(array[candidates], dtype=np.float64)  # a regular stride, in recording order
     z_candidates = Frame.corrected(calibration).normalise(rows)
     chosen, weights = weighted_even_subsample(z_candidates, max_samples, total=total)
     indices = candidates[chosen]
@@ -354,22 +179,37 @@ def diagnose(
             f"Diagnostics computed on a spatially even subsample of {indices.size} of {n} samples "
             "(weighted to stand for all of them)."
         )
-    kind = _model_kind(calibration)
+    kind = model_kind(calibration)
     cover = coverage(z)
-    observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg)
-    goodness = _goodness(calibration, raw, z, weights, held_out)
-    check = None
+    pinned = bool(calibration.details.get("radius_pinned"))
+    observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg, series=rows, pinned=pinned)
+    fitted = _weighted_evaluation(np.linalg.norm(z, axis=1) - 1.0, weights)
+    goodness = check = halves = None
     if uncertainty.offset_sigma is not None:  # an undetermined model has no maximum-likelihood fit to compare
         check = consistency(
             raw[:: max(1, indices.size // CONSISTENCY_SAMPLES)], kind, calibration, uncertainty, inclination_deg
         )
-    warnings = _warnings(cover, observability, goodness)
-    if check is not None and not check.consistent:
-        warnings.append(
-            f"the fit is {check.sigmas:.0f} one-sigmas ({check.heading_difference_deg:.2g}° of level heading) away "
-            "from the maximum-likelihood fit of the same model: the method is biased on these samples; prefer "
-            "method='auto' (or 'ml', 'als')"
-        )
+    if thorough:
+        goodness = _goodness(fitted, raw, weights, refit if held_out else None)
+        if refit is not None and check is not None and check.consistent:  # a biased method's halves differ anyway
+            halves = _halves(rows, refit, uncertainty)
+    evidence = Evidence(
+        kind=kind,
+        residual_rms=fitted.rms,
+        ellipsoid_rms=None if kind == "full" else _ellipsoid_rms(raw, weights),
+        coverage=cover,
+        observability=observability,
+        uncertainty=uncertainty,
+        known_field=_known_field(calibration),
+        consistency=check,
+        goodness=goodness,
+        halves=halves,
+        unit=calibration.unit,
+        method=calibration.method,
+        flat=flat_axis(raw, weights),
+        axis_ratio=float(np.max(calibration.semi_axes) / np.min(calibration.semi_axes)),
+    )
+    support = judge(evidence)
     return Diagnostics(
         n_samples=total,
         n_used=int(indices.size),
@@ -377,28 +217,111 @@ def diagnose(
         observability=observability,
         uncertainty=uncertainty,
         goodness=goodness,
-        warnings=tuple(warnings),
+        warnings=support.warnings,
         notes=tuple(notes),
         unit=calibration.unit,
         consistency=check,
+        support=support,
+    )
+
+
+#: Samples whose smallest principal spread is below this share of the largest lie close to a plane.
+FLAT_RATIO = 0.25
+
+
+def flat_axis(raw: NDArray[np.float64], weights: NDArray[np.float64] | None = None) -> tuple[str, float] | None:
+    """The axis raw samples hardly extend along and their spread along it over the largest, when below 0.25."""
+    from ..geometry.frame import axis_words
+
+    spreads, directions = np.linalg.eigh(np.cov(raw.T, aweights=weights))
+    ratio = float(np.sqrt(max(spreads[0], 0.0) / spreads[2])) if spreads[2] > 0 else 0.0
+    if ratio > FLAT_RATIO:
+        return None
+    direction = directions[:, 0] * np.sign(directions[np.argmax(np.abs(directions[:, 0])), 0])
+    return axis_words(direction).lstrip("+"), ratio
+
+
+def _ellipsoid_rms(raw: NDArray[np.float64], weights: NDArray[np.float64]) -> float | None:
+    """RMS sphere distance of the samples under the paper's algebraic ellipsoid (None when there is none).
+
+    What a full ellipsoid leaves of the samples, to tell "the samples lie on no ellipsoid" from "this
+    restricted model cannot describe the ellipsoid they lie on".
+    """
+    found = algebraic_ellipsoid(Statistics.from_samples(raw))
+    if isinstance(found, str):
+        return None
+    reference = calibration_from_ellipsoid("ellipsoid", *found)
+    distances = unchecked_sphere_distances(reference, raw)
+    return float(np.sqrt(np.sum(weights * distances**2) / np.sum(weights)))
+
+
+def _known_field(calibration: Calibration) -> tuple[float, float] | None:
+    """(given, fitted) field strength when the user gave one and the method kept the fitted value."""
+    fitted = calibration.details.get("fitted_field_strength")
+    if not calibration.details.get("field_strength_given") or not isinstance(fitted, (int, float)):
+        return None
+    if calibration.details.get("radius_pinned"):
+        return None  # the sphere fitted with the radius pinned checked it against the samples itself
+    return float(calibration.field_strength), float(fitted)
+
+
+#: Each half of the recording is refitted on at most this many samples.
+HALF_SAMPLES = 5_000
+
+
+def _halves(
+    rows: NDArray[np.float64], refit: Refit, uncertainty: Uncertainty
+) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
+    """Offset of the second half of the recording minus the first's, and the one-sigma of that difference.
+
+    Each half holds half the samples, so its offset has √2 times the whole recording's one-sigma (the
+    honest one, with the correlation in time counted); their difference 2 times. None when a half cannot
+    be fitted (too few samples, or too few directions in one half: that is the coverage's to report).
+    """
+    if uncertainty.offset_sigma is None or rows.shape[0] < 100:
+        return None
+    middle = rows.shape[0] // 2
+    offsets = []
+    for half in (rows[:middle], rows[middle:]):
+        step = max(1, half.shape[0] // HALF_SAMPLES)
+        try:
+            offsets.append(refit(half[::step]).offset)
+        except (MagfitError, np.linalg.LinAlgError):
+            return None
+    difference = offsets[1] - offsets[0]
+    sigma = 2.0 * np.asarray(uncertainty.offset_sigma)
+    return (
+        (float(difference[0]), float(difference[1]), float(difference[2])),
+        (float(sigma[0]), float(sigma[1]), float(sigma[2])),
     )
 
 
 def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Diagnostics:
-    """What a :class:`~magfit.Statistics` allows: the weakly determined directions, from the moments.
+    """What a :class:`~magfit.Statistics` allows: the verdict and the weak directions, from the moments.
 
     See :mod:`magfit.diagnostics.moments`: the directions are named, without one-sigmas (the algebraic
-    residual would understate them); coverage, uncertainty, consistency and held-out goodness need the
-    samples, and the result says so.
+    residual would understate them); a direction with less than 1/1000 of a full tumble's information is
+    not determined (refused), as are samples whose algebraic residual exceeds what any ellipsoid leaves.
+    Coverage, uncertainty, consistency and held-out goodness need the samples, and the result says so.
     """
     from .moments import analyse_statistics
 
-    observability, mean, std = analyse_statistics(statistics, calibration, _model_kind(calibration))
+    observability, mean, std = analyse_statistics(statistics, calibration, model_kind(calibration))
+    refusals = []
     undetermined = [w.description for w in observability.weak if not w.determined]
-    warnings = (
-        (f"the samples do not determine {'; '.join(undetermined)}: those numbers are noise; record more attitudes",)
-        if undetermined
-        else ()
+    if undetermined:
+        refusals.append(f"the samples do not determine {'; '.join(undetermined)}: those numbers would be noise")
+    if std > NO_ELLIPSOID_RMS:
+        refusals.append(
+            f"the samples lie on no ellipsoid: their algebraic distance to the fitted one is {100 * std:.0f} % of the "
+            "field (RMS)"
+        )
+    weaknesses = tuple(f"{w.description} is weakly determined" for w in observability.weak if w.determined)
+    support = Support(
+        verdict="refused" if refusals else "weak" if weaknesses else "supported",
+        refusals=tuple(refusals),
+        weaknesses=weaknesses,
+        advice="record again turning the sensor through all attitudes (a full tumble is best)",
     )
     return Diagnostics(
         n_samples=statistics.n,
@@ -407,30 +330,15 @@ def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Dia
         observability=observability,
         uncertainty=None,
         goodness=None,
-        warnings=warnings,
+        warnings=support.warnings,
         notes=(
             f"Fitted from Statistics: the weak directions come from the moments (algebraic residual: mean "
             f"{mean:+.4f}, std {std:.4f} of the field); coverage, uncertainty, consistency and held-out goodness "
             "need the samples: run magfit.diagnose(calibration, samples) on (a subsample of) them.",
         ),
         unit=calibration.unit,
+        support=support,
     )
-
-
-def attach_diagnostics(calibration: Calibration, samples: NDArray[Any] | None, statistics: Statistics) -> Calibration:
-    """``calibration`` with its diagnostics in ``details["diagnostics"]`` (what :func:`magfit.fit` returns).
-
-    A diagnosis that fails (a degenerate calibration) is recorded as a warning, never raised: the fit
-    itself succeeded.
-    """
-    from dataclasses import replace
-
-    try:
-        report = diagnose(calibration, samples) if samples is not None else diagnose_statistics(calibration, statistics)
-    except (MagfitError, np.linalg.LinAlgError) as error:
-        n = statistics.n
-        report = Diagnostics(n, 0, None, None, None, None, (f"the diagnostics could not be computed: {error}",), ())
-    return replace(calibration, details={**calibration.details, "diagnostics": report.to_dict()})
 
 
 def _weighted_evaluation(distances: NDArray[np.float64], weights: NDArray[np.float64]) -> Evaluation:
@@ -448,18 +356,14 @@ def _weighted_evaluation(distances: NDArray[np.float64], weights: NDArray[np.flo
 
 
 def _goodness(
-    calibration: Calibration,
+    fitted: Evaluation,
     raw: NDArray[np.float64],
-    z: NDArray[np.float64],
     weights: NDArray[np.float64],
-    held_out: bool,
+    refit: Refit | None,
 ) -> Goodness:
-    fitted = _weighted_evaluation(np.linalg.norm(z, axis=1) - 1.0, weights)
-    if not held_out:
-        return Goodness(fitted, None, 0, "not requested")
-    refit = _refitter(calibration)
+    """The paper's metric on the fitted samples and, with ``refit``, on held-out ones (k-fold refits)."""
     if refit is None:
-        return Goodness(fitted, None, 0, f"method {calibration.method!r} cannot be refitted on part of the samples")
+        return Goodness(fitted, None, 0, "no refit of the method was given (or not requested)")
     n = raw.shape[0]
     if n < 10 * FOLDS:
         return Goodness(fitted, None, 0, f"too few samples ({n}) for {FOLDS}-fold cross-validation")
@@ -477,55 +381,3 @@ def _goodness(
         "on the other four."
     )
     return Goodness(fitted, _weighted_evaluation(distances, weights), FOLDS, note)
-
-
-def _refitter(calibration: Calibration) -> Any:
-    """A function refitting ``calibration``'s method (with its recorded options) on (n, 3) samples."""
-    from ..methods import METHODS, FitInput
-    from ..statistics import Statistics
-
-    name = calibration.method
-    if name not in METHODS:
-        return None
-    spec = METHODS[name]
-    options = {key: calibration.details[key] for key in spec.options if key in calibration.details}
-    if name == "auto" and "chosen_model" in calibration.details:
-        from ..methods.auto import fit_chosen
-
-        chosen = str(calibration.details["chosen_model"])
-        return lambda samples: fit_chosen(chosen, samples)
-
-    def run(samples: NDArray[np.float64]) -> Calibration:
-        statistics = Statistics.from_samples(samples)
-        try:
-            return spec.function(FitInput(statistics, samples), **options)
-        except TypeError as error:  # an option recorded in another form than the method takes
-            raise CalibrationError(f"cannot refit {name!r} with options {options}: {error}") from None
-
-    return run
-
-
-def _warnings(cover: Coverage, observability: Observability, goodness: Goodness) -> list[str]:
-    warnings = []
-    if cover.share < 0.5:
-        warnings.append(
-            f"the samples cover only {100 * cover.share:.0f} % of the directions: the calibration is extrapolated "
-            "over the rest; record a fuller tumble"
-        )
-    for axis in cover.unseen_axes:
-        warnings.append(
-            f"no samples with the field near +{axis} or −{axis}: the sensor only turned about {axis}, so the offset "
-            f"and scale along {axis} are not determined by the samples; tilt the sensor so both ends of {axis} face "
-            "the field"
-        )
-    undetermined = [w for w in observability.weak if not w.determined]
-    if undetermined:
-        parts = "; ".join(w.description for w in undetermined)
-        turn = f" (the sensor only turned about {observability.turn_axis})" if observability.turn_axis else ""
-        warnings.append(
-            f"the samples do not determine {parts}{turn}: those numbers are noise; record more attitudes (tilt the "
-            "sensor further); the heading uncertainty includes them"
-        )
-    if goodness.held_out is not None and goodness.held_out.std > 1.25 * goodness.fitted.std:
-        warnings.append("the fit does much better on its own samples than on held-out ones: it is over-fitted")
-    return warnings

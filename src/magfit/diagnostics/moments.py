@@ -27,8 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
+from ..geometry.frame import symmetric_unit_map
 from ..statistics import DESIGN_EXPONENTS, DESIGN_WEIGHTS, Statistics
-from ._geometry import symmetric_unit_map
 from .uncertainty import Observability, WeakDirection, _weak_directions
 
 #: Without the samples, a direction is called not determined below this share of a full tumble's information.

@@ -1,7 +1,7 @@
 """How well the samples determine a calibration: observability and parameter uncertainty.
 
 Both come from the Jacobian J of the geometric residual ``r = |L (x − V)| − 1`` (see
-:mod:`magfit.diagnostics._geometry`) at the fitted calibration, in the calibration's corrected frame,
+:mod:`magfit.geometry.frame`) at the fitted calibration, in the calibration's corrected frame,
 where its parameters are ``v = 0, L = I``: an offset there is a fraction of the field strength along
 the corrected axes, a change of L a relative change of scale.
 
@@ -26,19 +26,19 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
-from ._geometry import (
+from ..findings import Consistency, Observability, Uncertainty, WeakDirection
+from ..geometry.frame import (
     N_PARAMETERS,
     Frame,
     describe_parameter_direction,
     distance_jacobian,
     distances,
+    distances_and_jacobian,
     parameters,
     symmetric_unit_map,
     unit_map,
@@ -52,219 +52,12 @@ WEAK_INFORMATION = 0.05
 UNDETERMINED_SIGMA = 0.05
 #: Default magnetic inclination assumed for the heading uncertainty, degrees.
 DEFAULT_INCLINATION_DEG = 60.0
-
-
-@dataclass(frozen=True)
-class WeakDirection:
-    """A combination of parameters the samples pin down poorly.
-
-    Attributes
-    ----------
-    description : str
-        The parameters it moves, in words ("the offset along z together with the scale along z").
-    relative_information : float
-        Its information per sample divided by what a full uniform tumble gives (1 = as good).
-    sigma : float or None
-        Its one-sigma, as a fraction of the field strength (None: not determined at all, or not computed:
-        a diagnosis from ``Statistics`` gives none).
-    determined : bool
-        False when ``sigma`` exceeds 5 % of the field (without a sigma: when the information is below
-        1/1000 of a tumble's, or zero).
-    vector : tuple of float
-        The unit direction in parameter space (corrected frame; layout of ``parameter_names``).
-    """
-
-    description: str
-    relative_information: float
-    sigma: float | None
-    determined: bool
-    vector: tuple[float, ...]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "description": self.description,
-            "relative_information": self.relative_information,
-            "sigma": self.sigma,
-            "determined": self.determined,
-            "vector": list(self.vector),
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> WeakDirection:
-        return cls(
-            description=str(data["description"]),
-            relative_information=float(data["relative_information"]),
-            sigma=None if data["sigma"] is None else float(data["sigma"]),
-            determined=bool(data["determined"]),
-            vector=tuple(float(v) for v in data["vector"]),
-        )
-
-    def sentence(self) -> str:
-        share = self.relative_information
-        amount = (
-            f"{share:.2g} of the information a full tumble gives"
-            if share >= 0.01
-            else f"1/{1 / max(share, 1e-12):.0f} of the information a full tumble gives"
-        )
-        if self.sigma is None:
-            state = "is weakly determined" if self.determined else "is not determined"
-            return f"{_capital(self.description)} {state} (the samples carry {amount})."
-        if not self.determined:
-            return (
-                f"{_capital(self.description)} is not determined (one-sigma {100 * self.sigma:.1f} % of the field; "
-                f"the samples carry {amount})."
-            )
-        return (
-            f"{_capital(self.description)} is weakly determined (one-sigma {100 * self.sigma:.2f} % of the "
-            f"field; the samples carry {amount})."
-        )
-
-
-def _capital(text: str) -> str:
-    return text[:1].upper() + text[1:]
-
-
-@dataclass(frozen=True)
-class Observability:
-    """How well the samples determine each part of the model.
-
-    Attributes
-    ----------
-    model : {"sphere", "diag", "full"}
-        The parameterisation analysed (from the calibration's structure).
-    condition : float
-        Largest over smallest eigenvalue of the per-sample information (corrected frame); a full tumble
-        gives about 3, larger is worse, inf when a direction is not determined at all.
-    weak : tuple of WeakDirection
-        The weakly or not determined directions, weakest first.
-    turn_axis : str or None
-        When the field direction in the sensor frame moved only on a cone (the sensor turned about one
-        axis), that axis ("+z", "+x−y" ...); else None.
-    """
-
-    model: str
-    condition: float | None
-    weak: tuple[WeakDirection, ...]
-    turn_axis: str | None
-
-    @property
-    def determined(self) -> bool:
-        """True when every direction is determined (weak ones included)."""
-        return all(w.determined for w in self.weak)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "model": self.model,
-            "condition": self.condition,
-            "weak": [w.to_dict() for w in self.weak],
-            "turn_axis": self.turn_axis,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Observability:
-        return cls(
-            model=str(data["model"]),
-            condition=None if data["condition"] is None else float(data["condition"]),
-            weak=tuple(WeakDirection.from_dict(w) for w in data["weak"]),
-            turn_axis=data.get("turn_axis"),
-        )
-
-    def summary(self) -> list[str]:
-        condition = "unbounded" if self.condition is None else f"{self.condition:.3g}"
-        if not self.weak:
-            return [
-                f"Observability: every parameter of the {self.model} model is well determined (condition {condition})."
-            ]
-        lines = [f"Observability: condition {condition} for the {self.model} model (a full tumble gives about 3)."]
-        if self.turn_axis is not None:
-            lines.append(
-                f"The sensor only turned about its {self.turn_axis} axis: directions off that cone were never seen."
-            )
-        lines.extend(w.sentence() for w in self.weak)
-        return lines
-
-
-@dataclass(frozen=True)
-class Uncertainty:
-    """One-sigma uncertainty of the calibration implied by the residuals and the sample geometry.
-
-    Attributes
-    ----------
-    offset_sigma : tuple of 3 float or None
-        One-sigma of the hard-iron offset along x, y, z, input units (None: not determined).
-    scale_sigma : tuple of 3 float or None
-        Relative one-sigma of the correction's scale along x, y, z (0.01 = 1 %).
-    field_strength_sigma : float or None
-        Relative one-sigma of the field strength.
-    heading_sigma_deg : float or None
-        RMS over all headings of the heading one-sigma at level attitude, degrees.
-    heading_sigma_max_deg : float or None
-        The worst heading's one-sigma, degrees.
-    inclination_deg : float
-        The inclination assumed for the heading figures.
-    residual_sigma : float
-        Standard deviation of the geometric residual, fraction of the field strength.
-    n_samples : int
-        Samples the information was scaled to (all samples the fit used, assumed independent).
-    """
-
-    offset_sigma: tuple[float, float, float] | None
-    scale_sigma: tuple[float, float, float] | None
-    field_strength_sigma: float | None
-    heading_sigma_deg: float | None
-    heading_sigma_max_deg: float | None
-    inclination_deg: float
-    residual_sigma: float
-    n_samples: int
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "offset_sigma": None if self.offset_sigma is None else list(self.offset_sigma),
-            "scale_sigma": None if self.scale_sigma is None else list(self.scale_sigma),
-            "field_strength_sigma": self.field_strength_sigma,
-            "heading_sigma_deg": self.heading_sigma_deg,
-            "heading_sigma_max_deg": self.heading_sigma_max_deg,
-            "inclination_deg": self.inclination_deg,
-            "residual_sigma": self.residual_sigma,
-            "n_samples": self.n_samples,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Uncertainty:
-        def triple(value: Any) -> tuple[float, float, float] | None:
-            return None if value is None else (float(value[0]), float(value[1]), float(value[2]))
-
-        def number(value: Any) -> float | None:
-            return None if value is None else float(value)
-
-        return cls(
-            offset_sigma=triple(data["offset_sigma"]),
-            scale_sigma=triple(data["scale_sigma"]),
-            field_strength_sigma=number(data["field_strength_sigma"]),
-            heading_sigma_deg=number(data["heading_sigma_deg"]),
-            heading_sigma_max_deg=number(data["heading_sigma_max_deg"]),
-            inclination_deg=float(data["inclination_deg"]),
-            residual_sigma=float(data["residual_sigma"]),
-            n_samples=int(data["n_samples"]),
-        )
-
-    def summary(self, unit: str | None = None) -> list[str]:
-        label = f" {unit}" if unit else ""
-        if self.offset_sigma is None or self.heading_sigma_deg is None:
-            return [
-                "Uncertainty: not available: part of the model is not determined by the samples "
-                "(see observability), so any number would be noise."
-            ]
-        offset = ", ".join(f"{value:.3g}" for value in self.offset_sigma)
-        lines = [f"Uncertainty (one-sigma): offset ± ({offset}){label} along x, y, z."]
-        if self.scale_sigma is not None:
-            scales = ", ".join(f"{100 * value:.2g}" for value in self.scale_sigma)
-            lines.append(f"Scale ± ({scales}) % along x, y, z.")
-        lines.append(
-            f"Heading at level attitude: ± {self.heading_sigma_deg:.2g}° (RMS over headings; worst "
-            f"± {self.heading_sigma_max_deg:.2g}°), for an inclination of {self.inclination_deg:.0f}°."
-        )
-        return lines
+#: The field directions stayed on a cone about an axis when they spread less than this along it (about ±2°
+#: of tilt): the sensor only turned about that axis, which no information matrix at a fitted point shows.
+TURN_SPREAD = 0.02
+#: Batches of the recording for the batch-means covariance, and the fewest rows a batch needs.
+_BATCHES = 20
+_BATCH_ROWS = 10
 
 
 def _parameter_field_map(kind: str, y: NDArray[np.float64], lmat: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -304,14 +97,14 @@ def _identity_parameters(kind: str) -> NDArray[np.float64]:
 
 def _turn_axis(z: NDArray[np.float64], weights: NDArray[np.float64]) -> str | None:
     """The axis the field direction turned about, when it stayed on a cone (spread < 0.05 along it)."""
-    from ._geometry import axis_words
+    from ..geometry.frame import axis_words
 
     directions = z / np.linalg.norm(z, axis=1)[:, None]
     mean = np.average(directions, axis=0, weights=weights)
     centred = directions - mean
     covariance = (centred * weights[:, None]).T @ centred / weights.sum()
     spreads, axes = np.linalg.eigh(covariance)
-    if spreads[0] < 0.05**2 and spreads[0] < 0.01 * spreads[1]:
+    if spreads[0] < TURN_SPREAD**2 and spreads[0] < 0.01 * spreads[1]:
         return axis_words(axes[:, 0] * (1.0 if axes[np.argmax(np.abs(axes[:, 0])), 0] > 0 else -1.0))
     return None
 
@@ -322,6 +115,8 @@ def analyse(
     kind: str,
     calibration: Calibration,
     inclination_deg: float,
+    series: NDArray[np.float64] | None = None,
+    pinned: bool = False,
 ) -> tuple[Observability, Uncertainty]:
     """Observability and uncertainty of ``calibration`` (a model of ``kind``) on raw samples.
 
@@ -335,6 +130,13 @@ def analyse(
     calibration : Calibration
     inclination_deg : float
         Inclination assumed for the heading uncertainty, degrees.
+    series : ndarray, shape (m, 3), optional
+        The samples in recording order (all of them, or a regular stride), each standing for the same
+        number of samples: the one-sigmas then also cover what independent samples would not
+        (:func:`correlation_excess`). None: the samples are taken as independent.
+    pinned : bool
+        The fit pinned the scale to a known field strength (a sphere with ``field_strength``): only the
+        offset was fitted, so only the offset is analysed.
     """
     z = Frame.corrected(calibration).normalise(raw)
     p = _identity_parameters(kind)
@@ -347,22 +149,39 @@ def analyse(
     information = (jac * weights[:, None]).T @ jac  # Jᵀ W J
     dof = max(total - k, 1.0)
     residual_variance = float(np.sum(weights * residual**2) / dof)
-    condition, weak, null = _weak_directions(information, residual_variance, total, kind)
+    excess = None
+    free = 3 if pinned else k
+    if series is not None:
+        z_series = Frame.corrected(calibration).normalise(series)
+        excess = correlation_excess(p, z_series, kind, total, residual_variance, free=free)
+    condition, weak, null = _weak_directions(information, residual_variance, total, kind, excess, free=free)
     observability = Observability(kind, condition, weak, _turn_axis(z, weights))
     n_samples = round(total)
     if null:
         return observability, Uncertainty(
             None, None, None, None, None, float(inclination_deg), math.sqrt(residual_variance), n_samples
         )
-    return observability, _uncertainty(raw, weights, kind, calibration, inclination_deg, n_samples)
+    return observability, _uncertainty(raw, weights, kind, calibration, inclination_deg, n_samples, series, pinned)
 
 
 def _weak_directions(
-    information: NDArray[np.float64], residual_variance: float, total: float, kind: str
+    information: NDArray[np.float64],
+    residual_variance: float,
+    total: float,
+    kind: str,
+    excess: NDArray[np.float64] | None = None,
+    free: int | None = None,
 ) -> tuple[float | None, tuple[WeakDirection, ...], bool]:
-    """Condition, weak directions (weakest first) and whether one is not determined at all, from JᵀWJ."""
-    k = information.shape[0]
-    eigenvalues, eigenvectors = np.linalg.eigh(information / total)
+    """Condition, weak directions (weakest first) and whether one is not determined at all, from JᵀWJ.
+
+    ``excess``: covariance to add to ``σ² (JᵀWJ)⁻¹`` for correlated samples and model error
+    (:func:`correlation_excess`), in the same parameters. ``free``: only the first ``free`` parameters
+    were fitted (the offset, when the scale was pinned); the rest are held.
+    """
+    k = information.shape[0] if free is None else free
+    eigenvalues, small_vectors = np.linalg.eigh(information[:k, :k] / total)
+    eigenvectors = np.zeros((information.shape[0], k))
+    eigenvectors[:k] = small_vectors  # directions in the full parameter layout, zero along held parameters
     tumble = _tumble_information(kind)
     largest = float(eigenvalues[-1])
     null = eigenvalues <= 1e-10 * largest
@@ -373,7 +192,12 @@ def _weak_directions(
         relative = float(eigenvalues[i] / (vector @ tumble @ vector))
         if relative >= WEAK_INFORMATION:
             continue
-        sigma = None if null[i] else math.sqrt(residual_variance / (total * float(eigenvalues[i])))
+        sigma = None
+        if not null[i]:
+            variance = residual_variance / (total * float(eigenvalues[i]))
+            if excess is not None:
+                variance += max(float(vector @ excess @ vector), 0.0)
+            sigma = math.sqrt(variance)
         weak.append(
             WeakDirection(
                 description=describe_parameter_direction(vector, kind),
@@ -393,12 +217,15 @@ def _uncertainty(
     calibration: Calibration,
     inclination_deg: float,
     n_samples: int,
+    series: NDArray[np.float64] | None = None,
+    pinned: bool = False,
 ) -> Uncertainty:
     """The Gauss-Newton covariance of the distances to the ellipsoid, in the isotropic frame (x − V) / B.
 
     The noise is isotropic on the raw samples, so the residual whose covariance formula holds is the
-    distance to the ellipsoid measured there (``_geometry.distances``), not the residual in the corrected
-    space, whose noise is stretched by the soft-iron correction.
+    distance to the ellipsoid measured there (``geometry.frame.distances``), not the residual in the
+    corrected space, whose noise is stretched by the soft-iron correction. With ``series`` (the samples
+    in recording order), the excess that correlated samples and model error add is included.
     """
     strength = calibration.field_strength
     frame = Frame(np.array(calibration.offset), np.eye(3) / strength)
@@ -411,8 +238,71 @@ def _uncertainty(
     total = float(weights.sum())
     residual_variance = float(np.sum(weights * distance**2) / max(total - k, 1.0))
     information = (jac * weights[:, None]).T @ jac  # Jᵀ W J
-    covariance = residual_variance * np.linalg.inv(information)  # Cov(p) = σ² (Jᵀ W J)⁻¹
-    return _report(covariance, kind, lmat, strength * np.eye(3), inclination_deg, residual_variance, n_samples)
+    free = 3 if pinned else k  # a pinned scale is held: only the offset has a covariance
+    covariance = np.zeros((k, k))
+    covariance[:free, :free] = residual_variance * np.linalg.inv(information[:free, :free])  # σ² (Jᵀ W J)⁻¹
+    independent_trace = float(np.trace(covariance))
+    if series is not None:
+        covariance += correlation_excess(p, frame.normalise(series), kind, total, residual_variance, free=free)
+    effective = n_samples * independent_trace / max(float(np.trace(covariance)), 1e-300)
+    return _report(
+        covariance, kind, lmat, strength * np.eye(3), inclination_deg, residual_variance, n_samples, effective
+    )
+
+
+def correlation_excess(
+    p: NDArray[np.float64],
+    z: NDArray[np.float64],
+    kind: str,
+    total: float,
+    residual_variance: float,
+    free: int | None = None,
+) -> NDArray[np.float64]:
+    """The covariance that samples in recording order add beyond ``σ² (JᵀWJ)⁻¹``: batch means of the score.
+
+    The Gauss-Newton covariance assumes independent samples. A magnetometer read at 100 Hz while turned by
+    hand is not: its noise is correlated from one sample to the next (filters, sample-and-hold), and a
+    field or distortion that changes along the recording (a motor, a drift, a crustal anomaly) leaves
+    residuals that no calibration model holds, in long runs of one sign. Both make the fit vary more than
+    independent noise would. The score ``s_i = d_i ∂d_i/∂p`` sums to zero at the optimum; summed over B
+    contiguous batches of the recording, the spread of the batch sums estimates ``Var(Σ s)`` whatever the
+    correlation within a batch (batch means, e.g. Flegal & Jones, Ann. Statist. 38, 2010; with the
+    Jacobian, the sandwich covariance of a misspecified model, White, Econometrica 50, 1982):
+
+        Cov_sandwich = H⁻¹ (Σ_b S_b S_bᵀ · B / (B − 1)) H⁻¹,    H = Σ J_iᵀ J_i,  S_b = Σ_{i ∈ b} s_i
+
+    ``z`` are the samples in recording order (normalised as ``p``), each standing for ``total / m`` of
+    the fitted samples (a regular stride of a long log sees no correlation shorter than its step, so its
+    covariance is then an upper bound). Returned: the part of ``Cov_sandwich`` beyond what ``total``
+    independent samples would give (the positive eigenvalues of the difference), in the parameters of ``p``.
+    """
+    k = p.size
+    m = z.shape[0]
+    batches = min(_BATCHES, m // _BATCH_ROWS)
+    excess = np.zeros((k, k))
+    if batches < 4:
+        return excess
+    distance, jac = distances_and_jacobian(p, z, kind)
+    jac = jac[:, : k if free is None else free]  # held parameters have no score
+    scores = jac * distance[:, None]
+    edges = np.linspace(0, m, batches + 1).astype(np.int64)
+    sums = np.add.reduceat(scores, edges[:-1], axis=0)
+    sums -= sums.mean(axis=0)
+    spread = sums.T @ sums * batches / (batches - 1)
+    hessian = jac.T @ jac
+    try:
+        inverse = np.linalg.inv(hessian)
+    except np.linalg.LinAlgError:
+        return excess
+    sandwich = inverse @ spread @ inverse
+    # What independent samples would give, for all ``total`` of them (σ² H⁻¹ is for the m rows): with a
+    # stride, the m rows' sandwich bounds the whole recording's covariance from above.
+    independent = residual_variance * inverse * (m / total)
+    difference = sandwich - independent
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (difference + difference.T))
+    fitted = jac.shape[1]
+    excess[:fitted, :fitted] = (eigenvectors * np.clip(eigenvalues, 0.0, None)) @ eigenvectors.T
+    return excess
 
 
 def _report(
@@ -423,6 +313,7 @@ def _report(
     inclination_deg: float,
     residual_variance: float,
     n_samples: int,
+    effective_samples: float | None = None,
 ) -> Uncertainty:
     """One-sigma figures from Cov(p) of parameters (v, L) whose offset moves V by ``offset_map @ v``."""
     k = covariance.shape[0]
@@ -458,68 +349,8 @@ def _report(
         inclination_deg=float(inclination_deg),
         residual_sigma=math.sqrt(residual_variance),
         n_samples=n_samples,
+        effective_samples=effective_samples,
     )
-
-
-@dataclass(frozen=True)
-class Consistency:
-    """How far the calibration is from the maximum-likelihood fit of the same model on the same samples.
-
-    The uncertainty describes the noise of the maximum-likelihood estimate, linearised at the calibration.
-    A biased estimator (the algebraic fits under strong noise or poor coverage, min/max) can sit far from
-    it, where the linearisation looks reassuring; this comparison shows that bias.
-
-    Attributes
-    ----------
-    offset_difference : tuple of 3 float
-        Calibration offset minus the maximum-likelihood offset, input units.
-    sigmas : float
-        That difference in units of the offset's one-sigma (Mahalanobis distance with the diagonal
-        one-sigmas; None when the uncertainty is not available).
-    heading_difference_deg : float
-        RMS over level headings of the heading difference between the two, degrees (same inclination as
-        the uncertainty).
-    consistent : bool
-        False when the difference exceeds 3 one-sigmas and 0.1° of heading.
-    """
-
-    offset_difference: tuple[float, float, float]
-    sigmas: float | None
-    heading_difference_deg: float
-    consistent: bool
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "offset_difference": list(self.offset_difference),
-            "sigmas": self.sigmas,
-            "heading_difference_deg": self.heading_difference_deg,
-            "consistent": self.consistent,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Consistency:
-        values = data["offset_difference"]
-        return cls(
-            offset_difference=(float(values[0]), float(values[1]), float(values[2])),
-            sigmas=None if data["sigmas"] is None else float(data["sigmas"]),
-            heading_difference_deg=float(data["heading_difference_deg"]),
-            consistent=bool(data["consistent"]),
-        )
-
-    def summary(self, unit: str | None = None) -> list[str]:
-        label = f" {unit}" if unit else ""
-        offset = ", ".join(f"{value:+.3g}" for value in self.offset_difference)
-        size = "" if self.sigmas is None else f" ({self.sigmas:.1f} one-sigmas)"
-        if self.sigmas is None or self.sigmas <= 3.0:
-            verdict = "within the uncertainty"
-        elif self.consistent:
-            verdict = "beyond the offset's uncertainty, but less than 0.1° of level heading"
-        else:
-            verdict = "beyond the uncertainty: this fit is biased, prefer method='auto' (or 'ml', 'als')"
-        return [
-            f"Consistency: the maximum-likelihood fit of the same model differs by ({offset}){label} in offset"
-            f"{size} and by {self.heading_difference_deg:.2g}° in level heading: {verdict}."
-        ]
 
 
 def consistency(
@@ -531,7 +362,7 @@ def consistency(
 ) -> Consistency | None:
     """Compare ``calibration`` with the maximum-likelihood fit of its model on ``raw`` (None if that fails)."""
     from ..errors import MagfitError
-    from ._geometry import calibration_from_parameters, maximum_likelihood
+    from ..geometry.frame import calibration_from_parameters, maximum_likelihood
 
     frame = Frame(np.array(calibration.offset), np.eye(3) / calibration.field_strength)
     z = frame.normalise(raw)

@@ -210,12 +210,13 @@ def jacobian(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArr
 
 
 def maximum_likelihood(
-    z: NDArray[np.float64], model: str, starts: list[NDArray[np.float64]]
+    z: NDArray[np.float64], model: str, starts: list[NDArray[np.float64]], *, cost_tolerance: float = 1e-6
 ) -> tuple[float, NDArray[np.float64]]:
     """Minimum of Σ d² (d: first-order distance to the ellipsoid) over ``model``'s parameters, and its p.
 
     Levenberg–Marquardt (:mod:`magfit._optimize`) from each start, for at most 20 iterations per
-    parameter; the best result, never worse than the best start.
+    parameter, until the cost changes by less than ``cost_tolerance`` (relative); the best result, never
+    worse than the best start.
     """
     from .._optimize import Evaluation, levenberg_marquardt
 
@@ -231,7 +232,7 @@ def maximum_likelihood(
         # The reference fits need the cost to a part in a million (BIC, consistency), not to round-off: the
         # looser stop ends the long crawls of a model that cannot describe the data (a sphere on steel).
         solution = levenberg_marquardt(
-            evaluate, start, n_residuals=z.shape[0], max_iterations=20 * start.size, cost_tolerance=1e-6
+            evaluate, start, n_residuals=z.shape[0], max_iterations=20 * start.size, cost_tolerance=cost_tolerance
         )
         for candidate in (solution.params, start):
             with np.errstate(all="ignore"):
@@ -253,7 +254,7 @@ def calibration_from_parameters(
     details: Mapping[str, Any] | None = None,
 ) -> Calibration:
     """The calibration of p: offset ``c + T⁻¹ v``, ellipsoid matrix ``Tᵀ L² T``, ``det(matrix) = 1``."""
-    from ..methods.quadric import calibration_from_ellipsoid
+    from .quadric import calibration_from_ellipsoid
 
     lmat = unit_map(p, kind)
     eigenvalues = np.linalg.eigvalsh(lmat)

@@ -15,10 +15,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import check_choice
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..statistics import Statistics
-from .registry import check_choice
 
 ROOTS = ("sqrt", "cholesky")
 _SIGN = {True: "+", False: "-"}
@@ -62,6 +62,16 @@ def quadric_ellipsoid(
     offset = statistics.centre + statistics.scale * centre_z
     shape = shape_z / statistics.scale**2
     return offset, shape
+
+
+def algebraic_ellipsoid(statistics: Statistics) -> tuple[NDArray[np.float64], NDArray[np.float64]] | str:
+    """The paper's least-squares ellipsoid (eq. 4 under |θ| = 1) of ``statistics``: centre and shape, or why none.
+
+    The smallest eigenvector of the scatter ``DᵀD`` minimises ``|Dθ|²`` subject to ``|θ| = 1``; see
+    :func:`quadric_ellipsoid` for the rest and :mod:`magfit.methods.ellipsoid` for the method.
+    """
+    eigenvectors = np.linalg.eigh(statistics.scatter)[1]
+    return quadric_ellipsoid(eigenvectors[:, 0], statistics)
 
 
 def ellipsoid_from_quadric(

@@ -45,8 +45,8 @@ from numpy.typing import NDArray
 from .._optimize import bracketed_root
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
+from ..geometry.quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
 from ..statistics import DESIGN_EXPONENTS, DESIGN_WEIGHTS, Statistics
-from .quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
 from .registry import FitInput, register
 
 __all__ = ["als_matrices", "als_theta", "estimate_noise_variance", "fit_als"]

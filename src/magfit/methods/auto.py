@@ -2,7 +2,7 @@
 
 The three models are nested (sphere ⊂ diag ⊂ full: 4, 6 and 9 parameters besides the rotation the
 data cannot see). ``auto`` fits each, refines it to the maximum-likelihood fit of its model (Levenberg-
-Marquardt on the first-order distances ``d`` of :mod:`magfit.diagnostics._geometry`, on a regular stride
+Marquardt on the first-order distances ``d`` of :mod:`magfit.geometry.frame`, on a regular stride
 of at most 20 000 samples), scores them by the Bayesian information criterion on RSS = Σ d²
 
     BIC = n ln(RSS / n) + k ln n              (Schwarz, Ann. Statist. 6, 1978; Gaussian residuals)
@@ -47,12 +47,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import check_choice
 from ..calibration import Calibration
+from ..diagnostics import diagnose
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import unchecked_sphere_distances
+from ..findings import Support
+from ..geometry.quadric import check_field_strength, pin_field_strength
+from ..sampling import thin
 from ..statistics import Statistics
-from .quadric import check_field_strength, pin_field_strength
-from .registry import METHODS, FitInput, check_choice, register
+from .registry import METHODS, FitInput, register
 from .robust import encode_indices, fit_model, fit_robust, resolve_model, robust_scale
 
 __all__ = ["CANDIDATES", "fit_auto", "fit_chosen"]
@@ -71,6 +75,18 @@ FLAT_SPREAD = 0.25
 FLAT_NOISE_SPREAD = 2.5
 #: A sample beyond this many robust standard deviations counts as an outlier when screening.
 _SCREEN_SIGMAS = 6.0
+#: Contiguous blocks of the recording held out in turn to compare the models.
+BLOCKS = 5
+#: Rows (a regular stride of the recording) for the outlier screen, the models' optima and the held-out
+#: blocks: enough for the 4-9 parameters, few enough to refit live several times a second.
+SCREEN_ROWS = 3_000
+CHOICE_ROWS = 5_000
+BLOCK_ROWS = 3_000
+#: Refits that only score held-out samples stop at this relative change of the cost (the fits the model
+#: choice compares and returns stop at 1e-6).
+SCORE_TOLERANCE = 1e-4
+#: A richer model must predict held-out blocks better by at least this share of the simpler one's distance.
+MIN_GAIN = 0.01
 
 
 @register(
@@ -130,12 +146,27 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     }
     ranked = sorted(bic, key=bic.__getitem__)
     best = ranked[0]
-    chosen, weak, fallback_reasons = _observable_choice(best, optima, kept)
+    verdicts = {model: _candidate_support(optima[model], kept) for model in CANDIDATES if model in optima}
+    determined = [model for model in CANDIDATES if model in verdicts and verdicts[model].verdict != "refused"]
+    if not determined:
+        raise CalibrationError(
+            "the samples determine no calibration model: "
+            + "; ".join(f"the {model} model: {'; '.join(verdicts[model].refusals)}" for model in verdicts)
+            + "; record again turning the sensor through more attitudes (a full tumble is best)"
+        )
+    held_out = _blocked_scores(kept, optima, determined)
+    chosen, steps = _choose(determined, held_out)
+    weak = list(verdicts[chosen].weaknesses)
     calibration = optima[chosen]
     if chosen == "full" or kept.shape[0] > 20_000:  # the optimum came from a stride of 20 000, or ml is due
         calibration = refine_chosen(chosen, calibration, kept)
     prefix = "robust " if robust else ""
-    reason = _reason(best, chosen, bic, weak, fallback_reasons, failed, screen_note)
+    passed_over = [
+        f"the {model} model was passed over: {'; '.join(verdicts[model].refusals)}"
+        for model in verdicts
+        if model not in determined
+    ]
+    reason = _reason(best, chosen, bic, steps, passed_over, weak, failed, screen_note)
     details: dict[str, Any] = {
         "chosen": prefix + chosen,
         "chosen_model": chosen,
@@ -147,6 +178,11 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
             "rss": {model: rss.get(model) for model in CANDIDATES},
             "parameters": dict(N_PARAMETERS),
             "n": m,
+        },
+        "held_out": {
+            "name": f"mean squared distance on {BLOCKS} contiguous blocks of the recording, each held out in turn",
+            "values": {m: [float(v) for v in held_out[m]] if m in held_out else None for m in CANDIDATES},
+            "determined": determined,
         },
         "weak": [w for w in weak],
         "failed": failed,
@@ -182,10 +218,10 @@ def _optimal_rss(
     at which the observability is judged. A model whose optimum has a semi-axis shorter than
     :data:`FLAT_SEMI_AXIS` residual distances is left out (third return value: why).
     """
-    from ..diagnostics import thin
-    from ..diagnostics._geometry import Frame, calibration_from_parameters, maximum_likelihood, parameters, unit_map
+    from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters, unit_map
+    from ..sampling import thin
 
-    rows = kept[thin(kept.shape[0], 2_000)]
+    rows = _stride(kept, CHOICE_ROWS)
     scale = kept.shape[0] / rows.shape[0]
     frame = Frame.of(rows)
     z = frame.normalise(rows)
@@ -235,8 +271,9 @@ def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) 
     ellipsoid matrix against 0.25 % for ``ml``). Sphere and diag, or when ``ml`` fails: that first-order
     fit, from ``start``.
     """
-    from ..diagnostics import MAX_SAMPLES, thin
-    from ..diagnostics._geometry import Frame, calibration_from_parameters, maximum_likelihood, parameters
+    from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters
+    from ..sampling import MAX_ANALYSED as MAX_SAMPLES
+    from ..sampling import thin
 
     rows = samples[thin(samples.shape[0], MAX_SAMPLES)]
     if model == "full" and "ml" in METHODS:
@@ -249,9 +286,35 @@ def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) 
     return calibration_from_parameters(optimum, model, frame, model)
 
 
-def fit_chosen(model: str, samples: NDArray[np.float64]) -> Calibration:
-    """What ``auto`` returns once it has chosen ``model``: the model's fit refined to maximum likelihood."""
-    return refine_chosen(model, fit_model(model, samples), samples)
+def _stride(samples: NDArray[np.float64], rows: int) -> NDArray[np.float64]:
+    """At most ``rows`` samples at a regular stride, in recording order (a view, no copy)."""
+    return samples[:: max(1, math.ceil(samples.shape[0] / rows))]
+
+
+def refit_first_order(
+    model: str, start: Calibration, samples: NDArray[np.float64], *, field_strength: float | None = None
+) -> Calibration:
+    """The first-order maximum-likelihood fit of ``model`` to ``samples``, from ``start``.
+
+    What the diagnostics refit for an ``auto`` calibration (held-out folds, halves): the chosen model,
+    fitted as the model choice fits it, from the returned calibration (a few iterations).
+    """
+    from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters
+
+    frame = Frame.of(samples)
+    z = frame.normalise(samples)
+    _, optimum = maximum_likelihood(z, model, [parameters(start, model, frame)], cost_tolerance=SCORE_TOLERANCE)
+    fitted = calibration_from_parameters(optimum, model, frame, model)
+    return pin_field_strength(fitted, check_field_strength(field_strength))
+
+
+def fit_chosen(model: str, samples: NDArray[np.float64], *, field_strength: float | None = None) -> Calibration:
+    """What ``auto`` returns once it has chosen ``model``: the model's fit refined to maximum likelihood.
+
+    ``field_strength``: the known field the user gave ``auto`` (the matrix is scaled to it).
+    """
+    refined = refine_chosen(model, fit_model(model, samples), samples)
+    return pin_field_strength(refined, check_field_strength(field_strength))
 
 
 def _embed(p: NDArray[np.float64], kind: str, target: str) -> NDArray[np.float64]:
@@ -271,14 +334,14 @@ def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.b
     enough to see 0.2 % of outliers, cheap on long logs. The robust candidates then find their own inliers
     among all samples.
     """
-    from ..diagnostics import thin
+    from ..sampling import thin
 
     everything = np.ones(samples.shape[0], dtype=bool)
     if mode == "keep":
         return False, everything, ""
-    rows = samples[thin(samples.shape[0], 2_000)]
+    rows = _stride(samples, SCREEN_ROWS)
     screen = None
-    for model in ("full", "sphere"):
+    for model in ("ellipsoid", "sphere"):  # the algebraic fit: enough to see far samples, and cheap
         try:
             screen = fit_robust(FitInput(Statistics.from_samples(rows), rows), model=model)
             break
@@ -321,78 +384,84 @@ def _fit_candidate(model: str, samples: NDArray[np.float64], robust: bool, stati
     return fit_model(model, samples, statistics)
 
 
-def _observable_choice(
-    best: str, optima: dict[str, Calibration], kept: NDArray[np.float64]
-) -> tuple[str, list[str], list[str]]:
-    """The best-scoring model, or the next simpler one whose parameters the samples determine.
+def _candidate_support(optimum: Calibration, kept: NDArray[np.float64]) -> Support:
+    """The verdict on one candidate, as :func:`magfit.fit` reaches it for any calibration (cheap checks only).
 
-    Two kinds of undetermined direction, two rules:
-
-    - a band of directions around an axis (both ends of it unseen, the axes at right angles seen): the
-      offset and scale along it are fixed by nothing in the samples. The model is passed over; if no model
-      is left, :class:`CalibrationError`.
-    - a combination of parameters with a one-sigma above 5 % of the field (e.g. the vertical offset and
-      scale under ±20° tilts): the BIC has already judged that the richer model fits significantly better,
-      so a simpler model's misfit would cost more than this uncertainty; the model is kept and the
-      direction is named ("not determined"), and the diagnostics warn.
-
-    Returns the chosen model, the descriptions of its weak directions and, for every model passed
-    over, why.
+    Judged at the model's maximum-likelihood optimum: an algebraic fit that drifted along a weak direction
+    (e.g. stretched along z to hug a cap of samples) makes the samples look better spread than they are;
+    the distances to the ellipsoid cannot shrink by such a stretch, so the optimum does not drift that way.
     """
-    passed_over: list[str] = []
-    order = [model for model in CANDIDATES[: CANDIDATES.index(best) + 1][::-1] if model in optima]
-    for model in order:
-        observability, unseen = _observe(optima[model], model, kept)
-        weak = [w.description + ("" if w.determined else " (not determined)") for w in observability.weak]
-        undetermined = [w.description for w in observability.weak if not w.determined]
-        band = [
-            f"the offset and scale along {axis} (no samples with the field near +{axis} or −{axis}: the sensor "
-            f"only turned about {axis})"
-            for axis in unseen
-        ]
-        cone = observability.turn_axis
-        if cone is not None and not band:  # a cone of directions: the same as a band, off the equator
-            axis = cone[1:] if len(cone) == 2 else f"the direction {cone}"
-            band.append(
-                f"the offset and scale along {axis} (the field direction stayed on a cone: the sensor only "
-                f"turned about {axis})"
+    report = diagnose(optimum, kept, thorough=False, max_samples=CHOICE_ROWS)
+    assert report.support is not None
+    return report.support
+
+
+def _blocked_scores(
+    kept: NDArray[np.float64], optima: dict[str, Calibration], models: list[str]
+) -> dict[str, NDArray[np.float64]]:
+    """Each model's mean squared distance on each of :data:`BLOCKS` contiguous blocks, fitted without it.
+
+    Held-out blocks that respect time: a real recording carries effects no calibration model holds (a
+    field that varies along the way, a vehicle's slowly changing fields), in long runs. A richer model
+    can bend its weakly determined parameters to follow them within the samples it sees (the BIC, which
+    counts every sample as independent evidence, then always prefers it on long logs); on a stretch of
+    the recording it did not see, that bending does not help, or hurts. Each block is predicted by the
+    model's first-order maximum-likelihood fit to the other blocks (Levenberg-Marquardt from the model's
+    optimum on all of them), on a regular stride of at most 5 000 samples.
+    """
+    from ..geometry.frame import Frame, distances, maximum_likelihood, parameters
+
+    rows = _stride(kept, BLOCK_ROWS)
+    frame = Frame.of(rows)
+    z = frame.normalise(rows)
+    edges = np.linspace(0, z.shape[0], BLOCKS + 1).astype(np.int64)
+    scores: dict[str, NDArray[np.float64]] = {}
+    for model in models:
+        start = parameters(optima[model], model, frame)
+        values = np.empty(BLOCKS)
+        for block in range(BLOCKS):
+            held = slice(edges[block], edges[block + 1])
+            train = np.concatenate([z[: edges[block]], z[edges[block + 1] :]])
+            _, p = maximum_likelihood(train, model, [start], cost_tolerance=SCORE_TOLERANCE)
+            with np.errstate(all="ignore"):
+                values[block] = float(np.mean(distances(p, z[held], model) ** 2))
+        scores[model] = np.where(np.isfinite(values), values, np.inf)
+    return scores
+
+
+def _choose(determined: list[str], held_out: dict[str, NDArray[np.float64]]) -> tuple[str, list[str]]:
+    """The simplest determined model, replaced by a richer one only where it predicts held-out blocks better.
+
+    A richer model wins when its mean held-out distance is lower by more than twice the standard error of
+    the block-by-block differences and by more than :data:`MIN_GAIN` of the simpler one's: a paired
+    comparison over the blocks, so that one block that the simpler model misses cannot decide alone.
+    Returns the model and the comparisons made, in words.
+    """
+    chosen = determined[0]
+    steps = []
+    for richer in determined[1:]:
+        difference = held_out[chosen] - held_out[richer]
+        if not np.all(np.isfinite(difference)):
+            steps.append(f"{richer} did not predict every held-out block")
+            continue
+        gain = float(difference.mean())
+        error = float(difference.std(ddof=1) / math.sqrt(difference.size))
+        base = float(held_out[chosen].mean())
+        if gain > 2.0 * error and gain > MIN_GAIN * base:
+            steps.append(f"{richer} predicts held-out blocks {100 * gain / base:.0f} % better than {chosen}")
+            chosen = richer
+        else:
+            share, spread = 100 * gain / max(base, 1e-300), 100 * error / max(base, 1e-300)
+            steps.append(
+                f"{richer} does not predict held-out blocks clearly better than {chosen} "
+                f"({share:+.1f} %, block-to-block error {spread:.1f} %)"
             )
-        if not band:
-            return model, weak, passed_over
-        passed_over.append(
-            f"the {model} model was passed over: the samples do not determine {'; '.join(band + undetermined)}"
-        )
-    raise CalibrationError(
-        "the samples determine no calibration model: "
-        + "; ".join(passed_over)
-        + "; record again turning the sensor through more attitudes (a full tumble is best)"
-    )
-
-
-def _observe(reference: Calibration, model: str, kept: NDArray[np.float64]) -> tuple[Any, tuple[str, ...]]:
-    """Observability of ``model`` and the axes the samples form a band around, seen through ``reference``.
-
-    The reference is the model's maximum-likelihood optimum: an algebraic fit that drifted along a weak
-    direction (e.g. stretched along z to hug a cap of samples) makes the samples look better spread than
-    they are; the distances to the ellipsoid cannot shrink by such a stretch, so the optimum does not drift
-    that way.
-    """
-    calibration = reference
-    from ..diagnostics import Frame, thin, weighted_even_subsample
-    from ..diagnostics.coverage import coverage
-    from ..diagnostics.uncertainty import analyse
-
-    candidates = thin(kept.shape[0])
-    z_candidates = Frame.corrected(calibration).normalise(kept[candidates])
-    chosen, weights = weighted_even_subsample(z_candidates, total=kept.shape[0])
-    z = z_candidates[chosen]
-    observability, _ = analyse(kept[candidates][chosen], weights, model, calibration, 60.0)
-    return observability, coverage(z).unseen_axes
+    return chosen, steps
 
 
 def _flatness(samples: NDArray[np.float64]) -> str:
     """Words for the direction the samples hardly extend along, when they lie near a plane."""
-    from ..diagnostics._geometry import axis_words
+    from ..geometry.frame import axis_words
 
     spreads, directions = np.linalg.eigh(np.cov(samples.T))
     ratio = math.sqrt(max(spreads[0], 0.0) / spreads[2])
@@ -409,17 +478,22 @@ def _reason(
     best: str,
     chosen: str,
     bic: dict[str, float],
-    weak: list[str],
+    steps: list[str],
     passed_over: list[str],
+    weak: list[str],
     failed: dict[str, str],
     screen_note: str,
 ) -> str:
     scores = ", ".join(f"{model} {value:.1f}" for model, value in sorted(bic.items(), key=lambda item: item[1]))
-    parts = [f"lowest BIC: {best} (BIC {scores})"]
-    if chosen != best:
-        parts.append("; ".join(passed_over) + f"; fell back to the {chosen} model")
+    parts = [
+        f"{chosen} model: the simplest the samples determine that no richer one predicts held-out stretches of "
+        "the recording clearly better"
+    ]
+    parts.extend(passed_over)
+    parts.extend(steps)
+    parts.append(f"lowest BIC: {best} (BIC {scores})")
     if weak:
-        parts.append(f"weakly determined in the {chosen} model: " + "; ".join(weak))
+        parts.append(f"weak in the {chosen} model: " + "; ".join(weak))
     if failed:
         parts.append("could not fit: " + ", ".join(sorted(failed)))
     if screen_note:

@@ -20,9 +20,8 @@ import numpy as np
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
-from .quadric import calibration_from_ellipsoid, check_field_strength, quadric_ellipsoid
+from ..geometry.quadric import calibration_from_ellipsoid, check_field_strength, quadric_ellipsoid
 from .registry import FitInput, register
-from .support import check_outlines_ellipsoid
 
 __all__ = ["DIAGONAL_TERMS", "fit_diag"]
 
@@ -32,7 +31,6 @@ DIAGONAL_TERMS = (0, 1, 2, 6, 7, 8, 9)
 
 @register(
     "diag",
-    checks=(check_outlines_ellipsoid,),
     min_samples=7,
     data="statistics",
     summary="hard iron + per-axis scale: axis-aligned ellipsoid fit (magcal 'diag', MotionCal 7 elements)",

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
-from .quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
+from ..geometry.quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
 from .registry import FitInput, register
 
 

@@ -48,9 +48,9 @@ from numpy.typing import NDArray
 from .._optimize import Evaluation, Solution, levenberg_marquardt
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
+from ..geometry.quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
 from ..statistics import Statistics
 from .als import als_theta
-from .quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
 from .registry import FitInput, register
 
 __all__ = ["COVARIANCE_PARAMETERS", "fit_ml", "orthogonal_distances"]

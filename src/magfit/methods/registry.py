@@ -58,8 +58,13 @@ class MethodSpec:
     @property
     def options(self) -> tuple[str, ...]:
         """Names of the keyword-only options the method accepts."""
+        return tuple(self.defaults)
+
+    @property
+    def defaults(self) -> dict[str, Any]:
+        """The keyword-only options with their default values."""
         parameters = inspect.signature(self.function).parameters.values()
-        return tuple(p.name for p in parameters if p.kind is inspect.Parameter.KEYWORD_ONLY)
+        return {p.name: p.default for p in parameters if p.kind is inspect.Parameter.KEYWORD_ONLY}
 
 
 METHODS: dict[str, MethodSpec] = {}
@@ -90,9 +95,3 @@ def get_method(name: str) -> MethodSpec:
         return METHODS[name]
     except (KeyError, TypeError):
         raise OptionError(f"unknown method {name!r}; valid methods: {', '.join(METHODS)}") from None
-
-
-def check_choice(option: str, value: object, choices: tuple[str, ...]) -> None:
-    """Raise an :class:`OptionError` when ``value`` is not one of ``choices``."""
-    if value not in choices:
-        raise OptionError(f"{option}={value!r} is not valid; choose one of: {', '.join(choices)}")

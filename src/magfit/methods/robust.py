@@ -30,8 +30,9 @@ from .._validation import check_support
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..evaluate import unchecked_sphere_distances
+from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..statistics import Statistics
-from .quadric import check_field_strength, pin_field_strength
+from .core import estimate
 from .registry import METHODS, FitInput, register
 
 __all__ = ["MODELS", "fit_model", "fit_robust", "rejected_indices", "resolve_model"]
@@ -62,14 +63,9 @@ def resolve_model(model: str) -> tuple[str, Callable[..., Calibration]]:
         if name == "diag":
             return "diag (algebraic, axis-aligned)", _fit_diag_algebraic
         raise OptionError(f"model={model!r} needs the method {name!r}, which this magfit does not have")
-    spec = METHODS[name]
-
     def run(samples: NDArray[np.float64], statistics: Statistics | None = None) -> Calibration:
         statistics = Statistics.from_samples(samples) if statistics is None else statistics
-        check_support(statistics, spec.name, spec.min_samples)
-        for check in getattr(spec, "checks", ()):  # the method's own refusals, as magfit.fit runs them
-            check(statistics, spec.name)
-        return spec.function(FitInput(statistics, samples))
+        return estimate(FitInput(statistics, samples), name)  # the refusals every caller of the method gets
 
     return name, run
 
@@ -85,7 +81,7 @@ def fit_model(model: str, samples: NDArray[np.float64], statistics: Statistics |
 
 def _fit_diag_algebraic(samples: NDArray[np.float64], statistics: Statistics | None = None) -> Calibration:
     """Offset + axis-aligned scales: eq. (4) with m₂ = m₃ = m₅ = 0, least squares under |θ| = 1."""
-    from .quadric import calibration_from_ellipsoid, ellipsoid_from_quadric
+    from ..geometry.quadric import calibration_from_ellipsoid, ellipsoid_from_quadric
 
     statistics = Statistics.from_samples(samples) if statistics is None else statistics
     check_support(statistics, "diag", 7)

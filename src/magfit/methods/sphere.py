@@ -19,10 +19,10 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
+from ..geometry.quadric import check_field_strength
 from ..statistics import Statistics
-from .quadric import check_field_strength
 from .registry import FitInput, register
-from .support import check_outlines_ellipsoid, ellipsoid_outline_problem
+from .support import ellipsoid_outline_problem
 
 
 def solve_sphere(statistics: Statistics) -> tuple[NDArray[np.float64], float]:
@@ -58,10 +58,8 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
     """
     known_field = check_field_strength(field_strength)
     statistics = data.statistics
-    if known_field is None:
-        # Without a known radius, samples that outline no ellipsoid cannot place a sphere's centre either;
-        # with it, a cap of directions (a vehicle that cannot tilt far) is enough.
-        check_outlines_ellipsoid(statistics, "sphere")
+    # Whether the samples place the centre (a cap of directions, a band) is the verdict's to judge, in the
+    # frame of the fitted sphere (magfit.diagnostics.verdict): a cap is enough for a sphere, not for more.
     centre_z, radius_squared_z = solve_sphere(statistics)
     if known_field is not None:
         free_centre_z = centre_z
@@ -83,7 +81,12 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
             matrix=np.eye(3),
             field_strength=known_field,
             n_samples=statistics.n,
-            details={"field_strength_given": True, "fitted_field_strength": fitted, "iterations": iterations},
+            details={
+                "field_strength_given": True,
+                "fitted_field_strength": fitted,
+                "radius_pinned": True,  # the fit itself used the known field: only the offset was fitted
+                "iterations": iterations,
+            },
         )
     if not radius_squared_z > 0:
         raise CalibrationError(

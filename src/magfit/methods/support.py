@@ -19,7 +19,7 @@ from ..statistics import Statistics
 
 def ellipsoid_outline_problem(statistics: Statistics) -> str | None:
     """Why the best algebraic quadric through the samples is no ellipsoid, or None when it is one."""
-    from .quadric import quadric_ellipsoid
+    from ..geometry.quadric import quadric_ellipsoid
 
     eigenvectors = np.linalg.eigh(statistics.scatter)[1]
     reason = quadric_ellipsoid(eigenvectors[:, 0], statistics)

@@ -1,0 +1,263 @@
+"""The support verdict: do the samples determine the calibration that was fitted to them?
+
+Every fit, from every method, is judged in the frame of the calibration it returned, before it is
+returned (:func:`magfit.fit`). The verdict is one of three:
+
+- ``"supported"``: every parameter of the model is determined and the samples lie on its ellipsoid
+  within a few per cent of the field;
+- ``"weak"``: returned, with warnings that name what is weak, in words, with the heading error it can
+  cause;
+- ``"refused"``: :class:`~magfit.CalibrationError` (exit 1 on the command line), naming what is missing
+  and what to record. ``allow_undetermined=True`` (``--force``) returns the calibration all the same,
+  with the refusal among its warnings.
+
+What is checked, in this order (each a refusal unless said otherwise):
+
+1. The samples lie on an ellipsoid at all: the RMS distance of the samples to the best ellipsoid (the
+   fit itself, or for the sphere and axis-aligned models the full algebraic ellipsoid as well) is below
+   :data:`NO_ELLIPSOID_RMS` of the field. A turned sensor in a steady field gives 0.5-5 % (the real
+   recordings in ``shared/data/real``: 0.4-4 %); a Gaussian cloud 39 %, a filled cube 28 %, a still
+   sensor's noise 40 %. Between :data:`LARGE_RESIDUAL_RMS` and that: weak.
+2. The sensor did not turn about one axis only: the field directions do not form a band or a cone
+   around an axis (then the offset and scale along that axis are fixed by nothing, whatever the
+   information matrix says at a fitted point).
+3. The information matrix of the returned model at the returned calibration: a combination of
+   parameters whose one-sigma (with the correlation of samples in time and the model error counted,
+   :func:`magfit.diagnostics.uncertainty.correlation_excess`) exceeds 5 % of the field is not
+   determined; one with less than 5 % of the information a full tumble gives is weak.
+4. A known field strength the samples contradict by more than :data:`FIELD_TOLERANCE` (usually a unit
+   mix-up, which is named).
+5. A fit more than :data:`BIASED_HEADING_DEG` of level heading away from the maximum-likelihood fit of
+   its own model: the method is biased on these samples (min/max, or an algebraic fit of a cap).
+6. Weak only: a restricted model (sphere, axis-aligned) that leaves much larger residuals than the
+   full ellipsoid; coverage below half the directions; a fit that does much worse on held-out samples
+   than on its own (over-fitted); a fit far from the maximum-likelihood fit of its model (biased); two
+   halves of the recording that give different offsets (the distortion changed while recording).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..findings import Consistency, Coverage, Goodness, Observability, Support, Uncertainty
+
+__all__ = [
+    "FIELD_TOLERANCE",
+    "LARGE_RESIDUAL_RMS",
+    "NO_ELLIPSOID_RMS",
+    "Evidence",
+    "judge",
+    "unit_mixup",
+]
+
+#: RMS distance to the best ellipsoid (fraction of the field) above which the samples lie on no ellipsoid.
+NO_ELLIPSOID_RMS = 0.20
+#: A fitted ellipsoid longer than this many times its thickness is no soft iron (the paper's steel case: 7).
+MAX_AXIS_RATIO = 20.0
+#: RMS distance above which the residuals are large enough to name (weak).
+LARGE_RESIDUAL_RMS = 0.05
+#: A known field strength further than this (relative) from the fitted one is contradicted by the samples.
+FIELD_TOLERANCE = 0.15
+#: A restricted model is named as missing the soft iron when its residual is this many times the full one's.
+RESTRICTED_RESIDUAL_RATIO = 2.0
+#: A fit further than this from the maximum-likelihood fit of its own model (degrees of level heading) is
+#: refused as biased; closer, it is named.
+BIASED_HEADING_DEG = 5.0
+#: Halves of a recording whose offsets differ by more than this many combined one-sigmas disagree.
+HALVES_SIGMAS = 3.0
+
+_RECORD_ADVICE = (
+    "record again turning the sensor slowly through all attitudes (every face pointing up and down in turn, "
+    "a full tumble is best), away from magnets, motors and steel"
+)
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What the verdict is reached from (computed by :func:`magfit.diagnostics.diagnose`).
+
+    Attributes
+    ----------
+    kind : {"sphere", "diag", "full"}
+        The model of the returned calibration.
+    residual_rms : float
+        RMS sphere distance of the analysed samples under the returned calibration (fraction of the field).
+    ellipsoid_rms : float or None
+        The same under the best full ellipsoid, when the returned model is restricted (None: not
+        computed, or no ellipsoid fits).
+    coverage, observability, uncertainty
+        In the frame of the returned calibration.
+    known_field : tuple of (given, fitted) or None
+        A field strength the user gave and the one the samples give, input units.
+    consistency, goodness : optional
+        The slower checks, when they ran.
+    halves : tuple of (offset difference, combined one-sigma), input units, or None
+        Offsets fitted on the two halves of the recording, when that ran.
+    unit : str or None
+        The samples' unit, for messages.
+    flat : tuple of (axis words, ratio) or None
+        When the raw samples lie close to a plane: the axis they hardly extend along and their spread
+        along it over the largest (below 0.25). It names the cause when no ellipsoid fits.
+    axis_ratio : float or None
+        The fitted ellipsoid's longest semi-axis over its shortest.
+    method : str or None
+        The method that fitted the calibration, for messages.
+    """
+
+    kind: str
+    residual_rms: float
+    ellipsoid_rms: float | None
+    coverage: Coverage
+    observability: Observability
+    uncertainty: Uncertainty
+    known_field: tuple[float, float] | None = None
+    consistency: Consistency | None = None
+    goodness: Goodness | None = None
+    halves: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    unit: str | None = None
+    flat: tuple[str, float] | None = None
+    axis_ratio: float | None = None
+    method: str | None = None
+
+
+def judge(evidence: Evidence) -> Support:
+    """The verdict on one calibration from its evidence (see the module docstring for the rules)."""
+    refusals: list[str] = []
+    weak: list[str] = []
+    cover, observability, uncertainty = evidence.coverage, evidence.observability, evidence.uncertainty
+    label = f" {evidence.unit}" if evidence.unit else ""
+    best = min(evidence.residual_rms, evidence.ellipsoid_rms or math.inf)
+    if best > NO_ELLIPSOID_RMS and evidence.flat is not None:
+        axis, ratio = evidence.flat
+        refusals.append(
+            f"the samples lie close to a plane (their spread along {axis} is {100 * ratio:.0f} % of the largest): the "
+            f"sensor turned mostly about {axis}, so no ellipsoid through them is determined (the best one misses them "
+            f"by {100 * best:.0f} % of the field); tilt the sensor so that both ends of {axis} face the field in turn"
+        )
+    elif best > NO_ELLIPSOID_RMS:
+        refusals.append(
+            f"the samples lie on no ellipsoid: their distance to the best one is {100 * best:.0f} % of the field "
+            "(RMS), where a sensor turned in a steady field gives a few per cent; the field or the distortion changed "
+            "while recording (a magnet, motors, a moving part), the sensor barely moved, or these are not "
+            "magnetometer readings"
+        )
+    elif best > LARGE_RESIDUAL_RMS:
+        weak.append(
+            f"the residuals are large: {100 * best:.1f} % of the field (RMS) where a few per cent are usual; the field "
+            "or the distortion changed while recording (motors, a magnet nearby) or the sensor is noisy: expect "
+            "heading errors of a few degrees"
+        )
+    if evidence.axis_ratio is not None and evidence.axis_ratio > MAX_AXIS_RATIO:
+        refusals.append(
+            f"the fitted ellipsoid is {evidence.axis_ratio:.0f} times longer than it is thick, where the strongest "
+            "soft iron squeezes an axis about 7 times: the samples hardly reach along its short axis, and the fit "
+            "scaled their noise up to the field there"
+        )
+    band = list(cover.unseen_axes)
+    if not band and observability.turn_axis is not None:
+        band.append(observability.turn_axis.lstrip("+"))
+    for axis in band:
+        refusals.append(
+            f"the sensor only turned about {axis}: the field was never seen near +{axis} or −{axis}, so the offset "
+            f"and scale along {axis} are fixed by nothing in the samples; tilt the sensor so that both ends of {axis} "
+            "face the field in turn"
+        )
+    undetermined = [w for w in observability.weak if not w.determined]
+    if undetermined and not refusals:
+        parts = "; ".join(
+            w.description + ("" if w.sigma is None else f" (one-sigma {100 * w.sigma:.0f} % of the field)")
+            for w in undetermined
+        )
+        refusals.append(f"the samples do not determine {parts}: those numbers would be noise")
+    heading = uncertainty.heading_sigma_deg
+    for w in observability.weak:
+        if w.determined:
+            effect = "" if heading is None else f"; the heading uncertainty that follows is ±{heading:.2g}°"
+            weak.append(
+                f"{w.description} is weakly determined (one-sigma {100 * (w.sigma or 0.0):.1f} % of the field; "
+                f"the samples carry {w.relative_information:.2g} of the information of a full tumble){effect}"
+            )
+    if evidence.known_field is not None:
+        given, fitted = evidence.known_field
+        ratio = fitted / given
+        if abs(ratio - 1.0) > FIELD_TOLERANCE:
+            refusals.append(
+                f"the field strength given ({given:.6g}{label}) is {ratio:.3g} times smaller than the samples show "
+                f"({fitted:.6g}{label})" if ratio > 1 else
+                f"the field strength given ({given:.6g}{label}) is {1 / ratio:.3g} times larger than the samples show "
+                f"({fitted:.6g}{label})"
+            )
+            mixup = unit_mixup(ratio)
+            refusals[-1] += f": {mixup}" if mixup else ": check the value and the samples' unit"
+    if (
+        evidence.kind != "full"
+        and evidence.ellipsoid_rms is not None
+        and evidence.residual_rms > RESTRICTED_RESIDUAL_RATIO * evidence.ellipsoid_rms
+        and evidence.residual_rms > LARGE_RESIDUAL_RMS / 2
+    ):
+        name = evidence.method if evidence.method and evidence.method != evidence.kind else evidence.kind
+        model = f"the {name} fit" if name != evidence.kind else f"the {name} model"
+        weak.append(
+            f"{model} leaves residuals of {100 * evidence.residual_rms:.1f} % of the field where a "
+            f"full ellipsoid leaves {100 * evidence.ellipsoid_rms:.1f} %: there is soft iron this model cannot "
+            "remove; the ellipsoid or auto method would"
+        )
+    if cover.share < 0.5:
+        weak.append(
+            f"the samples cover only {100 * cover.share:.0f} % of the directions: the calibration is extrapolated over "
+            "the rest"
+        )
+    goodness = evidence.goodness
+    if goodness is not None and goodness.held_out is not None and goodness.held_out.std > 1.25 * goodness.fitted.std:
+        weak.append(
+            "the fit does much better on its own samples than on held-out ones: it is over-fitted (too many parameters "
+            "for the directions covered)"
+        )
+    check = evidence.consistency
+    if check is not None and not check.consistent and check.heading_difference_deg > BIASED_HEADING_DEG:
+        refusals.append(
+            f"this method is biased on these samples: its fit is {check.heading_difference_deg:.2g}° of level heading "
+            "away from the maximum-likelihood fit of the same model (a method that only averages or scales the "
+            "samples, or an algebraic fit of a cap of directions); the auto or ml method is not"
+        )
+    elif check is not None and not check.consistent and check.sigmas is not None:
+        weak.append(
+            f"the fit is {check.sigmas:.0f} one-sigmas ({check.heading_difference_deg:.2g}° of level heading) away "
+            "from the maximum-likelihood fit of the same model: this method is biased on these samples; the auto, "
+            "ml or als method is not"
+        )
+    if evidence.halves is not None:
+        difference, sigma = evidence.halves
+        distance = math.sqrt(sum((d / max(s, 1e-300)) ** 2 for d, s in zip(difference, sigma, strict=True)) / 3.0)
+        if distance > HALVES_SIGMAS:
+            shown = ", ".join(f"{d:+.3g}" for d in difference)
+            weak.append(
+                f"the two halves of the recording give offsets that differ by ({shown}){label}, {distance:.0f} times "
+                "their one-sigma: the distortion or the field changed while recording (a magnet moved, motors, "
+                "temperature); calibrate on a recording where nothing near the sensor changes"
+            )
+    verdict = "refused" if refusals else "weak" if weak else "supported"
+    return Support(verdict=verdict, refusals=tuple(refusals), weaknesses=tuple(weak), advice=_RECORD_ADVICE)
+
+
+#: Ratios of common unit mix-ups: (factor, what it usually is).
+_MIXUPS = (
+    (10.0, "a factor of 10: µT against mG (1 µT = 10 mG)"),
+    (100.0, "a factor of 100: gauss against µT (1 G = 100 µT), or mG against nT"),
+    (1000.0, "a factor of 1000: µT against nT (1 µT = 1000 nT), or gauss against mG"),
+    (1e4, "a factor of 10 000: tesla against gauss (1 T = 10 000 G)"),
+    (1e5, "a factor of 100 000: gauss against nT (1 G = 100 000 nT)"),
+    (1e6, "a factor of a million: tesla against µT"),
+)
+
+
+def unit_mixup(ratio: float) -> str | None:
+    """Words for a ratio between two field strengths that looks like a unit mix-up (within 20 %), or None."""
+    if not ratio > 0:
+        return None
+    size = max(ratio, 1.0 / ratio)
+    for factor, words in _MIXUPS:
+        if abs(math.log(size / factor)) < math.log(1.2):
+            return "likely a unit mix-up, " + words
+    return None
