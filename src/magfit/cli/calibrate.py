@@ -341,10 +341,12 @@ class _FirstPass:
 
     def __enter__(self) -> _FirstPass:
         from ..io.readers import read_pieces
+        from ..io.sources import display_name
 
         try:
             reader = self._pieces[0]
-            with _progress(f"reading {reader.path.name}", lambda: _rows_in(reader.path, reader.format)) as advance:
+            name = Path(display_name(reader.path)).name  # not the name of a decompressed temporary copy
+            with _progress(f"reading {name}", lambda: _rows_in(reader.path, reader.format)) as advance:
                 parts = read_pieces(
                     self._pieces,
                     lambda piece, stopped: self._read(piece, self._spills[self._pieces.index(piece)], advance, stopped),
