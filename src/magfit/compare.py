@@ -124,6 +124,7 @@ def compare(
     methods: Sequence[str] = PAPER_METHODS,
     *,
     options: Mapping[str, Mapping[str, Any]] | None = None,
+    allow_undetermined: bool = False,
 ) -> Comparison:
     """Fit each method to the same samples and score it with the paper's sphere-distance metric.
 
@@ -135,6 +136,9 @@ def compare(
         Names in ``magfit.METHODS``; the paper's three by default.
     options : mapping, optional
         Per-method keyword options, e.g. ``{"minmax": {"centre": "midrange"}}``.
+    allow_undetermined : bool
+        Score a fit the samples do not support instead of reporting its refusal (the paper's tables,
+        which show every method on every case; the refusal is then in ``details["support"]``).
 
     Returns
     -------
@@ -173,7 +177,9 @@ def compare(
     for name in names:
         start = time.perf_counter()
         try:
-            calibration = fit(array, method=name, **dict(options.get(name, {})))
+            calibration = fit(
+                array, method=name, allow_undetermined=allow_undetermined, **dict(options.get(name, {}))
+            )
         except CalibrationError as error:
             results.append(MethodResult(name, None, None, str(error), time.perf_counter() - start))
             continue

@@ -151,7 +151,7 @@ def run_experiment(
             key = (SENSORS.index(sensor), DISTURBANCES.index(disturbance))
             rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=key))
             simulation = situation.simulate(n_samples, seed=rng)
-            cases.append(Case(situation, simulation, compare(simulation.samples, methods)))
+            cases.append(Case(situation, simulation, compare(simulation.samples, methods, allow_undetermined=True)))
     return Experiment(n_samples, seed, tuple(methods), tuple(cases))
 
 

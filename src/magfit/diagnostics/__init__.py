@@ -206,6 +206,7 @@ def diagnose(
         halves=halves,
         unit=calibration.unit,
         method=calibration.method,
+        field_strength=calibration.field_strength,
         flat=flat_axis(raw, weights),
         axis_ratio=float(np.max(calibration.semi_axes) / np.min(calibration.semi_axes)),
     )

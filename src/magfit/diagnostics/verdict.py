@@ -27,8 +27,9 @@ What is checked, in this order (each a refusal unless said otherwise):
    determined; one with less than 5 % of the information a full tumble gives is weak.
 4. A known field strength the samples contradict by more than :data:`FIELD_TOLERANCE` (usually a unit
    mix-up, which is named).
-5. A fit more than :data:`BIASED_HEADING_DEG` of level heading away from the maximum-likelihood fit of
-   its own model: the method is biased on these samples (min/max, or an algebraic fit of a cap).
+5. A fit more than :data:`BIASED_HEADING_DEG` of level heading, or :data:`BIASED_OFFSET` of the field in
+   offset, away from the maximum-likelihood fit of its own model (beyond the uncertainty): the method is
+   biased on these samples (min/max, or an algebraic fit of a cap of directions).
 6. Weak only: a restricted model (sphere, axis-aligned) that leaves much larger residuals than the
    full ellipsoid; coverage below half the directions; a fit that does much worse on held-out samples
    than on its own (over-fitted); a fit far from the maximum-likelihood fit of its model (biased); two
@@ -52,7 +53,7 @@ __all__ = [
 ]
 
 #: RMS distance to the best ellipsoid (fraction of the field) above which the samples lie on no ellipsoid.
-NO_ELLIPSOID_RMS = 0.20
+NO_ELLIPSOID_RMS = 0.15
 #: A fitted ellipsoid longer than this many times its thickness is no soft iron (the paper's steel case: 7).
 MAX_AXIS_RATIO = 20.0
 #: RMS distance above which the residuals are large enough to name (weak).
@@ -64,6 +65,8 @@ RESTRICTED_RESIDUAL_RATIO = 2.0
 #: A fit further than this from the maximum-likelihood fit of its own model (degrees of level heading) is
 #: refused as biased; closer, it is named.
 BIASED_HEADING_DEG = 5.0
+#: ... or further than this in offset (fraction of the field), beyond its uncertainty.
+BIASED_OFFSET = 0.05
 #: Halves of a recording whose offsets differ by more than this many combined one-sigmas disagree.
 HALVES_SIGMAS = 3.0
 
@@ -103,6 +106,8 @@ class Evidence:
         The fitted ellipsoid's longest semi-axis over its shortest.
     method : str or None
         The method that fitted the calibration, for messages.
+    field_strength : float or None
+        The calibration's field strength (input units), to judge offsets by.
     """
 
     kind: str
@@ -119,6 +124,7 @@ class Evidence:
     flat: tuple[str, float] | None = None
     axis_ratio: float | None = None
     method: str | None = None
+    field_strength: float | None = None
 
 
 def judge(evidence: Evidence) -> Support:
@@ -215,11 +221,16 @@ def judge(evidence: Evidence) -> Support:
             "for the directions covered)"
         )
     check = evidence.consistency
-    if check is not None and not check.consistent and check.heading_difference_deg > BIASED_HEADING_DEG:
+    field = evidence.field_strength
+    shift = math.sqrt(sum(d * d for d in check.offset_difference)) / field if check is not None and field else 0.0
+    if check is not None and not check.consistent and (
+        check.heading_difference_deg > BIASED_HEADING_DEG or shift > BIASED_OFFSET
+    ):
         refusals.append(
             f"this method is biased on these samples: its fit is {check.heading_difference_deg:.2g}° of level heading "
-            "away from the maximum-likelihood fit of the same model (a method that only averages or scales the "
-            "samples, or an algebraic fit of a cap of directions); the auto or ml method is not"
+            f"and {100 * shift:.0f} % of the field in offset away from the maximum-likelihood fit of the same model "
+            "(a method that only averages or scales the samples, or an algebraic fit of a cap of directions); the "
+            "auto or ml method is not"
         )
     elif check is not None and not check.consistent and check.sigmas is not None:
         weak.append(
