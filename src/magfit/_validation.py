@@ -6,6 +6,7 @@ Messages say what was received and what to do. Arrays are never transposed behin
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 import numpy as np
@@ -26,6 +27,7 @@ class Moments(Protocol):
     @property
     def covariance(self) -> NDArray[np.float64]: ...
 
+
 #: Below this ratio of the smallest to the largest spread (standard deviation along the principal
 #: directions), the samples are taken to lie on a plane or a line.
 FLATNESS_LIMIT = 1e-3
@@ -34,6 +36,10 @@ FLATNESS_LIMIT = 1e-3
 MAX_MAGNITUDE = 1e150
 #: Samples spread less than this many ulps of their magnitude are identical: float64 cannot tell them apart.
 _IDENTICAL_ULPS = 16
+#: Spreads (standard deviation along the widest direction, input units) the fits are tested over. The
+#: ellipsoid matrix scales as 1/spread² and its determinant as 1/spread⁶, which leaves float64 beyond about
+#: 1e±50; the limits keep ten orders of magnitude of margin. Real recordings, in any unit, lie far inside.
+SPREAD_RANGE = (1e-40, 1e40)
 _AXIS_NAMES = ("x", "y", "z")
 
 
@@ -93,7 +99,8 @@ def as_samples(samples: ArrayLike) -> NDArray[np.float64]:
 def check_support(statistics: Moments, method: str, min_samples: int) -> None:
     """Raise :class:`CalibrationError` when the samples cannot support a fit of ``method``.
 
-    Checks, in order: enough samples, not all identical, spread over three dimensions.
+    Checks, in order: enough samples, not all identical, a spread within :data:`SPREAD_RANGE` (else a
+    :class:`SampleError`: the samples need rescaling), spread over three dimensions.
     """
     n = statistics.n
     if n < min_samples:
@@ -110,6 +117,13 @@ def check_support(statistics: Moments, method: str, min_samples: int) -> None:
         raise CalibrationError(
             f"all {n} samples are identical ({_format_vector(statistics.mean)}): the sensor was not turned "
             "or not read; record while rotating it"
+        )
+    low, high = SPREAD_RANGE
+    if not low <= largest <= high:
+        factor = 10.0 ** (2 - round(math.log10(largest)))
+        raise SampleError(
+            f"the samples spread {largest:.3g} (input units), outside the {low:g} to {high:g} magfit fits in float64; "
+            f"rescale them (e.g. multiply by {factor:g}) and scale the calibration back"
         )
     if spreads[1] < FLATNESS_LIMIT * largest:
         raise CalibrationError(

@@ -25,6 +25,7 @@ import re
 import stat
 import tokenize
 import zipfile
+import zlib
 from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -436,8 +437,10 @@ def _npz_members(path: Path) -> dict[str, _NpyInfo]:
                     continue
                 with archive.open(info) as handle:
                     members[info.filename[: -len(".npy")]] = _read_npy_header(handle)
-    except (zipfile.BadZipFile, *_BROKEN_NPY) as error:
-        raise _error(path, f"is not a readable .npz archive ({_one_line(error)}); re-save it with numpy.savez") from None
+    except (zipfile.BadZipFile, zlib.error, *_BROKEN_NPY) as error:
+        raise _error(
+            path, f"is not a readable .npz archive ({_one_line(error)}); re-save it with numpy.savez"
+        ) from None
     if not members:
         raise _error(path, "is an .npz archive without arrays; save the samples with numpy.savez")
     return members
@@ -945,15 +948,23 @@ class ChunkReader:
         if selection.n_rows == 0:
             raise _error(self.path, f"the arrays {', '.join(selection.keys)} are empty; record some samples")
         with zipfile.ZipFile(self.path) as archive:
-            streams = [_NpyStream(archive, key, self.chunk_rows) for key in selection.keys]
+            streams: list[_NpyStream] = []
             try:
                 start = 0
                 while start < selection.n_rows:
-                    parts = [stream.next_rows() for stream in streams]
-                    if selection.key_columns is None:
-                        block = np.column_stack([np.asarray(part, dtype=np.float64) for part in parts])
-                    else:
-                        block = np.asarray(parts[0][:, list(selection.key_columns)], dtype=np.float64)
+                    # A damaged member shows only while it is inflated (bad deflate data, a CRC, a short array).
+                    try:
+                        if not streams:
+                            streams = [_NpyStream(archive, key, self.chunk_rows) for key in selection.keys]
+                        parts = [stream.next_rows() for stream in streams]
+                        if selection.key_columns is None:
+                            block = np.column_stack([np.asarray(part, dtype=np.float64) for part in parts])
+                        else:
+                            block = np.asarray(parts[0][:, list(selection.key_columns)], dtype=np.float64)
+                    except (zipfile.BadZipFile, zlib.error, *_BROKEN_NPY) as error:
+                        raise _error(
+                            self.path, f"is a damaged .npz archive ({_one_line(error)}); re-save it with numpy.savez"
+                        ) from None
                     yield self._filter(block, _next_row)
                     start += len(block)
             finally:
@@ -976,10 +987,16 @@ class ChunkReader:
         fmt = self.format
         with open(self.path, "rb") as raw:
             raw.seek(fmt.data_offset)
-            handle = io.TextIOWrapper(raw, encoding=self._text_encoding, errors="replace", newline="")
-            for number, line in enumerate(handle, start=fmt.data_line + 1):
+            for number, raw_line in enumerate(raw, start=fmt.data_line + 1):  # lines end at "\n" only, as here
+                line = raw_line.decode(self._text_encoding, errors="replace")
                 if not line.strip():
                     continue
+                if "\r" in line.rstrip("\r\n"):  # pandas ends a line there too: the rows no longer line up
+                    return _error(
+                        self.path,
+                        f"line {number} holds a carriage return (\\r) inside the line; delete it (line ends are "
+                        "\\n or \\r\\n)",
+                    )
                 fields = _split_fields(line.rstrip("\r\n"), fmt.delimiter)
                 for axis, index in enumerate(self._indices):
                     cell = fields[index] if index < len(fields) else ""
@@ -1046,6 +1063,10 @@ class ChunkReader:
                 reader = pandas.read_csv(source, chunksize=self.chunk_rows, **self._read_options(used))
             except pandas.errors.EmptyDataError:  # blank lines only (a piece of a file can be): no rows
                 return
+            except (ValueError, TypeError) as error:  # pandas checks the first line when it opens
+                if isinstance(error, DataFileError):
+                    raise
+                raise self._bad_cell_error(str(error)) from None
             with reader:
                 while True:
                     try:
@@ -1166,7 +1187,9 @@ class _CheckedSource(io.RawIOBase):
             consistent = tokens == self._n * n_lines
         else:
             consistent = int(np.count_nonzero(codes == self._delimiter_code)) == (self._n - 1) * n_lines
-        if not consistent:
+        # pandas also ends a line at a lone \r: only none, or one per line (\r\n), keeps its rows on the lines.
+        carriage_returns = int(np.count_nonzero(codes == 13))
+        if not consistent or carriage_returns not in (0, n_lines):
             self._scan(segment)
         self._line += n_lines
 
@@ -1180,6 +1203,12 @@ class _CheckedSource(io.RawIOBase):
             if not line.strip():
                 self._blank_rows.append(index - len(self._blank_rows))
                 continue
+            if "\r" in line.rstrip("\r"):
+                raise _error(
+                    self._reader.path,
+                    f"line {self._first_line + index} holds a carriage return (\\r) inside the line; delete it "
+                    "(line ends are \\n or \\r\\n)",
+                )
             count = len(_split_fields(line.rstrip("\r"), self._reader.format.delimiter))
             if count != self._n:
                 raise self._reader._field_count_error(self._first_line + index, count)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import re
 import zipfile
+import zlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -21,7 +22,7 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError
 from .atomic import atomic_open
-from .readers import NA_VALUES, ChunkReader, SampleTable, _check_file, _error
+from .readers import _BROKEN_NPY, NA_VALUES, ChunkReader, SampleTable, _check_file, _error, _one_line
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -241,8 +242,11 @@ class _TextRewriter:
         if int(np.count_nonzero(codes == delimiter[0])) != (n - 1) * len(lines):
             return None  # blank lines or a bad row: the slow path skips the former and names the latter
         x, y, z = self.indices
+        last = max(x, y, z)
         # Split only up to the last magnetometer column: the rest of the line stays one piece, untouched.
-        parts = [line.split(delimiter, max(x, y, z) + 1) for line in lines]
+        parts = [line.split(delimiter, last + 1) for line in lines]
+        if any(len(f) <= last for f in parts):  # short rows whose missing delimiters another row has too many
+            return None
         first = parts[0]
         # The spaces before a magnetometer cell (", " files) are those of the first row, in every row.
         leads = [first[i][: len(first[i]) - len(first[i].lstrip())] for i in (x, y, z)]
@@ -345,10 +349,15 @@ def _write_npy(reader: ChunkReader, calibration: Calibration, out: Path, normali
 def _write_npz(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool) -> None:
     selection = reader._npz
     assert selection is not None
-    with zipfile.ZipFile(reader.path) as archive:
-        compressed = any(info.compress_type != zipfile.ZIP_STORED for info in archive.infolist())
-    with np.load(reader.path, allow_pickle=False) as data:
-        arrays: dict[str, NDArray[Any]] = {key: data[key] for key in data.files}
+    try:
+        with zipfile.ZipFile(reader.path) as archive:
+            compressed = any(info.compress_type != zipfile.ZIP_STORED for info in archive.infolist())
+        with np.load(reader.path, allow_pickle=False) as data:
+            arrays: dict[str, NDArray[Any]] = {key: data[key] for key in data.files}
+    except (zipfile.BadZipFile, zlib.error, *_BROKEN_NPY) as error:  # a member damaged past its header
+        raise _error(
+            reader.path, f"is a damaged .npz archive ({_one_line(error)}); re-save it with numpy.savez"
+        ) from None
     if selection.key_columns is None:
         raw = np.column_stack([np.asarray(arrays[key], dtype=np.float64) for key in selection.keys])
         corrected, _ = _calibrate_finite(raw, calibration, normalized)
