@@ -87,7 +87,8 @@ def test_als_is_consistent_where_the_algebraic_fit_is_biased(orientations: str) 
         max_tilt_deg=60.0, seed=3,
     )  # fmt: skip
     als = magfit.fit(sim.samples, method="als", diagnostics=False)  # the diagnostics are tested elsewhere
-    ellipsoid = magfit.fit(sim.samples, method="ellipsoid", diagnostics=False)
+    # The algebraic fit of the restricted case is refused (its bias leaves 15 % residuals): forced here.
+    ellipsoid = magfit.fit(sim.samples, method="ellipsoid", diagnostics=False, allow_undetermined=True)
     smallest = float(np.linalg.svd(SOFT_IRON, compute_uv=False).min())
     # The band of a tilt-limited recording inflates the variance about 3x (seen over seeds).
     tol = 20 * noise / smallest / np.sqrt(n) * (1 if orientations == "uniform" else 3)

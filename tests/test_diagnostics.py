@@ -70,7 +70,10 @@ def test_offset_sigma_matches_spread_over_repeated_simulations() -> None:
 
 def test_restricted_attitudes_name_the_vertical_direction() -> None:
     sim = magfit.scenario("mpu9250", "smartphone").simulate(3000, seed=4, orientations="restricted")
-    report = magfit.fit(sim.samples, "als").diagnostics
+    with pytest.raises(magfit.CalibrationError, match="do not determine the scale along z together with the offset"):
+        magfit.fit(sim.samples, "als")  # ±20° of tilt: the full model's vertical scale and offset trade off
+    report = magfit.fit(sim.samples, "als", allow_undetermined=True).diagnostics
+    assert report is not None and report.warnings[0].startswith("NOT SUPPORTED (forced): the samples do not")
     assert report is not None and report.observability is not None and report.coverage is not None
     descriptions = [w.description for w in report.observability.weak]
     assert any("offset along z" in d and "scale along z" in d for d in descriptions), descriptions
@@ -139,14 +142,9 @@ def test_real_recordings_get_a_diagnosis_not_numbers(real_data_dir) -> None:
     for samples in (android, planar):
         with pytest.raises(magfit.CalibrationError, match="not an ellipsoid|do not outline"):
             magfit.fit(samples, "ellipsoid")
-    # The planar log: a diag fit is refused, or its diagnosis says the z direction is not determined.
-    try:
-        report = magfit.fit(planar, "diag").diagnostics
-    except magfit.CalibrationError as error:
-        assert "not an ellipsoid" in str(error) or "do not outline" in str(error)
-    else:
-        assert report is not None and not report.ok
-        assert any("only turned about z" in warning for warning in report.warnings)
+    # The planar log: a diag fit is refused, naming the axis the sensor only turned about.
+    with pytest.raises(magfit.CalibrationError, match="only turned about z"):
+        magfit.fit(planar, "diag")
     # diagnose() itself still reads the geometry of the planar log through a sphere about its centre.
     centre = planar.mean(axis=0)
     radius = float(np.median(np.linalg.norm(planar - centre, axis=1)))
@@ -160,7 +158,9 @@ def test_consistency_exposes_a_biased_fit_and_clears_the_maximum_likelihood_one(
     # linearised uncertainty at its own solution looks small; the comparison with the maximum-likelihood fit
     # of the same model must say so. auto returns that maximum-likelihood fit: consistent by construction.
     sim = magfit.scenario("mpu9250", "smartphone").simulate(3000, seed=2, orientations="restricted")
-    biased = magfit.fit(sim.samples, "ellipsoid").diagnostics
+    with pytest.raises(magfit.CalibrationError, match="biased .* in offset away from the maximum-likelihood"):
+        magfit.fit(sim.samples, "ellipsoid")
+    biased = magfit.fit(sim.samples, "ellipsoid", allow_undetermined=True).diagnostics
     assert biased is not None and biased.consistency is not None
     assert not biased.consistency.consistent
     assert abs(biased.consistency.offset_difference[2]) > 50  # counts; the truth is ~200 counts away
@@ -208,7 +208,10 @@ def test_affine_design_transform_matches_the_design_matrix() -> None:
 
 def test_statistics_fit_names_the_weak_direction_without_numbers() -> None:
     sim = magfit.scenario("mpu9250", "smartphone").simulate(3000, seed=3, orientations="restricted")
-    report = magfit.fit(magfit.Statistics.from_samples(sim.samples), "als").diagnostics
+    statistics = magfit.Statistics.from_samples(sim.samples)
+    with pytest.raises(magfit.CalibrationError, match="do not determine .*offset along z"):
+        magfit.fit(statistics, "als")
+    report = magfit.fit(statistics, "als", allow_undetermined=True).diagnostics
     assert report is not None and report.observability is not None and report.uncertainty is None
     assert any("offset along z" in w.description and not w.determined for w in report.observability.weak)
     assert all(w.sigma is None for w in report.observability.weak)

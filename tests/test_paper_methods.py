@@ -117,9 +117,9 @@ def test_minmax_as_published_centres_on_the_mean() -> None:
 
 def run_paper_experiment(sensor: str, disturbance: str) -> dict[str, magfit.Evaluation]:
     sim = magfit.scenario(sensor, disturbance).simulate(3000, seed=21)
-    return {
-        m: magfit.evaluate(magfit.fit(sim.samples, method=m), sim.samples) for m in ("ellipsoid", "sphere", "minmax")
-    }
+    # The paper scores every method on every case: the fits the samples do not support are forced.
+    fits = {m: magfit.fit(sim.samples, method=m, allow_undetermined=True) for m in ("ellipsoid", "sphere", "minmax")}
+    return {m: magfit.evaluate(cal, sim.samples) for m, cal in fits.items()}
 
 
 @pytest.mark.parametrize("sensor", magfit.SENSORS)

@@ -56,13 +56,39 @@ GOOD = ["fxos", "unc", "betaflight03", "betaflight00", "mxl_imu", "mxl_pni", "mx
 FAILURES = ["android", "hmc5883l"]
 
 
+#: The recordings on which a method is refused, and the reason it must give (the support verdict). Min/max
+#: centred on the mean of samples that do not cover the sphere evenly leaves 16-76 % residuals where the
+#: full ellipsoid leaves 0.4-4 %; a sphere on the QMC5883L's strong soft iron (semi-axis ratio 2.2) leaves
+#: 16 %; the second Hamagure set covers only the z < 0 half.
+REFUSED = {
+    ("ellipsoid", "hamagure2"): "do not determine the scale along z",
+    ("sphere", "unc"): "cannot describe these samples",
+    **{
+        ("minmax", name): "cannot describe these samples|biased"
+        for name in (
+            "unc", "mxl_imu", "mxl_pni", "mxl_drone", "animal_calib", "animal_track", "gyrolib", "hamagure1",
+            "hamagure2", "ensta",
+        )
+    },
+}  # fmt: skip
+
+
 @pytest.mark.parametrize("name", GOOD)
 @pytest.mark.parametrize("method", PAPER_METHODS)
-def test_every_recording_calibrates(real_data_dir: Path, name: str, method: str) -> None:
+def test_every_recording_calibrates_or_is_refused_with_its_reason(real_data_dir: Path, name: str, method: str) -> None:
     samples = load(real_data_dir, name)
+    reason = REFUSED.get((method, name))
+    if reason is not None:
+        with pytest.raises(CalibrationError, match=reason):
+            magfit.fit(samples, method=method)
+        cal = magfit.fit(samples, method=method, allow_undetermined=True)  # forced: returned, with the refusal
+        assert cal.details["support"]["forced"] and cal.diagnostics is not None
+        assert any(w.startswith("NOT SUPPORTED") for w in cal.diagnostics.warnings)
+        return
     cal = magfit.fit(samples, method=method)
     result = magfit.evaluate(cal, samples)
     assert np.all(np.isfinite(cal.matrix)) and cal.field_strength > 0
+    assert cal.details["support"]["verdict"] in ("supported", "weak")
     # Calibrated samples lie near the unit sphere: within 45 % even for min/max on strong soft iron.
     assert abs(result.mean) < 0.7 and result.std < 0.45
     if method == "ellipsoid":  # the full model fits every real recording to a few percent
@@ -72,9 +98,10 @@ def test_every_recording_calibrates(real_data_dir: Path, name: str, method: str)
 @pytest.mark.parametrize("name", FAILURES)
 @pytest.mark.parametrize("method", PAPER_METHODS)
 def test_failure_cases_get_a_diagnosis_not_numbers(real_data_dir: Path, name: str, method: str) -> None:
-    with pytest.raises(CalibrationError, match="not an ellipsoid|do not outline an ellipsoid") as caught:
+    reasons = "not an ellipsoid|do not outline an ellipsoid|no ellipsoid|only turned about|close to a plane"
+    with pytest.raises(CalibrationError, match=reasons) as caught:
         magfit.fit(load(real_data_dir, name), method=method)
-    assert "rotat" in str(caught.value) or "turning" in str(caught.value)  # it says what to do
+    assert any(remedy in str(caught.value) for remedy in ("rotat", "turning", "tilt"))  # it says what to do
 
 
 @pytest.mark.parametrize("name", FAILURES)

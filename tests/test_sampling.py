@@ -79,6 +79,10 @@ def test_bad_cell_count(count: object) -> None:
 # ---------------------------------------------------------------------- the pull of a long stay
 
 
+def _forced(samples: np.ndarray, method: str) -> magfit.Calibration:
+    return magfit.fit(samples, method, allow_undetermined=True, diagnostics=False)
+
+
 def test_thinning_removes_the_pull_of_a_long_stay() -> None:
     # 80 % of the samples in one attitude. Ground truth: the simulated offset. Over 8 recordings the
     # thinned fits land closer to it: the ellipsoid fit by a factor 2.2 on average (0.0114 -> 0.0051 of
@@ -90,9 +94,9 @@ def test_thinning_removes_the_pull_of_a_long_stay() -> None:
         sim = stay_simulation(seed)
         kept = even_subsample(sim.samples)
         assert np.count_nonzero(kept < 4000) < 60  # the 4000 samples of the stay share one or two cells
-        for method in raw:
-            raw[method].append(np.linalg.norm(magfit.fit(sim.samples, method).offset - sim.hard_iron))
-            thinned[method].append(np.linalg.norm(magfit.fit(sim.samples[kept], method).offset - sim.hard_iron))
+        for method in raw:  # the sphere cannot describe the steel case: forced, to measure the stay's pull
+            raw[method].append(np.linalg.norm(_forced(sim.samples, method).offset - sim.hard_iron))
+            thinned[method].append(np.linalg.norm(_forced(sim.samples[kept], method).offset - sim.hard_iron))
     radius = magfit.scenario("mpu9250", "steel").field_strength
     assert np.mean(thinned["ellipsoid"]) < 0.6 * np.mean(raw["ellipsoid"])
     assert np.mean(thinned["ellipsoid"]) < 0.007 * radius

@@ -28,10 +28,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validation import as_samples
-from .errors import OptionError, SampleError
+from ._validation import as_samples, check_support
+from .errors import CalibrationError, OptionError, SampleError
 from .geometry.cells import partition
-from .geometry.quadric import algebraic_ellipsoid
+from .geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
 
 if TYPE_CHECKING:
     from .statistics import Statistics
@@ -375,12 +375,15 @@ def direction_frame(statistics: Statistics) -> tuple[NDArray[np.float64], NDArra
 
 def _ellipsoid_frame(statistics: Statistics) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """Centre and shape of the paper's algebraic ellipsoid (section II), or None when there is none."""
+    try:
+        check_support(statistics, "ellipsoid", 9)  # enough samples, spread over three dimensions
+    except CalibrationError:
+        return None
     found = algebraic_ellipsoid(statistics)
     if isinstance(found, str):
         return None
-    offset, shape = found
-    eigenvalues, eigenvectors = np.linalg.eigh(shape)
-    return offset, (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T  # A^½: directions of the sphere
+    calibration = calibration_from_ellipsoid("ellipsoid", *found)
+    return calibration.offset, calibration.matrix
 
 
 def _box_frame(low: NDArray[np.float64], high: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -272,9 +272,10 @@ def correlation_excess(
         Cov_sandwich = H⁻¹ (Σ_b S_b S_bᵀ · B / (B − 1)) H⁻¹,    H = Σ J_iᵀ J_i,  S_b = Σ_{i ∈ b} s_i
 
     ``z`` are the samples in recording order (normalised as ``p``), each standing for ``total / m`` of
-    the fitted samples (a regular stride of a long log sees no correlation shorter than its step, so its
-    covariance is then an upper bound). Returned: the part of ``Cov_sandwich`` beyond what ``total``
-    independent samples would give (the positive eigenvalues of the difference), in the parameters of ``p``.
+    the fitted samples. Returned: the part of ``Cov_sandwich`` beyond ``σ² H⁻¹`` (the positive eigenvalues
+    of the difference), scaled from the m rows to the ``total`` samples, in the parameters of ``p``. Up to
+    200 000 samples the rows are all of them; a longer log is read at a regular stride, which sees no
+    correlation shorter than its step (at 100 Hz and 10⁷ samples, a step of half a second).
     """
     k = p.size
     m = z.shape[0]
@@ -295,13 +296,11 @@ def correlation_excess(
     except np.linalg.LinAlgError:
         return excess
     sandwich = inverse @ spread @ inverse
-    # What independent samples would give, for all ``total`` of them (σ² H⁻¹ is for the m rows): with a
-    # stride, the m rows' sandwich bounds the whole recording's covariance from above.
-    independent = residual_variance * inverse * (m / total)
-    difference = sandwich - independent
+    difference = sandwich - residual_variance * inverse  # beyond what m independent rows would give
     eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (difference + difference.T))
     fitted = jac.shape[1]
-    excess[:fitted, :fitted] = (eigenvectors * np.clip(eigenvalues, 0.0, None)) @ eigenvectors.T
+    # Variance falls as 1 / samples: from the m rows to the ``total`` samples they stand for.
+    excess[:fitted, :fitted] = (eigenvectors * np.clip(eigenvalues, 0.0, None)) @ eigenvectors.T * (m / total)
     return excess
 
 

@@ -16,8 +16,10 @@ What is checked, in this order (each a refusal unless said otherwise):
 1. The samples lie on an ellipsoid at all: the RMS distance of the samples to the best ellipsoid (the
    fit itself, or for the sphere and axis-aligned models the full algebraic ellipsoid as well) is below
    :data:`NO_ELLIPSOID_RMS` of the field. A turned sensor in a steady field gives 0.5-5 % (the real
-   recordings in ``shared/data/real``: 0.4-4 %); a Gaussian cloud 39 %, a filled cube 28 %, a still
-   sensor's noise 40 %. Between :data:`LARGE_RESIDUAL_RMS` and that: weak.
+   recordings in ``shared/data/real``: 0.4-4 %; simulated noise of 10 %, 10 %); a Gaussian cloud 39 %, a
+   filled cube 28 %, a still sensor's noise 40 %. Between :data:`LARGE_RESIDUAL_RMS` and that: weak. A
+   restricted model (sphere, axis-aligned, min/max) that leaves more than that where the full ellipsoid
+   fits cannot describe the samples: refused too.
 2. The sensor did not turn about one axis only: the field directions do not form a band or a cone
    around an axis (then the offset and scale along that axis are fixed by nothing, whatever the
    information matrix says at a fitted point).
@@ -148,6 +150,13 @@ def judge(evidence: Evidence) -> Support:
             "while recording (a magnet, motors, a moving part), the sensor barely moved, or these are not "
             "magnetometer readings"
         )
+    elif evidence.residual_rms > NO_ELLIPSOID_RMS:
+        refusals.append(
+            f"the {_fit_name(evidence)} cannot describe these samples: it leaves {100 * evidence.residual_rms:.0f} % of "
+            f"the field (RMS) where a full ellipsoid leaves {100 * best:.1f} %: it misplaces the ellipsoid the "
+            "samples lie on (a sphere ignores the soft iron; min/max centred on samples that do not cover every "
+            "direction evenly misses the centre), and the heading would keep the error; the auto method would not"
+        )
     elif best > LARGE_RESIDUAL_RMS:
         weak.append(
             f"the residuals are large: {100 * best:.1f} % of the field (RMS) where a few per cent are usual; the field "
@@ -200,12 +209,10 @@ def judge(evidence: Evidence) -> Support:
         evidence.kind != "full"
         and evidence.ellipsoid_rms is not None
         and evidence.residual_rms > RESTRICTED_RESIDUAL_RATIO * evidence.ellipsoid_rms
-        and evidence.residual_rms > LARGE_RESIDUAL_RMS / 2
+        and LARGE_RESIDUAL_RMS / 2 < evidence.residual_rms <= NO_ELLIPSOID_RMS
     ):
-        name = evidence.method if evidence.method and evidence.method != evidence.kind else evidence.kind
-        model = f"the {name} fit" if name != evidence.kind else f"the {name} model"
         weak.append(
-            f"{model} leaves residuals of {100 * evidence.residual_rms:.1f} % of the field where a "
+            f"the {_fit_name(evidence)} leaves residuals of {100 * evidence.residual_rms:.1f} % of the field where a "
             f"full ellipsoid leaves {100 * evidence.ellipsoid_rms:.1f} %: there is soft iron this model cannot "
             "remove; the ellipsoid or auto method would"
         )
@@ -223,7 +230,8 @@ def judge(evidence: Evidence) -> Support:
     check = evidence.consistency
     field = evidence.field_strength
     shift = math.sqrt(sum(d * d for d in check.offset_difference)) / field if check is not None and field else 0.0
-    if check is not None and not check.consistent and (
+    adequate = evidence.ellipsoid_rms is None or evidence.residual_rms <= RESTRICTED_RESIDUAL_RATIO * best
+    if adequate and check is not None and not check.consistent and (  # else its own model's ML fit runs off
         check.heading_difference_deg > BIASED_HEADING_DEG or shift > BIASED_OFFSET
     ):
         refusals.append(
@@ -250,6 +258,13 @@ def judge(evidence: Evidence) -> Support:
             )
     verdict = "refused" if refusals else "weak" if weak else "supported"
     return Support(verdict=verdict, refusals=tuple(refusals), weaknesses=tuple(weak), advice=_RECORD_ADVICE)
+
+
+def _fit_name(evidence: Evidence) -> str:
+    """``"sphere model"``, or ``"minmax fit"`` when the method is not named after its model."""
+    if evidence.method and evidence.method != evidence.kind:
+        return f"{evidence.method} fit"
+    return f"{evidence.kind} model"
 
 
 #: Ratios of common unit mix-ups: (factor, what it usually is).

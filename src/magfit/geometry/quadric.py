@@ -70,7 +70,7 @@ def algebraic_ellipsoid(statistics: Statistics) -> tuple[NDArray[np.float64], ND
     The smallest eigenvector of the scatter ``DᵀD`` minimises ``|Dθ|²`` subject to ``|θ| = 1``; see
     :func:`quadric_ellipsoid` for the rest and :mod:`magfit.methods.ellipsoid` for the method.
     """
-    eigenvectors = np.linalg.eigh(statistics.scatter)[1]
+    eigenvectors = np.linalg.eigh(statistics.scatter / statistics.n)[1]  # as the ellipsoid method scales it
     return quadric_ellipsoid(eigenvectors[:, 0], statistics)
 
 
