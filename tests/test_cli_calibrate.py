@@ -262,7 +262,9 @@ def test_no_method_imports_scipy_optimize(steel: tuple[Path, magfit.Simulation])
     code = (
         "import sys; from pathlib import Path; import magfit; from magfit.cli.calibrate import run_calibration\n"
         "for method in sorted(magfit.METHODS):\n"
-        "    assert run_calibration(Path(sys.argv[1]), method=method).calibration.diagnostics is not None\n"
+        # forced: sphere and minmax are refused on the steel case's soft iron, and every method must run here
+        "    run = run_calibration(Path(sys.argv[1]), method=method, allow_undetermined=True)\n"
+        "    assert run.calibration.diagnostics is not None\n"
         "print(sorted(m for m in sys.modules if 'scipy' in m))"
     )
     result = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True)

@@ -481,7 +481,8 @@ def _fit_streaming(
         # keep an evenly strided subsample (bounded) for the diagnostics, which need samples, not statistics.
         with _progress(f"scoring the fit on {path.name}", statistics.n) as advance:
             evaluation, subsample = first.score(calibration, advance)
-    return _with_diagnostics(calibration, subsample, statistics.n), evaluation, reader
+    forced = bool(options.get("allow_undetermined", False))
+    return _with_diagnostics(calibration, subsample, statistics.n, forced), evaluation, reader
 
 
 def _counted(chunks: Iterable[NDArray[np.float64]], advance: Advance) -> Iterator[NDArray[np.float64]]:
@@ -509,13 +510,18 @@ class _Strided:
         return np.concatenate(self.kept) if self.kept else np.empty((0, 3))
 
 
-def _with_diagnostics(calibration: Calibration, subsample: NDArray[np.float64], n_total: int) -> Calibration:
-    """``calibration`` with :func:`magfit.diagnose` of the strided subsample in ``details["diagnostics"]``.
+def _with_diagnostics(
+    calibration: Calibration, subsample: NDArray[np.float64], n_total: int, allow_undetermined: bool = False
+) -> Calibration:
+    """``calibration`` with :func:`magfit.diagnose` of the strided subsample in ``details["diagnostics"]``,
+    and its verdict in ``details["support"]``.
 
     A fit from Statistics carries no coverage or uncertainty (they need samples); the stream provides
-    them. Above :data:`DIAGNOSE_SAMPLES` rows the uncertainty is that of the subsample: conservative.
+    them. Above :data:`DIAGNOSE_SAMPLES` rows the uncertainty is that of the subsample: conservative. The
+    samples' verdict is the one an in-memory fit reaches: a refusal raises, unless ``allow_undetermined``
+    (``--force``), which returns the calibration marked as forced, as :func:`magfit.fit` does.
     """
-    from ..diagnostics import diagnose
+    from ..fit import diagnose
 
     try:
         report = diagnose(calibration, subsample)
@@ -530,7 +536,17 @@ def _with_diagnostics(calibration: Calibration, subsample: NDArray[np.float64], 
             f"{n_total}); the uncertainty is that of the subsample (conservative)."
         )
         report = replace(report, notes=(*report.notes, note))
-    return replace(calibration, details={**calibration.details, "diagnostics": report.to_dict()})
+    details = {**calibration.details}
+    support = report.support
+    if support is not None:
+        if support.verdict == "refused":
+            if not allow_undetermined:
+                raise CalibrationError(support.message(calibration.method))
+            support = replace(support, forced=True)
+            report = replace(report, support=support, warnings=support.warnings)
+        details["support"] = support.to_dict()
+    details["diagnostics"] = report.to_dict()
+    return replace(calibration, details=details)
 
 
 def _require_rows(path: Path, n_samples: int, read: _ReadResult) -> None:
