@@ -152,8 +152,8 @@ def judge(evidence: Evidence) -> Support:
         )
     elif evidence.residual_rms > NO_ELLIPSOID_RMS:
         refusals.append(
-            f"the {_fit_name(evidence)} cannot describe these samples: it leaves {100 * evidence.residual_rms:.0f} % of "
-            f"the field (RMS) where a full ellipsoid leaves {100 * best:.1f} %: it misplaces the ellipsoid the "
+            f"the {_fit_name(evidence)} cannot describe these samples: it leaves "
+            f"{100 * evidence.residual_rms:.0f} % of the field (RMS) where a full ellipsoid leaves {100 * best:.1f} %: it misplaces the ellipsoid the "
             "samples lie on (a sphere ignores the soft iron; min/max centred on samples that do not cover every "
             "direction evenly misses the centre), and the heading would keep the error; the auto method would not"
         )

@@ -224,7 +224,6 @@ def _optimal_rss(
     :data:`FLAT_SEMI_AXIS` residual distances is left out (third return value: why).
     """
     from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters, unit_map
-    from ..sampling import thin
 
     rows = _stride(kept, CHOICE_ROWS)
     scale = kept.shape[0] / rows.shape[0]
@@ -278,7 +277,6 @@ def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) 
     """
     from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters
     from ..sampling import MAX_ANALYSED as MAX_SAMPLES
-    from ..sampling import thin
 
     rows = samples[thin(samples.shape[0], MAX_SAMPLES)]
     if model == "full" and "ml" in METHODS:
@@ -339,7 +337,6 @@ def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.b
     enough to see 0.2 % of outliers, cheap on long logs. The robust candidates then find their own inliers
     among all samples.
     """
-    from ..sampling import thin
 
     everything = np.ones(samples.shape[0], dtype=bool)
     if mode == "keep":
