@@ -476,3 +476,11 @@ def test_fuzz_a_damaged_npy_header(tmp_path: Path) -> None:
     data[60:70] = b"\x00" * 10  # inside the header's Python literal: numpy raises a TokenError
     path.write_bytes(bytes(data))
     _assert_error(_run("calibrate", path), 2, "is not a readable .npy file")
+
+
+def test_2_simulate_checks_both_outputs_before_writing(tmp_path: Path) -> None:
+    keep = tmp_path / "keep.csv"
+    keep.write_text("OLD\n")
+    result = _run("simulate", "-n", "50", "-o", keep, "--truth", tmp_path / "nodir" / "t.json", "--force")
+    _assert_error(result, 2, "does not exist")
+    assert keep.read_text() == "OLD\n"

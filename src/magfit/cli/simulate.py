@@ -112,6 +112,10 @@ def simulate_command(
     existing = [str(path) for path in targets if path.exists()]
     if existing and not force:
         fail(f"{', '.join(existing)} already exists; pass --force to overwrite")
+    from ..io import check_output
+
+    for path in targets:  # before anything is written: a failed run must leave both files as they were
+        check_output(path)
 
     simulation = _simulate(
         sensor, disturbance, n_samples, seed, offset, matrix, noise, field_strength, orientations, max_tilt
