@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +23,7 @@ from ._common import (
     fixed,
     method_names,
     nonfinite_option,
+    option_wording,
     parse_columns,
     significant,
     vector,
@@ -113,6 +114,12 @@ def parse_methods(ctx: click.Context, param: click.Parameter, value: str | None)
     help="table (terminal), markdown, csv (one row per file and method) or json (with the calibrations).",
 )
 @click.option("--unit", help="Name of the samples' unit (uT, mG, counts ...), shown with the numbers.")
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Score the fits the samples do not support too (as the paper's tables do), marked NOT SUPPORTED, "
+    "instead of listing them as failed with the reason.",
+)
 @nonfinite_option
 @click.pass_context
 def compare_command(
@@ -122,13 +129,15 @@ def compare_command(
     columns: list[str | int] | None,
     output_format: str,
     unit: str | None,
+    force: bool,
     nonfinite: Nonfinite,
 ) -> None:
     """Fit several methods to each FILE and compare them as the paper does.
 
     For each file: the mean and std of the distance of the calibrated samples to the unit sphere, the
     field strength, the ellipsoid semi-axes and the hard-iron offset per method (6 significant digits, in
-    the --unit given, else the file's units). A method that cannot
+    the --unit given, else the file's units). A fit the samples do not support is listed as failed with
+    the reason, or with --force scored all the same and marked NOT SUPPORTED. A method that cannot
     fit a file shows its reason in the table instead. Exit status 0 when at least one method succeeded
     on every file, 1 when every method failed on some file, 2 when a file cannot be read.
 
@@ -146,7 +155,7 @@ def compare_command(
         table = read_samples(path, columns=columns, nonfinite=nonfinite)
         if table.n_skipped:
             warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
-        comparison = compare(table.samples, methods)
+        comparison = compare(table.samples, methods, allow_undetermined=force)
         results.append(
             FileComparison(
                 str(path), tuple(table.columns), table.n_rows, table.n_skipped, comparison, unit, table.column_note
@@ -156,6 +165,24 @@ def compare_command(
     render[output_format](results)
     if not all(result.comparison.any_succeeded for result in results):
         ctx.exit(EXIT_FIT_FAILED)
+
+
+def _reason(result: MethodResult) -> str:
+    """Why a method failed, as the command line words it (``--method sphere``, each reason once)."""
+    return option_wording(str(result.error))
+
+
+def _refusals(result: MethodResult) -> list[str] | None:
+    """Why the samples do not support a fit scored only because of ``--force``; None for a supported one."""
+    support = result.calibration.details.get("support") if result.calibration is not None else None
+    if not (isinstance(support, Mapping) and support.get("verdict") == "refused"):
+        return None
+    return [str(reason) for reason in support.get("refusals") or []]
+
+
+def _label(result: MethodResult, mark: str = " (NOT SUPPORTED)") -> str:
+    """The method's name, marked for a fit scored only because of ``--force``."""
+    return result.method + (mark if _refusals(result) is not None else "")
 
 
 def _numbers(result: MethodResult) -> list[str]:
@@ -197,16 +224,22 @@ def _print_tables(results: Sequence[FileComparison]) -> None:
         table.add_column("method")
         for header in _headers(result.unit):
             table.add_column(header, justify="right")
-        failures = not all(method_result.ok for method_result in result.comparison)
-        if failures:  # the column is there only when it has something to say
-            table.add_column("failure reason", overflow="fold", ratio=1)
+        reasons = []
         for method_result in result.comparison:
             if method_result.ok:
-                table.add_row(method_result.method, *_numbers(method_result), *([""] if failures else []))
+                table.add_row(_label(method_result, "*"), *_numbers(method_result))
+                refusals = _refusals(method_result)
+                if refusals is not None:
+                    why = option_wording("; ".join(refusals))
+                    reasons.append(Text(f"{method_result.method}*: NOT SUPPORTED by the samples: {why}", style="red"))
             else:
-                reason = Text(str(method_result.error), style="red")
-                table.add_row(method_result.method, "failed", "", "", "", "", reason)
+                table.add_row(method_result.method, "failed", "", "", "", "")
+                reasons.append(Text(f"{method_result.method} failed: {_reason(method_result)}", style="red"))
         out.print(table)
+        # Below the table, one line each (a reason folded into a narrow column is hard to read); * marks a fit
+        # scored only because of --force.
+        for reason in reasons:
+            out.print(reason, soft_wrap=True)
     out.print(Text(caption(results[0].unit if results else None), style="dim"))
 
 
@@ -222,9 +255,9 @@ def _print_markdown(results: Sequence[FileComparison]) -> None:
         lines.append("|---|---:|---:|---:|---:|---:|---|")
         for method_result in result.comparison:
             if method_result.ok:
-                cells = [method_result.method, *_numbers(method_result), ""]
+                cells = [_label(method_result), *_numbers(method_result), ""]
             else:
-                cells = [method_result.method, "failed", "", "", "", "", str(method_result.error)]
+                cells = [method_result.method, "failed", "", "", "", "", _reason(method_result)]
             lines.append("| " + " | ".join(_markdown_cell(cell) for cell in cells) + " |")
         lines.append("")
     lines.append(caption(results[0].unit if results else None))
@@ -250,7 +283,8 @@ def _print_csv(results: Sequence[FileComparison]) -> None:
                 *calibration.semi_axes,
                 *calibration.offset,
             ]
-            row = [result.name, method_result.method, "ok", *(repr(float(v)) for v in numbers), "", result.unit or ""]
+            status = "not supported" if _label(method_result) != method_result.method else "ok"
+            row = [result.name, method_result.method, status, *(repr(float(v)) for v in numbers), "", result.unit or ""]
             writer.writerow(row)
     click.echo(buffer.getvalue(), nl=False)
 
