@@ -484,3 +484,13 @@ def test_2_simulate_checks_both_outputs_before_writing(tmp_path: Path) -> None:
     result = _run("simulate", "-n", "50", "-o", keep, "--truth", tmp_path / "nodir" / "t.json", "--force")
     _assert_error(result, 2, "does not exist")
     assert keep.read_text() == "OLD\n"
+
+
+def test_2_plot_checks_its_output_first_and_writes_it_atomically(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    data = _csv(tmp_path / "s.csv", _samples())
+    _assert_error(_run("plot", data, "-o", tmp_path / "nodir" / "p.png"), 2, "does not exist")
+    result = _run("plot", data, "-m", "ellipsoid", "--methods", "ellipsoid", "-o", tmp_path / "p.png")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "p.png").read_bytes().startswith(b"\x89PNG")
+    _no_temporaries(tmp_path)

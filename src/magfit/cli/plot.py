@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import click
 from numpy.typing import ArrayLike
@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike
 from ..calibration import Calibration
 from ..compare import PAPER_METHODS, Comparison, compare
 from ..errors import CalibrationError
+from ..plot import method_labels
 from ._common import (
     RegistryChoice,
     console,
@@ -27,6 +28,9 @@ from ._extras import require
 from ._wording import columns_used
 from .compare import parse_methods
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 #: Figure formats ``-o`` accepts (matplotlib's Agg canvas writes them all).
 FIGURE_EXTENSIONS = (".png", ".svg", ".pdf")
 
@@ -41,11 +45,17 @@ def fit_for_plot(samples: ArrayLike, methods: Sequence[str], path: Path, columns
 
     ``columns`` (``"columns mx, my, mz"``) is named in the refusal: which columns could not be fitted.
     """
-    comparison = compare(samples, methods)
+    # The other methods are drawn even when the samples do not support them (the paper's figures compare
+    # all three), labelled so; the main one must be supported.
+    comparison = compare(samples, methods, allow_undetermined=True)
     main = comparison.results[0]
+    where = f"{path} ({columns})" if columns else str(path)
     if not main.ok:
-        where = f"{path} ({columns})" if columns else str(path)
         raise CalibrationError(f"{where}: the {main.method} fit failed, nothing to plot: {main.error}")
+    diagnostics = main.calibration.diagnostics if main.calibration is not None else None
+    if diagnostics is not None and diagnostics.support is not None and diagnostics.support.verdict == "refused":
+        reason = diagnostics.support.message(main.method)
+        raise CalibrationError(f"{where}: nothing to plot: {reason}; draw it with another --method")
     for result in comparison.results[1:]:
         if not result.ok:
             warn(f"{path}: {result.method} could not fit these samples and is left out of the plot: {result.error}")
@@ -124,12 +134,13 @@ def plot_command(
       magfit plot mag-readings.txt -o mag.png --unit uT
       magfit plot flight.csv --columns mx,my,mz --method ellipsoid --methods sphere,minmax -o flight.png
     """
-    from ..io import read_samples
-    from ..plot import calibration_figure, save_figure
+    from ..io import check_output, read_samples, write_all
+    from ..plot import calibration_figure
 
     require("plot", "magfit plot", ("matplotlib",))
     check_figure_path(output)
     refuse_overwriting_input(output, [file])
+    check_output(output)
     table = read_samples(file, columns=columns, nonfinite=nonfinite)
     if table.n_skipped:
         warn(f"{file}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
@@ -141,13 +152,14 @@ def plot_command(
     figure = calibration_figure(
         table.samples, calibrations, unit=unit, title=title or file.name, max_points=max_points, dpi=dpi
     )
-    save_figure(figure, output)
+    write_all([(output, figure_bytes(figure, output))])  # atomic: a failed save leaves an existing figure as it was
     out = console()
     out.print(f"{file}: {used}", soft_wrap=True)
     for result in comparison:
-        if result.evaluation is not None:
+        if result.evaluation is not None and result.calibration is not None:
+            (label,) = method_labels([result.calibration])  # "sphere (not supported)" as in the figure
             out.print(
-                f"{result.method:<12} sphere distance mean {fixed(result.evaluation.mean)}  "
+                f"{label:<12} sphere distance mean {fixed(result.evaluation.mean)}  "
                 f"std {fixed(result.evaluation.std)}",
                 soft_wrap=True,
             )
@@ -170,13 +182,18 @@ def plot_calibration(
         The figure in ``output``'s format (the caller writes it with its other outputs, so that a
         failure leaves every file as it was), and the line to print.
     """
-    import io
-
     from ..io import read_samples
     from ..plot import calibration_figure
 
     table = read_samples(file, columns=columns, nonfinite=nonfinite)
     figure = calibration_figure(table.samples, calibration, title=file.name)
+    return figure_bytes(figure, output), f"{figure.get_supxlabel()} Wrote the figure to {output}"
+
+
+def figure_bytes(figure: Figure, output: Path) -> bytes:
+    """The figure in the format of ``output``'s extension, to be written with the command's other outputs."""
+    import io
+
     buffer = io.BytesIO()
     figure.savefig(buffer, format=output.suffix.lower().lstrip("."), dpi="figure")
-    return buffer.getvalue(), f"{figure.get_supxlabel()} Wrote the figure to {output}"
+    return buffer.getvalue()
