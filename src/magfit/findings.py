@@ -334,6 +334,28 @@ class Uncertainty:
     n_samples: int
     effective_samples: float | None = None
 
+    def scaled(self, factor: float) -> Uncertainty:
+        """Every one-sigma times ``factor`` (and the effective samples divided by its square)."""
+
+        def times(values: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+            return None if values is None else (values[0] * factor, values[1] * factor, values[2] * factor)
+
+        def one(value: float | None) -> float | None:
+            return None if value is None else value * factor
+
+        effective = None if self.effective_samples is None else self.effective_samples / factor**2
+        return Uncertainty(
+            offset_sigma=times(self.offset_sigma),
+            scale_sigma=times(self.scale_sigma),
+            field_strength_sigma=one(self.field_strength_sigma),
+            heading_sigma_deg=one(self.heading_sigma_deg),
+            heading_sigma_max_deg=one(self.heading_sigma_max_deg),
+            inclination_deg=self.inclination_deg,
+            residual_sigma=self.residual_sigma,
+            n_samples=self.n_samples,
+            effective_samples=effective,
+        )
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "offset_sigma": None if self.offset_sigma is None else list(self.offset_sigma),

@@ -153,9 +153,10 @@ def judge(evidence: Evidence) -> Support:
     elif evidence.residual_rms > NO_ELLIPSOID_RMS:
         refusals.append(
             f"the {_fit_name(evidence)} cannot describe these samples: it leaves "
-            f"{100 * evidence.residual_rms:.0f} % of the field (RMS) where a full ellipsoid leaves {100 * best:.1f} %: it misplaces the ellipsoid the "
-            "samples lie on (a sphere ignores the soft iron; min/max centred on samples that do not cover every "
-            "direction evenly misses the centre), and the heading would keep the error; the auto method would not"
+            f"{100 * evidence.residual_rms:.0f} % of the field (RMS) where a full ellipsoid leaves {100 * best:.1f} %: "
+            "it misplaces the ellipsoid the samples lie on (a sphere ignores the soft iron; min/max centred on "
+            "samples that do not cover every direction evenly misses the centre), and the heading would keep the "
+            "error; the auto method would not"
         )
     elif best > LARGE_RESIDUAL_RMS:
         weak.append(
@@ -248,7 +249,7 @@ def judge(evidence: Evidence) -> Support:
         )
     if evidence.halves is not None:
         difference, sigma = evidence.halves
-        distance = math.sqrt(sum((d / max(s, 1e-300)) ** 2 for d, s in zip(difference, sigma, strict=True)) / 3.0)
+        distance = max(abs(d) / max(s, 1e-300) for d, s in zip(difference, sigma, strict=True))
         if distance > HALVES_SIGMAS:
             shown = ", ".join(f"{d:+.3g}" for d in difference)
             weak.append(
