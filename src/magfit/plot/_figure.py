@@ -7,7 +7,7 @@ Agg canvas of its own, without pyplot: no global state, no display needed, safe 
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -67,12 +67,16 @@ class _Prepared:
 
 
 def method_labels(calibrations: Sequence[Calibration]) -> tuple[str, ...]:
-    """A distinct display name per calibration: the method name, numbered when it repeats."""
+    """A distinct display name per calibration: the method name, numbered when it repeats, marked ``(not
+    supported)`` when the samples do not support it (a fit returned with ``allow_undetermined=True``)."""
     labels: list[str] = []
     for calibration in calibrations:
         label = calibration.method
-        repeat = sum(1 for other in labels if other == label or other.startswith(f"{label} #"))
-        labels.append(label if repeat == 0 else f"{label} #{repeat + 1}")
+        repeat = sum(1 for other in labels if other == label or other.startswith((f"{label} #", f"{label} (")))
+        label = label if repeat == 0 else f"{label} #{repeat + 1}"
+        support = calibration.details.get("support")
+        refused = isinstance(support, Mapping) and support.get("verdict") == "refused"
+        labels.append(f"{label} (not supported)" if refused else label)
     return tuple(labels)
 
 
