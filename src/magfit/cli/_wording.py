@@ -5,9 +5,12 @@ rewrites that at its boundary (``_common.option_wording``), without changing the
 
 - :func:`collapse_repeats`: ``sphere: <reason>; diag: <the same reason>`` becomes ``sphere: <reason>;
   diag: as sphere`` (and ``the diag model: ...`` likewise);
-- :func:`unquoted_alternatives`: ``--method auto (or 'ml', 'als')`` becomes ``--method auto (or ml, als)``;
+- :func:`after_keywords`: once ``name='value'`` is ``--name value``, flags are named
+  (``allow_undetermined=True`` -> ``--force``) and an option's alternatives unquoted
+  (:func:`unquoted_alternatives`: ``--method auto (or 'ml', 'als')`` -> ``--method auto (or ml, als)``);
 - :func:`without_own_advice`: a suggestion to use the method that was used is dropped (``prefer
-  method='auto' (or 'ml', 'als')`` after an ``auto`` fit becomes ``prefer method='ml' (or 'als')``).
+  method='auto' (or 'ml', 'als')`` after an ``auto`` fit becomes ``prefer method='ml' (or 'als')``);
+- :func:`columns_used`: the columns a message is about (every message about a fit names them).
 """
 
 from __future__ import annotations
