@@ -205,7 +205,12 @@ def judge(evidence: Evidence) -> Support:
                 f"({fitted:.6g}{label})"
             )
             mixup = unit_mixup(ratio)
-            refusals[-1] += f": {mixup}" if mixup else ": check the value and the samples' unit"
+            refusals[-1] += (
+                f": {mixup}"
+                if mixup
+                else ": check the value and the samples' unit (iron that scales the whole field, such as a steel "
+                "plate against the sensor, does this too: then leave the field strength out)"
+            )
     if (
         evidence.kind != "full"
         and evidence.ellipsoid_rms is not None
