@@ -153,6 +153,106 @@ def test_peer_results_are_converted_to_the_one_convention(simulation: magfit.Sim
         peers.calibration_from_correction("peer", truth.offset, np.full((3, 3), np.nan), 1.0, simulation.clean)
 
 
+def test_the_mild_sensor_stays_within_its_stated_bounds_and_differs_by_trial() -> None:
+    rng = np.random.default_rng(4)
+    drawn = [accuracy.mild_distortion(rng) for _ in range(200)]
+    for soft_iron, hard_iron in drawn:
+        np.testing.assert_array_equal(soft_iron, soft_iron.T)
+        assert np.all(np.abs(np.diag(soft_iron) - 1.0) <= 0.02)
+        assert np.all(np.abs(soft_iron[np.triu_indices(3, 1)]) <= 0.01)
+        assert np.all(np.abs(hard_iron) <= 0.4)
+    # The draws use their range: a sensor fixed at the identity would pass the bounds above.
+    assert np.ptp([h[0] for _, h in drawn]) > 0.6 and np.ptp([w[0, 0] for w, _ in drawn]) > 0.03
+
+
+def test_the_flight_case_simulates_its_sensor_and_its_held_out_samples_alike() -> None:
+    case = accuracy.flight_case(n=3000, trials=2, heldout=3000)
+    first, samples, heldout = case.trial_data(9, 0)
+    second, _, _ = case.trial_data(9, 1)
+    assert not np.allclose(first.soft_iron, second.soft_iron)  # a new sensor per trial
+    assert np.all(np.abs(np.diag(first.soft_iron) - 1.0) <= 0.02)
+    # Level flight: every attitude within ±15° of level; the held-out samples lie on the same ellipsoid
+    # (the true calibration maps them to within noise + drift of the field, 0.5 % + 0.5 %).
+    assert np.all(np.abs(first.attitudes[:, :2]) <= 15.0 + 1e-9)
+    for points in (samples, heldout):
+        radii = np.linalg.norm(first.truth.apply(points), axis=1)
+        assert np.max(np.abs(radii - 1.0)) < 0.03
+    # The field drifts by ±0.5 % along the recording, from +0.5 % at the start.
+    clean = np.linalg.norm(first.truth.apply(first.clean), axis=1)
+    assert clean[0] == pytest.approx(1.005, abs=1e-9)
+    assert clean.min() == pytest.approx(0.995, abs=1e-4)
+
+
+def test_adding_the_sensor_stream_keeps_the_samples_of_the_other_cases() -> None:
+    # trial_data spawns a fourth stream for the random sensor; the first three must be unchanged.
+    case = accuracy.Case("kept", 200, 0.02, seed_key="keep")
+    _, samples, _ = case.trial_data(5, 3)
+    key = accuracy.zlib.crc32(b"keep")
+    stream = np.random.SeedSequence([5, key, 3]).spawn(3)[0]
+    np.testing.assert_array_equal(samples, case.simulate(200, np.random.default_rng(stream)).samples)
+
+
+def test_no_calibration_scores_zero_only_on_an_undistorted_sensor() -> None:
+    clean = magfit.simulate(100, seed=1)  # identity soft iron, zero offset: the raw readings are right
+    identity = magfit.Calibration("none", np.zeros(3), np.eye(3), 1.0)
+    assert accuracy.heading_error_deg(identity, clean) < 1e-9
+    shifted = magfit.simulate(100, hard_iron=[0.2, 0.0, 0.0], seed=1)
+    assert accuracy.heading_error_deg(identity, shifted) > 5.0
+
+
+def test_verdicts_are_read_from_forced_fits_and_from_refusals() -> None:
+    yaw = magfit.simulate(2000, orientations="yaw", noise=0.01, seed=1)  # issue 10: refused by every method
+    forced = magfit.fit(yaw.samples, "ellipsoid", allow_undetermined=True)
+    verdict, reason = accuracy.verdict_of(forced, "")
+    assert verdict == "refused" and reason
+    with pytest.raises(magfit.CalibrationError) as refusal:
+        magfit.fit(yaw.samples, "auto")
+    message = accuracy._failure_message(refusal.value)
+    assert accuracy.verdict_of(None, message) == ("refused", str(refusal.value).splitlines()[0])
+    tumble = magfit.simulate(2000, noise=0.01, seed=2)
+    assert accuracy.verdict_of(magfit.fit(tumble.samples, "ellipsoid"), "")[0] == "supported"
+    assert accuracy.verdict_of(magfit.Calibration("peer", np.zeros(3), np.eye(3), 1.0), "") == (None, None)
+    assert accuracy.verdict_of(None, "PeerFailure: NaN") == (None, None)
+
+
+def _outcomes(headings: list[float | None], verdict: str = "supported") -> list:
+    return [
+        accuracy.Outcome(heading_deg=h, verdict=verdict if h is not None else "refused", error=None if h else "no")
+        for h in headings
+    ]
+
+
+def _flight_target(results: dict) -> accuracy.Target:
+    case = accuracy.flight_case(trials=3)
+    targets = accuracy.check_targets([case], {case.name: results})
+    return next(t for t in targets if "level flight" in t.name)
+
+
+def test_the_flight_target_compares_auto_with_the_best_model_and_with_no_calibration() -> None:
+    models = {
+        "sphere": _outcomes([1.0, 1.0, 1.0], "weak"),
+        "diag": _outcomes([0.8, 0.8, 0.8], "refused"),
+        "als": _outcomes([3.0, 3.0, 3.0], "refused"),
+        "ml": _outcomes([3.5, 3.5, 3.5], "refused"),
+        accuracy.UNCALIBRATED: _outcomes([30.0, 30.0, 0.9]),
+    }
+    passing = _flight_target(
+        {**models, "auto": _outcomes([0.85, 0.9, 0.88]), accuracy.UNCALIBRATED: _outcomes([30.0] * 3)}
+    )
+    assert passing.status == "PASS" and "best diag 0.8°" in passing.detail
+    # Within 1.2x of the best (diag, 0.8°), but the third trial is above no calibration (0.95° > 0.9°).
+    above_none = _flight_target({**models, "auto": _outcomes([0.85, 0.9, 0.95])})
+    assert above_none.status == "FAIL" and "on 1/3 trials" in above_none.detail
+    too_far = _flight_target(
+        {**models, "auto": _outcomes([1.2, 1.2, 1.2]), accuracy.UNCALIBRATED: _outcomes([30.0] * 3)}
+    )
+    assert too_far.status == "FAIL" and "paired ratio 1.500" in too_far.detail
+    refused = _flight_target(
+        {**models, "auto": _outcomes([0.8, 0.8, None]), accuracy.UNCALIBRATED: _outcomes([30.0] * 3)}
+    )
+    assert refused.status == "FAIL" and "auto refused 1/3" in refused.detail
+
+
 def test_smoke_run_of_the_harness_on_magfit_methods(tmp_path: Path) -> None:
     report = accuracy.run(accuracy.smoke_grid(), peers=False, real_data=None, command="test", floor_points=20_000)
     tumble = report["summaries"]["tumble σ=0.5% N=1000"]
@@ -160,12 +260,21 @@ def test_smoke_run_of_the_harness_on_magfit_methods(tmp_path: Path) -> None:
     # σ = 0.5 %, N = 1000: the floor is 0.054°; 2 trials of the algebraic fit stay well under 0.2°.
     assert tumble["ellipsoid"].heading_deg < 0.2
     assert tumble["ellipsoid"].failed == 0
+    assert tumble["ellipsoid"].verdicts == {"supported": 2}  # a full tumble supports the full model
     assert tumble["sphere"].heading_deg > 1.0  # the soft iron it cannot correct costs degrees
+    assert tumble["sphere"].failed == 0  # forced: scored even when the verdict is against it
+    assert tumble[accuracy.UNCALIBRATED].heading_deg > 10.0  # the generic sensor's iron, uncorrected
+    flight = report["summaries"][accuracy.flight_case(n=2000).name]
+    assert flight[accuracy.UNCALIBRATED].heading_deg > 5.0
+    assert sum(flight["auto"].verdicts.values()) == 2
+    assert report["floors"].get(accuracy.flight_case(n=2000).name) is None  # not defined with drift
     text = accuracy.render_markdown(report)
-    assert "## Targets" in text and "floor" in text
+    assert "## Targets" in text and "floor" in text and "## Support verdict" in text
+    assert "level flight" in text and "per trial ≤ no calibration" in text
     assert all(f"| {method} " in text or f" {method} |" in text for method in report["methods"])
     data = json.loads(accuracy.report_json(report))
     assert data["summaries"]["tumble σ=0.5% N=1000"]["ellipsoid"]["trials"] == 2
+    assert data["outcomes"]["tumble σ=0.5% N=1000"]["ellipsoid"][0]["verdict"] == "supported"
 
 
 def test_the_command_line_writes_both_files(tmp_path: Path) -> None:
