@@ -17,6 +17,15 @@ Four parts, each a ratio to a baseline timed in the same run (absolute times dep
    sizes, each size in its own process with a one-minute limit (run from ``benchmarks/.peers-venv``,
    see ``setup_peers.sh``); a size a peer cannot finish, or crashes on, is reported with the reason.
 
+5. Issue 10's two ratios, both sides timed in the same run, taking turns (best of ``--rounds``):
+   ``magfit.fit(samples, "auto")`` against ``magfit.fit(samples, "ellipsoid")`` on the same 10 000 samples,
+   default diagnostics (target at most 3x: ``auto`` fast enough to refit live), and ``magfit calibrate``
+   (default method) on a 300-row CSV against ``python -c "import magfit.cli"``, both as processes (target
+   at most 2x: the command costs little beyond its imports).
+6. ``magfit calibrate`` (default method) on the CSV of part 2 (10 million rows): its peak RSS (target
+   < 300 MB), alone, so that it can be measured without the readers of part 2.
+
+``--parts ratios,memory`` runs only some parts (the ratios take about a minute on an idle machine).
 Times are the best of ``--repeat`` runs (the least disturbed by other processes); the machine's load
 average is recorded with the results, since other work on the machine slows every row alike. The
 pyarrow readers of part 2 need ``pip install pyarrow`` (a row says so when it is missing); the peak RSS
@@ -64,7 +73,15 @@ TARGETS = {
     "cli_vs_reader": 1.5,
     "cli_rss_mb": 300.0,
     "ml_seconds": 2.0,
+    "auto_vs_ellipsoid": 3.0,
+    "calibrate_vs_import": 2.0,
+    "default_rss_mb": 300.0,
 }
+#: The parts, in the order they run (``--parts``).
+PARTS = ("fit", "ml", "cli", "peers", "ratios", "memory")
+#: Sizes of issue 10's ratios: samples of the in-memory fits, rows of the small CSV.
+N_RATIO_FIT = 10_000
+N_RATIO_CSV = 300
 
 
 # ---------------------------------------------------------------------- data
@@ -354,6 +371,86 @@ def part_ml(n: int, repeat: int, samples: NDArray[np.float64]) -> dict[str, Any]
     }
 
 
+# ---------------------------------------------------------------------- part 5: issue 10's ratios
+
+
+def part_ratios(rounds: int, workdir: Path) -> dict[str, Any]:
+    """``auto`` / ``ellipsoid`` in memory and ``magfit calibrate`` / ``import magfit.cli`` as processes.
+
+    Each pair takes turns for ``rounds`` rounds and the best time of each side counts: a slow spell of
+    the shared machine then slows both sides of a round alike, and the best is the least disturbed.
+    """
+    samples = make_samples(N_RATIO_FIT, seed=10)
+    print(f"[ratios] auto vs ellipsoid on {N_RATIO_FIT:,} samples, {rounds} rounds", flush=True)
+    results: dict[str, Any] = {"n_fit": N_RATIO_FIT, "n_csv": N_RATIO_CSV, "rounds": rounds}
+    fits: dict[str, list[float]] = {"ellipsoid": [], "auto": []}
+    outcome: dict[str, Any] = {}
+    for method in fits:  # imports and caches outside the timing
+        try:
+            magfit.fit(samples, method)
+        except magfit.MagfitError as error:
+            outcome[method] = f"{type(error).__name__}: {str(error).splitlines()[0]}"
+    for _ in range(rounds):
+        for method in fits:
+            start = time.perf_counter()
+            try:
+                calibration = magfit.fit(samples, method)
+            except magfit.MagfitError:
+                calibration = None  # a refusal is timed too, and said below
+            fits[method].append(time.perf_counter() - start)
+            if calibration is not None:
+                support = calibration.details.get("support", {})
+                chosen = calibration.details.get("chosen")
+                outcome[method] = f"verdict {support.get('verdict')}" + (f", chose {chosen}" if chosen else "")
+    results["fit_seconds"] = {method: min(times) for method, times in fits.items()}
+    results["fit_all_seconds"] = fits
+    results["fit_outcome"] = outcome
+    results["auto_vs_ellipsoid"] = results["fit_seconds"]["auto"] / results["fit_seconds"]["ellipsoid"]
+
+    csv = workdir / f"samples_{N_RATIO_CSV}.csv"
+    write_csv(make_samples(N_RATIO_CSV, seed=11), csv)
+    print(f"[ratios] magfit calibrate on {N_RATIO_CSV} rows vs import magfit.cli, {rounds} rounds", flush=True)
+    commands = {
+        "import": [sys.executable, "-c", "import magfit.cli"],
+        "calibrate": [str(Path(sys.executable).parent / "magfit"), "calibrate", str(csv)],
+    }
+    run_process(commands["calibrate"])  # the first run compiles bytecode and warms the file cache
+    best = _interleaved(commands, rounds)
+    processes: dict[str, Any] = {}
+    for name, run in best.items():
+        if isinstance(run, RuntimeError):
+            processes[name] = {"error": str(run)[-300:]}
+        else:
+            processes[name] = {"seconds": run.seconds, "cpu_seconds": run.cpu_seconds, "rss_mb": run.rss_mb}
+            if name == "calibrate":
+                processes[name].update(_calibrate_row(run))
+    results["processes"] = processes
+    results["commands"] = {name: shlex.join(command) for name, command in commands.items()}
+    results["calibrate_vs_import"] = processes["calibrate"].get("seconds", float("nan")) / processes["import"].get(
+        "seconds", float("nan")
+    )
+    return results
+
+
+# ---------------------------------------------------------------------- part 6: the default method's memory
+
+
+def part_memory(n: int, workdir: Path, samples: NDArray[np.float64]) -> dict[str, Any]:
+    """Peak RSS of ``magfit calibrate`` with the default method on the ``n``-row CSV of part 2, one run."""
+    csv = workdir / f"samples_{n}.csv"
+    if not csv.exists():
+        print(f"[memory] writing {csv}", flush=True)
+        write_csv(samples[:n], csv)
+    command = [str(Path(sys.executable).parent / "magfit"), "calibrate", str(csv), "--columns", "mx,my,mz"]
+    print(f"[memory] {shlex.join(command)}", flush=True)
+    run = run_process(command)
+    row: dict[str, Any] = {"n": n, "csv_mb": csv.stat().st_size / 1e6, "command": shlex.join(command)}
+    if run.status != 0:
+        last = run.output.strip().splitlines()[-1] if run.output.strip() else ""
+        return {**row, "error": f"exit {run.status}: {last[:300]}", "rss_mb": run.rss_mb, "seconds": run.seconds}
+    return {**row, **_calibrate_row(run)}
+
+
 # ---------------------------------------------------------------------- part 4: peers
 
 _PEER_SCRIPT = """
@@ -432,7 +529,7 @@ def _fmt(seconds: float) -> str:
 
 
 def _verdict(ok: bool) -> str:
-    return "met" if ok else "**missed**"
+    return "PASS" if ok else "**FAIL**"
 
 
 def machine() -> dict[str, Any]:
@@ -528,6 +625,13 @@ def report(results: dict[str, Any]) -> str:
                 )
             else:
                 lines.append(f"| {name} | failed: {value['error']} | | |")
+        default: dict[str, Any] = next((v for k, v in cli["calibrate"].items() if k.startswith("(")), {})
+        if "rss_mb" in default:
+            lines += [
+                "",
+                f"The default method's peak RSS: {default['rss_mb']:.0f} MB (target < "
+                f"{TARGETS['default_rss_mb']:g} MB: {_verdict(default['rss_mb'] < TARGETS['default_rss_mb'])}).",
+            ]
         lines += [
             "",
             f"`{cli['command']}`: {cli['cli_vs_reader']:.2f} x the fastest reader (target <= "
@@ -591,7 +695,72 @@ def report(results: dict[str, Any]) -> str:
         ]
     elif results.get("peers_skipped"):
         lines += ["## 4. Peers", "", f"Not run: {results['peers_skipped']}.", ""]
+    lines += _ratios_section(results.get("ratios"))
+    lines += _memory_section(results.get("memory"))
     return "\n".join(lines)
+
+
+def _ratios_section(ratios: dict[str, Any] | None) -> list[str]:
+    """Part 5: issue 10's two ratios with their targets."""
+    if not ratios:
+        return []
+    fit = ratios["fit_seconds"]
+    auto_ok = ratios["auto_vs_ellipsoid"] <= TARGETS["auto_vs_ellipsoid"]
+    lines = [
+        "## 5. Issue 10's ratios (fast enough to refit live)",
+        "",
+        f"Both sides of each ratio take turns, {ratios['rounds']} rounds, best of each.",
+        "",
+        "| what | time | ratio | target |",
+        "|---|---|---|---|",
+        f'| `magfit.fit(samples, "ellipsoid")`, {ratios["n_fit"]:,} samples, default diagnostics '
+        f"({ratios['fit_outcome'].get('ellipsoid', '—')}) | {_fmt(fit['ellipsoid'])} | 1 | |",
+        f'| `magfit.fit(samples, "auto")`, the same samples ({ratios["fit_outcome"].get("auto", "—")}) | '
+        f"{_fmt(fit['auto'])} | {ratios['auto_vs_ellipsoid']:.2f} x ellipsoid | <= "
+        f"{TARGETS['auto_vs_ellipsoid']:g} x: {_verdict(auto_ok)} |",
+    ]
+    processes = ratios["processes"]
+    base, calibrate = processes["import"], processes["calibrate"]
+    if "seconds" in base and "seconds" in calibrate:
+        cli_ok = ratios["calibrate_vs_import"] <= TARGETS["calibrate_vs_import"]
+        chose = f"; chose the {calibrate['chose']} model" if "chose" in calibrate else ""
+        lines += [
+            f"| `{ratios['commands']['import']}` (process) | {_fmt(base['seconds'])} | 1 | |",
+            f"| `magfit calibrate` on a {ratios['n_csv']}-row CSV, default method (process{chose}) | "
+            f"{_fmt(calibrate['seconds'])} | {ratios['calibrate_vs_import']:.2f} x import | <= "
+            f"{TARGETS['calibrate_vs_import']:g} x: {_verdict(cli_ok)} |",
+        ]
+    else:
+        failed = calibrate.get("error") or base.get("error")
+        lines.append(f"| `magfit calibrate` on {ratios['n_csv']} rows vs the import | failed: {failed} | | |")
+    lines += [
+        "",
+        "CPU time (user + system) of the two processes: "
+        + ", ".join(f"{name} {_fmt(v['cpu_seconds'])}" for name, v in processes.items() if "cpu_seconds" in v)
+        + ".",
+        "",
+    ]
+    return lines
+
+
+def _memory_section(memory: dict[str, Any] | None) -> list[str]:
+    """Part 6: the default method's peak RSS on the large CSV."""
+    if not memory:
+        return []
+    title = f"## 6. `magfit calibrate` (default method) on a {memory['n']:,}-row CSV ({memory['csv_mb']:.0f} MB)"
+    if "error" in memory:
+        return [title, "", f"`{memory['command']}` failed: {memory['error']} (peak RSS {memory['rss_mb']:.0f} MB).", ""]
+    ok = memory["rss_mb"] < TARGETS["default_rss_mb"]
+    how = "streamed in chunks" if memory["streamed"] else "whole file in memory"
+    chose = f", chose the {memory['chose']} model" if "chose" in memory else ""
+    return [
+        title,
+        "",
+        f"`{memory['command']}`: peak RSS {memory['rss_mb']:.0f} MB (target < {TARGETS['default_rss_mb']:g} MB: "
+        f"{_verdict(ok)}), {_fmt(memory['seconds'])} ({how}; fitted on {memory['fitted_on']}{chose}). "
+        f"The samples alone are {memory['n'] * 24 / 1e6:.0f} MB as float64.",
+        "",
+    ]
 
 
 # ---------------------------------------------------------------------- main
@@ -614,7 +783,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()) / "magfit-speed")
     parser.add_argument("--output", type=Path, default=ROOT / "benchmarks" / "results" / "speed.md")
     parser.add_argument("--peers-python", type=Path, default=PEERS_PYTHON)
+    parser.add_argument(
+        "--parts", default=",".join(PARTS), help=f"comma-separated parts to run, of {', '.join(PARTS)} (default all)"
+    )
+    parser.add_argument("--rounds", type=int, default=7, help="rounds of the interleaved ratios (part 5)")
     args = parser.parse_args(argv)
+    parts = {part.strip() for part in args.parts.split(",") if part.strip()}
+    if not parts or parts - set(PARTS):
+        parser.error(f"--parts takes names among {', '.join(PARTS)}, got {args.parts!r}")
+    if args.no_peers:
+        parts.discard("peers")
+    if args.no_cli:
+        parts.discard("cli")
     if args.smoke:
         options = Options(n_fit=1_000_000, n_cli=200_000, n_ml=100_000, peer_sizes=[1_000, 10_000])
     else:
@@ -632,17 +812,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         "machine": machine(),
         "repeat": args.repeat,
     }
-    samples = make_samples(max(options.n_fit, options.n_cli, options.n_ml, *options.peer_sizes))
-    results["fit"] = part_fit(options.n_fit, args.repeat, args.workdir, samples[: options.n_fit])
-    results["ml"] = part_ml(options.n_ml, args.repeat, samples)
-    if not args.no_cli:
+    results["parts"] = [part for part in PARTS if part in parts]
+    # Only the samples the chosen parts use (the peers' largest size is 30 million: 720 MB).
+    sizes = {"fit": options.n_fit, "ml": options.n_ml, "cli": options.n_cli, "memory": options.n_cli}
+    needed = [sizes[part] for part in parts if part in sizes]
+    if "peers" in parts:
+        needed += options.peer_sizes
+    samples = make_samples(max(needed)) if needed else np.empty((0, 3))
+    if "fit" in parts:
+        results["fit"] = part_fit(options.n_fit, args.repeat, args.workdir, samples[: options.n_fit])
+    if "ml" in parts:
+        results["ml"] = part_ml(options.n_ml, args.repeat, samples)
+    if "cli" in parts:
         results["cli"] = part_cli(options.n_cli, args.repeat, args.workdir, samples[: options.n_cli])
     if args.no_peers:
         results["peers_skipped"] = "--no-peers"
+    elif "peers" not in parts:
+        pass
     elif not args.peers_python.exists():
         results["peers_skipped"] = f"no peers environment at {args.peers_python} (run benchmarks/setup_peers.sh)"
     else:
         results["peers"] = part_peers(options.peer_sizes, args.workdir, samples, args.peers_python)
+    if "ratios" in parts:
+        results["ratios"] = part_ratios(args.rounds, args.workdir)
+    if "memory" in parts:
+        results["memory"] = part_memory(options.n_cli, args.workdir, samples)
     results["runtime_s"] = time.perf_counter() - start
     results["load_average_end"] = os.getloadavg()
     text = report(results)
