@@ -494,3 +494,15 @@ def test_2_plot_checks_its_output_first_and_writes_it_atomically(tmp_path: Path)
     assert result.exit_code == 0, result.output
     assert (tmp_path / "p.png").read_bytes().startswith(b"\x89PNG")
     _no_temporaries(tmp_path)
+
+
+def test_fuzz_denormal_and_tiny_samples_are_refused_for_their_spread() -> None:
+    # Denormal values (a damaged .npy): the frame's unit was denormal, 1 / unit inf, the scatter NaN with a
+    # numpy warning; 1e-200 samples were "all identical" (their covariance underflowed in input units).
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for samples in (_hard_iron_only(100) * 1e-319, _hard_iron_only(500) * 1e-200):
+            statistics = magfit.Statistics().update(samples)
+            assert statistics.n == len(samples)
+            with pytest.raises(magfit.SampleError, match=r"the samples spread .* outside the 1e-40 to 1e\+40"):
+                magfit.fit(samples, method="sphere")

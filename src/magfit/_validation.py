@@ -25,7 +25,10 @@ class Moments(Protocol):
     def mean(self) -> NDArray[np.float64]: ...
 
     @property
-    def covariance(self) -> NDArray[np.float64]: ...
+    def scale(self) -> float: ...
+
+    @property
+    def scatter(self) -> NDArray[np.float64]: ...
 
 
 #: Below this ratio of the smallest to the largest spread (standard deviation along the principal
@@ -108,8 +111,12 @@ def check_support(statistics: Moments, method: str, min_samples: int) -> None:
             f"method {method!r} needs at least {min_samples} samples, got {n}; "
             "record more while turning the sensor in all directions"
         )
-    spreads_squared, directions = np.linalg.eigh(statistics.covariance)
-    spreads = np.sqrt(np.clip(spreads_squared, 0.0, None))
+    # The covariance in the normalised frame (unit = the samples' RMS spread): in input units its entries,
+    # squares of the spread, would underflow for tiny samples (1e-200) and call them identical.
+    scatter = statistics.scatter
+    first = scatter[6:9, 9] / n
+    spreads_squared, directions = np.linalg.eigh(scatter[6:9, 6:9] / n - np.outer(first, first))
+    spreads = np.sqrt(np.clip(spreads_squared, 0.0, None)) * statistics.scale
     largest = spreads[-1]
     # Identical up to float64's resolution at their magnitude (x near 1e15 varying by ±200 is not identical).
     resolution = _IDENTICAL_ULPS * np.finfo(np.float64).eps * float(np.max(np.abs(statistics.mean)))
@@ -120,10 +127,10 @@ def check_support(statistics: Moments, method: str, min_samples: int) -> None:
         )
     low, high = SPREAD_RANGE
     if not low <= largest <= high:
-        factor = 10.0 ** (2 - round(math.log10(largest)))
+        exponent = 2 - round(math.log10(largest))  # a factor that brings the spread to about 100
         raise SampleError(
             f"the samples spread {largest:.3g} (input units), outside the {low:g} to {high:g} magfit fits in float64; "
-            f"rescale them (e.g. multiply by {factor:g}) and scale the calibration back"
+            f"rescale them (e.g. multiply by 1e{exponent}) and scale the calibration back"
         )
     if spreads[1] < FLATNESS_LIMIT * largest:
         raise CalibrationError(

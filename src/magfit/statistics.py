@@ -55,6 +55,8 @@ DEFAULT_CHUNK = 1 << 16
 _FRAME_REACH = 4.0
 #: The frame moves when the samples spread this many times wider than its unit.
 _REFRAME_GROWTH = 2.0
+#: Smallest unit of the normalised frame: its inverse stays finite.
+_MIN_SCALE = 1e-300
 
 
 def design_matrix(z: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -71,13 +73,13 @@ def design_matrix(z: NDArray[np.floating]) -> NDArray[np.float64]:
     return design
 
 
-def _mean_square(deviations: NDArray[np.float64]) -> float:
-    """Σ over rows of the mean over columns of ``deviations`` (3, m) squared, without overflow or underflow."""
+def _rms(deviations: NDArray[np.float64]) -> float:
+    """√(Σ over rows of the mean over columns of ``deviations`` (3, m) squared), without overflow or underflow."""
     largest = float(np.max(np.abs(deviations))) if deviations.size else 0.0
     if largest == 0.0:
         return 0.0
     scaled = deviations / largest
-    return largest * largest * float(np.einsum("ij,ij->", scaled, scaled)) / deviations.shape[1]
+    return largest * math.sqrt(float(np.einsum("ij,ij->", scaled, scaled)) / deviations.shape[1])
 
 
 def _polynomial_product(
@@ -242,19 +244,24 @@ class Statistics:
                 return  # the usual case: the chunk lies well inside the frame, nothing to compute
         m = chunk_t.shape[1]
         chunk_mean = chunk_t.mean(axis=1)
-        # Mean squares, not sums of squares, each scaled by its largest term: values up to MAX_MAGNITUDE
-        # never overflow, whatever the number of samples (update() has refused larger ones).
-        chunk_var = _mean_square(chunk_t - chunk_mean[:, None])  # mean |x − mean|², input units²
+        # RMS values, each scaled by its largest term, never sums of squares: values up to MAX_MAGNITUDE do not
+        # overflow, denormal ones do not underflow, whatever the number of samples.
+        chunk_spread = _rms(chunk_t - chunk_mean[:, None])  # √(mean |x − mean|²), input units
         if self._n == 0:
-            mean, spread = chunk_mean, math.sqrt(chunk_var)
+            mean, spread = chunk_mean, chunk_spread
         else:
-            own_mean, own_var = self._stored_mean(), self._spread() ** 2
+            own_mean, own_spread = self._stored_mean(), self._spread()
             n = self._n + m
             own_share, chunk_share = self._n / n, m / n
             mean = own_share * own_mean + chunk_share * chunk_mean
-            own_part = own_share * (own_var + _mean_square((own_mean - mean)[:, None]))
-            chunk_part = chunk_share * (chunk_var + _mean_square((chunk_mean - mean)[:, None]))
-            spread = math.sqrt(own_part + chunk_part)
+            own_shift, chunk_shift = _rms((own_mean - mean)[:, None]), _rms((chunk_mean - mean)[:, None])
+            unit = max(own_spread, chunk_spread, own_shift, chunk_shift)
+            spread = 0.0
+            if unit > 0:
+                spread = unit * math.sqrt(
+                    own_share * ((own_spread / unit) ** 2 + (own_shift / unit) ** 2)
+                    + chunk_share * ((chunk_spread / unit) ** 2 + (chunk_shift / unit) ** 2)
+                )
         if self._n == 0 or (spread > 0 and (not known or spread > _REFRAME_GROWTH * self._scale)):
             self._move_frame(mean, spread)
 
@@ -274,6 +281,8 @@ class Statistics:
     def _move_frame(self, centre: NDArray[np.float64], spread: float) -> None:
         """Express the scatter in the frame (centre, spread); a zero spread keeps a placeholder unit."""
         scale = spread if spread > 0 else (float(np.max(np.abs(centre))) or 1.0)
+        # A denormal unit would make 1 / scale infinite; such samples are refused by the fits anyway (SPREAD_RANGE).
+        scale = max(scale, _MIN_SCALE)
         self._canonical_cache = None
         if self._n > 0:
             assert self._centre is not None
@@ -362,7 +371,7 @@ class Statistics:
             first = self._scatter[6:9, 9] / self._n
             centre = self._centre + self._scale * first
             spread = self._spread()
-            scale = spread if spread > 0 else self._scale  # all samples identical: any unit will do
+            scale = max(spread, _MIN_SCALE) if spread > 0 else self._scale  # identical samples: any unit will do
             transform = design_transform(self._scale / scale, (self._centre - centre) / scale)
             scatter = transform @ self._scatter @ transform.T
             self._canonical_cache = (centre, scale, 0.5 * (scatter + scatter.T))
