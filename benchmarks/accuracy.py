@@ -33,6 +33,13 @@ sphere distances
     The paper's section V metric, ``magfit.evaluate``: mean and std of ``|apply(x, normalized=True)| − 1``
     on the fitted samples and on held-out samples (10 000 fresh samples of the same simulation, same
     noise and attitudes, without spikes). Averaged over trials.
+no calibration
+    The heading error of the raw readings (offset 0, identity matrix), per trial: the yardstick.
+support verdict
+    magfit's own judgement of each fit (``details["support"]``: supported, weak, refused). Every magfit
+    method but ``auto`` is fitted with ``allow_undetermined=True``, so the numbers above are what the
+    method gives even where the samples do not support it; the verdicts are counted beside them.
+    ``auto`` is not forced: its refusal is its answer, a failure with its reason.
 floor
     The Cramér–Rao bound of the geometric noise model (each sample a point of the true ellipsoid plus
     isotropic Gaussian noise; the points are nuisance parameters), propagated to the heading error by
