@@ -69,6 +69,8 @@ def _parse_until(ctx: click.Context, param: click.Parameter, value: str | None) 
               help="Good enough: heading one-sigma at level attitude, degrees.")  # fmt: skip
 @click.option("--rate", type=click.FloatRange(1, 5000), default=100.0, show_default=True,
               help="--simulate: samples per second.")  # fmt: skip
+@click.option("--speed", type=click.FloatRange(1, 3600), default=120.0, show_default=True,
+              help="--simulate: how fast the hand turns the board, degrees per second.")  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True, help="--simulate: seed of the hand's motion.")
 def live_command(
     port: str | None,
@@ -86,6 +88,7 @@ def live_command(
     min_coverage: float,
     max_heading_sigma: float,
     rate: float,
+    speed: float,
     seed: int,
 ) -> None:
     """Calibrate live: read PORT, refit as the sensor turns, save (and send) when good enough.
@@ -111,7 +114,7 @@ def live_command(
     thresholds = Thresholds(min_coverage=min_coverage, max_heading_sigma_deg=max_heading_sigma)
     source: Source
     if simulate:
-        source = SimulatedSource(SimulatedBoard(rate_hz=rate, seed=seed))
+        source = SimulatedSource(SimulatedBoard(rate_hz=rate, speed_dps=speed, seed=seed))
     else:
         assert port is not None
         source = open_source(port, baud=baud)

@@ -147,6 +147,8 @@ class SimulatedBoard:
 
     def raw_lines(self, n: int) -> bytes:
         """The next ``n`` samples as MotionCal ``Raw:`` lines (CR LF), then any pending ``Cal1:``/``Cal2:`` echo."""
+        if n <= 0:
+            return self._echo()
         mag, accel, gyro = self.readings(n)
         counts = np.column_stack(
             [

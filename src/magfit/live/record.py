@@ -44,12 +44,15 @@ class Recorder:
         except OSError as error:
             raise DataFileError(f"{path}: cannot create the recording ({error.strerror})") from None
         self._header_written = False
+        self._closing = False
         self._start = time.monotonic()
         self._synced = self._start
         self.rows = 0
 
     def write(self, samples: NDArray[np.float64], unit: str | None) -> None:
-        """Append (n, 3) samples; the header goes first, with ``unit`` when known."""
+        """Append (n, 3) samples; the header goes first (with the first rows), with ``unit`` when known."""
+        if samples.shape[0] == 0 and not self._closing:
+            return
         if not self._header_written:
             suffix = f"({unit})" if unit else ""
             self._file.write(f"time_s,mx{suffix},my{suffix},mz{suffix}\n")
@@ -69,7 +72,8 @@ class Recorder:
         """Flush, fsync and close."""
         if self._file.closed:
             return
-        if not self._header_written:
+        if not self._header_written:  # no sample came: the header alone says what the file is
+            self._closing = True
             self.write(np.empty((0, 3)), None)
         self._file.flush()
         os.fsync(self._file.fileno())

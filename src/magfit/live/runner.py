@@ -121,7 +121,7 @@ class LiveRun:
         """True once the run is over (a stop rule met, the stream ended, or an error)."""
         if self.stop.duration is not None and self.stopped_by is None and self.elapsed >= self.stop.duration:
             self._finish(f"{self.stop.duration:g} s")
-        return self._halt.is_set() or (self.ended is not None and self.stop.given) or self.error is not None
+        return self._halt.is_set() or self.ended is not None or self.error is not None
 
     def _finish(self, reason: str) -> None:
         if self.stopped_by is None:

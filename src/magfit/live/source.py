@@ -20,7 +20,7 @@ from typing import Any, Protocol
 from ..errors import DataFileError, OptionError
 from .board import SimulatedBoard
 
-__all__ = ["EndOfStream", "MissingExtraError", "Source", "open_source"]
+__all__ = ["EndOfStream", "FileLikeSource", "MissingExtraError", "SimulatedSource", "Source", "open_source"]
 
 #: The hint printed when pyserial is missing.
 INSTALL_HINT = "reading a serial port needs pyserial: pip install 'magfit[live]'"
@@ -60,7 +60,10 @@ def open_source(port: str, *, baud: int = 115200) -> Source:
         A serial port is named and pyserial is not installed.
     """
     if port == "-":
-        return _FdSource("standard input", sys.stdin.fileno(), ends_normally=True, cut=False)
+        try:
+            return _FdSource("standard input", sys.stdin.fileno(), ends_normally=True, cut=False)
+        except (AttributeError, OSError, ValueError):  # a file-like object with no descriptor (io.UnsupportedOperation)
+            return FileLikeSource("standard input", getattr(sys.stdin, "buffer", sys.stdin))
     for scheme in ("tcp://", "socket://"):
         if port.startswith(scheme):
             return _SocketSource(port, port[len(scheme) :])
@@ -114,6 +117,32 @@ class _FdSource:
     def close(self) -> None:
         if self._owned:
             os.close(self._fd)
+
+
+class FileLikeSource:
+    """Any binary file-like object (``read1`` or ``read``): a stream handed over by a program, a test's input.
+
+    Its reads block, so a run over it stops only when the stream ends or gives more bytes.
+    """
+
+    first_line_may_be_cut = False
+    ends_normally = True
+
+    def __init__(self, name: str, stream: Any) -> None:
+        self.name = name
+        self._read = getattr(stream, "read1", None) or stream.read
+
+    def read(self, timeout: float) -> bytes:
+        data = self._read(65536)
+        if not data:
+            raise EndOfStream(f"{self.name} ended")
+        return data if isinstance(data, bytes) else str(data).encode("utf-8")
+
+    def write(self, data: bytes) -> None:
+        raise OptionError(f"{self.name} is read-only: a calibration can be sent only to a serial port or a socket")
+
+    def close(self) -> None:
+        pass
 
 
 class _SocketSource:
