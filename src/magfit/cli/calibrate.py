@@ -62,6 +62,10 @@ DIAGNOSE_SAMPLES = 100_000
 #: about 90, robust on 1 M samples). A file estimated above half the available memory at this rate is
 #: fitted on an even subsample (docs/scaling.md).
 BYTES_PER_FIT_SAMPLE = 256
+#: ... and never more than this many samples: auto's own fits use a stride of at most 200 000 of them and
+#: ml fits a million in about a second; more only costs memory (a 10-million-row CSV fitted whole by auto
+#: peaked at 675 MB; on an even subsample of a million at 310 MB; the issue-10 target is 300 MB).
+DEFAULT_FIT_SAMPLES = 500_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,7 +173,8 @@ def run_calibration(
             if limited:
                 bound = f"the file has more rows than --max-samples {limit}"
                 if max_samples is None:
-                    bound += ", the default: half the available memory"
+                    default = f"{DEFAULT_FIT_SAMPLES:,}".replace(",", " ")
+                    bound += f", the default: {default} or half the available memory"
                 subsample = f"--even; {bound}" if even else bound
     except CalibrationError as error:
         raise CalibrationError(f"{path} ({columns_used(chosen.columns, chosen.column_note)}): {error}") from None
@@ -209,7 +214,8 @@ def _how_read(path: Path) -> str:
 
 
 def memory_sample_limit() -> int:
-    """Most samples an iterative fit holds: half the available memory at :data:`BYTES_PER_FIT_SAMPLE` each."""
+    """Most samples an iterative fit holds: :data:`DEFAULT_FIT_SAMPLES`, or half the available memory at
+    :data:`BYTES_PER_FIT_SAMPLE` each when that is less."""
     available = 4 << 30  # when the system does not say
     try:
         with open("/proc/meminfo", encoding="ascii") as meminfo:
@@ -222,7 +228,7 @@ def memory_sample_limit() -> int:
             available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
         except (ValueError, OSError, AttributeError):
             pass
-    return max(100_000, available // 2 // BYTES_PER_FIT_SAMPLE)
+    return min(DEFAULT_FIT_SAMPLES, max(100_000, available // 2 // BYTES_PER_FIT_SAMPLE))
 
 
 def _estimated_rows(path: Path) -> int:

@@ -71,8 +71,9 @@ Refit = Callable[[NDArray[np.float64]], Calibration]
 MAX_SAMPLES = MAX_ANALYSED
 #: The consistency check refits on at most this many of the analysed samples.
 CONSISTENCY_SAMPLES = 5_000
-#: Folds of the held-out evaluation.
+#: Folds of the held-out evaluation, and the most analysed samples it refits on.
 FOLDS = 5
+GOODNESS_SAMPLES = 5_000
 
 
 # ---------------------------------------------------------------------- diagnose
@@ -123,6 +124,7 @@ def diagnose(
     represents: int | None = None,
     refit: Refit | None = None,
     thorough: bool = True,
+    compare_ml: bool = True,
 ) -> Diagnostics:
     """Diagnose a calibration on the samples it was fitted to (or on a subsample of them), with its verdict.
 
@@ -150,6 +152,9 @@ def diagnose(
         Also run the checks that refit the method: held-out goodness and the two halves. Without them
         (``magfit.fit(..., diagnostics=False)``) the verdict still covers coverage, residuals,
         observability, the known field and the consistency with the maximum-likelihood fit.
+    compare_ml : bool
+        Compare with the maximum-likelihood fit of the same model (the consistency check). ``auto`` judges
+        its candidates without it: they are those fits.
 
     Returns
     -------
@@ -186,7 +191,7 @@ def diagnose(
     observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg, series=rows, pinned=pinned)
     fitted = _weighted_evaluation(np.linalg.norm(z, axis=1) - 1.0, weights)
     goodness = check = halves = None
-    if uncertainty.offset_sigma is not None:  # an undetermined model has no maximum-likelihood fit to compare
+    if compare_ml and uncertainty.offset_sigma is not None:  # an undetermined model has no ML fit to compare
         check = consistency(
             raw[:: max(1, indices.size // CONSISTENCY_SAMPLES)], kind, calibration, uncertainty, inclination_deg
         )
@@ -271,7 +276,7 @@ def _known_field(calibration: Calibration) -> tuple[float, float] | None:
 
 
 #: Each half of the recording is refitted on at most this many samples.
-HALF_SAMPLES = 5_000
+HALF_SAMPLES = 20_000
 #: Contiguous blocks of the block jackknife, and the most samples each refit sees.
 JACKKNIFE_BLOCKS = 8
 JACKKNIFE_SAMPLES = 4_000
@@ -321,21 +326,26 @@ def _halves(
     """Offset of the second half of the recording minus the first's, and the one-sigma of that difference.
 
     Each half holds half the samples, so its offset has √2 times the whole recording's one-sigma (the
-    honest one, with the correlation in time counted); their difference 2 times. None when a half cannot
-    be fitted (too few samples, or too few directions in one half: that is the coverage's to report).
+    honest one, with the correlation in time counted); their difference 2 times (more when a half is
+    refitted on a stride of it). None when a half cannot be fitted (too few samples, or too few directions
+    in one half: that is the coverage's to report).
     """
     if uncertainty.offset_sigma is None or rows.shape[0] < 100:
         return None
     middle = rows.shape[0] // 2
     offsets = []
+    variance_factor = 0.0  # Var(difference) / Var(whole recording's offset)
     for half in (rows[:middle], rows[middle:]):
         step = max(1, half.shape[0] // HALF_SAMPLES)
+        fitted_on = half[::step]
         try:
-            offsets.append(refit(half[::step]).offset)
+            offsets.append(refit(fitted_on).offset)
         except (MagfitError, np.linalg.LinAlgError):
             return None
+        # rows is a regular stride of the recording: a fit on a share s of them varies 1 / s times more.
+        variance_factor += rows.shape[0] / fitted_on.shape[0]
     difference = offsets[1] - offsets[0]
-    sigma = 2.0 * np.asarray(uncertainty.offset_sigma)
+    sigma = math.sqrt(variance_factor) * np.asarray(uncertainty.offset_sigma)
     return (
         (float(difference[0]), float(difference[1]), float(difference[2])),
         (float(sigma[0]), float(sigma[1]), float(sigma[2])),
@@ -410,6 +420,8 @@ def _goodness(
     """The paper's metric on the fitted samples and, with ``refit``, on held-out ones (k-fold refits)."""
     if refit is None:
         return Goodness(fitted, None, 0, "no refit of the method was given (or not requested)")
+    step = max(1, raw.shape[0] // GOODNESS_SAMPLES)
+    raw, weights = raw[::step], weights[::step]
     n = raw.shape[0]
     if n < 10 * FOLDS:
         return Goodness(fitted, None, 0, f"too few samples ({n}) for {FOLDS}-fold cross-validation")
@@ -423,7 +435,7 @@ def _goodness(
             return Goodness(fitted, None, 0, f"the refit on {FOLDS - 1} of {FOLDS} folds failed: {error}")
         distances[test] = unchecked_sphere_distances(model, raw[test])
     note = (
-        f"{FOLDS}-fold cross-validation on the analysed samples: each fold evaluated with the method refitted "
-        "on the other four."
+        f"{FOLDS}-fold cross-validation on {n} of the analysed samples: each fold evaluated with the method "
+        "refitted on the other four."
     )
     return Goodness(fitted, _weighted_evaluation(distances, weights), FOLDS, note)

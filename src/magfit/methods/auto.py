@@ -84,8 +84,8 @@ BLOCKS = 10
 #: Rows (a regular stride of the recording) for the outlier screen, the models' optima and the held-out
 #: blocks: enough for the 4-9 parameters, few enough to refit live several times a second.
 SCREEN_ROWS = 3_000
-CHOICE_ROWS = 5_000
-BLOCK_ROWS = 3_000
+CHOICE_ROWS = 2_000
+BLOCK_ROWS = 2_000
 #: Refits that only score held-out samples stop at this relative change of the cost (the fits the model
 #: choice compares and returns stop at 1e-6).
 SCORE_TOLERANCE = 1e-4
@@ -97,8 +97,8 @@ MIN_GAIN = 0.01
     "auto",
     min_samples=12,
     data="samples",
-    summary="chooses sphere, diag or full ellipsoid by BIC, robust when outliers are found, "
-    "falls back when the data cannot determine a model",
+    summary="the simplest of sphere, diag and full ellipsoid that the samples determine and that held-out "
+    "stretches of the recording do not reject; robust when outliers are found",
 )
 def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float | None = None) -> Calibration:
     """Fit the simplest model the samples support, robustly when they hold outliers.
@@ -240,7 +240,8 @@ def _optimal_rss(
         starts = [parameters(fits[model], model, frame)]
         if previous is not None:
             starts.append(_embed(previous[1], previous[0], model))
-        value, optimum = maximum_likelihood(z, model, starts)
+        # From the better start only: the richer model still never scores worse than the simpler optimum.
+        value, optimum = maximum_likelihood(z, model, [min(starts, key=lambda p: _cost(p, z, model))])
         eigenvalues, axes = np.linalg.eigh(unit_map(optimum, model))
         strongest = int(np.argmax(np.abs(eigenvalues)))
         shortest = 1.0 / float(abs(eigenvalues[strongest]))
@@ -264,6 +265,15 @@ def _optimal_rss(
         except MagfitError:
             optima[model] = fits[model]
     return rss, optima, degenerate
+
+
+def _cost(p: NDArray[np.float64], z: NDArray[np.float64], model: str) -> float:
+    """Σ d² at p (inf where the distances are not finite)."""
+    from ..geometry.frame import distances
+
+    with np.errstate(all="ignore"):
+        value = float(np.sum(distances(p, z, model) ** 2))
+    return value if np.isfinite(value) else math.inf
 
 
 def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) -> Calibration:
@@ -333,8 +343,9 @@ def _embed(p: NDArray[np.float64], kind: str, target: str) -> NDArray[np.float64
 def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.bool_], str]:
     """Whether to fit robustly, the inliers known so far, and a sentence on what was found.
 
-    The screen is a robust full fit (sphere when that fails) on a regular stride of at most 20 000 samples:
-    enough to see 0.2 % of outliers, cheap on long logs. The robust candidates then find their own inliers
+    The screen is a robust algebraic ellipsoid fit (sphere when that fails) on a regular stride of at most
+    3 000 samples: enough to see 0.2 % of outliers, cheap on long logs; it runs only when the plain fit
+    leaves far samples (:func:`_far_from_plain_fit`). The robust candidates then find their own inliers
     among all samples.
     """
 
@@ -342,6 +353,9 @@ def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.b
     if mode == "keep":
         return False, everything, ""
     rows = _stride(samples, SCREEN_ROWS)
+    threshold = max(5, math.ceil(2e-3 * rows.shape[0]))
+    if mode == "detect" and _far_from_plain_fit(rows) < threshold:
+        return False, everything, ""  # not even the plain fit, which spikes pull, leaves far samples
     screen = None
     for model in ("ellipsoid", "sphere"):  # the algebraic fit: enough to see far samples, and cheap
         try:
@@ -354,7 +368,7 @@ def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.b
     residuals = unchecked_sphere_distances(screen, rows)
     centre, sigma = robust_scale(residuals)
     far = int(np.sum(np.abs(residuals - centre) > _SCREEN_SIGMAS * max(sigma, 1e-12)))
-    found = far >= max(5, math.ceil(2e-3 * rows.shape[0]))
+    found = far >= threshold
     if mode == "reject" or found:
         note = (
             f"{far} of {rows.shape[0]} screened samples lie beyond {_SCREEN_SIGMAS:.0f} robust standard deviations "
@@ -364,6 +378,29 @@ def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.b
         )
         return True, everything, note
     return False, everything, ""
+
+
+def _far_from_plain_fit(rows: NDArray[np.float64]) -> int:
+    """Samples beyond 4 robust standard deviations of the plain algebraic ellipsoid (all, if there is none).
+
+    A quick first look: outliers pull the plain fit but still lie far from it, so a recording with fewer
+    such samples than the screen's count has nothing the robust screen would find (it uses 6 deviations
+    of a fit they cannot pull).
+    """
+    from ..geometry.frame import Frame, distances, parameters
+    from ..geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
+
+    found = algebraic_ellipsoid(Statistics.from_samples(rows))
+    if isinstance(found, str):
+        return rows.shape[0]
+    frame = Frame.of(rows)
+    # Distances in the sample space, where the noise is isotropic: on an eccentric ellipsoid the corrected
+    # residual's noise differs from axis to axis, and its tails would look like outliers.
+    p = parameters(calibration_from_ellipsoid("screen", *found), "full", frame)
+    with np.errstate(all="ignore"):
+        residuals = distances(p, frame.normalise(rows), "full")
+    centre, sigma = robust_scale(residuals)
+    return int(np.sum(np.abs(residuals - centre) > 4.0 * max(sigma, 1e-12)))
 
 
 def _refusal(opening: str, samples: NDArray[np.float64], failed: dict[str, str]) -> CalibrationError:
@@ -393,7 +430,10 @@ def _candidate_support(optimum: Calibration, kept: NDArray[np.float64]) -> Suppo
     (e.g. stretched along z to hug a cap of samples) makes the samples look better spread than they are;
     the distances to the ellipsoid cannot shrink by such a stretch, so the optimum does not drift that way.
     """
-    report = diagnose(optimum, kept, thorough=False, max_samples=CHOICE_ROWS)
+    rows = _stride(kept, CHOICE_ROWS)  # in recording order, each row standing for the same share of them
+    report = diagnose(
+        optimum, rows, thorough=False, compare_ml=False, max_samples=CHOICE_ROWS, represents=kept.shape[0]
+    )
     assert report.support is not None
     return report.support
 
