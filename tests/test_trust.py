@@ -277,3 +277,19 @@ def test_the_package_imports_in_one_direction() -> None:
             assert not any(t.startswith("magfit.methods") for t in targets), (name, targets)
         if name.startswith("magfit.geometry"):
             assert not any(t.startswith(("magfit.methods", "magfit.diagnostics")) for t in targets), (name, targets)
+
+
+def test_refits_use_the_options_the_user_gave() -> None:
+    # A sphere with a known field is cross-validated as the pinned sphere it is, not as a free one.
+    from magfit.fit import refit_of
+
+    sim = magfit.simulate(1500, field_strength=50.0, hard_iron=[10.0, -20.0, 30.0], noise=0.5, seed=2)
+    calibration = magfit.fit(sim.samples, "sphere", field_strength=48.0)
+    assert calibration.details["options"] == {"field_strength": 48.0}
+    refit = refit_of(calibration, "sphere", calibration.details["options"])
+    again = refit(sim.samples[::2])
+    assert again.field_strength == 48.0 and again.details["radius_pinned"]
+    # Every option is recorded, the defaults included, so magfit.diagnose refits exactly the same method.
+    assert magfit.fit(sim.samples, "minmax").details["options"] == {"centre": "mean"}
+    report = magfit.diagnose(calibration, sim.samples)
+    assert report.goodness is not None and report.goodness.held_out is not None
