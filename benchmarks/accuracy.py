@@ -970,7 +970,9 @@ def _peer_target(results: Mapping[str, Mapping[str, Sequence[Outcome]]], cases: 
     """Every magfit method at least as accurate as the best peer, case by case.
 
     A loss smaller than twice the standard error of the difference is listed as within noise and does
-    not fail the target; every loss is listed with the reason the method's model gives for it.
+    not fail the target; every loss is listed with the reason the method's model gives for it. A forced
+    fit that magfit's verdict refused on every trial of the case is listed apart and does not fail the
+    target either: without ``allow_undetermined`` the user gets the refusal, not that number.
     """
     what = "every magfit method ≤ best peer (heading error), on every case"
     peer_names = {m for per_case in results.values() for m in per_case if "." in m}
@@ -978,6 +980,7 @@ def _peer_target(results: Mapping[str, Mapping[str, Sequence[Outcome]]], cases: 
         return Target(what, "NOT RUN", "no peer ran")
     losses: dict[str, list[str]] = {}
     within_noise: list[str] = []
+    refused: list[str] = []
     for case_name, per_case in results.items():
         peers = {m: summarise(o) for m, o in per_case.items() if m in peer_names}
         fitted = [(m, s) for m, s in peers.items() if s.heading_deg is not None and s.failed == 0]
@@ -996,18 +999,20 @@ def _peer_target(results: Mapping[str, Mapping[str, Sequence[Outcome]]], cases: 
             noise = 2.0 * float(np.hypot(mine.heading_sem or 0.0, best.heading_sem or 0.0))
             if mine.heading_deg is not None and mine.failed == 0 and mine.heading_deg - best.heading_deg <= noise:
                 within_noise.append(f"{method} on {line}: within 2 standard errors ({noise:.2g}°)")
+            elif method not in NOT_FORCED and mine.verdicts.get("refused", 0) == mine.trials:
+                refused.append(f"{method} on {line}: refused by the verdict on every trial (forced here)")
             else:
                 losses.setdefault(method, []).append(line)
     items = [
         f"**{method}** loses on {len(lines)} case(s) — {_why(method)}: " + "; ".join(lines)
         for method, lines in losses.items()
     ]
-    items += [f"{line} (not counted as a loss)" for line in within_noise]
+    items += [f"{line} (not counted as a loss)" for line in within_noise + refused]
     count = sum(len(lines) for lines in losses.values())
     detail = (
         f"{count} loss(es) beyond noise by {', '.join(losses) or 'no method'}; {len(within_noise)} within noise"
-        " (listed below)"
-        if losses or within_noise
+        f"; {len(refused)} refused by magfit's verdict (listed below)"
+        if losses or within_noise or refused
         else "every magfit method at least as accurate as the best peer on every case"
     )
     return Target(what, _status(not losses), detail, items=items)

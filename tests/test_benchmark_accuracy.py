@@ -292,3 +292,16 @@ def test_real_recordings_are_read_with_their_documented_shapes(real_data_dir: Pa
     assert unc.shape == (22_745 - 3000, 3)  # the first 60 s at 50 Hz are warm-up
     imu = accuracy.read_recording(real_data_dir, by_path["mxl_umich_mpu9250_rm3100/preflight_data_original_imu.csv"])
     np.testing.assert_allclose(imu[0], [8.25, 0.15, -22.95])  # the UTF-8 BOM does not hide the header
+
+
+def test_a_loss_to_a_peer_counts_unless_the_verdict_refused_every_trial() -> None:
+    peer = [accuracy.Outcome(heading_deg=h) for h in (1.0, 1.1, 0.9)]
+    refused = [accuracy.Outcome(heading_deg=5.0, verdict="refused") for _ in range(3)]
+    weak = [accuracy.Outcome(heading_deg=5.0, verdict="weak") for _ in range(3)]
+    exempt = accuracy._peer_target({"case": {"peer.fit": peer, "ellipsoid": refused}}, {})
+    assert exempt.status == "PASS" and "1 refused by magfit's verdict" in exempt.detail
+    counted = accuracy._peer_target({"case": {"peer.fit": peer, "ellipsoid": weak}}, {})
+    assert counted.status == "FAIL" and "1 loss(es) beyond noise by ellipsoid" in counted.detail
+    # auto is not forced: its refusals are failures, and a loss.
+    auto_refused = [accuracy.Outcome(error="CalibrationError: no", verdict="refused") for _ in range(3)]
+    assert accuracy._peer_target({"case": {"peer.fit": peer, "auto": auto_refused}}, {}).status == "FAIL"
