@@ -80,7 +80,10 @@ def fit(
         report = diagnose_statistics(calibration, data.statistics)
     else:
         refit = refit_of(calibration, spec.name, options) if diagnostics else None
-        report = diagnose_samples(calibration, data.samples, refit=refit, thorough=diagnostics)
+        # auto returns its chosen model's maximum-likelihood fit: the comparison with that fit is moot.
+        report = diagnose_samples(
+            calibration, data.samples, refit=refit, thorough=diagnostics, compare_ml=spec.name != "auto"
+        )
     support = report.support
     assert support is not None  # both diagnoses reach a verdict
     if support.verdict == "refused":

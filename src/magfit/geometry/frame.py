@@ -210,13 +210,18 @@ def jacobian(p: NDArray[np.float64], z: NDArray[np.float64], kind: str) -> NDArr
 
 
 def maximum_likelihood(
-    z: NDArray[np.float64], model: str, starts: list[NDArray[np.float64]], *, cost_tolerance: float = 1e-6
+    z: NDArray[np.float64],
+    model: str,
+    starts: list[NDArray[np.float64]],
+    *,
+    cost_tolerance: float = 1e-6,
+    max_iterations: int | None = None,
 ) -> tuple[float, NDArray[np.float64]]:
     """Minimum of Σ d² (d: first-order distance to the ellipsoid) over ``model``'s parameters, and its p.
 
     Levenberg–Marquardt (:mod:`magfit._optimize`) from each start, for at most 20 iterations per
-    parameter, until the cost changes by less than ``cost_tolerance`` (relative); the best result, never
-    worse than the best start.
+    parameter (or ``max_iterations``), until the cost changes by less than ``cost_tolerance`` (relative);
+    the best result, never worse than the best start.
     """
     from .._optimize import Evaluation, levenberg_marquardt
 
@@ -232,7 +237,11 @@ def maximum_likelihood(
         # The reference fits need the cost to a part in a million (BIC, consistency), not to round-off: the
         # looser stop ends the long crawls of a model that cannot describe the data (a sphere on steel).
         solution = levenberg_marquardt(
-            evaluate, start, n_residuals=z.shape[0], max_iterations=20 * start.size, cost_tolerance=cost_tolerance
+            evaluate,
+            start,
+            n_residuals=z.shape[0],
+            max_iterations=max_iterations or 20 * start.size,
+            cost_tolerance=cost_tolerance,
         )
         for candidate in (solution.params, start):
             with np.errstate(all="ignore"):

@@ -86,9 +86,12 @@ BLOCKS = 10
 SCREEN_ROWS = 3_000
 CHOICE_ROWS = 2_000
 BLOCK_ROWS = 2_000
-#: Refits that only score held-out samples stop at this relative change of the cost (the fits the model
-#: choice compares and returns stop at 1e-6).
+#: Refits that only score held-out samples stop at this relative change of the cost.
 SCORE_TOLERANCE = 1e-4
+#: ... or after this many iterations: they start at the optimum on all the samples, a small step away.
+SCORE_ITERATIONS = 5
+#: The optima the model choice compares stop at this relative change of the cost.
+CHOICE_TOLERANCE = 1e-5
 #: A richer model must predict held-out blocks better by at least this share of the simpler one's distance.
 MIN_GAIN = 0.01
 
@@ -241,7 +244,9 @@ def _optimal_rss(
         if previous is not None:
             starts.append(_embed(previous[1], previous[0], model))
         # From the better start only: the richer model still never scores worse than the simpler optimum.
-        value, optimum = maximum_likelihood(z, model, [min(starts, key=lambda p: _cost(p, z, model))])
+        value, optimum = maximum_likelihood(
+            z, model, [min(starts, key=lambda p: _cost(p, z, model))], cost_tolerance=CHOICE_TOLERANCE
+        )
         eigenvalues, axes = np.linalg.eigh(unit_map(optimum, model))
         strongest = int(np.argmax(np.abs(eigenvalues)))
         shortest = 1.0 / float(abs(eigenvalues[strongest]))
@@ -316,7 +321,9 @@ def refit_first_order(
 
     frame = Frame.of(samples)
     z = frame.normalise(samples)
-    _, optimum = maximum_likelihood(z, model, [parameters(start, model, frame)], cost_tolerance=SCORE_TOLERANCE)
+    _, optimum = maximum_likelihood(
+        z, model, [parameters(start, model, frame)], cost_tolerance=SCORE_TOLERANCE, max_iterations=SCORE_ITERATIONS
+    )
     fitted = calibration_from_parameters(optimum, model, frame, model)
     return pin_field_strength(fitted, check_field_strength(field_strength))
 
@@ -493,7 +500,9 @@ def _blocked_scores(
         for block in range(BLOCKS):
             held = slice(edges[block], edges[block + 1])
             train = np.concatenate([z[: edges[block]], z[edges[block + 1] :]])
-            _, p = maximum_likelihood(train, model, [start], cost_tolerance=SCORE_TOLERANCE)
+            _, p = maximum_likelihood(
+                train, model, [start], cost_tolerance=SCORE_TOLERANCE, max_iterations=SCORE_ITERATIONS
+            )
             with np.errstate(all="ignore"):
                 values[block] = float(np.mean(distances(p, z[held], model) ** 2))
         scores[model] = np.where(np.isfinite(values), values, np.inf)
