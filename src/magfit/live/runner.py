@@ -183,14 +183,15 @@ class LiveRun:
                 if now < due:
                     self._halt.wait(min(due - now, READ_TIMEOUT))
                     continue
-                start = time.monotonic()
                 result = self.session.refit()
                 if result is None:
                     if not self._reading.is_set() and self.ended is not None:
                         return  # the stream is over and the last samples are fitted
                     self._halt.wait(READ_TIMEOUT)
                     continue
-                cost = max(time.monotonic() - start, result.cpu_seconds)
+                # The fit's own CPU time, not its wall time: on a busy machine the wall time grows with the
+                # other processes' load, and resting for it would leave the view's fit stale for nothing.
+                cost = result.cpu_seconds
                 due = time.monotonic() + max(self.min_interval, cost * (1.0 / self.budget - 1.0))
                 if self.stop.until_good and self.session.snapshot().verdict.good:
                     self._finish("a good-enough fit")
