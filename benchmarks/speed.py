@@ -583,7 +583,7 @@ def report(results: dict[str, Any]) -> str:
             f"{fit['fit_vs_floor']:.2f} x floor | <= {TARGETS['fit_vs_floor']:g} x: "
             f"{_verdict(fit['fit_vs_floor'] <= TARGETS['fit_vs_floor'])} |",
             f"| `numpy.linalg.lstsq` on the full 9-column design matrix | {_fmt(fit['lstsq_s'])} | "
-            f"fit is {fit['lstsq_vs_fit']:.0f} x faster | >= {TARGETS['lstsq_vs_fit']:g} x: "
+            f"fit is {fit['lstsq_vs_fit']:.2g} x faster | >= {TARGETS['lstsq_vs_fit']:g} x: "
             f"{_verdict(fit['lstsq_vs_fit'] >= TARGETS['lstsq_vs_fit'])} |",
             "",
             f"Peak extra memory of the fit: {fit['fit_tracemalloc_mb']:.1f} MB allocated (tracemalloc), "
