@@ -326,3 +326,46 @@ def test_a_stream_that_cannot_support_a_fit_exits_1(tmp_path: Path) -> None:
     assert result.exit_code == 1, result.output + result.stderr
     assert result.stderr.strip().splitlines()[-1].startswith("magfit: error: ")
     assert not (tmp_path / "cal.json").exists()
+
+
+def test_interactive_keys_through_a_terminal(tmp_path: Path) -> None:
+    """The view on a real terminal (a pty): wait for GOOD ENOUGH, press s, then q; the file saved is the truth's."""
+    import subprocess
+    import sys
+
+    master, slave = os.openpty()
+    command = [sys.executable, "-c", "import sys; from magfit.cli import main; sys.exit(main())"]
+    args = ["live", "--simulate", "--rate", "2000", "--speed", "1500", "-o", "cal.json", "--record", "raw.csv"]
+    env = {**os.environ, "COLUMNS": "130", "LINES": "50", "TERM": "xterm-256color"}
+    process = subprocess.Popen(command + args, stdin=slave, stdout=slave, stderr=slave, cwd=tmp_path, env=env)
+    os.close(slave)
+    screen = bytearray()
+
+    def wait_for(text: bytes, seconds: float) -> bool:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            if select.select([master], [], [], 0.1)[0]:
+                try:
+                    screen.extend(os.read(master, 65536))
+                except OSError:  # the process ended and closed the terminal
+                    return text in screen
+            if text in screen:
+                return True
+        return False
+
+    try:
+        assert wait_for(b"GOOD ENOUGH", 60), screen[-3000:].decode("utf-8", "replace")
+        os.write(master, b"s")
+        assert wait_for(b"saved to cal.json", 30), screen[-3000:].decode("utf-8", "replace")
+        os.write(master, b"q")
+        assert wait_for(b"the recording is in raw.csv", 20)
+        assert process.wait(20) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+        os.close(master)
+    # The view went from red to green, with the coverage map and the thresholds on screen.
+    assert screen.index(b"NOT YET") < screen.index(b"GOOD ENOUGH")
+    assert b"Coverage of the field's directions" in screen and b">= 85 %" in screen
+    _check_truth(tmp_path / "cal.json", SimulatedBoard(seed=0))
+    assert np.loadtxt(tmp_path / "raw.csv", delimiter=",", skiprows=1).shape[1] == 4
