@@ -254,8 +254,9 @@ def full_grid(trials_scale: float = 1.0) -> list[Case]:
     """The benchmark's grid (see the module docstring of the results for why it is not a full product).
 
     Noise sweep 0.5, 2, 5, 10 % at N = 10 000; N sweep 100 … 100 000 at 10 % and at 2 % noise; the special
-    scenarios (restricted attitude, 2 % spikes, the paper's steel and smartphone cases) at N = 1000. Trial
-    counts fall with N so that each size costs about the same and the grid runs in about 15 minutes.
+    scenarios (restricted attitude, 2 % spikes, the paper's steel and smartphone cases) at N = 1000, and
+    issue 10's level flight with a drifting field at N = 10 000 (:func:`flight_case`). Trial counts fall
+    with N so that each size costs about the same.
     """
     trials = {100: 100, 1000: 50, 10_000: 24, 100_000: 14}
 
