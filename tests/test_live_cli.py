@@ -369,3 +369,16 @@ def test_interactive_keys_through_a_terminal(tmp_path: Path) -> None:
     assert b"Coverage of the field's directions" in screen and b">= 85 %" in screen
     _check_truth(tmp_path / "cal.json", SimulatedBoard(seed=0))
     assert np.loadtxt(tmp_path / "raw.csv", delimiter=",", skiprows=1).shape[1] == 4
+
+
+def test_outputs_are_checked_before_the_session(tmp_path: Path) -> None:
+    cases = [
+        (["-o", str(tmp_path / "nodir" / "cal.json")], "not a file in an existing directory"),
+        (["--record", str(tmp_path / "nodir" / "raw.csv")], "not a file in an existing directory"),
+        (["--record", str(tmp_path)], "is a directory"),
+    ]
+    for args, message in cases:
+        started = time.monotonic()
+        result = CliRunner().invoke(cli, ["live", "--simulate", "--samples", "100000", *args])
+        assert result.exit_code == 2 and message in result.stderr, result.stderr
+        assert time.monotonic() - started < 5  # refused at once, not after 100 000 samples

@@ -18,7 +18,6 @@ from ..calibration import Calibration
 from ..errors import CalibrationError, MagfitError
 from ..live import LineParser, LiveRun, Recorder, Session, SimulatedBoard, SimulatedSource, StopRule, Thresholds
 from ..live.packet import motioncal_packet
-from ..live.session import FitResult
 from ..live.source import EndOfStream, Source, open_source
 from ._common import (
     FitFailedError,
@@ -110,6 +109,10 @@ def live_command(
         fail("give a PORT or --simulate (not both)")
     if record is not None and output is not None and same_file(record, output):
         fail(f"--record and -o are the same file {record}; choose two paths")
+    for path in (output, record):
+        # Checked now, not after the session: a typo must not cost the user a whole calibration run.
+        if path is not None and (path.is_dir() or not (path.parent if str(path.parent) else Path(".")).is_dir()):
+            fail(f"{path}: not a file in an existing directory; choose another path")
     stop = StopRule(samples=n_samples, duration=duration, until_good=until_good)
     thresholds = Thresholds(min_coverage=min_coverage, max_heading_sigma_deg=max_heading_sigma)
     source: Source
@@ -172,8 +175,7 @@ def _until_stopped(run: LiveRun, thresholds: Thresholds, unit: str | None) -> No
     except CalibrationError:
         _kept(run)
         raise
-    result = FitResult(calibration, None, calibration.n_samples or n, n, 0.0, 0.0)
-    verdict = run.session.verdict(result, calibration.diagnostics.coverage if calibration.diagnostics else None)
+    verdict = run.session.judge(calibration)
     if run.stop.until_good and not verdict.good:
         _kept(run)
         raise FitFailedError(

@@ -250,6 +250,13 @@ class Session:
             keep = even_subsample(samples, max_samples=FINAL_FIT_SAMPLES)
         return fit(samples[keep], self.method, **self.options)
 
+    def judge(self, calibration: Calibration) -> Verdict:
+        """The verdict on ``calibration`` (the final one), its coverage counted over every sample as the view does."""
+        samples = self.samples()
+        cover = coverage(calibration.apply(samples), COVERAGE_CELLS) if samples.shape[0] else None
+        n = samples.shape[0]
+        return self.verdict(FitResult(calibration, None, calibration.n_samples or n, n, 0.0, 0.0), cover)
+
     # ------------------------------------------------------------------ what the view shows
 
     def snapshot(self) -> Snapshot:
