@@ -1101,16 +1101,18 @@ def run_recordings(folder: Path, fitters: Mapping[str, Fitter], seed: int) -> di
         row: dict[str, Any] = {"n": len(samples), "failure_case": recording.failure_case, "methods": {}}
         for name, fitter in fitters.items():
             calibration, message, seconds = fit_once(fitter, fit_part, None)
+            verdict, reason = verdict_of(calibration, message) if name in magfit.METHODS else (None, None)
+            judged = {"verdict": verdict, "verdict_reason": reason} if verdict else {}
             if calibration is None:
-                row["methods"][name] = {"error": message, "seconds": seconds}
+                row["methods"][name] = {"error": message, "seconds": seconds, **judged}
                 continue
             try:
                 unseen = magfit.evaluate(calibration, heldout)
                 fitted = magfit.evaluate(calibration, fit_part)
             except magfit.MagfitError as failure:
-                row["methods"][name] = {"error": _failure_message(failure), "seconds": seconds}
+                row["methods"][name] = {"error": _failure_message(failure), "seconds": seconds, **judged}
                 continue
-            row["methods"][name] = {"heldout_std": unseen.std, "fit_std": fitted.std, "seconds": seconds}
+            row["methods"][name] = {"heldout_std": unseen.std, "fit_std": fitted.std, "seconds": seconds, **judged}
         table[recording.path] = row
     return table
 
@@ -1298,8 +1300,10 @@ def _real_section(real: Mapping[str, Any], methods: Sequence[str], notes: dict[s
         "## Real recordings: held-out sphere std",
         "",
         "Fitted on a random half of each recording; the std of the sphere distances on the other half "
-        "(dimensionless, a fraction of the fitted field). The two failure cases must be diagnosed, not "
-        "fitted: their diagnoses are listed below the table.",
+        "(dimensionless, a fraction of the fitted field). The methods but `auto` are forced, as in the "
+        "simulations: `refused [k]` / `weak [k]` beside a number is magfit's verdict on that fit, reason in "
+        "footnote k. The two failure cases must be diagnosed, not fitted: their diagnoses are listed below "
+        "the table.",
         "",
         "| recording | N | " + " | ".join(methods) + " |",
         "|---|---|" + "---|" * len(methods),
@@ -1317,7 +1321,10 @@ def _real_section(real: Mapping[str, Any], methods: Sequence[str], notes: dict[s
             elif "error" in entry:
                 cells.append(f"fails [{_note(notes, entry['error'])}]")
             else:
-                cells.append(f"{entry['heldout_std']:.3g}")
+                judged = ""
+                if entry.get("verdict") in ("refused", "weak") and entry.get("verdict_reason"):
+                    judged = f" ({entry['verdict']} [{_note(notes, entry['verdict_reason'])}])"
+                cells.append(f"{entry['heldout_std']:.3g}{judged}")
         lines.append(f"| {label} | {row['n']} | " + " | ".join(cells) + " |")
     lines.extend(["", "### Diagnoses on the failure cases", ""])
     for path, row in real.items():
@@ -1327,6 +1334,11 @@ def _real_section(real: Mapping[str, Any], methods: Sequence[str], notes: dict[s
             entry = row["methods"].get(method, {})
             if "error" in entry:
                 lines.append(f"- `{path}`, {method}: {entry['error']}")
+            elif entry.get("verdict") == "refused":
+                lines.append(
+                    f"- `{path}`, {method}: refused by the verdict (returned only because forced): "
+                    f"{entry.get('verdict_reason')}"
+                )
             else:
                 lines.append(
                     f"- `{path}`, {method}: **no diagnosis**, returned numbers (held-out std "
