@@ -113,6 +113,10 @@ def live_command(
         # Checked now, not after the session: a typo must not cost the user a whole calibration run.
         if path is not None and (path.is_dir() or not (path.parent if str(path.parent) else Path(".")).is_dir()):
             fail(f"{path}: not a file in an existing directory; choose another path")
+    if unit is not None:
+        from ..units import canonical_name
+
+        unit = canonical_name(unit)  # an unknown unit is a usage error now, listing the valid ones
     stop = StopRule(samples=n_samples, duration=duration, until_good=until_good)
     thresholds = Thresholds(min_coverage=min_coverage, max_heading_sigma_deg=max_heading_sigma)
     source: Source
@@ -198,7 +202,7 @@ def _kept(run: LiveRun) -> None:
 def _final(run: LiveRun, unit: str | None) -> Calibration:
     """The calibration to save, labelled with the stream's unit (µT for MotionCal lines)."""
     stream_unit = run.parser.unit
-    if stream_unit is not None and unit is not None and unit.casefold() not in ("ut", "µt", "μt"):
+    if stream_unit is not None and unit is not None and unit != "uT":
         warn(f"--unit {unit} ignored: {run.parser.describe()} are in uT")
     calibration = run.session.final_calibration()
     label = stream_unit or unit
