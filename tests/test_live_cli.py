@@ -183,7 +183,10 @@ def test_live_on_a_pty_with_noise_and_a_reboot_calibrates_and_sends(pty_board: o
     np.testing.assert_allclose(stored["softiron"], cal.matrix, atol=1e-6)
 
 
-def test_a_hangup_keeps_the_samples_and_writes_no_calibration(pty_board: object, tmp_path: Path) -> None:
+def test_a_hangup_keeps_the_samples_and_writes_no_calibration(
+    pty_board: object, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("magfit.live.source.REOPEN_SECONDS", 0.5)  # the port does not come back
     port, board = pty_board([1500, "hangup"])  # type: ignore[operator]
     output, record = tmp_path / "cal.json", tmp_path / "raw.csv"
     result = CliRunner().invoke(cli, ["live", port, "--samples", "5000", "-o", str(output), "--record", str(record)])
@@ -382,3 +385,72 @@ def test_outputs_are_checked_before_the_session(tmp_path: Path) -> None:
         result = CliRunner().invoke(cli, ["live", "--simulate", "--samples", "100000", *args])
         assert result.exit_code == 2 and message in result.stderr, result.stderr
         assert time.monotonic() - started < 5  # refused at once, not after 100 000 samples
+
+
+def test_a_usb_board_that_reboots_is_opened_again(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """A board with native USB leaves and comes back under the same name: here a link re-pointed to a new pty."""
+    opens: list[threading.Event] = [threading.Event(), threading.Event()]
+
+    class WatchedSerial(serial.Serial):  # type: ignore[misc, name-defined]
+        def open(self) -> None:
+            super().open()
+            next(event for event in opens if not event.is_set()).set()
+
+    monkeypatch.setattr(serial, "Serial", WatchedSerial)
+    link = tmp_path / "ttyBOARD"
+    board = SimulatedBoard(rate_hz=100, speed_dps=300, seed=9)
+    rows: list[list[float]] = []
+    fds: list[int] = []
+    stop = threading.Event()
+
+    def pty() -> int:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        fds.append(slave)
+        temporary = tmp_path / "link.tmp"
+        os.symlink(os.ttyname(slave), temporary)
+        os.replace(temporary, link)
+        return master
+
+    def send(master: int, n: int) -> None:
+        text = board.raw_lines(n)
+        rows.extend([int(v) * 0.1 for v in line[4:].split(b",")[6:]] for line in text.split(b"\r\n") if line)
+        os.write(master, text)
+
+    def run() -> None:
+        master = first
+        assert opens[0].wait(20)
+        os.write(master, BANNER)
+        for _ in range(30):
+            send(master, 50)
+            time.sleep(0.01)
+        time.sleep(0.5)
+        os.close(master)  # the board reboots: its port disappears ...
+        time.sleep(0.3)
+        master = pty()  # ... and comes back under the same name
+        assert opens[1].wait(20)
+        os.write(master, BANNER)
+        for _ in range(30):
+            send(master, 50)
+            time.sleep(0.01)
+        stop.wait(20)  # hold the port open until magfit is done
+        os.close(master)
+
+    first = pty()
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    output, record = tmp_path / "cal.json", tmp_path / "raw.csv"
+    try:
+        result = CliRunner().invoke(
+            cli, ["live", str(link), "--samples", "3000", "-o", str(output), "--record", str(record)]
+        )
+    finally:
+        stop.set()
+        thread.join(10)
+        for fd in fds:
+            os.close(fd)
+    assert result.exit_code == 0, result.output + result.stderr
+    assert "1 reconnections" in result.output
+    recorded = np.loadtxt(record, delimiter=",", skiprows=1)
+    np.testing.assert_allclose(recorded[:, 1:], np.array(rows[:3000]), atol=1e-9)
+    _check_truth(output, board)

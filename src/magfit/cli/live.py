@@ -215,7 +215,11 @@ def _summary(out: Console, run: LiveRun, calibration: Calibration, verdict: obje
     rows = [
         ("source", run.source.name),
         ("stream", run.parser.describe()),
-        ("samples", f"{run.session.n_samples} ({counts.junk} junk lines, {counts.interruptions} interruptions)"),
+        (
+            "samples",
+            f"{run.session.n_samples} ({counts.junk} junk lines, {counts.interruptions} interruptions"
+            + (f", {run.source.reconnections} reconnections)" if run.source.reconnections else ")"),
+        ),
         ("stopped by", run.stopped_by or run.ended or "the end of the stream"),
         ("chose", str(calibration.details.get("chosen", calibration.method))),
         ("offset", vector(calibration.offset) + u),
@@ -319,6 +323,8 @@ def _render(
 
     counts = run.parser.counts
     junk = f"junk {counts.junk} lines, {counts.interruptions} interruptions" if counts.junk else ""
+    if run.source.reconnections:
+        junk += f"{', ' if junk else ''}reconnected {run.source.reconnections} times"
     lines = list(status)
     if run.ended is not None:
         lines.insert(0, f"{run.ended}: {run.session.n_samples} samples kept")

@@ -92,6 +92,7 @@ class LiveRun:
         #: CPU seconds each thread used, set when it ends (for the benchmark).
         self.reader_cpu = 0.0
         self.fitter_cpu = 0.0
+        self._reconnections = 0
         self._halt = threading.Event()
         self._reading = threading.Event()  # set while the reader runs
         self._started = time.monotonic()
@@ -154,6 +155,9 @@ class LiveRun:
                     self._take(self.parser.finish(last_line_complete=self.source.ends_normally))
                     self.ended = str(end)
                     return
+                if self.source.reconnections != self._reconnections:
+                    self._reconnections = self.source.reconnections
+                    self.parser.reconnected()
                 if data:
                     self._take(self.parser.feed(data))
                     self._halt.wait(BATCH_INTERVAL - (time.monotonic() - batch_start))

@@ -22,6 +22,9 @@ from .board import SimulatedBoard
 
 __all__ = ["EndOfStream", "FileLikeSource", "MissingExtraError", "SimulatedSource", "Source", "open_source"]
 
+#: Seconds a serial port that closed is tried again: a board with native USB that reboots leaves and comes
+#: back under the same name (1 to 3 s for most; an Arduino Leonardo's bootloader waits 8 s).
+REOPEN_SECONDS = 5.0
 #: The hint printed when pyserial is missing.
 INSTALL_HINT = "reading a serial port needs pyserial: pip install 'magfit[live]'"
 
@@ -43,6 +46,8 @@ class Source(Protocol):
     first_line_may_be_cut: bool
     #: True when the end of the stream is its normal end (a file, a pipe), False when it is a hang-up.
     ends_normally: bool
+    #: Times the source lost its connection and got it back (the line in progress then is lost).
+    reconnections: int
 
     def read(self, timeout: float) -> bytes: ...
     def write(self, data: bytes) -> None: ...
@@ -92,6 +97,7 @@ class _FdSource:
     """A file descriptor: standard input, a named pipe, or a regular file read as a stream."""
 
     first_line_may_be_cut = False
+    reconnections = 0
 
     def __init__(self, name: str, fd: int, *, ends_normally: bool, cut: bool, owned: bool = False) -> None:
         self.name = name
@@ -127,6 +133,7 @@ class FileLikeSource:
 
     first_line_may_be_cut = False
     ends_normally = True
+    reconnections = 0
 
     def __init__(self, name: str, stream: Any) -> None:
         self.name = name
@@ -150,6 +157,7 @@ class _SocketSource:
 
     first_line_may_be_cut = True
     ends_normally = False
+    reconnections = 0
 
     def __init__(self, name: str, address: str) -> None:
         self.name = name
@@ -192,6 +200,9 @@ class _SerialSource:
         except ImportError:
             raise MissingExtraError(INSTALL_HINT) from None
         self.name = port
+        self.reconnections = 0
+        self._module = serial
+        self._baud = baud
         self._errors: tuple[type[BaseException], ...] = (serial.SerialException, OSError)
         try:
             self._serial: Any = serial.Serial(port, baud, timeout=0.05)
@@ -209,9 +220,26 @@ class _SerialSource:
                 data += bytes(self._serial.read(waiting))
             return data
         except self._errors as error:
+            if self._reopen():
+                return b""
             raise EndOfStream(
-                f"the port {self.name} closed ({_reason(error)}): the cable was pulled or the board reset its USB"
+                f"the port {self.name} closed ({_reason(error)}) and did not come back within {REOPEN_SECONDS:g} s: "
+                "the cable was pulled or the board stopped"
             ) from None
+
+    def _reopen(self) -> bool:
+        """Open the port again (a rebooting board re-enumerates under the same name); True when it came back."""
+        self.close()
+        deadline = time.monotonic() + REOPEN_SECONDS
+        while time.monotonic() < deadline:
+            time.sleep(0.1)
+            try:
+                self._serial = self._module.Serial(self.name, self._baud, timeout=0.05)
+            except self._errors:
+                continue
+            self.reconnections += 1
+            return True
+        return False
 
     def write(self, data: bytes) -> None:
         try:
@@ -241,6 +269,7 @@ class SimulatedSource:
 
     first_line_may_be_cut = False
     ends_normally = True
+    reconnections = 0
 
     def __init__(self, board: SimulatedBoard, *, limit: int | None = None) -> None:
         self.board = board

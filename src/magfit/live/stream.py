@@ -118,6 +118,13 @@ class LineParser:
         #: Column names or labels of the plain dialect (for the recording and messages).
         self.column_names: tuple[str, str, str] | None = None
 
+    def reconnected(self) -> None:
+        """The connection was lost and is back: the line in progress is lost, the next one may be cut."""
+        if self._pending:
+            self._junk(self._pending[:80].decode("utf-8", "replace"))
+        self._pending = b""
+        self._skip_next = True
+
     @property
     def unit(self) -> str | None:
         """``"uT"`` for the MotionCal formats; None (unknown) for plain lines or before the first sample."""
