@@ -75,7 +75,7 @@ def test_not_an_ellipsoid_is_refused_never_abs() -> None:
     hyperboloid = np.column_stack([radius * np.cos(t), radius * np.sin(t), height])
     with pytest.raises(CalibrationError, match="hyperboloid, not an ellipsoid .* use method='sphere'"):
         magfit.fit(hyperboloid)
-    with pytest.raises(CalibrationError, match="do not outline an ellipsoid"):
+    with pytest.raises(CalibrationError, match="lie on no ellipsoid|do not outline an ellipsoid"):
         magfit.fit(hyperboloid, method="sphere")
 
 
