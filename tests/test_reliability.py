@@ -506,3 +506,22 @@ def test_fuzz_denormal_and_tiny_samples_are_refused_for_their_spread() -> None:
             assert statistics.n == len(samples)
             with pytest.raises(magfit.SampleError, match=r"the samples spread .* outside the 1e-40 to 1e\+40"):
                 magfit.fit(samples, method="sphere")
+
+
+def test_fuzz_identical_samples_in_single_rows_keep_finite_statistics() -> None:
+    # Halving a denormal rounded the running mean, the round-off became a "spread", the frame shrank to it
+    # and the scatter overflowed to NaN: merged statistics had a NaN mean.
+    samples = np.array([[20, 338, -370]] * 3 + [[8, 291, -451]] * 3 + [[4.94e-324, 100, -512]] * 3, dtype=float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        merged = magfit.Statistics(1).update(samples[:6]).merge(magfit.Statistics(1).update(samples[6:]))
+        np.testing.assert_allclose(merged.mean, samples.mean(axis=0), rtol=1e-12)
+        identical = magfit.Statistics(1).update(np.array([[1e-300, 100, -512]] * 20))
+        with pytest.raises(magfit.CalibrationError, match="identical"):
+            magfit.fit(identical, method="ellipsoid")
+
+
+def test_fuzz_a_quote_before_a_lone_carriage_return(tmp_path: Path) -> None:
+    path = tmp_path / "quote.txt"
+    path.write_bytes(b'\n\r"')  # Python's csv module raised csv.Error: exit 3
+    _assert_error(_run("calibrate", path), 2, str(path))

@@ -38,7 +38,7 @@ FLATNESS_LIMIT = 1e-3
 #: (1e150² = 1e300). Real magnetometer data in any unit are many orders of magnitude below.
 MAX_MAGNITUDE = 1e150
 #: Samples spread less than this many ulps of their magnitude are identical: float64 cannot tell them apart.
-_IDENTICAL_ULPS = 16
+IDENTICAL_ULPS = 16
 #: Spreads (standard deviation along the widest direction, input units) the fits are tested over. The
 #: ellipsoid matrix scales as 1/spread² and its determinant as 1/spread⁶, which leaves float64 beyond about
 #: 1e±50; the limits keep ten orders of magnitude of margin. Real recordings, in any unit, lie far inside.
@@ -119,7 +119,7 @@ def check_support(statistics: Moments, method: str, min_samples: int) -> None:
     spreads = np.sqrt(np.clip(spreads_squared, 0.0, None)) * statistics.scale
     largest = spreads[-1]
     # Identical up to float64's resolution at their magnitude (x near 1e15 varying by ±200 is not identical).
-    resolution = _IDENTICAL_ULPS * np.finfo(np.float64).eps * float(np.max(np.abs(statistics.mean)))
+    resolution = IDENTICAL_ULPS * np.finfo(np.float64).eps * float(np.max(np.abs(statistics.mean)))
     if not largest > resolution:
         raise CalibrationError(
             f"all {n} samples are identical ({_format_vector(statistics.mean)}): the sensor was not turned "

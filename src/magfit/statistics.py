@@ -33,7 +33,7 @@ from collections.abc import Iterable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validation import MAX_MAGNITUDE, check_finite, check_magnitude, check_shape
+from ._validation import IDENTICAL_ULPS, MAX_MAGNITUDE, check_finite, check_magnitude, check_shape
 from .errors import OptionError, SampleError
 
 __all__ = ["DESIGN_EXPONENTS", "Statistics", "design_matrix"]
@@ -71,6 +71,11 @@ def design_matrix(z: NDArray[np.floating]) -> NDArray[np.float64]:
     design[:, 6:9] = z
     design[:, 9] = 1.0
     return design
+
+
+def _identical_spread(mean: NDArray[np.float64]) -> float:
+    """The largest spread that is round-off at the samples' magnitude (as :func:`check_support` judges)."""
+    return IDENTICAL_ULPS * float(np.finfo(np.float64).eps) * float(np.max(np.abs(mean)))
 
 
 def _rms(deviations: NDArray[np.float64]) -> float:
@@ -253,7 +258,7 @@ class Statistics:
             own_mean, own_spread = self._stored_mean(), self._spread()
             n = self._n + m
             own_share, chunk_share = self._n / n, m / n
-            mean = own_share * own_mean + chunk_share * chunk_mean
+            mean = own_mean + chunk_share * (chunk_mean - own_mean)  # exact when equal, even for denormals
             own_shift, chunk_shift = _rms((own_mean - mean)[:, None]), _rms((chunk_mean - mean)[:, None])
             unit = max(own_spread, chunk_spread, own_shift, chunk_shift)
             spread = 0.0
@@ -262,6 +267,8 @@ class Statistics:
                     own_share * ((own_spread / unit) ** 2 + (own_shift / unit) ** 2)
                     + chunk_share * ((chunk_spread / unit) ** 2 + (chunk_shift / unit) ** 2)
                 )
+        if spread <= _identical_spread(mean):
+            spread = 0.0
         if self._n == 0 or (spread > 0 and (not known or spread > _REFRAME_GROWTH * self._scale)):
             self._move_frame(mean, spread)
 
@@ -276,7 +283,9 @@ class Statistics:
             return 0.0
         first = self._scatter[6:9, 9] / self._n
         second = np.trace(self._scatter[6:9, 6:9]) / self._n
-        return float(self._scale * math.sqrt(max(float(second - first @ first), 0.0)))
+        spread = float(self._scale * math.sqrt(max(float(second - first @ first), 0.0)))
+        # Round-off of identical samples is no spread: a frame scaled to it would blow the scatter up to NaN.
+        return spread if spread > _identical_spread(self._stored_mean()) else 0.0
 
     def _move_frame(self, centre: NDArray[np.float64], spread: float) -> None:
         """Express the scatter in the frame (centre, spread); a zero spread keeps a placeholder unit."""

@@ -258,7 +258,11 @@ def _split_fields(line: str, delimiter: str | None) -> list[str]:
     if delimiter == "whitespace":
         return [cell.strip("\"'") for cell in line.split()]
     if '"' in line:
-        return [cell.strip() for cell in next(csv.reader([line], delimiter=delimiter[0], skipinitialspace=True))]
+        try:
+            cells = next(csv.reader([line], delimiter=delimiter[0], skipinitialspace=True), [])
+        except csv.Error:  # a quote around a lone carriage return: the plain split names the fields well enough
+            cells = line.split(delimiter[0])
+        return [cell.strip() for cell in cells]
     return [cell.strip() for cell in line.split(delimiter[0])]
 
 
