@@ -263,10 +263,12 @@ def test_simulate_sends_and_the_board_confirms(tmp_path: Path) -> None:
             str(output),
             "--send",
             "motioncal",
+            "--web",
         ],
     )
     assert result.exit_code == 0, result.output + result.stderr
     assert "the board confirmed it" in result.output
+    assert "magfit: the live page is at http://127.0.0.1:" in result.stderr
     _check_truth(output, SimulatedBoard(seed=0))  # the default truth
 
 

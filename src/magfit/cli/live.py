@@ -66,6 +66,7 @@ def _parse_until(ctx: click.Context, param: click.Parameter, value: str | None) 
 @click.option("--max-heading-sigma", type=click.FloatRange(min=0, min_open=True),
               default=Thresholds.max_heading_sigma_deg, show_default=True,
               help="Good enough: heading one-sigma at level attitude, degrees.")  # fmt: skip
+@click.option("--web", is_flag=True, help="Also show the view as a page on 127.0.0.1 (its address is printed).")
 @click.option("--rate", type=click.FloatRange(1, 5000), default=100.0, show_default=True,
               help="--simulate: samples per second.")  # fmt: skip
 @click.option("--speed", type=click.FloatRange(1, 3600), default=120.0, show_default=True,
@@ -86,6 +87,7 @@ def live_command(
     unit: str | None,
     min_coverage: float,
     max_heading_sigma: float,
+    web: bool,
     rate: float,
     speed: float,
     seed: int,
@@ -133,6 +135,12 @@ def live_command(
     parser = LineParser(columns=columns, first_line_may_be_cut=source.first_line_may_be_cut)
     session = Session(thresholds=thresholds)
     run = LiveRun(source, parser, session, recorder=recorder, stop=stop)
+    page = None
+    if web:
+        from ..live.web import WebView
+
+        page = WebView(run).start()
+        click.echo(f"magfit: the live page is at {page.url}", err=True)
     try:
         if interactive:
             _interactive(run, thresholds, unit, output, export_format, send)
@@ -141,6 +149,8 @@ def live_command(
     finally:
         run.close()
         source.close()
+        if page is not None:
+            page.close()
 
 
 # ---------------------------------------------------------------------- non-interactive

@@ -292,6 +292,11 @@ class Session:
             last_sample=last,
         )
 
+    def subset(self) -> NDArray[np.float64]:
+        """The even subset the fits use (before the first fit: the latest samples), (m, 3)."""
+        with self._lock:
+            return self._sampler.samples if self._sampler is not None else self._tail(self.fit_samples).copy()
+
     def _tail(self, count: int) -> NDArray[np.float64]:
         return self._all()[-count:]
 
