@@ -131,7 +131,11 @@ def live_command(
         source.close()
         fail(f"--send needs a serial port or a socket to write to; {source.name} is read-only")
     interactive = not stop.given and sys.stdin.isatty() and sys.stdout.isatty() and port != "-"
-    recorder = Recorder(record) if record is not None else None
+    try:
+        recorder = Recorder(record) if record is not None else None
+    except MagfitError:
+        source.close()
+        raise
     parser = LineParser(columns=columns, first_line_may_be_cut=source.first_line_may_be_cut)
     session = Session(thresholds=thresholds)
     run = LiveRun(source, parser, session, recorder=recorder, stop=stop)
