@@ -382,3 +382,37 @@ def test_cli_on_malformed_files(file: tuple[str, bytes], command: list[str], bro
         assert not [p.name for p in folder.iterdir() if p.name.endswith(".tmp")]
         if result.exit_code != 0:
             assert {p.name: p.read_bytes() for p in folder.iterdir()} == before, "a failed run changed a file"
+
+
+#: Real recordings of three layouts: tab-separated without a header, a header with many columns, a log
+#: with a preamble (../shared/data/real; the test is skipped without them, a failure under CI).
+REAL_FILES = (
+    "fxos8700_magneto/mag-readings.txt",
+    "hamagure_gauss/data-set_1.csv",
+    "betaflight_apex5_qmc5883/20231008_apex5_mag_on_tpu_00.txt",
+)
+
+
+@pytest.mark.parametrize("name", REAL_FILES)
+@budget(10)
+@given(data=st.data())
+def test_cli_on_damaged_real_recordings(real_data_dir: Path, name: str, data: st.DataObject) -> None:
+    from magfit.cli import cli
+
+    original = (real_data_dir / name).read_bytes()[:60_000]  # the head: the damage lands where it is read
+    damaged = data.draw(_mutated_bytes(original))
+    with tempfile.TemporaryDirectory() as folder_name:
+        folder = Path(folder_name)
+        path = folder / Path(name).name
+        path.write_bytes(damaged)
+        (folder / "cal.json").write_text("OLD")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            result = CliRunner().invoke(cli, ["calibrate", str(path), "-o", str(folder / "cal.json")])
+        assert result.exit_code in (0, 1, 2), (result.exit_code, result.output)
+        assert result.exception is None or isinstance(result.exception, SystemExit), "a traceback escaped"
+        if result.exit_code == 0:
+            check_calibration(magfit.Calibration.from_json((folder / "cal.json").read_text()))
+        else:
+            assert (folder / "cal.json").read_text() == "OLD"
+        assert not [p.name for p in folder.iterdir() if p.name.endswith(".tmp")]
