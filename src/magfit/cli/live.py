@@ -130,7 +130,8 @@ def live_command(
     if send is not None and getattr(source, "ends_normally", False) and not simulate:
         source.close()
         fail(f"--send needs a serial port or a socket to write to; {source.name} is read-only")
-    interactive = not stop.given and sys.stdin.isatty() and sys.stdout.isatty() and port != "-"
+    # The keys need a POSIX terminal (termios); elsewhere the run goes on until the stream ends.
+    interactive = not stop.given and sys.stdin.isatty() and sys.stdout.isatty() and port != "-" and _has_termios()
     try:
         recorder = Recorder(record) if record is not None else None
     except MagfitError:
@@ -429,6 +430,14 @@ def _echoes(parser: LineParser, packet: bytes) -> bool:
     return bool(
         np.allclose(parser.cal1, values[:10], rtol=0, atol=6e-4) and np.allclose(parser.cal2, cal2, rtol=0, atol=6e-5)
     )
+
+
+def _has_termios() -> bool:
+    try:
+        import termios  # noqa: F401 - POSIX only
+    except ImportError:
+        return False
+    return True
 
 
 @contextlib.contextmanager
