@@ -7,7 +7,7 @@ The invariants (docs/reliability.md):
 - the command line exits 0, 1 or 2 (never 3: a bug), prints no traceback, changes no existing file when it
   fails and leaves no temporary file.
 
-Bounded for CI: about 300 examples in all, some 30 seconds. ``MAGFIT_FUZZ_EXAMPLES=N`` multiplies the
+Bounded for CI: about 430 examples in all, 15-30 seconds. ``MAGFIT_FUZZ_EXAMPLES=N`` multiplies the
 budget of every test by N / 100 for a long run (e.g. ``MAGFIT_FUZZ_EXAMPLES=5000`` for an overnight one).
 """
 
