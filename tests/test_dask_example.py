@@ -43,8 +43,8 @@ def test_distributed_statistics_equal_those_of_the_concatenated_samples(example:
     merged = example.distributed_statistics(samples, scheduler="threads", fan_in=fan_in)
     whole = samples.compute()
     assert merged.n == 20_000
-    for method in ("ellipsoid", "sphere"):
-        a, b = magfit.fit(merged, method), magfit.fit(whole, method)
+    for method in ("ellipsoid", "sphere"):  # the sphere cannot describe the steel case: forced, both ways
+        a, b = (magfit.fit(data, method, allow_undetermined=True) for data in (merged, whole))
         # Round-off only (see tests/test_statistics.py): 1e-9 of the field radius.
         np.testing.assert_allclose(a.offset, b.offset, rtol=0, atol=1e-9 * b.field_strength)
         scale = np.linalg.norm(b.ellipsoid_matrix)

@@ -368,10 +368,18 @@ def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Dia
     if undetermined:
         refusals.append(f"the samples do not determine {'; '.join(undetermined)}: those numbers would be noise")
     if std > NO_ELLIPSOID_RMS:
-        refusals.append(
-            f"the samples lie on no ellipsoid: their algebraic distance to the fitted one is {100 * std:.0f} % of the "
-            "field (RMS)"
-        )
+        best = std if model_kind(calibration) == "full" else _algebraic_ellipsoid_std(statistics)
+        if best is not None and best <= NO_ELLIPSOID_RMS:
+            refusals.append(
+                f"the {calibration.method} fit cannot describe these samples: its algebraic distance to them is "
+                f"{100 * std:.0f} % of the field (RMS) where a full ellipsoid's is {100 * best:.1f} %; the auto or "
+                "ellipsoid method would not leave that"
+            )
+        else:
+            refusals.append(
+                f"the samples lie on no ellipsoid: their algebraic distance to the fitted one is {100 * std:.0f} % of "
+                "the field (RMS)"
+            )
     weaknesses = tuple(f"{w.description} is weakly determined" for w in observability.weak if w.determined)
     support = Support(
         verdict="refused" if refusals else "weak" if weaknesses else "supported",
@@ -395,6 +403,17 @@ def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Dia
         unit=calibration.unit,
         support=support,
     )
+
+
+def _algebraic_ellipsoid_std(statistics: Statistics) -> float | None:
+    """The algebraic residual's spread under the paper's ellipsoid of ``statistics`` (None: there is none)."""
+    from .moments import analyse_statistics
+
+    found = algebraic_ellipsoid(statistics)
+    if isinstance(found, str):
+        return None
+    _, _, std = analyse_statistics(statistics, calibration_from_ellipsoid("ellipsoid", *found), "full")
+    return float(std)
 
 
 def _weighted_evaluation(distances: NDArray[np.float64], weights: NDArray[np.float64]) -> Evaluation:
