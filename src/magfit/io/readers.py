@@ -24,6 +24,7 @@ import os
 import re
 import stat
 import tokenize
+import warnings
 import zipfile
 import zlib
 from collections import Counter
@@ -424,10 +425,12 @@ def _one_line(error: BaseException) -> str:
 
 def _read_npy_header(handle: Any) -> _NpyInfo:
     version = np.lib.format.read_magic(handle)
-    if version == (1, 0):
-        shape, fortran, dtype = np.lib.format.read_array_header_1_0(handle)
-    else:
-        shape, fortran, dtype = np.lib.format.read_array_header_2_0(handle)
+    with warnings.catch_warnings():  # numpy's "created on Python 2" advice: the header is read all the same
+        warnings.simplefilter("ignore", UserWarning)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(handle)
+        else:
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(handle)
     return _NpyInfo(tuple(shape), np.dtype(dtype), bool(fortran))
 
 
@@ -937,7 +940,9 @@ class ChunkReader:
 
     def _iter_npy(self) -> Iterator[NDArray[np.float64]]:
         try:
-            array = np.load(self.path, mmap_mode="r", allow_pickle=False)
+            with warnings.catch_warnings():  # as in _read_npy_header
+                warnings.simplefilter("ignore", UserWarning)
+                array = np.load(self.path, mmap_mode="r", allow_pickle=False)
         except _BROKEN_NPY as error:  # changed since it was sniffed
             raise _error(self.path, f"is not a readable .npy file ({error}); re-save it with numpy.save") from None
         if array.shape[0] == 0:
