@@ -338,9 +338,11 @@ def test_calibrate_reads_a_big_text_file_in_parallel_pieces_with_the_same_result
     diagnosed: list[np.ndarray] = []
     original = calibrate._with_diagnostics
 
-    def recorded(calibration: magfit.Calibration, subsample: np.ndarray, n_total: int) -> magfit.Calibration:
+    def recorded(
+        calibration: magfit.Calibration, subsample: np.ndarray, n_total: int, allow_undetermined: bool = False
+    ) -> magfit.Calibration:
         diagnosed.append(subsample)
-        return original(calibration, subsample, n_total)
+        return original(calibration, subsample, n_total, allow_undetermined)
 
     monkeypatch.setattr(calibrate, "_with_diagnostics", recorded)
     sequential = calibrate.run_calibration(path, method="ellipsoid")
