@@ -223,3 +223,17 @@ def test_plot_names_its_columns_in_its_output_and_its_refusals(tmp_path: Path) -
     assert refused.exit_code == 1, refused.output
     assert refused.stderr.startswith(f"magfit: error: {flat} (columns column 2, column 3, column 4;")
     assert not (tmp_path / "flat.png").exists()
+
+
+def test_a_recording_that_starts_at_rest_is_judged_on_rows_further_in(tmp_path: Path) -> None:
+    """6000 rows at rest (a warm-up: every column constant but for noise), then the tumble; gyro columns first.
+    The head alone holds no direction: the rule also reads rows from further in."""
+    rng = np.random.default_rng(15)
+    rest = np.tile([20.0, -30.0, 25.0], (6000, 1)) + rng.normal(scale=0.3, size=(6000, 3))
+    mag = np.vstack([rest, magnetometer(6000, seed=16, noise=0.3)])
+    gyro = np.vstack([rng.normal(scale=0.01, size=(6000, 3)), rng.normal(scale=1.5, size=(6000, 3))])
+    path = write(tmp_path / "rest_then_tumble.csv", [gyro, mag], delimiter=",")
+    assert path.stat().st_size > 256 * 1024  # longer than the head the layout is sniffed from
+    table = read_samples(path)
+    assert table.columns == ("column 4", "column 5", "column 6")
+    np.testing.assert_allclose(table.samples, mag, atol=1e-6)

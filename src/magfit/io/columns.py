@@ -180,7 +180,8 @@ def find_magnetometer_columns(names: Sequence[str]) -> list[ColumnTriple]:
 
 # ---------------------------------------------------------------------------------------------- by content
 
-#: Rows of a file's head that the content rule looks at: enough for a stable fit, cheap to parse.
+#: Rows the content rule looks at (the first ones, and rows from further in for a file longer than its
+#: head): enough for a stable fit, cheap to parse.
 CONTENT_ROWS = 2000
 #: A column is taken for a time or a counter when it never decreases (or never increases) over at least
 #: this many rows of the head and changes in at least half of its steps.

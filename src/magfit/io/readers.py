@@ -846,13 +846,30 @@ class ChunkReader:
         head = np.asarray(np.load(self.path, mmap_mode="r", allow_pickle=False)[:CONTENT_ROWS], dtype=np.float64)
         return choose_columns_by_content(head, range(self.format.n_columns))
 
+    def _rows_further_in(self, per_window: int) -> list[list[str]]:
+        """Up to ``per_window`` rows at each of 1/4, 1/2 and 3/4 of a file longer than its head, in file order."""
+        fmt = self.format
+        size = self.path.stat().st_size
+        rows: list[list[str]] = []
+        with open(self.path, "rb") as handle:
+            for quarter in (1, 2, 3):
+                handle.seek(fmt.data_offset + (size - fmt.data_offset) * quarter // 4)
+                text = handle.read(HEAD_BYTES // 4).decode(self._text_encoding, errors="replace")
+                lines = text.split("\n")[1:-1]  # the first and last are cut by the window
+                fields = (_split_fields(line.rstrip("\r"), fmt.delimiter) for line in lines[:per_window])
+                rows += [row for row in fields if len(row) == fmt.n_columns]
+        return rows
+
     def _content_choice(self) -> ContentChoice:
-        """The x, y, z columns of a text file without a header, chosen from the values of its first rows."""
+        """The x, y, z columns of a text file without a header, chosen from the values of its rows (the first
+        ones, and for a file longer than its head, rows from further in as well)."""
         fmt = self.format
         head, truncated = _read_head(self.path)
         _, lines, _ = _decode_lines(self.path, head, truncated)
         rows = [_split_fields(line, fmt.delimiter) for line in lines[fmt.data_line :][:CONTENT_ROWS]]
         rows = [row for row in rows if len(row) == fmt.n_columns]
+        if truncated:  # half from the head, half from further in: a recording may start at rest (a warm-up)
+            rows = rows[: CONTENT_ROWS // 2] + self._rows_further_in(CONTENT_ROWS // 6)
         # Columns of numbers in the first 50 rows (a leading date or label column is passed over).
         numeric = [
             j
