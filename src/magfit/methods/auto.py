@@ -42,7 +42,6 @@ fitted robustly and the criterion is computed on the common inliers.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -153,8 +152,13 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     }
     ranked = sorted(bic, key=bic.__getitem__)
     best = ranked[0]
-    verdicts = {model: _candidate_support(optima[model], kept) for model in CANDIDATES if model in optima}
-    verdicts.update(_inadequate(rss, verdicts, m))
+    inadequate = _inadequate(rss, m)  # first: no need to judge a model that cannot stand in for a richer one
+    verdicts = {
+        model: Support("refused", (inadequate[model],), (), "") if model in inadequate
+        else _candidate_support(optima[model], kept)
+        for model in CANDIDATES
+        if model in optima
+    }
     determined = [model for model in CANDIDATES if model in verdicts and verdicts[model].verdict != "refused"]
     if not determined:
         raise CalibrationError(
@@ -162,7 +166,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
             + "; ".join(f"the {model} model: {'; '.join(verdicts[model].refusals)}" for model in verdicts)
             + "; record again turning the sensor through more attitudes (a full tumble is best)"
         )
-    held_out = _blocked_scores(kept, optima, determined)
+    held_out = _blocked_scores(kept, optima, determined) if len(determined) > 1 else {}  # one left: no choice
     chosen, steps = _choose(determined, held_out)
     weak = list(verdicts[chosen].weaknesses)
     calibration = optima[chosen]
@@ -445,17 +449,17 @@ def _candidate_support(optimum: Calibration, kept: NDArray[np.float64]) -> Suppo
     return report.support
 
 
-def _inadequate(rss: dict[str, float], verdicts: dict[str, Support], n: int) -> dict[str, Support]:
-    """Refusals of the simpler models that leave far larger residuals than a richer one (the soft iron).
+def _inadequate(rss: dict[str, float], n: int) -> dict[str, str]:
+    """Why each simpler model that leaves far larger residuals than a richer one cannot be chosen.
 
     A richer model that the samples do not determine cannot be returned, but its fit still shows what the
     simpler ones miss: a sphere whose RMS distance is :data:`INADEQUATE_RATIO` times the full ellipsoid's
     (and above :data:`INADEQUATE_RMS` of the field) leaves the soft iron in the heading, by tens of
     degrees on the paper's steel case. Falling back to it would be a confident wrong calibration.
     """
-    refused: dict[str, Support] = {}
+    reasons: dict[str, str] = {}
     for simple in CANDIDATES:
-        if simple not in rss or simple not in verdicts:
+        if simple not in rss:
             continue
         for richer in CANDIDATES[CANDIDATES.index(simple) + 1 :]:
             if richer not in rss:
@@ -463,15 +467,12 @@ def _inadequate(rss: dict[str, float], verdicts: dict[str, Support], n: int) -> 
             ratio = math.sqrt(rss[simple] / max(rss[richer], 1e-300))
             rms = math.sqrt(rss[simple] / n)  # the data's RMS radius is 1 in the frame of the sums: ≈ the field
             if ratio > INADEQUATE_RATIO and rms > INADEQUATE_RMS:
-                reason = (
+                reasons[simple] = (
                     f"it leaves residuals {ratio:.1f} times those of the {richer} model: the soft iron it cannot "
                     "describe would stay in the heading"
                 )
-                refused[simple] = replace(
-                    verdicts[simple], verdict="refused", refusals=(*verdicts[simple].refusals, reason)
-                )
                 break
-    return refused
+    return reasons
 
 
 def _blocked_scores(
