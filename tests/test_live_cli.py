@@ -456,3 +456,31 @@ def test_a_usb_board_that_reboots_is_opened_again(monkeypatch: pytest.MonkeyPatc
     recorded = np.loadtxt(record, delimiter=",", skiprows=1)
     np.testing.assert_allclose(recorded[:, 1:], np.array(rows[:3000]), atol=1e-9)
     _check_truth(output, board)
+
+
+def test_ctrl_c_exits_130_and_keeps_the_recording(tmp_path: Path) -> None:
+    """Ctrl-C stops a session as it stops every command (status 130), the samples so far kept on disk."""
+    import signal
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-c", "import sys; from magfit.cli import main; sys.exit(main())"]
+    args = ["live", "--simulate", "--rate", "200", "--duration", "60", "-o", "cal.json", "--record", "raw.csv"]
+    process = subprocess.Popen(
+        command + args, cwd=tmp_path, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and not (
+            (tmp_path / "raw.csv").exists() and (tmp_path / "raw.csv").stat().st_size > 200
+        ):
+            time.sleep(0.1)
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 130, stderr
+    assert b"Traceback" not in stderr and b"interrupted" in stderr
+    assert not (tmp_path / "cal.json").exists()
+    assert np.loadtxt(tmp_path / "raw.csv", delimiter=",", skiprows=1).shape[0] > 0

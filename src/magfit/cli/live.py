@@ -171,10 +171,10 @@ def _until_stopped(run: LiveRun, thresholds: Thresholds, unit: str | None) -> No
         with _view(err, run, thresholds, unit, enabled=err.is_terminal):
             while not run.poll():
                 time.sleep(0.05)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # stop the run, say where the recording is, then exit 130 as every command does
         run.close()
         _kept(run)
-        raise FitFailedError("interrupted: no calibration was written") from None
+        raise
     run.close()
     if run.error is not None:
         _kept(run)
