@@ -269,3 +269,17 @@ def test_no_method_imports_scipy_optimize(steel: tuple[Path, magfit.Simulation])
     )
     result = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True)
     assert "'scipy.optimize'" not in result.stdout, result.stdout
+
+
+def test_system_id_goes_into_the_px4_file_and_nowhere_else(tmp_path: Path) -> None:
+    sim = magfit.simulate(2000, field_strength=50.0, hard_iron=[10.0, -20.0, 30.0], noise=0.5, seed=4)
+    path = tmp_path / "mag.csv"
+    np.savetxt(path, sim.samples, delimiter=",", header="mx,my,mz", comments="")
+    runner = CliRunner()
+    result = runner.invoke(cli, ["calibrate", str(path), "--unit", "uT", "--export", "px4", "--system-id", "3"])
+    assert result.exit_code == 0, result.output
+    rows = [line.split("\t") for line in result.stdout.splitlines() if line and not line.startswith("#")]
+    assert rows and all(row[0] == "3" for row in rows)
+    refused = runner.invoke(cli, ["calibrate", str(path), "--system-id", "3", "-o", str(tmp_path / "cal.json")])
+    assert refused.exit_code == 2 and "--system-id goes with --export px4" in refused.output
+    assert not (tmp_path / "cal.json").exists()

@@ -601,12 +601,14 @@ def _progress(description: str, total: int | Callable[[], int] | None = None) ->
         yield lambda rows: progress.advance(task, rows)
 
 
-def render_output(run: CalibrationRun, export_format: str | None, unit: str | None) -> str:
-    """The text of the calibration: its JSON, or the firmware export."""
+def render_output(
+    run: CalibrationRun, export_format: str | None, unit: str | None, system_id: int | None = None
+) -> str:
+    """The text of the calibration: its JSON, or the firmware export (``system_id``: PX4's, for ``px4``)."""
     if export_format is not None:
         from ..export import export
 
-        return export(run.calibration, export_format, unit=unit)
+        return export(run.calibration, export_format, unit=unit, system_id=system_id)
     return run.calibration.to_json() + "\n"
 
 
@@ -670,7 +672,14 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     type=click.IntRange(min=10),
     default=None,
     help="Most samples an iterative method (ml, robust, auto) holds in memory; a larger file is fitted on an "
-    "even subsample of this many. Default: from the available memory.",
+    "even subsample of this many. Default: 500 000, fewer when memory is short.",
+)
+@click.option(
+    "--system-id",
+    type=click.IntRange(1, 255),
+    default=None,
+    help="With --export px4: the vehicle's MAV_SYS_ID written in the parameter file (QGroundControl refuses a file "
+    "written for another id). Default 1.",
 )
 @click.option(
     "--plot",
@@ -697,6 +706,7 @@ def calibrate_command(
     max_samples: int | None,
     plot_path: Path | None,
     force: bool,
+    system_id: int | None,
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -722,6 +732,8 @@ def calibrate_command(
         require("plot", "'magfit calibrate --plot'", ("matplotlib",))  # before the calibration is written
         check_figure_path(plot_path, "'--plot'")
     check_outputs(file, output, plot_path)
+    if system_id is not None and export_format != "px4":
+        raise click.UsageError("--system-id goes with --export px4: it is the vehicle id a PX4 parameter file names")
     method = method or default_method()
     if output is not None and export_format is not None and str(output) != STDOUT:
         _check_extension(output, export_format)
@@ -738,7 +750,9 @@ def calibrate_command(
         allow_undetermined=force,
     )
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
-    text = render_output(run, export_format, unit) if output is not None or export_format is not None else None
+    text = (
+        render_output(run, export_format, unit, system_id) if output is not None or export_format is not None else None
+    )
     to_stdout = text is not None and (output is None or str(output) == STDOUT)
     files: list[tuple[Path, bytes]] = []
     if output is not None and text is not None and not to_stdout:
