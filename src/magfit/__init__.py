@@ -16,7 +16,7 @@ from .calibration import CONVENTION, Calibration
 from .diagnostics import Diagnostics
 from .errors import CalibrationError, DataFileError, ExportError, MagfitError, OptionError, SampleError
 from .evaluate import Evaluation, evaluate, sphere_distances
-from .fit import diagnose, fit
+from .fit import diagnose, fit, refit
 from .methods import METHODS
 from .simulate import DISTURBANCES, SENSORS, Scenario, Simulation, scenario, simulate
 from .statistics import Statistics
@@ -44,6 +44,7 @@ __all__ = [
     "diagnose",
     "evaluate",
     "fit",
+    "refit",
     "scenario",
     "simulate",
     "sphere_distances",

@@ -9,26 +9,28 @@ warnings.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import Any, Literal
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from .calibration import Calibration
 from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refit, diagnose_statistics
 from .diagnostics import diagnose as diagnose_samples
 from .errors import CalibrationError, MagfitError
+from .methods import FitInput
 from .methods.auto import refit_first_order
 from .methods.core import estimate, method_spec, prepare, refitter
 from .statistics import Statistics
 
-__all__ = ["diagnose", "fit"]
+__all__ = ["diagnose", "fit", "refit"]
 
 
 def fit(
     samples: ArrayLike | Statistics,
     method: str = "ellipsoid",
     *,
-    diagnostics: bool = True,
+    diagnostics: bool | Literal["quick"] = True,
     allow_undetermined: bool = False,
     **options: Any,
 ) -> Calibration:
@@ -43,11 +45,13 @@ def fit(
     method : str
         A name in ``magfit.METHODS``: ``"ellipsoid"`` (hard + soft iron, paper section II),
         ``"sphere"`` (hard iron only, section III), ``"minmax"`` (pseudo-calibration, section IV), ...
-    diagnostics : bool
+    diagnostics : bool or "quick"
         Attach :func:`diagnose`'s full report as ``details["diagnostics"]`` (read it typed with
         ``calibration.diagnostics``). It runs on at most 20 000 spatially even samples; from
-        ``Statistics`` only what statistics allow is attached. Without it the verdict is still reached
-        (``details["support"]``), on the cheaper checks.
+        ``Statistics`` only what statistics allow is attached. ``False``: the verdict is still reached
+        (``details["support"]``), on the checks that need no refit of the method. ``"quick"``: those
+        checks' findings are attached too (coverage, observability, the uncertainty without the block
+        jackknife, consistency): what a live view refreshed several times a second needs.
     allow_undetermined : bool
         Return a calibration that the samples do not support (see below) instead of raising; its
         refusal is then the first of its warnings (``--force`` on the command line).
@@ -76,19 +80,58 @@ def fit(
     spec = method_spec(method, options)
     data = prepare(samples, spec)
     calibration = estimate(data, spec.name, options)
+    return _judged(calibration, data, spec.name, options, diagnostics, allow_undetermined)
+
+
+def refit(
+    calibration: Calibration,
+    samples: ArrayLike,
+    *,
+    diagnostics: bool | Literal["quick"] = "quick",
+    allow_undetermined: bool = False,
+) -> Calibration:
+    """``calibration``'s method fitted again to ``samples`` with the options it recorded, judged as :func:`fit` judges.
+
+    For an ``auto`` calibration the model it chose is refitted (its first-order maximum-likelihood fit,
+    from ``calibration``: a few iterations) without a new model choice: what a live calibration does
+    between two full ``auto`` fits, as new samples arrive. Raises as :func:`fit` does.
+    """
+    options = calibration.details.get("options", {})
+    if not isinstance(options, dict):
+        raise CalibrationError(f"the {calibration.method} calibration records no options to refit it with")
+    spec = method_spec(calibration.method, options)
+    data = prepare(samples, spec)
+    assert data.samples is not None  # an array was given
+    refitted = refit_of(calibration, spec.name, options)(np.asarray(data.samples, dtype=np.float64))
+    if spec.name == "auto":  # keep what auto said of its choice, with the refitted numbers
+        refitted = replace(refitted, method="auto", details={**calibration.details, **refitted.details})
+        refitted = replace(refitted, details={k: v for k, v in refitted.details.items() if k != "diagnostics"})
+    return _judged(refitted, data, spec.name, options, diagnostics, allow_undetermined)
+
+
+def _judged(
+    calibration: Calibration,
+    data: FitInput,
+    method: str,
+    options: dict[str, Any],
+    diagnostics: bool | Literal["quick"],
+    allow_undetermined: bool,
+) -> Calibration:
+    """``calibration`` with its verdict (and diagnostics) attached, or the refusal raised."""
     if data.samples is None:
         report = diagnose_statistics(calibration, data.statistics)
     else:
-        refit = refit_of(calibration, spec.name, options) if diagnostics else None
+        thorough = diagnostics is True
+        refit = refit_of(calibration, method, options) if thorough else None
         # auto returns its chosen model's maximum-likelihood fit: the comparison with that fit is moot.
         report = diagnose_samples(
-            calibration, data.samples, refit=refit, thorough=diagnostics, compare_ml=spec.name != "auto"
+            calibration, data.samples, refit=refit, thorough=thorough, compare_ml=method != "auto"
         )
     support = report.support
     assert support is not None  # both diagnoses reach a verdict
     if support.verdict == "refused":
         if not allow_undetermined:
-            raise CalibrationError(support.message(spec.name))
+            raise CalibrationError(support.message(method))
         support = replace(support, forced=True)
         report = replace(report, support=support, warnings=support.warnings)
     details: dict[str, Any] = {**calibration.details, "support": support.to_dict()}
