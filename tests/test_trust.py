@@ -293,3 +293,18 @@ def test_refits_use_the_options_the_user_gave() -> None:
     assert magfit.fit(sim.samples, "minmax").details["options"] == {"centre": "mean"}
     report = magfit.diagnose(calibration, sim.samples)
     assert report.goodness is not None and report.goodness.held_out is not None
+
+
+def test_refit_follows_new_samples_with_the_same_model_and_a_new_verdict() -> None:
+    sim = magfit.simulate(4000, soft_iron=np.diag([1.1, 0.95, 1.0]), hard_iron=[0.3, 0.1, -0.2], noise=0.01, seed=3)
+    first = magfit.fit(sim.samples[:1500], "auto", diagnostics="quick")
+    assert first.diagnostics is not None and first.diagnostics.uncertainty is not None
+    assert first.diagnostics.goodness is None  # quick: no held-out refits
+    again = magfit.refit(first, sim.samples[1500:])
+    assert again.method == "auto" and again.details["chosen_model"] == first.details["chosen_model"]
+    assert again.details["support"]["verdict"] == "supported"
+    np.testing.assert_allclose(again.offset, sim.truth.offset, atol=0.005)
+    # A refit is judged too: new samples that only yaw do not support it.
+    yaw = magfit.simulate(2000, orientations="yaw", noise=0.01, seed=1, hard_iron=[0.3, 0.1, -0.2]).samples
+    with pytest.raises(CalibrationError):
+        magfit.refit(magfit.fit(sim.samples, "ellipsoid"), yaw)
