@@ -98,6 +98,7 @@ def _register_commands() -> None:
     from .calibrate import calibrate_command
     from .compare import compare_command
     from .demo import demo_command
+    from .inspect import inspect_command
     from .live import live_command
     from .plot import plot_command
     from .report import report_command
@@ -112,6 +113,7 @@ def _register_commands() -> None:
         plot_command,
         report_command,
         live_command,
+        inspect_command,
     ):
         cli.add_command(command)
 

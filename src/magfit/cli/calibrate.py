@@ -136,6 +136,7 @@ def run_calibration(
     max_samples: int | None = None,
     options: Mapping[str, Any] | None = None,
     allow_undetermined: bool = False,
+    sensor: str | None = None,
 ) -> CalibrationRun:
     """Read ``path``, fit ``method`` and score the fit; memory stays bounded for streaming methods.
 
@@ -149,11 +150,16 @@ def run_calibration(
     ``allow_undetermined`` (``--force``) returns a calibration the samples do not support, marked so.
     """
     from ..io import ChunkReader
+    from ..sources import log_kind
 
     spec = get_method(method)
     options = dict(options or {})
     if allow_undetermined:  # fit's own keyword, passed with the method's options
         options["allow_undetermined"] = True
+    if log_kind(path) is not None:  # a flight log: one compass's samples, read through magfit.sources
+        return _run_log(path, sensor, method, options, unit=unit, even=even)
+    if sensor is not None:
+        raise DataFileError(f"{path}: --sensor chooses a compass of a flight log (ULog, DataFlash), not of this file")
     limit = memory_sample_limit() if max_samples is None else max_samples
     subsample = "--even" if even else None
     # The columns first (cheap: the file's head): every message, a refusal too, says which were used.
@@ -202,6 +208,43 @@ def run_calibration(
         streamed=streamed,
         subsample=subsample,
         column_note=chosen.column_note,
+    )
+
+
+def _run_log(
+    path: Path, sensor: str | None, method: str, options: Mapping[str, Any], *, unit: str | None, even: bool
+) -> CalibrationRun:
+    """Fit one magnetometer of a flight log (docs/file-formats.md): its raw field, read by magfit.sources."""
+    from ..sources import open_source
+
+    source = open_source(path)
+    read = source.read(sensor)
+    chosen = read.magnetometer
+    for note in (*source.notes, *read.notes):
+        warn(f"{path} ({chosen.id}): {note}")
+    where = f"{path} ({chosen.id}, {chosen.description})"
+    if len(read.samples) == 0:
+        raise DataFileError(f"{where}: holds no finite samples")
+    try:
+        calibration = fit(_samples_for_fit(read.samples, even), method=method, **options)
+    except CalibrationError as error:
+        advice = "".join(f"; {note}" for note in chosen.notes if "logged at only" in note or "only " in note)
+        raise CalibrationError(f"{where}: {error}{advice}") from None
+    calibration = calibration.with_unit(unit or chosen.unit) if (unit or chosen.unit) else calibration
+    source_details = {"file": path.name, "sensor": chosen.id, "device_id": chosen.device_id, "unit": calibration.unit}
+    calibration = replace(calibration, details={**calibration.details, "source": source_details})
+    span = f"{chosen.span_s:.1f} s" if np.isfinite(chosen.span_s) else "no time stamps"
+    return CalibrationRun(
+        path=path,
+        calibration=calibration,
+        evaluation=evaluate(calibration, read.samples),
+        columns=read.columns,
+        n_rows=len(read.samples),
+        n_skipped=0,
+        skipped_lines=(),
+        file_format=f"{source.format}; {chosen.id}: {chosen.description}, {span}",
+        streamed=False,
+        subsample="--even" if even else None,
     )
 
 
@@ -688,6 +731,12 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     help="Also draw the samples before and after the fit into this figure (.png, .svg, .pdf), as 'magfit plot'.",
 )
 @click.option(
+    "--sensor",
+    metavar="ID",
+    help="The compass of a flight log to fit (its id or device id, as 'magfit inspect FILE' lists them); needed "
+    "when the log holds several.",
+)
+@click.option(
     "--force",
     is_flag=True,
     help="Return the calibration even when the samples do not support it (exit 0): it is marked NOT SUPPORTED "
@@ -707,6 +756,7 @@ def calibrate_command(
     plot_path: Path | None,
     force: bool,
     system_id: int | None,
+    sensor: str | None,
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -748,6 +798,7 @@ def calibrate_command(
         max_samples=max_samples,
         options=options,
         allow_undetermined=force,
+        sensor=sensor,
     )
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
     text = (

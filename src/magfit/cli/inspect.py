@@ -1,0 +1,70 @@
+"""``magfit inspect``: what a recording holds — its magnetometers (ids, units, rates, spans) and what else."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import click
+
+from ..sources import Magnetometer, Source, open_source
+from ._common import console
+
+
+def _number(value: float, digits: int = 1) -> str:
+    return "-" if not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _magnetometer_lines(magnetometer: Magnetometer) -> list[tuple[str, str]]:
+    unit = magnetometer.unit or "unit not recorded"
+    timing = ""
+    if math.isfinite(magnetometer.span_s):
+        timing = (
+            f", {_number(magnetometer.start_s)}-{_number(magnetometer.end_s)} s ({_number(magnetometer.span_s)} s), "
+            f"{_number(magnetometer.rate_hz)} Hz"
+        )
+    lines = [(magnetometer.id, f"{magnetometer.description}: {magnetometer.n_samples} samples in {unit}{timing}")]
+    lines += [("", f"note: {note}") for note in magnetometer.notes]
+    if magnetometer.problem is not None:
+        lines.append(("", f"cannot be fitted: {magnetometer.problem}"))
+    return lines
+
+
+def source_lines(source: Source) -> list[tuple[str, str]]:
+    """The labelled lines ``inspect`` prints for ``source``."""
+    lines = [("file", f"{source.path} ({source.format})"), ("time base", source.time_base)]
+    if not source.magnetometers:
+        lines.append(("magnetometers", "none"))
+    for index, magnetometer in enumerate(source.magnetometers):
+        label, text = _magnetometer_lines(magnetometer)[0]
+        lines.append(("magnetometers" if index == 0 else "", f"{label}  {text}"))
+        lines += [("", f"{' ' * len(label)}  {more}") for _, more in _magnetometer_lines(magnetometer)[1:]]
+    for index, other in enumerate(source.other):
+        lines.append(("also logged" if index == 0 else "", other))
+    lines += [("note", note) for note in source.notes]
+    usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
+    if source.kind != "samples" and len(usable) > 1:
+        lines.append(("calibrate", f"choose a magnetometer with --sensor ID ({', '.join(usable)})"))
+    return lines
+
+
+@click.command("inspect")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+def inspect_command(file: Path) -> None:
+    """List what a recording holds: its magnetometers and what else is logged.
+
+    FILE is a PX4 ULog (.ulg, needs pip install 'magfit[ulog]'), an ArduPilot DataFlash log (.bin) or a
+    samples file (CSV, text, .npy, .npz); the format is recognised by its first bytes. For each
+    magnetometer: the id that 'magfit calibrate --sensor' takes, its unit, sample count, time span and
+    rate, and what stands in the way of a fit (a compass logged too slowly, a calibration that cannot be
+    undone).
+
+    \b
+    Examples:
+      magfit inspect flight.ulg
+      magfit inspect 00000042.BIN
+      magfit inspect mag.csv
+    """
+    out = console()
+    for label, value in source_lines(open_source(file)):
+        out.print(f"{label:<16} {value}", soft_wrap=True)

@@ -1,0 +1,267 @@
+"""What a recording holds: its magnetometers (ids, units, rates, time spans) and what else was logged.
+
+A flight log carries several compasses, each logged by the firmware in its own way, beside the attitude,
+the accelerometer and the GPS. :func:`open_source` reads a file once into a :class:`Source` that says what
+it holds; :meth:`Source.read` returns the samples of one magnetometer as the raw field of its sensor (the
+firmware's calibration undone where the log says how), with the notes a user must see (a compass logged
+too slowly, a calibration undone with the log's parameters).
+
+Formats are recognised by their first bytes, not by their names:
+
+- PX4 ULog (``ULog\\x01\\x12\\x35``): :mod:`magfit.sources.ulog`, needs ``pyulog`` (the ``ulog`` extra);
+- ArduPilot DataFlash ``.bin`` (``0xA3 0x95``, then a FMT message): :mod:`magfit.sources.dataflash`, a small
+  reader built on the format's own FMT messages (no extra);
+- anything else is a samples file for :mod:`magfit.io` (text, ``.npy``, ``.npz``).
+
+(:mod:`magfit.io.sources` is another thing: where a file's bytes come from — a pipe, a compressed copy.)
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError
+
+__all__ = [
+    "LogSamples",
+    "Magnetometer",
+    "Source",
+    "log_kind",
+    "open_source",
+]
+
+#: First bytes of a PX4 ULog file (the version byte and the timestamp follow).
+ULOG_MAGIC = b"ULog\x01\x12\x35"
+#: First bytes of every ArduPilot DataFlash message; the first message of a log is a FMT (type 128).
+DATAFLASH_MAGIC = b"\xa3\x95\x80"
+#: Below this rate a magnetometer is flagged as logged too slowly for a fit (a tumble lasts about a minute:
+#: at 1 Hz that is 60 samples, too few to tell the directions apart).
+SLOW_RATE_HZ = 5.0
+
+
+@dataclass(frozen=True)
+class Magnetometer:
+    """One magnetometer stream in a recording.
+
+    Attributes
+    ----------
+    id : str
+        What ``--sensor`` takes: ``sensor_mag/0`` (ULog topic/instance), ``MAG/1`` (DataFlash compass index,
+        0-based), ``columns`` for a samples file.
+    description : str
+        What it is, in words (``raw sensor_mag, device_id 592905``).
+    unit : str
+        The unit of its samples (``G``, ``mG``, or empty for an unknown unit).
+    n_samples : int
+        Samples in the recording.
+    start_s, end_s : float
+        First and last time stamp, in seconds on the recording's time base (NaN when it has none).
+    device_id : int or None
+        The firmware's device id, which the exported calibration must be written for.
+    raw : bool
+        True when the samples are the sensor's raw field as logged; False when :meth:`Source.read` undoes
+        the firmware's calibration with the log's parameters (``notes`` says with which).
+    notes : tuple of str
+        What a user must know about this stream (too slow, calibration undone, motor compensation ...).
+    problem : str or None
+        Why the stream cannot be fitted (a calibration that cannot be undone), or None.
+    """
+
+    id: str
+    description: str
+    unit: str
+    n_samples: int
+    start_s: float = float("nan")
+    end_s: float = float("nan")
+    device_id: int | None = None
+    raw: bool = True
+    notes: tuple[str, ...] = ()
+    problem: str | None = None
+
+    @property
+    def span_s(self) -> float:
+        """Seconds between the first and the last sample (NaN without time stamps)."""
+        return self.end_s - self.start_s
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean sample rate over the span (NaN without time stamps or with fewer than two samples)."""
+        span = self.span_s
+        if self.n_samples < 2 or not np.isfinite(span) or span <= 0:
+            return float("nan")
+        return (self.n_samples - 1) / span
+
+
+@dataclass(frozen=True)
+class LogSamples:
+    """The samples of one magnetometer, read from a recording.
+
+    Attributes
+    ----------
+    magnetometer : Magnetometer
+        Which stream they are.
+    samples : ndarray, shape (N, 3)
+        The sensor's field, in ``magnetometer.unit`` (the firmware's calibration undone when it was applied).
+    time_s : ndarray, shape (N,)
+        Their time stamps in seconds (the recording's time base).
+    columns : tuple of str
+        The fields the samples came from (``x, y, z`` or ``MagX, MagY, MagZ``).
+    notes : tuple of str
+        What was done to them (the calibration undone, and with which parameters).
+    """
+
+    magnetometer: Magnetometer
+    samples: NDArray[np.float64]
+    time_s: NDArray[np.float64]
+    columns: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Source:
+    """What a recording holds: its format, magnetometers and other logged streams.
+
+    Attributes
+    ----------
+    path : Path
+        The file, as the user named it.
+    kind : str
+        ``"ulog"``, ``"dataflash"`` or ``"samples"`` (text, npy, npz: read by :mod:`magfit.io`).
+    format : str
+        The format in words (``PX4 ULog, PX4 v1.14.0``).
+    time_base : str
+        What the time stamps count (``microseconds since boot``).
+    magnetometers : tuple of Magnetometer
+        Every magnetometer stream, fit-able or not (see ``Magnetometer.problem``).
+    other : tuple of str
+        The other streams logged, with their sample counts (``vehicle_attitude (2 310)``).
+    notes : tuple of str
+        What a user must know about the whole file (bytes skipped as damaged ...).
+    """
+
+    path: Path
+    kind: str
+    format: str
+    time_base: str
+    magnetometers: tuple[Magnetometer, ...]
+    other: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    _reader: Callable[[Magnetometer], LogSamples] | None = field(default=None, repr=False, compare=False)
+
+    def magnetometer(self, sensor: str | None) -> Magnetometer:
+        """The magnetometer ``sensor`` names (its id, or its device id), or the only usable one when None.
+
+        Raises
+        ------
+        DataFileError
+            No such sensor (the ids listed); several usable and none chosen (``--sensor`` asked for); none
+            usable (each one's reason).
+        """
+        listing = "; ".join(f"{m.id} ({m.description})" for m in self.magnetometers)
+        if sensor is not None:
+            for candidate in self.magnetometers:
+                if sensor == candidate.id or (candidate.device_id is not None and sensor == str(candidate.device_id)):
+                    return candidate
+            raise DataFileError(f"{self.path}: holds no magnetometer {sensor!r}; it holds: {listing or 'none'}")
+        usable = [m for m in self.magnetometers if m.problem is None and m.n_samples > 0]
+        if len(usable) == 1:
+            return usable[0]
+        if not usable:
+            if not self.magnetometers:
+                raise DataFileError(f"{self.path}: this {self.format} holds no magnetometer data")
+            reasons = "; ".join(f"{m.id}: {m.problem or 'no samples'}" for m in self.magnetometers)
+            raise DataFileError(f"{self.path}: no magnetometer in this {self.format} can be fitted ({reasons})")
+        ids = ", ".join(m.id for m in usable)
+        raise DataFileError(
+            f"{self.path}: holds {len(usable)} magnetometers that can be fitted ({listing}); choose one with "
+            f"--sensor ID (one of {ids})"
+        )
+
+    def read(self, sensor: str | None = None) -> LogSamples:
+        """The samples of the magnetometer ``sensor`` names (see :meth:`magnetometer`).
+
+        Raises
+        ------
+        DataFileError
+            As :meth:`magnetometer`, or the stream's ``problem`` (a calibration that cannot be undone).
+        """
+        chosen = self.magnetometer(sensor)
+        if chosen.problem is not None:
+            raise DataFileError(f"{self.path}: {chosen.id} cannot be fitted: {chosen.problem}")
+        if self._reader is None:
+            raise DataFileError(f"{self.path}: is a samples file; read it with magfit.io.read_samples")
+        return self._reader(chosen)
+
+
+def log_kind(path: str | os.PathLike[str]) -> str | None:
+    """``"ulog"`` or ``"dataflash"`` when the file's first bytes are those of a flight log, else None.
+
+    A missing or unreadable file is None too: the samples readers report it with their own message.
+    """
+    from ..io.sources import data_file
+
+    try:
+        with open(data_file(path), "rb") as handle:
+            head = handle.read(len(ULOG_MAGIC))
+    except OSError:
+        return None
+    if head.startswith(ULOG_MAGIC):
+        return "ulog"
+    if head.startswith(DATAFLASH_MAGIC):
+        return "dataflash"
+    return None
+
+
+def open_source(path: str | os.PathLike[str]) -> Source:
+    """Open a recording once and say what it holds.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A PX4 ULog, an ArduPilot DataFlash log, or a samples file (text, ``.npy``, ``.npz``); compressed
+        files and standard input (``-``) as :func:`magfit.io.read_samples` takes them.
+
+    Raises
+    ------
+    DataFileError
+        An unreadable, truncated or damaged file (one line naming the file and the problem); a ULog without
+        the ``pyulog`` package (the install command).
+    """
+    from ..io.sources import data_file
+
+    kind = log_kind(path)
+    if kind == "ulog":
+        from .ulog import open_ulog
+
+        return open_ulog(Path(path), data_file(path))
+    if kind == "dataflash":
+        from .dataflash import open_dataflash
+
+        return open_dataflash(Path(path), data_file(path))
+    return _samples_source(Path(path))
+
+
+def _samples_source(path: Path) -> Source:
+    """A text, npy or npz file as a Source: one magnetometer, the three columns :mod:`magfit.io` finds."""
+    from ..io import read_samples, sniff
+
+    fmt = sniff(path)
+    table = read_samples(path)
+    columns = ", ".join(str(c) for c in table.columns)
+    note = (f"{table.n_skipped} rows skipped (NaN or inf)",) if table.n_skipped else ()
+    magnetometer = Magnetometer(
+        id="columns",
+        description=columns + (f" ({table.column_note})" if table.column_note else ""),
+        unit="",
+        n_samples=int(table.samples.shape[0]),
+        notes=note,
+    )
+    return Source(
+        path=path, kind="samples", format=fmt.describe(), time_base="none (rows)", magnetometers=(magnetometer,)
+    )

@@ -1,0 +1,502 @@
+"""ArduPilot DataFlash logs (``.bin``): the compasses, their calibration undone with the log's own parameters.
+
+The format describes itself. Every message is ``0xA3 0x95 <type>`` and a packed little-endian payload; the
+FMT messages (type 128, 89 bytes) give each type's name, length, field types (one letter each) and field
+names. This reader walks the messages once to learn their formats and where each one starts, then reads
+every message of a wanted type as one NumPy structured array. It is a small reader of the format, not
+pymavlink's DFReader: that one is a 7 MB wheel (93 MB installed, with lxml) to read six messages, and
+magfit reads the same MAG and PARM messages about 10x faster (docs/file-formats.md has the measurement).
+
+The compasses: ``MAG`` with an instance field ``I`` (ArduPilot 4.0 and later), or ``MAG``, ``MAG2`` and
+``MAG3`` in older logs. ``MagX, MagY, MagZ`` are milligauss **after** the firmware's current calibration
+(``AP_Compass_Backend::correct_field``, after the board rotation)::
+
+    logged = M · (s · (raw + ofs)) + motor_offset
+
+with ``ofs`` = COMPASS_OFS*_X/Y/Z, ``s`` = COMPASS_SCALE* (applied only between 0.85 and 1.4, as the
+firmware's ``have_scale_factor``), ``M`` the symmetric matrix of COMPASS_DIA*_X/Y/Z (diagonal) and
+COMPASS_ODI*_X/Y/Z (off-diagonal: xy, xz, yz), and ``motor_offset`` the motor compensation (COMPASS_MOTCT
+1 throttle / 2 current, or COMPASS_PMOT_EN per motor), which the log records per sample in ``MOX, MOY,
+MOZ``. :func:`undo_calibration` inverts it to the field in the board frame, the frame in which ArduPilot's
+own calibration (and magfit's ArduPilot export) is expressed. Logged values are truncated to whole
+milligauss (int16): the undone field carries up to 1 mG of that rounding.
+
+Parameters of compass k (0-based) are ``COMPASS_OFS_X`` (k = 0), ``COMPASS_OFS2_X`` (k = 1),
+``COMPASS_OFS3_X`` (k = 2), and so on. Since ArduPilot 4.1 the logged instance is a *priority* slot: slot i
+holds the compass whose ``COMPASS_DEV_ID{k}`` equals ``COMPASS_PRIO{i+1}_ID`` (``Compass::_get_state_id``);
+this reader maps it the same way when the log has those parameters.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError
+from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Source
+
+__all__ = ["DataFlashLog", "open_dataflash", "undo_calibration"]
+
+_HEAD = b"\xa3\x95"
+_FMT_TYPE = 0x80
+_FMT_LENGTH = 89  # header 3 + Type B + Length B + Name 4s + Format 16s + Labels 64s
+#: Field letters: numpy type, and the factor that turns the stored integer into the value.
+_LETTERS: dict[str, tuple[str, float | None]] = {
+    "a": ("(32,)<i2", None),
+    "b": ("i1", None),
+    "B": ("u1", None),
+    "h": ("<i2", None),
+    "H": ("<u2", None),
+    "i": ("<i4", None),
+    "I": ("<u4", None),
+    "f": ("<f4", None),
+    "d": ("<f8", None),
+    "g": ("<f2", None),
+    "n": ("S4", None),
+    "N": ("S16", None),
+    "Z": ("S64", None),
+    "c": ("<i2", 0.01),
+    "C": ("<u2", 0.01),
+    "e": ("<i4", 0.01),
+    "E": ("<u4", 0.01),
+    "L": ("<i4", 1e-7),
+    "M": ("u1", None),
+    "q": ("<i8", None),
+    "Q": ("<u8", None),
+}
+#: COMPASS_SCALE is applied only inside this range (AP_Compass's have_scale_factor, CompassCalibrator.h).
+_SCALE_RANGE = (0.85, 1.4)
+#: Messages listed by `magfit inspect` beside the compasses, when present.
+_ALSO = ("ATT", "IMU", "GPS", "BARO", "PARM", "MODE", "BAT", "CURR", "RCOU")
+
+
+@dataclass(frozen=True)
+class _Format:
+    name: str
+    length: int
+    letters: str
+    labels: tuple[str, ...]
+    dtype: np.dtype[Any] | None  # None: a letter this reader does not know (the messages are skipped)
+
+
+def _format_from(payload: bytes) -> tuple[int, _Format] | None:
+    """The (type, format) a FMT payload defines, or None when it is not a sane FMT (garbage)."""
+    type_id, length, name, letters, labels = struct.unpack("<BB4s16s64s", payload)
+    try:
+        name_text = name.rstrip(b"\x00").decode("ascii")
+        letters_text = letters.rstrip(b"\x00").decode("ascii")
+        label_list = tuple(labels.rstrip(b"\x00").decode("ascii").split(","))
+    except UnicodeDecodeError:
+        return None
+    if length < 3 or not name_text.isprintable():
+        return None
+    dtype: np.dtype[Any] | None = None
+    if (
+        len(label_list) == len(letters_text)
+        and all(c in _LETTERS for c in letters_text)
+        and len(set(label_list)) == len(label_list)
+    ):
+        candidate = np.dtype([(label, _LETTERS[c][0]) for label, c in zip(label_list, letters_text, strict=False)])
+        if candidate.itemsize == length - 3:
+            dtype = candidate
+    return type_id, _Format(name_text, length, letters_text, label_list, dtype)
+
+
+class DataFlashLog:
+    """A DataFlash log walked once: the formats, and where each message of each type starts.
+
+    Parameters
+    ----------
+    path : Path
+        The name messages give.
+    data : bytes
+        The file's bytes.
+
+    Raises
+    ------
+    DataFileError
+        No DataFlash message at all, or no FMT message before the data.
+    """
+
+    def __init__(self, path: Path, data: bytes) -> None:
+        self.path = path
+        self._data = data
+        self.formats: dict[int, _Format] = {}
+        self.skipped_bytes = 0
+        self.truncated = False
+        self._offsets: dict[int, NDArray[np.int64]] = {}
+        self._walk()
+        self._by_name = {fmt.name: type_id for type_id, fmt in self.formats.items()}
+
+    def _walk(self) -> None:
+        data, n = self._data, len(self._data)
+        lengths = {_FMT_TYPE: _FMT_LENGTH}
+        starts: dict[int, list[int]] = {}
+        pos = 0
+        # One pass in Python over the message headers (the payloads are read later by NumPy, per type). A
+        # byte that does not start a known message is damage: skip to the next 0xA3 0x95, and count it.
+        while pos + 3 <= n:
+            if data[pos] == 0xA3 and data[pos + 1] == 0x95:
+                type_id = data[pos + 2]
+                length = lengths.get(type_id)
+                if length is not None:
+                    end = pos + length
+                    if end > n:
+                        self.truncated = True
+                        break
+                    if type_id == _FMT_TYPE:
+                        defined = _format_from(data[pos + 3 : end])
+                        if defined is None:  # a damaged FMT: not a message after all
+                            pos = self._resync(pos)
+                            continue
+                        new_type, fmt = defined
+                        old = self.formats.get(new_type)
+                        if old is not None and old.length != fmt.length:
+                            fmt = _Format(fmt.name, fmt.length, fmt.letters, fmt.labels, None)  # two layouts: unusable
+                        self.formats[new_type] = fmt
+                        if new_type != _FMT_TYPE:
+                            lengths[new_type] = fmt.length
+                    starts.setdefault(type_id, []).append(pos)
+                    pos = end
+                    continue
+            pos = self._resync(pos)
+        if not self.formats:
+            raise DataFileError(
+                f"{self.path}: starts like an ArduPilot DataFlash log but holds no readable FMT message; the file "
+                "is damaged: download the log from the vehicle again"
+            )
+        self._offsets = {type_id: np.asarray(offsets, dtype=np.int64) for type_id, offsets in starts.items()}
+
+    def _resync(self, pos: int) -> int:
+        found = self._data.find(_HEAD, pos + 1)
+        end = len(self._data) if found < 0 else found
+        self.skipped_bytes += end - pos
+        return end
+
+    def names(self) -> dict[str, int]:
+        """Every message type in the log and how many messages of it (FMT excluded)."""
+        counts = {}
+        for type_id, fmt in self.formats.items():
+            if type_id != _FMT_TYPE:
+                count = len(self._offsets.get(type_id, ()))
+                if count:
+                    counts[fmt.name] = count
+        return counts
+
+    def has(self, name: str) -> bool:
+        return name in self._by_name and len(self._offsets.get(self._by_name[name], ())) > 0
+
+    def messages(self, name: str) -> NDArray[Any]:
+        """Every message ``name`` as a structured array (fields by their labels, stored values unscaled).
+
+        Raises
+        ------
+        DataFileError
+            The type's format uses a field letter this reader does not know, or was defined twice differently.
+        """
+        type_id = self._by_name.get(name)
+        if type_id is None:
+            return np.empty(0)
+        fmt = self.formats[type_id]
+        if fmt.dtype is None:
+            raise DataFileError(
+                f"{self.path}: the {name} messages' format ({fmt.letters!r}, {fmt.length} bytes) cannot be read: a "
+                "field type magfit does not know, or two different definitions; please report the log"
+            )
+        offsets = self._offsets.get(type_id, np.empty(0, dtype=np.int64))
+        width = fmt.length - 3
+        raw = np.frombuffer(self._data, dtype=np.uint8)
+        rows = raw[(offsets + 3)[:, None] + np.arange(width)]  # (n, width) bytes of the payloads
+        return np.ascontiguousarray(rows).view(fmt.dtype).reshape(-1)
+
+    def value(self, records: NDArray[Any], name: str, label: str) -> NDArray[np.float64]:
+        """Field ``label`` of ``name``'s records as float64, with its letter's factor (centi-units, 1e-7 deg)."""
+        fmt = self.formats[self._by_name[name]]
+        factor = _LETTERS[fmt.letters[fmt.labels.index(label)]][1]
+        values = records[label].astype(np.float64)
+        return values * factor if factor is not None else values
+
+    def parameters(self) -> dict[str, list[tuple[float, float]]]:
+        """PARM messages: name -> [(time in s, value), ...] in log order."""
+        if not self.has("PARM"):
+            return {}
+        records = self.messages("PARM")
+        times = _time_s(self, "PARM", records)
+        table: dict[str, list[tuple[float, float]]] = {}
+        for name, value, time in zip(records["Name"], records["Value"].astype(np.float64), times, strict=False):
+            table.setdefault(name.rstrip(b"\x00").decode("ascii", "replace"), []).append((float(time), float(value)))
+        return table
+
+
+def _time_s(log: DataFlashLog, name: str, records: NDArray[Any]) -> NDArray[np.float64]:
+    """The messages' time stamps in seconds: TimeUS (microseconds since boot), or TimeMS in older logs."""
+    labels = records.dtype.names or ()
+    if "TimeUS" in labels:
+        return records["TimeUS"].astype(np.float64) / 1e6
+    if "TimeMS" in labels:
+        return records["TimeMS"].astype(np.float64) / 1e3
+    return np.full(len(records), np.nan)
+
+
+def _suffix(k: int) -> str:
+    """The parameter suffix of compass k (0-based): '' for the first, '2', '3' for the others."""
+    return "" if k == 0 else str(k + 1)
+
+
+@dataclass(frozen=True)
+class _Compass:
+    """The parameters ArduPilot corrected one compass with, read from PARM."""
+
+    index: int  # k: the parameter set (COMPASS_OFS{k}...)
+    offsets: NDArray[np.float64]
+    diagonals: NDArray[np.float64]
+    offdiagonals: NDArray[np.float64]
+    scale: float
+    device_id: int | None
+    motor_compensation: bool
+
+
+def undo_calibration(
+    logged: NDArray[np.float64],
+    *,
+    offsets: NDArray[np.float64],
+    diagonals: NDArray[np.float64],
+    offdiagonals: NDArray[np.float64],
+    scale: float = 0.0,
+    motor_offsets: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """The board-frame raw field from MAG's logged field: the inverse of ``correct_field`` (module docstring).
+
+    Parameters
+    ----------
+    logged : ndarray, shape (N, 3)
+        MagX, MagY, MagZ (mG).
+    offsets, diagonals, offdiagonals : ndarray, shape (3,)
+        COMPASS_OFS*, COMPASS_DIA* (all zero means 1, as the firmware does) and COMPASS_ODI* (xy, xz, yz).
+    scale : float
+        COMPASS_SCALE*; outside 0.85..1.4 (0 by default) the firmware does not apply it.
+    motor_offsets : ndarray, shape (N, 3), optional
+        MOX, MOY, MOZ: the motor compensation added after the matrix.
+    """
+    diagonal = np.ones(3) if not np.any(diagonals) else np.asarray(diagonals, dtype=np.float64)
+    xy, xz, yz = np.asarray(offdiagonals, dtype=np.float64)
+    matrix = np.array([[diagonal[0], xy, xz], [xy, diagonal[1], yz], [xz, yz, diagonal[2]]])
+    field = np.asarray(logged, dtype=np.float64)
+    if motor_offsets is not None:
+        field = field - motor_offsets
+    unscaled = np.linalg.solve(matrix, field.T).T
+    if _SCALE_RANGE[0] <= scale <= _SCALE_RANGE[1]:
+        unscaled = unscaled / scale
+    return unscaled - np.asarray(offsets, dtype=np.float64)
+
+
+def open_dataflash(path: Path, file: Path) -> Source:
+    """Read an ArduPilot DataFlash log into a :class:`~magfit.sources.Source` (``file``: its bytes on disk)."""
+    try:
+        data = file.read_bytes()
+    except OSError as error:
+        raise DataFileError(f"{path}: cannot be read ({error.strerror}); check the file's permissions") from None
+    log = DataFlashLog(path, data)
+    parameters = log.parameters()
+    streams = _compass_streams(log)
+    magnetometers = []
+    for slot, (name, records) in enumerate(streams):
+        magnetometers.append(_describe(log, parameters, slot, name, records))
+    notes = []
+    if log.skipped_bytes:
+        notes.append(f"{log.skipped_bytes} bytes skipped as damaged (no message starts there)")
+    if log.truncated:
+        notes.append("the last message is cut short (the log was not closed): it is ignored")
+    counts = log.names()
+    other = tuple(f"{name} ({counts[name]})" for name in _ALSO if name in counts)
+    rest = sorted(set(counts) - set(_ALSO) - {"MAG", "MAG2", "MAG3"})
+    if rest:
+        other += (f"{len(rest)} other message types: {', '.join(rest)}",)
+
+    def read(magnetometer: Magnetometer) -> LogSamples:
+        slot = int(magnetometer.id.split("/")[1])
+        name, records = streams[slot]
+        return _read(log, parameters, magnetometer, name, records)
+
+    return Source(
+        path=path,
+        kind="dataflash",
+        format="ArduPilot DataFlash log",
+        time_base="seconds since boot (TimeUS)",
+        magnetometers=tuple(magnetometers),
+        other=other,
+        notes=tuple(notes),
+        _reader=read,
+    )
+
+
+def _compass_streams(log: DataFlashLog) -> list[tuple[str, NDArray[Any]]]:
+    """(message name, records) per compass slot: MAG split by its instance field I, else MAG, MAG2, MAG3."""
+    if not log.has("MAG"):
+        return []
+    records = log.messages("MAG")
+    if "I" in (records.dtype.names or ()):
+        return [("MAG", records[records["I"] == slot]) for slot in np.unique(records["I"]).tolist()]
+    streams = [("MAG", records)]
+    for name in ("MAG2", "MAG3"):
+        if log.has(name):
+            streams.append((name, log.messages(name)))
+    return streams
+
+
+def _latest(parameters: dict[str, list[tuple[float, float]]], name: str) -> float | None:
+    values = parameters.get(name)
+    return values[0][1] if values else None
+
+
+def _compass_parameters(
+    parameters: dict[str, list[tuple[float, float]]], slot: int, first_time: float
+) -> tuple[_Compass | None, str | None]:
+    """The parameters compass slot ``slot`` was corrected with, or the reason they cannot be known."""
+    k = slot
+    prio = _latest(parameters, f"COMPASS_PRIO{slot + 1}_ID")
+    if prio is not None and prio != 0:
+        matches = [j for j in range(3) if _latest(parameters, f"COMPASS_DEV_ID{_suffix(j)}") == prio]
+        if not matches:
+            return None, (
+                f"COMPASS_PRIO{slot + 1}_ID is {int(prio)} but no COMPASS_DEV_ID* holds it, so its calibration "
+                "parameters are unknown"
+            )
+        k = matches[0]
+    s = _suffix(k)
+    names = {
+        "offsets": [f"COMPASS_OFS{s}_{axis}" for axis in "XYZ"],
+        "diagonals": [f"COMPASS_DIA{s}_{axis}" for axis in "XYZ"],
+        "offdiagonals": [f"COMPASS_ODI{s}_{axis}" for axis in "XYZ"],
+    }
+    missing = [name for group in names.values() for name in group if name not in parameters]
+    if missing:
+        return None, (
+            f"the log's PARM messages lack {', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}, so the "
+            "calibration the firmware applied cannot be undone; log the parameters (ArduPilot writes them at the "
+            "start of every log)"
+        )
+    every = [*names["offsets"], *names["diagonals"], *names["offdiagonals"], f"COMPASS_SCALE{s}"]
+    for name in every:
+        changes = [(t, v) for t, v in parameters.get(name, []) if t > first_time]
+        if changes and any(v != parameters[name][0][1] for _, v in changes):
+            return None, (
+                f"{name} changed during the log (at {changes[0][0]:.1f} s): the samples were corrected with two "
+                "calibrations; fit a log recorded after the change"
+            )
+    motor = (_latest(parameters, "COMPASS_MOTCT") or 0) != 0 or (
+        k == 0 and (_latest(parameters, "COMPASS_PMOT_EN") or 0)
+    )
+    device = _latest(parameters, f"COMPASS_DEV_ID{s}")
+    return (
+        _Compass(
+            index=k,
+            offsets=np.array([_latest(parameters, n) for n in names["offsets"]], dtype=np.float64),
+            diagonals=np.array([_latest(parameters, n) for n in names["diagonals"]], dtype=np.float64),
+            offdiagonals=np.array([_latest(parameters, n) for n in names["offdiagonals"]], dtype=np.float64),
+            scale=float(_latest(parameters, f"COMPASS_SCALE{s}") or 0.0),
+            device_id=int(device) if device else None,
+            motor_compensation=bool(motor),
+        ),
+        None,
+    )
+
+
+def _describe(
+    log: DataFlashLog, parameters: dict[str, list[tuple[float, float]]], slot: int, name: str, records: NDArray[Any]
+) -> Magnetometer:
+    times = _time_s(log, name, records)
+    first = float(times[0]) if len(times) else float("nan")
+    compass, problem = _compass_parameters(parameters, slot, first)
+    labels = records.dtype.names or ()
+    notes: list[str] = []
+    if compass is not None:
+        notes.append(
+            f"MagX/Y/Z are logged after ArduPilot's calibration; undone with COMPASS_OFS{_suffix(compass.index)}, "
+            f"DIA{_suffix(compass.index)}, ODI{_suffix(compass.index)} and SCALE{_suffix(compass.index)} from the "
+            "log's parameters"
+        )
+        if compass.motor_compensation:
+            if {"MOX", "MOY", "MOZ"} <= set(labels):
+                notes.append("motor compensation was active: undone with the motor offsets logged per sample (MOX/Y/Z)")
+            else:
+                problem = (
+                    "motor compensation was active (COMPASS_MOTCT or COMPASS_PMOT_EN) and this log does not record "
+                    "the motor offsets it added (no MOX/MOY/MOZ), so the raw field cannot be recovered; record with "
+                    "COMPASS_MOTCT 0, or use the onboard calibrator (COMPASS_CAL_FIT)"
+                )
+    missing = [axis for axis in ("MagX", "MagY", "MagZ") if axis not in labels]
+    if missing:
+        problem = f"the {name} messages have no {', '.join(missing)} field"
+    magnetometer = Magnetometer(
+        id=f"MAG/{slot}",
+        description=f"compass {slot + 1} ({name}"
+        + (f", I={slot})" if name == "MAG" and "I" in labels else ")")
+        + (f", COMPASS_DEV_ID{_suffix(compass.index)} {compass.device_id}" if compass and compass.device_id else ""),
+        unit="mG",
+        n_samples=len(records),
+        start_s=first,
+        end_s=float(times[-1]) if len(times) else float("nan"),
+        device_id=compass.device_id if compass else None,
+        raw=False,
+        notes=tuple(notes),
+        problem=problem,
+    )
+    rate = magnetometer.rate_hz
+    if np.isfinite(rate) and rate < SLOW_RATE_HZ:
+        notes.append(
+            f"logged at only {rate:.1f} Hz: too slow for a fit over a short tumble; enable the compass in LOG_BITMASK "
+            "(COMPASS bit) for 10 Hz or more, or use the onboard calibrator (COMPASS_CAL_FIT)"
+        )
+        magnetometer = Magnetometer(**{**magnetometer.__dict__, "notes": tuple(notes)})
+    return magnetometer
+
+
+def _read(
+    log: DataFlashLog,
+    parameters: dict[str, list[tuple[float, float]]],
+    magnetometer: Magnetometer,
+    name: str,
+    records: NDArray[Any],
+) -> LogSamples:
+    slot = int(magnetometer.id.split("/")[1])
+    compass, problem = _compass_parameters(parameters, slot, magnetometer.start_s)
+    if compass is None:  # _describe set the problem; Source.read refuses it before calling here
+        raise DataFileError(f"{log.path}: {magnetometer.id} cannot be fitted: {problem}")
+    logged = np.column_stack([log.value(records, name, axis) for axis in ("MagX", "MagY", "MagZ")])
+    labels = records.dtype.names or ()
+    motor = None
+    if compass.motor_compensation:
+        motor = np.column_stack([log.value(records, name, axis) for axis in ("MOX", "MOY", "MOZ")])
+    samples = undo_calibration(
+        logged,
+        offsets=compass.offsets,
+        diagonals=compass.diagonals,
+        offdiagonals=compass.offdiagonals,
+        scale=compass.scale,
+        motor_offsets=motor,
+    )
+    notes = list(magnetometer.notes)
+    if {"OfsX", "OfsY", "OfsZ"} <= set(labels):
+        # The offsets in use are logged with each sample (truncated to whole mG): they must be the parameters'.
+        used = np.column_stack([log.value(records, name, axis) for axis in ("OfsX", "OfsY", "OfsZ")])
+        if np.any(np.abs(used - np.trunc(compass.offsets)) > 1.0):
+            raise DataFileError(
+                f"{log.path}: {magnetometer.id}: the offsets logged with the samples (OfsX/Y/Z, e.g. "
+                f"{used[0].tolist()}) are not COMPASS_OFS{_suffix(compass.index)} from the log's parameters "
+                f"({np.round(compass.offsets, 1).tolist()}), so the calibration cannot be undone with confidence; "
+                "please report the log"
+            )
+    finite = np.all(np.isfinite(samples), axis=1)
+    return LogSamples(
+        magnetometer=magnetometer,
+        samples=samples[finite],
+        time_s=_time_s(log, name, records)[finite],
+        columns=("MagX", "MagY", "MagZ"),
+        notes=tuple(notes),
+    )

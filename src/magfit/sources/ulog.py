@@ -1,0 +1,243 @@
+"""PX4 ULog files (``.ulg``), read with pyulog (the ``ulog`` extra, imported here only).
+
+Two topics carry the magnetometers:
+
+- ``sensor_mag`` (one instance per compass): the raw field in gauss in the sensor's own frame, with the
+  ``device_id`` that PX4's ``CAL_MAGn_ID`` refers to. This is what a calibration is fitted to. PX4's
+  default logging profile records it at about **1 Hz**, too slow for a fit: set ``SDLOG_PROFILE`` to
+  include "high rate" (bit 1) or "sensor comparison" (bit 6), or list ``sensor_mag`` with a rate in
+  ``etc/logging/logger_topics.txt`` on the SD card, then record the tumble again.
+- ``vehicle_magnetometer``: the field **after** PX4's calibration, at 15-50 Hz, in the body frame.
+  PX4 corrects (``calibration::Magnetometer::Correct``)::
+
+      corrected = R · S · (raw + power · COMP - OFF)
+
+  with OFF = CAL_MAGn_{X,Y,Z}OFF, S the symmetric matrix of CAL_MAGn_{X,Y,Z}SCALE (diagonal) and
+  CAL_MAGn_{X,Y,Z}ODIAG (xy, xz, yz), R the rotation (CAL_MAGn_ROT for an external compass, the board's
+  SENS_BOARD_ROT and SENS_BOARD_*_OFF for an internal one) and COMP the power compensation
+  (CAL_MAG_COMP_TYP). This reader undoes it (``raw = S⁻¹ · corrected + OFF``) when R is the identity and no
+  power compensation is configured, the CAL_MAGn index found by the message's ``device_id``; otherwise
+  the stream is listed with the reason it cannot be undone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError
+from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Source
+
+__all__ = ["open_ulog", "undo_px4_calibration"]
+
+#: Topics listed by `magfit inspect` beside the magnetometers, when logged.
+_ALSO = (
+    "vehicle_attitude",
+    "sensor_combined",
+    "sensor_accel",
+    "vehicle_gps_position",
+    "sensor_gps",
+    "estimator_status",
+)
+_HOW_TO_LOG_MORE = (
+    "set SDLOG_PROFILE to include high rate (bit 1) or sensor comparison (bit 6), or add 'sensor_mag 0' to "
+    "etc/logging/logger_topics.txt on the SD card, and record again"
+)
+
+
+def _pyulog() -> Any:
+    try:
+        import pyulog
+    except ImportError:
+        raise DataFileError(
+            "reading PX4 ULog files needs pyulog, which is not installed (the ulog extra): pip install 'magfit[ulog]'"
+        ) from None
+    return pyulog
+
+
+def undo_px4_calibration(
+    corrected: NDArray[np.float64],
+    *,
+    offsets: NDArray[np.float64],
+    scales: NDArray[np.float64],
+    offdiagonals: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The raw field from PX4's corrected one, for a compass with no rotation and no power compensation.
+
+    Parameters
+    ----------
+    corrected : ndarray, shape (N, 3)
+        ``vehicle_magnetometer.magnetometer_ga`` (gauss).
+    offsets, scales, offdiagonals : ndarray, shape (3,)
+        CAL_MAGn_{X,Y,Z}OFF, CAL_MAGn_{X,Y,Z}SCALE and CAL_MAGn_{X,Y,Z}ODIAG (xy, xz, yz).
+    """
+    sx, sy, sz = np.asarray(scales, dtype=np.float64)
+    xy, xz, yz = np.asarray(offdiagonals, dtype=np.float64)
+    matrix = np.array([[sx, xy, xz], [xy, sy, yz], [xz, yz, sz]])
+    return np.linalg.solve(matrix, np.asarray(corrected, dtype=np.float64).T).T + np.asarray(offsets, dtype=np.float64)
+
+
+def open_ulog(path: Path, file: Path) -> Source:
+    """Read a PX4 ULog into a :class:`~magfit.sources.Source` (``file``: its bytes on disk)."""
+    pyulog = _pyulog()
+    try:
+        # pyulog prints its warnings about damaged data on stdout, which is magfit's output: captured.
+        with contextlib.redirect_stdout(io.StringIO()) as said:
+            ulog = pyulog.ULog(str(file))
+    except Exception as error:  # pyulog raises what its parser meets (struct.error, IndexError, ...)
+        reason = " ".join(str(error).split()) or type(error).__name__
+        raise DataFileError(
+            f"{path}: is a PX4 ULog that cannot be read ({reason}); the file is damaged or cut short: download the "
+            "log again"
+        ) from None
+    parameters = dict(ulog.initial_parameters)
+    changed = [(int(t), str(name), float(value)) for t, name, value in ulog.changed_parameters]
+    streams: dict[str, Any] = {}
+    magnetometers = []
+    for data in sorted(ulog.data_list, key=lambda d: (d.name, d.multi_id)):
+        if data.name == "sensor_mag":
+            sid = f"sensor_mag/{data.multi_id}"
+            streams[sid] = data
+            magnetometers.append(_raw(sid, data))
+    for data in sorted(ulog.data_list, key=lambda d: (d.name, d.multi_id)):
+        if data.name == "vehicle_magnetometer":
+            sid = f"vehicle_magnetometer/{data.multi_id}"
+            streams[sid] = data
+            magnetometers.append(_calibrated(sid, data, parameters, changed))
+    counts: dict[str, int] = {}
+    for data in ulog.data_list:
+        counts[data.name] = counts.get(data.name, 0) + len(data.data["timestamp"])
+    other = tuple(f"{name} ({counts[name]})" for name in _ALSO if name in counts)
+    rest = sorted(set(counts) - set(_ALSO) - {"sensor_mag", "vehicle_magnetometer"})
+    if rest:
+        other += (f"{len(rest)} other topics: {', '.join(rest)}",)
+    notes = []
+    if getattr(ulog, "file_corruption", False) or "corrupt" in said.getvalue().lower():
+        notes.append("pyulog found damaged data in the file and skipped it")
+    described = "PX4 ULog" + (f", firmware {ulog.msg_info_dict['ver_sw']}" if "ver_sw" in ulog.msg_info_dict else "")
+
+    def read(magnetometer: Magnetometer) -> LogSamples:
+        data = streams[magnetometer.id]
+        if magnetometer.id.startswith("sensor_mag/"):
+            samples = np.column_stack([np.asarray(data.data[axis], dtype=np.float64) for axis in "xyz"])
+            columns: tuple[str, ...] = ("x", "y", "z")
+        else:
+            columns = tuple(f"magnetometer_ga[{i}]" for i in range(3))
+            corrected = np.column_stack([np.asarray(data.data[c], dtype=np.float64) for c in columns])
+            index = _calibration_index(parameters, magnetometer.device_id)
+            assert index is not None  # _calibrated made it a problem otherwise; Source.read refused it
+            samples = undo_px4_calibration(corrected, **_cal(parameters, index))
+        times = np.asarray(data.data["timestamp"], dtype=np.float64) / 1e6
+        finite = np.all(np.isfinite(samples), axis=1)
+        return LogSamples(magnetometer, samples[finite], times[finite], columns, magnetometer.notes)
+
+    return Source(
+        path=path,
+        kind="ulog",
+        format=described,
+        time_base="seconds since boot (timestamp)",
+        magnetometers=tuple(magnetometers),
+        other=other,
+        notes=tuple(notes),
+        _reader=read,
+    )
+
+
+def _span(data: Any) -> tuple[int, float, float]:
+    times = np.asarray(data.data["timestamp"], dtype=np.float64) / 1e6
+    if not len(times):
+        return 0, float("nan"), float("nan")
+    return len(times), float(times[0]), float(times[-1])
+
+
+def _device(data: Any) -> int | None:
+    ids = data.data.get("device_id")
+    if ids is None or not len(ids):
+        return None
+    return int(np.asarray(ids)[-1])
+
+
+def _raw(sid: str, data: Any) -> Magnetometer:
+    n, start, end = _span(data)
+    device = _device(data)
+    magnetometer = Magnetometer(
+        id=sid,
+        description="raw sensor_mag" + (f", device_id {device}" if device is not None else ""),
+        unit="G",
+        n_samples=n,
+        start_s=start,
+        end_s=end,
+        device_id=device,
+        raw=True,
+    )
+    rate = magnetometer.rate_hz
+    if n < 2 or (np.isfinite(rate) and rate < SLOW_RATE_HZ):
+        how = f"logged at only {rate:.1f} Hz" if np.isfinite(rate) else f"only {n} sample(s) logged"
+        note = f"{how} (PX4's default logging profile): too few samples for a fit; {_HOW_TO_LOG_MORE}"
+        magnetometer = Magnetometer(**{**magnetometer.__dict__, "notes": (note,)})
+    return magnetometer
+
+
+def _calibration_index(parameters: dict[str, Any], device: int | None) -> int | None:
+    if not device:
+        return None
+    for index in range(4):
+        if parameters.get(f"CAL_MAG{index}_ID") == device:
+            return index
+    return None
+
+
+def _cal(parameters: dict[str, Any], index: int) -> dict[str, NDArray[np.float64]]:
+    def vector(kind: str, default: float) -> NDArray[np.float64]:
+        return np.array([float(parameters.get(f"CAL_MAG{index}_{axis}{kind}", default)) for axis in "XYZ"])
+
+    return {"offsets": vector("OFF", 0.0), "scales": vector("SCALE", 1.0), "offdiagonals": vector("ODIAG", 0.0)}
+
+
+def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[tuple[int, str, float]]) -> Magnetometer:
+    n, start, end = _span(data)
+    device = _device(data)
+    index = _calibration_index(parameters, device)
+    problem = None
+    if device is None:
+        problem = "this PX4 version's vehicle_magnetometer does not say which compass it is (no device_id)"
+    elif index is None:
+        problem = f"no CAL_MAGn_ID parameter holds its device_id {device}, so its calibration is unknown"
+    else:
+        name = f"CAL_MAG{index}"
+        rotation = int(parameters.get(f"{name}_ROT", -1))
+        board = int(parameters.get("SENS_BOARD_ROT", 0))
+        tilt = [float(parameters.get(f"SENS_BOARD_{axis}_OFF", 0.0)) for axis in "XYZ"]
+        comp = int(parameters.get("CAL_MAG_COMP_TYP", 0))
+        if rotation > 0 or (rotation < 0 and (board != 0 or any(abs(t) > 1e-3 for t in tilt))):
+            what = f"{name}_ROT {rotation}" if rotation > 0 else f"SENS_BOARD_ROT {board}, SENS_BOARD_X/Y/Z_OFF {tilt}"
+            problem = f"it is rotated into the body frame ({what}), which magfit does not undo yet"
+        elif comp != 0:
+            problem = f"power compensation is configured (CAL_MAG_COMP_TYP {comp}) and cannot be undone from the log"
+        else:
+            moved = sorted({p for t, p, _ in changed if p.startswith(f"{name}_") and t > start * 1e6})
+            if moved:
+                problem = f"{', '.join(moved)} changed during the log: the samples were corrected with two calibrations"
+    notes = []
+    if problem is None:
+        notes.append(
+            f"calibrated by PX4 (body frame); undone with CAL_MAG{index}_*OFF, *SCALE and *ODIAG from the log's "
+            "parameters"
+        )
+    return Magnetometer(
+        id=sid,
+        description="calibrated vehicle_magnetometer" + (f", device_id {device}" if device is not None else ""),
+        unit="G",
+        n_samples=n,
+        start_s=start,
+        end_s=end,
+        device_id=device,
+        raw=False,
+        notes=tuple(notes),
+        problem=problem,
+    )
