@@ -1,0 +1,403 @@
+"""ROS bags: ROS 1 ``.bag`` files, ROS 2 bag folders (sqlite3 or MCAP storage) and bare ``.mcap``/``.db3`` files.
+
+Read with ``rosbags`` (the ``ros`` extra: pure Python, no ROS install), imported when a bag is first read.
+Every ``sensor_msgs/MagneticField`` topic becomes one magnetometer: its ``magnetic_field`` x, y, z are
+in tesla by the message's definition (REP 145), its ``header.frame_id`` names the sensor frame. Every
+``sensor_msgs/Imu`` topic is kept beside them (orientation quaternion, linear acceleration) for the
+checks that need the attitude.
+
+Times are the messages' ``header.stamp`` in seconds since the epoch: the time the sensor measured. A
+driver that leaves the stamps at zero (it happens) gets the bag's receive times instead, and the topic
+says so (``time_base``).
+
+A bag is recognised by its content, not its name: ``#ROSBAG V2.0`` (ROS 1), the MCAP magic, an SQLite
+database, or a folder holding ``metadata.yaml``. A damaged bag (a recording killed before its index was
+written, a truncated copy) is a one-line :class:`~magfit.errors.DataFileError` naming the file, what
+failed and how to repair it (``rosbag reindex`` / ``ros2 bag reindex``).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError
+
+if TYPE_CHECKING:
+    from . import Source
+
+__all__ = ["BagContents", "ImuTopic", "MagneticTopic", "bag_kind", "open_rosbag", "read_bag", "read_bag_contents"]
+
+INSTALL_HINT = "pip install 'magfit[ros]'"
+
+#: The message types read, by their ROS 2 names (rosbags names ROS 1 types the same way).
+MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
+IMU = "sensor_msgs/msg/Imu"
+
+BagKind = Literal["ros1", "mcap", "sqlite3", "folder"]
+
+_MAGIC: tuple[tuple[bytes, BagKind], ...] = (
+    (b"#ROSBAG V2.0\n", "ros1"),
+    (b"\x89MCAP0\r\n", "mcap"),
+    (b"SQLite format 3\x00", "sqlite3"),
+)
+#: The suffix rosbags needs to pick its reader for each kind.
+_SUFFIX: dict[BagKind, str] = {"ros1": ".bag", "mcap": ".mcap", "sqlite3": ".db3"}
+
+
+@dataclass(frozen=True, eq=False)
+class MagneticTopic:
+    """One ``sensor_msgs/MagneticField`` topic: one magnetometer.
+
+    Attributes
+    ----------
+    topic : str
+        The topic name (``/imu/mag``).
+    frame_id : str
+        The sensor frame of the first message (``header.frame_id``); frames that change along the topic
+        are listed in :attr:`frame_ids`.
+    samples : ndarray, shape (N, 3)
+        The field in tesla, in message order.
+    timestamps : ndarray, shape (N,)
+        Seconds since the epoch (float64): ``header.stamp``, or the bag's receive time (:attr:`time_base`).
+    time_base : str
+        ``"header"`` or ``"bag"`` (the stamps were zero).
+    frame_ids : tuple of str
+        Every distinct ``frame_id`` seen, in order of appearance.
+    """
+
+    topic: str
+    frame_id: str
+    samples: NDArray[np.float64]
+    timestamps: NDArray[np.float64]
+    time_base: str = "header"
+    frame_ids: tuple[str, ...] = ()
+
+    @property
+    def unit(self) -> str:
+        """Always ``"T"``: the message's field is in tesla."""
+        return "T"
+
+    @property
+    def rate_hz(self) -> float | None:
+        """Median message rate, or None with fewer than two distinct times."""
+        return _rate(self.timestamps)
+
+
+@dataclass(frozen=True, eq=False)
+class ImuTopic:
+    """One ``sensor_msgs/Imu`` topic.
+
+    Attributes
+    ----------
+    topic, frame_id : str
+        As for :class:`MagneticTopic`.
+    orientation : ndarray, shape (N, 4)
+        Quaternions (x, y, z, w) as the message orders them; rows whose covariance's first element is -1
+        ("no orientation", by the message's definition) are NaN.
+    linear_acceleration : ndarray, shape (N, 3)
+        m/s², the sensor's specific force (gravity included).
+    timestamps : ndarray, shape (N,)
+        Seconds since the epoch, as for :class:`MagneticTopic`.
+    time_base : str
+        ``"header"`` or ``"bag"``.
+    """
+
+    topic: str
+    frame_id: str
+    orientation: NDArray[np.float64]
+    linear_acceleration: NDArray[np.float64]
+    timestamps: NDArray[np.float64]
+    time_base: str = "header"
+
+
+@dataclass(frozen=True, eq=False)
+class BagContents:
+    """What a bag holds for magfit.
+
+    Attributes
+    ----------
+    path : Path
+        The bag (a file or a ROS 2 bag folder).
+    kind : str
+        ``"ros1"``, ``"mcap"``, ``"sqlite3"`` or ``"folder"`` (a ROS 2 bag folder, either storage).
+    magnetometers : tuple of MagneticTopic
+        Every MagneticField topic with at least one message, sorted by topic name.
+    imus : tuple of ImuTopic
+        Every Imu topic with at least one message, sorted by topic name.
+    topics : dict
+        Every topic of the bag and its message type (for messages that list what the bag holds).
+    """
+
+    path: Path
+    kind: str
+    magnetometers: tuple[MagneticTopic, ...]
+    imus: tuple[ImuTopic, ...]
+    topics: dict[str, str]
+
+
+def bag_kind(path: str | os.PathLike[str]) -> BagKind | None:
+    """What kind of bag ``path`` is, from its content (magic bytes, or a folder with ``metadata.yaml``); None
+    when it is no bag."""
+    path = Path(path)
+    if path.is_dir():
+        return "folder" if (path / "metadata.yaml").is_file() else None
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(16)
+    except OSError:
+        return None
+    for magic, kind in _MAGIC:
+        if head.startswith(magic):
+            return kind
+    return None
+
+
+def read_bag(path: str | os.PathLike[str]) -> list[MagneticTopic]:
+    """Every ``sensor_msgs/MagneticField`` topic of a bag: (topic, frame_id, samples (N, 3) in tesla, timestamps).
+
+    Raises
+    ------
+    DataFileError
+        Not a bag, a damaged bag, or a bag with no MagneticField message (naming the topics it has).
+    ImportError
+        The ``ros`` extra is not installed (the message is the install command).
+    """
+    contents = read_bag_contents(path)
+    if not contents.magnetometers:
+        listed = ", ".join(f"{name} ({kind})" for name, kind in sorted(contents.topics.items())) or "no topics"
+        raise DataFileError(
+            f"{path}: the bag has no sensor_msgs/MagneticField messages to calibrate (it holds {listed}); record the "
+            "magnetometer's MagneticField topic"
+        )
+    return list(contents.magnetometers)
+
+
+def read_bag_contents(path: str | os.PathLike[str]) -> BagContents:
+    """The MagneticField and Imu topics of a bag, read in one pass (see :func:`read_bag`)."""
+    path = Path(path)
+    if not path.exists():
+        raise DataFileError(f"{path}: no such file or folder")
+    kind = bag_kind(path)
+    if kind is None:
+        what = (
+            "folder has no metadata.yaml" if path.is_dir() else "file does not start like a ROS 1 bag, MCAP or SQLite"
+        )
+        raise DataFileError(f"{path}: not a ROS bag (the {what})")
+    rosbags = _rosbags()
+    try:
+        with _readable(path, kind) as readable:
+            return _read(path, kind, readable, rosbags)
+    except DataFileError:
+        raise
+    except MemoryError:
+        raise
+    except Exception as error:  # a damaged bag can fail anywhere in the parser: one line, never a traceback
+        raise DataFileError(_damaged(path, kind, error)) from None
+
+
+def open_rosbag(path: str | os.PathLike[str]) -> Source:
+    """A bag as a :class:`~magfit.sources.Source`: one magnetometer per MagneticField topic (its id is the topic).
+
+    The samples are given in µT (the messages' tesla times 10⁶, an exact power of ten): the unit of the
+    calibration and of the exports. The Imu topics and the other topics are listed in ``other``.
+    """
+    from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Source
+
+    path = Path(path)
+    contents = read_bag_contents(path)
+    magnetometers = []
+    for topic in contents.magnetometers:
+        rate = topic.rate_hz
+        notes = [f"{topic.topic}: the header stamps are zero; the bag's receive times are used"] * (
+            topic.time_base == "bag"
+        )
+        if len(topic.frame_ids) > 1:
+            notes.append(f"{topic.topic}: the frame_id changes along the topic ({', '.join(topic.frame_ids)})")
+        if rate is not None and rate < SLOW_RATE_HZ:
+            notes.append(
+                f"{topic.topic} is published at only {rate:.2g} Hz: too few samples for a fit unless the recording is "
+                "long; raise the driver's publishing rate"
+            )
+        magnetometers.append(
+            Magnetometer(
+                id=topic.topic,
+                description=f"sensor_msgs/MagneticField, frame {topic.frame_id or '(none)'}"
+                + (f", {rate:.3g} Hz" if rate is not None else ""),
+                unit="uT",
+                n_samples=int(topic.samples.shape[0]),
+                start_s=float(topic.timestamps[0]) if topic.timestamps.size else float("nan"),
+                end_s=float(topic.timestamps[-1]) if topic.timestamps.size else float("nan"),
+                notes=tuple(notes),
+            )
+        )
+    by_id = {topic.topic: topic for topic in contents.magnetometers}
+    read_topics = set(by_id) | {imu.topic for imu in contents.imus}
+    counts = {imu.topic: imu.timestamps.size for imu in contents.imus}
+    other = tuple(f"{name} (sensor_msgs/Imu, {counts[name]})" for name in sorted(counts))
+    rest = sorted(set(contents.topics) - read_topics)
+    if rest:
+        other += (f"{len(rest)} other topics: {', '.join(rest)}",)
+
+    def read(magnetometer: Magnetometer) -> LogSamples:
+        topic = by_id[magnetometer.id]
+        return LogSamples(
+            magnetometer=magnetometer,
+            samples=topic.samples * 1e6,  # tesla -> µT
+            time_s=topic.timestamps,
+            columns=("magnetic_field.x", "magnetic_field.y", "magnetic_field.z"),
+            notes=("sensor_msgs/MagneticField is in tesla: given in uT",),
+        )
+
+    names = {"ros1": "ROS 1 bag", "mcap": "MCAP file", "sqlite3": "ROS 2 sqlite3 bag", "folder": "ROS 2 bag folder"}
+    return Source(
+        path=path,
+        kind="rosbag",
+        format=names[contents.kind],
+        time_base="seconds since the epoch (header.stamp)",
+        magnetometers=tuple(magnetometers),
+        other=other,
+        _reader=read,
+    )
+
+
+def _rosbags() -> Any:
+    try:
+        import rosbags.highlevel
+        import rosbags.typesys
+    except ImportError:
+        raise ImportError(
+            f"reading ROS bags needs rosbags, which is not installed (the ros extra): {INSTALL_HINT}", name="rosbags"
+        ) from None
+    return rosbags
+
+
+@contextmanager
+def _readable(path: Path, kind: BagKind) -> Iterator[Path]:
+    """``path``, or a link to it under the suffix rosbags needs to pick its reader (a bag is known by content)."""
+    suffix = _SUFFIX.get(kind)
+    if suffix is None or path.suffix == suffix:
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix="magfit-bag-") as folder:
+        link = Path(folder) / f"bag{suffix}"
+        try:
+            link.symlink_to(path.resolve())
+        except OSError:  # no symbolic links here (some Windows setups): a copy
+            import shutil
+
+            shutil.copyfile(path, link)
+        yield link
+
+
+def _read(path: Path, kind: BagKind, readable: Path, rosbags: Any) -> BagContents:
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    # A ROS 1 bag carries its message definitions; an older ROS 2 bag may not: the standard ones stand in.
+    default = get_typestore(Stores.ROS1_NOETIC if kind == "ros1" else Stores.ROS2_HUMBLE)
+    with AnyReader([readable], default_typestore=default) as reader:
+        topics = {connection.topic: connection.msgtype for connection in reader.connections}
+        wanted = [c for c in reader.connections if c.msgtype in (MAGNETIC_FIELD, IMU)]
+        mag: dict[str, _Collector] = {}
+        imu: dict[str, _Collector] = {}
+        if wanted:
+            for connection, bag_time, raw in reader.messages(connections=wanted):
+                message: Any = reader.deserialize(raw, connection.msgtype)
+                if connection.msgtype == MAGNETIC_FIELD:
+                    field = message.magnetic_field
+                    mag.setdefault(connection.topic, _Collector()).add(message, bag_time, (field.x, field.y, field.z))
+                else:
+                    q, a = message.orientation, message.linear_acceleration
+                    # orientation_covariance[0] == -1: the IMU gives no orientation (sensor_msgs/Imu's definition)
+                    known = message.orientation_covariance[0] != -1
+                    quaternion = (q.x, q.y, q.z, q.w) if known else (np.nan,) * 4
+                    imu.setdefault(connection.topic, _Collector()).add(message, bag_time, quaternion, (a.x, a.y, a.z))
+    return BagContents(
+        path=path,
+        kind=kind,
+        magnetometers=tuple(mag[name].magnetic(name) for name in sorted(mag)),
+        imus=tuple(imu[name].imu(name) for name in sorted(imu)),
+        topics=topics,
+    )
+
+
+class _Collector:
+    """The messages of one topic, gathered into arrays."""
+
+    def __init__(self) -> None:
+        self.frames: list[str] = []
+        self.stamps: list[int] = []
+        self.bag_times: list[int] = []
+        self.values: list[Sequence[float]] = []
+        self.extra: list[Sequence[float]] = []
+
+    def add(self, message: Any, bag_time: int, values: Sequence[float], extra: Sequence[float] = ()) -> None:
+        header = message.header
+        frame = str(header.frame_id)
+        if not self.frames or frame != self.frames[-1]:
+            self.frames.append(frame)
+        self.stamps.append(int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec))
+        self.bag_times.append(int(bag_time))
+        self.values.append(values)
+        self.extra.append(extra)
+
+    def times(self) -> tuple[NDArray[np.float64], str]:
+        stamps = np.asarray(self.stamps, dtype=np.int64)
+        if np.all(stamps == 0):
+            return np.asarray(self.bag_times, dtype=np.int64) / 1e9, "bag"
+        return stamps / 1e9, "header"
+
+    def magnetic(self, topic: str) -> MagneticTopic:
+        times, base = self.times()
+        frames = tuple(dict.fromkeys(self.frames))
+        return MagneticTopic(
+            topic=topic,
+            frame_id=frames[0] if frames else "",
+            samples=np.asarray(self.values, dtype=np.float64).reshape(-1, 3),
+            timestamps=times,
+            time_base=base,
+            frame_ids=frames,
+        )
+
+    def imu(self, topic: str) -> ImuTopic:
+        times, base = self.times()
+        return ImuTopic(
+            topic=topic,
+            frame_id=self.frames[0] if self.frames else "",
+            orientation=np.asarray(self.values, dtype=np.float64).reshape(-1, 4),
+            linear_acceleration=np.asarray(self.extra, dtype=np.float64).reshape(-1, 3),
+            timestamps=times,
+            time_base=base,
+        )
+
+
+def _rate(times: NDArray[np.float64]) -> float | None:
+    steps = np.diff(times)
+    steps = steps[steps > 0]
+    return float(1.0 / np.median(steps)) if steps.size else None
+
+
+def _damaged(path: Path, kind: BagKind, error: Exception) -> str:
+    """The one line for a bag the parser could not read."""
+    reason = " ".join(str(error).split()).rstrip(".") or type(error).__name__
+    if len(reason) > 160:
+        reason = reason[:157] + "..."
+    if kind == "ros1":
+        fix = "if the recording was interrupted, 'rosbag reindex' repairs its index"
+        name = "ROS 1 bag"
+    elif kind == "folder":
+        fix = "if the recording was interrupted, 'ros2 bag reindex' rebuilds its metadata.yaml"
+        name = "ROS 2 bag folder"
+    else:
+        fix = "the file may be truncated or damaged: copy it again from the recorder"
+        name = "MCAP file" if kind == "mcap" else "ROS 2 sqlite3 bag"
+    return f"{path}: this {name} cannot be read ({type(error).__name__}: {reason}); {fix}"
