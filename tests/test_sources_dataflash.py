@@ -1,0 +1,285 @@
+"""ArduPilot DataFlash logs: a log written here from a known truth (ArduPilot's calibration applied as
+``correct_field`` does), read back, the calibration undone and the truth recovered; the traps told in
+words; damaged logs refused in one line."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import magfit
+from magfit.cli import cli
+from magfit.errors import DataFileError
+from magfit.sources import open_source
+from magfit.sources.dataflash import undo_calibration
+
+HEAD = b"\xa3\x95"
+_STRUCT = {"Q": "Q", "B": "B", "h": "h", "f": "f", "I": "I", "N": "16s", "Z": "64s", "n": "4s"}
+
+
+class DataFlashWriter:
+    """A minimal DataFlash writer: FMT messages first, then packed messages (the format ArduPilot writes)."""
+
+    def __init__(self) -> None:
+        self.chunks: list[bytes] = []
+        self.types: dict[str, tuple[int, str]] = {}
+        self.define(0x80, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")
+
+    def define(self, type_id: int, name: str, letters: str, labels: str) -> None:
+        length = 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in letters))
+        self.types[name] = (type_id, letters)
+        self.chunks.append(
+            HEAD
+            + bytes([0x80])
+            + struct.pack("<BB4s16s64s", type_id, length, name.encode(), letters.encode(), labels.encode())
+        )
+
+    def write(self, name: str, *values: object) -> None:
+        type_id, letters = self.types[name]
+        encoded = [v.encode() if isinstance(v, str) else v for v in values]
+        self.chunks.append(HEAD + bytes([type_id]) + struct.pack("<" + "".join(_STRUCT[c] for c in letters), *encoded))
+
+    def bytes(self) -> bytes:
+        return b"".join(self.chunks)
+
+
+def correct_field(raw: np.ndarray, ofs: np.ndarray, dia: np.ndarray, odi: np.ndarray, scale: float) -> np.ndarray:
+    """ArduPilot's correction, written from its description (offset, scale, then the symmetric matrix).
+
+    The firmware applies COMPASS_SCALE only between 0.85 and 1.4, and takes all-zero diagonals as ones.
+    """
+    dia = dia if np.any(dia) else np.ones(3)
+    matrix = np.array([[dia[0], odi[0], odi[1]], [odi[0], dia[1], odi[2]], [odi[1], odi[2], dia[2]]])
+    factor = scale if 0.85 <= scale <= 1.4 else 1.0
+    return (factor * (raw + ofs)) @ matrix.T
+
+
+#: Two compasses: ArduPilot's parameter sets (k = 0, 1) and the raw fields' truth.
+COMPASSES = [
+    {
+        "ofs": np.array([-35.0, 110.5, -80.25]),
+        "dia": np.array([1.05, 0.97, 1.02]),
+        "odi": np.array([0.03, -0.02, 0.015]),
+        "scale": 1.1,
+        "dev_id": 97539,
+        "soft_iron": np.array([[1.2, 0.1, 0.0], [0.1, 0.9, 0.05], [0.0, 0.05, 1.05]]),
+        "hard_iron": np.array([120.0, -60.0, 200.0]),
+    },
+    {
+        "ofs": np.array([12.0, -7.0, 30.0]),
+        "dia": np.array([0.0, 0.0, 0.0]),  # all zero: the firmware uses 1
+        "odi": np.array([0.0, 0.0, 0.0]),
+        "scale": 0.0,  # out of range: not applied
+        "dev_id": 658953,
+        "soft_iron": np.array([[0.95, 0.0, 0.08], [0.0, 1.1, 0.0], [0.08, 0.0, 1.0]]),
+        "hard_iron": np.array([-40.0, 85.0, -150.0]),
+    },
+]
+
+
+def _parameters(writer: DataFlashWriter, motct: int = 0, priority: tuple[int, ...] | None = None) -> None:
+    for k, compass in enumerate(COMPASSES):
+        s = "" if k == 0 else str(k + 1)
+        for axis, i in zip("XYZ", range(3), strict=True):
+            writer.write("PARM", 1000, f"COMPASS_OFS{s}_{axis}", float(compass["ofs"][i]))
+            writer.write("PARM", 1000, f"COMPASS_DIA{s}_{axis}", float(compass["dia"][i]))
+            writer.write("PARM", 1000, f"COMPASS_ODI{s}_{axis}", float(compass["odi"][i]))
+        writer.write("PARM", 1000, f"COMPASS_SCALE{s}", float(compass["scale"]))
+        writer.write("PARM", 1000, f"COMPASS_DEV_ID{s}", float(compass["dev_id"]))
+    writer.write("PARM", 1000, "COMPASS_MOTCT", float(motct))
+    for slot, device in enumerate(priority or ()):
+        writer.write("PARM", 1000, f"COMPASS_PRIO{slot + 1}_ID", float(device))
+
+
+def _simulations(n: int) -> list[magfit.Simulation]:
+    return [
+        magfit.simulate(
+            n,
+            soft_iron=c["soft_iron"],
+            hard_iron=c["hard_iron"],
+            field_strength=480.0,
+            noise=1.5,
+            seed=7 + k,
+        )
+        for k, c in enumerate(COMPASSES)
+    ]
+
+
+def write_new_style(path: Path, n: int = 1500, *, motct: int = 0, swap_priority: bool = False) -> list:
+    """MAG with instance field I (ArduPilot 4.x), 20 Hz; returns the simulations (raw truth per compass k)."""
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "QBhhhhhhhhhBI", "TimeUS,I,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOX,MOY,MOZ,Health,S")
+    writer.define(131, "ATT", "Qff", "TimeUS,Roll,Pitch")
+    # Slot i of MAG holds compass k = order[i]: the priority list maps them (Compass::_get_state_id).
+    order = [1, 0] if swap_priority else [0, 1]
+    _parameters(writer, motct, tuple(COMPASSES[k]["dev_id"] for k in order) if swap_priority else None)
+    simulations = _simulations(n)
+    rng = np.random.default_rng(3)
+    motor = rng.uniform(-20, 20, size=(n, 3)) if motct else np.zeros((n, 3))
+    motor = np.trunc(motor)  # ArduPilot logs it as int16
+    logged = {}
+    for k, compass in enumerate(COMPASSES):
+        field = correct_field(simulations[k].samples, compass["ofs"], compass["dia"], compass["odi"], compass["scale"])
+        logged[k] = np.trunc(field + motor)
+    for j in range(n):
+        time = 2_000_000 + j * 50_000
+        writer.write("ATT", time, 1.0, 2.0)
+        for slot, k in enumerate(order):
+            ofs = np.trunc(COMPASSES[k]["ofs"]).astype(int)
+            writer.write("MAG", time, slot, *logged[k][j].astype(int), *ofs, *motor[j].astype(int), 1, time)
+    path.write_bytes(writer.bytes())
+    return simulations
+
+
+def write_old_style(path: Path, n: int = 1500, *, motct: int = 0) -> list:
+    """MAG and MAG2 without an instance field and without the motor offsets (older ArduPilot)."""
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "Qhhh", "TimeUS,MagX,MagY,MagZ")
+    writer.define(131, "MAG2", "Qhhh", "TimeUS,MagX,MagY,MagZ")
+    _parameters(writer, motct)
+    simulations = _simulations(n)
+    for j in range(n):
+        for k, name in enumerate(("MAG", "MAG2")):
+            c = COMPASSES[k]
+            field = correct_field(simulations[k].samples[j : j + 1], c["ofs"], c["dia"], c["odi"], c["scale"])[0]
+            writer.write(name, 1_000_000 + j * 100_000, *np.trunc(field).astype(int))
+    path.write_bytes(writer.bytes())
+    return simulations
+
+
+def _assert_recovers(calibration: magfit.Calibration, truth: magfit.Calibration) -> None:
+    # Noise is 1.5 mG of 480 (0.3 %) plus up to 1 mG of int16 truncation: the identifiable ellipsoid within
+    # 1 % of its largest entry and the offset within 1 % of the field still catch any sign or axis mix-up.
+    scale = float(np.max(np.abs(truth.ellipsoid_matrix)))
+    np.testing.assert_allclose(calibration.ellipsoid_matrix, truth.ellipsoid_matrix, atol=0.01 * scale)
+    np.testing.assert_allclose(calibration.offset, truth.offset, atol=0.01 * truth.field_strength)
+
+
+def test_undo_is_the_inverse_of_correct_field() -> None:
+    rng = np.random.default_rng(1)
+    raw = rng.normal(0, 400, size=(50, 3))
+    c = COMPASSES[0]
+    logged = correct_field(raw, c["ofs"], c["dia"], c["odi"], c["scale"])
+    back = undo_calibration(logged, offsets=c["ofs"], diagonals=c["dia"], offdiagonals=c["odi"], scale=c["scale"])
+    np.testing.assert_allclose(back, raw, atol=1e-9)
+    # A scale outside 0.85..1.4 is not applied by the firmware, so it is not undone either.
+    plain = correct_field(raw, c["ofs"], c["dia"], c["odi"], 1.0)
+    back = undo_calibration(plain, offsets=c["ofs"], diagonals=c["dia"], offdiagonals=c["odi"], scale=2.0)
+    np.testing.assert_allclose(back, raw, atol=1e-9)
+
+
+@pytest.mark.parametrize("swap", [False, True])
+def test_new_style_log_recovers_the_raw_field_and_the_truth(tmp_path: Path, swap: bool) -> None:
+    path = tmp_path / "00000042.BIN"
+    simulations = write_new_style(path, swap_priority=swap)
+    source = open_source(path)
+    assert source.kind == "dataflash"
+    assert [m.id for m in source.magnetometers] == ["MAG/0", "MAG/1"]
+    order = [1, 0] if swap else [0, 1]
+    for slot, k in enumerate(order):
+        magnetometer = source.magnetometers[slot]
+        assert magnetometer.device_id == COMPASSES[k]["dev_id"] and magnetometer.unit == "mG"
+        assert magnetometer.rate_hz == pytest.approx(20.0)
+        read = source.read(magnetometer.id)
+        # The raw field comes back to within the int16 truncation of the log (1 mG, divided by the matrix).
+        np.testing.assert_allclose(read.samples, simulations[k].samples, atol=1.5)
+        _assert_recovers(magfit.fit(read.samples, method="ellipsoid"), simulations[k].truth)
+    assert any(other.startswith("ATT (1500)") for other in source.other)
+
+
+def test_motor_compensation_is_undone_with_the_logged_motor_offsets(tmp_path: Path) -> None:
+    path = tmp_path / "motor.bin"
+    simulations = write_new_style(path, motct=2)
+    read = open_source(path).read("MAG/0")
+    assert any("motor compensation" in note for note in read.notes)
+    np.testing.assert_allclose(read.samples, simulations[0].samples, atol=1.5)
+
+
+def test_old_style_log_without_motor_offsets_is_refused_with_the_reason(tmp_path: Path) -> None:
+    path = tmp_path / "old.bin"
+    write_old_style(path, motct=1)
+    source = open_source(path)
+    assert [m.id for m in source.magnetometers] == ["MAG/0", "MAG/1"]
+    with pytest.raises(DataFileError, match="motor compensation was active"):
+        source.read("MAG/1")
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "MAG/0"])
+    assert result.exit_code == 2
+    assert "COMPASS_MOTCT" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_old_style_log_recovers_the_truth(tmp_path: Path) -> None:
+    path = tmp_path / "old.bin"
+    simulations = write_old_style(path)
+    source = open_source(path)
+    for slot in range(2):
+        read = source.read(f"MAG/{slot}")
+        np.testing.assert_allclose(read.samples, simulations[slot].samples, atol=1.5)
+
+
+def test_calibrate_on_a_log_needs_sensor_and_fits_the_chosen_compass(tmp_path: Path) -> None:
+    path = tmp_path / "flight.bin"
+    simulations = write_new_style(path)
+    runner = CliRunner()
+    result = runner.invoke(cli, ["calibrate", str(path)])
+    assert result.exit_code == 2
+    assert "--sensor" in result.stderr and "MAG/0" in result.stderr and "MAG/1" in result.stderr
+    output = tmp_path / "cal.json"
+    result = runner.invoke(cli, ["calibrate", str(path), "--sensor", "658953", "-m", "ellipsoid", "-o", str(output)])
+    assert result.exit_code == 0, result.output
+    calibration = magfit.Calibration.from_json(output.read_text())
+    assert calibration.unit == "mG" and calibration.details["source"]["sensor"] == "MAG/1"
+    _assert_recovers(calibration, simulations[1].truth)
+    assert "ArduPilot DataFlash log; MAG/1" in result.stdout
+    assert "after ArduPilot's calibration" in result.stderr  # the trap told in words
+
+
+def test_inspect_lists_the_compasses(tmp_path: Path) -> None:
+    path = tmp_path / "flight.bin"
+    write_new_style(path, n=200)
+    result = CliRunner().invoke(cli, ["inspect", str(path)])
+    assert result.exit_code == 0, result.output
+    assert "MAG/0  compass 1 (MAG, I=0), COMPASS_DEV_ID 97539: 200 samples in mG" in result.stdout
+    assert "20.0 Hz" in result.stdout and "ATT (200)" in result.stdout
+
+
+def test_a_slow_compass_says_how_to_log_more(tmp_path: Path) -> None:
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "Qhhh", "TimeUS,MagX,MagY,MagZ")
+    _parameters(writer)
+    for j in range(30):
+        writer.write("MAG", j * 1_000_000, 100 + j, 200, 300)
+    path = tmp_path / "slow.bin"
+    path.write_bytes(writer.bytes())
+    (magnetometer,) = open_source(path).magnetometers
+    assert any("LOG_BITMASK" in note for note in magnetometer.notes)
+
+
+def test_damaged_and_truncated_logs_fail_in_one_line(tmp_path: Path) -> None:
+    path = tmp_path / "good.bin"
+    write_new_style(path, n=300)
+    data = path.read_bytes()
+    rng = np.random.default_rng(5)
+    runner = CliRunner()
+    cases = [data[:cut] for cut in (3, 50, 89, 200, len(data) // 2, len(data) - 7)]
+    for _ in range(12):
+        damaged = bytearray(data)
+        for where in rng.integers(0, len(data), size=int(rng.integers(1, 40))):
+            damaged[where] = int(rng.integers(0, 256))
+        cases.append(bytes(damaged))
+    cases.append(data[:89] + bytes(rng.integers(0, 256, size=5000, dtype=np.uint8)))
+    for i, case in enumerate(cases):
+        broken = tmp_path / f"broken{i}.bin"
+        broken.write_bytes(case)
+        for command in (["inspect", str(broken)], ["calibrate", str(broken), "--sensor", "MAG/0", "-m", "ellipsoid"]):
+            result = runner.invoke(cli, command)
+            assert result.exit_code in (0, 1, 2), (i, command, result.output)
+            if result.exit_code:
+                lines = result.stderr.strip().splitlines()
+                assert lines[-1].startswith("magfit: error: ") and "Traceback" not in result.output, (i, result.output)
