@@ -95,8 +95,10 @@ def open_ulog(path: Path, file: Path) -> Source:
             f"{path}: is a PX4 ULog that cannot be read ({reason}); the file is damaged or cut short: download the "
             "log again"
         ) from None
-    parameters = dict(ulog.initial_parameters)
-    changed = [(int(t), str(name), float(value)) for t, name, value in ulog.changed_parameters]
+    # A parameter of an unexpected type (bytes in a damaged log) is dropped: the stream it concerns is then
+    # refused for want of it, rather than undone with a wrong value.
+    parameters = {k: v for k, v in ulog.initial_parameters.items() if isinstance(v, (int, float))}
+    changed = [(int(t), str(name), v) for t, name, v in ulog.changed_parameters if isinstance(v, (int, float))]
     streams: dict[str, Any] = {}
     magnetometers = []
     for data in sorted(ulog.data_list, key=lambda d: (d.name, d.multi_id)):
@@ -214,7 +216,11 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
         board = int(parameters.get("SENS_BOARD_ROT", 0))
         tilt = [float(parameters.get(f"SENS_BOARD_{axis}_OFF", 0.0)) for axis in "XYZ"]
         comp = int(parameters.get("CAL_MAG_COMP_TYP", 0))
-        if rotation > 0 or (rotation < 0 and (board != 0 or any(abs(t) > 1e-3 for t in tilt))):
+        # ODIAG came with PX4 1.11 (absent before: zero); OFF and SCALE are in every version's log.
+        missing = [f"{name}_{a}{k}" for k in ("OFF", "SCALE") for a in "XYZ" if f"{name}_{a}{k}" not in parameters]
+        if missing:
+            problem = f"the log's parameters lack {', '.join(missing)}, so its calibration cannot be undone"
+        elif rotation > 0 or (rotation < 0 and (board != 0 or any(abs(t) > 1e-3 for t in tilt))):
             what = f"{name}_ROT {rotation}" if rotation > 0 else f"SENS_BOARD_ROT {board}, SENS_BOARD_X/Y/Z_OFF {tilt}"
             problem = f"it is rotated into the body frame ({what}), which magfit does not undo yet"
         elif comp != 0:

@@ -1,0 +1,247 @@
+"""PX4 ULog files: logs written here from a known truth (raw sensor_mag, and vehicle_magnetometer corrected
+as PX4 corrects it), read back with pyulog, the calibration undone and the truth recovered; PX4's sample
+log (1 Hz sensor_mag) told in words; damaged logs refused in one line."""
+
+from __future__ import annotations
+
+import shutil
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import magfit
+from magfit.cli import cli
+from magfit.errors import DataFileError
+from magfit.sources import open_source
+from magfit.sources.ulog import undo_px4_calibration
+
+pytest.importorskip("pyulog")
+
+#: PX4's sample log from pyulog's repository (BSD 3-clause, tests/data/px4_pyulog/LICENSE).
+SAMPLE = Path(__file__).parent / "data" / "px4_pyulog" / "sample_log_small.ulg"
+
+
+#: ULog field types and their struct letters.
+ULOG_TYPES = {"uint64_t": "Q", "uint32_t": "I", "int32_t": "i", "float": "f", "uint8_t": "B"}
+
+
+class ULogWriter:
+    """A minimal ULog writer (file format version 1): header, formats, parameters, subscriptions, data."""
+
+    def __init__(self) -> None:
+        self.out = [b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)]
+        self._message(b"B", bytes(40))  # flag bits: nothing incompatible
+        self.layouts: dict[int, str] = {}
+        self.ids: dict[tuple[str, int], int] = {}
+        self.layouts_by_name: dict[str, str] = {}
+
+    def _message(self, kind: bytes, payload: bytes) -> None:
+        self.out.append(struct.pack("<HB", len(payload), kind[0]) + payload)
+
+    def format(self, name: str, fields: list[tuple[str, str]]) -> None:
+        text = name + ":" + "".join(f"{t} {f};" for t, f in fields)
+        self._message(b"F", text.encode())
+        layout = ""
+        for t, _ in fields:
+            base, _, count = t.partition("[")
+            layout += ULOG_TYPES[base] * (int(count[:-1]) if count else 1)
+        self.layouts_by_name[name] = layout
+
+    def info(self, key: str, value: str) -> None:
+        encoded = value.encode()
+        full = f"char[{len(encoded)}] {key}".encode()
+        self._message(b"I", bytes([len(full)]) + full + encoded)
+
+    def parameter(self, name: str, value: float | int) -> None:
+        kind, packed = (
+            ("int32_t", struct.pack("<i", value)) if isinstance(value, int) else ("float", struct.pack("<f", value))
+        )
+        full = f"{kind} {name}".encode()
+        self._message(b"P", bytes([len(full)]) + full + packed)
+
+    def subscribe(self, name: str, multi_id: int = 0) -> None:
+        msg_id = len(self.ids)
+        self.ids[(name, multi_id)] = msg_id
+        self.layouts[msg_id] = self.layouts_by_name[name]
+        self._message(b"A", struct.pack("<BH", multi_id, msg_id) + name.encode())
+
+    def data(self, name: str, multi_id: int, *values: float | int) -> None:
+        msg_id = self.ids[(name, multi_id)]
+        self._message(b"D", struct.pack("<H", msg_id) + struct.pack("<" + self.layouts[msg_id], *values))
+
+    def bytes(self) -> bytes:
+        return b"".join(self.out)
+
+
+def px4_correct(raw: np.ndarray, off: np.ndarray, scale: np.ndarray, odiag: np.ndarray) -> np.ndarray:
+    """PX4's Correct() with no rotation and no power compensation: S · (raw - OFF)."""
+    matrix = np.array([[scale[0], odiag[0], odiag[1]], [odiag[0], scale[1], odiag[2]], [odiag[1], odiag[2], scale[2]]])
+    return (raw - off) @ matrix.T
+
+
+CAL = {
+    "off": np.array([0.12, -0.3, 0.05]),
+    "scale": np.array([1.04, 0.97, 1.01]),
+    "odiag": np.array([0.02, -0.01, 0.03]),
+}
+DEVICE = 592905
+
+
+def write_log(path: Path, n: int = 1500, *, board_rot: int = 0, second: bool = True) -> magfit.Simulation:
+    """sensor_mag at 50 Hz (two instances) and vehicle_magnetometer (corrected) beside it, in gauss."""
+    simulation = magfit.simulate(
+        n,
+        soft_iron=[[1.1, 0.05, 0.0], [0.05, 0.92, 0.02], [0.0, 0.02, 1.0]],
+        hard_iron=[0.15, -0.22, 0.4],
+        field_strength=0.5,
+        noise=0.002,
+        seed=11,
+    )
+    writer = ULogWriter()
+    writer.format(
+        "sensor_mag",
+        [("uint64_t", "timestamp"), ("uint32_t", "device_id"), ("float", "x"), ("float", "y"), ("float", "z")],
+    )
+    writer.format(
+        "vehicle_magnetometer", [("uint64_t", "timestamp"), ("uint32_t", "device_id"), ("float[3]", "magnetometer_ga")]
+    )
+    writer.format("vehicle_attitude", [("uint64_t", "timestamp"), ("float[4]", "q")])
+    writer.info("ver_sw", "v1.14.0-test")
+    writer.parameter("CAL_MAG0_ID", DEVICE)
+    writer.parameter("CAL_MAG0_ROT", -1)
+    writer.parameter("SENS_BOARD_ROT", board_rot)
+    writer.parameter("CAL_MAG_COMP_TYP", 0)
+    for axis, i in zip("XYZ", range(3), strict=True):
+        writer.parameter(f"CAL_MAG0_{axis}OFF", float(CAL["off"][i]))
+        writer.parameter(f"CAL_MAG0_{axis}SCALE", float(CAL["scale"][i]))
+        writer.parameter(f"CAL_MAG0_{axis}ODIAG", float(CAL["odiag"][i]))
+    writer.subscribe("sensor_mag", 0)
+    if second:
+        writer.subscribe("sensor_mag", 1)
+    writer.subscribe("vehicle_magnetometer", 0)
+    writer.subscribe("vehicle_attitude", 0)
+    corrected = px4_correct(simulation.samples, CAL["off"], CAL["scale"], CAL["odiag"])
+    for j in range(n):
+        time = 1_000_000 + j * 20_000
+        writer.data("sensor_mag", 0, time, DEVICE, *simulation.samples[j])
+        if second:
+            writer.data("sensor_mag", 1, time, 12345, 0.2, 0.1, 0.4)
+        writer.data("vehicle_magnetometer", 0, time + 100, DEVICE, *corrected[j])
+        writer.data("vehicle_attitude", 0, time, 1.0, 0.0, 0.0, 0.0)
+    path.write_bytes(writer.bytes())
+    return simulation
+
+
+def _assert_recovers(calibration: magfit.Calibration, truth: magfit.Calibration) -> None:
+    # Noise 0.4 % of the field over 1500 samples: the ellipsoid within 1 % of its largest entry, the offset
+    # within 1 % of the field.
+    scale = float(np.max(np.abs(truth.ellipsoid_matrix)))
+    np.testing.assert_allclose(calibration.ellipsoid_matrix, truth.ellipsoid_matrix, atol=0.01 * scale)
+    np.testing.assert_allclose(calibration.offset, truth.offset, atol=0.01 * truth.field_strength)
+
+
+def test_undo_is_the_inverse_of_px4_correct() -> None:
+    raw = np.random.default_rng(2).normal(0, 0.5, size=(40, 3))
+    corrected = px4_correct(raw, CAL["off"], CAL["scale"], CAL["odiag"])
+    back = undo_px4_calibration(corrected, offsets=CAL["off"], scales=CAL["scale"], offdiagonals=CAL["odiag"])
+    np.testing.assert_allclose(back, raw, atol=1e-12)
+
+
+def test_raw_and_calibrated_streams_both_recover_the_truth(tmp_path: Path) -> None:
+    path = tmp_path / "flight.ulg"
+    simulation = write_log(path)
+    source = open_source(path)
+    assert source.kind == "ulog" and "v1.14.0-test" in source.format
+    assert [m.id for m in source.magnetometers] == ["sensor_mag/0", "sensor_mag/1", "vehicle_magnetometer/0"]
+    raw = source.read("sensor_mag/0")
+    assert raw.magnetometer.rate_hz == pytest.approx(50.0) and raw.magnetometer.unit == "G"
+    np.testing.assert_allclose(raw.samples, simulation.samples, atol=1e-6)  # float32 in the log
+    undone = source.read("vehicle_magnetometer/0")
+    np.testing.assert_allclose(undone.samples, simulation.samples, atol=1e-6)
+    for read in (raw, undone):
+        _assert_recovers(magfit.fit(read.samples, method="ellipsoid"), simulation.truth)
+
+
+def test_calibrate_by_device_id_and_inspect(tmp_path: Path) -> None:
+    path = tmp_path / "flight.ulg"
+    simulation = write_log(path)
+    runner = CliRunner()
+    result = runner.invoke(cli, ["calibrate", str(path)])
+    assert result.exit_code == 2 and "--sensor" in result.stderr
+    output = tmp_path / "cal.json"
+    result = runner.invoke(
+        cli, ["calibrate", str(path), "--sensor", "sensor_mag/0", "-m", "ellipsoid", "-o", str(output)]
+    )
+    assert result.exit_code == 0, result.output
+    calibration = magfit.Calibration.from_json(output.read_text())
+    assert calibration.unit == "G" and calibration.details["source"]["device_id"] == DEVICE
+    _assert_recovers(calibration, simulation.truth)
+    result = runner.invoke(cli, ["inspect", str(path)])
+    assert result.exit_code == 0, result.output
+    assert "sensor_mag/0  raw sensor_mag, device_id 592905: 1500 samples in G" in result.stdout
+    assert "50.0 Hz" in result.stdout and "vehicle_attitude (1500)" in result.stdout
+
+
+def test_a_rotated_calibrated_stream_is_refused_with_the_reason(tmp_path: Path) -> None:
+    path = tmp_path / "rotated.ulg"
+    write_log(path, n=100, board_rot=4, second=False)
+    source = open_source(path)
+    assert source.magnetometers[1].problem is not None and "SENS_BOARD_ROT 4" in source.magnetometers[1].problem
+    with pytest.raises(DataFileError, match="rotated into the body frame"):
+        source.read("vehicle_magnetometer/0")
+    # Only the raw stream can be fitted, so it is chosen without --sensor.
+    assert source.magnetometer(None).id == "sensor_mag/0"
+
+
+def test_px4_sample_log_tells_that_sensor_mag_is_logged_at_1_hz(tmp_path: Path) -> None:
+    runner = CliRunner()
+    result = runner.invoke(cli, ["inspect", str(SAMPLE)])
+    assert result.exit_code == 0, result.output
+    assert "sensor_mag/0  raw sensor_mag, device_id 589858: 6 samples in G" in result.stdout
+    assert "1.0 Hz" in result.stdout and "SDLOG_PROFILE" in result.stdout
+    assert "no device_id" in result.stdout  # this PX4 version's vehicle_magnetometer cannot be undone
+    result = runner.invoke(cli, ["calibrate", str(SAMPLE), "--sensor", "sensor_mag/1"])
+    assert result.exit_code == 1
+    assert "needs at least" in result.stderr and "SDLOG_PROFILE" in result.stderr.splitlines()[-1]
+
+
+def test_damaged_and_truncated_logs_fail_in_one_line(tmp_path: Path) -> None:
+    path = tmp_path / "good.ulg"
+    write_log(path, n=300, second=False)
+    data = path.read_bytes()
+    rng = np.random.default_rng(9)
+    cases = [data[:cut] for cut in (7, 16, 30, 200, len(data) // 2, len(data) - 3)]
+    for _ in range(12):
+        damaged = bytearray(data)
+        for where in rng.integers(0, len(data), size=int(rng.integers(1, 30))):
+            damaged[where] = int(rng.integers(0, 256))
+        cases.append(bytes(damaged))
+    sample = SAMPLE.read_bytes()
+    cases += [sample[: len(sample) // 3], sample[:5000]]
+    runner = CliRunner()
+    for i, case in enumerate(cases):
+        broken = tmp_path / f"broken{i}.ulg"
+        broken.write_bytes(case)
+        for command in (
+            ["inspect", str(broken)],
+            ["calibrate", str(broken), "--sensor", "sensor_mag/0", "-m", "ellipsoid"],
+        ):
+            result = runner.invoke(cli, command)
+            assert result.exit_code in (0, 1, 2), (i, command, result.output)
+            if result.exit_code:
+                assert result.stderr.strip().splitlines()[-1].startswith("magfit: error: "), (i, result.output)
+                assert "Traceback" not in result.output
+
+
+def test_without_pyulog_the_error_is_the_install_hint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "pyulog", None)  # import fails as when it is not installed
+    copy = tmp_path / "flight.ulg"
+    shutil.copy(SAMPLE, copy)
+    result = CliRunner().invoke(cli, ["inspect", str(copy)])
+    assert result.exit_code == 2
+    assert "pip install 'magfit[ulog]'" in result.stderr and len(result.stderr.strip().splitlines()) == 1
