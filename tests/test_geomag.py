@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import re
 import sys
 
 import numpy as np
@@ -173,3 +174,111 @@ def test_importing_magfit_does_not_import_the_model() -> None:
     code = "import magfit, magfit.geomag, sys; print('pygeomag' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+# ---------------------------------------------------------------------- the command line
+
+ZURICH = "47.4,8.5,0.5"
+DATE = "2026-06-01"
+
+
+def _recording(tmp_path, field_ut: float, name: str = "mag.csv"):
+    """The paper's Ellipse 2A with steel, scaled so that its field is ``field_ut`` (µT), as a CSV."""
+    import magfit
+
+    simulation = magfit.scenario("ellipse2a", "steel").simulate(2000, seed=5)
+    path = tmp_path / name
+    # Scaled by the field an ellipsoid fit finds (the geometric mean of the semi-axes: the steel shrinks it).
+    samples = simulation.samples * (field_ut / magfit.fit(simulation.samples, method="ellipsoid").field_strength)
+    np.savetxt(path, samples, fmt="%.17g", delimiter=",", header="mx,my,mz", comments="")
+    return path
+
+
+def _run(*args: str):
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    return CliRunner().invoke(cli, list(args))
+
+
+def test_calibrate_pins_the_field_to_the_model(tmp_path) -> None:
+    import magfit
+
+    expected = field_at(47.4, 8.5, alt_km=0.5, date=DATE).total_in("uT")
+    path = _recording(tmp_path, 50.0)
+    output = tmp_path / "cal.json"
+    result = _run(
+        "calibrate", str(path), "--unit", "uT", "--field-strength", "wmm", "--location", ZURICH, "--date", DATE,
+        "-m", "ellipsoid", "-o", str(output),
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    calibration = magfit.Calibration.from_json(output.read_text())
+    assert calibration.field_strength == expected  # the model's number, exactly
+    corrected = np.linalg.norm(calibration.apply(np.loadtxt(path, delimiter=",", skiprows=1)), axis=1)
+    assert np.median(corrected) == pytest.approx(expected, rel=0.01)
+    assert "used as the field strength (the samples alone: 50" in result.stdout
+    assert "warning" not in result.stderr  # 50 against 48.4 µT: 3 %, within the 10 % warning threshold
+
+
+def test_calibrate_prints_the_model_beside_the_fit_and_warns_when_far(tmp_path) -> None:
+    near = _run("calibrate", str(_recording(tmp_path, 49.0)), "--unit", "uT", "--location", ZURICH, "--date", DATE)
+    assert near.exit_code == 0, near.output
+    assert "model field      48.3798 ± 0.14 uT (WMM-2025 at 47.4°, 8.5°, 0.5 km on 2026.41" in near.stdout
+    assert "warning" not in near.stderr
+    far = _run("calibrate", str(_recording(tmp_path, 40.0, "far.csv")), "--unit", "uT", "--location", ZURICH)
+    assert far.exit_code == 0, far.output
+    assert "-17 % off the World Magnetic Model's" in far.stderr and "steel or magnets near the sensor" in far.stderr
+    wrong_unit = _run("calibrate", str(_recording(tmp_path, 0.49, "gauss.csv")), "--unit", "uT", "--location", ZURICH)
+    assert wrong_unit.exit_code == 0, wrong_unit.output
+    assert "the samples look like G, not uT" in wrong_unit.stderr
+    unknown = _run("calibrate", str(_recording(tmp_path, 49.0, "counts.csv")), "--location", ZURICH)
+    assert unknown.exit_code == 0 and "not compared with the fit: the samples' unit is unknown" in unknown.stdout
+
+
+def test_a_model_field_the_samples_contradict_is_refused(tmp_path) -> None:
+    # Samples in gauss labelled µT, pinned to the model: the fit's verdict refuses (exit 1), naming the mix-up.
+    path = _recording(tmp_path, 0.484)
+    result = _run("calibrate", str(path), "--unit", "uT", "--field-strength", "wmm", "--location", ZURICH)
+    assert result.exit_code == 1, result.output
+    assert "unit mix-up" in result.stderr and "Traceback" not in result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--unit", "uT", "--field-strength", "wmm"], "--field-strength wmm needs --location"),
+        (["--field-strength", "wmm", "--location", ZURICH], "needs the samples' physical unit"),
+        (["--unit", "counts", "--field-strength", "wmm", "--location", ZURICH], "raw counts have no known scale"),
+        (["--unit", "uT", "--date", DATE], "--date goes with --location"),
+        (["--unit", "uT", "--location", "47.4"], "expected a location as LAT,LON"),
+        (["--unit", "uT", "--location", ZURICH, "--date", "01/06/2026"], "YYYY-MM-DD"),
+        (["--unit", "uT", "--location", ZURICH, "--date", "2031-01-01"], "no World Magnetic Model covers 2031.00"),
+        (["--unit", "uT", "--field-strength", "-3"], "a positive number .* or 'wmm'"),
+    ],
+)
+def test_bad_model_options_are_usage_errors(tmp_path, args: list[str], message: str) -> None:
+    path = _recording(tmp_path, 48.0)
+    output = tmp_path / "cal.json"
+    output.write_text("kept")
+    result = _run("calibrate", str(path), "-o", str(output), *args)
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("magfit: error: ")
+    assert re.search(message, lines[0]), lines[0]
+    assert output.read_text() == "kept"
+
+
+def test_the_cli_without_the_extra_names_the_install_command(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = _recording(tmp_path, 48.0)
+    geomag._model.cache_clear()
+    monkeypatch.setitem(sys.modules, "pygeomag", None)
+    try:
+        result = _run("calibrate", str(path), "--unit", "uT", "--location", ZURICH)
+    finally:
+        geomag._model.cache_clear()
+    assert result.exit_code == 2, result.output
+    assert result.stderr.strip() == (
+        "magfit: error: the World Magnetic Model needs pygeomag, which is not installed (the wmm extra): "
+        "pip install 'magfit[wmm]'"
+    )

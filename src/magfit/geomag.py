@@ -268,3 +268,33 @@ def field_at(
         model=str(model.model),
         total_uncertainty=uncertainty,
     )
+
+
+#: A fitted field further than this (relative) from the model's is worth a warning: the model is good to
+#: 0.3 %, local anomalies rarely reach a few %, so 10 % is something near the sensor or a wrong unit.
+MODEL_TOLERANCE = 0.10
+
+
+def compare_fitted(fitted: float, unit: str, field: Field, *, tolerance: float = MODEL_TOLERANCE) -> str | None:
+    """None when a fitted field strength (in ``unit``) agrees with the model's; else why it may not.
+
+    The likely causes are named: a unit that would make them agree (the samples in G labelled µT), steel or
+    magnets near the sensor while recording, a sensor range or gain other than the one assumed, a wrong
+    place or date.
+    """
+    expected = field.total_in(unit)
+    ratio = fitted / expected
+    if abs(ratio - 1.0) <= tolerance:
+        return None
+    how = f"{100 * (ratio - 1):+.0f} % off" if 0.5 < ratio < 2 else f"{ratio:.3g} times"
+    text = (
+        f"the fitted field {fitted:.4g} {unit} is {how} the World Magnetic Model's {expected:.4g} {unit} "
+        f"({field.describe()}): "
+    )
+    for other in ("T", "mT", "uT", "nT", "G", "mG"):
+        if other != get_unit(unit).name and abs(fitted / field.total_in(other) - 1.0) <= tolerance:
+            return text + f"the samples look like {other}, not {unit} (check --unit)"
+    return text + (
+        "likely causes: steel or magnets near the sensor while recording (indoors, a vehicle, a desk), a sensor range "
+        "or gain other than the one assumed, or a wrong --location or --date"
+    )

@@ -189,6 +189,37 @@ class RegistryChoice(click.ParamType):
         self.fail(f"unknown {self.kind} {value!r}; valid {self.kind}s: {', '.join(names)}", param, ctx)
 
 
+class FieldStrength(click.ParamType):
+    """``--field-strength``: a positive number in the samples' unit, or ``wmm`` (the World Magnetic Model's)."""
+
+    name = "field strength"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float | str:
+        if str(value).strip().lower() == "wmm":
+            return "wmm"
+        try:
+            number = float(value)
+        except ValueError:
+            number = float("nan")
+        if not (np.isfinite(number) and number > 0):
+            self.fail(f"expected a positive number (in the samples' unit) or 'wmm', got {value!r}", param, ctx)
+        return number
+
+
+def geomag_option(parse: Callable[[str], Any]) -> Callable[[click.Context, click.Parameter, str | None], Any]:
+    """A callback that parses ``--location`` or ``--date`` with :mod:`magfit.geomag`'s parser (usage error if bad)."""
+
+    def callback(ctx: click.Context, param: click.Parameter, value: str | None) -> Any:
+        if value is None:
+            return None
+        try:
+            return parse(value)
+        except OptionError as error:
+            raise click.BadParameter(str(error), ctx, param) from None
+
+    return callback
+
+
 def method_names() -> list[str]:
     """The registered calibration methods, in registration order."""
     from ..methods import METHODS

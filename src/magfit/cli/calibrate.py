@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime
 import itertools
 import os
 import shutil
@@ -23,9 +24,12 @@ from ..calibration import CONVENTION, Calibration
 from ..errors import CalibrationError, DataFileError, MagfitError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
+from ..geomag import Field, compare_fitted, field_at, parse_date, parse_location
 from ..methods import get_method
 from ..statistics import Statistics
+from ..units import conversion_factor, get_unit
 from ._common import (
+    FieldStrength,
     Nonfinite,
     RegistryChoice,
     columns_text,
@@ -34,6 +38,7 @@ from ._common import (
     export_format_names,
     fail,
     fixed,
+    geomag_option,
     method_names,
     nonfinite_option,
     parse_columns,
@@ -699,10 +704,25 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
 @nonfinite_option
 @click.option(
     "--field-strength",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FieldStrength(),
     default=None,
-    help="Known magnitude of the local field, in the samples' unit (e.g. from the World Magnetic Model): the "
-    "corrected field is scaled to it, and the sphere fit pins its radius to it (see docs/methods.md).",
+    help="Known magnitude of the local field, in the samples' unit, or 'wmm' for the World Magnetic Model's at "
+    "--location (needs the samples' unit): the corrected field is scaled to it, and the sphere fit pins its radius "
+    "to it (see docs/methods.md).",
+)
+@click.option(
+    "--location",
+    callback=geomag_option(parse_location),
+    metavar="LAT,LON[,ALT]",
+    help="Where the recording was made (degrees; ALT in km above the WGS-84 ellipsoid, or 500m): the World Magnetic "
+    "Model's field is printed beside the fitted one, with a warning when they differ by more than 10 %.",
+)
+@click.option(
+    "--date",
+    "model_date",
+    callback=geomag_option(parse_date),
+    metavar="YYYY-MM-DD",
+    help="When the recording was made, for the World Magnetic Model (default: today).",
 )
 @click.option(
     "--even",
@@ -750,7 +770,9 @@ def calibrate_command(
     export_format: str | None,
     unit: str | None,
     nonfinite: Nonfinite,
-    field_strength: float | None,
+    field_strength: float | str | None,
+    location: tuple[float, float, float] | None,
+    model_date: datetime.date | None,
     even: bool,
     max_samples: int | None,
     plot_path: Path | None,
@@ -774,6 +796,7 @@ def calibrate_command(
       magfit calibrate mag.txt --unit uT --plot mag.png
       magfit calibrate parked_then_tumbled.csv --even
       magfit calibrate boat.csv --unit uT --field-strength 48.2
+      magfit calibrate boat.csv --unit uT --field-strength wmm --location 47.4,8.5,0.5 --date 2026-06-01
     """
     from ..io import STDOUT, write_all
     from .plot import check_figure_path, plot_calibration
@@ -787,6 +810,9 @@ def calibrate_command(
     method = method or default_method()
     if output is not None and export_format is not None and str(output) != STDOUT:
         _check_extension(output, export_format)
+    model = _model_field(file, field_strength, location, model_date, unit, sensor)  # before any work
+    if field_strength == "wmm" and model is not None and model[1] is not None:  # (the unit is checked physical)
+        field_strength = model[0].total_in(model[1])
     options = {} if field_strength is None else {"field_strength": field_strength}
     run = run_calibration(
         file,
@@ -824,6 +850,8 @@ def calibrate_command(
     for message in _fit_warnings(run.calibration):
         warn(without_own_advice(message, run.calibration.method))  # "prefer method='auto'" after auto: no advice
     print_summary(summary, run)
+    if model is not None:
+        _print_model_field(summary, run.calibration, *model)
     if output is not None and not to_stdout:
         what = f"{export_format} export" if export_format else "calibration"
         summary.print(f"wrote the {what} to {output}")
@@ -831,6 +859,55 @@ def calibrate_command(
         summary.print(plot_line)
     if to_stdout and text is not None:
         click.echo(text, nl=not text.endswith("\n"))
+
+
+def _model_field(
+    file: Path,
+    field_strength: float | str | None,
+    location: tuple[float, float, float] | None,
+    date: datetime.date | None,
+    unit: str | None,
+    sensor: str | None,
+) -> tuple[Field, str | None] | None:
+    """The World Magnetic Model's field at ``--location`` and the samples' unit (None when unknown), or None
+    without ``--location``; refuses ``--field-strength wmm`` without a place or a physical unit."""
+    if location is None:
+        if field_strength == "wmm":
+            raise click.UsageError("--field-strength wmm needs --location LAT,LON[,ALT] (where the recording was made)")
+        if date is not None:
+            raise click.UsageError("--date goes with --location: the World Magnetic Model needs the place too")
+        return None
+    if unit is None:
+        from ..sources import log_kind, open_source
+
+        if log_kind(file) is not None:  # a flight log says its unit (read once more: only with --location)
+            unit = open_source(file).magnetometer(sensor).unit or None
+    physical = unit is not None and get_unit(unit).is_physical
+    if field_strength == "wmm" and not physical:
+        raise click.UsageError(
+            "--field-strength wmm needs the samples' physical unit (--unit uT, G, mG ...): the model gives the field "
+            "in tesla units, and raw counts have no known scale"
+        )
+    return field_at(*location, date=date), unit if physical else None
+
+
+def _print_model_field(out: Console, calibration: Calibration, field: Field, unit: str | None) -> None:
+    """The model's field beside the fitted one, and a warning when they differ by more than 10 %."""
+    shown = unit or "uT"
+    sigma = field.total_uncertainty
+    spread = f" ± {significant(sigma * conversion_factor('nT', shown), 2)}" if sigma else ""
+    line = f"{significant(field.total_in(shown), 6)}{spread} {shown} ({field.describe()}, inclination "
+    line += f"{field.inclination_deg:.1f}°)"
+    fitted = calibration.details.get("fitted_field_strength")
+    if unit is None:
+        line += "; not compared with the fit: the samples' unit is unknown (give --unit)"
+    elif calibration.details.get("field_strength_given") and isinstance(fitted, float):
+        line += f"; used as the field strength (the samples alone: {significant(fitted, 6)} {unit})"
+    out.print(f"{'model field':<16} {line}", soft_wrap=True)
+    if unit is not None:
+        mismatch = compare_fitted(fitted if isinstance(fitted, float) else calibration.field_strength, unit, field)
+        if mismatch is not None:
+            warn(mismatch)
 
 
 def _fit_warnings(calibration: Calibration) -> list[str]:
