@@ -283,3 +283,30 @@ def test_damaged_and_truncated_logs_fail_in_one_line(tmp_path: Path) -> None:
             if result.exit_code:
                 lines = result.stderr.strip().splitlines()
                 assert lines[-1].startswith("magfit: error: ") and "Traceback" not in result.output, (i, result.output)
+
+
+#: A cut-down ArduPilot SITL log (ArduCopter 4.x, three compasses; only its FMT, PARM, MAG, ATT, GPS, IMU
+#: and VER messages kept), from a public repository under the MIT licence (tests/data/ardupilot_sitl/LICENSE).
+SITL = Path(__file__).parent / "data" / "ardupilot_sitl" / "sitl_three_compasses.bin"
+
+
+def test_real_sitl_log_maps_the_priority_slots_and_refuses_a_still_vehicle() -> None:
+    source = open_source(SITL)
+    assert [(m.id, m.device_id, m.n_samples) for m in source.magnetometers] == [
+        ("MAG/0", 97539, 249),
+        ("MAG/1", 131874, 249),
+        ("MAG/2", 263178, 249),
+    ]
+    assert all(m.rate_hz == pytest.approx(10.0, rel=0.01) for m in source.magnetometers)
+    read = source.read("MAG/1")
+    # COMPASS_OFS2 is (5, 13, -18), DIA2 ones, SCALE2 1: the raw field is the logged one minus the offsets,
+    # and its strength is that of SITL's field (495 mG).
+    from magfit.sources.dataflash import DataFlashLog
+
+    records = DataFlashLog(SITL, SITL.read_bytes()).messages("MAG")
+    logged = records[records["I"] == 1]
+    expected = np.column_stack([logged["MagX"], logged["MagY"], logged["MagZ"]]) - [5.0, 13.0, -18.0]
+    np.testing.assert_allclose(read.samples, expected)
+    assert np.linalg.norm(read.samples[0]) == pytest.approx(495.3, abs=0.1)
+    result = CliRunner().invoke(cli, ["calibrate", str(SITL), "--sensor", "MAG/2"])
+    assert result.exit_code == 1 and "identical" in result.stderr
