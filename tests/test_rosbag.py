@@ -292,3 +292,21 @@ def test_a_slow_compass_is_named(tmp_path: Path, simulation: magfit.Simulation) 
     (magnetometer,) = rosbag.open_rosbag(path).magnetometers
     assert magnetometer.rate_hz < 1.0
     assert any("published at only" in note for note in magnetometer.notes)
+
+
+def test_a_bag_written_by_ros_itself() -> None:
+    # tests/data/ros/README.md: written by ROS's rosbag, MIT; hard-coded field, stamps left at zero, 0.5 Hz.
+    path = Path(__file__).parent / "data" / "ros" / "fake_sensors_sample.bag"
+    contents = read_bag_contents(path)
+    assert contents.topics == {
+        "/my_magnetic_field": "sensor_msgs/msg/MagneticField",
+        "/my_temperature": "sensor_msgs/msg/Temperature",
+    }
+    (mag,) = contents.magnetometers
+    np.testing.assert_array_equal(mag.samples, np.tile([1.4, 0.2, 0.6], (10, 1)))
+    assert mag.time_base == "bag" and mag.frame_id == ""
+    assert np.all(np.diff(mag.timestamps) > 0) and mag.timestamps[0] == pytest.approx(1626720936.25, abs=0.01)
+    assert mag.rate_hz == pytest.approx(0.5, rel=0.01)
+    (magnetometer,) = rosbag.open_rosbag(path).magnetometers
+    assert any("header stamps are zero" in note for note in magnetometer.notes)
+    assert any("only 0.5 Hz" in note for note in magnetometer.notes)
