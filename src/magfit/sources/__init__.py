@@ -11,6 +11,7 @@ Formats are recognised by their first bytes, not by their names:
 - PX4 ULog (``ULog\\x01\\x12\\x35``): :mod:`magfit.sources.ulog`, needs ``pyulog`` (the ``ulog`` extra);
 - ArduPilot DataFlash ``.bin`` (``0xA3 0x95``, then a FMT message): :mod:`magfit.sources.dataflash`, a small
   reader built on the format's own FMT messages (no extra);
+- ROS 1 bags, MCAP and ROS 2 SQLite bags: :mod:`magfit.sources.rosbag`, needs ``rosbags`` (the ``ros`` extra);
 - anything else is a samples file for :mod:`magfit.io` (text, ``.npy``, ``.npz``).
 
 (:mod:`magfit.io.sources` is another thing: where a file's bytes come from — a pipe, a compressed copy.)
@@ -200,7 +201,7 @@ class Source:
 
 
 def log_kind(path: str | os.PathLike[str]) -> str | None:
-    """``"ulog"`` or ``"dataflash"`` when the file's first bytes are those of a flight log, else None.
+    """``"ulog"``, ``"dataflash"`` or ``"rosbag"`` when the file's first bytes are those of a log, else None.
 
     A missing or unreadable file is None too: the samples readers report it with their own message.
     """
@@ -215,6 +216,10 @@ def log_kind(path: str | os.PathLike[str]) -> str | None:
         return "ulog"
     if head.startswith(DATAFLASH_MAGIC):
         return "dataflash"
+    from .rosbag import bag_kind  # its own magic numbers (ROS 1, MCAP, SQLite); the module imports no extra
+
+    if str(path) != "-" and bag_kind(path) is not None:
+        return "rosbag"
     return None
 
 
@@ -244,6 +249,10 @@ def open_source(path: str | os.PathLike[str]) -> Source:
         from .dataflash import open_dataflash
 
         return open_dataflash(Path(path), data_file(path))
+    if kind == "rosbag":
+        from .rosbag import open_rosbag
+
+        return open_rosbag(path)
     return _samples_source(Path(path))
 
 
