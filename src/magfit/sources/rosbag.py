@@ -230,7 +230,7 @@ def open_rosbag(path: str | os.PathLike[str]) -> Source:
         magnetometers.append(
             Magnetometer(
                 id=topic.topic,
-                description=f"sensor_msgs/MagneticField, frame {topic.frame_id or '(none)'}"
+                description=f"sensor_msgs/MagneticField (tesla, read as uT), frame {topic.frame_id or '(none)'}"
                 + (f", {rate:.3g} Hz" if rate is not None else ""),
                 unit="uT",
                 n_samples=int(topic.samples.shape[0]),
@@ -254,7 +254,6 @@ def open_rosbag(path: str | os.PathLike[str]) -> Source:
             samples=topic.samples * 1e6,  # tesla -> µT
             time_s=topic.timestamps,
             columns=("magnetic_field.x", "magnetic_field.y", "magnetic_field.z"),
-            notes=("sensor_msgs/MagneticField is in tesla: given in uT",),
         )
 
     names = {"ros1": "ROS 1 bag", "mcap": "MCAP file", "sqlite3": "ROS 2 sqlite3 bag", "folder": "ROS 2 bag folder"}
