@@ -310,3 +310,25 @@ def test_a_bag_written_by_ros_itself() -> None:
     (magnetometer,) = rosbag.open_rosbag(path).magnetometers
     assert any("header stamps are zero" in note for note in magnetometer.notes)
     assert any("only 0.5 Hz" in note for note in magnetometer.notes)
+
+
+@pytest.mark.parametrize("kind", ["ros1", "mcap_file"])
+def test_magfit_calibrate_on_a_bag_recovers_the_truth(
+    kind: str, bags: dict[str, Path], tmp_path: Path, simulation: magfit.Simulation
+) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    path = bags["ros1"] if kind == "ros1" else next(bags["mcap"].glob("*.mcap"))
+    output = tmp_path / "cal.json"
+    args = ["calibrate", str(path), "--sensor", "/imu/mag", "-m", "ellipsoid", "-o", str(output)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    calibration = magfit.Calibration.from_json(output.read_text())
+    truth = simulation.truth
+    assert calibration.unit == "uT"  # tesla read as µT: 100 µT per simulated unit
+    np.testing.assert_allclose(calibration.offset, truth.offset * 100, atol=0.01 * truth.field_strength * 100)
+    scale = float(np.max(np.abs(truth.ellipsoid_matrix)))
+    np.testing.assert_allclose(calibration.ellipsoid_matrix * 1e4, truth.ellipsoid_matrix, atol=0.02 * scale)
+    assert "/imu/mag" in result.stdout and "warning" not in result.stderr
