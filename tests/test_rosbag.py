@@ -332,3 +332,48 @@ def test_magfit_calibrate_on_a_bag_recovers_the_truth(
     scale = float(np.max(np.abs(truth.ellipsoid_matrix)))
     np.testing.assert_allclose(calibration.ellipsoid_matrix * 1e4, truth.ellipsoid_matrix, atol=0.02 * scale)
     assert "/imu/mag" in result.stdout and "warning" not in result.stderr
+
+
+def test_a_bag_with_gnss_fixes_pins_the_field_to_the_model_there(tmp_path: Path, simulation: magfit.Simulation) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+    from magfit.geomag import field_at
+
+    typestore = get_typestore(Stores.ROS1_NOETIC)
+    types = typestore.types
+    # The simulated sensor scaled to a 48 µT field (what an ellipsoid fit finds), in tesla.
+    samples_t = simulation.samples * (48e-6 / magfit.fit(simulation.samples, method="ellipsoid").field_strength)
+    path = tmp_path / "gnss.bag"
+    fixes = [(-1, 0.0, 0.0, 0.0), (0, 47.40, 8.50, 500.0), (0, 47.41, 8.51, 510.0), (1, 47.39, 8.49, 490.0)]
+    with Writer1(path) as writer:
+        mag_conn = writer.add_connection("/imu/mag", "sensor_msgs/msg/MagneticField", typestore=typestore)
+        fix_conn = writer.add_connection("/gps/fix", "sensor_msgs/msg/NavSatFix", typestore=typestore)
+        for bag_time, mag, _ in _messages(typestore, samples_t):
+            writer.write(mag_conn, bag_time, typestore.serialize_ros1(mag, "sensor_msgs/msg/MagneticField"))
+        for i, (status, lat, lon, alt) in enumerate(fixes):
+            ns = START_NS + i * 1_000_000_000
+            header = types["std_msgs/msg/Header"](
+                seq=i, stamp=types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=0), frame_id="gps"
+            )
+            message = types["sensor_msgs/msg/NavSatFix"](
+                header=header,
+                status=types["sensor_msgs/msg/NavSatStatus"](status=status, service=1),
+                latitude=lat,
+                longitude=lon,
+                altitude=alt,
+                position_covariance=np.zeros(9),
+                position_covariance_type=0,
+            )
+            writer.write(fix_conn, ns, typestore.serialize_ros1(message, "sensor_msgs/msg/NavSatFix"))
+    contents = read_bag_contents(path)
+    assert contents.fixes.shape == (3, 4)  # the status -1 message (no fix) is left out
+    lat, lon, alt_km, when = contents.position()
+    assert (lat, lon, alt_km) == pytest.approx((47.40, 8.50, 0.5)) and when == pytest.approx(START_NS / 1e9 + 1)
+    output = tmp_path / "cal.json"
+    args = ["calibrate", str(path), "-m", "ellipsoid", "--field-strength", "wmm", "-o", str(output)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    expected = field_at(47.40, 8.50, alt_km=0.5, date="2026-01-01").total_in("uT")  # the date of the first fix
+    assert magfit.Calibration.from_json(output.read_text()).field_strength == pytest.approx(expected, rel=1e-12)
+    assert "WMM-2025 at 47.4°, 8.5°, 0.5 km on 2026.00" in result.stdout

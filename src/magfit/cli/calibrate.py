@@ -707,8 +707,8 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     type=FieldStrength(),
     default=None,
     help="Known magnitude of the local field, in the samples' unit, or 'wmm' for the World Magnetic Model's at "
-    "--location (needs the samples' unit): the corrected field is scaled to it, and the sphere fit pins its radius "
-    "to it (see docs/methods.md).",
+    "--location (or at a ROS bag's own GNSS fixes; needs the samples' unit): the corrected field is scaled to it, "
+    "and the sphere fit pins its radius to it (see docs/methods.md).",
 )
 @click.option(
     "--location",
@@ -871,6 +871,8 @@ def _model_field(
 ) -> tuple[Field, str | None] | None:
     """The World Magnetic Model's field at ``--location`` and the samples' unit (None when unknown), or None
     without ``--location``; refuses ``--field-strength wmm`` without a place or a physical unit."""
+    if location is None and field_strength == "wmm":
+        location, date = _bag_position(file, date)  # a ROS bag may carry its own GNSS fixes
     if location is None:
         if field_strength == "wmm":
             raise click.UsageError("--field-strength wmm needs --location LAT,LON[,ALT] (where the recording was made)")
@@ -889,6 +891,24 @@ def _model_field(
             "in tesla units, and raw counts have no known scale"
         )
     return field_at(*location, date=date), unit if physical else None
+
+
+def _bag_position(
+    file: Path, date: datetime.date | None
+) -> tuple[tuple[float, float, float] | None, datetime.date | None]:
+    """The median GNSS fix of a ROS bag and, unless ``--date`` says otherwise, the date of its first fix."""
+    from ..sources import log_kind
+
+    if log_kind(file) != "rosbag":
+        return None, date
+    from ..sources.rosbag import read_bag_contents
+
+    position = read_bag_contents(file).position()
+    if position is None:
+        return None, date
+    lat, lon, alt_km, time_s = position
+    when = datetime.datetime.fromtimestamp(time_s, tz=datetime.timezone.utc).date()
+    return (lat, lon, alt_km), date or when
 
 
 def _print_model_field(out: Console, calibration: Calibration, field: Field, unit: str | None) -> None:

@@ -22,7 +22,7 @@ import os
 import tempfile
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -41,6 +41,7 @@ INSTALL_HINT = "pip install 'magfit[ros]'"
 #: The message types read, by their ROS 2 names (rosbags names ROS 1 types the same way).
 MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
 IMU = "sensor_msgs/msg/Imu"
+NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"
 
 BagKind = Literal["ros1", "mcap", "sqlite3", "folder"]
 
@@ -135,6 +136,10 @@ class BagContents:
         Every Imu topic with at least one message, sorted by topic name.
     topics : dict
         Every topic of the bag and its message type (for messages that list what the bag holds).
+    fixes : ndarray, shape (K, 4)
+        The GNSS fixes of every ``sensor_msgs/NavSatFix`` topic whose status says there is one: latitude,
+        longitude (degrees), altitude (m above the WGS-84 ellipsoid, NaN when not given) and time (seconds
+        since the epoch); see :meth:`position`.
     """
 
     path: Path
@@ -142,6 +147,19 @@ class BagContents:
     magnetometers: tuple[MagneticTopic, ...]
     imus: tuple[ImuTopic, ...]
     topics: dict[str, str]
+    fixes: NDArray[np.float64] = field(default_factory=lambda: np.empty((0, 4)))
+
+    def position(self) -> tuple[float, float, float, float] | None:
+        """Where and when the bag was recorded, from its ``sensor_msgs/NavSatFix`` messages with a fix:
+        (latitude, longitude in degrees, altitude in km above the WGS-84 ellipsoid, time in seconds since the
+        epoch of the first fix); the median of the fixes, so that a few wild ones do not move it. None without
+        a fix."""
+        if not len(self.fixes):
+            return None
+        lat, lon = np.median(self.fixes[:, :2], axis=0)
+        heights = self.fixes[:, 2][np.isfinite(self.fixes[:, 2])]
+        alt_km = float(np.median(heights)) / 1000.0 if heights.size else 0.0  # no altitude: the ellipsoid's
+        return float(lat), float(lon), alt_km, float(self.fixes[0, 3])
 
 
 def bag_kind(path: str | os.PathLike[str]) -> BagKind | None:
@@ -305,15 +323,20 @@ def _read(path: Path, kind: BagKind, readable: Path, rosbags: Any) -> BagContent
     default = get_typestore(Stores.ROS1_NOETIC if kind == "ros1" else Stores.ROS2_HUMBLE)
     with AnyReader([readable], default_typestore=default) as reader:
         topics = {connection.topic: connection.msgtype for connection in reader.connections}
-        wanted = [c for c in reader.connections if c.msgtype in (MAGNETIC_FIELD, IMU)]
+        wanted = [c for c in reader.connections if c.msgtype in (MAGNETIC_FIELD, IMU, NAV_SAT_FIX)]
         mag: dict[str, _Collector] = {}
         imu: dict[str, _Collector] = {}
+        fixes: list[tuple[float, float, float, float]] = []
         if wanted:
             for connection, bag_time, raw in reader.messages(connections=wanted):
                 message: Any = reader.deserialize(raw, connection.msgtype)
                 if connection.msgtype == MAGNETIC_FIELD:
-                    field = message.magnetic_field
-                    mag.setdefault(connection.topic, _Collector()).add(message, bag_time, (field.x, field.y, field.z))
+                    b = message.magnetic_field
+                    mag.setdefault(connection.topic, _Collector()).add(message, bag_time, (b.x, b.y, b.z))
+                elif connection.msgtype == NAV_SAT_FIX:
+                    fix = _fix(message, bag_time)
+                    if fix is not None:
+                        fixes.append(fix)
                 else:
                     q, a = message.orientation, message.linear_acceleration
                     # orientation_covariance[0] == -1: the IMU gives no orientation (sensor_msgs/Imu's definition)
@@ -326,7 +349,17 @@ def _read(path: Path, kind: BagKind, readable: Path, rosbags: Any) -> BagContent
         magnetometers=tuple(mag[name].magnetic(name) for name in sorted(mag)),
         imus=tuple(imu[name].imu(name) for name in sorted(imu)),
         topics=topics,
+        fixes=np.array(sorted(fixes, key=lambda row: row[3]), dtype=np.float64).reshape(-1, 4),
     )
+
+
+def _fix(message: Any, bag_time: int) -> tuple[float, float, float, float] | None:
+    """(lat, lon, alt_m, time_s) of a NavSatFix that has a fix (status >= 0, finite, in range), else None."""
+    lat, lon, alt = float(message.latitude), float(message.longitude), float(message.altitude)
+    if message.status.status < 0 or not (np.isfinite(lat) and np.isfinite(lon)) or abs(lat) > 90 or abs(lon) > 360:
+        return None
+    stamp = int(message.header.stamp.sec) * 1_000_000_000 + int(message.header.stamp.nanosec)
+    return lat, lon, alt if np.isfinite(alt) else float("nan"), (stamp or int(bag_time)) / 1e9
 
 
 class _Collector:
