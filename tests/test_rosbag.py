@@ -377,3 +377,20 @@ def test_a_bag_with_gnss_fixes_pins_the_field_to_the_model_there(tmp_path: Path,
     expected = field_at(47.40, 8.50, alt_km=0.5, date="2026-01-01").total_in("uT")  # the date of the first fix
     assert magfit.Calibration.from_json(output.read_text()).field_strength == pytest.approx(expected, rel=1e-12)
     assert "WMM-2025 at 47.4°, 8.5°, 0.5 km on 2026.00" in result.stdout
+
+
+def test_a_truncated_bag_on_the_command_line_is_exit_2_and_one_line(bags: dict[str, Path], tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    for source in (bags["ros1"], next(bags["mcap"].glob("*.mcap")), next(bags["sqlite3"].glob("*.db3"))):
+        damaged = tmp_path / f"cut{source.suffix}"
+        damaged.write_bytes(source.read_bytes()[: len(source.read_bytes()) // 2])
+        output = tmp_path / "cal.json"
+        output.write_text("kept")
+        result = CliRunner().invoke(cli, ["calibrate", str(damaged), "--sensor", "/imu/mag", "-o", str(output)])
+        assert result.exit_code == 2, result.output
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"magfit: error: {damaged}: this "), lines
+        assert output.read_text() == "kept"
