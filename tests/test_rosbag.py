@@ -312,7 +312,7 @@ def test_a_bag_written_by_ros_itself() -> None:
     assert any("only 0.5 Hz" in note for note in magnetometer.notes)
 
 
-@pytest.mark.parametrize("kind", ["ros1", "mcap_file"])
+@pytest.mark.parametrize("kind", ["ros1", "mcap_file", "folder"])
 def test_magfit_calibrate_on_a_bag_recovers_the_truth(
     kind: str, bags: dict[str, Path], tmp_path: Path, simulation: magfit.Simulation
 ) -> None:
@@ -320,7 +320,7 @@ def test_magfit_calibrate_on_a_bag_recovers_the_truth(
 
     from magfit.cli import cli
 
-    path = bags["ros1"] if kind == "ros1" else next(bags["mcap"].glob("*.mcap"))
+    path = {"ros1": bags["ros1"], "mcap_file": next(bags["mcap"].glob("*.mcap")), "folder": bags["sqlite3"]}[kind]
     output = tmp_path / "cal.json"
     args = ["calibrate", str(path), "--sensor", "/imu/mag", "-m", "ellipsoid", "-o", str(output)]
     result = CliRunner().invoke(cli, args)

@@ -674,7 +674,7 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
 
 
 @click.command("calibrate")
-@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("file", type=click.Path(path_type=Path))
 @click.option(
     "-m",
     "--method",

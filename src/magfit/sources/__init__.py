@@ -207,6 +207,10 @@ def log_kind(path: str | os.PathLike[str]) -> str | None:
     """
     from ..io.sources import data_file
 
+    if os.path.isdir(path):  # a ROS 2 bag is a folder (metadata.yaml beside its storage files)
+        from .rosbag import bag_kind
+
+        return "rosbag" if bag_kind(path) == "folder" else None
     try:
         with open(data_file(path), "rb") as handle:
             head = handle.read(len(ULOG_MAGIC))
