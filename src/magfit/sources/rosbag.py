@@ -2,7 +2,7 @@
 
 Read with ``rosbags`` (the ``ros`` extra: pure Python, no ROS install), imported when a bag is first read.
 Every ``sensor_msgs/MagneticField`` topic becomes one magnetometer: its ``magnetic_field`` x, y, z are
-in tesla by the message's definition (REP 145), its ``header.frame_id`` names the sensor frame. Every
+in tesla by the message's definition, its ``header.frame_id`` names the sensor frame. Every
 ``sensor_msgs/Imu`` topic is kept beside them (orientation quaternion, linear acceleration) for the
 checks that need the attitude.
 
