@@ -310,3 +310,31 @@ def test_real_sitl_log_maps_the_priority_slots_and_refuses_a_still_vehicle() -> 
     assert np.linalg.norm(read.samples[0]) == pytest.approx(495.3, abs=0.1)
     result = CliRunner().invoke(cli, ["calibrate", str(SITL), "--sensor", "MAG/2"])
     assert result.exit_code == 1 and "identical" in result.stderr
+
+
+def test_a_singular_soft_iron_matrix_is_refused_not_inverted(tmp_path: Path) -> None:
+    # Found by the long fuzz run: a damaged COMPASS_DIA_Y of 0 made the undo a singular solve.
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "Qhhh", "TimeUS,MagX,MagY,MagZ")
+    for name, value in [("OFS_X", 0.0), ("OFS_Y", 0.0), ("OFS_Z", 0.0), ("DIA_X", 1.0), ("DIA_Y", 0.0), ("DIA_Z", 1.0)]:
+        writer.write("PARM", 0, f"COMPASS_{name}", value)
+    for axis in "XYZ":
+        writer.write("PARM", 0, f"COMPASS_ODI_{axis}", 0.0)
+    for j in range(100):
+        writer.write("MAG", j * 50_000, 100 + j, 0, 300)
+    path = tmp_path / "singular.bin"
+    path.write_bytes(writer.bytes())
+    (magnetometer,) = open_source(path).magnetometers
+    assert magnetometer.problem is not None and "singular matrix" in magnetometer.problem
+
+
+def test_a_parm_format_without_values_is_one_line(tmp_path: Path) -> None:
+    # Found by the long fuzz run: a damaged FMT gave PARM other field names.
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Vxlue")
+    writer.write("PARM", 0, "COMPASS_OFS_X", 1.0)
+    path = tmp_path / "parm.bin"
+    path.write_bytes(writer.bytes())
+    with pytest.raises(DataFileError, match="PARM messages' format has no Name and Value"):
+        open_source(path)

@@ -226,9 +226,16 @@ class DataFlashLog:
         if not self.has("PARM"):
             return {}
         records = self.messages("PARM")
+        if not {"Name", "Value"} <= set(records.dtype.names or ()):
+            raise DataFileError(
+                f"{self.path}: the PARM messages' format has no Name and Value fields: the log is damaged, so the "
+                "parameters its compasses were corrected with are unknown"
+            )
         times = _time_s(self, "PARM", records)
         table: dict[str, list[tuple[float, float]]] = {}
-        for name, value, time in zip(records["Name"], records["Value"].astype(np.float64), times, strict=False):
+        with np.errstate(invalid="ignore"):  # a damaged value is NaN or inf: refused where it is used
+            values = records["Value"].astype(np.float64)
+        for name, value, time in zip(records["Name"], values, times, strict=False):
             table.setdefault(name.rstrip(b"\x00").decode("ascii", "replace"), []).append((float(time), float(value)))
         return table
 
@@ -261,6 +268,13 @@ class _Compass:
     motor_compensation: bool
 
 
+def _matrix(diagonals: Any, offdiagonals: Any) -> NDArray[np.float64]:
+    """ArduPilot's soft-iron matrix: COMPASS_DIA* (all zero: ones, as the firmware), COMPASS_ODI* (xy, xz, yz)."""
+    diagonal = np.ones(3) if not np.any(diagonals) else np.asarray(diagonals, dtype=np.float64)
+    xy, xz, yz = np.asarray(offdiagonals, dtype=np.float64)
+    return np.array([[diagonal[0], xy, xz], [xy, diagonal[1], yz], [xz, yz, diagonal[2]]])
+
+
 def undo_calibration(
     logged: NDArray[np.float64],
     *,
@@ -283,9 +297,7 @@ def undo_calibration(
     motor_offsets : ndarray, shape (N, 3), optional
         MOX, MOY, MOZ: the motor compensation added after the matrix.
     """
-    diagonal = np.ones(3) if not np.any(diagonals) else np.asarray(diagonals, dtype=np.float64)
-    xy, xz, yz = np.asarray(offdiagonals, dtype=np.float64)
-    matrix = np.array([[diagonal[0], xy, xz], [xy, diagonal[1], yz], [xz, yz, diagonal[2]]])
+    matrix = _matrix(diagonals, offdiagonals)
     field = np.asarray(logged, dtype=np.float64)
     if motor_offsets is not None:
         field = field - motor_offsets
@@ -389,6 +401,20 @@ def _compass_parameters(
                 f"{name} changed during the log (at {changes[0][0]:.1f} s): the samples were corrected with two "
                 "calibrations; fit a log recorded after the change"
             )
+    used = [_latest(parameters, name) for name in every if name in parameters]
+    matrix = _matrix(
+        [_latest(parameters, n) or 0.0 for n in names["diagonals"]],
+        [_latest(parameters, n) or 0.0 for n in names["offdiagonals"]],
+    )
+    if (
+        not all(np.isfinite(v) for v in used if v is not None)
+        or not np.isfinite(np.linalg.cond(matrix))
+        or np.linalg.cond(matrix) > 1e6
+    ):
+        return None, (
+            f"its calibration parameters (COMPASS_OFS{s}, DIA{s}, ODI{s}, SCALE{s}) are not finite or form a "
+            "singular matrix, so the logged field cannot be undone (a damaged log, or a calibration that lost an axis)"
+        )
     motor = (_latest(parameters, "COMPASS_MOTCT") or 0) != 0 or (
         k == 0 and (_latest(parameters, "COMPASS_PMOT_EN") or 0)
     )
@@ -468,7 +494,8 @@ def _read(
     compass, problem = _compass_parameters(parameters, slot, magnetometer.start_s)
     if compass is None:  # _describe set the problem; Source.read refuses it before calling here
         raise DataFileError(f"{log.path}: {magnetometer.id} cannot be fitted: {problem}")
-    logged = np.column_stack([log.value(records, name, axis) for axis in ("MagX", "MagY", "MagZ")])
+    with np.errstate(invalid="ignore"):  # damaged values become NaN: dropped below as non-finite samples
+        logged = np.column_stack([log.value(records, name, axis) for axis in ("MagX", "MagY", "MagZ")])
     labels = records.dtype.names or ()
     motor = None
     if compass.motor_compensation:

@@ -113,7 +113,7 @@ def open_ulog(path: Path, file: Path) -> Source:
             magnetometers.append(_calibrated(sid, data, parameters, changed))
     counts: dict[str, int] = {}
     for data in ulog.data_list:
-        counts[data.name] = counts.get(data.name, 0) + len(data.data["timestamp"])
+        counts[data.name] = counts.get(data.name, 0) + len(next(iter(data.data.values()), ()))
     other = tuple(f"{name} ({counts[name]})" for name in _ALSO if name in counts)
     rest = sorted(set(counts) - set(_ALSO) - {"sensor_mag", "vehicle_magnetometer"})
     if rest:
@@ -126,7 +126,8 @@ def open_ulog(path: Path, file: Path) -> Source:
     def read(magnetometer: Magnetometer) -> LogSamples:
         data = streams[magnetometer.id]
         if magnetometer.id.startswith("sensor_mag/"):
-            samples = np.column_stack([np.asarray(data.data[axis], dtype=np.float64) for axis in "xyz"])
+            with np.errstate(invalid="ignore"):  # damaged values become NaN: dropped below as non-finite samples
+                samples = np.column_stack([np.asarray(data.data[axis], dtype=np.float64) for axis in "xyz"])
             columns: tuple[str, ...] = ("x", "y", "z")
         else:
             columns = tuple(f"magnetometer_ga[{i}]" for i in range(3))
@@ -150,7 +151,24 @@ def open_ulog(path: Path, file: Path) -> Source:
     )
 
 
+#: The fields each magnetometer topic must have; a damaged format definition may lack them.
+_FIELDS = {
+    "sensor_mag": ("timestamp", "x", "y", "z"),
+    "vehicle_magnetometer": ("timestamp", *(f"magnetometer_ga[{i}]" for i in range(3))),
+}
+
+
+def _lacking(data: Any) -> str | None:
+    """Why ``data`` cannot be read as its topic (fields missing from its format), or None."""
+    missing = [name for name in _FIELDS[data.name] if name not in data.data]
+    if not missing:
+        return None
+    return f"its format in this log has no {', '.join(missing)} field: the log is damaged"
+
+
 def _span(data: Any) -> tuple[int, float, float]:
+    if "timestamp" not in data.data:
+        return len(next(iter(data.data.values()), ())), float("nan"), float("nan")
     times = np.asarray(data.data["timestamp"], dtype=np.float64) / 1e6
     if not len(times):
         return 0, float("nan"), float("nan")
@@ -176,6 +194,7 @@ def _raw(sid: str, data: Any) -> Magnetometer:
         end_s=end,
         device_id=device,
         raw=True,
+        problem=_lacking(data),
     )
     rate = magnetometer.rate_hz
     if n < 2 or (np.isfinite(rate) and rate < SLOW_RATE_HZ):
@@ -194,6 +213,15 @@ def _calibration_index(parameters: dict[str, Any], device: int | None) -> int | 
     return None
 
 
+def _invertible(cal: dict[str, NDArray[np.float64]]) -> bool:
+    sx, sy, sz = cal["scales"]
+    xy, xz, yz = cal["offdiagonals"]
+    matrix = np.array([[sx, xy, xz], [xy, sy, yz], [xz, yz, sz]])
+    if not (np.all(np.isfinite(matrix)) and np.all(np.isfinite(cal["offsets"]))):
+        return False
+    return bool(np.linalg.cond(matrix) < 1e6)
+
+
 def _cal(parameters: dict[str, Any], index: int) -> dict[str, NDArray[np.float64]]:
     def vector(kind: str, default: float) -> NDArray[np.float64]:
         return np.array([float(parameters.get(f"CAL_MAG{index}_{axis}{kind}", default)) for axis in "XYZ"])
@@ -205,8 +233,10 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
     n, start, end = _span(data)
     device = _device(data)
     index = _calibration_index(parameters, device)
-    problem = None
-    if device is None:
+    problem = _lacking(data)
+    if problem is not None:
+        pass
+    elif device is None:
         problem = "this PX4 version's vehicle_magnetometer does not say which compass it is (no device_id)"
     elif index is None:
         problem = f"no CAL_MAGn_ID parameter holds its device_id {device}, so its calibration is unknown"
@@ -223,6 +253,11 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
         elif rotation > 0 or (rotation < 0 and (board != 0 or any(abs(t) > 1e-3 for t in tilt))):
             what = f"{name}_ROT {rotation}" if rotation > 0 else f"SENS_BOARD_ROT {board}, SENS_BOARD_X/Y/Z_OFF {tilt}"
             problem = f"it is rotated into the body frame ({what}), which magfit does not undo yet"
+        elif not _invertible(_cal(parameters, index)):
+            problem = (
+                f"its calibration parameters ({name}_*OFF, *SCALE, *ODIAG) are not finite or form a singular matrix, "
+                "so the logged field cannot be undone"
+            )
         elif comp != 0:
             problem = f"power compensation is configured (CAL_MAG_COMP_TYP {comp}) and cannot be undone from the log"
         else:
