@@ -338,3 +338,9 @@ def test_a_parm_format_without_values_is_one_line(tmp_path: Path) -> None:
     path.write_bytes(writer.bytes())
     with pytest.raises(DataFileError, match="PARM messages' format has no Name and Value"):
         open_source(path)
+
+
+def test_plot_of_a_log_is_refused_before_any_work(tmp_path: Path) -> None:
+    figure = tmp_path / "fit.png"
+    result = CliRunner().invoke(cli, ["calibrate", str(SITL), "--sensor", "MAG/0", "--plot", str(figure)])
+    assert result.exit_code == 2 and "--plot does not draw a flight log" in result.stderr and not figure.exists()

@@ -216,6 +216,12 @@ def run_calibration(
     )
 
 
+def _is_log(path: Path) -> bool:
+    from ..sources import log_kind
+
+    return log_kind(path) is not None
+
+
 def _run_log(
     path: Path, sensor: str | None, method: str, options: Mapping[str, Any], *, unit: str | None, even: bool
 ) -> CalibrationRun:
@@ -805,6 +811,8 @@ def calibrate_command(
         require("plot", "'magfit calibrate --plot'", ("matplotlib",))  # before the calibration is written
         check_figure_path(plot_path, "'--plot'")
     check_outputs(file, output, plot_path)
+    if plot_path is not None and _is_log(file):
+        fail(f"{file}: --plot does not draw a flight log's samples yet; fit without --plot")
     if system_id is not None and export_format != "px4":
         raise click.UsageError("--system-id goes with --export px4: it is the vehicle id a PX4 parameter file names")
     method = method or default_method()
