@@ -245,3 +245,21 @@ def test_without_pyulog_the_error_is_the_install_hint(tmp_path: Path, monkeypatc
     result = CliRunner().invoke(cli, ["inspect", str(copy)])
     assert result.exit_code == 2
     assert "pip install 'magfit[ulog]'" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_log_that_sends_pyulog_round_in_circles_is_one_line() -> None:
+    # Found by the long fuzz run: a synthetic log (written by ULogWriter) with a few bytes overwritten in its
+    # definitions section makes pyulog seek back as far as it read, for ever. Run in a subprocess with a time
+    # limit, so that a regression fails instead of hanging the suite.
+    import subprocess
+    import sys
+
+    damaged = Path(__file__).parent / "data" / "synthetic" / "ulog_pyulog_loops.ulg"
+    done = subprocess.run(
+        [sys.executable, "-c", "import sys; from magfit.cli import main; sys.exit(main())", "inspect", str(damaged)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2, done.stderr
+    assert "went round in circles on damaged data" in done.stderr and len(done.stderr.strip().splitlines()) == 1
