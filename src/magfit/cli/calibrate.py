@@ -712,6 +712,7 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     "--field-strength",
     type=FieldStrength(),
     default=None,
+    metavar="NUMBER|wmm",
     help="Known magnitude of the local field, in the samples' unit, or 'wmm' for the World Magnetic Model's at "
     "--location (or at a ROS bag's own GNSS fixes; needs the samples' unit): the corrected field is scaled to it, "
     "and the sphere fit pins its radius to it (see docs/methods.md).",
