@@ -156,7 +156,8 @@ def open_ulog(path: Path, file: Path) -> Source:
             columns: tuple[str, ...] = ("x", "y", "z")
         else:
             columns = tuple(f"magnetometer_ga[{i}]" for i in range(3))
-            corrected = np.column_stack([np.asarray(data.data[c], dtype=np.float64) for c in columns])
+            with np.errstate(invalid="ignore"):  # as above: damaged values become NaN, dropped below
+                corrected = np.column_stack([np.asarray(data.data[c], dtype=np.float64) for c in columns])
             index = _calibration_index(parameters, magnetometer.device_id)
             assert index is not None  # _calibrated made it a problem otherwise; Source.read refused it
             samples = undo_px4_calibration(corrected, **_cal(parameters, index))
