@@ -164,7 +164,7 @@ def run_calibration(
     if log_kind(path) is not None:  # a flight log: one compass's samples, read through magfit.sources
         return _run_log(path, sensor, method, options, unit=unit, even=even)
     if sensor is not None:
-        raise DataFileError(f"{path}: --sensor chooses a compass of a flight log (ULog, DataFlash), not of this file")
+        raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
     limit = memory_sample_limit() if max_samples is None else max_samples
     subsample = "--even" if even else None
     # The columns first (cheap: the file's head): every message, a refusal too, says which were used.

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..sources import Magnetometer, Source, open_source
-from ._common import console
+from ._common import console, option_wording
 
 
 def _number(value: float, digits: int = 1) -> str:
@@ -26,7 +26,7 @@ def _magnetometer_lines(magnetometer: Magnetometer) -> list[tuple[str, str]]:
     lines = [(magnetometer.id, f"{magnetometer.description}: {magnetometer.n_samples} samples in {unit}{timing}")]
     lines += [("", f"note: {note}") for note in magnetometer.notes]
     if magnetometer.problem is not None:
-        lines.append(("", f"cannot be fitted: {magnetometer.problem}"))
+        lines.append(("", f"cannot be fitted: {option_wording(magnetometer.problem)}"))
     return lines
 
 

@@ -265,7 +265,15 @@ def _samples_source(path: Path) -> Source:
     from ..io import read_samples, sniff
 
     fmt = sniff(path)
-    table = read_samples(path)
+    try:
+        table = read_samples(path)
+    except DataFileError as error:  # the layout is known, the magnetometer columns are not: say so
+        unknown = Magnetometer(
+            id="columns", description="no magnetometer columns", unit="", n_samples=0, problem=str(error)
+        )
+        return Source(
+            path=path, kind="samples", format=fmt.describe(), time_base="none (rows)", magnetometers=(unknown,)
+        )
     columns = ", ".join(str(c) for c in table.columns)
     note = (f"{table.n_skipped} rows skipped (NaN or inf)",) if table.n_skipped else ()
     magnetometer = Magnetometer(
