@@ -30,7 +30,7 @@ this reader maps it the same way when the log has those parameters.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -479,7 +479,7 @@ def _describe(
             f"logged at only {rate:.1f} Hz: too slow for a fit over a short tumble; enable the compass in LOG_BITMASK "
             "(COMPASS bit) for 10 Hz or more, or use the onboard calibrator (COMPASS_CAL_FIT)"
         )
-        magnetometer = Magnetometer(**{**magnetometer.__dict__, "notes": tuple(notes)})
+        magnetometer = replace(magnetometer, notes=tuple(notes))
     return magnetometer
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -226,7 +227,7 @@ def _raw(sid: str, data: Any) -> Magnetometer:
     if n < 2 or (np.isfinite(rate) and rate < SLOW_RATE_HZ):
         how = f"logged at only {rate:.1f} Hz" if np.isfinite(rate) else f"only {n} sample(s) logged"
         note = f"{how} (PX4's default logging profile): too few samples for a fit; {_HOW_TO_LOG_MORE}"
-        magnetometer = Magnetometer(**{**magnetometer.__dict__, "notes": (note,)})
+        magnetometer = replace(magnetometer, notes=(note,))
     return magnetometer
 
 
