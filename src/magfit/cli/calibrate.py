@@ -228,7 +228,7 @@ def _run_log(
     """Fit one magnetometer of a flight log (docs/file-formats.md): its raw field, read by magfit.sources."""
     from ..sources import open_source
 
-    source = open_source(path)
+    source = open_source(path, everything=False)  # the magnetometers only: what is logged beside is for inspect
     read = source.read(sensor)
     chosen = read.magnetometer
     for note in (*source.notes, *read.notes):

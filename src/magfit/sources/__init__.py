@@ -227,14 +227,18 @@ def log_kind(path: str | os.PathLike[str]) -> str | None:
     return None
 
 
-def open_source(path: str | os.PathLike[str]) -> Source:
+def open_source(path: str | os.PathLike[str], *, everything: bool = True) -> Source:
     """Open a recording once and say what it holds.
 
     Parameters
     ----------
     path : str or path-like
-        A PX4 ULog, an ArduPilot DataFlash log, or a samples file (text, ``.npy``, ``.npz``); compressed
-        files and standard input (``-``) as :func:`magfit.io.read_samples` takes them.
+        A PX4 ULog, an ArduPilot DataFlash log, a ROS bag, or a samples file (text, ``.npy``, ``.npz``);
+        compressed files and standard input (``-``) as :func:`magfit.io.read_samples` takes them.
+    everything : bool
+        False reads only the magnetometer topics of a ULog (``Source.other`` stays empty): what a fit needs,
+        at the cost of pyulog reading those topics alone (a log busy with other topics is read in half the
+        time or less).
 
     Raises
     ------
@@ -248,7 +252,7 @@ def open_source(path: str | os.PathLike[str]) -> Source:
     if kind == "ulog":
         from .ulog import open_ulog
 
-        return open_ulog(Path(path), data_file(path))
+        return open_ulog(Path(path), data_file(path), everything=everything)
     if kind == "dataflash":
         from .dataflash import open_dataflash
 

@@ -108,13 +108,16 @@ def undo_px4_calibration(
     return np.linalg.solve(matrix, np.asarray(corrected, dtype=np.float64).T).T + np.asarray(offsets, dtype=np.float64)
 
 
-def open_ulog(path: Path, file: Path) -> Source:
-    """Read a PX4 ULog into a :class:`~magfit.sources.Source` (``file``: its bytes on disk)."""
+def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
+    """Read a PX4 ULog into a :class:`~magfit.sources.Source` (``file``: its bytes on disk).
+
+    ``everything=False`` reads only the magnetometer topics (nothing listed in ``other``).
+    """
     pyulog = _pyulog()
     try:
         # pyulog prints its warnings about damaged data on stdout, which is magfit's output: captured.
         with contextlib.redirect_stdout(io.StringIO()) as said, _BudgetedFile(file) as handle:
-            ulog = pyulog.ULog(handle)
+            ulog = pyulog.ULog(handle, None if everything else list(_FIELDS))
     except Exception as error:  # pyulog raises what its parser meets (struct.error, IndexError, ...)
         reason = " ".join(str(error).split()) or type(error).__name__
         raise DataFileError(
