@@ -1469,10 +1469,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--real-data", type=Path, default=DEFAULT_REAL_DATA, help="folder of the real recordings")
     parser.add_argument("--no-real", action="store_true", help="skip the real recordings")
     parser.add_argument("--seed", type=int, default=20261121)
+    parser.add_argument("--cases", help="comma-separated words: only the cases whose name contains one of them")
     args = parser.parse_args(argv)
 
     command = _command_line(sys.argv[1:] if argv is None else list(argv))
     cases = smoke_grid() if args.smoke else full_grid(args.trials_scale)
+    if args.cases:
+        words = [word.strip() for word in args.cases.split(",") if word.strip()]
+        cases = [case for case in cases if any(word in case.name for word in words)]
+        if not cases:
+            parser.error(f"--cases {args.cases!r} matches no case of the grid")
     methods = args.methods.split(",") if args.methods else None
     report = run(
         cases,

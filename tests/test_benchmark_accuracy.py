@@ -305,3 +305,13 @@ def test_a_loss_to_a_peer_counts_unless_the_verdict_refused_every_trial() -> Non
     # auto is not forced: its refusals are failures, and a loss.
     auto_refused = [accuracy.Outcome(error="CalibrationError: no", verdict="refused") for _ in range(3)]
     assert accuracy._peer_target({"case": {"peer.fit": peer, "auto": auto_refused}}, {}).status == "FAIL"
+
+
+def test_cases_selects_cases_by_name(tmp_path: Path) -> None:
+    arguments = ["--smoke", "--no-peers", "--methods", "ellipsoid", "--output", str(tmp_path)]
+    assert accuracy.main([*arguments, "--cases", "tumble"]) == 0
+    names = [case["name"] for case in json.loads((tmp_path / "accuracy.json").read_text())["cases"]]
+    assert names == ["tumble σ=0.5% N=1000"]
+    with pytest.raises(SystemExit) as usage:
+        accuracy.main([*arguments, "--cases", "no such case"])
+    assert usage.value.code == 2
