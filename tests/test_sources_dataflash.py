@@ -18,7 +18,19 @@ from magfit.sources import open_source
 from magfit.sources.dataflash import undo_calibration
 
 HEAD = b"\xa3\x95"
-_STRUCT = {"Q": "Q", "B": "B", "h": "h", "f": "f", "I": "I", "N": "16s", "Z": "64s", "n": "4s"}
+_STRUCT = {
+    "Q": "Q",
+    "B": "B",
+    "h": "h",
+    "H": "H",
+    "f": "f",
+    "I": "I",
+    "L": "i",
+    "e": "i",
+    "N": "16s",
+    "Z": "64s",
+    "n": "4s",
+}
 
 
 class DataFlashWriter:
@@ -344,3 +356,26 @@ def test_plot_of_a_log_is_refused_before_any_work(tmp_path: Path) -> None:
     figure = tmp_path / "fit.png"
     result = CliRunner().invoke(cli, ["calibrate", str(SITL), "--sensor", "MAG/0", "--plot", str(figure)])
     assert result.exit_code == 2 and "--plot does not draw a flight log" in result.stderr and not figure.exists()
+
+
+def test_the_position_is_the_median_of_the_3d_fixes_with_the_gps_time(tmp_path: Path) -> None:
+    writer = DataFlashWriter()
+    writer.define(132, "GPS", "QBBIHLLe", "TimeUS,I,Status,GMS,GWk,Lat,Lng,Alt")
+    writer.write("GPS", 1, 0, 1, 0, 0, 0, 0, 0)
+    for j, lat in enumerate((472000000, 472000010, 472000020)):
+        writer.write("GPS", 2 + j, 0, 3, 100_000 + j * 200, 2300, lat, 85000000, 48850)
+    writer.write("GPS", 9, 1, 3, 100_000, 2300, 100000000, 100000000, 0)  # the second receiver: not used
+    path = tmp_path / "gps.bin"
+    path.write_bytes(writer.bytes())
+    position = open_source(path).position
+    assert position is not None and position.n_fixes == 3
+    assert position.lat_deg == pytest.approx(47.200001) and position.lon_deg == pytest.approx(8.5)
+    assert position.alt_km == pytest.approx(0.4885)
+    # GPS week 2300, 100 s into it, less the 18 leap seconds: 2024-02-04 00:01:22 UTC.
+    assert position.time_s == pytest.approx(315_964_800 + 2300 * 604_800 + 100 - 18)
+
+
+def test_the_real_sitl_log_gives_its_position() -> None:
+    position = open_source(SITL).position
+    assert position is not None and position.n_fixes == 125
+    assert (position.lat_deg, position.lon_deg) == pytest.approx((37.2418609, -115.796917))

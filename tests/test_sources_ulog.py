@@ -263,3 +263,14 @@ def test_a_log_that_sends_pyulog_round_in_circles_is_one_line() -> None:
     )
     assert done.returncode == 2, done.stderr
     assert "went round in circles on damaged data" in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+
+def test_the_position_comes_from_the_3d_fixes() -> None:
+    # PX4's sample log was flown in Trondheim (vehicle_gps_position in 1e-7 degrees and millimetres).
+    position = open_source(SAMPLE).position
+    assert position is not None and position.n_fixes == 32
+    assert position.lat_deg == pytest.approx(63.41705, abs=1e-4) and position.lon_deg == pytest.approx(
+        10.40822, abs=1e-4
+    )
+    assert 0.0 < position.alt_km < 0.2
+    assert position.time_s == pytest.approx(1618986658.6, abs=1.0)  # 2021-04-21 06:30 UTC

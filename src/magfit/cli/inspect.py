@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime
 import math
 from pathlib import Path
 
@@ -41,6 +42,20 @@ def source_lines(source: Source) -> list[tuple[str, str]]:
         lines += [("", f"{' ' * len(label)}  {more}") for _, more in _magnetometer_lines(magnetometer)[1:]]
     for index, other in enumerate(source.other):
         lines.append(("also logged" if index == 0 else "", other))
+    if source.position is not None:
+        where = source.position
+        when = ""
+        if math.isfinite(where.time_s):
+            when = datetime.datetime.fromtimestamp(where.time_s, tz=datetime.timezone.utc).strftime(
+                ", %Y-%m-%d %H:%M UTC"
+            )
+        lines.append(
+            (
+                "position",
+                f"{where.lat_deg:.5f}, {where.lon_deg:.5f}, {where.alt_km:.3f} km{when} (median of {where.n_fixes} "
+                "3-D GNSS fixes)",
+            )
+        )
     lines += [("note", note) for note in source.notes]
     usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
     if source.kind != "samples" and len(usable) > 1:

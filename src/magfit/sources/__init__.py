@@ -32,8 +32,10 @@ from ..errors import DataFileError
 __all__ = [
     "LogSamples",
     "Magnetometer",
+    "Position",
     "Source",
     "log_kind",
+    "median_position",
     "open_source",
 ]
 
@@ -125,6 +127,49 @@ class LogSamples:
 
 
 @dataclass(frozen=True)
+class Position:
+    """Where and when a log was recorded, from its own GNSS fixes (for the World Magnetic Model).
+
+    Attributes
+    ----------
+    lat_deg, lon_deg : float
+        The median of the 3-D fixes, geodetic degrees.
+    alt_km : float
+        Their median altitude above mean sea level, km (the model's ellipsoid height differs by the geoid's
+        tens of metres: nothing for the field).
+    time_s : float
+        UTC seconds since 1970 of the first fix with a time, NaN when the receiver gave none.
+    n_fixes : int
+        How many 3-D fixes the medians are taken over.
+    """
+
+    lat_deg: float
+    lon_deg: float
+    alt_km: float
+    time_s: float
+    n_fixes: int
+
+
+def median_position(
+    lat_deg: NDArray[np.float64], lon_deg: NDArray[np.float64], alt_m: NDArray[np.float64], time_s: NDArray[np.float64]
+) -> Position | None:
+    """The :class:`Position` of the fixes given (already the 3-D ones), or None when there is no finite one."""
+    good = np.isfinite(lat_deg) & np.isfinite(lon_deg) & (np.abs(lat_deg) <= 90) & (np.abs(lon_deg) <= 180)
+    good &= ~((lat_deg == 0) & (lon_deg == 0))  # a receiver without a fix reports 0, 0
+    if not np.any(good):
+        return None
+    altitude = alt_m[good][np.isfinite(alt_m[good])]
+    times = time_s[good][np.isfinite(time_s[good]) & (time_s[good] > 0)]
+    return Position(
+        lat_deg=float(np.median(lat_deg[good])),
+        lon_deg=float(np.median(lon_deg[good])),
+        alt_km=float(np.median(altitude)) / 1000 if len(altitude) else 0.0,
+        time_s=float(times[0]) if len(times) else float("nan"),
+        n_fixes=int(np.count_nonzero(good)),
+    )
+
+
+@dataclass(frozen=True)
 class Source:
     """What a recording holds: its format, magnetometers and other logged streams.
 
@@ -144,6 +189,8 @@ class Source:
         The other streams logged, with their sample counts (``vehicle_attitude (2 310)``).
     notes : tuple of str
         What a user must know about the whole file (bytes skipped as damaged ...).
+    position : Position or None
+        Where and when, from the log's own 3-D GNSS fixes (flight logs), or None.
     """
 
     path: Path
@@ -153,6 +200,7 @@ class Source:
     magnetometers: tuple[Magnetometer, ...]
     other: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    position: Position | None = None
     _reader: Callable[[Magnetometer], LogSamples] | None = field(default=None, repr=False, compare=False)
 
     def magnetometer(self, sensor: str | None) -> Magnetometer:

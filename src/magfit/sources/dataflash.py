@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
-from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Source
+from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
 __all__ = ["DataFlashLog", "open_dataflash", "undo_calibration"]
 
@@ -337,6 +337,7 @@ def open_dataflash(path: Path, file: Path) -> Source:
 
     return Source(
         path=path,
+        position=_position(log),
         kind="dataflash",
         format="ArduPilot DataFlash log",
         time_base="seconds since boot (TimeUS)",
@@ -345,6 +346,33 @@ def open_dataflash(path: Path, file: Path) -> Source:
         notes=tuple(notes),
         _reader=read,
     )
+
+
+#: GPS time starts at 1980-01-06 00:00 UTC; it runs ahead of UTC by the leap seconds since (18 from 2017).
+_GPS_EPOCH_S = 315_964_800.0
+_GPS_LEAP_S = 18.0
+
+
+def _position(log: DataFlashLog) -> Position | None:
+    """The median of the first GPS's 3-D fixes (Status >= 3) and the UTC time of the first (GWk, GMS)."""
+    if not log.has("GPS"):
+        return None
+    records = log.messages("GPS")
+    labels = set(records.dtype.names or ())
+    if not {"Status", "Lat", "Lng"} <= labels:
+        return None
+    if "I" in labels:
+        records = records[records["I"] == 0]
+    records = records[records["Status"] >= 3]
+    with np.errstate(invalid="ignore"):
+        lat, lon = log.value(records, "GPS", "Lat"), log.value(records, "GPS", "Lng")
+        alt = log.value(records, "GPS", "Alt") if "Alt" in labels else np.full(len(records), np.nan)
+        if {"GWk", "GMS"} <= labels:
+            weeks, ms = records["GWk"].astype(np.float64), records["GMS"].astype(np.float64)
+            time = np.where(weeks > 0, _GPS_EPOCH_S + weeks * 604_800 + ms / 1000 - _GPS_LEAP_S, np.nan)
+        else:
+            time = np.full(len(records), np.nan)
+    return median_position(lat, lon, alt, time)
 
 
 def _compass_streams(log: DataFlashLog) -> list[tuple[str, NDArray[Any]]]:

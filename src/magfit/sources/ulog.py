@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
-from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Source
+from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
 __all__ = ["open_ulog", "undo_px4_calibration"]
 
@@ -117,7 +117,7 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
     try:
         # pyulog prints its warnings about damaged data on stdout, which is magfit's output: captured.
         with contextlib.redirect_stdout(io.StringIO()) as said, _BudgetedFile(file) as handle:
-            ulog = pyulog.ULog(handle, None if everything else list(_FIELDS))
+            ulog = pyulog.ULog(handle, None if everything else [*_FIELDS, *_GPS_TOPICS])
     except Exception as error:  # pyulog raises what its parser meets (struct.error, IndexError, ...)
         reason = " ".join(str(error).split()) or type(error).__name__
         raise DataFileError(
@@ -171,6 +171,7 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
 
     return Source(
         path=path,
+        position=_position(ulog),
         kind="ulog",
         format=described,
         time_base="seconds since boot (timestamp)",
@@ -186,6 +187,32 @@ _FIELDS = {
     "sensor_mag": ("timestamp", "x", "y", "z"),
     "vehicle_magnetometer": ("timestamp", *(f"magnetometer_ga[{i}]" for i in range(3))),
 }
+
+
+#: The GNSS topics: vehicle_gps_position (every version), sensor_gps (the raw receiver, newer versions).
+_GPS_TOPICS = ("vehicle_gps_position", "sensor_gps")
+
+
+def _position(ulog: Any) -> Position | None:
+    """The median of the first GNSS topic's 3-D fixes (fix_type >= 3) and the UTC time of the first one."""
+    for topic in _GPS_TOPICS:
+        for data in ulog.data_list:
+            if data.name != topic or data.multi_id != 0 or "fix_type" not in data.data:
+                continue
+            fields = data.data
+            fixed = np.asarray(fields["fix_type"]) >= 3
+            with np.errstate(invalid="ignore"):
+                if "latitude_deg" in fields:  # PX4 1.14 on: degrees and metres as doubles
+                    lat, lon = np.asarray(fields["latitude_deg"], float), np.asarray(fields["longitude_deg"], float)
+                    alt = np.asarray(fields.get("altitude_msl_m", np.full(len(lat), np.nan)), float)
+                elif "lat" in fields:  # before: 1e-7 degrees and millimetres as integers
+                    lat, lon = np.asarray(fields["lat"], float) * 1e-7, np.asarray(fields["lon"], float) * 1e-7
+                    alt = np.asarray(fields.get("alt", np.full(len(lat), np.nan)), float) / 1000
+                else:
+                    continue
+                time = np.asarray(fields.get("time_utc_usec", np.zeros(len(lat))), float) / 1e6
+            return median_position(lat[fixed], lon[fixed], alt[fixed], time[fixed])
+    return None
 
 
 def _lacking(data: Any) -> str | None:
