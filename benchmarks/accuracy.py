@@ -644,7 +644,8 @@ def run_case(
                 if name in keep:
                     outcome.details = {k: v for k, v in calibration.details.items() if k in KEPT_DETAILS}
             if name in magfit.METHODS:
-                outcome.verdict, outcome.verdict_reason = verdict_of(calibration, error)
+                # A forced method that raises failed to fit (no convergence, a hyperboloid): no verdict.
+                outcome.verdict, outcome.verdict_reason = verdict_of(calibration, error if name in NOT_FORCED else "")
             outcome.seconds = seconds
             outcomes[name].append(outcome)
         # What the raw readings give, as the yardstick a calibration must beat (issue 10).
@@ -1101,7 +1102,8 @@ def run_recordings(folder: Path, fitters: Mapping[str, Fitter], seed: int) -> di
         row: dict[str, Any] = {"n": len(samples), "failure_case": recording.failure_case, "methods": {}}
         for name, fitter in fitters.items():
             calibration, message, seconds = fit_once(fitter, fit_part, None)
-            verdict, reason = verdict_of(calibration, message) if name in magfit.METHODS else (None, None)
+            unforced = message if name in NOT_FORCED else ""
+            verdict, reason = verdict_of(calibration, unforced) if name in magfit.METHODS else (None, None)
             judged = {"verdict": verdict, "verdict_reason": reason} if verdict else {}
             if calibration is None:
                 row["methods"][name] = {"error": message, "seconds": seconds, **judged}
