@@ -4,6 +4,7 @@ words; damaged logs refused in one line."""
 
 from __future__ import annotations
 
+import re
 import struct
 from pathlib import Path
 
@@ -234,13 +235,28 @@ def test_old_style_log_recovers_the_truth(tmp_path: Path) -> None:
         np.testing.assert_allclose(read.samples, simulations[slot].samples, atol=1.5)
 
 
-def test_calibrate_on_a_log_needs_sensor_and_fits_the_chosen_compass(tmp_path: Path) -> None:
+def test_calibrate_on_a_log_fits_each_compass_or_the_chosen_one(tmp_path: Path) -> None:
     path = tmp_path / "flight.bin"
     simulations = write_new_style(path)
     runner = CliRunner()
-    result = runner.invoke(cli, ["calibrate", str(path)])
+    # Without --sensor: every compass, one summary each, its first line saying which it is.
+    result = runner.invoke(cli, ["calibrate", str(path), "-m", "ellipsoid"])
+    assert result.exit_code == 0, result.output
+    blocks = result.stdout.split("\n\n")
+    assert len(blocks) == 2
+    for k, block in enumerate(blocks):
+        assert (
+            f"MAG/{k}: compass {k + 1} (MAG, I={k}), COMPASS_DEV_ID{'' if k == 0 else k + 1} {COMPASSES[k]['dev_id']}"
+            in block
+        )
+        printed = re.search(r"^offset +\(([^)]*)\) mG$", block, re.MULTILINE)
+        assert printed is not None
+        offset = [float(v) for v in printed.group(1).split(",")]  # the right compass's offset under its name
+        np.testing.assert_allclose(offset, simulations[k].truth.offset, atol=0.01 * simulations[k].field_strength)
+    # -o and --export write one calibration: the compass must be chosen.
+    result = runner.invoke(cli, ["calibrate", str(path), "-o", str(tmp_path / "x.json")])
     assert result.exit_code == 2
-    assert "--sensor" in result.stderr and "MAG/0" in result.stderr and "MAG/1" in result.stderr
+    assert "--sensor" in result.stderr and "MAG/0, MAG/1" in result.stderr and not (tmp_path / "x.json").exists()
     output = tmp_path / "cal.json"
     result = runner.invoke(cli, ["calibrate", str(path), "--sensor", "658953", "-m", "ellipsoid", "-o", str(output)])
     assert result.exit_code == 0, result.output
@@ -322,6 +338,9 @@ def test_real_sitl_log_maps_the_priority_slots_and_refuses_a_still_vehicle() -> 
     assert np.linalg.norm(read.samples[0]) == pytest.approx(495.3, abs=0.1)
     result = CliRunner().invoke(cli, ["calibrate", str(SITL), "--sensor", "MAG/2"])
     assert result.exit_code == 1 and "identical" in result.stderr
+    result = CliRunner().invoke(cli, ["calibrate", str(SITL)])  # every compass: each refused, exit 1
+    assert result.exit_code == 1 and result.stderr.count("identical") == 3
+    assert "3 of 3 magnetometers could not be fitted (MAG/0, MAG/1, MAG/2)" in result.stderr.splitlines()[-1]
 
 
 def test_a_singular_soft_iron_matrix_is_refused_not_inverted(tmp_path: Path) -> None:

@@ -169,8 +169,14 @@ def test_calibrate_by_device_id_and_inspect(tmp_path: Path) -> None:
     path = tmp_path / "flight.ulg"
     simulation = write_log(path)
     runner = CliRunner()
-    result = runner.invoke(cli, ["calibrate", str(path)])
-    assert result.exit_code == 2 and "--sensor" in result.stderr
+    # Without --sensor every stream is fitted: sensor_mag/1 holds one repeated value and is refused (exit 1),
+    # the other two recover the truth, each summary naming its stream.
+    result = runner.invoke(cli, ["calibrate", str(path), "-m", "ellipsoid"])
+    assert result.exit_code == 1
+    assert "1 of 3 magnetometers could not be fitted (sensor_mag/1)" in result.stderr.splitlines()[-1]
+    assert "sensor_mag/0: raw sensor_mag, device_id 592905" in result.stdout
+    assert "vehicle_magnetometer/0: calibrated vehicle_magnetometer, device_id 592905" in result.stdout
+    assert "sensor_mag/1: not fitted" in result.stdout
     output = tmp_path / "cal.json"
     result = runner.invoke(
         cli, ["calibrate", str(path), "--sensor", "sensor_mag/0", "-m", "ellipsoid", "-o", str(output)]

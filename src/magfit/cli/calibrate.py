@@ -216,6 +216,62 @@ def run_calibration(
     )
 
 
+def _several_compasses(path: Path) -> list[str]:
+    """The ids of a log's magnetometers that can be fitted, when there are several; else an empty list."""
+    if not _is_log(path):
+        return []
+    from ..sources import open_source
+
+    source = open_source(path, everything=False)
+    usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
+    return usable if len(usable) > 1 else []
+
+
+def _calibrate_each(
+    file: Path,
+    sensors: Sequence[str],
+    method: str,
+    unit: str | None,
+    even: bool,
+    max_samples: int | None,
+    options: Mapping[str, Any],
+    force: bool,
+    model: tuple[Field, str | None] | None,
+) -> None:
+    """Fit every compass of a log, one summary each (its 'file' line names the compass); exit 1 if one failed."""
+    out = console()
+    failed = []
+    for index, sensor in enumerate(sensors):
+        if index:
+            out.print("")
+        try:
+            run = run_calibration(
+                file,
+                method=method,
+                unit=unit,
+                even=even,
+                max_samples=max_samples,
+                options=options,
+                allow_undetermined=force,
+                sensor=sensor,
+            )
+        except CalibrationError as error:
+            failed.append(sensor)
+            warn(str(error))
+            out.print(f"{'sensor':<16} {sensor}: not fitted (the warning above says why)")
+            continue
+        for message in _fit_warnings(run.calibration):
+            warn(without_own_advice(message, run.calibration.method))
+        print_summary(out, run)
+        if model is not None:
+            _print_model_field(out, run.calibration, *model)
+    if failed:
+        raise CalibrationError(
+            f"{file}: {len(failed)} of {len(sensors)} magnetometers could not be fitted ({', '.join(failed)}); the "
+            "warnings above say why"
+        )
+
+
 def _is_log(path: Path) -> bool:
     from ..sources import log_kind
 
@@ -823,6 +879,14 @@ def calibrate_command(
     if field_strength == "wmm" and model is not None and model[1] is not None:  # (the unit is checked physical)
         field_strength = model[0].total_in(model[1])
     options = {} if field_strength is None else {"field_strength": field_strength}
+    if sensor is None and (several := _several_compasses(file)):
+        if output is not None or export_format is not None:
+            fail(
+                f"{file}: holds {len(several)} magnetometers ({', '.join(several)}); -o and --export write one "
+                "calibration: choose it with --sensor ID"
+            )
+        _calibrate_each(file, several, method, unit, even, max_samples, options, force, model)
+        return
     run = run_calibration(
         file,
         method=method,
