@@ -59,7 +59,7 @@ def source_lines(source: Source) -> list[tuple[str, str]]:
     lines += [("note", note) for note in source.notes]
     usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
     if source.kind != "samples" and len(usable) > 1:
-        lines.append(("calibrate", f"choose a magnetometer with --sensor ID ({', '.join(usable)})"))
+        lines.append(("calibrate", f"fits each; --sensor ID fits one ({', '.join(usable)}), as -o and --export need"))
     return lines
 
 
