@@ -355,6 +355,13 @@ _GPS_LEAP_S = 18.0
 
 def _position(log: DataFlashLog) -> Position | None:
     """The median of the first GPS's 3-D fixes (Status >= 3) and the UTC time of the first (GWk, GMS)."""
+    try:
+        return _gps_position(log)
+    except (DataFileError, TypeError, ValueError):  # a damaged GPS format: the log has no position to give
+        return None
+
+
+def _gps_position(log: DataFlashLog) -> Position | None:
     if not log.has("GPS"):
         return None
     records = log.messages("GPS")

@@ -195,6 +195,13 @@ _GPS_TOPICS = ("vehicle_gps_position", "sensor_gps")
 
 def _position(ulog: Any) -> Position | None:
     """The median of the first GNSS topic's 3-D fixes (fix_type >= 3) and the UTC time of the first one."""
+    try:
+        return _gnss_position(ulog)
+    except (TypeError, ValueError, KeyError):  # a damaged topic format: the log has no position to give
+        return None
+
+
+def _gnss_position(ulog: Any) -> Position | None:
     for topic in _GPS_TOPICS:
         for data in ulog.data_list:
             if data.name != topic or data.multi_id != 0 or "fix_type" not in data.data:
