@@ -15,10 +15,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .calibration import Calibration
-from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refit, diagnose_statistics
+from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refit, diagnose_statistics, model_kind
 from .diagnostics import diagnose as diagnose_samples
 from .errors import CalibrationError, MagfitError
-from .methods import FitInput
+from .methods import FitInput, get_method
 from .methods.auto import refit_first_order
 from .methods.core import estimate, method_spec, prepare, refitter
 from .statistics import Statistics
@@ -123,9 +123,19 @@ def _judged(
     else:
         thorough = diagnostics is True
         refit = refit_of(calibration, method, options) if thorough else None
+        # The halves and the block jackknife refit 10 times: an iterative method (ml, robust: seconds on a
+        # long log) is stood in for by its model's first-order maximum-likelihood fit, which the same
+        # stretches of the recording move the same way.
+        iterative = get_method(method).data == "samples" and method != "auto"
+        variation = _first_order_refit(calibration, options) if thorough and iterative else None
         # auto returns its chosen model's maximum-likelihood fit: the comparison with that fit is moot.
         report = diagnose_samples(
-            calibration, data.samples, refit=refit, thorough=thorough, compare_ml=method != "auto"
+            calibration,
+            data.samples,
+            refit=refit,
+            thorough=thorough,
+            compare_ml=method != "auto",
+            variation_refit=variation,
         )
     support = report.support
     assert support is not None  # both diagnoses reach a verdict
@@ -147,6 +157,13 @@ def refit_of(calibration: Calibration, method: str, options: dict[str, Any]) -> 
         known = options.get("field_strength")
         return lambda samples: refit_first_order(chosen, calibration, samples, field_strength=known)
     return refitter(method, options)
+
+
+def _first_order_refit(calibration: Calibration, options: dict[str, Any]) -> Refit:
+    """The first-order maximum-likelihood fit of ``calibration``'s model, from it (see :func:`_judged`)."""
+    kind = model_kind(calibration)
+    known = options.get("field_strength")
+    return lambda samples: refit_first_order(kind, calibration, samples, field_strength=known)
 
 
 def diagnose(
