@@ -73,7 +73,7 @@ MAX_SAMPLES = MAX_ANALYSED
 CONSISTENCY_SAMPLES = 5_000
 #: Folds of the held-out evaluation, and the most analysed samples it refits on.
 FOLDS = 5
-GOODNESS_SAMPLES = 5_000
+GOODNESS_SAMPLES = 3_000
 
 
 # ---------------------------------------------------------------------- diagnose
@@ -285,7 +285,7 @@ def _known_field(calibration: Calibration) -> tuple[float, float] | None:
 HALF_SAMPLES = 20_000
 #: Contiguous blocks of the block jackknife, and the most samples each refit sees.
 JACKKNIFE_BLOCKS = 8
-JACKKNIFE_SAMPLES = 4_000
+JACKKNIFE_SAMPLES = 2_000
 
 
 def _with_block_jackknife(uncertainty: Uncertainty, rows: NDArray[np.float64], refit: Refit) -> Uncertainty:
