@@ -1,42 +1,32 @@
 """Automatic model choice: sphere, axis-aligned or full ellipsoid, robust when outliers are present.
 
 The three models are nested (sphere ⊂ diag ⊂ full: 4, 6 and 9 parameters besides the rotation the
-data cannot see). ``auto`` fits each, refines it to the maximum-likelihood fit of its model (Levenberg-
-Marquardt on the first-order distances ``d`` of :mod:`magfit.geometry.frame`, on a regular stride
-of at most 20 000 samples), scores them by the Bayesian information criterion on RSS = Σ d²
+data cannot see). ``auto`` returns the simplest model the samples determine that no richer one predicts
+clearly better on stretches of the recording it did not see (docs/diagnostics.md, "auto"):
 
-    BIC = n ln(RSS / n) + k ln n              (Schwarz, Ann. Statist. 6, 1978; Gaussian residuals)
+1. Each model is fitted and refined to its maximum-likelihood fit (Levenberg-Marquardt on the first-order
+   distances ``d`` of :mod:`magfit.geometry.frame`, on a regular stride of at most :data:`CHOICE_ROWS`
+   samples). An optimum flattened onto the samples (they lie in a plane within the noise) is left out.
+2. A simpler model leaving more than :data:`INADEQUATE_RATIO` times a richer one's RMS distance (and more
+   than :data:`INADEQUATE_RMS` of the field) cannot stand in for it (the soft iron would stay in the
+   heading). The others are judged by the support verdict (:mod:`magfit.diagnostics.verdict`) at their
+   optimum: models with an undetermined direction, a band or a cone of directions are passed over.
+3. Among the determined models, a richer one replaces a simpler one only when it predicts
+   :data:`BLOCKS` contiguous held-out blocks of the recording better by more than one standard error of
+   the paired differences (and :data:`MIN_GAIN`). The BIC, ``n ln(RSS / n) + k ln n`` (Schwarz, Ann.
+   Statist. 6, 1978), is reported but does not choose: it counts every sample as independent evidence, so
+   on long logs it prefers the richer model whenever it follows effects no calibration holds (a drifting
+   field, a vehicle's slowly changing fields) with its weakly determined parameters.
+4. An undetermined richer model that predicts the held-out blocks more than :data:`WITNESS_GAIN` better
+   than the chosen one vetoes it: the chosen model leaves out a distortion the samples show.
 
-and keeps the lowest. Why BIC rather than cross-validation or the parameter uncertainty: it needs no
-refit on held-out folds (one fit per candidate on a bounded stride, so it scales to 10⁷ samples), it is
-consistent for nested models
-(the true model is chosen with probability → 1 as n grows, where AIC and cross-validation keep a fixed
-chance of over-fitting), and the penalty ``k ln n`` asks a richer model to explain more than the noise.
+The calibration returned is the chosen model's maximum-likelihood fit on a stride of at most 200 000
+samples: for the full ellipsoid the ``ml`` method's fit (exact orthogonal distances, corrected for the
+σ²-bias of curved surfaces); for the sphere and diag models, the first-order fit of the model choice.
 
-The BIC only judges how well each model fits the samples it saw. When the samples do not determine
-part of a model (a vehicle that only yaws, or tilts ±20°: the vertical offset and scale trade off
-against each other), a richer model can fit the band of samples as well as any other and return noise
-along that direction. So the chosen model is then checked for observability (see
-:mod:`magfit.diagnostics.uncertainty`): if a combination of its parameters has a one-sigma above 5 % of
-the field, the model is kept (the BIC already found that the simpler models fit significantly worse, and
-their misfit would cost more than this uncertainty) and the direction is named as not determined: a
-vehicle tilting ±20° barely sees the vertical offset, which hardly matters for heading near level.
-When the samples form a band around an axis (the sensor only turned about it),
-the offset and scale along that axis are fixed by nothing: the model is passed over regardless, and if no
-model is left, ``auto`` raises :class:`~magfit.CalibrationError` with the reason.
-
-The calibration returned is the chosen model's maximum-likelihood fit (least squares on the distances
-of the samples to the ellipsoid, Levenberg-Marquardt from the model's algebraic or ALS fit, on a stride of
-at most 200 000 samples): under
-restricted attitudes it is less biased than the algebraic fits (measured: 1.26° vs 1.37° for ALS and
-6.8° for the algebraic ellipsoid on the benchmark's restricted case). For the full ellipsoid it is the
-``ml`` method's fit (exact orthogonal distances, corrected for the σ²-bias of curved surfaces); for the
-sphere and diag models, the first-order (Sampson) distances of the model choice.
-
-Outliers: a robust fit (:mod:`magfit.methods.robust`) of the full model screens (a stride of at most
-20 000 of) the samples first; when
-more than 0.2 % of them (and at least 5) lie beyond 6 robust standard deviations, every candidate is
-fitted robustly and the criterion is computed on the common inliers.
+Outliers: when the plain algebraic fit leaves far samples, a robust algebraic fit screens a stride of at
+most :data:`SCREEN_ROWS` samples; when more than 0.2 % of them (and at least 5) lie beyond 6 robust
+standard deviations, every candidate is fitted robustly and the choice uses the common inliers.
 """
 
 from __future__ import annotations
@@ -238,12 +228,11 @@ def _optimal_rss(
 ) -> tuple[dict[str, float], dict[str, Calibration], dict[str, str]]:
     """Σ d² at each model's maximum-likelihood optimum over all kept samples, and the optima themselves.
 
-    The BIC compares maximised likelihoods: under isotropic Gaussian noise on the samples, each model is
-    scored at the minimum of the sum of squared (first-order) distances of the samples to its ellipsoid,
-    reached from the model's own fit and from the simpler model's optimum (so a richer model never scores
-    worse than a simpler one it contains). On long logs the sum runs on a regular stride of at most
-    20 000 samples, scaled to all of them; the sums are in units of the data's radius squared (only ratios
-    matter). The optima (when real ellipsoids) are the calibrations ``auto`` returns and the references
+    Each model is scored at the minimum of the sum of squared (first-order) distances of the samples to
+    its ellipsoid (its maximised likelihood under isotropic Gaussian noise), reached from the better of the
+    model's own fit and the simpler model's optimum (so a richer model never scores worse than a simpler
+    one it contains). The sum runs on a regular stride of at most :data:`CHOICE_ROWS` samples, scaled to
+    all of them; the sums are in units of the data's radius squared (only ratios matter). The optima (when real ellipsoids) are the calibrations ``auto`` returns and the references
     at which the observability is judged. A model whose optimum has a semi-axis shorter than
     :data:`FLAT_SEMI_AXIS` residual distances is left out (third return value: why).
     """
