@@ -232,8 +232,9 @@ def _optimal_rss(
     its ellipsoid (its maximised likelihood under isotropic Gaussian noise), reached from the better of the
     model's own fit and the simpler model's optimum (so a richer model never scores worse than a simpler
     one it contains). The sum runs on a regular stride of at most :data:`CHOICE_ROWS` samples, scaled to
-    all of them; the sums are in units of the data's radius squared (only ratios matter). The optima (when real ellipsoids) are the calibrations ``auto`` returns and the references
-    at which the observability is judged. A model whose optimum has a semi-axis shorter than
+    all of them; the sums are in units of the data's radius squared (only ratios matter). The optima
+    (when real ellipsoids) are the calibrations ``auto`` returns and the references at which the verdict
+    judges each model. A model whose optimum has a semi-axis shorter than
     :data:`FLAT_SEMI_AXIS` residual distances is left out (third return value: why).
     """
     from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters, unit_map
