@@ -7,6 +7,16 @@ A :class:`Calibration` undoes it with one convention, used everywhere in magfit:
     corrected = matrix @ (raw - offset)          # lies on a sphere of radius field_strength
 
 ``offset`` is V, ``matrix`` is a (scaled) W⁻¹ and ``field_strength`` is B, all in the input units.
+
+Two kinds of calibration share that formula, told apart by :attr:`Calibration.frame`:
+
+- ``"sensor"`` (every magnitude-only fit): the corrected field is in the magnetometer's own axes. Only the
+  ellipsoid is determined, so the matrix is one root of A (below) and any root is as good.
+- ``"vehicle"`` (a fit against a reference field, ``method="vector"``): the matrix is a general 3x3 that
+  also rotates the magnetometer's axes into the vehicle's (soft iron times misalignment). It is not
+  symmetric and may be a mirror (a sensor with left-handed axes); an export must carry the rotation or
+  refuse.
+
 Only ``A = matrixᵀ matrix / field_strength²`` (paper, eq. 2) is identifiable from the samples: the
 samples fix the ellipsoid ``(x − V)ᵀ A (x − V) = 1`` and nothing distinguishes W from W·Q for a
 rotation Q. magfit picks the symmetric square root (or, on request, the Cholesky factor) and scales
@@ -32,12 +42,14 @@ from .errors import DataFileError, MagfitError, SampleError
 if TYPE_CHECKING:
     from .findings import Diagnostics
 
-__all__ = ["CONVENTION", "SCHEMA_VERSION", "Calibration"]
+__all__ = ["CONVENTION", "FRAMES", "SCHEMA_VERSION", "Calibration"]
 
 #: The formula every exported calibration states, word for word.
 CONVENTION = "corrected = matrix @ (raw - offset)"
 #: Field strengths a calibration can hold: 1/field_strength² (in A of eq. 2) stays a normal float64.
 FIELD_STRENGTH_RANGE = (1e-150, 1e150)
+#: What the corrected field's axes are: the magnetometer's own, or the vehicle's (see the module docstring).
+FRAMES = ("sensor", "vehicle")
 #: Version of the JSON layout written by :meth:`Calibration.to_dict`.
 SCHEMA_VERSION = 1
 _SCHEMA_NAME = "magfit.calibration"
@@ -74,6 +86,10 @@ class Calibration:
     details : mapping
         Method-specific, JSON-serialisable facts about the fit (options used, solver status,
         rejected samples, diagnostics ...). Read-only.
+    frame : {"sensor", "vehicle"}
+        ``"sensor"``: the matrix corrects within the magnetometer's axes (magnitude-only fits; any root
+        of the ellipsoid matrix will do). ``"vehicle"``: the matrix is general and also rotates into the
+        vehicle's axes (fits against a reference field); its determinant may be negative.
     """
 
     method: str
@@ -83,8 +99,11 @@ class Calibration:
     unit: str | None = None
     n_samples: int | None = None
     details: Mapping[str, Any] = field(default_factory=dict)
+    frame: str = "sensor"
 
     def __post_init__(self) -> None:
+        if self.frame not in FRAMES:
+            raise SampleError(f"Calibration.frame must be one of {', '.join(FRAMES)}; got {self.frame!r}")
         object.__setattr__(self, "offset", _frozen_array(self.offset, (3,), "offset"))
         object.__setattr__(self, "matrix", _frozen_array(self.matrix, (3, 3), "matrix"))
         strength = float(self.field_strength)
@@ -102,6 +121,11 @@ class Calibration:
         if not np.isfinite(determinant) or abs(determinant) < 1e-12:
             what = "singular" if np.isfinite(determinant) else "too large (its determinant overflows float64)"
             raise SampleError(f"Calibration.matrix is {what}: it cannot be a soft-iron correction")
+        if determinant < 0 and self.frame == "sensor":
+            raise SampleError(
+                "Calibration.matrix is a mirror (negative determinant): a correction within the sensor's own axes "
+                "never is; a mirror belongs to frame='vehicle' (a sensor with left-handed axes)"
+            )
         # Stored as plain JSON types so that a JSON round trip gives back an equal calibration.
         object.__setattr__(self, "details", MappingProxyType(_jsonable(dict(self.details))))
 
@@ -148,6 +172,12 @@ class Calibration:
         if normalized:
             corrected = corrected / self.field_strength
         return corrected
+
+    @property
+    def is_symmetric(self) -> bool:
+        """True when the matrix equals its transpose (to 1e-9 of its largest entry)."""
+        scale = float(np.max(np.abs(self.matrix)))
+        return bool(np.max(np.abs(self.matrix - self.matrix.T)) <= 1e-9 * scale)
 
     # ------------------------------------------------------------------ diagnostics
 
@@ -211,14 +241,16 @@ class Calibration:
             and self.unit == other.unit
             and self.n_samples == other.n_samples
             and dict(self.details) == dict(other.details)
+            and self.frame == other.frame
         )
 
     __hash__ = None  # type: ignore[assignment]
 
     def __repr__(self) -> str:
         unit = f" {self.unit}" if self.unit else ""
+        frame = ", frame='vehicle'" if self.frame == "vehicle" else ""
         return (
-            f"Calibration(method={self.method!r}, offset={np.array2string(self.offset, precision=5)}{unit}, "
+            f"Calibration(method={self.method!r}{frame}, offset={np.array2string(self.offset, precision=5)}{unit}, "
             f"field_strength={self.field_strength:.6g}{unit}, "
             f"matrix={np.array2string(self.matrix, precision=5, separator=', ')})"
         )
@@ -237,6 +269,7 @@ class Calibration:
             "matrix": self.matrix.tolist(),
             "field_strength": self.field_strength,
             "n_samples": self.n_samples,
+            "frame": self.frame,
             "details": _jsonable(dict(self.details)),
         }
 
@@ -293,8 +326,13 @@ class Calibration:
              for i, row in enumerate(rows)]
         )  # fmt: skip
         field_strength = _number(data["field_strength"], "field_strength")
+        frame = data.get("frame", "sensor")  # files written before frames existed are all "sensor"
+        if frame not in FRAMES:
+            raise DataFileError(f"calibration 'frame' must be one of {', '.join(FRAMES)}; got {_shown(frame)}")
         with np.errstate(all="ignore"):  # a determinant beyond float64 is refused by the constructor
             determinant = float(np.linalg.det(matrix))
+        if frame == "vehicle" and determinant < 0:
+            determinant = -determinant  # a left-handed sensor's alignment: a mirror is allowed here
         if not determinant > 0:
             what = "a mirror (negative determinant)" if determinant < 0 else "singular"
             raise DataFileError(f"calibration 'matrix' is {what}: no soft-iron correction is; re-run the calibration")
@@ -307,6 +345,7 @@ class Calibration:
                 unit=unit,
                 n_samples=n_samples,
                 details=details,
+                frame=frame,
             )
             if diagnostics is not None:
                 calibration.diagnostics  # noqa: B018 - read once, so a malformed report fails here, not later

@@ -74,6 +74,10 @@ class Magnetometer:
         What a user must know about this stream (too slow, calibration undone, motor compensation ...).
     problem : str or None
         Why the stream cannot be fitted (a calibration that cannot be undone), or None.
+    slot : int or None
+        The firmware's calibration slot its calibration is written to, 0-based: ArduPilot's compass index
+        (``COMPASS_OFS_*`` is 0, ``COMPASS_OFS2_*`` is 1), PX4's ``CAL_MAGn`` index (the one whose
+        ``CAL_MAGn_ID`` is this device, else the first free one). None when unknown (a samples file).
     """
 
     id: str
@@ -86,6 +90,7 @@ class Magnetometer:
     raw: bool = True
     notes: tuple[str, ...] = ()
     problem: str | None = None
+    slot: int | None = None
 
     @property
     def span_s(self) -> float:
