@@ -355,7 +355,7 @@ def test_the_file_formats_page_examples_run(tmp_path: Path, monkeypatch: pytest.
 def test_read_samples_in_parallel_pieces_is_one_reader(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # Above PARALLEL_BYTES a text file is read in pieces on threads (lowered here so that 3 pieces are cut):
     # the samples, counts, skipped lines and errors are those of one reader.
-    import magfit.io.readers as readers
+    import magfit.io.chunks as chunks
 
     rng = np.random.default_rng(3)
     values = rng.normal(0.0, 50.0, (3000, 3)).round(3)
@@ -365,15 +365,15 @@ def test_read_samples_in_parallel_pieces_is_one_reader(tmp_path: Path, monkeypat
     lines[1000:1000] = [""] * 60_000  # a run of blank lines longer than a piece: that piece has no rows
     path = write(tmp_path, "t,mx,my,mz\n" + "\n".join(lines) + "\n")
     whole = read_samples(path)
-    monkeypatch.setattr(readers, "PARALLEL_BYTES", 100)
-    monkeypatch.setattr(readers.os, "cpu_count", lambda: 16)  # capped at MAX_PIECES
+    monkeypatch.setattr(chunks, "PARALLEL_BYTES", 100)
+    monkeypatch.setattr(chunks.os, "cpu_count", lambda: 16)  # capped at MAX_PIECES
     pieces = ChunkReader(path).parallel_pieces()
-    assert len(pieces) == readers.MAX_PIECES
+    assert len(pieces) == chunks.MAX_PIECES
     assert min(len(list(piece)) for piece in pieces) == 0
     counted: list[int] = []
     parallel = read_samples(path, progress=counted.append)
     np.testing.assert_array_equal(parallel.samples, whole.samples)
-    assert sum(counted) == len(parallel.samples) == 2997 and len(counted) >= readers.MAX_PIECES - 1
+    assert sum(counted) == len(parallel.samples) == 2997 and len(counted) >= chunks.MAX_PIECES - 1
     expected = (3000, 3, (7, 61_502, 62_992))  # file lines: header, then rows shifted by the blank run
     assert (parallel.n_rows, parallel.n_skipped, parallel.skipped_lines) == expected
     assert (whole.n_rows, whole.n_skipped, whole.skipped_lines) == expected
@@ -387,7 +387,7 @@ def test_read_samples_in_parallel_pieces_is_one_reader(tmp_path: Path, monkeypat
 def test_read_pieces_stops_the_pieces_after_a_failure_but_not_those_before(tmp_path: Path) -> None:
     import time
 
-    import magfit.io.readers as readers
+    import magfit.io.chunks as chunks
 
     lines = [f"{i},{i},{2 * i},{3 * i}" for i in range(4000)]
     path = write(tmp_path, "t,mx,my,mz\n" + "\n".join(lines) + "\n")
@@ -410,20 +410,20 @@ def test_read_pieces_stops_the_pieces_after_a_failure_but_not_those_before(tmp_p
 
     # The first piece fails at once: the two after it stop early instead of parsing to their ends.
     with pytest.raises(DataFileError, match="piece 0 failed"):
-        readers.read_pieces(pieces, work({0: 0}))
+        chunks.read_pieces(pieces, work({0: 0}))
     assert chunks_read[0] == 0 and max(chunks_read[1:]) < 10  # of about 13 chunks each
     # The last piece fails at once, the first only later (an earlier line of the file): the first piece is
     # not stopped, and its error is the one raised, as one reader would raise it.
     chunks_read[:] = [0, 0, 0]
     with pytest.raises(DataFileError, match="piece 0 failed"):
-        readers.read_pieces(pieces, work({0: 5, 2: 0}))
+        chunks.read_pieces(pieces, work({0: 5, 2: 0}))
     assert chunks_read[0] == 5
 
 
 def test_pieces_report_skipped_lines_as_one_reader(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # 40 NaN rows spread over every piece: the split read reports the first MAX_REPORTED_LINES of them, in
     # file order, as one reader does (read_samples and calibrate's first pass share PiecesRead).
-    import magfit.io.readers as readers
+    import magfit.io.chunks as chunks
 
     lines = [f"{i},{'nan' if i % 100 == 7 else i},{2 * i},{3 * i}" for i in range(4000)]
     path = write(tmp_path, "t,mx,my,mz\n" + "\n".join(lines) + "\n")
@@ -432,6 +432,6 @@ def test_pieces_report_skipped_lines_as_one_reader(tmp_path: Path, monkeypatch: 
     pieces = ChunkReader(path).split(4)
     for piece in pieces:
         list(piece)
-    read = readers.PiecesRead(pieces)
+    read = chunks.PiecesRead(pieces)
     assert (read.n_rows, read.n_skipped) == (whole.n_rows, whole.n_skipped) == (4000, 40)
     assert read.skipped_lines == whole.skipped_lines == tuple(range(9, 1000, 100))

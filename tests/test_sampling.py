@@ -346,7 +346,7 @@ def test_calibrate_reads_a_big_text_file_in_parallel_pieces_with_the_same_result
 
     monkeypatch.setattr(calibrate, "_with_diagnostics", recorded)
     sequential = calibrate.run_calibration(path, method="ellipsoid")
-    monkeypatch.setattr(magfit.io.readers, "PARALLEL_BYTES", 1000)
+    monkeypatch.setattr(magfit.io.chunks, "PARALLEL_BYTES", 1000)
     monkeypatch.setattr(magfit.io.readers.os, "cpu_count", lambda: 3)
     split = magfit.io.ChunkReader.split
     pieces: list[int] = []

@@ -29,7 +29,16 @@ from typing import BinaryIO, cast
 
 from ..errors import DataFileError
 
-__all__ = ["COMPRESSIONS", "STDIN", "compression_of", "data_file", "describe_source", "display_name"]
+__all__ = [
+    "COMPRESSIONS",
+    "STDIN",
+    "check_file",
+    "compression_of",
+    "data_file",
+    "describe_source",
+    "display_name",
+    "file_error",
+]
 
 #: The file name that means standard input.
 STDIN = "-"
@@ -70,6 +79,32 @@ def describe_source(path: str | os.PathLike[str]) -> str | None:
 def display_name(path: Path) -> str:
     """How messages name ``path``: the source the user gave for a temporary copy, else the path itself."""
     return _names.get(path, str(path))
+
+
+def file_error(path: Path, message: str) -> DataFileError:
+    """The one-line error about ``path``, named as the user gave it (a temporary copy is not named)."""
+    return DataFileError(f"{display_name(path)}: {message}")
+
+
+def check_file(path: str | os.PathLike[str]) -> Path:
+    """The regular file to read ``path`` from, after checking that it is readable: the file itself, or the
+    decompressed copy of standard input (``-``), a pipe or a compressed file (:func:`data_file`)."""
+    if str(path) == STDIN:
+        return data_file(path)
+    file = Path(path)
+    if not file.exists():
+        raise file_error(file, "no such file; check the path and the current directory")
+    if file.is_dir():
+        raise file_error(file, "is a directory, not a data file; give the path of a file inside it")
+    if not file.is_file() and not stat.S_ISFIFO(file.stat().st_mode):  # a pipe is copied, as standard input
+        raise file_error(
+            file,
+            "is a device or a socket, not a regular file: magfit reads a file more than once (its layout, then "
+            "its rows); save the data to a file first",
+        )
+    if not os.access(file, os.R_OK):
+        raise file_error(file, "permission denied; make the file readable (chmod +r) or copy it")
+    return data_file(file)
 
 
 def data_file(path: str | os.PathLike[str]) -> Path:

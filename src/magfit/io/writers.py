@@ -22,7 +22,11 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError
 from .atomic import atomic_open
-from .readers import _BROKEN_NPY, NA_VALUES, ChunkReader, SampleTable, _check_file, _error, _one_line
+from .chunks import ChunkReader
+from .layout import NA_VALUES
+from .npy import BROKEN_NPY, one_line
+from .readers import SampleTable
+from .sources import check_file, file_error
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -92,7 +96,7 @@ def write_calibrated(
         path = source.path
         chosen: Sequence[str | int] | None = columns if columns is not None else source.columns
     else:
-        path = _check_file(source)
+        path = check_file(source)
         chosen = columns
     out = Path(out_path)
     if _same_file(path, out):
@@ -157,7 +161,7 @@ class _TextRewriter:
         except ValueError:
             index = self.indices[axis]
             shown = cell.strip().decode(self.encoding, errors="replace")
-            raise _error(
+            raise file_error(
                 self.reader.path,
                 f"line {line}, column {self.reader.columns[axis]!r} (column {index + 1}): {shown!r} is not a number; "
                 "fix that cell, or choose other columns with columns=[...]",
@@ -195,7 +199,7 @@ class _TextRewriter:
             if position == len(body):
                 return fields
             if body[position : position + 1] != self.split_byte:
-                raise _error(
+                raise file_error(
                     self.reader.path,
                     f"line {line}: a quote is not closed or is followed by text ({body[position:][:20]!r}); "
                     "fix the quotes of that line",
@@ -354,9 +358,9 @@ def _write_npz(reader: ChunkReader, calibration: Calibration, out: Path, normali
             compressed = any(info.compress_type != zipfile.ZIP_STORED for info in archive.infolist())
         with np.load(reader.path, allow_pickle=False) as data:
             arrays: dict[str, NDArray[Any]] = {key: data[key] for key in data.files}
-    except (zipfile.BadZipFile, zlib.error, *_BROKEN_NPY) as error:  # a member damaged past its header
-        raise _error(
-            reader.path, f"is a damaged .npz archive ({_one_line(error)}); re-save it with numpy.savez"
+    except (zipfile.BadZipFile, zlib.error, *BROKEN_NPY) as error:  # a member damaged past its header
+        raise file_error(
+            reader.path, f"is a damaged .npz archive ({one_line(error)}); re-save it with numpy.savez"
         ) from None
     if selection.key_columns is None:
         raw = np.column_stack([np.asarray(arrays[key], dtype=np.float64) for key in selection.keys])
