@@ -13,10 +13,10 @@ from click.testing import CliRunner
 
 import magfit
 import magfit.io
-from magfit.cli import calibrate as calibrate_module
 from magfit.cli import cli
-from magfit.cli.calibrate import run_calibration
+from magfit.cli.calibrate import progress_bar
 from magfit.export import FORMATS, export
+from magfit.pipeline import streaming as streaming_module
 
 
 @pytest.fixture(scope="module")
@@ -196,17 +196,18 @@ def test_progress_is_shown_only_on_a_terminal(
     path, simulation = steel
     terminal = _Terminal()
     monkeypatch.setattr(sys, "stderr", terminal)
-    run = run_calibration(path, method="ellipsoid")
+    run = magfit.calibrate_file(path, "ellipsoid", progress=progress_bar).compasses[0]
     shown = terminal.getvalue()
     assert f"reading {path.name}" in shown and f"scoring the fit on {path.name}" in shown
     assert "100%" in shown and "3,000 rows" in shown  # a bar with the share done: the total is known
     terminal.truncate(0)
-    in_memory = run_calibration(path, method="ml")  # the whole file is loaded: the read shows progress too
+    # ml: the whole file is loaded, and the read shows progress too
+    in_memory = magfit.calibrate_file(path, "ml", progress=progress_bar).compasses[0]
     assert not in_memory.streamed and f"reading {path.name}" in terminal.getvalue()
     assert run.evaluation.n == 3000 and run.streamed
     piped = io.StringIO()
     monkeypatch.setattr(sys, "stderr", piped)
-    again = run_calibration(path, method="ellipsoid")
+    again = magfit.calibrate_file(path, "ellipsoid", progress=progress_bar).compasses[0]
     assert piped.getvalue() == ""
     assert again.evaluation == run.evaluation
     whole = magfit.evaluate(run.calibration, simulation.samples)
@@ -244,7 +245,7 @@ def test_streamed_fits_are_diagnosed_on_a_bounded_subsample(
     in_memory = magfit.fit(simulation.samples, method="ellipsoid").diagnostics
     assert in_memory is not None and diagnostics.to_dict() == in_memory.to_dict()
     # Over the cap, every k-th row: 3000 rows with a cap of 1000 keep rows 0, 3, 6 ...
-    monkeypatch.setattr(calibrate_module, "DIAGNOSE_SAMPLES", 1000)
+    monkeypatch.setattr(streaming_module, "DIAGNOSE_SAMPLES", 1000)
     assert CliRunner().invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "-o", str(output)]).exit_code == 0
     capped = magfit.Calibration.from_json(output.read_text()).diagnostics
     assert capped is not None and capped.n_samples == 1000
@@ -260,10 +261,10 @@ def test_no_method_imports_scipy_optimize(steel: tuple[Path, magfit.Simulation])
 
     path, _ = steel
     code = (
-        "import sys; from pathlib import Path; import magfit; from magfit.cli.calibrate import run_calibration\n"
+        "import sys; from pathlib import Path; import magfit\n"
         "for method in sorted(magfit.METHODS):\n"
         # forced: sphere and minmax are refused on the steel case's soft iron, and every method must run here
-        "    run = run_calibration(Path(sys.argv[1]), method=method, allow_undetermined=True)\n"
+        "    run = magfit.calibrate_file(Path(sys.argv[1]), method, force=True)\n"
         "    assert run.calibration.diagnostics is not None\n"
         "print(sorted(m for m in sys.modules if 'scipy' in m))"
     )

@@ -329,7 +329,8 @@ def test_calibrate_reads_a_big_text_file_in_parallel_pieces_with_the_same_result
 ) -> None:
     # Above PARALLEL_BYTES a text file is cut into pieces read on threads (one Statistics each, merged
     # exactly) and scored piece by piece (metrics pooled). Lowered here so that a small file is cut in 3.
-    calibrate = pytest.importorskip("magfit.cli.calibrate", reason="the cli extra is not installed")
+    import magfit.pipeline.streaming as calibrate
+
     sim = magfit.scenario("mpu9250", "steel").simulate(20_000, seed=8)
     lines = [f"{t},{x:.1f},{y:.1f},{z:.1f}" for t, (x, y, z) in enumerate(sim.samples.tolist())]
     lines[12_345] = "12345,nan,1.0,2.0"  # a skipped row in a middle piece
@@ -345,13 +346,13 @@ def test_calibrate_reads_a_big_text_file_in_parallel_pieces_with_the_same_result
         return original(calibration, subsample, n_total, allow_undetermined)
 
     monkeypatch.setattr(calibrate, "_with_diagnostics", recorded)
-    sequential = calibrate.run_calibration(path, method="ellipsoid")
+    sequential = magfit.calibrate_file(path, "ellipsoid").compasses[0]
     monkeypatch.setattr(magfit.io.chunks, "PARALLEL_BYTES", 1000)
     monkeypatch.setattr(magfit.io.readers.os, "cpu_count", lambda: 3)
     split = magfit.io.ChunkReader.split
     pieces: list[int] = []
     monkeypatch.setattr(magfit.io.ChunkReader, "split", lambda self, n: pieces.append(n) or split(self, n))
-    parallel = calibrate.run_calibration(path, method="ellipsoid")
+    parallel = magfit.calibrate_file(path, "ellipsoid").compasses[0]
     assert pieces == [3]
     for run in (sequential, parallel):
         assert (run.n_rows, run.n_skipped, run.skipped_lines) == (20_000, 1, (12_347,))

@@ -18,6 +18,7 @@ from .errors import CalibrationError, DataFileError, ExportError, MagfitError, O
 from .evaluate import Evaluation, evaluate, sphere_distances
 from .fit import diagnose, fit, refit
 from .methods import METHODS
+from .pipeline import CompassCalibration, FileCalibration, calibrate_file
 from .simulate import DISTURBANCES, SENSORS, Scenario, Simulation, scenario, simulate
 from .statistics import Statistics
 
@@ -30,10 +31,12 @@ __all__ = [
     "SENSORS",
     "Calibration",
     "CalibrationError",
+    "CompassCalibration",
     "DataFileError",
     "Diagnostics",
     "Evaluation",
     "ExportError",
+    "FileCalibration",
     "MagfitError",
     "OptionError",
     "SampleError",
@@ -41,6 +44,7 @@ __all__ = [
     "Simulation",
     "Statistics",
     "__version__",
+    "calibrate_file",
     "diagnose",
     "evaluate",
     "fit",

@@ -61,7 +61,7 @@ def one_line(message: str) -> str:
 
 #: Library hints that name a keyword argument (``nonfinite='skip'``, ``columns=[...]``): the options that set them.
 _KEYWORD_HINT = re.compile(
-    r"\b(nonfinite|unit|method|columns|field_strength|max_samples)=(?:'([^']*)'|\[([^\]]*)\]|(-?\d[\w.+-]*))"
+    r"\b(nonfinite|unit|method|columns|field_strength|max_samples|location|date|sensor)=(?:'([^']*)'|\[([^\]]*)\]|(-?\d[\w.+-]*))"
 )
 
 
@@ -150,6 +150,25 @@ def significant(value: float, digits: int = 4) -> str:
     """``value`` to ``digits`` significant digits (``262.1``, ``-0.01203``); no negative zero."""
     text = f"{value:.{digits}g}"
     return "0" if float(text) == 0.0 else text
+
+
+def time_span(start_s: float, end_s: float, time_base: str) -> str:
+    """A log's time span in words: ``2026-01-01 10:00:00 to 10:01:03 UTC (63.0 s)`` on an epoch time base (a ROS
+    bag's stamps), ``12.3 to 75.4 s after boot (63.1 s)`` on a boot clock, ``no time stamps`` without."""
+    import datetime
+    import math
+
+    if not (math.isfinite(start_s) and math.isfinite(end_s)):
+        return "no time stamps"
+    span = f"({end_s - start_s:.1f} s)"
+    if time_base.startswith("seconds since the epoch"):
+        utc = datetime.timezone.utc
+        first = datetime.datetime.fromtimestamp(start_s, tz=utc)
+        last = datetime.datetime.fromtimestamp(end_s, tz=utc)
+        end = last.strftime("%H:%M:%S" if last.date() == first.date() else "%Y-%m-%d %H:%M:%S")
+        return f"{first:%Y-%m-%d %H:%M:%S} to {end} UTC {span}"
+    after = " after boot" if "boot" in time_base else ""
+    return f"{start_s:.1f} to {end_s:.1f} s{after} {span}"
 
 
 def vector(values: ArrayLike, formatter: Callable[[float], str] = fixed) -> str:

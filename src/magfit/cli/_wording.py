@@ -68,7 +68,7 @@ def collapse_repeats(message: str) -> str:
 
 
 #: Library keywords whose command-line form is a flag.
-_FLAGS = {"allow_undetermined=True": "--force"}
+_FLAGS = {"allow_undetermined=True": "--force", "even=True": "--even"}
 
 
 def after_keywords(message: str) -> str:

@@ -1,0 +1,536 @@
+"""A recording to calibrations: :func:`calibrate_file`, what ``magfit calibrate`` runs, for Python users too.
+
+One direction: the file is opened once as a source (:mod:`magfit.sources` for flight logs and bags,
+:mod:`magfit.io` for samples files), each compass's samples are fitted (:func:`magfit.fit`, in bounded
+memory for big samples files: :mod:`magfit.pipeline.streaming`) and scored (:func:`magfit.evaluate`), and the
+World Magnetic Model's field (:mod:`magfit.geomag`) is looked up where and when the recording was made — at
+the place given, or at the log's own GNSS fixes. Nothing here prints: notes reach the caller in the result
+(and, as they are found, through ``notify``); errors are magfit's own exceptions.
+
+>>> import magfit, numpy as np, tempfile, pathlib
+>>> sim = magfit.simulate(2000, field_strength=50.0, hard_iron=[10.0, -20.0, 30.0], noise=0.5, seed=4)
+>>> path = pathlib.Path(tempfile.mkdtemp()) / "mag.csv"
+>>> np.savetxt(path, sim.samples, delimiter=",", header="mx,my,mz", comments="")
+>>> result = magfit.calibrate_file(path, method="sphere", unit="uT")
+>>> [round(float(v)) for v in result.calibration.offset]
+[10, -20, 30]
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from ..calibration import Calibration
+from ..errors import CalibrationError, DataFileError, MagfitError, OptionError
+from ..evaluate import Evaluation, evaluate
+from ..fit import fit
+from ..units import get_unit
+from .streaming import Nonfinite, Progress, fit_samples_file, no_progress, samples_for_fit
+
+if TYPE_CHECKING:
+    from ..geomag import Field
+    from ..sources import Magnetometer, Position, Source
+
+__all__ = [
+    "CompassCalibration",
+    "CompassFailure",
+    "FileCalibration",
+    "ModelField",
+    "Progress",
+    "calibrate_file",
+    "log_position",
+    "no_progress",
+]
+
+#: ``location="log"``: the World Magnetic Model at the recording's own GNSS fixes.
+FROM_LOG: Literal["log"] = "log"
+
+
+@dataclass(frozen=True)
+class ModelField:
+    """The World Magnetic Model's field where and when the recording was made.
+
+    Attributes
+    ----------
+    field : Field
+        The model's field (components in nT; :meth:`Field.total_in` converts).
+    origin : str
+        Where the place came from, in words: ``"the location given"`` or ``"the log's GNSS fixes (median of
+        12 3-D fixes, first at 2026-01-01 10:00 UTC)"``.
+    """
+
+    field: Field
+    origin: str
+
+
+@dataclass(frozen=True, eq=False)
+class CompassCalibration:
+    """One compass's calibration and what was read to fit it.
+
+    Attributes
+    ----------
+    path : Path
+        The recording.
+    calibration : Calibration
+        The fit, labelled with the samples' unit; ``details["source"]`` says what it was fitted on (the
+        columns, for ``magfit apply``; the log's compass) and, for a log, ``details["sensor"]`` is
+        ``{"id", "slot", "device_id"}``: the compass an export writes it for.
+    evaluation : Evaluation
+        The paper's sphere-distance metric over every sample read (dimensionless).
+    columns : tuple
+        The three columns or fields used (names, or 0-based indices for files without a header).
+    n_rows, n_skipped : int
+        Rows (samples) read, and rows skipped because a value was NaN or infinite.
+    skipped_lines : tuple of int
+        Line numbers (1-based) of skipped rows, as reported by the reader (possibly only the first few).
+    file_format : str
+        The layout or log format in words.
+    streamed : bool
+        True when the file was read in chunks (a method that needs only the statistics).
+    subsample : str or None
+        None when the fit used every sample; else why it used an even subsample (``even=True``, or a file
+        too large for memory), ``calibration.n_samples`` being how many.
+    column_note : str or None
+        For a file without a header, why these columns (``column 1 is monotonic: time or a counter``).
+    magnetometer : Magnetometer or None
+        For a flight log or a bag, the compass (id, device id, calibration slot, unit); None for a samples file.
+    start_s, end_s : float
+        First and last time stamp of the samples fitted, in seconds on the log's time base (``time_base``);
+        NaN for a samples file.
+    time_base : str
+        What the time stamps count (``seconds since boot (TimeUS)``, ``seconds since the epoch ...``).
+    notes : tuple of str
+        What the user must know about these samples, in words (a compass logged too slowly, the firmware's
+        calibration undone with the log's parameters, damaged data skipped).
+    model_field : ModelField or None
+        The World Magnetic Model's field at the recording, when asked for.
+    """
+
+    path: Path
+    calibration: Calibration
+    evaluation: Evaluation
+    columns: tuple[Any, ...]
+    n_rows: int
+    n_skipped: int
+    skipped_lines: tuple[int, ...]
+    file_format: str
+    streamed: bool
+    subsample: str | None = None
+    column_note: str | None = None
+    magnetometer: Magnetometer | None = None
+    start_s: float = float("nan")
+    end_s: float = float("nan")
+    time_base: str = ""
+    notes: tuple[str, ...] = ()
+    model_field: ModelField | None = None
+
+    @property
+    def sensor(self) -> str | None:
+        """The compass's id (``MAG/1``, ``sensor_mag/0``, a topic), None for a samples file."""
+        return self.magnetometer.id if self.magnetometer is not None else None
+
+    @property
+    def span_s(self) -> float:
+        """Seconds between the first and the last sample fitted (NaN without time stamps)."""
+        return self.end_s - self.start_s
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean sample rate over the span (NaN without time stamps)."""
+        span = self.span_s
+        return (self.n_rows - 1) / span if self.n_rows > 1 and math.isfinite(span) and span > 0 else float("nan")
+
+    @property
+    def coverage(self) -> float | None:
+        """The share of the sphere of field directions the samples reach (0 to 1), None when not diagnosed."""
+        diagnostics = self.calibration.diagnostics
+        if diagnostics is None or diagnostics.coverage is None:
+            return None
+        return float(diagnostics.coverage.share)
+
+
+@dataclass(frozen=True)
+class CompassFailure:
+    """A compass of a log that could not be fitted: which, and why (the fit's refusal or the read's error)."""
+
+    sensor: str
+    reason: str
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class FileCalibration:
+    """What :func:`calibrate_file` returns: one :class:`CompassCalibration` per compass fitted.
+
+    Attributes
+    ----------
+    path : Path
+        The recording.
+    compasses : tuple of CompassCalibration
+        One per compass fitted, in the log's order (one for a samples file).
+    failures : tuple of CompassFailure
+        The compasses of a log fitted together that could not be fitted, with the reason (a single fit raises
+        instead); ``compasses`` may then be empty.
+    model_field : ModelField or None
+        The World Magnetic Model's field at the recording, when asked for.
+    sensors : tuple of str
+        The ids of the compasses tried, in the log's order (empty for a samples file).
+    """
+
+    path: Path
+    compasses: tuple[CompassCalibration, ...]
+    failures: tuple[CompassFailure, ...] = ()
+    model_field: ModelField | None = None
+    sensors: tuple[str, ...] = ()
+
+    @property
+    def calibration(self) -> Calibration:
+        """The calibration, when one compass was fitted.
+
+        Raises
+        ------
+        MagfitError
+            Several compasses were fitted (read ``compasses``) or none was.
+        """
+        if len(self.compasses) != 1:
+            ids = ", ".join(compass.sensor or "?" for compass in self.compasses) or "none"
+            raise MagfitError(
+                f"{self.path}: {len(self.compasses)} compasses were fitted ({ids}); read .compasses, or choose one "
+                "with sensor='ID'"
+            )
+        return self.compasses[0].calibration
+
+
+def calibrate_file(
+    path: str | os.PathLike[str],
+    method: str = "auto",
+    *,
+    sensor: str | None = None,
+    columns: Sequence[str | int] | None = None,
+    unit: str | None = None,
+    field_strength: float | Literal["wmm"] | None = None,
+    location: tuple[float, float, float] | Literal["log"] | None = None,
+    date: datetime.date | str | None = None,
+    force: bool = False,
+    nonfinite: Nonfinite = "skip",
+    even: bool = False,
+    max_samples: int | None = None,
+    options: Mapping[str, Any] | None = None,
+    progress: Progress = no_progress,
+    notify: Callable[[str], None] | None = None,
+) -> FileCalibration:
+    """Fit a recording: a samples file (text, npy, npz), a PX4 ULog, an ArduPilot DataFlash log or a ROS bag.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The recording (compressed files and ``"-"`` for standard input as :func:`magfit.io.read_samples`).
+    method : str
+        A name in :data:`magfit.METHODS`.
+    sensor : str or None
+        A log's compass (its id or device id, as :func:`magfit.sources.open_source` lists them). None fits
+        every compass of a log that holds several (each one's failure in ``failures``), or the only one.
+    columns : sequence or None
+        A samples file's three magnetometer columns (names or 0-based indices); None detects them.
+    unit : str or None
+        The samples' unit (``"uT"``, ``"G"``, ``"counts"`` ...); a log's own unit when None.
+    field_strength : float, ``"wmm"`` or None
+        The known field strength in the samples' unit, or ``"wmm"``: the World Magnetic Model's at
+        ``location`` (or at the log's own GNSS fixes); the fit scales the corrected field to it.
+    location : (lat, lon, alt_km), ``"log"`` or None
+        Where the recording was made, for the model's field (checked against the fitted one); ``"log"``: the
+        log's own GNSS fixes (the median of its 3-D fixes).
+    date : date, str or None
+        When, for the model; None is the date of the log's first fix with a time, else today.
+    force : bool
+        Return a calibration the samples do not support, marked so (``allow_undetermined``).
+    nonfinite : {"skip", "error"}
+        A samples file's rows holding NaN or inf: skipped (counted) or refused.
+    even : bool
+        Fit an even subsample over directions (a long stay in one attitude does not pull the fit).
+    max_samples : int or None
+        Most samples an iterative method holds in memory (a larger samples file is fitted on an even
+        subsample); None: :func:`magfit.pipeline.streaming.memory_sample_limit`.
+    options : mapping or None
+        The method's other keyword options, passed to :func:`magfit.fit`.
+    progress : Progress
+        Shows the passes over a big samples file (the command line's bar); default: nothing shown.
+    notify : callable or None
+        Called with each note about the recording as soon as it is known (``"x.bin (MAG/0): ..."``), before
+        a fit that may fail; the notes are in the result too.
+
+    Returns
+    -------
+    FileCalibration
+        One :class:`CompassCalibration` per compass fitted.
+
+    Raises
+    ------
+    CalibrationError
+        The samples cannot support the fit (of one compass: several fitted together report theirs in
+        ``failures``).
+    DataFileError
+        The file cannot be read, holds no samples, or ``sensor`` names no compass of it.
+    OptionError
+        Unknown method or option; ``field_strength="wmm"`` without a place or without a physical unit.
+    """
+    from ..methods import get_method
+    from ..sources import log_kind
+
+    path = Path(path)
+    get_method(method)  # an unknown method, before the file is read
+    options = dict(options or {})
+    if force:  # fit's own keyword, passed with the method's options
+        options["allow_undetermined"] = True
+    if date is not None and location is None and field_strength != "wmm":
+        raise OptionError(
+            "date='YYYY-MM-DD' goes with location='LAT,LON[,ALT]' or field_strength='wmm': the World Magnetic "
+            "Model needs the place too"
+        )
+    say = notify or (lambda note: None)
+    if log_kind(path) is None:
+        if sensor is not None:
+            raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
+        model = _model(path, None, location, date)  # (no log: "wmm" without a place is refused below)
+        if field_strength == "wmm":
+            options["field_strength"] = _model_strength(model, unit)
+        elif field_strength is not None:
+            options["field_strength"] = field_strength
+        compass = _calibrate_samples(path, method, columns, nonfinite, unit, even, max_samples, options, progress)
+        return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
+    if columns is not None:
+        raise OptionError(f"{path}: columns=[...] chooses the columns of a samples file; a log's compass by sensor=")
+    from ..sources import open_source
+
+    source = open_source(path, everything=False)  # the magnetometers (and the GNSS): what a fit needs
+    place: tuple[float, float, float] | Literal["log"] | None = location
+    if place is None and field_strength == "wmm":
+        place = FROM_LOG
+    model = _model(path, source, place, date)
+    chosen = [sensor] if sensor is not None else _usable(source)
+    compasses: list[CompassCalibration] = []
+    failures: list[CompassFailure] = []
+    for sensor_id in chosen:
+        magnetometer = source.magnetometer(sensor_id)
+        compass_options = dict(options)
+        if field_strength == "wmm":
+            compass_options["field_strength"] = _model_strength(model, unit or magnetometer.unit or None)
+        elif field_strength is not None:
+            compass_options["field_strength"] = field_strength
+        try:
+            compass = _calibrate_compass(source, magnetometer, method, compass_options, unit, even, say)
+        except (CalibrationError, DataFileError) as error:
+            if len(chosen) == 1:
+                raise
+            failures.append(CompassFailure(magnetometer.id, str(error), _notes(source, magnetometer)))
+            continue
+        compasses.append(replace(compass, model_field=model))
+    tried = tuple(compass.sensor or "" for compass in compasses) + tuple(f.sensor for f in failures)
+    order = [m.id for m in source.magnetometers]
+    sensors = tuple(sorted(tried, key=lambda sensor_id: order.index(sensor_id) if sensor_id in order else len(order)))
+    return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors)
+
+
+
+def _usable(source: Source) -> list[str | None]:
+    """The compasses to fit when none is chosen: every usable one of a log that holds several, else the one
+    :meth:`Source.magnetometer` picks (which names the problem when there is none)."""
+    usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
+    return list(usable) if len(usable) > 1 else [None]
+
+
+def _notes(source: Source, magnetometer: Magnetometer) -> tuple[str, ...]:
+    """What the log says about a compass, each note naming the file and the compass."""
+    return tuple(f"{source.path} ({magnetometer.id}): {note}" for note in (*source.notes, *magnetometer.notes))
+
+
+def _calibrate_compass(
+    source: Source,
+    magnetometer: Magnetometer,
+    method: str,
+    options: Mapping[str, Any],
+    unit: str | None,
+    even: bool,
+    say: Callable[[str], None],
+) -> CompassCalibration:
+    """Fit one magnetometer of a flight log or bag (docs/file-formats.md): its raw field, read by magfit.sources."""
+    path = source.path
+    where = f"{path} ({magnetometer.id}, {magnetometer.description})"
+    try:
+        read = source.read(magnetometer.id)
+    except DataFileError:
+        for note in source.notes:
+            say(f"{path} ({magnetometer.id}): {note}")
+        raise
+    # Told before a refusal too: they often say why (a compass logged at 1 Hz, a calibration undone).
+    notes = tuple(f"{path} ({magnetometer.id}): {note}" for note in (*source.notes, *read.notes))
+    for note in notes:
+        say(note)
+    if len(read.samples) == 0:
+        raise DataFileError(f"{where}: holds no finite samples")
+    try:
+        calibration = fit(samples_for_fit(read.samples, even), method=method, **options)
+    except CalibrationError as error:
+        advice = "".join(f"; {note}" for note in magnetometer.notes if "logged at only" in note or "only " in note)
+        raise CalibrationError(f"{where}: {error}{advice}") from None
+    label = unit or magnetometer.unit
+    calibration = calibration.with_unit(label) if label else calibration
+    sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id}
+    source_details = {"file": path.name, "sensor": magnetometer.id, "device_id": magnetometer.device_id}
+    source_details["unit"] = calibration.unit
+    calibration = replace(calibration, details={**calibration.details, "source": source_details, "sensor": sensor})
+    times = read.time_s[np.isfinite(read.time_s)]
+    span = f"{magnetometer.span_s:.1f} s" if np.isfinite(magnetometer.span_s) else "no time stamps"
+    return CompassCalibration(
+        path=path,
+        calibration=calibration,
+        evaluation=evaluate(calibration, read.samples),
+        columns=read.columns,
+        n_rows=len(read.samples),
+        n_skipped=0,
+        skipped_lines=(),
+        file_format=f"{source.format}; {magnetometer.id}: {magnetometer.description}, {span}",
+        streamed=False,
+        subsample="even=True" if even else None,
+        magnetometer=magnetometer,
+        start_s=float(times.min()) if times.size else float("nan"),
+        end_s=float(times.max()) if times.size else float("nan"),
+        time_base=source.time_base,
+        notes=notes,
+    )
+
+
+def _calibrate_samples(
+    path: Path,
+    method: str,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    unit: str | None,
+    even: bool,
+    max_samples: int | None,
+    options: Mapping[str, Any],
+    progress: Progress,
+) -> CompassCalibration:
+    """Fit a samples file (text, npy, npz) within bounded memory (:func:`.streaming.fit_samples_file`)."""
+    from ..io import ChunkReader
+    from .streaming import how_read
+
+    # The columns first (cheap: the file's head): every message, a refusal too, says which were used.
+    chosen = ChunkReader(path, columns=columns, nonfinite=nonfinite)  # not iterated: layout and columns only
+    try:
+        fitted = fit_samples_file(
+            path,
+            method,
+            columns=columns,
+            nonfinite=nonfinite,
+            options=options,
+            even=even,
+            max_samples=max_samples,
+            progress=progress,
+        )
+    except CalibrationError as error:
+        used = "columns " + ", ".join(str(c) for c in chosen.columns)
+        used += f"; {chosen.column_note}" if chosen.column_note else ""
+        raise CalibrationError(f"{path} ({used}): {error}") from None
+    calibration = fitted.calibration
+    if unit is not None:
+        calibration = calibration.with_unit(unit)
+    # Where the samples came from, so that `magfit apply` reads the same columns (details["source"]).
+    source = {
+        "file": path.name,
+        "columns": list(chosen.columns),
+        "column_indices": list(chosen.column_indices),
+        "header": chosen.format.header is not None,
+        "n_columns": chosen.format.n_columns,
+        "unit": unit if unit is not None else calibration.unit,
+    }
+    calibration = replace(calibration, details={**calibration.details, "source": source})
+    read = fitted.read
+    return CompassCalibration(
+        path=path,
+        calibration=calibration,
+        evaluation=fitted.evaluation,
+        columns=tuple(read.columns),
+        n_rows=int(read.n_rows),
+        n_skipped=int(read.n_skipped),
+        skipped_lines=tuple(int(line) for line in read.skipped_lines),
+        file_format=how_read(path) + read.format.describe(),
+        streamed=fitted.streamed,
+        subsample=fitted.subsample,
+        column_note=chosen.column_note,
+    )
+
+
+def log_position(source: Source) -> Position | None:
+    """Where and when a flight log or bag was recorded, from its own GNSS fixes; None without a fix.
+
+    ``Source.position`` for ULog and DataFlash; a ROS bag's ``sensor_msgs/NavSatFix`` fixes
+    (:meth:`magfit.sources.rosbag.BagContents.position`) otherwise.
+    """
+    if source.position is not None or source.kind != "rosbag":
+        return source.position
+    from ..sources import Position
+    from ..sources.rosbag import read_bag_contents
+
+    contents = read_bag_contents(source.path)
+    found = contents.position()
+    if found is None:
+        return None
+    lat, lon, alt_km, time_s = found
+    return Position(lat, lon, alt_km, time_s, len(contents.fixes))
+
+
+def _model(
+    path: Path,
+    source: Source | None,
+    location: tuple[float, float, float] | Literal["log"] | None,
+    date: datetime.date | str | None,
+) -> ModelField | None:
+    """The World Magnetic Model's field at ``location`` (or the log's fixes), None when no place is asked for.
+
+    The field is needed for ``field_strength="wmm"`` too: without a place then, the log's fixes are used.
+    """
+    from ..geomag import field_at
+
+    if location is None:
+        return None
+    if location != FROM_LOG:
+        lat, lon, alt_km = location
+        return ModelField(field_at(lat, lon, alt_km, date=date), "the location given")
+    position = log_position(source) if source is not None else None
+    if position is None:
+        what = "this file is no flight log or bag" if source is None else "this log holds no 3-D GNSS fix"
+        raise OptionError(
+            f"{path}: the World Magnetic Model needs the place of the recording and {what}: give "
+            "location='LAT,LON[,ALT]'"
+        )
+    when = ""
+    if math.isfinite(position.time_s):
+        first = datetime.datetime.fromtimestamp(position.time_s, tz=datetime.timezone.utc)
+        when = first.strftime(", first at %Y-%m-%d %H:%M UTC")
+        date = date or first.date()
+    origin = f"the log's GNSS fixes (median of {position.n_fixes} 3-D fixes{when})"
+    return ModelField(field_at(position.lat_deg, position.lon_deg, position.alt_km, date=date), origin)
+
+
+def _model_strength(model: ModelField | None, unit: str | None) -> float:
+    """The model's field strength in ``unit`` for ``field_strength="wmm"``; refuses a missing place or unit."""
+    if model is None:
+        raise OptionError(
+            "field_strength='wmm' needs location='LAT,LON[,ALT]' (where the recording was made), or a flight log or "
+            "bag with its own GNSS fixes"
+        )
+    if unit is None or not get_unit(unit).is_physical:
+        raise OptionError(
+            "field_strength='wmm' needs the samples' physical unit (unit='uT', 'G', 'mG' ...): the model gives the "
+            "field in tesla units, and raw counts have no known scale"
+        )
+    return model.field.total_in(unit)

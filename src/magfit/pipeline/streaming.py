@@ -1,0 +1,510 @@
+"""A samples file (text, npy, npz) read and fitted within bounded memory: in memory, streamed, or subsampled.
+
+Methods that need only the :class:`~magfit.Statistics` stream the file in chunks (two passes: the statistics,
+then the score and a strided subsample for the diagnostics); methods that need the samples load a file that
+fits in memory, and fit an even subsample of a larger one (docs/scaling.md). :func:`fit_samples_file` chooses.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import AbstractContextManager, contextmanager
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import IO, TYPE_CHECKING, Any, Literal, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..calibration import Calibration
+from ..errors import CalibrationError, DataFileError, MagfitError
+from ..evaluate import Evaluation, evaluate
+from ..fit import fit
+from ..methods import get_method
+from ..statistics import Statistics
+
+if TYPE_CHECKING:
+    from ..io import ChunkReader, FileFormat
+
+#: What to do with rows holding NaN or inf (the readers' ``nonfinite`` argument).
+Nonfinite = Literal["skip", "error"]
+#: Reports progress: called with the number of rows just processed.
+Advance = Callable[[int], None]
+
+
+class Progress(Protocol):
+    """Shows the progress of one pass over a file: ``with progress("reading x.csv", total) as advance: ...``.
+
+    ``total`` is the rows expected, or a function that estimates them (called only when it is shown), or None.
+    The command line draws a bar on a terminal; the default, :func:`no_progress`, shows nothing.
+    """
+
+    def __call__(
+        self, description: str, total: int | Callable[[], int] | None = None
+    ) -> AbstractContextManager[Advance]: ...
+
+
+@contextmanager
+def no_progress(description: str, total: int | Callable[[], int] | None = None) -> Iterator[Advance]:
+    """A :class:`Progress` that shows nothing."""
+    yield lambda rows: None
+
+
+#: Rows per chunk when streaming. Measured on a 4-million-row CSV: peak memory 204 MB with 250 000 rows
+#: against 329 MB with the reader's default of 1 000 000 (153 MB for a tiny file), at the same CPU time.
+STREAM_CHUNK_ROWS = 250_000
+#: Most rows a streamed fit keeps for its diagnostics (2.4 MB); more only sharpen the uncertainty figures.
+DIAGNOSE_SAMPLES = 100_000
+#: Memory an iterative fit (ml, robust, auto) needs per sample, all told: the float64 samples (24 bytes),
+#: the reader's parse of the whole file (about 60 with pandas) and the method's working arrays (up to
+#: about 90, robust on 1 M samples). A file estimated above half the available memory at this rate is
+#: fitted on an even subsample (docs/scaling.md).
+BYTES_PER_FIT_SAMPLE = 256
+#: ... and never more than this many samples: auto's own fits use a stride of at most 200 000 of them and
+#: ml fits a million in about a second; more only costs memory (a 10-million-row CSV fitted whole by auto
+#: peaked at 675 MB; on an even subsample of a million at 310 MB; the issue-10 target is 300 MB).
+DEFAULT_FIT_SAMPLES = 500_000
+
+
+
+@dataclass(frozen=True, eq=False)
+class FileFit:
+    """A samples file's fit and what was read: see :func:`fit_samples_file`."""
+
+    calibration: Calibration
+    evaluation: Evaluation
+    read: _ReadResult
+    streamed: bool
+    subsample: str | None
+
+
+class _ReadResult(Protocol):
+    """The part of magfit.io's SampleTable / ChunkReader that ``calibrate`` reports."""
+
+    @property
+    def n_rows(self) -> int: ...
+    @property
+    def n_skipped(self) -> int: ...
+    @property
+    def skipped_lines(self) -> Sequence[int]: ...
+    @property
+    def columns(self) -> Sequence[Any]: ...
+    @property
+    def format(self) -> Any: ...
+
+
+
+def fit_samples_file(
+    path: Path,
+    method: str,
+    *,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    options: Mapping[str, Any],
+    even: bool,
+    max_samples: int | None,
+    progress: Progress = no_progress,
+) -> FileFit:
+    """Fit ``method`` to the samples of ``path`` and score it, within bounded memory.
+
+    Methods whose ``METHODS[method].data`` is ``"statistics"`` read the file in chunks into a
+    :class:`~magfit.Statistics` (a first pass), fit, then score the fit in a second pass over the chunks:
+    only one chunk is ever in memory. Methods that need the samples load the whole file when it fits in
+    memory (at most ``max_samples`` rows, default :func:`memory_sample_limit`), and otherwise stream it
+    and fit a spatially even subsample of ``max_samples`` rows. ``even`` fits the even subsample of
+    :func:`magfit.sampling.even_subsample` (every direction weighs the same) with any method.
+    ``FileFit.subsample`` says why an even subsample was fitted (None when every sample was).
+    """
+    spec = get_method(method)
+    limit = memory_sample_limit() if max_samples is None else max_samples
+    subsample = "even=True" if even else None
+    if spec.data == "statistics" and not even:
+        calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite, options, progress)
+        return FileFit(calibration, evaluation, read, True, subsample)
+    if _estimated_rows(path) <= limit:
+        calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite, options, even, progress)
+        return FileFit(calibration, evaluation, read, False, subsample)
+    calibration, evaluation, read, limited = _fit_subsample(
+        path, method, columns, nonfinite, options, even=even, limit=limit, progress=progress
+    )
+    if limited:
+        bound = f"the file has more rows than max_samples={limit}"
+        if max_samples is None:
+            default = f"{DEFAULT_FIT_SAMPLES:,}".replace(",", " ")
+            bound += f", the default: {default} or half the available memory"
+        subsample = f"even=True; {bound}" if even else bound
+    return FileFit(calibration, evaluation, read, True, subsample)
+
+
+def how_read(path: Path) -> str:
+    """``"gzip-compressed; "`` (or ``standard input``, ``a pipe``) before the layout; empty for a plain file."""
+    from ..io.sources import describe_source
+
+    how = describe_source(path)
+    return f"{how}; " if how else ""
+
+
+def memory_sample_limit() -> int:
+    """Most samples an iterative fit holds: :data:`DEFAULT_FIT_SAMPLES`, or half the available memory at
+    :data:`BYTES_PER_FIT_SAMPLE` each when that is less."""
+    available = 4 << 30  # when the system does not say
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    available = int(line.split()[1]) * 1024
+                    break
+    except (OSError, ValueError):
+        try:
+            available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            pass
+    return min(DEFAULT_FIT_SAMPLES, max(100_000, available // 2 // BYTES_PER_FIT_SAMPLE))
+
+
+def _estimated_rows(path: Path) -> int:
+    """Data rows in ``path``, estimated without reading it all: exact for npy, from the line lengths for text."""
+    from ..io import sniff
+    from ..io.sources import data_file
+
+    file = data_file(path)  # standard input, a pipe or a compressed file: their decompressed copy
+    return _rows_in(file, sniff(file))
+
+
+def _rows_in(path: Path, fmt: FileFormat) -> int:
+    """:func:`_estimated_rows` for a file whose layout is known."""
+    if fmt.kind == "npy":
+        return int(np.load(path, mmap_mode="r").shape[0])
+    if fmt.kind == "npz":  # an upper bound: every member, uncompressed, as float64 triples
+        import zipfile
+
+        with zipfile.ZipFile(path) as archive:
+            return sum(info.file_size for info in archive.infolist()) // 24
+    size = path.stat().st_size - fmt.data_offset
+    with open(path, "rb") as handle:
+        handle.seek(fmt.data_offset)
+        head = handle.read(1 << 20)
+    return int(size * max(head.count(b"\n"), 1) / max(len(head), 1))
+
+
+def _fit_in_memory(
+    path: Path,
+    method: str,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    options: Mapping[str, Any],
+    even: bool,
+    progress: Progress,
+) -> tuple[Calibration, Evaluation, _ReadResult]:
+    from ..io import read_samples
+
+    with progress(f"reading {path.name}", lambda: _estimated_rows(path)) as advance:
+        table = read_samples(path, columns=columns, nonfinite=nonfinite, progress=advance)
+    _require_rows(path, table.samples.shape[0], table)
+    samples = samples_for_fit(table.samples, even)
+    calibration = fit(samples, method=method, **options)
+    return calibration, evaluate(calibration, table.samples), table
+
+
+def samples_for_fit(samples: NDArray[np.float64], even: bool) -> NDArray[np.float64]:
+    """The samples the fit uses: all of them, or with ``--even`` the even subsample (docs/scaling.md).
+
+    The score is still computed on every sample.
+    """
+    if not even:
+        return samples
+    from ..sampling import even_subsample
+
+    return samples[even_subsample(samples)]
+
+
+def _fit_subsample(
+    path: Path,
+    method: str,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    options: Mapping[str, Any],
+    *,
+    even: bool,
+    limit: int,
+    progress: Progress,
+) -> tuple[Calibration, Evaluation, _ReadResult, bool]:
+    """Stream a file too large for memory: statistics, an even subsample of at most ``limit`` rows, fit, score.
+
+    The last item returned is true when ``limit`` thinned the samples (not only ``even``).
+
+    The directions of the subsample start from the ellipsoid fit of the whole file's statistics
+    (:func:`magfit.sampling.direction_frame`); without ``even`` the cells are capped only as far as
+    ``limit`` requires, so the densest directions give way first (:func:`magfit.sampling.even_subsample_chunks`).
+    """
+    from ..compare import evaluate_chunks
+    from ..io import iter_sample_chunks
+    from ..sampling import direction_frame, even_subsample_chunks
+
+    def chunks() -> ChunkReader:
+        return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
+
+    with _FirstPass(chunks, progress) as first:
+        statistics, reader, source = first.statistics, first.read, first.source
+        _require_rows(path, statistics.n, reader)
+        centre, shape = direction_frame(statistics)
+        with progress(f"sampling {path.name} evenly") as advance:
+            sampler = even_subsample_chunks(
+                lambda: _counted(source(), advance), centre=centre, shape=shape, max_samples=limit, cap_at_median=even
+            )
+        calibration = fit(sampler.samples, method=method, **options)
+        with progress(f"scoring the fit on {path.name}", statistics.n) as advance:
+            evaluation = evaluate_chunks(calibration, _counted(source(), advance))
+    limited = sampler.max_samples == limit and len(sampler.indices) < statistics.n
+    return calibration, evaluation, reader, limited
+
+
+class _FirstPass:
+    """Pass 1 over a file: its :class:`~magfit.Statistics`, and the samples spilled for the later passes.
+
+    A large text file is cut into pieces at line ends, one per core (``ChunkReader.parallel_pieces``),
+    read on threads: pandas parses without holding the GIL, and the pieces' statistics merge exactly
+    (``Statistics.merge``), so the result is that of one reader, in about half the time on two cores.
+    Errors come as one reader would raise them: the first piece's first.
+    """
+
+    def __init__(self, chunks: Callable[[], ChunkReader], progress: Progress) -> None:
+        from ..io.readers import PiecesRead
+
+        self._chunks = chunks
+        self._progress = progress
+        self._pieces = chunks().parallel_pieces()
+        self._spills = [_Spill(piece) for piece in self._pieces]
+        self.statistics = Statistics()
+        self.read = PiecesRead(self._pieces)
+
+    def __enter__(self) -> _FirstPass:
+        from ..io.readers import read_pieces
+        from ..io.sources import display_name
+
+        try:
+            reader = self._pieces[0]
+            name = Path(display_name(reader.path)).name  # not the name of a decompressed temporary copy
+            with self._progress(f"reading {name}", lambda: _rows_in(reader.path, reader.format)) as advance:
+                parts = read_pieces(
+                    self._pieces,
+                    lambda piece, stopped: self._read(piece, self._spills[self._pieces.index(piece)], advance, stopped),
+                )
+        except BaseException:
+            self.__exit__()
+            raise
+        self.statistics = sum(parts, Statistics())
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for spill in self._spills:
+            spill.close()
+
+    @staticmethod
+    def _read(piece: ChunkReader, spill: _Spill, advance: Advance, stopped: Callable[[], bool]) -> Statistics:
+        statistics = Statistics()
+        for chunk in piece:
+            if stopped():  # an earlier piece failed: its error is what the user sees
+                break
+            statistics.update(chunk)
+            spill.write(chunk)
+            advance(len(chunk))
+        return statistics
+
+    def score(self, calibration: Calibration, advance: Advance) -> tuple[Evaluation, NDArray[np.float64]]:
+        """The paper's metric over every sample, and at most :data:`DIAGNOSE_SAMPLES` rows evenly strided.
+
+        Spilled pieces are scored on threads (NumPy computes without the GIL) and their metrics pooled.
+        """
+        from ..compare import evaluate_chunks
+
+        total = self.statistics.n
+        spills = [spill for spill in self._spills if spill.rows]
+        if len(spills) < 2 or not all(spill.complete for spill in self._spills):
+            strided = _Strided(total, DIAGNOSE_SAMPLES)
+            return evaluate_chunks(calibration, strided.collect(_counted(self.source(), advance))), strided.samples()
+        offsets = np.cumsum([0] + [spill.rows for spill in spills[:-1]])
+
+        def one(spill: _Spill, offset: int) -> tuple[Evaluation, NDArray[np.float64]]:
+            strided = _Strided(total, DIAGNOSE_SAMPLES)
+            strided.seen = offset  # rows of the earlier pieces: the stride continues across pieces
+            return evaluate_chunks(calibration, strided.collect(_counted(spill.chunks(), advance))), strided.samples()
+
+        with ThreadPoolExecutor(len(spills)) as pool:
+            parts = list(pool.map(one, spills, (int(offset) for offset in offsets)))
+        return _pooled([part[0] for part in parts]), np.concatenate([part[1] for part in parts])
+
+    def source(self) -> Iterator[NDArray[np.float64]]:
+        """The samples again, in file order: from the spills, or by reading the file once more."""
+        if all(spill.complete for spill in self._spills):
+            return itertools.chain.from_iterable(spill.chunks() for spill in self._spills)
+        return iter(self._chunks())
+
+
+def _pooled(parts: Sequence[Evaluation]) -> Evaluation:
+    """The metric of the union of disjoint sample sets, from each set's (exact up to round-off)."""
+    n = sum(part.n for part in parts)
+    weights = np.array([part.n / n for part in parts])
+    means = np.array([part.mean for part in parts])
+    mean = float(weights @ means)
+    variance = float(weights @ (np.array([part.std for part in parts]) ** 2 + (means - mean) ** 2))
+    return Evaluation(
+        n=n,
+        mean=mean,
+        std=float(np.sqrt(variance)),
+        mean_abs=float(weights @ np.array([part.mean_abs for part in parts])),
+        rms=float(np.sqrt(weights @ np.array([part.rms for part in parts]) ** 2)),
+        max_abs=max(part.max_abs for part in parts),
+    )
+
+
+class _Spill:
+    """The samples of a first pass over a text file, kept as raw float64 in a temporary file.
+
+    Later passes (scoring, sampling) read 24 bytes a row back instead of parsing the text again, which is
+    most of the time of a pass. Only for text files (npy/npz are read as fast as the spill), and only
+    while the temporary folder has room for it: when a write fails the passes read the file again.
+    """
+
+    def __init__(self, reader: ChunkReader) -> None:
+        self.complete = reader.format.kind == "text"
+        self.rows = 0
+        self._file: IO[bytes] | None = None
+        if self.complete:
+            room = shutil.disk_usage(tempfile.gettempdir()).free
+            self.complete = _rows_in(reader.path, reader.format) * 24 < room // 2
+        if self.complete:
+            self._file = tempfile.TemporaryFile()
+
+    def __enter__(self) -> _Spill:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+
+    def write(self, chunk: NDArray[np.float64]) -> None:
+        if not self.complete or self._file is None:
+            return
+        try:
+            self._file.write(np.ascontiguousarray(chunk, dtype=np.float64).data)  # no copy to bytes
+            self.rows += len(chunk)
+        except OSError:  # the disk filled up: the later passes read the file again
+            self.complete = False
+
+    def chunks(self) -> Iterator[NDArray[np.float64]]:
+        assert self._file is not None
+        self._file.seek(0)
+        while block := self._file.read(STREAM_CHUNK_ROWS * 24):
+            yield np.frombuffer(block, dtype=np.float64).reshape(-1, 3)
+
+
+def _fit_streaming(
+    path: Path,
+    method: str,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    options: Mapping[str, Any],
+    progress: Progress,
+) -> tuple[Calibration, Evaluation, _ReadResult]:
+    from ..io import iter_sample_chunks
+
+    def chunks() -> ChunkReader:
+        return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
+
+    # Pass 1: the sufficient statistics of eq. (4), one chunk at a time (a text file's samples are spilled
+    # to a temporary binary file on the way, so that pass 2 does not parse the text again).
+    with _FirstPass(chunks, progress) as first:
+        statistics, reader = first.statistics, first.read
+        _require_rows(path, statistics.n, reader)
+        calibration = fit(statistics, method=method, **options)
+        # Pass 2: the paper's metric needs the final calibration, so the samples are read again; on the way,
+        # keep an evenly strided subsample (bounded) for the diagnostics, which need samples, not statistics.
+        with progress(f"scoring the fit on {path.name}", statistics.n) as advance:
+            evaluation, subsample = first.score(calibration, advance)
+    forced = bool(options.get("allow_undetermined", False))
+    return _with_diagnostics(calibration, subsample, statistics.n, forced), evaluation, reader
+
+
+def _counted(chunks: Iterable[NDArray[np.float64]], advance: Advance) -> Iterator[NDArray[np.float64]]:
+    for chunk in chunks:
+        advance(len(chunk))
+        yield chunk
+
+
+class _Strided:
+    """Every k-th row of a stream of chunks, k chosen from the known total so that at most ``cap`` are kept."""
+
+    def __init__(self, total: int, cap: int) -> None:
+        self.step = max(1, -(-total // cap))  # ceil(total / cap)
+        self.seen = 0
+        self.kept: list[NDArray[np.float64]] = []
+
+    def collect(self, chunks: Iterable[NDArray[np.float64]]) -> Iterator[NDArray[np.float64]]:
+        for chunk in chunks:
+            first = (-self.seen) % self.step  # index in this chunk of the next row to keep
+            self.kept.append(np.array(chunk[first :: self.step], dtype=np.float64))
+            self.seen += len(chunk)
+            yield chunk
+
+    def samples(self) -> NDArray[np.float64]:
+        return np.concatenate(self.kept) if self.kept else np.empty((0, 3))
+
+
+def _with_diagnostics(
+    calibration: Calibration, subsample: NDArray[np.float64], n_total: int, allow_undetermined: bool = False
+) -> Calibration:
+    """``calibration`` with :func:`magfit.diagnose` of the strided subsample in ``details["diagnostics"]``,
+    and its verdict in ``details["support"]``.
+
+    A fit from Statistics carries no coverage or uncertainty (they need samples); the stream provides
+    them. Above :data:`DIAGNOSE_SAMPLES` rows the uncertainty is that of the subsample: conservative. The
+    samples' verdict is the one an in-memory fit reaches: a refusal raises, unless ``allow_undetermined``
+    (``--force``), which returns the calibration marked as forced, as :func:`magfit.fit` does.
+    """
+    from ..fit import diagnose
+
+    try:
+        report = diagnose(calibration, subsample)
+    except (MagfitError, np.linalg.LinAlgError) as error:  # the fit stands; say why there is no diagnosis
+        return replace(
+            calibration,
+            details={**calibration.details, "diagnostics_error": f"the diagnostics could not be computed: {error}"},
+        )
+    if subsample.shape[0] < n_total:
+        note = (
+            f"Streamed: diagnosed on one row in {-(-n_total // subsample.shape[0])} ({subsample.shape[0]} of "
+            f"{n_total}); the uncertainty is that of the subsample (conservative)."
+        )
+        report = replace(report, notes=(*report.notes, note))
+    details = {**calibration.details}
+    support = report.support
+    if support is not None:
+        if support.verdict == "refused":
+            if not allow_undetermined:
+                raise CalibrationError(support.message(calibration.method))
+            support = replace(support, forced=True)
+            report = replace(report, support=support, warnings=support.warnings)
+        details["support"] = support.to_dict()
+    details["diagnostics"] = report.to_dict()
+    return replace(calibration, details=details)
+
+
+def _require_rows(path: Path, n_samples: int, read: _ReadResult) -> None:
+    if n_samples > 0:
+        return
+    if read.n_skipped:
+        raise DataFileError(
+            f"{path}: all {read.n_skipped} data rows hold NaN or inf values; nothing is left to calibrate"
+        )
+    raise DataFileError(f"{path}: the file holds no data rows")
+
+
