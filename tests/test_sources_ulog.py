@@ -90,8 +90,21 @@ CAL = {
 DEVICE = 592905
 
 
-def write_log(path: Path, n: int = 1500, *, board_rot: int = 0, second: bool = True) -> magfit.Simulation:
-    """sensor_mag at 50 Hz (two instances) and vehicle_magnetometer (corrected) beside it, in gauss."""
+def write_log(
+    path: Path,
+    n: int = 1500,
+    *,
+    board_rot: int = 0,
+    second: bool = True,
+    cal_rot: int = -1,
+    board_tilt: float = 0.0,
+    rotation: np.ndarray | None = None,
+) -> magfit.Simulation:
+    """sensor_mag at 50 Hz (two instances) and vehicle_magnetometer (corrected) beside it, in gauss.
+
+    ``rotation``: the R of PX4's Correct that CAL_MAG0_ROT ``cal_rot`` or SENS_BOARD_ROT ``board_rot`` stands
+    for, written here from PX4's rotate_3f cases (not from magfit's table), applied to vehicle_magnetometer.
+    """
     simulation = magfit.simulate(
         n,
         soft_iron=[[1.1, 0.05, 0.0], [0.05, 0.92, 0.02], [0.0, 0.02, 1.0]],
@@ -111,8 +124,9 @@ def write_log(path: Path, n: int = 1500, *, board_rot: int = 0, second: bool = T
     writer.format("vehicle_attitude", [("uint64_t", "timestamp"), ("float[4]", "q")])
     writer.info("ver_sw", "v1.14.0-test")
     writer.parameter("CAL_MAG0_ID", DEVICE)
-    writer.parameter("CAL_MAG0_ROT", -1)
+    writer.parameter("CAL_MAG0_ROT", cal_rot)
     writer.parameter("SENS_BOARD_ROT", board_rot)
+    writer.parameter("SENS_BOARD_X_OFF", board_tilt)
     writer.parameter("CAL_MAG_COMP_TYP", 0)
     for axis, i in zip("XYZ", range(3), strict=True):
         writer.parameter(f"CAL_MAG0_{axis}OFF", float(CAL["off"][i]))
@@ -124,6 +138,8 @@ def write_log(path: Path, n: int = 1500, *, board_rot: int = 0, second: bool = T
     writer.subscribe("vehicle_magnetometer", 0)
     writer.subscribe("vehicle_attitude", 0)
     corrected = px4_correct(simulation.samples, CAL["off"], CAL["scale"], CAL["odiag"])
+    if rotation is not None:
+        corrected = corrected @ rotation.T
     for j in range(n):
         time = 1_000_000 + j * 20_000
         writer.data("sensor_mag", 0, time, DEVICE, *simulation.samples[j])
@@ -191,12 +207,38 @@ def test_calibrate_by_device_id_and_inspect(tmp_path: Path) -> None:
     assert "50.0 Hz" in result.stdout and "vehicle_attitude (1500)" in result.stdout
 
 
-def test_a_rotated_calibrated_stream_is_refused_with_the_reason(tmp_path: Path) -> None:
+#: R of PX4's Correct, from rotate_3f's cases in src/lib/conversion/rotation.cpp: YAW_180 (4) is
+#: x, y = -x, -y; ROLL_180_YAW_90 (10) is x, y, z = y, x, -z; PITCH_270 (25) is x, z = -z, x.
+ROTATE_3F = {
+    4: np.array([[-1.0, 0, 0], [0, -1, 0], [0, 0, 1]]),
+    10: np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]]),
+    25: np.array([[0.0, 0, -1], [0, 1, 0], [1, 0, 0]]),
+}
+
+
+@pytest.mark.parametrize(("cal_rot", "board_rot", "applied"), [(-1, 4, 4), (10, 4, 10), (25, 0, 25)])
+def test_a_rotated_calibrated_stream_is_undone_to_the_sensor_frame(
+    tmp_path: Path, cal_rot: int, board_rot: int, applied: int
+) -> None:
+    # An internal compass (CAL_MAG0_ROT -1) turns with the board (SENS_BOARD_ROT); an external one by its own
+    # CAL_MAG0_ROT, whatever the board's.
     path = tmp_path / "rotated.ulg"
-    write_log(path, n=100, board_rot=4, second=False)
+    simulation = write_log(path, n=300, board_rot=board_rot, cal_rot=cal_rot, second=False, rotation=ROTATE_3F[applied])
     source = open_source(path)
-    assert source.magnetometers[1].problem is not None and "SENS_BOARD_ROT 4" in source.magnetometers[1].problem
-    with pytest.raises(DataFileError, match="rotated into the body frame"):
+    undone = source.read("vehicle_magnetometer/0")
+    np.testing.assert_allclose(undone.samples, simulation.samples, atol=1e-6)
+    assert source.magnetometers[1].slot == 0 and source.magnetometers[0].slot == 0
+    motion = source.read_motion("vehicle_magnetometer/0")
+    assert motion.magnetometer_frame == "sensor"
+    np.testing.assert_allclose(motion.mounting, ROTATE_3F[applied], atol=1e-12)
+
+
+def test_a_fine_tuned_board_rotation_is_refused_with_the_reason(tmp_path: Path) -> None:
+    path = tmp_path / "tilted.ulg"
+    write_log(path, n=100, board_rot=4, board_tilt=2.5, second=False)
+    source = open_source(path)
+    assert source.magnetometers[1].problem is not None and "SENS_BOARD_X/Y/Z_OFF" in source.magnetometers[1].problem
+    with pytest.raises(DataFileError, match="rotation into the body frame cannot be undone"):
         source.read("vehicle_magnetometer/0")
     # Only the raw stream can be fitted, so it is chosen without --sensor.
     assert source.magnetometer(None).id == "sensor_mag/0"

@@ -23,11 +23,15 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
+
+if TYPE_CHECKING:
+    from .motion import Motion
 
 __all__ = [
     "LogSamples",
@@ -196,6 +200,9 @@ class Source:
         What a user must know about the whole file (bytes skipped as damaged ...).
     position : Position or None
         Where and when, from the log's own 3-D GNSS fixes (flight logs), or None.
+
+    :meth:`read` gives a magnetometer's samples; :meth:`read_motion` gives them with the attitude, gyroscope
+    and accelerometer at their time stamps (:class:`magfit.sources.motion.Motion`).
     """
 
     path: Path
@@ -207,6 +214,7 @@ class Source:
     notes: tuple[str, ...] = ()
     position: Position | None = None
     _reader: Callable[[Magnetometer], LogSamples] | None = field(default=None, repr=False, compare=False)
+    _motion: Callable[[Magnetometer], Motion] | None = field(default=None, repr=False, compare=False)
 
     def magnetometer(self, sensor: str | None) -> Magnetometer:
         """The magnetometer ``sensor`` names (its id, or its device id), or the only usable one when None.
@@ -251,6 +259,25 @@ class Source:
         if self._reader is None:
             raise DataFileError(f"{self.path}: is a samples file; read it with magfit.io.read_samples")
         return self._reader(chosen)
+
+    def read_motion(self, sensor: str | None = None) -> Motion:
+        """The samples of magnetometer ``sensor`` with the vehicle's attitude, gyroscope and accelerometer at
+        their time stamps, each with its frame (see :mod:`magfit.sources.motion`).
+
+        Raises
+        ------
+        DataFileError
+            As :meth:`read`; a samples file (it holds no other streams).
+        """
+        chosen = self.magnetometer(sensor)
+        if chosen.problem is not None:
+            raise DataFileError(f"{self.path}: {chosen.id} cannot be fitted: {chosen.problem}")
+        if self._motion is None:
+            raise DataFileError(
+                f"{self.path}: is a samples file, which holds no attitude, gyroscope or accelerometer stream beside "
+                "the magnetometer; give a flight log or a bag"
+            )
+        return self._motion(chosen)
 
 
 def log_kind(path: str | os.PathLike[str]) -> str | None:

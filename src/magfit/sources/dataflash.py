@@ -38,7 +38,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
+from ..rotations import custom_rotation, standard_rotations
 from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
+from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
 
 __all__ = ["DataFlashLog", "open_dataflash", "undo_calibration"]
 
@@ -72,7 +74,7 @@ _LETTERS: dict[str, tuple[str, float | None]] = {
 #: COMPASS_SCALE is applied only inside this range (AP_Compass's have_scale_factor, CompassCalibrator.h).
 _SCALE_RANGE = (0.85, 1.4)
 #: Messages listed by `magfit inspect` beside the compasses, when present.
-_ALSO = ("ATT", "IMU", "GPS", "BARO", "PARM", "MODE", "BAT", "CURR", "RCOU")
+_ALSO = ("ATT", "AHR2", "XKQ", "IMU", "GPS", "BARO", "PARM", "MODE", "BAT", "CURR", "RCOU")
 
 
 @dataclass(frozen=True)
@@ -313,7 +315,13 @@ def open_dataflash(path: Path, file: Path) -> Source:
         data = file.read_bytes()
     except OSError as error:
         raise DataFileError(f"{path}: cannot be read ({error.strerror}); check the file's permissions") from None
-    log = DataFlashLog(path, data)
+    return source_from_log(path, DataFlashLog(path, data), "ArduPilot DataFlash log")
+
+
+def source_from_log(path: Path, log: Any, described: str) -> Source:
+    """The :class:`~magfit.sources.Source` of a DataFlash log already read: a :class:`DataFlashLog`, or anything
+    with its ``has``, ``messages``, ``value``, ``parameters``, ``names``, ``skipped_bytes`` and ``truncated``
+    (the text of ``mavlogdump.py``, :mod:`magfit.sources.mavlogdump`)."""
     parameters = log.parameters()
     streams = _compass_streams(log)
     magnetometers = []
@@ -329,22 +337,147 @@ def open_dataflash(path: Path, file: Path) -> Source:
     rest = sorted(set(counts) - set(_ALSO) - {"MAG", "MAG2", "MAG3"})
     if rest:
         other += (f"{len(rest)} other message types: {', '.join(rest)}",)
+    position = _position(log)
 
     def read(magnetometer: Magnetometer) -> LogSamples:
         slot = int(magnetometer.id.split("/")[1])
         name, records = streams[slot]
         return _read(log, parameters, magnetometer, name, records)
 
+    def motion(magnetometer: Magnetometer) -> Motion:
+        return _motion(log, parameters, read(magnetometer), position)
+
     return Source(
         path=path,
-        position=_position(log),
+        position=position,
         kind="dataflash",
-        format="ArduPilot DataFlash log",
+        format=described,
         time_base="seconds since boot (TimeUS)",
         magnetometers=tuple(magnetometers),
         other=other,
         notes=tuple(notes),
         _reader=read,
+        _motion=motion,
+    )
+
+
+def _first_instance(records: NDArray[Any]) -> NDArray[Any]:
+    """The messages of instance 0 (field ``I``) or core 0 (``C``, the EKF's), when the type has one."""
+    labels = records.dtype.names or ()
+    for key in ("I", "C"):
+        if key in labels and len(records):
+            return records[records[key] == np.min(records[key])]
+    return records
+
+
+def _attitude_stream(log: Any) -> Stream | None:
+    """ATT (the attitude the vehicle flew by: Roll, Pitch, Yaw in degrees), else XKQ (EKF3 core 0's quaternion,
+    Q1..Q4 = w, x, y, z), else AHR2 (the backup DCM estimate: its quaternion, or its angles).
+
+    ArduPilot's Euler angles are 3-2-1, body -> NED: ``Matrix3f::from_euler(roll, pitch, yaw)`` is
+    ``Rz(yaw) · Ry(pitch) · Rx(roll)`` (libraries/AP_Math/matrix3.cpp), the DCM ``AP_AHRS`` logs from
+    (libraries/AP_AHRS/AP_AHRS_Logging.cpp, Write_Attitude); XKQ's quaternion is the NED <- body rotation
+    (libraries/AP_NavEKF3/AP_NavEKF3_Logging.cpp, Log_Write_Quaternion).
+    """
+    for name in ("ATT", "XKQ", "AHR2"):
+        if not log.has(name):
+            continue
+        records = _first_instance(log.messages(name))
+        labels = set(records.dtype.names or ())
+        time = _time_s(log, name, records)
+        with np.errstate(invalid="ignore"):
+            if name != "ATT" and {"Q1", "Q2", "Q3", "Q4"} <= labels:
+                quaternions = quaternion_wxyz(
+                    np.column_stack([log.value(records, name, q) for q in ("Q1", "Q2", "Q3", "Q4")])
+                )
+                return Stream(f"{name} Q1..Q4", time, quaternions, "body (FRD)")
+            if {"Roll", "Pitch", "Yaw"} <= labels:
+                roll, pitch, yaw = (log.value(records, name, a) for a in ("Roll", "Pitch", "Yaw"))
+                finite = np.isfinite(roll) & np.isfinite(pitch) & np.isfinite(yaw)
+                quaternions = np.full((len(records), 4), np.nan)
+                if np.any(finite):
+                    quaternions[finite] = euler_quaternions(roll[finite], pitch[finite], yaw[finite])
+                return Stream(f"{name} Roll/Pitch/Yaw", time, quaternions, "body (FRD)")
+    return None
+
+
+def _imu_streams(log: Any) -> tuple[Stream | None, Stream | None]:
+    """IMU instance 0: GyrX/Y/Z (rad/s) and AccX/Y/Z (m/s²), in the body frame: AP_InertialSensor rotates every
+    IMU by its board orientation (AHRS_ORIENTATION) before it is logged (AP_InertialSensor_Backend::
+    _rotate_and_correct_gyro / _accel, libraries/AP_InertialSensor/AP_InertialSensor_Backend.cpp)."""
+    if not log.has("IMU"):
+        return None, None
+    records = _first_instance(log.messages("IMU"))
+    labels = set(records.dtype.names or ())
+    time = _time_s(log, "IMU", records)
+    found: list[Stream | None] = []
+    for prefix, what in (("Gyr", "GyrX/Y/Z"), ("Acc", "AccX/Y/Z")):
+        axes = [f"{prefix}{a}" for a in "XYZ"]
+        if set(axes) <= labels:
+            with np.errstate(invalid="ignore"):
+                values = np.column_stack([log.value(records, "IMU", a) for a in axes])
+            found.append(Stream(f"IMU[0] {what}", time, values, "body (FRD)"))
+        else:
+            found.append(None)
+    return found[0], found[1]
+
+
+def _mounting(parameters: dict[str, list[tuple[float, float]]], index: int) -> tuple[NDArray[np.float64] | None, str]:
+    """The rotation ArduPilot applied to compass ``index`` before logging it (AP_Compass_Backend::rotate_field,
+    libraries/AP_Compass/AP_Compass_Backend.cpp): COMPASS_ORIENT* for an external compass, AHRS_ORIENTATION for
+    an internal one (the chip's own orientation on its board, MAG_BOARD_ORIENTATION, is the driver's and is
+    not logged)."""
+    s = _suffix(index)
+    external = _latest(parameters, f"COMPASS_EXTERN{s}")
+    if external is None:
+        external = _latest(parameters, f"COMPASS_EXTERNAL{s}")
+    if external is None:
+        return None, f"the log has no COMPASS_EXTERN{s}: which orientation the firmware applied is unknown"
+    name = f"COMPASS_ORIENT{s}" if external else "AHRS_ORIENTATION"
+    value = _latest(parameters, name)
+    if value is None:
+        return None, f"the log has no {name}"
+    index_value = int(value)
+    where = "external" if external else "internal"
+    found = standard_rotations("ardupilot").get(index_value)
+    if found is not None:
+        return np.array(found.matrix), (
+            f"{name} {index_value} ({found.name}; {where} compass), already applied by the firmware before logging"
+        )
+    if index_value in (101, 102):  # ROTATION_CUSTOM_1/2: CUST_ROTn_ROLL/PITCH/YAW (AP_CustomRotations, 4.2 on)
+        n = index_value - 100
+        angles = [_latest(parameters, f"CUST_ROT{n}_{axis}") for axis in ("ROLL", "PITCH", "YAW")]
+        if all(a is not None for a in angles):
+            roll, pitch, yaw = (float(a) for a in angles)  # type: ignore[arg-type]
+            return custom_rotation("ardupilot", roll, pitch, yaw), (
+                f"{name} {index_value} (custom: CUST_ROT{n}_ROLL/PITCH/YAW {roll:g}, {pitch:g}, {yaw:g}; {where} "
+                "compass), already applied by the firmware before logging"
+            )
+    return None, f"{name} {index_value}: a rotation whose matrix the log does not give"
+
+
+def _motion(
+    log: Any, parameters: dict[str, list[tuple[float, float]]], read: LogSamples, position: Position | None
+) -> Motion:
+    slot = read.magnetometer.slot
+    mounting, note = _mounting(parameters, slot if slot is not None else 0)
+    gyro, accel = _imu_streams(log)
+    return align(
+        read.magnetometer.id,
+        read.magnetometer.unit,
+        read.time_s,
+        read.samples,
+        magnetometer_frame="body",
+        attitude=_attitude_stream(log),
+        gyro=gyro,
+        accel=accel,
+        mounting=mounting,
+        mounting_note=note,
+        position=position,
+        notes=(
+            "magnetometer: MAG is logged in the body frame (FRD), after the board or COMPASS_ORIENT rotation "
+            f"(AP_Compass_Backend::rotate_field); mounting: {note}",
+        ),
     )
 
 
@@ -504,6 +637,7 @@ def _describe(
         start_s=first,
         end_s=float(times[-1]) if len(times) else float("nan"),
         device_id=compass.device_id if compass else None,
+        slot=compass.index if compass else slot,
         raw=False,
         notes=tuple(notes),
         problem=problem,

@@ -3,8 +3,14 @@
 Read with ``rosbags`` (the ``ros`` extra: pure Python, no ROS install), imported when a bag is first read.
 Every ``sensor_msgs/MagneticField`` topic becomes one magnetometer: its ``magnetic_field`` x, y, z are
 in tesla by the message's definition, its ``header.frame_id`` names the sensor frame. Every
-``sensor_msgs/Imu`` topic is kept beside them (orientation quaternion, linear acceleration) for the
-checks that need the attitude.
+``sensor_msgs/Imu`` topic is kept beside them (orientation quaternion, angular velocity, linear
+acceleration) for :meth:`~magfit.sources.Source.read_motion`.
+
+Frames (REP-103, REP-145): an Imu's ``orientation`` turns its ``frame_id`` (x forward, y left, z up) into a
+world frame that is East-North-Up; ``read_motion`` turns it into North-East-Down (``R_ned = C · R_enu`` with C
+swapping x and y and negating z) and keeps the body axes of the ``frame_id``. A driver that reports its
+orientation in NED breaks REP-145: its attitude would come out mirrored, and the notes say which convention
+was assumed. ``angular_velocity`` (rad/s) and ``linear_acceleration`` (m/s²) are in the Imu's ``frame_id``.
 
 Times are the messages' ``header.stamp`` in seconds since the epoch: the time the sensor measured. A
 driver that leaves the stamps at zero (it happens) gets the bag's receive times instead, and the topic
@@ -30,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
+from .motion import Motion, Stream, align
 
 if TYPE_CHECKING:
     from . import Source
@@ -110,6 +117,8 @@ class ImuTopic:
         Seconds since the epoch, as for :class:`MagneticTopic`.
     time_base : str
         ``"header"`` or ``"bag"``.
+    angular_velocity : ndarray, shape (N, 3)
+        rad/s; rows whose covariance's first element is -1 (not given) are NaN.
     """
 
     topic: str
@@ -118,6 +127,7 @@ class ImuTopic:
     linear_acceleration: NDArray[np.float64]
     timestamps: NDArray[np.float64]
     time_base: str = "header"
+    angular_velocity: NDArray[np.float64] = field(default_factory=lambda: np.empty((0, 3)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,7 +238,7 @@ def open_rosbag(path: str | os.PathLike[str]) -> Source:
     The samples are given in µT (the messages' tesla times 10⁶, an exact power of ten): the unit of the
     calibration and of the exports. The Imu topics and the other topics are listed in ``other``.
     """
-    from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Source
+    from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source
 
     path = Path(path)
     contents = read_bag_contents(path)
@@ -274,6 +284,16 @@ def open_rosbag(path: str | os.PathLike[str]) -> Source:
             columns=("magnetic_field.x", "magnetic_field.y", "magnetic_field.z"),
         )
 
+    place = contents.position()
+    position = (
+        Position(lat_deg=place[0], lon_deg=place[1], alt_km=place[2], time_s=place[3], n_fixes=len(contents.fixes))
+        if place is not None
+        else None
+    )
+
+    def motion(magnetometer: Magnetometer) -> Motion:
+        return _motion(by_id[magnetometer.id], contents.imus, read(magnetometer), position)
+
     names = {"ros1": "ROS 1 bag", "mcap": "MCAP file", "sqlite3": "ROS 2 sqlite3 bag", "folder": "ROS 2 bag folder"}
     return Source(
         path=path,
@@ -282,7 +302,71 @@ def open_rosbag(path: str | os.PathLike[str]) -> Source:
         time_base="seconds since the epoch (header.stamp)",
         magnetometers=tuple(magnetometers),
         other=other,
+        position=position,
         _reader=read,
+        _motion=motion,
+    )
+
+
+#: ENU -> NED: x and y swapped, z negated (a proper rotation: 180° about the axis between north and east).
+_ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def _companion(mag: MagneticTopic, imus: Sequence[ImuTopic]) -> tuple[ImuTopic | None, str]:
+    """The Imu topic that goes with a magnetometer: the same frame_id, else the same namespace, else the first."""
+    if not imus:
+        return None, "the bag has no sensor_msgs/Imu topic"
+    for imu in imus:
+        if imu.frame_id == mag.frame_id:
+            return imu, f"{imu.topic}: the same frame_id as {mag.topic} ({mag.frame_id})"
+    namespace = mag.topic.rsplit("/", 1)[0]
+    for imu in imus:
+        if imu.topic.rsplit("/", 1)[0] == namespace:
+            return imu, f"{imu.topic}: the same namespace as {mag.topic} (frame_id {imu.frame_id})"
+    return imus[0], f"{imus[0].topic}: the bag's first Imu topic (no Imu shares {mag.topic}'s frame_id or namespace)"
+
+
+def _motion(mag: MagneticTopic, imus: Sequence[ImuTopic], read: Any, position: Any) -> Motion:
+    from scipy.spatial.transform import Rotation
+
+    imu, why = _companion(mag, imus)
+    attitude = gyro = accel = None
+    notes = [f"imu: {why}"]
+    same = imu is not None and imu.frame_id == mag.frame_id
+    if imu is not None:
+        frame = f"frame_id {imu.frame_id or '(none)'} (REP-103: x forward, y left, z up)"
+        quaternions = imu.orientation
+        known = np.all(np.isfinite(quaternions), axis=1) & (np.linalg.norm(quaternions, axis=1) > 0.5)
+        if np.any(known):
+            ned = np.full_like(quaternions, np.nan)
+            ned[known] = (Rotation.from_matrix(_ENU_TO_NED) * Rotation.from_quat(quaternions[known])).as_quat()
+            attitude = Stream(f"{imu.topic} orientation, ENU turned into NED", imu.timestamps, ned, frame)
+            notes.append(
+                "attitude: the Imu's orientation taken as REP-145's (its frame_id in East-North-Up) and turned into "
+                "NED; the body axes stay the frame_id's"
+            )
+        else:
+            notes.append(f"attitude: {imu.topic} gives no orientation (orientation_covariance[0] = -1)")
+        gyro = Stream(f"{imu.topic} angular_velocity", imu.timestamps, imu.angular_velocity, frame)
+        accel = Stream(f"{imu.topic} linear_acceleration", imu.timestamps, imu.linear_acceleration, frame)
+    if not same:
+        notes.append(
+            f"magnetometer: frame_id {mag.frame_id or '(none)'} is not the Imu's; the transform between them (tf) "
+            "is not read"
+        )
+    return align(
+        mag.topic,
+        "uT",
+        read.time_s,
+        read.samples,
+        magnetometer_frame="body" if same else "sensor",
+        attitude=attitude,
+        gyro=gyro,
+        accel=accel,
+        mounting=np.eye(3) if same else None,
+        mounting_note="the same frame_id as the Imu" if same else "",
+        position=position,
+        notes=tuple(notes),
     )
 
 
@@ -338,11 +422,14 @@ def _read(path: Path, kind: BagKind, readable: Path, rosbags: Any) -> BagContent
                     if fix is not None:
                         fixes.append(fix)
                 else:
-                    q, a = message.orientation, message.linear_acceleration
-                    # orientation_covariance[0] == -1: the IMU gives no orientation (sensor_msgs/Imu's definition)
+                    q, a, w = message.orientation, message.linear_acceleration, message.angular_velocity
+                    # covariance[0] == -1: the IMU does not give this quantity (sensor_msgs/Imu's definition)
                     known = message.orientation_covariance[0] != -1
                     quaternion = (q.x, q.y, q.z, q.w) if known else (np.nan,) * 4
-                    imu.setdefault(connection.topic, _Collector()).add(message, bag_time, quaternion, (a.x, a.y, a.z))
+                    rate = (w.x, w.y, w.z) if message.angular_velocity_covariance[0] != -1 else (np.nan,) * 3
+                    imu.setdefault(connection.topic, _Collector()).add(
+                        message, bag_time, quaternion, (a.x, a.y, a.z), rate
+                    )
     return BagContents(
         path=path,
         kind=kind,
@@ -371,8 +458,16 @@ class _Collector:
         self.bag_times: list[int] = []
         self.values: list[Sequence[float]] = []
         self.extra: list[Sequence[float]] = []
+        self.more: list[Sequence[float]] = []
 
-    def add(self, message: Any, bag_time: int, values: Sequence[float], extra: Sequence[float] = ()) -> None:
+    def add(
+        self,
+        message: Any,
+        bag_time: int,
+        values: Sequence[float],
+        extra: Sequence[float] = (),
+        more: Sequence[float] = (),
+    ) -> None:
         header = message.header
         frame = str(header.frame_id)
         if not self.frames or frame != self.frames[-1]:
@@ -381,6 +476,7 @@ class _Collector:
         self.bag_times.append(int(bag_time))
         self.values.append(values)
         self.extra.append(extra)
+        self.more.append(more)
 
     def times(self) -> tuple[NDArray[np.float64], str]:
         stamps = np.asarray(self.stamps, dtype=np.int64)
@@ -409,6 +505,7 @@ class _Collector:
             linear_acceleration=np.asarray(self.extra, dtype=np.float64).reshape(-1, 3),
             timestamps=times,
             time_base=base,
+            angular_velocity=np.asarray(self.more, dtype=np.float64).reshape(-1, 3),
         )
 
 

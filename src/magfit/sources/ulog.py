@@ -15,9 +15,20 @@ Two topics carry the magnetometers:
   with OFF = CAL_MAGn_{X,Y,Z}OFF, S the symmetric matrix of CAL_MAGn_{X,Y,Z}SCALE (diagonal) and
   CAL_MAGn_{X,Y,Z}ODIAG (xy, xz, yz), R the rotation (CAL_MAGn_ROT for an external compass, the board's
   SENS_BOARD_ROT and SENS_BOARD_*_OFF for an internal one) and COMP the power compensation
-  (CAL_MAG_COMP_TYP). This reader undoes it (``raw = S⁻¹ · corrected + OFF``) when R is the identity and no
-  power compensation is configured, the CAL_MAGn index found by the message's ``device_id``; otherwise
-  the stream is listed with the reason it cannot be undone.
+  (CAL_MAG_COMP_TYP). This reader undoes it (``raw = S⁻¹ · Rᵀ · corrected + OFF``) when no power
+  compensation is configured, the CAL_MAGn index found by the message's ``device_id`` and R known: the
+  rotation ``CAL_MAGn_ROT`` names (0 and up: an external compass), or ``SENS_BOARD_ROT`` for an internal one
+  (``CAL_MAGn_ROT`` -1) without the level fine-tuning ``SENS_BOARD_X/Y/Z_OFF`` (which some PX4 versions fold
+  into the board rotation and others do not); otherwise the stream is listed with the reason it cannot be
+  undone. The samples undone are in the sensor's frame, as ``sensor_mag``'s.
+
+Frames (``calibration::Magnetometer::Correct``, src/lib/sensor_calibration/Magnetometer.hpp, and
+``PX4Magnetometer::update``, src/lib/drivers/magnetometer/PX4Magnetometer.cpp): ``sensor_mag`` is published
+after the driver's own fixed chip rotation and before ``CAL_MAGn_ROT``/``SENS_BOARD_ROT``, so
+:meth:`~magfit.sources.Source.read_motion` gives it as ``magnetometer_frame="sensor"`` with that rotation as
+``mounting``. ``vehicle_attitude.q`` is the rotation from the FRD body frame to NED (w, x, y, z);
+``vehicle_angular_velocity`` and ``sensor_combined`` are in the body frame (calibrated, rotated); the raw
+``sensor_gyro``/``sensor_accel`` are in the sensor's frame.
 """
 
 from __future__ import annotations
@@ -32,14 +43,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
+from ..rotations import standard_rotations
 from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
+from .motion import Motion, Stream, align, quaternion_wxyz
 
 __all__ = ["open_ulog", "undo_px4_calibration"]
 
 #: Topics listed by `magfit inspect` beside the magnetometers, when logged.
 _ALSO = (
     "vehicle_attitude",
+    "vehicle_angular_velocity",
     "sensor_combined",
+    "sensor_gyro",
     "sensor_accel",
     "vehicle_gps_position",
     "sensor_gps",
@@ -92,8 +107,9 @@ def undo_px4_calibration(
     offsets: NDArray[np.float64],
     scales: NDArray[np.float64],
     offdiagonals: NDArray[np.float64],
+    rotation: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
-    """The raw field from PX4's corrected one, for a compass with no rotation and no power compensation.
+    """The raw field (sensor frame) from PX4's corrected one (body frame), for a compass without power compensation.
 
     Parameters
     ----------
@@ -101,29 +117,42 @@ def undo_px4_calibration(
         ``vehicle_magnetometer.magnetometer_ga`` (gauss).
     offsets, scales, offdiagonals : ndarray, shape (3,)
         CAL_MAGn_{X,Y,Z}OFF, CAL_MAGn_{X,Y,Z}SCALE and CAL_MAGn_{X,Y,Z}ODIAG (xy, xz, yz).
+    rotation : ndarray, shape (3, 3), optional
+        R of ``corrected = R · S · (raw - OFF)``: CAL_MAGn_ROT's matrix, or SENS_BOARD_ROT's (None: identity).
     """
     sx, sy, sz = np.asarray(scales, dtype=np.float64)
     xy, xz, yz = np.asarray(offdiagonals, dtype=np.float64)
     matrix = np.array([[sx, xy, xz], [xy, sy, yz], [xz, yz, sz]])
-    return np.linalg.solve(matrix, np.asarray(corrected, dtype=np.float64).T).T + np.asarray(offsets, dtype=np.float64)
+    field = np.asarray(corrected, dtype=np.float64)
+    if rotation is not None:
+        field = field @ np.asarray(rotation, dtype=np.float64)  # rows: (Rᵀ · v)ᵀ = vᵀ · R
+    return np.linalg.solve(matrix, field.T).T + np.asarray(offsets, dtype=np.float64)
 
 
-def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
-    """Read a PX4 ULog into a :class:`~magfit.sources.Source` (``file``: its bytes on disk).
-
-    ``everything=False`` reads only the magnetometer topics (nothing listed in ``other``).
-    """
+def _parse(path: Path, file: Path, topics: list[str] | None) -> Any:
+    """pyulog's reading of ``topics`` (None: all), its damage a one-line DataFileError."""
     pyulog = _pyulog()
     try:
         # pyulog prints its warnings about damaged data on stdout, which is magfit's output: captured.
         with contextlib.redirect_stdout(io.StringIO()) as said, _BudgetedFile(file) as handle:
-            ulog = pyulog.ULog(handle, None if everything else [*_FIELDS, *_GPS_TOPICS])
+            ulog = pyulog.ULog(handle, topics)
     except Exception as error:  # pyulog raises what its parser meets (struct.error, IndexError, ...)
         reason = " ".join(str(error).split()) or type(error).__name__
         raise DataFileError(
             f"{path}: is a PX4 ULog that cannot be read ({reason}); the file is damaged or cut short: download the "
             "log again"
         ) from None
+    ulog.magfit_said = said.getvalue()
+    return ulog
+
+
+def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
+    """Read a PX4 ULog into a :class:`~magfit.sources.Source` (``file``: its bytes on disk).
+
+    ``everything=False`` reads only the magnetometer topics (nothing listed in ``other``); :meth:`read_motion`
+    then reads the file again for the attitude and IMU topics.
+    """
+    ulog = _parse(path, file, None if everything else [*_FIELDS, *_GPS_TOPICS])
     # A parameter of an unexpected type (bytes in a damaged log) is dropped: the stream it concerns is then
     # refused for want of it, rather than undone with a wrong value.
     parameters = {k: v for k, v in ulog.initial_parameters.items() if isinstance(v, (int, float))}
@@ -140,6 +169,8 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
             sid = f"vehicle_magnetometer/{data.multi_id}"
             streams[sid] = data
             magnetometers.append(_calibrated(sid, data, parameters, changed))
+    slots = _slots(parameters, [m.device_id for m in magnetometers])
+    magnetometers = [replace(m, slot=slots.get(m.device_id)) if m.device_id else m for m in magnetometers]
     counts: dict[str, int] = {}
     for data in ulog.data_list:
         counts[data.name] = counts.get(data.name, 0) + len(next(iter(data.data.values()), ()))
@@ -148,9 +179,11 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
     if rest:
         other += (f"{len(rest)} other topics: {', '.join(rest)}",)
     notes = []
-    if getattr(ulog, "file_corruption", False) or "corrupt" in said.getvalue().lower():
+    if getattr(ulog, "file_corruption", False) or "corrupt" in ulog.magfit_said.lower():
         notes.append("pyulog found damaged data in the file and skipped it")
     described = "PX4 ULog" + (f", firmware {ulog.msg_info_dict['ver_sw']}" if "ver_sw" in ulog.msg_info_dict else "")
+    position = _position(ulog)
+    motion_log: list[Any] = [ulog] if everything else []
 
     def read(magnetometer: Magnetometer) -> LogSamples:
         data = streams[magnetometer.id]
@@ -164,14 +197,21 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
                 corrected = np.column_stack([np.asarray(data.data[c], dtype=np.float64) for c in columns])
             index = _calibration_index(parameters, magnetometer.device_id)
             assert index is not None  # _calibrated made it a problem otherwise; Source.read refused it
-            samples = undo_px4_calibration(corrected, **_cal(parameters, index))
+            rotation, _, problem = _rotation(parameters, index)
+            assert problem is None  # likewise
+            samples = undo_px4_calibration(corrected, **_cal(parameters, index), rotation=rotation)
         times = np.asarray(data.data["timestamp"], dtype=np.float64) / 1e6
         finite = np.all(np.isfinite(samples), axis=1)
         return LogSamples(magnetometer, samples[finite], times[finite], columns, magnetometer.notes)
 
+    def motion(magnetometer: Magnetometer) -> Motion:
+        if not motion_log:  # opened for the magnetometers only: the motion topics are read now, once
+            motion_log.append(_parse(path, file, list(_MOTION_TOPICS)))
+        return _motion(motion_log[0], parameters, read(magnetometer), position)
+
     return Source(
         path=path,
-        position=_position(ulog),
+        position=position,
         kind="ulog",
         format=described,
         time_base="seconds since boot (timestamp)",
@@ -179,7 +219,141 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
         other=other,
         notes=tuple(notes),
         _reader=read,
+        _motion=motion,
     )
+
+
+#: The topics read_motion uses, in the order of preference for each stream.
+_ATTITUDE_TOPICS = ("vehicle_attitude",)
+_GYRO_TOPICS = (
+    ("vehicle_angular_velocity", "xyz", "body (FRD)"),
+    ("sensor_combined", "gyro_rad", "body (FRD)"),
+    ("sensor_gyro", "", "sensor (before SENS_BOARD_ROT and the gyro calibration)"),
+)
+_ACCEL_TOPICS = (
+    ("sensor_combined", "accelerometer_m_s2", "body (FRD)"),
+    ("vehicle_acceleration", "xyz", "body (FRD), bias removed"),
+    ("sensor_accel", "", "sensor (before SENS_BOARD_ROT and the accelerometer calibration)"),
+)
+_MOTION_TOPICS = tuple(dict.fromkeys([*_ATTITUDE_TOPICS, *(t for t, _, _ in _GYRO_TOPICS + _ACCEL_TOPICS)]))
+
+
+def _vector(data: Any, prefix: str) -> NDArray[np.float64] | None:
+    """Fields ``prefix[0..2]`` (an array field), or ``x, y, z`` when ``prefix`` is empty; None when absent."""
+    names = [f"{prefix}[{i}]" for i in range(3)] if prefix else ["x", "y", "z"]
+    if not all(name in data.data for name in names):
+        return None
+    with np.errstate(invalid="ignore"):
+        return np.column_stack([np.asarray(data.data[name], dtype=np.float64) for name in names])
+
+
+def _topic(ulog: Any, name: str) -> Any:
+    for data in ulog.data_list:
+        if data.name == name and data.multi_id == 0 and "timestamp" in data.data:
+            return data
+    return None
+
+
+def _vector_stream(ulog: Any, choices: tuple[tuple[str, str, str], ...], what: str) -> Stream | None:
+    for name, prefix, frame in choices:
+        data = _topic(ulog, name)
+        values = _vector(data, prefix) if data is not None else None
+        if values is not None:
+            # timestamp_sample is when the sensor measured (newer PX4); timestamp when the message was published.
+            stamp = "timestamp_sample" if "timestamp_sample" in data.data else "timestamp"
+            time = np.asarray(data.data[stamp], dtype=np.float64) / 1e6
+            return Stream(f"{name}.{prefix or 'x/y/z'} ({what})", time, values, frame)
+    return None
+
+
+def _motion(ulog: Any, parameters: dict[str, Any], read: LogSamples, position: Position | None) -> Motion:
+    attitude = None
+    data = _topic(ulog, "vehicle_attitude")
+    quaternion = _vector4(data, "q") if data is not None else None
+    if quaternion is not None:
+        time = np.asarray(data.data["timestamp"], dtype=np.float64) / 1e6
+        attitude = Stream("vehicle_attitude.q", time, quaternion_wxyz(quaternion), "body (FRD)")
+    index = _calibration_index(parameters, read.magnetometer.device_id)
+    mounting, note = None, "the log has no CAL_MAGn_ID for this device: its mounting rotation is unknown"
+    if index is not None:
+        mounting, note, problem = _rotation(parameters, index)
+        note = problem or note
+    return align(
+        read.magnetometer.id,
+        read.magnetometer.unit,
+        read.time_s,
+        read.samples,
+        magnetometer_frame="sensor",
+        attitude=attitude,
+        gyro=_vector_stream(ulog, _GYRO_TOPICS, "rad/s"),
+        accel=_vector_stream(ulog, _ACCEL_TOPICS, "m/s²"),
+        mounting=mounting,
+        mounting_note=note,
+        position=position,
+        notes=(
+            "magnetometer: in the sensor's frame (sensor_mag, or vehicle_magnetometer undone), before CAL_MAGn_ROT or "
+            f"SENS_BOARD_ROT (calibration::Magnetometer::Correct); mounting: {note}",
+        ),
+    )
+
+
+def _vector4(data: Any, prefix: str) -> NDArray[np.float64] | None:
+    names = [f"{prefix}[{i}]" for i in range(4)]
+    if not all(name in data.data for name in names):
+        return None
+    with np.errstate(invalid="ignore"):
+        return np.column_stack([np.asarray(data.data[name], dtype=np.float64) for name in names])
+
+
+def _slots(parameters: dict[str, Any], devices: list[int | None]) -> dict[int | None, int]:
+    """Each device's CAL_MAGn index: the one whose CAL_MAGn_ID is the device, else the next free one (no
+    CAL_MAGn_ID, or 0), in the order the devices come; what PX4's calibration does (FindCalibrationIndex,
+    src/lib/sensor_calibration/Utilities.cpp)."""
+    slots: dict[int | None, int] = {}
+    taken = {i for i in range(4) if parameters.get(f"CAL_MAG{i}_ID")}
+    for device in devices:
+        if not device or device in slots:
+            continue
+        index = _calibration_index(parameters, device)
+        if index is None:
+            free = [i for i in range(4) if i not in taken]
+            if not free:
+                continue
+            index = free[0]
+            taken.add(index)
+        slots[device] = index
+    return slots
+
+
+def _rotation(parameters: dict[str, Any], index: int) -> tuple[NDArray[np.float64] | None, str, str | None]:
+    """R of PX4's Correct for CAL_MAG{index}: (matrix sensor -> body, what it is, why it is unknown or None).
+
+    ``CAL_MAGn_ROT`` 0 and up: an external compass, that rotation; -1: an internal one, turned by the board's
+    ``SENS_BOARD_ROT`` (calibration::Magnetometer::ParametersUpdate, src/lib/sensor_calibration/Magnetometer.cpp).
+    """
+    name = f"CAL_MAG{index}"
+    value = int(parameters.get(f"{name}_ROT", -1))
+    table = standard_rotations("px4")
+    if value >= 0:
+        found = table.get(value)
+        if found is None:
+            return None, "", f"{name}_ROT {value} is a rotation magfit does not know"
+        return found.matrix, f"{name}_ROT {value} ({found.name}; external compass)", None
+    board = int(parameters.get("SENS_BOARD_ROT", 0))
+    tilt = [float(parameters.get(f"SENS_BOARD_{axis}_OFF", 0.0)) for axis in "XYZ"]
+    if any(abs(t) > 1e-3 for t in tilt):
+        return (
+            None,
+            "",
+            (
+                f"it is an internal compass on a board fine-tuned by SENS_BOARD_X/Y/Z_OFF {tilt}, which some PX4 "
+                "versions fold into its rotation and others do not"
+            ),
+        )
+    found = table.get(board)
+    if found is None:
+        return None, "", f"SENS_BOARD_ROT {board} is a rotation magfit does not know"
+    return found.matrix, f"SENS_BOARD_ROT {board} ({found.name}; internal compass, {name}_ROT -1)", None
 
 
 #: The fields each magnetometer topic must have; a damaged format definition may lack them.
@@ -306,17 +480,14 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
         problem = f"no CAL_MAGn_ID parameter holds its device_id {device}, so its calibration is unknown"
     else:
         name = f"CAL_MAG{index}"
-        rotation = int(parameters.get(f"{name}_ROT", -1))
-        board = int(parameters.get("SENS_BOARD_ROT", 0))
-        tilt = [float(parameters.get(f"SENS_BOARD_{axis}_OFF", 0.0)) for axis in "XYZ"]
+        _, _, unknown = _rotation(parameters, index)
         comp = int(parameters.get("CAL_MAG_COMP_TYP", 0))
         # ODIAG came with PX4 1.11 (absent before: zero); OFF and SCALE are in every version's log.
         missing = [f"{name}_{a}{k}" for k in ("OFF", "SCALE") for a in "XYZ" if f"{name}_{a}{k}" not in parameters]
         if missing:
             problem = f"the log's parameters lack {', '.join(missing)}, so its calibration cannot be undone"
-        elif rotation > 0 or (rotation < 0 and (board != 0 or any(abs(t) > 1e-3 for t in tilt))):
-            what = f"{name}_ROT {rotation}" if rotation > 0 else f"SENS_BOARD_ROT {board}, SENS_BOARD_X/Y/Z_OFF {tilt}"
-            problem = f"it is rotated into the body frame ({what}), which magfit does not undo yet"
+        elif unknown is not None:
+            problem = f"its rotation into the body frame cannot be undone: {unknown}"
         elif not _invertible(_cal(parameters, index)):
             problem = (
                 f"its calibration parameters ({name}_*OFF, *SCALE, *ODIAG) are not finite or form a singular matrix, "
@@ -329,10 +500,10 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
             if moved:
                 problem = f"{', '.join(moved)} changed during the log: the samples were corrected with two calibrations"
     notes = []
-    if problem is None:
+    if problem is None and index is not None:
         notes.append(
-            f"calibrated by PX4 (body frame); undone with CAL_MAG{index}_*OFF, *SCALE and *ODIAG from the log's "
-            "parameters"
+            f"calibrated by PX4 (body frame); undone to the sensor's frame with CAL_MAG{index}_*OFF, *SCALE, *ODIAG "
+            f"and {_rotation(parameters, index)[1]} from the log's parameters"
         )
     return Magnetometer(
         id=sid,
