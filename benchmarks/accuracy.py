@@ -1472,9 +1472,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-real", action="store_true", help="skip the real recordings")
     parser.add_argument("--seed", type=int, default=20261121)
     parser.add_argument("--cases", help="comma-separated words: only the cases whose name contains one of them")
+    parser.add_argument(
+        "--vehicle",
+        action="store_true",
+        help="issue 14's vehicle scenarios instead (attitude-aided, alignment, gyro-aided; accuracy_vehicle.py); "
+        "--output defaults to results/vehicle",
+    )
     args = parser.parse_args(argv)
 
     command = _command_line(sys.argv[1:] if argv is None else list(argv))
+    if args.vehicle:
+        return _main_vehicle(args, command, parser)
     cases = smoke_grid() if args.smoke else full_grid(args.trials_scale)
     if args.cases:
         words = [word.strip() for word in args.cases.split(",") if word.strip()]
@@ -1496,6 +1504,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     (args.output / "accuracy.md").write_text(render_markdown(report), encoding="utf-8")
     (args.output / "accuracy.json").write_text(report_json(report), encoding="utf-8")
     print(f"wrote {args.output / 'accuracy.md'} and accuracy.json in {report['runtime_s']:.0f} s", file=sys.stderr)
+    for target in report["targets"]:
+        print(f"{target.status:8} {target.name}: {target.detail}", file=sys.stderr)
+    return 0
+
+
+def _main_vehicle(args: argparse.Namespace, command: str, parser: argparse.ArgumentParser) -> int:
+    """``--vehicle``: issue 14's scenarios (the sibling module ``accuracy_vehicle``), written to their own folder."""
+    import accuracy_vehicle as vehicle  # the sibling module; it imports this one
+
+    cases = vehicle.vehicle_smoke_grid() if args.smoke else vehicle.vehicle_grid(args.trials_scale)
+    if args.cases:
+        words = [word.strip() for word in args.cases.split(",") if word.strip()]
+        cases = [case for case in cases if any(word in case.name for word in words)]
+        if not cases:
+            parser.error(f"--cases {args.cases!r} matches no vehicle case")
+    report = vehicle.run(
+        cases,
+        methods=args.methods.split(",") if args.methods else None,
+        peers=not args.no_peers,
+        seed=args.seed,
+        command=command,
+        progress=lambda message: print(message, file=sys.stderr, flush=True),
+    )
+    output = args.output if args.output != HERE / "results" else HERE / "results" / "vehicle"
+    output.mkdir(parents=True, exist_ok=True)
+    (output / "accuracy.md").write_text(vehicle.render_markdown(report), encoding="utf-8")
+    (output / "accuracy.json").write_text(vehicle.report_json(report), encoding="utf-8")
+    print(f"wrote {output / 'accuracy.md'} and accuracy.json in {report['runtime_s']:.0f} s", file=sys.stderr)
     for target in report["targets"]:
         print(f"{target.status:8} {target.name}: {target.detail}", file=sys.stderr)
     return 0

@@ -315,3 +315,77 @@ def test_cases_selects_cases_by_name(tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as usage:
         accuracy.main([*arguments, "--cases", "no such case"])
     assert usage.value.code == 2
+
+
+# ---------------------------------------------------------------------- issue 14: the vehicle scenarios
+
+vehicle = importlib.import_module("accuracy_vehicle")
+
+
+@pytest.fixture(scope="module")
+def level_turns() -> vehicle.VehicleSimulation:
+    """Level turns only (attitude = a yaw), a mounting of 20° about (1, 2, 3), noise-free."""
+    mounting = Rotation.from_rotvec(np.radians(20.0) * np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)).as_matrix()
+    soft_iron = np.array([[1.02, 0.01, -0.005], [0.01, 0.98, 0.0], [-0.005, 0.0, 1.01]])
+    return vehicle.simulate_vehicle(
+        600, "yaw", soft_iron=soft_iron, hard_iron=[0.2, -0.1, 0.3], mounting=mounting, declination_deg=7.0, seed=5
+    )
+
+
+def test_vehicle_truth_scores_zero_and_a_magnitude_only_truth_is_charged_its_mounting(
+    level_turns: vehicle.VehicleSimulation,
+) -> None:
+    exact = vehicle.score(level_turns.truth, level_turns)
+    assert exact.heading_deg < 1e-9 and exact.alignment_deg < 1e-6 and exact.offset_error == 0.0
+    sensor = vehicle.score(level_turns.truth_sensor, level_turns)
+    assert sensor.heading_mounted_deg < 1e-9  # the symmetric truth, the true mounting applied: exact
+    assert sensor.heading_deg > 1.0  # the 20° mounting, not applied, costs degrees of heading
+    assert sensor.alignment_deg is None  # a sensor-frame calibration states no rotation
+
+
+@pytest.mark.parametrize("alpha_deg", [-3.0, 0.7, 12.0])
+def test_vehicle_heading_and_alignment_errors_of_a_known_yaw_error(
+    level_turns: vehicle.VehicleSimulation, alpha_deg: float
+) -> None:
+    # On level turns (attitude = Rz(ψ)), a calibration turned by Rz(α) in the vehicle frame reads every
+    # heading α too far: Rz(ψ) Rz(α) b = Rz(ψ + α) b. Its rotation is α away from the mounting.
+    turn = Rotation.from_euler("z", alpha_deg, degrees=True).as_matrix()
+    truth = level_turns.truth
+    turned = magfit.Calibration("turned", truth.offset, turn @ truth.matrix, truth.field_strength, frame="vehicle")
+    outcome = vehicle.score(turned, level_turns)
+    assert outcome.heading_deg == pytest.approx(abs(alpha_deg), rel=1e-9)
+    assert outcome.alignment_deg == pytest.approx(abs(alpha_deg), rel=1e-6)
+
+
+def test_polar_rotation_of_the_true_vehicle_matrix_is_the_mounting(level_turns: vehicle.VehicleSimulation) -> None:
+    np.testing.assert_allclose(vehicle.polar_rotation(level_turns.truth.matrix), level_turns.mounting, atol=1e-12)
+
+
+def test_plain_regression_recovers_the_truth_from_an_exact_reference() -> None:
+    # No noise, no lag, no attitude error, a tilting flight: raw = G r + V holds exactly.
+    simulation = vehicle.simulate_vehicle(
+        800, "flight", soft_iron=np.diag([1.1, 0.95, 0.9]), hard_iron=[0.3, 0.1, -0.2],
+        mounting=Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix(), seed=2,
+    )  # fmt: skip
+    fitted = vehicle.regression(simulation)
+    outcome = vehicle.score(fitted, simulation)
+    assert outcome.heading_deg < 1e-6 and outcome.alignment_deg < 1e-6
+    np.testing.assert_allclose(fitted.offset, simulation.hard_iron, atol=1e-9)
+
+
+def test_the_vehicle_smoke_grid_runs_and_reports_every_target(tmp_path: Path) -> None:
+    report = vehicle.run(vehicle.vehicle_smoke_grid(), peers=False, command="test")
+    tumble = report["summaries"]["tumble, attitude ±0.5°"]
+    flight = report["summaries"]["flight, attitude ±1°"]
+    assert tumble["ml"].failed == 0 and tumble["ml"].trials == 2
+    # A full tumble, the magnetometer in the vehicle's axes: the full model gets headings within 0.3°.
+    assert tumble["ml"].heading_deg < 0.3
+    # The 5-35° mounting that no magnitude-only fit sees: degrees of heading, unless it is applied.
+    assert flight["auto"].trials == 2
+    assert flight["sphere"].heading_deg > 3.0 > flight["sphere"].heading_mounted_deg
+    text = vehicle.render_markdown(report)
+    assert "## Targets" in text and "vector ≤ 0.5 ×" in text and "alignment (" in text and "gyro-aided" in text
+    data = json.loads(vehicle.report_json(report))
+    assert data["outcomes"]["flight, attitude ±1°"]["regression"][0]["alignment_deg"] is not None
+    assert accuracy.main(["--vehicle", "--smoke", "--no-peers", "--methods", "sphere", "--output", str(tmp_path)]) == 0
+    assert "accuracy.py --vehicle --smoke" in (tmp_path / "accuracy.md").read_text()
