@@ -12,6 +12,8 @@ Formats are recognised by their first bytes, not by their names:
 - ArduPilot DataFlash ``.bin`` (``0xA3 0x95``, then a FMT message): :mod:`magfit.sources.dataflash`, a small
   reader built on the format's own FMT messages (no extra);
 - ROS 1 bags, MCAP and ROS 2 SQLite bags: :mod:`magfit.sources.rosbag`, needs ``rosbags`` (the ``ros`` extra);
+- the text ``mavlogdump.py log.bin`` prints (``2023-05-01 10:00:00.12: MAG {TimeUS : ...}`` lines):
+  :mod:`magfit.sources.mavlogdump`, read as the DataFlash log it came from (no extra);
 - anything else is a samples file for :mod:`magfit.io` (text, ``.npy``, ``.npz``).
 
 (:mod:`magfit.io.sources` is another thing: where a file's bytes come from — a pipe, a compressed copy.)
@@ -281,7 +283,8 @@ class Source:
 
 
 def log_kind(path: str | os.PathLike[str]) -> str | None:
-    """``"ulog"``, ``"dataflash"`` or ``"rosbag"`` when the file's first bytes are those of a log, else None.
+    """``"ulog"``, ``"dataflash"``, ``"rosbag"`` or ``"mavlogdump"`` when the file's first bytes are those of a
+    log, else None.
 
     A missing or unreadable file is None too: the samples readers report it with their own message.
     """
@@ -293,13 +296,17 @@ def log_kind(path: str | os.PathLike[str]) -> str | None:
         return "rosbag" if bag_kind(path) == "folder" else None
     try:
         with open(data_file(path), "rb") as handle:
-            head = handle.read(len(ULOG_MAGIC))
+            head = handle.read(4096)
     except OSError:
         return None
     if head.startswith(ULOG_MAGIC):
         return "ulog"
     if head.startswith(DATAFLASH_MAGIC):
         return "dataflash"
+    from .mavlogdump import is_mavlogdump
+
+    if is_mavlogdump(head):
+        return "mavlogdump"
     from .rosbag import bag_kind  # its own magic numbers (ROS 1, MCAP, SQLite); the module imports no extra
 
     if str(path) != "-" and bag_kind(path) is not None:
@@ -341,6 +348,10 @@ def open_source(path: str | os.PathLike[str], *, everything: bool = True) -> Sou
         from .rosbag import open_rosbag
 
         return open_rosbag(path)
+    if kind == "mavlogdump":
+        from .mavlogdump import open_mavlogdump
+
+        return open_mavlogdump(Path(path), data_file(path))
     return _samples_source(Path(path))
 
 

@@ -318,20 +318,20 @@ def open_dataflash(path: Path, file: Path) -> Source:
     return source_from_log(path, DataFlashLog(path, data), "ArduPilot DataFlash log")
 
 
-def source_from_log(path: Path, log: Any, described: str) -> Source:
+def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, ...] = ()) -> Source:
     """The :class:`~magfit.sources.Source` of a DataFlash log already read: a :class:`DataFlashLog`, or anything
     with its ``has``, ``messages``, ``value``, ``parameters``, ``names``, ``skipped_bytes`` and ``truncated``
-    (the text of ``mavlogdump.py``, :mod:`magfit.sources.mavlogdump`)."""
+    (the text of ``mavlogdump.py``, :mod:`magfit.sources.mavlogdump`); ``notes``: what to say of the file."""
     parameters = log.parameters()
     streams = _compass_streams(log)
     magnetometers = []
     for slot, (name, records) in enumerate(streams):
         magnetometers.append(_describe(log, parameters, slot, name, records))
-    notes = []
+    said = list(notes)
     if log.skipped_bytes:
-        notes.append(f"{log.skipped_bytes} bytes skipped as damaged (no message starts there)")
+        said.append(f"{log.skipped_bytes} bytes skipped as damaged (no message starts there)")
     if log.truncated:
-        notes.append("the last message is cut short (the log was not closed): it is ignored")
+        said.append("the last message is cut short (the log was not closed): it is ignored")
     counts = log.names()
     other = tuple(f"{name} ({counts[name]})" for name in _ALSO if name in counts)
     rest = sorted(set(counts) - set(_ALSO) - {"MAG", "MAG2", "MAG3"})
@@ -355,7 +355,7 @@ def source_from_log(path: Path, log: Any, described: str) -> Source:
         time_base="seconds since boot (TimeUS)",
         magnetometers=tuple(magnetometers),
         other=other,
-        notes=tuple(notes),
+        notes=tuple(said),
         _reader=read,
         _motion=motion,
     )

@@ -1,0 +1,140 @@
+"""ArduPilot logs as text: the output of pymavlink's ``mavlogdump.py log.bin`` (its default format).
+
+Each message is one line, the time the dump computed for it, then the message as ``str()`` of pymavlink's
+``DFMessage`` prints it (``DFReader.py``: ``NAME {Field : value, Field : value}``)::
+
+    2023-05-01 10:00:00.12: MAG {TimeUS : 123456, I : 0, MagX : 12, MagY : -40, MagZ : 301, OfsX : ...}
+    2023-05-01 10:00:00.12: PARM {TimeUS : 1000, Name : COMPASS_OFS_X, Value : 12.5, Default : 0.0}
+
+The values are printed *after* the format's multipliers (degrees, not 1e-7 degrees; a quiet NaN as
+``qnan``), so they are read as they are. The messages are then what a ``.bin`` holds, and the same reader
+works on them (:func:`magfit.sources.dataflash.source_from_log`): MAG per instance ``I`` (or MAG, MAG2,
+MAG3), its calibration undone with the ``COMPASS_*`` parameters of the PARM lines, ATT/XKQ/AHR2 and IMU for
+:meth:`~magfit.sources.Source.read_motion`, GPS for the position. The line's leading date is the dump's
+rendering of the log's clock in the local time zone of whoever ran it: not used; ``TimeUS`` is.
+
+A file is recognised by its content: its first non-empty line has that shape.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError
+from . import Source
+
+__all__ = ["MavlogdumpLog", "is_mavlogdump", "open_mavlogdump"]
+
+#: The date mavlogdump puts before each message, then the message's name and its fields.
+_LINE = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d(?:\.\d+)?: ([A-Z][A-Z0-9_]{0,15}) \{(.*)\}\s*$")
+_HEAD = re.compile(rb"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d(?:\.\d+)?: [A-Z][A-Z0-9_]{0,15} \{")
+#: The messages whose fields are read; the others are only counted (a MSG's text may hold ", " and " : ").
+_READ = frozenset({"MAG", "MAG2", "MAG3", "PARM", "ATT", "AHR2", "XKQ", "IMU", "GPS"})
+
+
+def is_mavlogdump(head: bytes) -> bool:
+    """True when the first non-empty line of ``head`` (the file's first bytes) is a mavlogdump message line."""
+    for line in head.splitlines():
+        if line.strip():
+            return bool(_HEAD.match(line.lstrip(b"\xef\xbb\xbf")))
+    return False
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")  # 'qnan' (pymavlink's quiet NaN), or text in a numeric field: no value
+
+
+class MavlogdumpLog:
+    """A mavlogdump text file read once: the messages magfit needs as structured arrays, the others counted.
+
+    It has the interface :func:`magfit.sources.dataflash.source_from_log` reads a log by (``has``,
+    ``messages``, ``value``, ``parameters``, ``names``, ``skipped_bytes``, ``truncated``).
+    """
+
+    def __init__(self, path: Path, lines: Any) -> None:
+        self.path = path
+        self.skipped_bytes = 0
+        self.truncated = False
+        self.skipped_lines = 0
+        self._counts: dict[str, int] = {}
+        fields: dict[str, list[str]] = {}
+        rows: dict[str, list[dict[str, str]]] = {}
+        for number, line in enumerate(lines, start=1):
+            if not line.strip():
+                continue
+            match = _LINE.match(line)
+            if match is None:
+                if number == 1 and line.startswith("\ufeff"):
+                    match = _LINE.match(line[1:])
+                if match is None:
+                    self.skipped_lines += 1
+                    continue
+            name, body = match.group(1), match.group(2)
+            if name in ("FMT", "FMTU", "UNIT", "MULT"):
+                continue
+            self._counts[name] = self._counts.get(name, 0) + 1
+            if name not in _READ:
+                continue
+            values: dict[str, str] = {}
+            for part in body.split(", "):
+                label, sep, value = part.partition(" : ")
+                if sep:
+                    values[label.strip()] = value.strip()
+            fields.setdefault(name, list(values))
+            rows.setdefault(name, []).append(values)
+        if not self._counts:
+            raise DataFileError(
+                f"{path}: starts like mavlogdump.py's text but holds no message line; dump the log again"
+            )
+        self._parameters: dict[str, list[tuple[float, float]]] = {}
+        for values in rows.pop("PARM", []):
+            time = _number(values.get("TimeUS", "nan")) / 1e6
+            self._parameters.setdefault(values.get("Name", ""), []).append((time, _number(values.get("Value", "nan"))))
+        self._records: dict[str, NDArray[Any]] = {}
+        for name, table in rows.items():
+            labels = fields[name]
+            dtype = np.dtype([(label, "<f8") for label in labels])
+            records = np.empty(len(table), dtype=dtype)
+            for label in labels:
+                records[label] = [_number(values.get(label, "nan")) for values in table]
+            self._records[name] = records
+
+    def names(self) -> dict[str, int]:
+        """Every message type in the file and how many lines of it."""
+        return dict(self._counts)
+
+    def has(self, name: str) -> bool:
+        return self._counts.get(name, 0) > 0 and (name == "PARM" or name in self._records)
+
+    def messages(self, name: str) -> NDArray[Any]:
+        """The messages ``name`` as a structured array of float64 fields (values as printed)."""
+        return self._records.get(name, np.empty(0))
+
+    def value(self, records: NDArray[Any], name: str, label: str) -> NDArray[np.float64]:
+        """Field ``label`` as float64: mavlogdump printed it already scaled."""
+        return np.asarray(records[label], dtype=np.float64)
+
+    def parameters(self) -> dict[str, list[tuple[float, float]]]:
+        """PARM lines: name -> [(time in s, value), ...] in file order."""
+        return self._parameters
+
+
+def open_mavlogdump(path: Path, file: Path) -> Source:
+    """Read a mavlogdump text file into a :class:`~magfit.sources.Source` (``file``: its bytes on disk)."""
+    from .dataflash import source_from_log
+
+    try:
+        with open(file, encoding="utf-8", errors="replace") as handle:
+            log = MavlogdumpLog(path, handle)
+    except OSError as error:
+        raise DataFileError(f"{path}: cannot be read ({error.strerror}); check the file's permissions") from None
+    notes = (f"{log.skipped_lines} lines skipped: not a mavlogdump message line",) if log.skipped_lines else ()
+    return source_from_log(path, log, "ArduPilot log as mavlogdump.py text", notes=notes)
