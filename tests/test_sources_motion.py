@@ -22,7 +22,7 @@ from magfit.errors import DataFileError
 from magfit.rotations import standard_rotations
 from magfit.sources import open_source
 from magfit.sources.motion import Stream, align
-from test_sources_dataflash import DataFlashWriter
+from test_sources_dataflash import COMPASSES, DataFlashWriter, correct_field
 
 DATA = Path(__file__).parent / "data"
 SITL = DATA / "ardupilot_sitl" / "sitl_three_compasses.bin"
@@ -107,8 +107,13 @@ def assert_world_field(motion, mounting: np.ndarray | None = None) -> None:
 ORIENT = 6
 
 
-def dataflash_messages(n_mag: int = 2400, *, att_start_s: float = 2.0, gap: tuple[float, float] | None = None):
-    """(name, letters, labels, rows) of a tumble: MAG 20 Hz from 1 s, ATT 25 Hz from ``att_start_s``, IMU 50 Hz."""
+def dataflash_messages(
+    n_mag: int = 2400, *, att_start_s: float = 2.0, gap: tuple[float, float] | None = None, calibrated: bool = False
+):
+    """(name, letters, labels, rows) of a tumble: MAG 20 Hz from 1 s, ATT 25 Hz from ``att_start_s``, IMU 50 Hz.
+
+    ``calibrated``: MAG logged after the firmware's calibration (COMPASSES[0]'s parameters), as ArduPilot does.
+    """
     t_mag = 1.0 + np.arange(n_mag) / 20.0
     end = t_mag[-1] + 0.5
     t_att = np.arange(att_start_s, end, 0.04) + 0.013  # another clock than the magnetometer's
@@ -123,9 +128,16 @@ def dataflash_messages(n_mag: int = 2400, *, att_start_s: float = 2.0, gap: tupl
         "COMPASS_SCALE": 0.0, "COMPASS_DEV_ID": 97539.0, "COMPASS_MOTCT": 0.0,
         "COMPASS_EXTERNAL": 1.0, "COMPASS_ORIENT": float(ORIENT), "AHRS_ORIENTATION": 0.0,
     }  # fmt: skip
-    for name, value in params.items():
-        rows["PARM"].append((500_000, name, value))
     mag = raw_field(t_mag)  # ArduPilot logs the body frame: COMPASS_ORIENT is applied before the log
+    if calibrated:
+        c = COMPASSES[0]
+        for axis, i in zip("XYZ", range(3), strict=True):
+            params.update({f"COMPASS_OFS_{axis}": c["ofs"][i], f"COMPASS_DIA_{axis}": c["dia"][i]})
+            params[f"COMPASS_ODI_{axis}"] = c["odi"][i]
+        params["COMPASS_SCALE"] = c["scale"]
+        mag = correct_field(mag, c["ofs"], c["dia"], c["odi"], c["scale"])
+    for name, value in params.items():
+        rows["PARM"].append((500_000, name, float(value)))
     for time, field in zip(t_mag, mag, strict=True):
         rows["MAG"].append((round(time * 1e6), 0, *field))
     a, _ = euler(t_att)
@@ -204,6 +216,38 @@ def test_mavlogdump_text_reads_as_its_bin(dataflash: dict[str, Path]) -> None:
     np.testing.assert_allclose(from_text.samples, from_bin.samples, rtol=1e-6, atol=1e-4)
     np.testing.assert_allclose(from_text.attitude, from_bin.attitude, atol=1e-6)
     np.testing.assert_array_equal(from_text.time_s, from_bin.time_s)
+
+
+@pytest.mark.parametrize("writer", [write_bin, write_mavlogdump])
+def test_the_calibration_logged_is_undone_in_both_forms(tmp_path: Path, writer) -> None:
+    formats, rows = dataflash_messages(200, att_start_s=0.5, calibrated=True)
+    source = open_source(writer(tmp_path / "calibrated.log", formats, rows))
+    read = source.read()
+    assert "undone with COMPASS_OFS, DIA, ODI and SCALE" in " ".join(read.notes)
+    np.testing.assert_allclose(read.samples, raw_field(read.time_s), atol=1e-3)  # float32 of ~500 mG
+
+
+def test_a_damaged_mavlogdump_line_is_skipped_and_said(tmp_path: Path) -> None:
+    formats, rows = dataflash_messages(200, att_start_s=0.5)
+    path = write_mavlogdump(tmp_path / "dump.txt", formats, rows)
+    lines = path.read_text().splitlines()
+    lines[300] = lines[300][:25]  # a line cut short
+    lines.insert(10, "garbage that is no message")
+    path.write_text("\n".join(lines) + "\n")
+    source = open_source(path)
+    assert source.notes == ("2 lines skipped: not a mavlogdump message line",)
+    assert len(source.read_motion().samples) >= 198
+
+
+def test_inspect_lists_a_mavlogdump_file(dataflash: dict[str, Path]) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    result = CliRunner().invoke(cli, ["inspect", str(dataflash["text"])])
+    assert result.exit_code == 0, result.output
+    assert "ArduPilot log as mavlogdump.py text" in result.stdout
+    assert "MAG/0" in result.stdout and "ATT (" in result.stdout and "IMU (" in result.stdout
 
 
 def test_a_gap_in_the_attitude_drops_the_samples_inside_it(tmp_path: Path) -> None:
