@@ -1,0 +1,709 @@
+"""The magnetometer's rotation into the vehicle's frame, from gravity and the field's inclination, no attitude.
+
+A magnitude-only calibration (every ``magfit.fit`` method with ``frame="sensor"``) leaves the corrected field
+in the magnetometer's own axes. The firmware must also know how those axes sit in the vehicle (ArduPilot
+``COMPASS_ORIENT``, PX4 ``CAL_MAGn_ROT``, Betaflight/INAV ``align_mag``). The accelerometer gives it without
+any attitude estimate: wherever the vehicle is, the angle between gravity and the Earth's field is the same,
+90° minus the inclination δ. With ``m_k`` the calibrated field (magnetometer frame) and ``a_k`` the
+accelerometer's specific force (body frame) at sample k, and ``d_k = −a_k / |a_k|`` the downward direction
+(the accelerometer reads the specific force, which points *up*: about (0, 0, −g) in a level
+forward-right-down body; the field points down in the northern magnetic hemisphere, δ > 0)::
+
+    d_kᵀ R m_k / |m_k| = sin δ          for every sample k                                 (A1)
+
+R (``body = R @ sensor``, the firmwares' convention, :mod:`magfit.rotations`) is fitted by robust
+Gauss-Newton over rotations from the 24 axis-aligned starts (and their 24 mirror images), with δ known
+(the World Magnetic Model, :mod:`magfit.geomag`) or fitted as a fourth parameter.
+
+What the samples determine. Turning R by a small angle θ (body frame) changes (A1) by ``θ · (R m̂_k × d_k)``:
+each sample constrains only the rotation about its *magnetic east* direction ``m̂ × d`` (normal to the plane of
+the field and gravity). A rotation about the field, about gravity or any axis in their plane leaves that
+sample's dip unchanged. R is determined only when the east directions of the samples span the three body
+axes. A level vehicle turning in yaw has d = body z always, so its east directions all lie in the body x-y
+plane: the mount's roll and pitch are determined, its yaw (rotation about body z) is not, whatever the
+number of samples. A boat rolling on a steady heading sees east near one body direction in a plane; the
+rotation about the axis normal to that plane is weakly determined. The information matrix ``Σ w_k j_k j_kᵀ``,
+``j_k = R m̂_k × d_k``, gives those directions and their one-sigma; a rotation axis with a one-sigma beyond
+:data:`UNDETERMINED_SIGMA_DEG` is refused (``CalibrationError``) naming it, one beyond
+:data:`WEAK_SIGMA_DEG` is weak.
+
+The accelerometer sees gravity alone only when the vehicle does not accelerate: samples are kept where
+``|a|`` is within :data:`ACCEL_TOLERANCE` of g (the median |a|) and the rotation rate (the gyroscope, or the
+rate at which the field and gravity directions turn) is below ``max_rate_dps``: in a turn at speed v and
+rate ω the centripetal acceleration v ω tilts the apparent gravity by ``atan(v ω / g)`` (2.5° at 25 m/s and
+1°/s), and a coordinated turn hides it from |a| entirely. Remaining outliers are down-weighted (Huber).
+
+Mirrors. A magnetometer whose axes are left-handed relative to the body (one axis inverted, or two swapped)
+is an orthogonal R with det −1 that no firmware rotation can represent; it is fitted as such and reported
+with the sensor axis to invert. Without a known inclination, R with δ and −R with −δ fit (A1) alike: the
+field is then taken to point down (δ > 0, the northern magnetic hemisphere), and the mirror verdict rests
+on that. An accelerometer that reports gravity instead of the specific force (its sign inverted) also looks
+like a mirror.
+
+The one-sigma is honest for correlated samples: batch means of the score over contiguous blocks of the
+recording (the sandwich covariance, as in :func:`magfit.diagnostics.uncertainty.correlation_excess`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import CalibrationError, OptionError, SampleError
+from .rotations import FIRMWARES, StandardRotation, angle_between_deg, euler_angles, nearest_rotation
+
+__all__ = ["ACCEL_TOLERANCE", "Alignment", "FirmwareRotation", "align"]
+
+#: Largest relative deviation of |a| from g for a sample to count as "the accelerometer sees gravity".
+ACCEL_TOLERANCE = 0.03
+#: Default largest rotation rate (°/s) of a sample used: at 25 m/s a 0.3°/s turn tilts gravity by 0.75°.
+MAX_RATE_DPS = 0.3
+#: Fewest samples the fit needs after the gates.
+MIN_SAMPLES = 50
+#: A rotation axis determined worse than this (one-sigma, degrees) is refused; worse than WEAK is weak.
+UNDETERMINED_SIGMA_DEG = 10.0
+WEAK_SIGMA_DEG = 1.0
+#: An inclination fitted worse than this (one-sigma, degrees) is not determined.
+INCLINATION_UNDETERMINED_DEG = 10.0
+#: Contiguous blocks of the recording for the batch-means covariance.
+_BATCHES = 20
+#: Samples fitted from each of the 48 starts before the best is refined on all of them.
+_START_SAMPLES = 1500
+_AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class FirmwareRotation:
+    """The firmware's table entry nearest to the fitted rotation.
+
+    Attributes
+    ----------
+    firmware : str
+        ``"ardupilot"``, ``"px4"``, ``"betaflight"`` or ``"inav"``.
+    rotation : StandardRotation
+        The entry (``id`` is the parameter value) with ``angle_deg``, the angle between it and the fit.
+    parameter : str
+        The parameter that selects it (``COMPASS_ORIENT``, ``CAL_MAG0_ROT``, ``align_mag``).
+    """
+
+    firmware: str
+    rotation: StandardRotation
+    parameter: str
+
+
+@dataclass(frozen=True, eq=False)
+class Alignment:
+    """The magnetometer's rotation into the accelerometer's (vehicle's) frame: ``body = matrix @ sensor``.
+
+    Attributes
+    ----------
+    matrix : ndarray, shape (3, 3)
+        Orthogonal; det +1, or −1 for a mirror (:attr:`mirror`).
+    roll_deg, pitch_deg, yaw_deg : float
+        The 3-2-1 angles of the rotation (``Rz(yaw) Ry(pitch) Rx(roll)``, the firmwares' sequence); for a
+        mirror, of ``matrix @ diag`` with :attr:`inverted_axis` negated.
+    sigma_deg : ndarray, shape (3,)
+        One-sigma of roll, pitch, yaw, degrees (batch means over the recording: correlated samples counted).
+    axis_sigma_deg : ndarray, shape (3,)
+        One-sigma of a small rotation about body x, y, z, degrees.
+    inclination_deg, inclination_sigma_deg : float
+        The field's inclination used: given (sigma 0) or fitted.
+    inclination_fitted : bool
+    mirror : bool
+        det(matrix) = −1: the sensor's axes are left-handed relative to the body.
+    inverted_axis : str or None
+        For a mirror, the sensor axis (``"x"``, ``"y"``, ``"z"``) whose sign to invert so that a proper rotation
+        (the nearest standard one being the closest) remains.
+    nearest : tuple of FirmwareRotation
+        The nearest table entry of each firmware (of the proper part for a mirror).
+    residual_deg : float
+        RMS of the dip residuals of the samples used, degrees (``asin(dᵀ R m̂) − δ``).
+    n_samples, n_used : int
+        Samples given, samples used in the fit.
+    dropped : dict
+        Why the others were left out, in words -> count.
+    verdict : str
+        ``"supported"`` or ``"weak"`` (a refusal raises :class:`~magfit.CalibrationError`, unless
+        ``allow_undetermined``, then ``"refused"``).
+    warnings : tuple of str
+        What is weak or refused, in words.
+    """
+
+    matrix: NDArray[np.float64]
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+    sigma_deg: NDArray[np.float64]
+    axis_sigma_deg: NDArray[np.float64]
+    inclination_deg: float
+    inclination_sigma_deg: float
+    inclination_fitted: bool
+    mirror: bool
+    inverted_axis: str | None
+    nearest: tuple[FirmwareRotation, ...]
+    residual_deg: float
+    n_samples: int
+    n_used: int
+    dropped: dict[str, int] = field(default_factory=dict)
+    verdict: str = "supported"
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def proper_matrix(self) -> NDArray[np.float64]:
+        """The rotation left once :attr:`inverted_axis` is negated (``matrix`` itself when not a mirror)."""
+        return self.matrix @ _flip(self.inverted_axis)
+
+    def nearest_for(self, firmware: str) -> FirmwareRotation:
+        """The nearest table entry of ``firmware``."""
+        for entry in self.nearest:
+            if entry.firmware == firmware:
+                return entry
+        raise OptionError(f"unknown firmware {firmware!r}; valid firmwares: {', '.join(FIRMWARES)}")
+
+
+# --- small rotation algebra -------------------------------------------------------------------------------
+
+
+def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _exp(theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rodrigues: the rotation by |θ| about θ."""
+    angle = float(np.linalg.norm(theta))
+    k = _skew(theta)
+    if angle < 1e-12:
+        return np.eye(3) + k
+    return np.eye(3) + math.sin(angle) / angle * k + (1.0 - math.cos(angle)) / angle**2 * (k @ k)
+
+
+def _flip(axis: str | None) -> NDArray[np.float64]:
+    d = np.ones(3)
+    if axis is not None:
+        d[_AXES.index(axis)] = -1.0
+    return np.diag(d)
+
+
+def _cube_rotations() -> list[NDArray[np.float64]]:
+    """The 24 proper signed permutation matrices: every rotation is within 62.8° of one of them."""
+    out = []
+    for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):
+        for signs in np.array(np.meshgrid([1, -1], [1, -1], [1, -1])).T.reshape(-1, 3):
+            m = np.zeros((3, 3))
+            m[np.arange(3), perm] = signs
+            if np.linalg.det(m) > 0:
+                out.append(m)
+    return out
+
+
+def _axis_words(axis: NDArray[np.float64]) -> str:
+    """A rotation axis of the body frame in words: ``body z (down; the mount's yaw)`` or its components."""
+    names = {0: "body x (forward; the mount's roll)", 1: "body y (right; the mount's pitch)",
+             2: "body z (down; the mount's yaw)"}  # fmt: skip
+    a = axis / np.linalg.norm(axis)
+    i = int(np.argmax(np.abs(a)))
+    if abs(a[i]) > math.cos(math.radians(20.0)):
+        return names[i]
+    return "the body axis ({:+.2f}, {:+.2f}, {:+.2f})".format(*(a if a[i] > 0 else -a))
+
+
+# --- the gates ----------------------------------------------------------------------------------------------
+
+
+def _moving_mean(values: NDArray[np.float64], width: int) -> NDArray[np.float64]:
+    if width <= 1:
+        return values
+    kernel = np.ones(width) / width
+    padded = np.pad(values, (width // 2, width - 1 - width // 2), mode="edge")
+    return np.convolve(padded, kernel, mode="valid")
+
+
+def _direction_rate(vectors: NDArray[np.float64], time_s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """How fast (rad/s) the direction of ``vectors`` turns, at each sample (central differences)."""
+    unit = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)
+    step = np.gradient(unit, axis=0)
+    dt = np.gradient(time_s)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rate = np.linalg.norm(step, axis=1) / dt
+    return np.where(dt > 0, rate, np.inf)
+
+
+def _gates(
+    mag: NDArray[np.float64],
+    accel: NDArray[np.float64],
+    gyro: NDArray[np.float64] | None,
+    time_s: NDArray[np.float64] | None,
+    max_rate_dps: float | None,
+    accel_tolerance: float,
+) -> tuple[NDArray[np.bool_], dict[str, int], list[str], int]:
+    """The samples on which the accelerometer sees gravity alone, why the others were dropped, notes, and
+    the number of samples in about a second (1 when the rate is not gated: nothing may be averaged)."""
+    notes: list[str] = []
+    dropped: dict[str, int] = {}
+    norm_a = np.linalg.norm(accel, axis=1)
+    g = float(np.median(norm_a))
+    if not g > 0:
+        raise SampleError("the accelerometer reads zero on most samples: no gravity to align with")
+    keep = np.abs(norm_a / g - 1.0) <= accel_tolerance
+    dropped[f"|a| more than {100 * accel_tolerance:g} % away from g (the median |a|)"] = int(np.sum(~keep))
+    if max_rate_dps is None:
+        return keep, dropped, notes, 1
+    if gyro is not None:
+        rate = np.linalg.norm(gyro, axis=1)
+        source = "the gyroscope"
+    elif time_s is not None:
+        # The field direction misses a rotation about the field, gravity's one about gravity: the larger
+        # sees every turn (a level yaw turn moves the field direction at ω cos δ).
+        rate = np.maximum(_direction_rate(mag, time_s), _direction_rate(accel, time_s))
+        source = "the turning of the field and gravity directions"
+    else:
+        notes.append(
+            "no gyroscope and no time stamps: samples taken while turning cannot be recognised, their "
+            "centripetal accelerations are only down-weighted as outliers"
+        )
+        return keep, dropped, notes, 1
+    if time_s is not None and time_s.size > 1:
+        step = float(np.median(np.diff(time_s)))
+        width = max(1, round(1.0 / step)) if step > 0 else 1
+    else:
+        width = 5
+    smooth = _moving_mean(rate, width)  # over about a second: gyro noise averages out, turn edges widen
+    still = smooth <= math.radians(max_rate_dps)
+    dropped[f"turning faster than {max_rate_dps:g}°/s (from {source})"] = int(np.sum(keep & ~still))
+    return keep & still, dropped, notes, width
+
+
+# --- the fit ------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Solution:
+    matrix: NDArray[np.float64]  # orthogonal, possibly a mirror
+    s: float  # sin δ
+    cost: float
+
+
+def _huber_weights(r: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
+    k = 1.345 * scale
+    a = np.abs(r)
+    return np.where(a <= k, 1.0, k / np.maximum(a, 1e-300))
+
+
+def _huber_loss(r: NDArray[np.float64], scale: float) -> float:
+    k = 1.345 * scale
+    a = np.abs(r)
+    return float(np.sum(np.where(a <= k, 0.5 * a**2, k * a - 0.5 * k**2)))
+
+
+def _robust_scale(r: NDArray[np.float64]) -> float:
+    return max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-6)
+
+
+def _residuals(down: NDArray[np.float64], mhat: NDArray[np.float64], matrix: NDArray[np.float64], s: float
+               ) -> NDArray[np.float64]:  # fmt: skip
+    """(A1)'s residuals ``dᵀ R m̂ − sin δ``."""
+    return np.einsum("ij,ij->i", down, mhat @ matrix.T) - s
+
+
+def _solve(
+    down: NDArray[np.float64],
+    mhat: NDArray[np.float64],
+    start: NDArray[np.float64],
+    s0: float,
+    fit_s: bool,
+    iterations: int = 30,
+) -> _Solution:
+    """Robust Levenberg-Marquardt on (A1) from ``start`` (Huber, its scale re-estimated each step); the
+    rotation is updated on the left, in the body frame."""
+    matrix, s = start.copy(), s0
+    damping = 1e-3
+    for _ in range(iterations):
+        x = mhat @ matrix.T  # the field in the body frame
+        r = np.einsum("ij,ij->i", down, x) - s
+        scale = _robust_scale(r)
+        w = _huber_weights(r, scale)
+        jac = np.cross(x, down)  # d r / d θ = x × d, for R -> exp([θ]×) R
+        if fit_s:
+            jac = np.column_stack([jac, -np.ones(len(r))])
+        h = jac.T @ (w[:, None] * jac)
+        grad = jac.T @ (w * r)
+        cost = _huber_loss(r, scale)
+        while damping <= 1e6:
+            step = -np.linalg.solve(h + damping * np.diag(np.diag(h) + 1e-12), grad)
+            trial = _exp(step[:3]) @ matrix
+            trial_s = s + (float(step[3]) if fit_s else 0.0)
+            if _huber_loss(_residuals(down, mhat, trial, trial_s), scale) <= cost:
+                matrix, s, damping = trial, trial_s, max(damping / 10.0, 1e-9)
+                break
+            damping *= 10.0
+        else:
+            break
+        if np.linalg.norm(step) < 1e-10:
+            break
+    u, _, vt = np.linalg.svd(matrix)  # keep it orthogonal against rounding
+    matrix = u @ vt
+    return _Solution(matrix, float(s), float(np.median(_residuals(down, mhat, matrix, s) ** 2)))
+
+
+def _covariance(
+    down: NDArray[np.float64], mhat: NDArray[np.float64], solution: _Solution, fit_s: bool
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float]:
+    """(covariance of (θ, [s]), information matrix, residuals, how many times the batch means widen the
+    independent-sample variance): Gauss-Newton σ² H⁻¹ widened by batch means."""
+    x = mhat @ solution.matrix.T
+    r = np.einsum("ij,ij->i", down, x) - solution.s
+    scale = _robust_scale(r)
+    w = _huber_weights(r, scale)
+    jac = np.cross(x, down)
+    if fit_s:
+        jac = np.column_stack([jac, -np.ones(len(r))])
+    k = jac.shape[1]
+    h = jac.T @ (w[:, None] * jac)
+    variance = float(np.sum(w * r**2) / max(np.sum(w) - k, 1.0))
+    h_inv = np.linalg.pinv(h)
+    cov = variance * h_inv
+    # Batch means of the score over contiguous blocks (Flegal & Jones 2010; the sandwich of White 1982): the
+    # samples of a recording are not independent, a block's sum of scores spreads as much as it really does.
+    batches = min(_BATCHES, len(r) // 10)
+    if batches >= 4:
+        scores = jac * (w * r)[:, None]
+        edges = np.linspace(0, len(r), batches + 1).astype(np.int64)
+        sums = np.add.reduceat(scores, edges[:-1], axis=0)
+        sums -= sums.mean(axis=0)
+        sandwich = h_inv @ (sums.T @ sums * batches / (batches - 1)) @ h_inv
+        values, vectors = np.linalg.eigh(sandwich - cov)
+        widened = cov + (vectors * np.clip(values, 0.0, None)) @ vectors.T
+        inflation = float(np.trace(widened) / max(np.trace(cov), 1e-300))
+        return widened, h / variance, r, inflation
+    return cov, h / variance, r, 1.0
+
+
+def _euler_sigma(matrix: NDArray[np.float64], cov_theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """One-sigma of (roll, pitch, yaw) in degrees, by a numerical Jacobian of the 3-2-1 angles."""
+    base = np.array(euler_angles(matrix))
+    jac = np.empty((3, 3))
+    eps = 1e-6
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = eps
+        diff = np.array(euler_angles(_exp(d) @ matrix)) - base
+        jac[:, i] = (diff + 180.0) % 360.0 - 180.0
+    jac /= eps
+    return np.sqrt(np.clip(np.diag(jac @ cov_theta @ jac.T), 0.0, None))
+
+
+def _check_array(values: ArrayLike, name: str, n: int | None = None) -> NDArray[np.float64]:
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise SampleError(f"{name} must have shape (N, 3), got {array.shape}")
+    if n is not None and array.shape[0] != n:
+        raise SampleError(f"{name} has {array.shape[0]} rows but the magnetometer has {n}: give one row per sample")
+    if not np.all(np.isfinite(array)):
+        raise SampleError(f"{name} contains NaN or inf values")
+    return array
+
+
+def _mirror_axis(matrix: NDArray[np.float64]) -> tuple[str, tuple[FirmwareRotation, ...]]:
+    """The sensor axis whose inversion leaves the proper rotation nearest to ArduPilot's table (the
+    tables share their 90° entries), and the nearest entries of that rotation."""
+    best: tuple[float, str, tuple[FirmwareRotation, ...]] | None = None
+    for axis in _AXES:
+        nearest = _nearest(matrix @ _flip(axis))
+        angle = nearest[0].rotation.angle_deg
+        if best is None or angle < best[0] - 1e-6:
+            best = (angle, axis, nearest)
+    assert best is not None
+    return best[1], best[2]
+
+
+_PARAMETERS = {"ardupilot": "COMPASS_ORIENT", "px4": "CAL_MAG0_ROT", "betaflight": "align_mag", "inav": "align_mag"}
+
+
+def _nearest(rotation: NDArray[np.float64]) -> tuple[FirmwareRotation, ...]:
+    return tuple(
+        FirmwareRotation(firmware, nearest_rotation(rotation, firmware), _PARAMETERS[firmware])
+        for firmware in FIRMWARES
+    )
+
+
+def align(
+    calibrated_mag: ArrayLike,
+    accel: ArrayLike,
+    *,
+    inclination_deg: float | None = None,
+    gyro: ArrayLike | None = None,
+    time_s: ArrayLike | None = None,
+    max_rate_dps: float | None = MAX_RATE_DPS,
+    accel_tolerance: float = ACCEL_TOLERANCE,
+    allow_mirror: bool = True,
+    allow_undetermined: bool = False,
+) -> Alignment:
+    """The rotation of the magnetometer into the accelerometer's frame, from gravity and the inclination (A1).
+
+    Parameters
+    ----------
+    calibrated_mag : array_like, shape (N, 3)
+        The field corrected by a magnitude-only calibration (``cal.apply(raw)``), magnetometer axes, any unit.
+    accel : array_like, shape (N, 3)
+        The accelerometer's specific force at the same instants, in the body (vehicle) frame, any unit
+        (gravity reads about (0, 0, −1 g) in a level forward-right-down body).
+    inclination_deg : float, optional
+        The field's inclination δ, positive downwards (the World Magnetic Model: :func:`magfit.geomag.field_at`).
+        Fitted when not given, which needs the vehicle tilted; the field is then taken to point down.
+    gyro : array_like, shape (N, 3), optional
+        Body rates in rad/s: samples turning faster than ``max_rate_dps`` are left out.
+    time_s : array_like, shape (N,), optional
+        Sample times in seconds: without a gyroscope, the rate is that of the field and gravity directions.
+    max_rate_dps : float or None
+        Fastest rotation (°/s, averaged over about a second) of a sample used; None keeps every rate (a
+        hand-held rotation about the sensor itself, which has no centripetal acceleration to speak of).
+    accel_tolerance : float
+        Largest relative deviation of |a| from g (the median |a|) of a sample used.
+    allow_mirror : bool
+        Consider mirror images (det −1) of the sensor's axes too (default). False when the axes are known to be
+        right-handed: a vehicle that stays nearly level cannot tell a rotation from its mirror image.
+    allow_undetermined : bool
+        Return a refused alignment (``verdict="refused"``, the reason first in ``warnings``) instead of raising.
+
+    Returns
+    -------
+    Alignment
+
+    Raises
+    ------
+    SampleError
+        Malformed arrays (shape, rows, NaN), a zero accelerometer or field.
+    OptionError
+        An inclination, tolerance or rate out of range.
+    CalibrationError
+        Too few samples see gravity alone; a rotation axis (or the fitted inclination) the samples do not
+        determine, named; two distinct rotations that fit alike.
+    """
+    mag = _check_array(calibrated_mag, "calibrated_mag")
+    n = mag.shape[0]
+    acc = _check_array(accel, "accel", n)
+    rates = None if gyro is None else _check_array(gyro, "gyro", n)
+    times = None
+    if time_s is not None:
+        times = np.asarray(time_s, dtype=np.float64)
+        if times.shape != (n,) or not np.all(np.isfinite(times)):
+            raise SampleError(f"time_s must be {n} finite times (seconds), got shape {times.shape}")
+    if inclination_deg is not None and not -90.0 < inclination_deg < 90.0:
+        raise OptionError(f"inclination_deg must be within (-90, 90) degrees, got {inclination_deg}")
+    if not 0.0 < accel_tolerance < 1.0:
+        raise OptionError(f"accel_tolerance must be within (0, 1), got {accel_tolerance}")
+    if max_rate_dps is not None and not max_rate_dps > 0:
+        raise OptionError(f"max_rate_dps must be positive (or None), got {max_rate_dps}")
+    norm_m = np.linalg.norm(mag, axis=1)
+    if np.any(norm_m <= 0):
+        raise SampleError("calibrated_mag has zero rows: a field of zero has no direction")
+
+    keep, dropped, notes, width = _gates(mag, acc, rates, times, max_rate_dps, accel_tolerance)
+    n_used = int(np.sum(keep))
+    dropped = {reason: count for reason, count in dropped.items() if count}
+    if n_used < MIN_SAMPLES:
+        reasons = "; ".join(f"{count} {reason}" for reason, count in dropped.items()) or "none"
+        raise CalibrationError(
+            f"only {n_used} of {n} samples see gravity alone (dropped: {reasons}); the alignment needs at least "
+            f"{MIN_SAMPLES}: record the vehicle held still or moved slowly in several attitudes"
+            + ("" if max_rate_dps is None else ", or allow faster turns (max_rate_dps) if it turned about itself")
+        )
+    # The accelerometer's direction noise (radians per sample, from successive differences of still samples):
+    # tilt within it carries no information about the rotations, only noise that looks like some.
+    raw_down = -acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    pairs = keep[1:] & keep[:-1]
+    steps = np.linalg.norm(np.diff(raw_down, axis=0)[pairs], axis=1) if np.any(pairs) else np.zeros(1)
+    direction_noise = math.sqrt(float(np.mean(steps**2)) / 4.0) / math.sqrt(max(1, width // 2))
+    if width > 1:
+        # Averaged over half a second of samples that turn slower than max_rate_dps (less than 0.5° apart):
+        # the accelerometer's noise would otherwise look like tilt, and information about the rotations the
+        # motion does not determine (the mount's yaw, for a level vehicle) would be made of noise.
+        half = max(1, width // 2)
+        acc = np.column_stack([_moving_mean(acc[:, i], half) for i in range(3)])
+        mag = np.column_stack([_moving_mean(mag[:, i], half) for i in range(3)])
+        norm_m = np.linalg.norm(mag, axis=1)
+    down = -acc[keep] / np.linalg.norm(acc[keep], axis=1, keepdims=True)
+    mhat = mag[keep] / norm_m[keep, None]
+    fit_s = inclination_deg is None
+    s0 = math.sin(math.radians(inclination_deg)) if inclination_deg is not None else 0.0
+
+    solutions = _search(down, mhat, s0, fit_s, allow_mirror)
+    best = solutions[0]
+    cov, info, residuals, inflation = _covariance(down, mhat, best, fit_s)
+    refusals: list[str] = []
+    weak: list[str] = list(notes)
+
+    # Which rotations the samples determine: the eigen-directions of the information about θ.
+    info_theta = info[:3, :3] - (np.outer(info[:3, 3], info[3, :3]) / info[3, 3] if fit_s and info[3, 3] > 0 else 0.0)
+    values, vectors = np.linalg.eigh(info_theta)
+    lever_arms = np.cross(mhat @ best.matrix.T, down)
+    for value, vector in zip(values, vectors.T, strict=True):
+        sigma = math.degrees(1.0 / math.sqrt(value)) if value > 0 else math.inf
+        sigma_cov = math.degrees(math.sqrt(max(float(vector @ cov[:3, :3] @ vector), 0.0)))
+        sigma = max(sigma, sigma_cov)
+        # The lever of this rotation on the dips; against the noise of gravity's direction it is made of noise
+        # (its sigma then falls as 1/√N all the same: a level vehicle would "determine" its mount's yaw).
+        lever = math.sqrt(float(np.mean((lever_arms @ vector) ** 2)))
+        if lever < 1.5 * direction_noise:
+            sigma = math.inf
+        # Far along this axis (the sigma is local): another angle that fits as well leaves it undetermined.
+        far = _far_minimum(down, mhat, best, vector, inflation)
+        if far is not None:
+            sigma = max(sigma, far)
+        if sigma > UNDETERMINED_SIGMA_DEG:
+            refusals.append(
+                f"the rotation about {_axis_words(vector)} is not determined (one-sigma "
+                f"{'beyond 180' if sigma > 180 else f'{sigma:.0f}'}°): each sample pins only the rotation about its "
+                "magnetic east (normal to gravity and the field), and these samples' east directions do not reach "
+                "that axis"
+                + (
+                    " (a level vehicle turning in yaw sees gravity on body z only: its roll and pitch of the mount are "
+                    "determined, its yaw is not)"
+                    if abs(vector[2]) > 0.9
+                    else ""
+                )
+                + "; record the vehicle tilted (rolled and pitched) in several headings, or give the mount's rotation"
+            )
+        elif sigma > WEAK_SIGMA_DEG:
+            weak.append(f"the rotation about {_axis_words(vector)} is weakly determined (one-sigma {sigma:.1f}°)")
+
+    s = best.s
+    inclination = math.degrees(math.asin(max(-1.0, min(1.0, s))))
+    inclination_sigma = 0.0
+    if fit_s:
+        var_s = float(cov[3, 3])
+        inclination_sigma = math.degrees(math.sqrt(max(var_s, 0.0)) / max(math.cos(math.radians(inclination)), 1e-9))
+        if inclination_sigma > INCLINATION_UNDETERMINED_DEG:
+            refusals.append(
+                f"the inclination is not determined (fitted {inclination:.1f}° ± {inclination_sigma:.0f}°): "
+                "record more tilt, or give the inclination (the World Magnetic Model at your place: --location)"
+            )
+
+    # Another minimum that fits as well but is a different rotation, or the mirror image: the data cannot
+    # tell them apart. Compared by the Huber loss at the best fit's scale, as a chi-square with the
+    # correlation of the samples counted (25: five one-sigmas).
+    scale = _robust_scale(residuals)
+    best_loss = _huber_loss(residuals, scale)
+    for other in solutions[1:]:
+        excess = 2.0 * (_huber_loss(_residuals(down, mhat, other.matrix, other.s), scale) - best_loss) / scale**2
+        if excess < 25.0 * inflation:
+            if np.linalg.det(other.matrix) * np.linalg.det(best.matrix) < 0:
+                refusals.append(
+                    "these samples cannot tell a rotation from a mirror image of the sensor's axes (gravity stays "
+                    "near one body axis: a reflection across a plane that holds it changes no dip angle); record the "
+                    "vehicle tilted in several attitudes, or state that the axes are right-handed (allow_mirror=False)"
+                )
+                break
+            angle = _relative_angle(best.matrix, other.matrix)
+            if angle > 5.0:  # two starts that refined onto the same minimum are one
+                refusals.append(
+                    f"two rotations {angle:.0f}° apart fit these samples alike: record the vehicle in more attitudes"
+                )
+                break
+
+    mirror = bool(np.linalg.det(best.matrix) < 0)
+    if mirror:
+        inverted, nearest = _mirror_axis(best.matrix)
+        weak.append(
+            f"the magnetometer's axes are a mirror image of the body's (det -1): no firmware rotation can fix it; "
+            f"invert its {inverted} axis (in the driver or the wiring), then the rotation is "
+            f"{nearest[0].rotation.name} + {nearest[0].rotation.angle_deg:.1f}° (or the accelerometer reports "
+            "gravity instead of the specific force: its sign inverted)"
+        )
+    else:
+        inverted, nearest = None, _nearest(best.matrix)
+    proper = best.matrix @ _flip(inverted)
+    roll, pitch, yaw = euler_angles(proper)
+    # Flipping a sensor axis is a reflection on the right, which does not change the body-frame θ.
+    axis_sigma = np.degrees(np.sqrt(np.clip(np.diag(cov[:3, :3]), 0.0, None)))
+    euler_sigma = _euler_sigma(proper, cov[:3, :3])
+    dips = np.degrees(np.arcsin(np.clip(residuals + s, -1.0, 1.0))) - inclination
+    residual_deg = float(np.sqrt(np.mean(dips**2)))
+
+    verdict = "refused" if refusals else "weak" if len(weak) > len(notes) else "supported"
+    if refusals and not allow_undetermined:
+        raise CalibrationError(f"the alignment is refused: {refusals[0]}")
+    return Alignment(
+        matrix=best.matrix,
+        roll_deg=roll,
+        pitch_deg=pitch,
+        yaw_deg=yaw,
+        sigma_deg=euler_sigma,
+        axis_sigma_deg=axis_sigma,
+        inclination_deg=inclination,
+        inclination_sigma_deg=inclination_sigma,
+        inclination_fitted=fit_s,
+        mirror=mirror,
+        inverted_axis=inverted,
+        nearest=nearest,
+        residual_deg=residual_deg,
+        n_samples=n,
+        n_used=n_used,
+        dropped=dropped,
+        verdict=verdict,
+        warnings=tuple(refusals + weak),
+    )
+
+
+def _far_minimum(
+    down: NDArray[np.float64], mhat: NDArray[np.float64], best: _Solution, axis: NDArray[np.float64], inflation: float
+) -> float | None:
+    """The largest angle (degrees, beyond 10°) of a rotation of the best fit about ``axis`` (body frame) whose
+    loss is within chance of the best (a chi-square of 25, widened by the samples' correlation), or None."""
+    r = _residuals(down, mhat, best.matrix, best.s)
+    scale = _robust_scale(r)
+    best_loss = _huber_loss(r, scale)
+    worst = None
+    for angle in np.arange(10.0, 360.0, 5.0):
+        turned = _exp(np.radians(angle) * axis) @ best.matrix
+        excess = 2.0 * (_huber_loss(_residuals(down, mhat, turned, best.s), scale) - best_loss) / scale**2
+        if excess < 25.0 * inflation:
+            distance = min(angle, 360.0 - angle)
+            worst = distance if worst is None else max(worst, distance)
+    return worst
+
+
+def _relative_angle(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """Angle (degrees) between two orthogonal matrices of the same handedness; 180 for opposite handedness."""
+    if np.linalg.det(a) * np.linalg.det(b) < 0:
+        return 180.0
+    return angle_between_deg(
+        a @ _flip("z") if np.linalg.det(a) < 0 else a, b @ _flip("z") if np.linalg.det(b) < 0 else b
+    )
+
+
+def _search(
+    down: NDArray[np.float64], mhat: NDArray[np.float64], s0: float, fit_s: bool, allow_mirror: bool
+) -> list[_Solution]:
+    """Distinct minima of (A1), best first: 48 starts (24 rotations, 24 mirrors) on a stride of the samples,
+    the best three and the best of the other handedness then refined on all of them."""
+    stride = max(1, len(down) // _START_SAMPLES)
+    d_sub, m_sub = down[::stride], mhat[::stride]
+    start_s = s0 if not fit_s else 0.5
+    found: list[_Solution] = []
+    for start in _cube_rotations():
+        for handed in (np.eye(3), _flip("z")) if allow_mirror else (np.eye(3),):
+            found.append(_solve(d_sub, m_sub, start @ handed, start_s, fit_s, iterations=15))
+    found = [_northern(f, fit_s, allow_mirror) for f in found]
+    found.sort(key=lambda f: f.cost)
+    distinct: list[_Solution] = []
+    for candidate in found:
+        if all(_relative_angle(candidate.matrix, other.matrix) > 5.0 for other in distinct):
+            distinct.append(candidate)
+    chosen = distinct[:3]
+    handedness = {bool(np.linalg.det(c.matrix) < 0) for c in chosen}
+    chosen += [c for c in distinct if bool(np.linalg.det(c.matrix) < 0) not in handedness][:1]
+    refined = [_northern(_solve(down, mhat, c.matrix, c.s, fit_s), fit_s, allow_mirror) for c in chosen]
+    refined.sort(key=lambda f: f.cost)
+    return refined
+
+
+def _northern(solution: _Solution, fit_s: bool, allow_mirror: bool) -> _Solution:
+    """With δ fitted, R with δ and −R with −δ fit alike: the field is taken to point down (δ > 0). Without
+    mirrors, −R is not a candidate and δ keeps the sign the fit gives it."""
+    if fit_s and allow_mirror and solution.s < 0:
+        return _Solution(-solution.matrix, -solution.s, solution.cost)
+    return solution
