@@ -32,26 +32,28 @@ COMPASS_OFS_X,-286
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import json
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 from ..calibration import Calibration
-from ..errors import MagfitError, OptionError
+from ..errors import ExportError, MagfitError, OptionError
 from .adafruit import write_adafruit, write_adafruit_json
-from .ardupilot import write_ardupilot
+from .ardupilot import write_ardupilot, write_ardupilot_several
 from .betaflight import write_betaflight
 from .c_header import write_c_header
 from .fusion import write_fusion
 from .inav import write_inav
-from .jsonfile import write_json
+from .jsonfile import write_json, write_json_dict
 from .magcal import write_magcal
-from .px4 import write_px4
+from .px4 import write_px4, write_px4_several
 from .ros_madgwick import write_ros_madgwick
 from .rtimulib import write_rtimulib
 from .yamlfile import write_yaml
 
-__all__ = ["FORMATS", "FormatSpec", "export"]
+__all__ = ["FORMATS", "SEVERAL", "FormatSpec", "export", "export_several"]
 
 
 @dataclass(frozen=True)
@@ -93,11 +95,11 @@ _SPECS = (
     ),
     FormatSpec(
         "ardupilot", ".param", "ArduPilot COMPASS_OFS/DIA/ODI/SCALE parameters in milligauss (Mission Planner)",
-        "mG", write_ardupilot,
+        "mG", write_ardupilot, ("slot", "device_id", "expected_field"),
     ),
     FormatSpec(
         "px4", ".params", "PX4 CAL_MAG0_OFF/SCALE/ODIAG parameters in gauss (QGroundControl parameter file)",
-        "G", write_px4, ("system_id",),
+        "G", write_px4, ("system_id", "slot", "device_id"),
     ),
     FormatSpec(
         "fusion", ".h", "x-io Fusion softIronMatrix / hardIronOffset (C header) with the imufusion Python names",
@@ -141,13 +143,25 @@ _SPECS = (
 FORMATS: Mapping[str, FormatSpec] = MappingProxyType({spec.name: spec for spec in _SPECS})
 
 
-def export(calibration: Calibration, format: str, *, unit: str | None = None, system_id: int | None = None) -> str:
+def export(
+    calibration: Calibration,
+    format: str,
+    *,
+    unit: str | None = None,
+    system_id: int | None = None,
+    slot: int | None = None,
+    device_id: int | None = None,
+    expected_field: float | None = None,
+) -> str:
     """The text of a file that carries ``calibration`` in the convention of ``format``.
 
     Parameters
     ----------
     calibration : Calibration
-        The calibration to write (``corrected = matrix @ (raw - offset)``, input units).
+        The calibration to write (``corrected = matrix @ (raw - offset)``, input units). A vehicle-frame
+        calibration (``frame == "vehicle"``) is written whole by the full-matrix formats, split into the
+        firmware's rotation and symmetric matrix by ``ardupilot``, ``px4``, ``betaflight`` and ``inav``, and
+        refused, with the reason and the alternative, where the target cannot hold it.
     format : str
         A name in :data:`FORMATS`: ``"json"``, ``"c"``, ``"ardupilot"``, ``"px4"``, ``"fusion"``, ``"magcal"``,
         ``"adafruit"``, ``"adafruit-json"``, ``"inav"``, ``"betaflight"``, ``"rtimulib"``, ``"ros-madgwick"``,
@@ -156,6 +170,16 @@ def export(calibration: Calibration, format: str, *, unit: str | None = None, sy
         Unit of the samples the calibration was fitted on (``"uT"``, ``"nT"``, ``"mT"``, ``"mG"``,
         ``"G"``/``"gauss"``, ``"counts"``; aliases such as ``"µT"`` accepted), overriding
         ``calibration.unit``. ArduPilot and PX4 need a physical unit to convert to mG / G.
+    system_id : int or None
+        ``px4``: the vehicle's MAVLink system id (1 unless given).
+    slot, device_id : int or None
+        ``ardupilot``, ``px4``: the firmware's 0-based compass slot (ArduPilot 0-2: ``COMPASS_OFS_*``,
+        ``COMPASS_OFS2_*``, ``COMPASS_OFS3_*``; PX4 0-3: ``CAL_MAG0..3_*``) and the sensor's device id.
+        Default: ``calibration.details["sensor"]`` (``{"id", "slot", "device_id"}``, filled from a flight
+        log), else slot 0 and no id. The explicit option wins.
+    expected_field : float or None
+        ``ardupilot``: the local field strength (World Magnetic Model) in the calibration's unit;
+        ``COMPASS_SCALE`` becomes expected / fitted field, as ArduPilot's calibrator sets it.
 
     Returns
     -------
@@ -168,18 +192,100 @@ def export(calibration: Calibration, format: str, *, unit: str | None = None, sy
         Unknown ``format`` (the message lists the valid ones), unknown ``unit``, or an option the
         format does not take (``system_id`` for anything but ``px4``).
     ExportError
-        The target cannot represent the calibration (out of its accepted range, or a
-        non-symmetric matrix) or needs a unit conversion that the unit does not allow (counts, none).
+        The target cannot represent the calibration (out of its accepted range, a non-symmetric matrix,
+        a rotation or a mirror it has no parameter for) or needs a unit conversion that the unit does not
+        allow (counts, none).
     """
+    spec = _spec(format)
+    if not isinstance(calibration, Calibration):
+        raise MagfitError(f"export() takes a magfit.Calibration, got {type(calibration).__name__}")
+    given = _options(
+        spec, {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field}
+    )
+    return spec.writer(calibration, unit, **given)
+
+
+#: The formats :func:`export_several` writes: several compasses of one vehicle in one file.
+SEVERAL = ("ardupilot", "px4", "json")
+
+
+def export_several(
+    calibrations: Sequence[Calibration],
+    format: str,
+    *,
+    unit: str | None = None,
+    system_id: int | None = None,
+    slots: Sequence[int | None] | None = None,
+    device_ids: Sequence[int | None] | None = None,
+    expected_field: float | None = None,
+) -> str:
+    """One file holding every compass of a vehicle (issue 13): ``ardupilot``, ``px4`` or ``json``.
+
+    Parameters
+    ----------
+    calibrations : sequence of Calibration
+        One calibration per compass, each for its own slot.
+    format : {"ardupilot", "px4", "json"}
+        ``ardupilot``: COMPASS_*, COMPASS_*2, COMPASS_*3 in one ``.param`` file; ``px4``: CAL_MAG0..3_* in
+        one QGroundControl file; ``json``: a JSON array of magfit's own calibrations (each element reads back
+        with ``Calibration.from_dict``).
+    unit, system_id, expected_field
+        As for :func:`export`, applied to every calibration.
+    slots, device_ids : sequence of (int or None), optional
+        Per calibration, in the same order: the firmware slot and the device id; None (or an entry None)
+        takes the calibration's ``details["sensor"]``.
+
+    Raises
+    ------
+    ExportError
+        A format that holds one compass (the message says to export each on its own), two calibrations for
+        the same slot, or anything :func:`export` refuses for one of them.
+    OptionError
+        Unknown format or option, or ``slots``/``device_ids`` not one per calibration.
+    """
+    spec = _spec(format)
+    calibrations = list(calibrations)
+    if not calibrations or not all(isinstance(c, Calibration) for c in calibrations):
+        raise MagfitError("export_several() takes a non-empty sequence of magfit.Calibration")
+    if format not in SEVERAL:
+        raise ExportError(
+            f"the {format} export holds one compass; export each calibration on its own with export(), or use "
+            f"{', '.join(SEVERAL)} for several in one file"
+        )
+    for name, values in (("slots", slots), ("device_ids", device_ids)):
+        if values is not None and len(values) != len(calibrations):
+            raise OptionError(f"{name} must give one entry per calibration ({len(calibrations)}), got {len(values)}")
+    if format == "json":
+        _options(spec, {"system_id": system_id, "expected_field": expected_field})
+        if slots is not None or device_ids is not None:
+            raise OptionError(
+                "the json export keeps each calibration's details; slots and device_ids apply to: ardupilot, px4"
+            )
+        return json.dumps([write_json_dict(c, unit) for c in calibrations], indent=2) + "\n"
+    if format == "ardupilot":
+        _options(spec, {"system_id": system_id, "expected_field": expected_field})
+        return write_ardupilot_several(
+            calibrations, unit, slots=slots, device_ids=device_ids, expected_field=expected_field
+        )
+    _options(spec, {"system_id": system_id, "expected_field": expected_field})
+    return write_px4_several(
+        calibrations, unit, system_id=1 if system_id is None else system_id, slots=slots, device_ids=device_ids
+    )
+
+
+def _spec(format: str) -> FormatSpec:
     spec = FORMATS.get(format) if isinstance(format, str) else None
     if spec is None:
         valid = ", ".join(f"{name} ({s.extension})" for name, s in FORMATS.items())
         raise OptionError(f"unknown export format {format!r}; valid formats: {valid}")
-    if not isinstance(calibration, Calibration):
-        raise MagfitError(f"export() takes a magfit.Calibration, got {type(calibration).__name__}")
-    given = {name: value for name, value in (("system_id", system_id),) if value is not None}
+    return spec
+
+
+def _options(spec: FormatSpec, options: Mapping[str, Any]) -> dict[str, Any]:
+    """The options given (not None), after checking that ``spec`` takes each (``slots``/``device_ids``: all)."""
+    given = {name: value for name, value in options.items() if value is not None}
     for name in given:
-        if name not in spec.options:
+        if name not in (*spec.options, "slots", "device_ids"):
             takers = ", ".join(s.name for s in FORMATS.values() if name in s.options)
-            raise OptionError(f"the {format} export takes no {name}; {name} applies to: {takers}")
-    return spec.writer(calibration, unit, **given)
+            raise OptionError(f"the {spec.name} export takes no {name}; {name} applies to: {takers}")
+    return given

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,6 +11,7 @@ from numpy.typing import NDArray
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import ExportError, OptionError
+from ..rotations import StandardRotation, nearest_rotation, polar_decomposition
 from ..units import Unit, conversion_factor, get_unit
 from ._heading import ASSUMPTION, heading_error_deg
 
@@ -18,6 +20,16 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 #: Largest relative asymmetry max|M − Mᵀ| / max|M| still treated as a symmetric matrix (rounding only).
 SYMMETRY_TOLERANCE = 1e-9
+
+#: Largest angle (degrees) between a vehicle-frame calibration's rotation and a firmware's fixed rotation for
+#: the fixed one to stand in for it. The residual turns every corrected vector by that angle, so a heading
+#: by at most as much: 0.5 deg is below the heading error magfit's fits leave on real recordings (0.8-1 deg
+#: RMS in level flight, benchmarks/README.md) and near the spread of a vector fit's alignment at 1 deg of
+#: attitude noise, so the fixed rotation loses nothing the data could vouch for.
+ROTATION_TOLERANCE_DEG = 0.5
+
+#: The formats that write the matrix whole (``matrix @ (raw - offset)``): a vehicle frame and a mirror fit.
+FULL_MATRIX_FORMATS = ("c", "fusion", "magcal", "adafruit", "adafruit-json", "json", "yaml", "rtimulib")
 
 
 def version() -> str:
@@ -200,6 +212,9 @@ def _polar(m: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
 def rotated_frame_warning(calibration: Calibration) -> str | None:
     """A warning for targets that keep the full matrix, when that matrix turns the corrected field.
 
+    A vehicle-frame calibration (``frame == "vehicle"``) gets a NOTE that the matrix includes the
+    magnetometer-to-vehicle alignment (and, for a negative determinant, a mirror).
+
     A Cholesky root (``root="cholesky"``) fits the same ellipsoid as the symmetric root but turns every
     corrected vector by a fixed rotation that the samples do not determine (14 deg with strong soft
     iron): a compass heading made from it is off by up to that angle. These targets keep the matrix
@@ -207,6 +222,21 @@ def rotated_frame_warning(calibration: Calibration) -> str | None:
     None when the matrix is symmetric (then the rotation is zero by construction).
     """
     m = calibration.matrix
+    if calibration.frame == "vehicle":
+        rotation, _ = polar_decomposition(m)
+        mirror = np.linalg.det(rotation) < 0
+        proper = rotation @ np.diag([1.0, 1.0, -1.0]) if mirror else rotation
+        angle = math.degrees(math.acos(min(1.0, max(-1.0, (float(np.trace(proper)) - 1.0) / 2.0))))
+        what = (
+            f"a mirror (left-handed sensor axes: z flipped, then turned by {angle:.2f} deg)"
+            if mirror
+            else f"a rotation of {angle:.2f} deg"
+        )
+        return (
+            "NOTE: frame 'vehicle': the matrix also aligns the magnetometer with the vehicle "
+            f"({what} after the soft-iron correction), so the corrected field is in the vehicle's axes; "
+            "apply it to the sensor's own readings, with no further mounting rotation"
+        )
     if _asymmetry(m) <= SYMMETRY_TOLERANCE or np.linalg.det(m) <= 0:
         return None
     root, angle = _polar(m)
@@ -235,3 +265,89 @@ def describe(calibration: Calibration, unit: str | None) -> list[str]:
         f"magfit convention: {CONVENTION}",
         f"field strength (radius of the corrected sphere): {float32_text(calibration.field_strength)} {label}",
     ]
+
+
+@dataclass(frozen=True)
+class VehicleSplit:
+    """A vehicle-frame matrix as the firmwares apply it: ``matrix = rotation @ symmetric`` (first S, then R).
+
+    ``symmetric`` is the magnitude-only soft-iron correction (``sqrtm(Mᵀ M)``), ``rotation`` the proper
+    rotation into the vehicle frame. ``standard`` is the firmware's nearest fixed rotation, or None when
+    the firmware's table was not asked for.
+    """
+
+    rotation: NDArray[np.float64]
+    symmetric: NDArray[np.float64]
+    standard: StandardRotation | None
+
+
+def vehicle_split(calibration: Calibration, target: str, firmware: str | None) -> VehicleSplit:
+    """Split a vehicle-frame calibration into its rotation and symmetric part; refuse a mirror.
+
+    ``firmware`` (``"ardupilot"``, ``"px4"``, ``"betaflight"``, ``"inav"`` or None) names the rotation
+    table to search for the nearest fixed rotation.
+    """
+    rotation, symmetric = polar_decomposition(calibration.matrix)
+    if np.linalg.det(rotation) < 0:
+        raise ExportError(
+            f"the {target} export cannot hold this vehicle-frame calibration: its matrix is a mirror (negative "
+            "determinant: left-handed sensor axes) and the firmware's rotations are all proper; swap two axes of the "
+            f"samples and refit, or export to a full-matrix format ({', '.join(FULL_MATRIX_FORMATS)})"
+        )
+    standard = nearest_rotation(rotation, firmware) if firmware is not None else None
+    return VehicleSplit(rotation, symmetric, standard)
+
+
+@dataclass(frozen=True)
+class SensorSlot:
+    """Which of a vehicle's compasses a calibration is for: the firmware's 0-based slot and its device id."""
+
+    slot: int
+    device_id: int | None
+    name: str | None
+
+
+def sensor_slot(
+    calibration: Calibration, target: str, count: int, slot: int | None, device_id: int | None
+) -> SensorSlot:
+    """The slot and device id to write: the explicit options first, else ``details["sensor"]``, else slot 0.
+
+    ``details["sensor"] = {"id": str, "slot": int | None, "device_id": int | None}`` is filled by the
+    pipeline from the log's magnetometer (:class:`magfit.sources.Magnetometer`).
+
+    Raises
+    ------
+    OptionError
+        An explicit ``slot`` or ``device_id`` of the wrong type or range.
+    ExportError
+        The calibration's own slot is beyond the ``count`` compasses ``target`` calibrates.
+    """
+    sensor = calibration.details.get("sensor")
+    sensor = sensor if isinstance(sensor, Mapping) else {}
+    name = sensor.get("id")
+    if slot is not None:
+        if not _is_int(slot) or not 0 <= slot < count:
+            raise OptionError(f"slot must be the {target} compass slot, an integer from 0 to {count - 1}; got {slot!r}")
+        chosen = int(slot)
+    elif _is_int(sensor.get("slot")):
+        chosen = int(sensor["slot"])
+        if not 0 <= chosen < count:
+            raise ExportError(
+                f"{target} calibrates {count} compasses (slots 0-{count - 1}), but this calibration is for slot "
+                f"{chosen} ({plain(name)}); pass slot=... to write it to another slot"
+            )
+    else:
+        chosen = 0
+    if device_id is not None:
+        if not _is_int(device_id) or not 0 < device_id < 2**32:
+            raise OptionError(
+                f"device_id must be the firmware's device id, a positive 32-bit integer; got {device_id!r}"
+            )
+        chosen_id: int | None = int(device_id)
+    else:
+        chosen_id = int(sensor["device_id"]) if _is_int(sensor.get("device_id")) else None
+    return SensorSlot(chosen, chosen_id, plain(name) if isinstance(name, str) else None)
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)

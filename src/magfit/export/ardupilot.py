@@ -37,17 +37,69 @@ in AP_Compass.cpp's parameter documentation. ArduPilot itself accepts it, but Mi
 the documented range when a value is loaded or edited (ConfigRawParams.cs) and asks "COMPASS_OFS_X
 value is out of range. Do you want to continue?"; answering No keeps the old value.
 
-The file uses Mission Planner's ``NAME,VALUE`` lines (MAVProxy's ``param load`` reads them too),
-``#`` comments, and writes the first compass only (COMPASS_OFS2_* ... for the others).
+**Several compasses** (issue 13). ArduPilot calibrates up to three: slot 0 is ``COMPASS_OFS_*``,
+``COMPASS_DIA_*``, ``COMPASS_ODI_*``, ``COMPASS_SCALE``, ``COMPASS_ORIENT``; slot 1 the same names with 2
+(``COMPASS_OFS2_X``, ``COMPASS_SCALE2``), slot 2 with 3. The slot and the device id come from the
+``slot=`` / ``device_id=`` options or from ``details["sensor"]`` (filled from a flight log);
+:func:`magfit.export.export_several` writes several compasses in one file. ``COMPASS_DEV_ID*`` is written
+as a comment, not a parameter: ArduPilot sets it itself at boot (``@ReadOnly``) from the detected sensor,
+and ``Compass::configured`` (AP_Compass.cpp) treats a compass whose stored ``COMPASS_DEV_ID`` differs from
+the detected one as not calibrated ("Compass not calibrated" at arming), so a loaded id can only break a
+vehicle whose compass order differs; the comment tells the user which id to check before loading.
+
+**COMPASS_SCALE** (option ``expected_field``, the World Magnetic Model's field strength in the
+calibration's unit): ``CompassCalibrator::fix_radius`` sets ``scale_factor = expected_radius / radius``,
+where ``radius`` is the fitted sphere after DIA/ODI, and fails the calibration ("bad radius") outside
+``COMPASS_MIN/MAX_SCALE_FACTOR`` = 0.85-1.4 (CompassCalibrator.h); ``Compass::have_scale_factor`` ignores
+a SCALE outside that range. magfit writes ``SCALE = expected_field / field_strength`` and refuses it
+outside 0.85-1.4 with the reason. Without ``expected_field``, SCALE = 1 (ArduPilot's calibrator writes 0,
+"no scale", when it has no GPS position; both leave the field as fitted).
+
+**A vehicle-frame calibration** (``frame == "vehicle"``: ``corrected_vehicle = M @ (raw - offset)``, M
+general). ``AP_Compass_Backend::accumulate_sample`` calls ``rotate_field`` (the driver's rotation, then,
+for an external compass, ``COMPASS_ORIENT``) *before* ``correct_field``, so ArduPilot applies::
+
+    corrected = D @ (SCALE * (R @ raw + OFS))
+
+With the polar split ``M = Q @ S`` (:func:`magfit.rotations.polar_decomposition`), ``R = Q`` and
+``D = Q S Qᵀ`` (symmetric, as DIA/ODI must be) and ``OFS = -k Q @ offset`` (the offsets live in the
+rotated frame) give ``D @ (R @ raw + OFS) = k M @ (raw - offset)`` exactly. R is written as
+``COMPASS_ORIENT``: the nearest fixed rotation (:func:`magfit.rotations.nearest_rotation`) when it is
+within :data:`._common.ROTATION_TOLERANCE_DEG` of Q (D then uses it, and the residual rotation, with the
+heading error it costs, is stated), else ArduPilot 4.2's custom rotation ``COMPASS_ORIENT = 101`` with
+``CUST_ROT1_ROLL/PITCH/YAW`` (``CUST_ROT_ENABLE = 1``; 102 and ``CUST_ROT2_*`` for a second compass),
+exact. A mirror (det M < 0) is refused: ArduPilot's rotations are proper. The samples must be the
+sensor's field with ``COMPASS_ORIENT = 0`` and no calibration applied; ArduPilot applies
+``COMPASS_ORIENT`` to external compasses only (an internal one follows ``AHRS_ORIENTATION``), which the
+file says when the rotation is not the identity.
+
+The file uses Mission Planner's ``NAME,VALUE`` lines (MAVProxy's ``param load`` reads them too) and
+``#`` comments.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..calibration import Calibration
-from ..errors import ExportError
-from ._common import describe, factor, float32_text, physical_unit, plain, symmetric_matrix
+from ..errors import ExportError, OptionError
+from ..rotations import custom_angles
+from ._common import (
+    ROTATION_TOLERANCE_DEG,
+    describe,
+    factor,
+    float32_text,
+    physical_unit,
+    plain,
+    sensor_slot,
+    symmetric_matrix,
+    vehicle_split,
+)
+from ._heading import ASSUMPTION, heading_error_deg
 
 #: COMPASS_OFFS_MAX default (AP_COMPASS_OFFSETS_MAX_DEFAULT), mG: arming fails when |COMPASS_OFS| exceeds it.
 OFFSET_MAX_MG = 1800.0
@@ -59,26 +111,55 @@ DIAGONAL_RANGE = (0.2, 5.0)
 OFFDIAGONAL_MAX = 1.0
 #: AP_Arming "Check mag field": 185 <= |field| <= 875 mG.
 FIELD_RANGE_MG = (185.0, 875.0)
-#: COMPASS_MIN/MAX_SCALE_FACTOR (CompassCalibrator.h): outside, Compass::have_scale_factor() ignores SCALE.
+#: COMPASS_MIN/MAX_SCALE_FACTOR (CompassCalibrator.h): outside, Compass::have_scale_factor() ignores SCALE
+#: and CompassCalibrator::fix_radius fails the calibration ("bad radius").
 SCALE_RANGE = (0.85, 1.4)
-#: The COMPASS_SCALE written: magfit's corrected field is already in physical milligauss.
+#: The COMPASS_SCALE written without an expected field: magfit's corrected field is already in milligauss.
 SCALE = 1.0
-NAMES = (
-    "COMPASS_OFS_X",
-    "COMPASS_OFS_Y",
-    "COMPASS_OFS_Z",
-    "COMPASS_DIA_X",
-    "COMPASS_DIA_Y",
-    "COMPASS_DIA_Z",
-    "COMPASS_ODI_X",
-    "COMPASS_ODI_Y",
-    "COMPASS_ODI_Z",
-    "COMPASS_SCALE",
-)
+#: Compasses ArduPilot calibrates (COMPASS_OFS, OFS2, OFS3) and custom rotations it has (CUST_ROT1, CUST_ROT2).
+COMPASS_COUNT = 3
+CUSTOM_ROTATION_COUNT = 2
+#: COMPASS_ORIENT's value for CUST_ROT1 (ROTATION_CUSTOM_1 in rotations.h, ArduPilot 4.2+); CUST_ROT2 is 102.
+ROTATION_CUSTOM_1 = 101
 
 
-def ardupilot_parameters(calibration: Calibration, unit: str | None = None) -> dict[str, float]:
-    """The ten COMPASS_* values (milligauss offsets), after checking ArduPilot's limits.
+def suffix(slot: int) -> str:
+    """The parameter suffix of compass ``slot`` (0-based): ``""``, ``"2"``, ``"3"``."""
+    return "" if slot == 0 else str(slot + 1)
+
+
+def parameter_names(slot: int) -> tuple[str, ...]:
+    """The ten calibration parameters of compass ``slot`` (0-based), offsets first, SCALE last."""
+    n = suffix(slot)
+    return (
+        *(f"COMPASS_OFS{n}_{a}" for a in "XYZ"),
+        *(f"COMPASS_DIA{n}_{a}" for a in "XYZ"),
+        *(f"COMPASS_ODI{n}_{a}" for a in "XYZ"),
+        f"COMPASS_SCALE{n}",
+    )
+
+
+NAMES = parameter_names(0)
+
+
+@dataclass(frozen=True)
+class _Compass:
+    """One compass's parameters (in file order) and the comment lines that explain them."""
+
+    slot: int
+    parameters: dict[str, float]
+    comments: list[str]
+
+
+def ardupilot_parameters(
+    calibration: Calibration,
+    unit: str | None = None,
+    *,
+    slot: int | None = None,
+    device_id: int | None = None,
+    expected_field: float | None = None,
+) -> dict[str, float]:
+    """The COMPASS_* values of one compass (milligauss offsets), after checking ArduPilot's limits.
 
     Parameters
     ----------
@@ -86,19 +167,38 @@ def ardupilot_parameters(calibration: Calibration, unit: str | None = None) -> d
         The calibration; ``offset`` and ``field_strength`` in the samples' unit.
     unit : str or None
         The samples' unit, overriding ``calibration.unit``; must be physical (not counts).
+    slot, device_id : int or None
+        ArduPilot's compass slot (0-based: 0 writes COMPASS_OFS_*, 1 COMPASS_OFS2_*) and the sensor's
+        device id; default from ``calibration.details["sensor"]``, else slot 0.
+    expected_field : float or None
+        The local field strength (World Magnetic Model) in the calibration's unit: fills COMPASS_SCALE.
 
     Returns
     -------
     dict
-        Parameter name -> value, in the order of :data:`NAMES`.
+        Parameter name -> value: offsets, DIA, ODI, SCALE, then for a vehicle-frame calibration
+        COMPASS_ORIENT (and CUST_ROT_ENABLE, CUST_ROT1_* for a custom rotation).
 
     Raises
     ------
     ExportError
-        No physical unit, or ArduPilot would reject the values (see the module docstring).
+        No physical unit, ArduPilot would reject the values (see the module docstring), or a mirror.
     OptionError
-        ``unit`` is not a unit magfit knows.
+        ``unit`` is not a unit magfit knows, or an option is out of range.
     """
+    return _compass(calibration, unit, slot, device_id, expected_field, custom=1).parameters
+
+
+def _compass(
+    calibration: Calibration,
+    unit: str | None,
+    slot: int | None,
+    device_id: int | None,
+    expected_field: float | None,
+    custom: int,
+) -> _Compass:
+    """The parameters and comments of one compass; ``custom`` is the CUST_ROTn it may use."""
+    where = sensor_slot(calibration, "ardupilot", COMPASS_COUNT, slot, device_id)
     source = physical_unit(calibration, unit, "ardupilot", "milligauss")
     k = factor(source, "mG")
     # The field first: a wrong unit shows there, before it inflates the offset.
@@ -109,14 +209,58 @@ def ardupilot_parameters(calibration: Calibration, unit: str | None = None) -> d
             f"{FIELD_RANGE_MG[0]:.0f}-{FIELD_RANGE_MG[1]:.0f} mG; check the unit of the samples "
             f"(unit={source.name!r} was used)"
         )
-    offsets = -k * calibration.offset  # ArduPilot adds its offsets: mag += OFS
-    length = float(np.linalg.norm(offsets))
+    length = k * float(np.linalg.norm(calibration.offset))
     if length > OFFSET_MAX_MG:
         raise ExportError(
             f"ArduPilot would refuse to arm: the compass offset is {length:.0f} mG long, above COMPASS_OFFS_MAX "
             f"({OFFSET_MAX_MG:.0f} mG by default); mount the compass further from magnetised parts and recalibrate"
         )
-    matrix = symmetric_matrix(calibration, "ardupilot").matrix
+    n = suffix(where.slot)
+    comments: list[str] = []
+    orientation: dict[str, float] = {}
+    if calibration.frame == "vehicle":
+        split = vehicle_split(calibration, "ardupilot", "ardupilot")
+        assert split.standard is not None
+        if split.standard.angle_deg <= ROTATION_TOLERANCE_DEG:
+            rotation = np.asarray(split.standard.matrix)
+            applied = rotation @ split.symmetric
+            loss = heading_error_deg(calibration, applied, calibration.offset)
+            orientation[f"COMPASS_ORIENT{n}"] = float(split.standard.id)
+            comments.append(
+                f"# COMPASS_ORIENT{n} = {split.standard.id} ({split.standard.name}) is "
+                f"{split.standard.angle_deg:.2f} deg from the fitted alignment (tolerance "
+                f"{ROTATION_TOLERANCE_DEG} deg): a heading error of up to {loss:.2f} deg ({ASSUMPTION})"
+            )
+        else:
+            if custom > CUSTOM_ROTATION_COUNT:
+                raise ExportError(
+                    f"ArduPilot has {CUSTOM_ROTATION_COUNT} custom rotations (CUST_ROT1, CUST_ROT2), and compass "
+                    f"slot {where.slot} would need a third (its alignment is {split.standard.angle_deg:.1f} deg from "
+                    "every fixed COMPASS_ORIENT); export that compass on its own, or align it to a fixed rotation"
+                )
+            rotation = split.rotation
+            roll, pitch, yaw = custom_angles(rotation, "ardupilot")
+            orientation[f"COMPASS_ORIENT{n}"] = float(ROTATION_CUSTOM_1 + custom - 1)
+            orientation["CUST_ROT_ENABLE"] = 1.0
+            orientation |= {
+                f"CUST_ROT{custom}_{axis}": value
+                for axis, value in zip(("ROLL", "PITCH", "YAW"), (roll, pitch, yaw), strict=True)
+            }
+            comments.append(
+                f"# COMPASS_ORIENT{n} = {ROTATION_CUSTOM_1 + custom - 1}: custom rotation CUST_ROT{custom} (ArduPilot "
+                f"4.2+; reboot after loading), the fitted alignment exactly; the nearest fixed one, "
+                f"{split.standard.name}, is {split.standard.angle_deg:.2f} deg away"
+            )
+        if split.standard.angle_deg > 1e-6 or not np.allclose(rotation, np.eye(3)):
+            comments.append(
+                f"# WARNING: ArduPilot applies COMPASS_ORIENT{n} to an external compass only (COMPASS_EXTERNAL{n} = 1, "
+                "AP_Compass_Backend::rotate_field); an internal one follows AHRS_ORIENTATION, which turns the board"
+            )
+        matrix = rotation @ split.symmetric @ rotation.T  # D = R S R^T: symmetric, D R = R S
+        offsets = -k * (rotation @ calibration.offset)  # ArduPilot adds its offsets, after the rotation
+    else:
+        matrix = symmetric_matrix(calibration, "ardupilot").matrix
+        offsets = -k * calibration.offset  # ArduPilot adds its offsets: mag += OFS
     diagonal = np.diag(matrix)
     offdiagonal = np.array([matrix[0, 1], matrix[0, 2], matrix[1, 2]])
     low, high = DIAGONAL_RANGE
@@ -130,38 +274,142 @@ def ardupilot_parameters(calibration: Calibration, unit: str | None = None) -> d
             f"ArduPilot's calibrator accepts |COMPASS_ODI| < {OFFDIAGONAL_MAX} only, got "
             f"{np.array2string(offdiagonal, precision=4)}; the soft-iron distortion is too strong for ArduPilot"
         )
-    values = [*offsets, *diagonal, *offdiagonal, SCALE]
-    return dict(zip(NAMES, (float(v) for v in values), strict=True))
-
-
-def write_ardupilot(calibration: Calibration, unit: str | None = None) -> str:
-    """The calibration as an ArduPilot ``.param`` file (``NAME,VALUE`` lines; see the module docstring)."""
-    parameters = ardupilot_parameters(calibration, unit)
-    source = physical_unit(calibration, unit, "ardupilot", "milligauss")
-    k = factor(source, "mG")
-    note = symmetric_matrix(calibration, "ardupilot").note
-    lines = [
-        "# ArduPilot compass calibration (first compass: COMPASS_* parameters)",
-        *(f"# {line}" for line in describe(calibration, source.name)),
-        "# ArduPilot corrects each sample (AP_Compass_Backend::correct_field), in milligauss, body frame:",
-        "#   mag += (OFS_X, OFS_Y, OFS_Z)",
-        f"#   mag *= SCALE   (only if {SCALE_RANGE[0]} <= SCALE <= {SCALE_RANGE[1]}: Compass::have_scale_factor)",
-        "#   mag = [[DIA_X, ODI_X, ODI_Y], [ODI_X, DIA_Y, ODI_Z], [ODI_Y, ODI_Z, DIA_Z]] * mag",
-        f"# mapping: OFS = -offset * {float32_text(k)} ({source.name} -> mG), DIA/ODI = magfit's matrix, SCALE = 1;",
-        f"#   ArduPilot's corrected field = {float32_text(k)} x magfit's, radius "
-        f"{float32_text(k * calibration.field_strength)} mG",
-        "# Samples must be ArduPilot's body-frame field logged with no calibration applied",
-        "#   (COMPASS_OFS = 0, COMPASS_DIA = 1, COMPASS_ODI = 0, COMPASS_SCALE = 0).",
-        "# Load: Mission Planner > Config > Full Parameter List > Load from file, or MAVProxy 'param load <file>'.",
-    ]
-    if note is not None:
-        lines.append(f"# NOTE: {plain(note)}")
-    beyond = [name for name in NAMES[:3] if abs(parameters[name]) > OFFSET_RANGE_MG]
+    scale = _scale(calibration, k, expected_field)
+    values = [*offsets, *diagonal, *offdiagonal, scale]
+    parameters = dict(zip(parameter_names(where.slot), (float(v) for v in values), strict=True)) | orientation
+    if expected_field is not None:
+        comments.insert(
+            0,
+            f"#   COMPASS_SCALE{n} = expected field {float32_text(k * expected_field)} mG / fitted "
+            f"{float32_text(field)} mG (CompassCalibrator::fix_radius)",
+        )
+    sensor = f" ({where.name})" if where.name else ""
+    if where.device_id is not None:
+        head = [
+            f"# compass {where.slot + 1}{sensor}: COMPASS_*{n} parameters, fitted for the sensor with "
+            f"COMPASS_DEV_ID{n} = {where.device_id}",
+            f"#   (ArduPilot sets COMPASS_DEV_ID{n} at boot: load this only if the vehicle shows that id there)",
+        ]
+    else:
+        head = [f"# compass {where.slot + 1}{sensor}: COMPASS_*{n} parameters (the sensor's device id is not known)"]
+    comments[:0] = head
+    beyond = [name for name in parameter_names(where.slot)[:3] if abs(parameters[name]) > OFFSET_RANGE_MG]
     if beyond:
-        lines += [
+        comments += [
             f"# WARNING: {', '.join(beyond)} beyond +-{OFFSET_RANGE_MG:.0f} mG, the documented range: Mission Planner",
             "#   asks '<name> value is out of range. Do you want to continue?' when loading this file; answer Yes,",
             "#   or it keeps the old value (ArduPilot itself accepts offsets up to COMPASS_OFFS_MAX).",
         ]
-    lines += [f"{name},{float32_text(value)}" for name, value in parameters.items()]
+    note = symmetric_matrix(calibration, "ardupilot").note if calibration.frame == "sensor" else None
+    if note is not None:
+        comments.append(f"# NOTE: {plain(note)}")
+    return _Compass(where.slot, parameters, comments)
+
+
+def _scale(calibration: Calibration, k: float, expected_field: float | None) -> float:
+    """COMPASS_SCALE: expected / fitted field, as CompassCalibrator::fix_radius sets it; 1 without a model."""
+    if expected_field is None:
+        return SCALE
+    if isinstance(expected_field, bool) or not isinstance(expected_field, (int, float, np.floating, np.integer)):
+        raise OptionError(f"expected_field must be a field strength in the calibration's unit; got {expected_field!r}")
+    expected = float(expected_field)
+    if not math.isfinite(expected) or expected <= 0:
+        raise OptionError(f"expected_field must be a positive field strength in the calibration's unit; got {expected}")
+    scale = expected / calibration.field_strength
+    low, high = SCALE_RANGE
+    if not low <= scale <= high:
+        raise ExportError(
+            f"ArduPilot's calibrator rejects a scale factor outside {low}-{high} ('bad radius', "
+            f"CompassCalibrator::fix_radius) and ignores COMPASS_SCALE there: the fitted field "
+            f"{k * calibration.field_strength:.4g} mG is {1 / scale:.3g} x the expected {k * expected:.4g} mG; "
+            "check the samples' unit, the expected field's unit and place, or a magnetic disturbance in the recording"
+        )
+    return scale
+
+
+def write_ardupilot(
+    calibration: Calibration,
+    unit: str | None = None,
+    *,
+    slot: int | None = None,
+    device_id: int | None = None,
+    expected_field: float | None = None,
+) -> str:
+    """The calibration as an ArduPilot ``.param`` file (``NAME,VALUE`` lines; see the module docstring)."""
+    compass = _compass(calibration, unit, slot, device_id, expected_field, custom=1)
+    return _file([calibration], [compass], unit)
+
+
+def write_ardupilot_several(
+    calibrations: Sequence[Calibration],
+    unit: str | None = None,
+    *,
+    slots: Sequence[int | None] | None = None,
+    device_ids: Sequence[int | None] | None = None,
+    expected_field: float | None = None,
+) -> str:
+    """Several compasses of one vehicle in one ``.param`` file; each in its own slot."""
+    compasses: list[_Compass] = []
+    custom = 1
+    calibrations = list(calibrations)
+    for index, calibration in enumerate(calibrations):
+        slot = None if slots is None else slots[index]
+        device_id = None if device_ids is None else device_ids[index]
+        compass = _compass(calibration, unit, slot, device_id, expected_field, custom)
+        if any(name.startswith("CUST_ROT") for name in compass.parameters):
+            custom += 1
+        compasses.append(compass)
+    _check_distinct([c.slot for c in compasses], "ardupilot")
+    order = sorted(range(len(compasses)), key=lambda i: compasses[i].slot)
+    return _file([calibrations[i] for i in order], [compasses[i] for i in order], unit)
+
+
+def _check_distinct(slots: list[int], target: str) -> None:
+    for slot in slots:
+        if slots.count(slot) > 1:
+            raise ExportError(
+                f"two calibrations are for {target} compass slot {slot}; give each compass its own slot (slots=...)"
+            )
+
+
+def _file(calibrations: Sequence[Calibration], compasses: list[_Compass], unit: str | None) -> str:
+    first = calibrations[0]
+    source = physical_unit(first, unit, "ardupilot", "milligauss")
+    k = factor(source, "mG")
+    which = ", ".join(f"{c.slot + 1} (COMPASS_*{suffix(c.slot)})" for c in compasses)
+    lines = [
+        f"# ArduPilot compass calibration: compass {which}",
+        *(f"# {line}" for line in describe(first, source.name) if len(compasses) == 1),
+        "# ArduPilot corrects each sample (AP_Compass_Backend::correct_field), in milligauss, body frame:",
+        "#   mag += (OFS_X, OFS_Y, OFS_Z)",
+        f"#   mag *= SCALE   (only if {SCALE_RANGE[0]} <= SCALE <= {SCALE_RANGE[1]}: Compass::have_scale_factor)",
+        "#   mag = [[DIA_X, ODI_X, ODI_Y], [ODI_X, DIA_Y, ODI_Z], [ODI_Y, ODI_Z, DIA_Z]] * mag",
+    ]
+    if any(c.frame == "vehicle" for c in calibrations):
+        lines += [
+            "# after rotate_field has turned the sensor's reading by COMPASS_ORIENT (R): mag = R * raw first.",
+            "# vehicle frame: magfit's matrix M = Q S (rotation Q after the soft-iron S) maps onto R = Q,",
+            "#   DIA/ODI = Q S Q^T, OFS = -Q * offset * k: ArduPilot's corrected field = k * M (raw - offset).",
+            "# Samples must be the sensor's field logged with COMPASS_ORIENT = 0 and no calibration applied.",
+        ]
+    if any(c.frame == "sensor" for c in calibrations):
+        lines += [
+            f"# mapping: OFS = -offset * {float32_text(k)} ({source.name} -> mG), DIA/ODI = magfit's matrix, "
+            "SCALE = 1 or expected / fitted field;",
+            f"#   ArduPilot's corrected field = {float32_text(k)} x magfit's, radius "
+            f"{float32_text(k * first.field_strength)} mG",
+            "# Samples must be ArduPilot's body-frame field logged with no calibration applied",
+            "#   (COMPASS_OFS = 0, COMPASS_DIA = 1, COMPASS_ODI = 0, COMPASS_SCALE = 0).",
+        ]
+    lines.append(
+        "# Load: Mission Planner > Config > Full Parameter List > Load from file, or MAVProxy 'param load <file>'."
+    )
+    written: set[str] = set()
+    for calibration, compass in zip(calibrations, compasses, strict=True):
+        if len(compasses) > 1:
+            lines += [f"# {line}" for line in describe(calibration, source.name)]
+        lines += compass.comments
+        # CUST_ROT_ENABLE is one parameter for both custom rotations: written once.
+        lines += [f"{name},{float32_text(v)}" for name, v in compass.parameters.items() if name not in written]
+        written |= set(compass.parameters)
     return "\n".join(lines) + "\n"

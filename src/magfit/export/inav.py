@@ -18,6 +18,15 @@ matrix and the rounding to integers. A fit with ``method="diag"`` is the best IN
 Settings (src/main/fc/settings.yaml): ``magzero_*`` and ``maggain_*`` are int16 (-32768 to 32767),
 maggain's default 1024 (with all zeros 0) meaning "not calibrated". Refused: a physical unit (INAV
 needs the driver's counts), a value outside int16, a gain below 1 (INAV divides by it).
+
+**A vehicle-frame calibration** (``frame == "vehicle"``, ``corrected_vehicle = M @ (raw - offset)``): INAV
+applies its alignment *after* the zero and gain (compassUpdate: ``applySensorAlignment``, or, when any of
+``align_mag_roll/pitch/yaw`` is non-zero, ``rotationMatrixRotateVector`` with ``rotationMatrixFromAngles``).
+With the polar split ``M = Q @ S``: ``magzero = round(offset)`` (sensor frame), the gains from the diagonal
+of S (its off-diagonal dropped, as for any calibration), and the alignment Q as a fixed ``align_mag``
+(``align_mag_roll/pitch/yaw = 0``) within :data:`._common.ROTATION_TOLERANCE_DEG`, else as
+``align_mag_roll/pitch/yaw`` in whole decidegrees (:func:`magfit.rotations.custom_rotation`). With a custom
+alignment INAV skips the board alignment. A mirror is refused. The samples must be INAV's raw counts.
 """
 
 from __future__ import annotations
@@ -26,13 +35,18 @@ import numpy as np
 
 from ..calibration import Calibration
 from ..errors import ExportError
-from ._common import describe, plain, raw_counts, unit_phrase
+from ..rotations import custom_angles, custom_rotation
+from ._common import ROTATION_TOLERANCE_DEG, describe, plain, raw_counts, unit_phrase, vehicle_split
 from ._heading import ASSUMPTION, heading_error_deg
 
 #: INAV's corrected scale: (raw - zero) * 1024 / gain.
 INAV_SCALE = 1024
 INT16 = (-32768, 32767)
 AXES = "xyz"
+#: INAV's CLI names of align_mag (the alignment table of src/main/fc/settings.yaml), by value.
+ALIGNMENT_NAMES = {
+    1: "CW0", 2: "CW90", 3: "CW180", 4: "CW270", 5: "CW0FLIP", 6: "CW90FLIP", 7: "CW180FLIP", 8: "CW270FLIP"
+}  # fmt: skip
 
 
 def inav_settings(calibration: Calibration, unit: str | None = None) -> dict[str, int]:
@@ -46,7 +60,10 @@ def inav_settings(calibration: Calibration, unit: str | None = None) -> dict[str
         ``unit`` is not a unit magfit knows.
     """
     raw_counts(calibration, unit, "inav")
-    diagonal = np.diag(calibration.matrix)
+    matrix = (
+        vehicle_split(calibration, "inav", None).symmetric if calibration.frame == "vehicle" else calibration.matrix
+    )
+    diagonal = np.diag(matrix)
     if not np.all(diagonal > 0):
         raise ExportError(
             f"INAV holds positive gains only, but the matrix's diagonal is {np.array2string(diagonal, precision=4)}; "
@@ -66,14 +83,39 @@ def inav_settings(calibration: Calibration, unit: str | None = None) -> dict[str
     return settings
 
 
+def _alignment(calibration: Calibration) -> tuple[np.ndarray, list[str], list[str]]:
+    """(the rotation INAV will apply, its CLI lines, comment lines); the identity for a sensor frame."""
+    if calibration.frame != "vehicle":
+        return np.eye(3), [], []
+    split = vehicle_split(calibration, "inav", "inav")
+    standard = split.standard
+    assert standard is not None
+    names = ("align_mag_roll", "align_mag_pitch", "align_mag_yaw")
+    if standard.angle_deg <= ROTATION_TOLERANCE_DEG:
+        name = ALIGNMENT_NAMES[standard.id]
+        commands = [f"set align_mag = {name}", *(f"set {n} = 0" for n in names)]
+        return np.asarray(standard.matrix), commands, [f"# align_mag = {name}: {standard.angle_deg:.2f} deg off"]
+    angles = [round(a) for a in custom_angles(split.rotation, "inav")]
+    comments = [
+        "# align_mag_roll/pitch/yaw: the fitted alignment to 0.1 deg, in decidegrees (the nearest fixed align_mag,",
+        f"#   {ALIGNMENT_NAMES[standard.id]}, is {standard.angle_deg:.1f} deg away); INAV then skips board alignment",
+    ]
+    commands = [f"set {n} = {a}" for n, a in zip(names, angles, strict=True)]
+    return custom_rotation("inav", *angles), commands, comments
+
+
 def write_inav(calibration: Calibration, unit: str | None = None) -> str:
     """INAV CLI commands (``set ... = ...``, then ``save``); see the module docstring."""
     settings = inav_settings(calibration, unit)
     label = raw_counts(calibration, unit, "inav")
+    rotation, commands, comments = _alignment(calibration)
     zero = np.array([settings[f"magzero_{a}"] for a in AXES], dtype=np.float64)
     gain = np.array([settings[f"maggain_{a}"] for a in AXES], dtype=np.float64)
-    loss = heading_error_deg(calibration, np.diag(INAV_SCALE / gain), zero)
-    off = calibration.matrix - np.diag(np.diag(calibration.matrix))
+    loss = heading_error_deg(calibration, rotation @ np.diag(INAV_SCALE / gain), zero)
+    matrix = (
+        vehicle_split(calibration, "inav", None).symmetric if calibration.frame == "vehicle" else calibration.matrix
+    )
+    off = matrix - np.diag(np.diag(matrix))
     largest = float(np.max(np.abs(off)))
     lines = [
         "# INAV magnetometer calibration: paste into the CLI (Configurator > CLI), the 'save' line reboots.",
@@ -82,6 +124,14 @@ def write_inav(calibration: Calibration, unit: str | None = None) -> str:
         "#   magADC = (magADCRaw - magzero) * 1024 / maggain",
         "# mapping: magzero = round(offset), maggain = round(field strength / diag(matrix)): radius 1024.",
         f"# Samples: {unit_phrase(label)}; they must be INAV's raw sensor counts, before any alignment.",
+    ]
+    if calibration.frame == "vehicle":
+        lines += [
+            "# vehicle frame: magfit's matrix M = Q S (rotation Q after the soft iron S): the gains come from",
+            "#   diag(S), and INAV's alignment, applied after them, is Q.",
+            *comments,
+        ]
+    lines += [
         f"# Lost: INAV holds a diagonal only. The matrix's off-diagonal terms (largest {largest:.4f}) and the",
         f"#   rounding cost a heading error of up to {loss:.2f} deg ({ASSUMPTION}).",
     ]
@@ -89,6 +139,7 @@ def write_inav(calibration: Calibration, unit: str | None = None) -> str:
         lines.append(
             "#   Fit with method 'diag' for the best correction INAV can hold, or use a target with a full matrix."
         )
+    lines += commands
     lines += [f"set {name} = {value}" for name, value in settings.items()]
     lines.append("save")
     return "\n".join(lines) + "\n"

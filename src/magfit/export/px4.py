@@ -40,19 +40,50 @@ each parameter first set 0.05 away from its final value, then to it (every singl
 by more than 0.01, whatever the value in use).
 
 The file is QGroundControl's parameter file format: ``#`` comments, then tab-separated
-``Vehicle-Id Component-Id Name Value Type`` lines (type 9 = MAV_PARAM_TYPE_REAL32), for the vehicle
-``system_id`` (1 unless given: older QGroundControl refuses a file whose id differs from the
-vehicle's), component 1 and the first magnetometer (CAL_MAG0_*). PX4 applies CAL_MAG0_* only to the
-sensor whose device id is CAL_MAG0_ID, so calibrate once in QGroundControl first (it sets the id).
+``Vehicle-Id Component-Id Name Value Type`` lines (type 9 = MAV_PARAM_TYPE_REAL32, 6 = INT32), for the
+vehicle ``system_id`` (1 unless given: older QGroundControl refuses a file whose id differs from the
+vehicle's) and component 1.
+
+**Several magnetometers** (issue 13): PX4 keeps four calibration slots, ``CAL_MAG0_*`` .. ``CAL_MAG3_*``,
+and applies slot n to the sensor whose device id is ``CAL_MAGn_ID`` (``FindCalibrationIndex`` in
+src/lib/sensor_calibration/Utilities.cpp, called by ``Magnetometer::ParametersUpdate``). The slot and the
+device id come from the ``slot=`` / ``device_id=`` options or from ``details["sensor"]`` (filled from the
+log's ``sensor_mag.device_id``); with a device id the file writes ``CAL_MAGn_ID`` (INT32), so PX4 finds the
+calibration; without one, PX4 applies the slot only if it already holds the sensor's id (calibrate once in
+QGroundControl first). :func:`magfit.export.export_several` writes several in one file.
+
+**A vehicle-frame calibration** (``frame == "vehicle"``, ``corrected_vehicle = M @ (raw - offset)``).
+``Magnetometer::Correct`` (Magnetometer.hpp) applies the rotation *after* the scale matrix:
+``R @ (S @ (raw - OFF))``, so the polar split ``M = Q @ S`` (:func:`magfit.rotations.polar_decomposition`)
+maps onto it with ``S`` as SCALE/ODIAG, ``OFF = k offset`` (in the sensor frame) and R = Q. PX4 has no
+custom rotation: ``CAL_MAGn_ROT`` takes only the 48 fixed rotations of rotation.h (``ParametersUpdate``
+resets any other value to 0), so the file writes the nearest fixed one when it is within
+:data:`._common.ROTATION_TOLERANCE_DEG` of Q (the residual's heading error stated) and refuses otherwise.
+An internal magnetometer ignores ``CAL_MAGn_ROT`` (PX4 resets it to -1 and uses ``SENS_BOARD_ROT``), which
+the file says when R is not the identity. A mirror is refused.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 import numpy as np
+from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
-from ._common import describe, factor, float32_text, physical_unit, plain, symmetric_matrix
+from ._common import (
+    ROTATION_TOLERANCE_DEG,
+    describe,
+    factor,
+    float32_text,
+    physical_unit,
+    plain,
+    sensor_slot,
+    symmetric_matrix,
+    vehicle_split,
+)
 from ._heading import ASSUMPTION, heading_error_deg
 
 #: check_calibration_result: sphere radius in [0.2, 0.7) gauss.
@@ -65,23 +96,39 @@ CHANGE_THRESHOLD = 0.01
 DETOUR = 0.05
 #: MAVLink system ids a vehicle can have (0 is the broadcast id).
 SYSTEM_ID_RANGE = (1, 255)
-#: MAV_PARAM_TYPE_REAL32, the type column of a QGroundControl parameter file.
+#: MAV_PARAM_TYPE_REAL32 and MAV_PARAM_TYPE_INT32, the type column of a QGroundControl parameter file.
 REAL32 = 9
-NAMES = (
-    "CAL_MAG0_XOFF",
-    "CAL_MAG0_YOFF",
-    "CAL_MAG0_ZOFF",
-    "CAL_MAG0_XSCALE",
-    "CAL_MAG0_YSCALE",
-    "CAL_MAG0_ZSCALE",
-    "CAL_MAG0_XODIAG",
-    "CAL_MAG0_YODIAG",
-    "CAL_MAG0_ZODIAG",
-)
+INT32 = 6
+#: Calibration slots (Magnetometer::MAX_SENSOR_COUNT): CAL_MAG0 .. CAL_MAG3.
+SLOT_COUNT = 4
+#: Parameters PX4 stores as integers.
+INTEGER_SUFFIXES = ("_ID", "_ROT")
 
 
-def px4_parameters(calibration: Calibration, unit: str | None = None) -> dict[str, float]:
-    """The nine CAL_MAG0_* values (gauss offsets), after checking PX4's limits.
+def parameter_names(slot: int) -> tuple[str, ...]:
+    """The nine calibration parameters of slot ``slot``: offsets, scales, off-diagonals."""
+    p = f"CAL_MAG{slot}_"
+    return (
+        *(f"{p}{a}OFF" for a in "XYZ"),
+        *(f"{p}{a}SCALE" for a in "XYZ"),
+        *(f"{p}{a}ODIAG" for a in "XYZ"),
+    )
+
+
+NAMES = parameter_names(0)
+
+
+@dataclass(frozen=True)
+class _Slot:
+    slot: int
+    parameters: dict[str, float]
+    comments: list[str]
+
+
+def px4_parameters(
+    calibration: Calibration, unit: str | None = None, *, slot: int | None = None, device_id: int | None = None
+) -> dict[str, float]:
+    """The CAL_MAGn_* values of one magnetometer (gauss offsets), after checking PX4's limits.
 
     Parameters
     ----------
@@ -89,19 +136,29 @@ def px4_parameters(calibration: Calibration, unit: str | None = None) -> dict[st
         The calibration; ``offset`` and ``field_strength`` in the samples' unit.
     unit : str or None
         The samples' unit, overriding ``calibration.unit``; must be physical (not counts).
+    slot, device_id : int or None
+        PX4's calibration slot n (0-3) and the sensor's device id (``CAL_MAGn_ID``); default from
+        ``calibration.details["sensor"]``, else slot 0 and no id.
 
     Returns
     -------
     dict
-        Parameter name -> value, in the order of :data:`NAMES`.
+        Parameter name -> value: offsets, scales, off-diagonals, then ``CAL_MAGn_ROT`` for a vehicle-frame
+        calibration and ``CAL_MAGn_ID`` when the device id is known.
 
     Raises
     ------
     ExportError
-        No physical unit, or PX4 would reject the values (see the module docstring).
+        No physical unit, PX4 would reject the values (see the module docstring), or the rotation is no
+        fixed PX4 rotation.
     OptionError
-        ``unit`` is not a unit magfit knows.
+        ``unit`` is not a unit magfit knows, or an option is out of range.
     """
+    return _slot(calibration, unit, slot, device_id).parameters
+
+
+def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_id: int | None) -> _Slot:
+    where = sensor_slot(calibration, "px4", SLOT_COUNT, slot, device_id)
     source = physical_unit(calibration, unit, "px4", "gauss")
     k = factor(source, "G")
     field = k * calibration.field_strength
@@ -111,20 +168,58 @@ def px4_parameters(calibration: Calibration, unit: str | None = None) -> dict[st
             f"PX4 rejects a magnetometer calibration whose sphere radius is outside [{low}, {high}) G; the "
             f"corrected field is {field:.4g} G; check the unit of the samples (unit={source.name!r} was used)"
         )
-    matrix = symmetric_matrix(calibration, "px4").matrix
+    prefix = f"CAL_MAG{where.slot}_"
+    comments: list[str] = []
+    extra: dict[str, float] = {}
+    if calibration.frame == "vehicle":
+        split = vehicle_split(calibration, "px4", "px4")
+        standard = split.standard
+        assert standard is not None
+        if standard.angle_deg > ROTATION_TOLERANCE_DEG:
+            raise ExportError(
+                f"PX4's CAL_MAGn_ROT holds only its 48 fixed rotations, and the fitted alignment is "
+                f"{standard.angle_deg:.2f} deg from the nearest ({standard.id}, {standard.name}; tolerance "
+                f"{ROTATION_TOLERANCE_DEG} deg); export to 'ardupilot' (custom rotation) or a full-matrix format, or "
+                "mount the magnetometer on a fixed rotation"
+            )
+        matrix = split.symmetric
+        loss = heading_error_deg(calibration, np.asarray(standard.matrix) @ matrix, calibration.offset)
+        extra[f"{prefix}ROT"] = float(standard.id)
+        comments.append(
+            f"# {prefix}ROT = {standard.id} ({standard.name}) is {standard.angle_deg:.2f} deg from the fitted "
+            f"alignment (tolerance {ROTATION_TOLERANCE_DEG} deg): a heading error of up to {loss:.2f} deg"
+        )
+        if standard.id != 0:
+            comments.append(
+                f"# WARNING: PX4 applies {prefix}ROT to an external magnetometer only; an internal one is reset to -1 "
+                "and follows SENS_BOARD_ROT (Magnetometer::ParametersUpdate)"
+            )
+    else:
+        matrix = symmetric_matrix(calibration, "px4").matrix
     diagonal = np.diag(matrix)
     if not np.all(diagonal > 0):
         raise ExportError(
-            f"PX4 ignores non-positive CAL_MAG0_*SCALE values, got {np.array2string(diagonal, precision=4)}; "
+            f"PX4 ignores non-positive {prefix}*SCALE values, got {np.array2string(diagonal, precision=4)}; "
             "the calibration flips an axis: check the samples' axis order and signs"
         )
     offdiagonal = [matrix[0, 1], matrix[0, 2], matrix[1, 2]]
     values = [*(k * calibration.offset), *diagonal, *offdiagonal]
-    return dict(zip(NAMES, (float(v) for v in values), strict=True))
+    parameters = dict(zip(parameter_names(where.slot), (float(v) for v in values), strict=True)) | extra
+    sensor = f" ({where.name})" if where.name else ""
+    if where.device_id is not None:
+        parameters[f"{prefix}ID"] = float(where.device_id)
+        comments.insert(0, f"# magnetometer slot {where.slot}{sensor}: {prefix}ID = {where.device_id}, its device id")
+    else:
+        comments.insert(
+            0,
+            f"# magnetometer slot {where.slot}{sensor}: device id not known; PX4 applies {prefix}* only to the sensor "
+            f"whose id is {prefix}ID: calibrate once in QGroundControl first",
+        )
+    return _Slot(where.slot, parameters, comments)
 
 
-def ignored_vectors(parameters: dict[str, float]) -> list[str]:
-    """The CAL_MAG0 vectors (``"OFF"``, ``"SCALE"``, ``"ODIAG"``) PX4 would keep at its defaults.
+def ignored_vectors(parameters: dict[str, float], slot: int = 0) -> list[str]:
+    """The CAL_MAGn vectors (``"OFF"``, ``"SCALE"``, ``"ODIAG"``) PX4 would keep at its defaults.
 
     PX4 takes a new vector only when it moves by more than :data:`CHANGE_THRESHOLD` from the value
     in use; from the defaults (OFF 0, SCALE 1, ODIAG 0), a vector closer than that (and not equal
@@ -133,28 +228,27 @@ def ignored_vectors(parameters: dict[str, float]) -> list[str]:
     defaults = {"OFF": np.zeros(3), "SCALE": np.ones(3), "ODIAG": np.zeros(3)}
     ignored = []
     for group, default in defaults.items():
-        vector = np.array([parameters[name] for name in NAMES if name.endswith(group)])
+        vector = np.array([parameters[name] for name in parameter_names(slot) if name.endswith(group)])
         if 0.0 < np.linalg.norm(vector - default) <= CHANGE_THRESHOLD:
             ignored.append(group)
     return ignored
 
 
-def _as_applied(parameters: dict[str, float], ignored: list[str], k: float) -> tuple[np.ndarray, np.ndarray]:
+def _as_applied(
+    parameters: dict[str, float], ignored: list[str], k: float, slot: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The matrix and offset (in the samples' unit) PX4 applies when the ``ignored`` vectors keep their defaults."""
     p = dict(parameters)
+    names = parameter_names(slot)
     for group, default in (("OFF", 0.0), ("SCALE", 1.0), ("ODIAG", 0.0)):
         if group in ignored:
-            for name in NAMES:
+            for name in names:
                 if name.endswith(group):
                     p[name] = default
-    s = np.array(
-        [
-            [p["CAL_MAG0_XSCALE"], p["CAL_MAG0_XODIAG"], p["CAL_MAG0_YODIAG"]],
-            [p["CAL_MAG0_XODIAG"], p["CAL_MAG0_YSCALE"], p["CAL_MAG0_ZODIAG"]],
-            [p["CAL_MAG0_YODIAG"], p["CAL_MAG0_ZODIAG"], p["CAL_MAG0_ZSCALE"]],
-        ]
-    )
-    offset = np.array([p["CAL_MAG0_XOFF"], p["CAL_MAG0_YOFF"], p["CAL_MAG0_ZOFF"]]) / k
+    x, y, z = (p[name] for name in names[3:6])
+    xy, xz, yz = (p[name] for name in names[6:9])
+    s = np.array([[x, xy, xz], [xy, y, yz], [xz, yz, z]])
+    offset = np.array([p[name] for name in names[:3]]) / k
     return s, offset
 
 
@@ -167,7 +261,14 @@ def _check_system_id(system_id: int) -> int:
     return int(system_id)
 
 
-def write_px4(calibration: Calibration, unit: str | None = None, *, system_id: int = 1) -> str:
+def write_px4(
+    calibration: Calibration,
+    unit: str | None = None,
+    *,
+    system_id: int = 1,
+    slot: int | None = None,
+    device_id: int | None = None,
+) -> str:
     """The calibration as a QGroundControl parameter file for PX4 (see the module docstring).
 
     Parameters
@@ -178,58 +279,110 @@ def write_px4(calibration: Calibration, unit: str | None = None, *, system_id: i
         The samples' unit, overriding ``calibration.unit``; must be physical (not counts).
     system_id : int
         The vehicle's MAVLink system id (MAV_SYS_ID), 1 to 255, written in the first column.
+    slot, device_id : int or None
+        The calibration slot (CAL_MAGn, 0-3) and the sensor's device id (see :func:`px4_parameters`).
 
     Raises
     ------
     ExportError
         No physical unit, or PX4 would reject the values.
     OptionError
-        ``unit`` is not a unit magfit knows, or ``system_id`` is not 1 to 255.
+        ``unit`` is not a unit magfit knows, ``system_id`` is not 1 to 255, or ``slot``/``device_id`` out of range.
     """
     system_id = _check_system_id(system_id)
-    parameters = px4_parameters(calibration, unit)
-    source = physical_unit(calibration, unit, "px4", "gauss")
+    return _file([calibration], [_slot(calibration, unit, slot, device_id)], unit, system_id)
+
+
+def write_px4_several(
+    calibrations: Sequence[Calibration],
+    unit: str | None = None,
+    *,
+    system_id: int = 1,
+    slots: Sequence[int | None] | None = None,
+    device_ids: Sequence[int | None] | None = None,
+) -> str:
+    """Several magnetometers of one vehicle in one QGroundControl parameter file, each in its own slot."""
+    system_id = _check_system_id(system_id)
+    entries = [
+        _slot(c, unit, None if slots is None else slots[i], None if device_ids is None else device_ids[i])
+        for i, c in enumerate(calibrations)
+    ]
+    taken = [entry.slot for entry in entries]
+    for slot in taken:
+        if taken.count(slot) > 1:
+            raise ExportError(f"two calibrations are for PX4 slot CAL_MAG{slot}; give each its own slot (slots=...)")
+    order = sorted(range(len(entries)), key=lambda i: entries[i].slot)
+    return _file([calibrations[i] for i in order], [entries[i] for i in order], unit, system_id)
+
+
+def _file(calibrations: Sequence[Calibration], entries: list[_Slot], unit: str | None, system_id: int) -> str:
+    first = calibrations[0]
+    source = physical_unit(first, unit, "px4", "gauss")
     k = factor(source, "G")
-    symmetric = symmetric_matrix(calibration, "px4")
-    note = symmetric.note
-    # The loss below is measured against what this file holds in full: the symmetric root for a Cholesky one.
-    reference = Calibration(calibration.method, calibration.offset, symmetric.matrix, calibration.field_strength)
+    slots = ", ".join(f"CAL_MAG{entry.slot}_*" for entry in entries)
     lines = [
         f"# Onboard parameters for Vehicle {system_id}",
         "#",
-        "# PX4 magnetometer calibration (first magnetometer: CAL_MAG0_* parameters)",
-        *(f"# {line}" for line in describe(calibration, source.name)),
+        f"# PX4 magnetometer calibration ({slots} parameters)",
+        *(f"# {line}" for line in describe(first, source.name) if len(entries) == 1),
         "# PX4 corrects each sensor_mag sample (calibration::Magnetometer::Correct), in gauss, sensor frame:",
-        "#   corrected = R * (S * (raw - (XOFF, YOFF, ZOFF))),  R = CAL_MAG0_ROT / board rotation",
+        "#   corrected = R * (S * (raw - (XOFF, YOFF, ZOFF))),  R = CAL_MAGn_ROT / board rotation",
         "#   S = [[XSCALE, XODIAG, YODIAG], [XODIAG, YSCALE, ZODIAG], [YODIAG, ZODIAG, ZSCALE]]",
         f"# mapping: OFF = offset * {float32_text(k)} ({source.name} -> G), SCALE/ODIAG = magfit's matrix;",
-        f"#   PX4's corrected field = {float32_text(k)} x magfit's, "
-        f"radius {float32_text(k * calibration.field_strength)} G",
-        "# PX4 uses CAL_MAG0_* only for the sensor whose id is CAL_MAG0_ID: calibrate once in QGroundControl first.",
-        "# Load: QGroundControl > Vehicle Setup > Parameters > Tools > Load from file.",
+        f"#   PX4's corrected field = {float32_text(k)} x magfit's, radius {float32_text(k * first.field_strength)} G",
     ]
-    if note is not None:
-        lines.append(f"# NOTE: {plain(note)}")
-    offsets = np.array([parameters[name] for name in NAMES[:3]])
+    if any(c.frame == "vehicle" for c in calibrations):
+        lines.append(
+            "# vehicle frame: magfit's matrix M = Q S (rotation Q after the soft-iron S): SCALE/ODIAG = S, R = Q"
+        )
+    lines.append("# Load: QGroundControl > Vehicle Setup > Parameters > Tools > Load from file.")
+    lines.append(
+        f"# PX4 takes a new OFF, SCALE or ODIAG vector only if it moves by more than {CHANGE_THRESHOLD} (Magnetometer)"
+    )
+    for calibration, entry in zip(calibrations, entries, strict=True):
+        if len(entries) > 1:
+            lines += [f"# {line}" for line in describe(calibration, source.name)]
+        lines += entry.comments
+        lines += _warnings(calibration, entry, k)
+    lines += ["#", "# Vehicle-Id\tComponent-Id\tName\tValue\tType"]
+    for entry in entries:
+        for name, value in entry.parameters.items():
+            if name.endswith(INTEGER_SUFFIXES):
+                lines.append(f"{system_id}\t1\t{name}\t{int(value)}\t{INT32}")
+            else:
+                lines.append(f"{system_id}\t1\t{name}\t{float32_text(value)}\t{REAL32}")
+    return "\n".join(lines) + "\n"
+
+
+def _warnings(calibration: Calibration, entry: _Slot, k: float) -> list[str]:
+    """The NOTE and WARNING lines of one slot: a Cholesky root, large offsets, terms PX4 would ignore."""
+    lines = []
+    parameters = entry.parameters
+    names = parameter_names(entry.slot)
+    if calibration.frame == "sensor":
+        symmetric = symmetric_matrix(calibration, "px4")
+        if symmetric.note is not None:
+            lines.append(f"# NOTE: {plain(symmetric.note)}")
+        reference_matrix = symmetric.matrix
+    else:
+        reference_matrix = vehicle_split(calibration, "px4", None).symmetric
+    offsets = np.array([parameters[name] for name in names[:3]])
     if np.any(np.abs(offsets) > OFFSET_WARNING_G):
         lines.append(
             f"# WARNING: an offset exceeds {OFFSET_WARNING_G} G on some axis; PX4 warns that the sensor may saturate"
         )
-    lines.append(
-        f"# PX4 takes a new OFF, SCALE or ODIAG vector only if it moves by more than {CHANGE_THRESHOLD} (Magnetometer)"
-    )
-    ignored = ignored_vectors(parameters)
-    matrix, offset = _as_applied(parameters, ignored, k)
+    # The loss is measured against what this file holds in full (the symmetric part), in the sensor frame.
+    reference = Calibration(calibration.method, calibration.offset, reference_matrix, calibration.field_strength)
+    ignored = ignored_vectors(parameters, entry.slot)
+    matrix, offset = _as_applied(parameters, ignored, k, entry.slot)
     error = heading_error_deg(reference, matrix, offset) if ignored else 0.0
     if error >= 0.005:  # shown with 2 decimals: below, nothing worth a warning is lost
-        names = [name for name in NAMES if name.rsplit("_", 1)[1][1:] in ignored]
+        changed = [name for name in names if name.rsplit("_", 1)[1][1:] in ignored]
         lines += [
             f"# WARNING: {', '.join(ignored)} within {CHANGE_THRESHOLD} of PX4's defaults: a vehicle at its defaults",
             f"#   keeps them, a heading error of up to {error:.2f} deg ({ASSUMPTION}).",
             "#   To make PX4 take every value, run in QGroundControl's MAVLink Console (each step moves > 0.01):",
-            *(f"#     param set {name} {float32_text(parameters[name] + DETOUR)}" for name in names),
-            *(f"#     param set {name} {float32_text(parameters[name])}" for name in names),
+            *(f"#     param set {name} {float32_text(parameters[name] + DETOUR)}" for name in changed),
+            *(f"#     param set {name} {float32_text(parameters[name])}" for name in changed),
         ]
-    lines += ["#", "# Vehicle-Id\tComponent-Id\tName\tValue\tType"]
-    lines += [f"{system_id}\t1\t{name}\t{float32_text(value)}\t{REAL32}" for name, value in parameters.items()]
-    return "\n".join(lines) + "\n"
+    return lines

@@ -15,7 +15,10 @@ launch file); for ROS 1, load the three keys into the node's namespace (``rospar
 
 What dropping magfit's matrix costs is said in the file as a heading error computed for the
 calibration at hand (:func:`._heading.heading_error_deg`); the ``yaml`` export keeps the full matrix.
-Refused: no physical unit (MagneticField is in tesla).
+Refused: no physical unit (MagneticField is in tesla), and a vehicle-frame calibration: the filter has
+no rotation parameter, and dropping the alignment would turn every heading by it (ROS states the
+magnetometer's mounting in the TF tree of the message's ``frame_id`` instead); the ``yaml`` export
+keeps the whole matrix.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..calibration import Calibration
+from ..errors import ExportError
 from ._common import describe, factor, float32_text, physical_unit, plain
 from ._heading import ASSUMPTION, heading_error_deg
 
@@ -41,6 +45,12 @@ def write_ros_madgwick(calibration: Calibration, unit: str | None = None) -> str
     OptionError
         ``unit`` is not a unit magfit knows.
     """
+    if calibration.frame == "vehicle":
+        raise ExportError(
+            "imu_filter_madgwick holds a bias only and no rotation, so it cannot carry this vehicle-frame "
+            "calibration's alignment; export to 'yaml' (the whole matrix) and state the mounting in the TF of "
+            "the messages' frame_id"
+        )
     source = physical_unit(calibration, unit, "ros-madgwick", "tesla")
     k = factor(source, "T")
     bias = k * calibration.offset
