@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike
 from .calibration import Calibration
 from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refit, diagnose_statistics, model_kind
 from .diagnostics import diagnose as diagnose_samples
+from .diagnostics.reference import judged as judged_against_reference
 from .errors import CalibrationError, MagfitError
 from .methods import FitInput, get_method
 from .methods.auto import refit_first_order
@@ -118,6 +119,8 @@ def _judged(
     allow_undetermined: bool,
 ) -> Calibration:
     """``calibration`` with its verdict (and diagnostics) attached, or the refusal raised."""
+    if calibration.frame == "vehicle":  # fitted against a reference field: judged there, not by its magnitude
+        return judged_against_reference(calibration, method, diagnostics, allow_undetermined)
     if data.samples is None:
         report = diagnose_statistics(calibration, data.statistics)
     else:

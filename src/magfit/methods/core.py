@@ -81,6 +81,8 @@ def recorded_options(options: Mapping[str, Any]) -> dict[str, Any]:
     for name, value in options.items():
         if isinstance(value, (bool, str)) or value is None:
             recorded[name] = value
+        elif isinstance(value, (np.ndarray, list, tuple)):  # vector's reference= and time_s=: their shape only
+            recorded[name] = f"an array of {len(value)} rows"
         elif isinstance(value, (int, float, np.integer, np.floating)) and math.isfinite(float(value)):
             recorded[name] = float(value) if not isinstance(value, (int, np.integer)) else int(value)
         else:

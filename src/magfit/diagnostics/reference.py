@@ -1,0 +1,399 @@
+"""The verdict and uncertainty of a fit against a reference field (``method="vector"``, :mod:`magfit.methods.vector`).
+
+A vector fit solves ``raw = G r + V`` for a general G and V by linear least squares on the design
+``[r, 1]``; the magnitude-only checks (distance to an ellipsoid, held-out refits, the comparison with the
+maximum-likelihood ellipsoid) do not apply to it. What decides whether the numbers can be trusted:
+
+- **The design.** Each axis of ``raw`` is regressed on the same four columns ``(r_x, r_y, r_z, 1)``. Scaled
+  by the field B, a full tumble gives them the per-sample information ``diag(1/3, 1/3, 1/3, 1)``; the
+  eigen-directions of the recording's information relative to that (the share of a tumble's information)
+  name what is weak. A vehicle that stays level keeps ``r_z`` at ``B sin δ``: the column ``r_z`` is then a
+  multiple of the column 1, and the matrix's response to the field along z cannot be told from the offset.
+- **The uncertainty**, with samples that are not independent: the attitude behind the reference errs
+  slowly (an estimator's error wanders over seconds), so neighbouring residuals share their error. The
+  Gauss-Newton covariance ``σ² H⁻¹`` is widened by batch means of the score over contiguous stretches
+  of the recording (the sandwich covariance; as in :func:`magfit.diagnostics.uncertainty.correlation_excess`).
+- **The residuals**: the samples must follow the reference (a reference in the world frame, a transposed
+  attitude or another field leaves residuals of the order of the field).
+- **The scale**: G's scale is the samples' unit over the reference's; a factor of 10, 100 or 1000 is
+  named as the unit mix-up it usually is.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..calibration import Calibration
+from ..errors import CalibrationError
+from ..findings import Coverage, Diagnostics, Observability, Support, Uncertainty, WeakDirection
+from .coverage import coverage
+from .uncertainty import DEFAULT_INCLINATION_DEG, UNDETERMINED_SIGMA, WEAK_INFORMATION
+from .verdict import LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
+
+__all__ = ["ReferenceReport", "design_singularity", "judge_reference_fit", "judged", "reference_inclination"]
+
+#: Contiguous batches for the batch-means covariance. Fewer and longer than the magnitude-only analysis
+#: uses (20): the attitude's error is correlated over seconds, and a batch must be longer than that to
+#: see it (simulate_vehicle, 60 s with a 5 s correlation: 10 batches predict the spread of the heading
+#: error over seeds better than 20, which under-state it).
+BATCHES = 10
+#: Relative information (share of a tumble's) below which the design is singular: nothing can be fitted.
+SINGULAR_INFORMATION = 1e-10
+#: Heading one-sigma (degrees, RMS over headings, at level or at :data:`TILT_DEG`) beyond which a vector
+#: calibration is refused: worse than what a magnitude-only fit of a tumble gives.
+HEADING_LIMIT_DEG = 5.0
+#: The tilt at which the heading is also judged: a banked turn, a slope, a wave. A vehicle that never tilted
+#: leaves G's response along its vertical confounded with the offset, harmless level, not at this tilt
+#: (simulate_vehicle, level turns with 0.2° of attitude error: ±0.1° level, ±41° at 10°).
+TILT_DEG = 10.0
+#: The design columns, in words.
+_COLUMNS = (
+    "the response to the field along the vehicle x axis (the matrix's column x)",
+    "the response to the field along the vehicle y axis (the matrix's column y)",
+    "the response to the field along the vehicle z axis (the matrix's column z)",
+    "the offset",
+)
+_TUMBLE = np.array([1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0, 1.0])
+ADVICE = (
+    "record while the vehicle turns through every heading and also tilts (rolls and pitches) as far as it "
+    "safely can, or calibrate the magnetometer first with a tumble (method auto) and use the reference only "
+    "to align it"
+)
+
+
+@dataclass(frozen=True)
+class ReferenceReport:
+    """What :func:`judge_reference_fit` found: the verdict and the findings behind it."""
+
+    support: Support
+    observability: Observability
+    uncertainty: Uncertainty
+    coverage: Coverage
+    covariance: NDArray[np.float64]
+    residual_rms: float
+    scale: float
+
+    def diagnostics(self, n_samples: int) -> Diagnostics:
+        """The typed :class:`Diagnostics` that ``calibration.diagnostics`` reads back."""
+        notes = (
+            "Judged against the reference field: the design of the reference directions, the residuals and the "
+            "uncertainty with batch means over the recording; the magnitude-only checks (distance to an "
+            "ellipsoid, held-out refits) do not apply to a fit against a reference.",
+            "Coverage is that of the reference's directions in the vehicle frame.",
+        )
+        return Diagnostics(
+            n_samples=n_samples,
+            n_used=n_samples,
+            coverage=self.coverage,
+            observability=self.observability,
+            uncertainty=self.uncertainty,
+            goodness=None,
+            warnings=self.support.warnings,
+            notes=notes,
+            support=self.support,
+        )
+
+
+def _whitened_information(reference: NDArray[np.float64], field: float) -> tuple[NDArray[Any], NDArray[Any]]:
+    """Eigenvalues (ascending) and eigenvectors of the design's information relative to a full tumble."""
+    design = np.column_stack([reference / field, np.ones(reference.shape[0])])
+    information = design.T @ design / reference.shape[0]
+    root = 1.0 / np.sqrt(_TUMBLE)
+    values, vectors = np.linalg.eigh(information * np.outer(root, root))
+    return values, vectors
+
+
+def _combination_words(vector: NDArray[np.float64]) -> str:
+    """The design columns a weak direction moves, in words (those with a share of at least 1/16)."""
+    terms = [_COLUMNS[k] for k in np.argsort(-np.abs(vector)) if vector[k] ** 2 >= 1.0 / 16.0]
+    if len(terms) == 1:
+        return terms[0]
+    return ", ".join(terms[:-1]) + " together with " + terms[-1]
+
+
+def _why(vector: NDArray[np.float64], reference: NDArray[np.float64], field: float) -> str:
+    """Why the reference does not separate them: the field along the axis that hardly changed."""
+    axis = int(np.argmax(np.abs(vector[:3])))
+    letter = "xyz"[axis]
+    spread = float(np.std(reference[:, axis])) / field
+    turn = {
+        "x": "pitch it and turn it through other headings",
+        "y": "roll it and turn it through other headings",
+        "z": "tilt it (roll and pitch)",
+    }[letter]
+    return (
+        f"the reference field along the vehicle {letter} axis hardly changed (its spread is {100 * spread:.2g} % "
+        f"of the field), so nothing tells a response to it from a constant; {turn} while recording"
+    )
+
+
+def design_singularity(reference: NDArray[np.float64], field: float) -> str | None:
+    """The refusal when the reference directions cannot determine G and V at all (a singular design), else None."""
+    values, vectors = _whitened_information(reference, field)
+    if values[0] > SINGULAR_INFORMATION * max(values[-1], 1e-300):
+        return None
+    vector = vectors[:, 0]
+    return f"the reference directions do not determine {_combination_words(vector)}: {_why(vector, reference, field)}"
+
+
+def _jacobians(
+    reference: NDArray[np.float64], rate: NDArray[np.float64] | None, g: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """∂e/∂p of the residual ``e = raw − G r − V`` per sample, (N, 3, P); p = (G row-major, V[, lag])."""
+    n = reference.shape[0]
+    count = 12 if rate is None else 13
+    jac = np.zeros((n, 3, count))
+    for i in range(3):
+        jac[:, i, 3 * i : 3 * i + 3] = -reference
+        jac[:, i, 9 + i] = -1.0
+    if rate is not None:
+        jac[:, :, 12] = -(rate @ g.T)
+    return jac
+
+
+def _covariance(jac: NDArray[np.float64], residuals: NDArray[np.float64], batches: int) -> NDArray[np.float64]:
+    """Gauss-Newton covariance widened by batch means of the score over contiguous stretches of the recording."""
+    n, _, count = jac.shape
+    hessian = np.einsum("kap,kaq->pq", jac, jac)
+    inverse = np.linalg.pinv(hessian)
+    variance = float(np.sum(residuals**2)) / max(3 * n - count, 1)
+    covariance = variance * inverse
+    blocks = min(batches, n // 20)
+    if blocks < 4:
+        return covariance
+    scores = np.einsum("kap,ka->kp", jac, residuals)
+    edges = np.linspace(0, n, blocks + 1).astype(np.int64)
+    sums = np.add.reduceat(scores, edges[:-1], axis=0)
+    sums -= sums.mean(axis=0)
+    sandwich = inverse @ (sums.T @ sums * blocks / (blocks - 1)) @ inverse
+    # Only the part beyond independent noise is added (as uncertainty.correlation_excess does): batch sums
+    # of few batches are noisy, and must not shrink what the independent noise alone gives.
+    values, vectors = np.linalg.eigh(0.5 * (sandwich - covariance + (sandwich - covariance).T))
+    return covariance + (vectors * np.clip(values, 0.0, None)) @ vectors.T
+
+
+def _heading_sigmas(
+    covariance: NDArray[np.float64],
+    g: NDArray[np.float64],
+    field: float,
+    inclination_deg: float,
+    tilt_deg: float = 0.0,
+) -> tuple[float, float]:
+    """RMS and worst heading one-sigma (degrees) over 36 headings, level or tilted by ``tilt_deg``.
+
+    At heading ψ, the field in the vehicle frame (FRD) is ``f = Rᵀ B (cos δ, 0, sin δ)`` with ``R`` the attitude
+    (yaw ψ; tilted: rolled or pitched by ±``tilt_deg``, the four averaged); the raw sample is ``G f + V``,
+    corrected by ``G⁻¹ (raw − V)``. A parameter error moves the corrected field by ``−G⁻¹ (dG f + dV)``, and
+    the heading by the component of ``R`` times that along the world's horizontal at right angles to the
+    field, over the horizontal field ``B cos δ``.
+    """
+    from scipy.spatial.transform import Rotation  # not needed to import magfit
+
+    inverse = np.linalg.inv(g)
+    delta = math.radians(inclination_deg)
+    world = field * np.array([math.cos(delta), 0.0, math.sin(delta)])
+    east = np.array([0.0, 1.0, 0.0])
+    tilts = [(0.0, 0.0)] if tilt_deg == 0 else [(tilt_deg, 0.0), (-tilt_deg, 0.0), (0.0, tilt_deg), (0.0, -tilt_deg)]
+    variances = []
+    for psi in np.linspace(0.0, 360.0, 36, endpoint=False):
+        for roll, pitch in tilts:
+            attitude = Rotation.from_euler("ZYX", [psi, pitch, roll], degrees=True).as_matrix()
+            f = attitude.T @ world
+            moves = np.zeros((3, covariance.shape[0]))
+            for i in range(3):
+                moves[i, 3 * i : 3 * i + 3] = f
+                moves[i, 9 + i] = 1.0
+            gradient = -(east @ attitude @ inverse @ moves) / (field * math.cos(delta))
+            variances.append(float(gradient @ covariance @ gradient))
+    variances_array = np.clip(np.array(variances), 0.0, None)
+    return math.degrees(math.sqrt(variances_array.mean())), math.degrees(math.sqrt(variances_array.max()))
+
+
+def _weak_directions(
+    reference: NDArray[np.float64], field: float, covariance: NDArray[np.float64], scale: float
+) -> tuple[tuple[WeakDirection, ...], float]:
+    """The design directions with less than 5 % of a tumble's information, with their one-sigma; the condition."""
+    values, vectors = _whitened_information(reference, field)
+    condition = float(values[-1] / max(values[0], 1e-300))
+    root = np.sqrt(_TUMBLE)
+    weak = []
+    for value, vector in zip(values, vectors.T, strict=True):
+        if value >= WEAK_INFORMATION:
+            continue
+        # The combination's one-sigma as the RMS over a tumble of the field it mispredicts: with the
+        # coefficients β_i = (G_i·, V_i) of output axis i, the whitened coefficients are a ⊙ β_i with
+        # a = √tumble ⊙ (B, B, B, 1), whose information a tumble makes the identity; the worst axis, as a
+        # fraction of the field in the samples' unit.
+        along = vector * root * np.array([field, field, field, 1.0])
+        worst = 0.0
+        for i in range(3):
+            index = [3 * i, 3 * i + 1, 3 * i + 2, 9 + i]
+            worst = max(worst, float(along @ covariance[np.ix_(index, index)] @ along))
+        sigma = math.sqrt(worst) / (scale * field)
+        weak.append(
+            WeakDirection(
+                description=_combination_words(vector),
+                relative_information=float(max(value, 0.0)),
+                sigma=float(min(sigma, 1e300)),
+                determined=sigma <= UNDETERMINED_SIGMA,
+                vector=tuple(float(v) for v in vector),
+            )
+        )
+    return tuple(weak), condition
+
+
+def reference_inclination(reference: NDArray[np.float64]) -> float:
+    """The inclination (degrees) at which headings are judged: the reference's own at its median attitude.
+
+    A vehicle spends its time near level, where ``asin(r_z / |r|)`` is the inclination (z down, FRD); a
+    reference that tilts all over (a tumble, or another vehicle frame) has none to read, and the default of
+    the magnitude-only diagnostics stands.
+    """
+    vertical = reference[:, 2] / np.linalg.norm(reference, axis=1)
+    if float(np.std(vertical)) > 0.25:
+        return DEFAULT_INCLINATION_DEG
+    return math.degrees(math.asin(float(np.clip(np.median(vertical), -0.999, 0.999))))
+
+
+def judge_reference_fit(
+    raw: NDArray[np.float64],
+    reference: NDArray[np.float64],
+    g: NDArray[np.float64],
+    offset: NDArray[np.float64],
+    *,
+    rate: NDArray[np.float64] | None = None,
+    lag_at_limit: float | None = None,
+    inclination_deg: float | None = None,
+) -> ReferenceReport:
+    """The verdict on ``raw = G r + V`` fitted to ``raw`` against ``reference`` (both (N, 3), in recording order).
+
+    ``rate`` is the reference's time derivative at the samples when a lag was fitted (its column joins the
+    design, so the lag's uncertainty is part of the covariance: parameter 13, seconds); ``lag_at_limit`` the
+    search limit when the lag ended on it; ``inclination_deg`` the field's (default: the reference's own,
+    :func:`reference_inclination`).
+    """
+    n = raw.shape[0]
+    field = float(np.median(np.linalg.norm(reference, axis=1)))
+    inclination = reference_inclination(reference) if inclination_deg is None else inclination_deg
+    residuals = raw - reference @ g.T - offset
+    scale = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
+    # In the samples' unit over the field in it: G⁻¹ would blow the residual up along an undetermined direction.
+    residual_rms = float(np.sqrt(np.mean(np.sum(residuals**2, axis=1)))) / (scale * field)
+    jacobians = _jacobians(reference, rate, g)
+    covariance = _covariance(jacobians, residuals, BATCHES)
+    weak, condition = _weak_directions(reference, field, covariance, scale)
+    heading, heading_max = _heading_sigmas(covariance, g, field, inclination)
+    tilted, _ = _heading_sigmas(covariance, g, field, inclination, TILT_DEG)
+    heading_independent, _ = _heading_sigmas(_covariance(jacobians, residuals, 0), g, field, inclination)
+    effective = n * (heading_independent / heading) ** 2 if heading > 0 else float(n)
+    scales = tuple(
+        float(math.sqrt(max(covariance[3 * i + i, 3 * i + i], 0.0)) / np.linalg.norm(g[i])) for i in range(3)
+    )
+    offsets = tuple(float(math.sqrt(max(covariance[9 + i, 9 + i], 0.0))) for i in range(3))
+    uncertainty = Uncertainty(
+        offset_sigma=(offsets[0], offsets[1], offsets[2]),
+        scale_sigma=(scales[0], scales[1], scales[2]),
+        field_strength_sigma=None,
+        heading_sigma_deg=heading,
+        heading_sigma_max_deg=heading_max,
+        inclination_deg=inclination,
+        residual_sigma=residual_rms,
+        n_samples=n,
+        effective_samples=float(min(effective, n)),
+    )
+    observability = Observability(model="vector", condition=condition, weak=weak, turn_axis=None)
+
+    refusals: list[str] = []
+    weaknesses: list[str] = []
+    worst = max(heading, tilted)
+    effect = (
+        f"the heading one-sigma that follows is ±{heading:.2g}° at level and ±{tilted:.2g}° at {TILT_DEG:.0f}° of tilt"
+    )
+    if worst > HEADING_LIMIT_DEG:
+        if weak:
+            first = weak[0]
+            refusals.append(
+                f"the reference does not determine {first.description} (one-sigma {100 * (first.sigma or 0.0):.2g} % "
+                f"of the field; the reference carries {_share(first.relative_information)} of the information a full "
+                f"tumble gives): {_why(np.array(first.vector), reference, field)}; {effect}"
+            )
+        else:
+            refusals.append(
+                f"the reference's error leaves the calibration uncertain: {effect} (the attitude's error does not "
+                "average out over so short a recording); record longer, through every heading"
+            )
+    for direction in weak[1 if refusals and weak else 0 :]:
+        weaknesses.append(
+            f"{direction.description} is weakly determined (one-sigma {100 * (direction.sigma or 0.0):.2g} % of the "
+            f"field; the reference carries {_share(direction.relative_information)} of the information a full "
+            f"tumble gives): the calibration holds near the attitudes recorded; {effect}"
+        )
+    if not refusals and residual_rms > NO_ELLIPSOID_RMS:
+        refusals.append(
+            f"the samples do not follow the reference: after the best G and V they still differ from it by "
+            f"{100 * residual_rms:.0f} % of the field (RMS), where an attitude good to a degree leaves about 2 %; "
+            "the reference is likely in the wrong frame (the world's instead of the vehicle's), its attitude "
+            "transposed (vehicle-to-world used as world-to-vehicle), on another time base, or the field changed "
+            "(motors, a magnet)"
+        )
+    elif residual_rms > LARGE_RESIDUAL_RMS:
+        weaknesses.append(
+            f"the residuals are large: {100 * residual_rms:.1f} % of the field (RMS) where an attitude good to a "
+            "degree leaves about 2 %: the attitude errs by several degrees, the time bases drift, or the field "
+            "changed while recording; expect heading errors of a few degrees"
+        )
+    mixup = unit_mixup(scale)
+    if mixup is not None:
+        weaknesses.append(
+            f"the samples are {scale:.3g} times the reference field: {mixup}; the calibration converts the samples "
+            "into the reference's unit (if the samples are raw counts, this is the sensor's gain)"
+        )
+    if lag_at_limit is not None:
+        weaknesses.append(
+            f"the lag between the reference and the samples reached the search limit ({lag_at_limit:+.3g} s): the "
+            "true lag may be larger; give a larger max_lag_s or check the two time bases"
+        )
+    verdict = "refused" if refusals else "weak" if weaknesses else "supported"
+    support = Support(verdict=verdict, refusals=tuple(refusals), weaknesses=tuple(weaknesses), advice=ADVICE)
+    directions = reference / np.linalg.norm(reference, axis=1, keepdims=True)
+    return ReferenceReport(
+        support=support,
+        observability=observability,
+        uncertainty=uncertainty,
+        coverage=coverage(directions),
+        covariance=covariance,
+        residual_rms=residual_rms,
+        scale=scale,
+    )
+
+
+def _share(value: float) -> str:
+    return f"{value:.2g}" if value >= 0.01 else f"1/{1 / max(value, 1e-12):.0f}"
+
+
+def judged(calibration: Calibration, method: str, diagnostics: bool | str, allow_undetermined: bool) -> Calibration:
+    """A vector calibration with the verdict its method reached: raised when refused (unless forced).
+
+    What :func:`magfit.fit` does for a calibration in the vehicle frame, in place of the magnitude-only
+    diagnosis: the method judged it against its reference (``details["support"]``, ``details["diagnostics"]``).
+    """
+    stored = calibration.details.get("support")
+    if not isinstance(stored, dict):
+        raise CalibrationError(f"the {method} calibration carries no verdict of its own")
+    support = Support.from_dict(stored)
+    if support.verdict == "refused":
+        if not allow_undetermined:
+            raise CalibrationError(support.message(method))
+        support = replace(support, forced=True)
+    details = {key: value for key, value in calibration.details.items() if key != "diagnostics"}
+    details["support"] = support.to_dict()
+    report = calibration.details.get("diagnostics")
+    if diagnostics and isinstance(report, dict):
+        typed = replace(Diagnostics.from_dict(report), support=support, warnings=support.warnings)
+        details["diagnostics"] = typed.to_dict()
+    return replace(calibration, details=details)
