@@ -376,8 +376,9 @@ def _attitude_stream(log: Any) -> Stream | None:
 
     ArduPilot's Euler angles are 3-2-1, body -> NED: ``Matrix3f::from_euler(roll, pitch, yaw)`` is
     ``Rz(yaw) · Ry(pitch) · Rx(roll)`` (libraries/AP_Math/matrix3.cpp), the DCM ``AP_AHRS`` logs from
-    (libraries/AP_AHRS/AP_AHRS_Logging.cpp, Write_Attitude); XKQ's quaternion is the NED <- body rotation
-    (libraries/AP_NavEKF3/AP_NavEKF3_Logging.cpp, Log_Write_Quaternion).
+    (libraries/AP_AHRS/AP_AHRS_Logging.cpp, Write_Attitude). XKQ logs ``NavEKF3_core::getQuaternion``, whose
+    ``rotation_matrix()`` is the body -> NED matrix (``getRotationBodyToNED``,
+    libraries/AP_NavEKF3/AP_NavEKF3_Outputs.cpp), though the comment there calls it "NED to body".
     """
     for name in ("ATT", "XKQ", "AHR2"):
         if not log.has(name):
