@@ -221,14 +221,19 @@ def _moving_mean(values: NDArray[np.float64], width: int) -> NDArray[np.float64]
     return np.convolve(padded, kernel, mode="valid")
 
 
-def _direction_rate(vectors: NDArray[np.float64], time_s: NDArray[np.float64]) -> NDArray[np.float64]:
-    """How fast (rad/s) the direction of ``vectors`` turns, at each sample (central differences)."""
+def _direction_rate(vectors: NDArray[np.float64], time_s: NDArray[np.float64], width: int) -> NDArray[np.float64]:
+    """How fast (rad/s) the direction of ``vectors`` turns at each sample: the angle between the mean
+    directions ``width`` samples apart (means over ``width`` samples: one sample's noise would read as tens
+    of degrees per second at 50 Hz)."""
     unit = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)
-    step = np.gradient(unit, axis=0)
-    dt = np.gradient(time_s)
+    mean = np.column_stack([_moving_mean(unit[:, i], width) for i in range(3)])
+    n = len(unit)
+    ahead = np.minimum(np.arange(n) + width // 2, n - 1)
+    behind = np.maximum(np.arange(n) - width // 2, 0)
+    dt = time_s[ahead] - time_s[behind]
+    turned = np.linalg.norm(mean[ahead] - mean[behind], axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        rate = np.linalg.norm(step, axis=1) / dt
-    return np.where(dt > 0, rate, np.inf)
+        return np.where(dt > 0, turned / dt, np.inf)
 
 
 def _gates(
@@ -251,13 +256,19 @@ def _gates(
     dropped[f"|a| more than {100 * accel_tolerance:g} % away from g (the median |a|)"] = int(np.sum(~keep))
     if max_rate_dps is None:
         return keep, dropped, notes, 1
+    if time_s is not None and time_s.size > 1:
+        step = float(np.median(np.diff(time_s)))
+        width = max(1, round(1.0 / step)) if step > 0 else 1
+    else:
+        width = 5
     if gyro is not None:
         rate = np.linalg.norm(gyro, axis=1)
         source = "the gyroscope"
     elif time_s is not None:
         # The field direction misses a rotation about the field, gravity's one about gravity: the larger
-        # sees every turn (a level yaw turn moves the field direction at ω cos δ).
-        rate = np.maximum(_direction_rate(mag, time_s), _direction_rate(accel, time_s))
+        # sees every turn (a level yaw turn moves the field direction at ω cos δ). Over two seconds, so that
+        # the accelerometer's noise stays below the gate.
+        rate = np.maximum(_direction_rate(mag, time_s, 2 * width), _direction_rate(accel, time_s, 2 * width))
         source = "the turning of the field and gravity directions"
     else:
         notes.append(
@@ -265,11 +276,6 @@ def _gates(
             "centripetal accelerations are only down-weighted as outliers"
         )
         return keep, dropped, notes, 1
-    if time_s is not None and time_s.size > 1:
-        step = float(np.median(np.diff(time_s)))
-        width = max(1, round(1.0 / step)) if step > 0 else 1
-    else:
-        width = 5
     smooth = _moving_mean(rate, width)  # over about a second: gyro noise averages out, turn edges widen
     still = smooth <= math.radians(max_rate_dps)
     dropped[f"turning faster than {max_rate_dps:g}°/s (from {source})"] = int(np.sum(keep & ~still))

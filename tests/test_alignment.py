@@ -1,0 +1,157 @@
+"""magfit.alignment against the truth of simulated vehicles (magfit.vehicle): the rotation, its one-sigma, the
+rotations the motion does not determine, mirrors, the nearest firmware rotations, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from magfit import CalibrationError, OptionError, SampleError
+from magfit.alignment import align
+from magfit.rotations import angle_between_deg, euler_matrix
+from magfit.vehicle import GRAVITY, simulate_vehicle
+
+#: Accelerometer noise equivalent to 1° of tilt per sample (the issue's 1° of attitude noise).
+ONE_DEGREE = GRAVITY * np.sin(np.radians(1.0))
+
+
+def _vehicle(motion: str, mounting: np.ndarray, n: int, seed: int = 1, **options: float):
+    sim = simulate_vehicle(
+        n, motion, mounting=mounting, noise=0.005, accel_noise=ONE_DEGREE, gyro_noise=0.002, seed=seed, **options
+    )
+    return sim, sim.truth_sensor.apply(sim.samples)
+
+
+@pytest.mark.parametrize(
+    "angles",
+    [(5.0, 0.0, 0.0), (10.0, -20.0, 30.0), (-35.0, 12.0, -25.0), (180.0, 0.0, 90.0), (0.0, 90.0, 0.0)],
+)
+def test_tumble_recovers_the_mounting_within_half_a_degree(angles):
+    mounting = euler_matrix(*angles)
+    sim, calibrated = _vehicle("tumble", mounting, 4000)
+    # A hand-held tumble turns all the time, about the sensor itself: no rate gate.
+    result = align(calibrated, sim.accel, inclination_deg=64.0, max_rate_dps=None)
+    error = angle_between_deg(result.matrix, mounting)
+    assert error < 0.5
+    assert result.verdict == "supported" and not result.mirror
+    # The one-sigma is honest: the error is within a few of them, and they are not absurdly wide.
+    assert error < 5.0 * np.linalg.norm(result.axis_sigma_deg)
+    assert np.all(result.axis_sigma_deg < 0.5)
+    assert np.allclose(euler_matrix(result.roll_deg, result.pitch_deg, result.yaw_deg), result.matrix, atol=1e-9)
+
+
+def test_standard_rotation_is_named_for_each_firmware():
+    # 180° about x, as between the magnetometer and the accelerometer of the real MPU-9250 rig
+    # (../shared/data/real/mxl_umich_mpu9250_rm3100).
+    sim, calibrated = _vehicle("tumble", euler_matrix(180.0, 0.0, 0.0), 3000, seed=2)
+    result = align(calibrated, sim.accel, inclination_deg=64.0, max_rate_dps=None)
+    ardupilot, px4 = result.nearest_for("ardupilot"), result.nearest_for("px4")
+    assert (ardupilot.rotation.id, ardupilot.rotation.name) == (8, "ROTATION_ROLL_180")
+    assert (px4.rotation.id, px4.parameter) == (8, "CAL_MAG0_ROT")
+    assert result.nearest_for("betaflight").rotation.name == "CW180_DEG_FLIP"
+    assert ardupilot.rotation.angle_deg < 0.5
+    with pytest.raises(OptionError, match="valid firmwares"):
+        result.nearest_for("nuttx")
+
+
+def test_off_table_mounting_reports_the_angle_to_the_nearest_entry():
+    sim, calibrated = _vehicle("tumble", euler_matrix(0.0, 0.0, 20.0), 3000, seed=3)
+    result = align(calibrated, sim.accel, inclination_deg=64.0, max_rate_dps=None)
+    nearest = result.nearest_for("ardupilot").rotation
+    assert nearest.name == "ROTATION_NONE"
+    assert abs(nearest.angle_deg - 20.0) < 0.5
+    assert abs(result.yaw_deg - 20.0) < 0.5
+
+
+def test_fitted_inclination_matches_the_field():
+    sim, calibrated = _vehicle("tumble", euler_matrix(10.0, -20.0, 30.0), 4000, seed=4, inclination_deg=58.0)
+    result = align(calibrated, sim.accel, max_rate_dps=None)
+    assert result.inclination_fitted
+    assert abs(result.inclination_deg - 58.0) < 0.5
+    assert 0.0 < result.inclination_sigma_deg < 0.5
+    assert angle_between_deg(result.matrix, sim.mounting) < 0.5
+
+
+def test_mirror_is_detected_and_the_inverted_axis_named():
+    # Sensor z inverted (a left-handed magnetometer), then turned 90° in yaw.
+    mounting = euler_matrix(0.0, 0.0, 90.0) @ np.diag([1.0, 1.0, -1.0])
+    sim, calibrated = _vehicle("tumble", mounting, 3000, seed=5)
+    result = align(calibrated, sim.accel, inclination_deg=64.0, max_rate_dps=None)
+    assert result.mirror and np.linalg.det(result.matrix) < 0
+    assert np.abs(result.matrix - mounting).max() < 0.01
+    # Inverting the named axis leaves a table rotation (within the fit's error).
+    assert result.nearest_for("ardupilot").rotation.angle_deg < 0.5
+    assert np.abs(result.proper_matrix - result.nearest_for("ardupilot").rotation.matrix).max() < 0.01
+    assert result.verdict == "weak"
+    assert any("mirror image" in w and f"invert its {result.inverted_axis} axis" in w for w in result.warnings)
+
+
+def test_gravity_with_the_wrong_sign_shows_as_a_mirror():
+    sim, calibrated = _vehicle("tumble", np.eye(3), 2000, seed=6)
+    result = align(calibrated, -sim.accel, inclination_deg=64.0, max_rate_dps=None)
+    assert result.mirror
+    assert any("specific force" in w for w in result.warnings)
+
+
+def test_level_yaw_turns_leave_the_mount_yaw_undetermined():
+    sim, calibrated = _vehicle("yaw", euler_matrix(10.0, -20.0, 30.0), 6000, seed=7)
+    with pytest.raises(CalibrationError, match=r"body z \(down; the mount's yaw\) is not determined"):
+        align(calibrated, sim.accel, inclination_deg=64.0, gyro=sim.gyro, time_s=sim.time_s)
+    result = align(
+        calibrated, sim.accel, inclination_deg=64.0, gyro=sim.gyro, time_s=sim.time_s, allow_undetermined=True
+    )
+    assert result.verdict == "refused"
+    # What the motion does determine, the tilt of the mount (where body down lies in the sensor's axes), is right.
+    down_fitted, down_true = result.matrix.T @ [0, 0, 1], sim.mounting.T @ [0, 0, 1]
+    assert np.degrees(np.arccos(np.clip(down_fitted @ down_true, -1, 1))) < 0.5
+
+
+def test_level_flight_with_right_handed_axes_within_half_a_degree():
+    mounting = euler_matrix(-15.0, 25.0, 35.0)
+    sim, calibrated = _vehicle("flight", mounting, 20000, seed=8)
+    kwargs = {"inclination_deg": 64.0, "gyro": sim.gyro, "time_s": sim.time_s}
+    # Nearly level: a reflection across the vertical plane of the pitching changes no dip angle.
+    with pytest.raises(CalibrationError, match="mirror image"):
+        align(calibrated, sim.accel, **kwargs)
+    result = align(calibrated, sim.accel, allow_mirror=False, **kwargs)
+    assert angle_between_deg(result.matrix, mounting) < 0.5
+    assert sum(result.dropped.values()) + result.n_used == result.n_samples
+    assert any("turning faster than 0.3°/s" in reason for reason in result.dropped)
+
+
+def test_a_car_that_always_turns_or_accelerates_is_refused_with_the_counts():
+    sim, calibrated = _vehicle("car", np.eye(3), 5000, seed=9)
+    with pytest.raises(CalibrationError, match=r"only \d+ of 5000 samples see gravity alone.*turning faster"):
+        align(calibrated, sim.accel, inclination_deg=64.0, gyro=sim.gyro, time_s=sim.time_s)
+
+
+def test_rate_gate_from_the_field_and_gravity_without_a_gyroscope():
+    sim, calibrated = _vehicle("flight", np.eye(3), 20000, seed=10)
+    with_gyro = align(calibrated, sim.accel, inclination_deg=64.0, gyro=sim.gyro, time_s=sim.time_s, allow_mirror=False)
+    without = align(calibrated, sim.accel, inclination_deg=64.0, time_s=sim.time_s, allow_mirror=False)
+    assert any("field and gravity directions" in reason for reason in without.dropped)
+    assert 0.3 < without.n_used / with_gyro.n_used < 3.0
+    # The tilt of the mount stays within half a degree; the yaw, seen through the ±5° pitch of straight legs
+    # only, is within its own (wider, stated) one-sigma.
+    assert np.degrees(np.arccos(min(1.0, without.matrix[2, 2]))) < 0.5
+    assert angle_between_deg(without.matrix, np.eye(3)) < 2.0 * without.axis_sigma_deg[2] + 0.5
+    if without.axis_sigma_deg[2] > 1.0:
+        assert without.verdict == "weak" and "body z" in without.warnings[0]
+
+
+@pytest.mark.parametrize(
+    ("mag", "accel", "options", "error", "match"),
+    [
+        (np.zeros((10, 2)), np.ones((10, 3)), {}, SampleError, r"calibrated_mag must have shape \(N, 3\)"),
+        (np.ones((10, 3)), np.ones((9, 3)), {}, SampleError, "accel has 9 rows but the magnetometer has 10"),
+        (np.ones((10, 3)), np.full((10, 3), np.nan), {}, SampleError, "accel contains NaN"),
+        (np.ones((10, 3)), np.ones((10, 3)), {"inclination_deg": 95.0}, OptionError, "inclination_deg"),
+        (np.ones((10, 3)), np.ones((10, 3)), {"max_rate_dps": -1.0}, OptionError, "max_rate_dps"),
+        (np.ones((10, 3)), np.ones((10, 3)), {"time_s": np.arange(9.0)}, SampleError, "time_s must be 10"),
+        (np.ones((10, 3)), np.zeros((10, 3)), {}, SampleError, "accelerometer reads zero"),
+        (np.ones((10, 3)), np.ones((10, 3)), {}, CalibrationError, r"only 10 of 10 samples .* at least 50"),
+    ],
+)
+def test_bad_input_is_named(mag, accel, options, error, match):
+    with pytest.raises(error, match=match):
+        align(mag, accel, **options)
