@@ -10,7 +10,8 @@ import click
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import DataFileError, MagfitError
-from ._common import columns_text, console, parse_columns, refuse_overwriting_input
+from ._common import columns_text, console, parse_columns, refuse_overwriting_input, warn
+from ._logs import is_log, read_recordings
 
 if TYPE_CHECKING:
     from ..io import FileFormat
@@ -69,18 +70,32 @@ def remembered_columns(calibration: Calibration, fmt: FileFormat) -> list[str | 
     is_flag=True,
     help="Divide by the field strength: corrected samples on the unit sphere instead of input units.",
 )
+@click.option(
+    "--sensor",
+    metavar="ID",
+    help="The compass of a flight log or bag to correct. Default: the one CAL was fitted on (or the log's only one).",
+)
 def apply_command(
-    calibration_file: Path, file: Path, output: Path, columns: list[str | int] | None, normalized: bool
+    calibration_file: Path,
+    file: Path,
+    output: Path,
+    columns: list[str | int] | None,
+    normalized: bool,
+    sensor: str | None,
 ) -> None:
     """Correct the samples of FILE with the calibration CAL and write them to -o.
 
     Each sample becomes matrix @ (raw - offset); the file's other columns (time, gyro ...) and its
-    format (delimiter, header) are kept. CAL is a JSON file written by 'magfit calibrate -o'.
+    format (delimiter, header) are kept. CAL is a JSON file written by 'magfit calibrate -o'. FILE may be a
+    flight log or bag (ULog, DataFlash, ROS): its compass's corrected samples are written as CSV with their
+    time stamps (time_s, then x, y, z), or as an (N, 4) array when -o ends in .npy.
 
     \b
-    Example:
+    Examples:
       magfit calibrate flight.csv --columns mx,my,mz -o cal.json
       magfit apply cal.json flight.csv --columns mx,my,mz -o flight_calibrated.csv
+      magfit calibrate 00000042.BIN --sensor MAG/0 -o mag0.json
+      magfit apply mag0.json 00000042.BIN -o mag0_calibrated.csv
     """
     from ..io import STDOUT, check_output, iter_sample_chunks, sniff, write_calibrated
 
@@ -89,6 +104,11 @@ def apply_command(
         refuse_overwriting_input(output, [file, calibration_file])
     check_output(output)
     calibration = read_calibration(calibration_file)
+    if is_log(file):
+        _apply_to_log(calibration, calibration_file, file, output, columns, normalized, sensor)
+        return
+    if sensor is not None:
+        raise DataFileError(f"{file}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
     # Without --columns, the columns the calibration was fitted on (details["source"], written by calibrate).
     remembered = remembered_columns(calibration, sniff(file)) if columns is None else None
     chosen = columns if columns is not None else remembered
@@ -108,6 +128,65 @@ def apply_command(
     used = f" (columns {columns_text(reader.columns)}{f'; {how}' if how else ''})"
     out.print(
         f"wrote {written}: {file}{used} corrected with {calibration_file} ({calibration.method}), {scale}",
+        soft_wrap=True,
+    )
+    out.print(f"convention: {CONVENTION}")
+
+
+def fitted_sensor(calibration: Calibration) -> str | None:
+    """The log compass ``calibration`` was fitted on (``details["sensor"]["id"]``, written by calibrate), or None."""
+    for key, field in (("sensor", "id"), ("source", "sensor")):
+        entry = calibration.details.get(key)
+        if isinstance(entry, Mapping) and isinstance(entry.get(field), str):
+            return str(entry[field])
+    return None
+
+
+def _apply_to_log(
+    calibration: Calibration,
+    calibration_file: Path,
+    file: Path,
+    output: Path,
+    columns: list[str | int] | None,
+    normalized: bool,
+    sensor: str | None,
+) -> None:
+    """Correct one compass of a flight log or bag and write it with its time stamps (CSV, or .npy)."""
+    import io
+
+    import numpy as np
+
+    from ..io import STDOUT, write_all
+    from ..units import get_unit
+
+    fitted = fitted_sensor(calibration)
+    chosen = sensor if sensor is not None else fitted
+    (recording,) = read_recordings(file, columns=columns, nonfinite="skip", sensor=chosen, every=False)
+    if fitted is not None and recording.sensor != fitted:
+        warn(f"{calibration_file} was fitted on {fitted}, and is applied to {recording.sensor} of {file}")
+    if calibration.unit and recording.unit and get_unit(calibration.unit).name != get_unit(recording.unit).name:
+        raise DataFileError(
+            f"{calibration_file} is in {calibration.unit} and {file} ({recording.sensor}) logs {recording.unit}: "
+            f"fit the calibration on this log ('magfit calibrate {file} --sensor {recording.sensor}')"
+        )
+    corrected = calibration.apply(recording.samples, normalized=normalized)
+    assert recording.time_s is not None
+    table = np.column_stack([recording.time_s, corrected])
+    if output.suffix.lower() == ".npy" and str(output) != STDOUT:
+        buffer = io.BytesIO()
+        np.save(buffer, table)
+        data = buffer.getvalue()
+    else:
+        names = ",".join(["time_s", *(str(column) for column in recording.columns)])
+        text = io.StringIO()
+        np.savetxt(text, table, fmt=["%.6f", "%.9g", "%.9g", "%.9g"], delimiter=",", header=names, comments="")
+        data = text.getvalue().encode("utf-8")
+    write_all([(output, data)])
+    out = console(stderr=str(output) == STDOUT)
+    scale = "unit sphere" if normalized else f"input units{f' ({calibration.unit})' if calibration.unit else ''}"
+    out.print(
+        f"wrote {output}: {len(table)} samples of {recording.name} with their time stamps, corrected with "
+        f"{calibration_file} ({calibration.method}), {scale}",
         soft_wrap=True,
     )
     out.print(f"convention: {CONVENTION}")

@@ -49,7 +49,8 @@ from ._common import (
 from ._extras import require
 from ._wording import without_own_advice
 
-#: Formats whose one file holds every compass of a vehicle (``magfit.export.export_several``).
+#: Formats whose one file holds every compass of a vehicle (``magfit.export.export_several``). JSON is written
+#: one file per compass, each a calibration that ``magfit apply`` and ``Calibration.from_json`` read.
 SEVERAL_IN_ONE_FILE = ("ardupilot", "px4")
 
 
@@ -88,8 +89,6 @@ def progress_bar(description: str, total: int | Callable[[], int] | None = None)
     ) as progress:
         task = progress.add_task(description, total=total or None)
         yield lambda rows: progress.advance(task, rows)
-
-
 
 
 def parse_place(text: str) -> tuple[float, float, float] | str:
@@ -148,8 +147,11 @@ def several_outputs(
         several = getattr(exports, "export_several", None)
         if several is None:  # (until magfit.export writes several compasses)
             fail(f"{file}: this magfit writes one compass per {export_format} file: choose it with --sensor ID ({ids})")
+        # One expected field for the file: the compasses of a log share its unit.
+        units = {compass.calibration.unit for compass in result.compasses}
         options = _export_options(result.compasses[0], export_format, system_id)
-        options.pop("expected_field", None)  # per compass, not one number for the file
+        if len(units) != 1:
+            options.pop("expected_field", None)
         text = several([compass.calibration for compass in result.compasses], export_format, unit=unit, **options)
         return [(output if output is not None else Path(STDOUT), text.encode("utf-8"))]
     what = f"the {export_format} format" if export_format else "a JSON calibration"

@@ -27,8 +27,8 @@ from ._common import (
     parse_columns,
     significant,
     vector,
-    warn,
 )
+from ._logs import read_recordings, sensor_option
 
 OUTPUT_FORMATS = ("table", "markdown", "csv", "json")
 _CSV_FIELDS = (
@@ -121,6 +121,7 @@ def parse_methods(ctx: click.Context, param: click.Parameter, value: str | None)
     "instead of listing them as failed with the reason.",
 )
 @nonfinite_option
+@sensor_option
 @click.pass_context
 def compare_command(
     ctx: click.Context,
@@ -131,6 +132,7 @@ def compare_command(
     unit: str | None,
     force: bool,
     nonfinite: Nonfinite,
+    sensor: str | None,
 ) -> None:
     """Fit several methods to each FILE and compare them as the paper does.
 
@@ -147,20 +149,26 @@ def compare_command(
       magfit compare flight1.csv flight2.csv --methods ellipsoid,sphere,minmax --format markdown
       magfit compare log.txt --columns 0,1,2 --format json > comparison.json
       magfit compare hamagure.csv --unit G
-    """
-    from ..io import read_samples
+      magfit compare flight.ulg --methods ellipsoid,sphere,auto
 
+    A flight log or bag (ULog, DataFlash, ROS) is compared compass by compass, or for the one --sensor names.
+    """
     results = []
     for path in files:
-        table = read_samples(path, columns=columns, nonfinite=nonfinite)
-        if table.n_skipped:
-            warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
-        comparison = compare(table.samples, methods, allow_undetermined=force)
-        results.append(
-            FileComparison(
-                str(path), tuple(table.columns), table.n_rows, table.n_skipped, comparison, unit, table.column_note
+        for recording in read_recordings(path, columns=columns, nonfinite=nonfinite, sensor=sensor):
+            comparison = compare(recording.samples, methods, allow_undetermined=force)
+            name = str(path) if recording.sensor is None else f"{path} ({recording.sensor})"
+            results.append(
+                FileComparison(
+                    name,
+                    tuple(recording.columns),
+                    recording.n_rows,
+                    recording.n_skipped,
+                    comparison,
+                    unit or recording.unit,
+                    recording.column_note,
+                )
             )
-        )
     render = {"table": _print_tables, "markdown": _print_markdown, "csv": _print_csv, "json": _print_json}
     render[output_format](results)
     if not all(result.comparison.any_succeeded for result in results):

@@ -9,21 +9,19 @@ from pathlib import Path
 import click
 
 from ..sources import Magnetometer, Source, open_source
-from ._common import console, option_wording
+from ._common import console, option_wording, time_span
 
 
 def _number(value: float, digits: int = 1) -> str:
     return "-" if not math.isfinite(value) else f"{value:.{digits}f}"
 
 
-def _magnetometer_lines(magnetometer: Magnetometer) -> list[tuple[str, str]]:
+def _magnetometer_lines(magnetometer: Magnetometer, time_base: str = "") -> list[tuple[str, str]]:
     unit = magnetometer.unit or "unit not recorded"
     timing = ""
-    if math.isfinite(magnetometer.span_s):
-        timing = (
-            f", {_number(magnetometer.start_s)}-{_number(magnetometer.end_s)} s ({_number(magnetometer.span_s)} s), "
-            f"{_number(magnetometer.rate_hz)} Hz"
-        )
+    if math.isfinite(magnetometer.span_s):  # a bag's epoch stamps as a UTC date-time, a boot clock in seconds
+        span = time_span(magnetometer.start_s, magnetometer.end_s, time_base)
+        timing = f", {span}, {_number(magnetometer.rate_hz)} Hz"
     lines = [(magnetometer.id, f"{magnetometer.description}: {magnetometer.n_samples} samples in {unit}{timing}")]
     lines += [("", f"note: {note}") for note in magnetometer.notes]
     if magnetometer.problem is not None:
@@ -37,9 +35,10 @@ def source_lines(source: Source) -> list[tuple[str, str]]:
     if not source.magnetometers:
         lines.append(("magnetometers", "none"))
     for index, magnetometer in enumerate(source.magnetometers):
-        label, text = _magnetometer_lines(magnetometer)[0]
+        described = _magnetometer_lines(magnetometer, source.time_base)
+        label, text = described[0]
         lines.append(("magnetometers" if index == 0 else "", f"{label}  {text}"))
-        lines += [("", f"{' ' * len(label)}  {more}") for _, more in _magnetometer_lines(magnetometer)[1:]]
+        lines += [("", f"{' ' * len(label)}  {more}") for _, more in described[1:]]
     for index, other in enumerate(source.other):
         lines.append(("also logged" if index == 0 else "", other))
     if source.position is not None:
@@ -59,7 +58,7 @@ def source_lines(source: Source) -> list[tuple[str, str]]:
     lines += [("note", note) for note in source.notes]
     usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
     if source.kind != "samples" and len(usable) > 1:
-        lines.append(("calibrate", f"fits each; --sensor ID fits one ({', '.join(usable)}), as -o and --export need"))
+        lines.append(("calibrate", f"fits each (-o writes every one); --sensor ID fits one ({', '.join(usable)})"))
     return lines
 
 

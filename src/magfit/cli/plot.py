@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING, Literal
 import click
 from numpy.typing import ArrayLike
 
-from ..calibration import Calibration
 from ..compare import PAPER_METHODS, Comparison, compare
 from ..errors import CalibrationError
 from ..plot import method_labels
@@ -25,6 +24,7 @@ from ._common import (
     warn,
 )
 from ._extras import require
+from ._logs import read_recordings, sensor_option
 from ._wording import columns_used
 from .compare import parse_methods
 
@@ -110,6 +110,7 @@ def check_figure_path(output: Path, option: str = "'-o' / '--output'") -> None:
 )
 @click.option("--dpi", type=click.IntRange(min=20, max=600), default=100, show_default=True, help="Pixels per inch.")
 @nonfinite_option
+@sensor_option
 def plot_command(
     file: Path,
     output: Path,
@@ -121,6 +122,7 @@ def plot_command(
     max_points: int,
     dpi: int,
     nonfinite: Literal["skip", "error"],
+    sensor: str | None,
 ) -> None:
     """Draw a recording before and after calibration, in one figure.
 
@@ -133,61 +135,42 @@ def plot_command(
     Examples:
       magfit plot mag-readings.txt -o mag.png --unit uT
       magfit plot flight.csv --columns mx,my,mz --method ellipsoid --methods sphere,minmax -o flight.png
+      magfit plot 00000042.BIN --sensor MAG/1 -o compass2.png
+
+    FILE may be a flight log or bag (ULog, DataFlash, ROS): --sensor chooses its compass.
     """
-    from ..io import check_output, read_samples, write_all
+    from ..io import check_output, write_all
     from ..plot import calibration_figure
 
     require("plot", "magfit plot", ("matplotlib",))
     check_figure_path(output)
     refuse_overwriting_input(output, [file])
     check_output(output)
-    table = read_samples(file, columns=columns, nonfinite=nonfinite)
-    if table.n_skipped:
-        warn(f"{file}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
-    used = columns_used(table.columns, table.column_note)
+    (recording,) = read_recordings(file, columns=columns, nonfinite=nonfinite, sensor=sensor, every=False)
+    used = columns_used(recording.columns, recording.column_note)
     comparison = fit_for_plot(
-        table.samples, methods_in_order(method or default_method(), methods or PAPER_METHODS), file, used
+        recording.samples, methods_in_order(method or default_method(), methods or PAPER_METHODS), file, used
     )
     calibrations = [result.calibration for result in comparison if result.calibration is not None]
     figure = calibration_figure(
-        table.samples, calibrations, unit=unit, title=title or file.name, max_points=max_points, dpi=dpi
+        recording.samples,
+        calibrations,
+        unit=unit or recording.unit,
+        title=title or recording.name,
+        max_points=max_points,
+        dpi=dpi,
     )
     write_all([(output, figure_bytes(figure, output))])  # atomic: a failed save leaves an existing figure as it was
     out = console()
-    out.print(f"{file}: {used}", soft_wrap=True)
+    out.print(f"{file}{f' ({recording.sensor})' if recording.sensor else ''}: {used}", soft_wrap=True)
     for result in comparison:
         if result.evaluation is not None and result.calibration is not None:
             (label,) = method_labels([result.calibration])  # "sphere (not supported)" as in the figure
             out.print(
-                f"{label:<12} sphere distance mean {fixed(result.evaluation.mean)}  "
-                f"std {fixed(result.evaluation.std)}",
+                f"{label:<12} sphere distance mean {fixed(result.evaluation.mean)}  std {fixed(result.evaluation.std)}",
                 soft_wrap=True,
             )
     out.print(f"{figure.get_supxlabel()} Wrote the figure to {output}", soft_wrap=True)
-
-
-def plot_calibration(
-    file: Path,
-    calibration: Calibration,
-    output: Path,
-    *,
-    columns: Sequence[str | int] | None,
-    nonfinite: Literal["skip", "error"],
-) -> tuple[bytes, str]:
-    """Draw ``file``'s samples before and after ``calibration`` for ``output`` (``calibrate --plot``).
-
-    Returns
-    -------
-    (bytes, str)
-        The figure in ``output``'s format (the caller writes it with its other outputs, so that a
-        failure leaves every file as it was), and the line to print.
-    """
-    from ..io import read_samples
-    from ..plot import calibration_figure
-
-    table = read_samples(file, columns=columns, nonfinite=nonfinite)
-    figure = calibration_figure(table.samples, calibration, title=file.name)
-    return figure_bytes(figure, output), f"{figure.get_supxlabel()} Wrote the figure to {output}"
 
 
 def figure_bytes(figure: Figure, output: Path) -> bytes:

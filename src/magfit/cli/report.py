@@ -20,6 +20,7 @@ from ._common import (
     warn,
 )
 from ._extras import require
+from ._logs import read_recordings, sensor_option
 from .compare import parse_methods
 from .plot import methods_in_order
 
@@ -79,6 +80,7 @@ def check_html_path(output: Path, option: str = "'-o' / '--output'") -> None:
     help="Samples drawn in each interactive 3-D view (keeps the file at a few MB).",
 )
 @nonfinite_option
+@sensor_option
 @click.option(
     "--allow-unfitted",
     is_flag=True,
@@ -95,6 +97,7 @@ def report_command(
     max_points: int,
     max_points_3d: int,
     nonfinite: Literal["skip", "error"],
+    sensor: str | None,
     allow_unfitted: bool,
 ) -> None:
     """Write an HTML report of the calibration of each FILE.
@@ -110,9 +113,12 @@ def report_command(
     Examples:
       magfit report mag-readings.txt -o report.html --unit uT
       magfit report flight1.csv flight2.csv --methods ellipsoid,sphere -o flights.html
+      magfit report 00000042.BIN -o compasses.html
+
+    A flight log or bag (ULog, DataFlash, ROS) gets a section per compass, or for the one --sensor names.
     """
     from ..compare import compare
-    from ..io import atomic_write_text, read_samples
+    from ..io import atomic_write_text
     from ..report import ReportSection, report_html, section_from_comparison
 
     require("plot", "magfit report")  # matplotlib and plotly, before anything is read or written
@@ -120,27 +126,32 @@ def report_command(
     refuse_overwriting_input(output, files)
     compared = methods_in_order(method or default_method(), methods or PAPER_METHODS)
     sections: list[ReportSection] = []
-    unfitted: list[Path] = []
+    unfitted: list[str] = []
     out = console()
     for path in files:
-        table = read_samples(path, columns=columns, nonfinite=nonfinite)
-        why = f" ({table.column_note})" if table.column_note else ""  # a file without a header: why these
-        notes = [f"Columns {', '.join(map(str, table.columns))}{why}; {table.n_rows:,} data rows."]
-        if table.n_skipped:
-            warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
-            notes.append(f"{table.n_skipped:,} rows with NaN or inf values were skipped.")
-        # A method that fails is listed in the report with its reason; the first that succeeds is the main one.
-        comparison = compare(table.samples, compared)
-        for result in comparison:
-            if not result.ok:
-                warn(f"{path}: {result.method} could not fit these samples: {result.error}")
-        if not comparison.any_succeeded:
-            unfitted.append(path)
-        sections.append(section_from_comparison(path.name, table.samples, comparison, unit=unit, notes=notes))
-        fitted = sum(1 for result in comparison if result.ok)
-        out.print(
-            f"{path}: {len(table.samples):,} samples, {fitted} of {len(comparison)} methods fitted", soft_wrap=True
-        )
+        for recording in read_recordings(path, columns=columns, nonfinite=nonfinite, sensor=sensor):
+            label = str(path) if recording.sensor is None else f"{path} ({recording.sensor})"
+            why = f" ({recording.column_note})" if recording.column_note else ""  # no header: why these columns
+            notes = [f"Columns {', '.join(map(str, recording.columns))}{why}; {recording.n_rows:,} data rows."]
+            if recording.n_skipped:
+                notes.append(f"{recording.n_skipped:,} rows with NaN or inf values were skipped.")
+            # A method that fails is listed in the report with its reason; the first that succeeds is the main one.
+            comparison = compare(recording.samples, compared)
+            for result in comparison:
+                if not result.ok:
+                    warn(f"{label}: {result.method} could not fit these samples: {result.error}")
+            if not comparison.any_succeeded:
+                unfitted.append(label)
+            sections.append(
+                section_from_comparison(
+                    recording.name, recording.samples, comparison, unit=unit or recording.unit, notes=notes
+                )
+            )
+            fitted = sum(1 for result in comparison if result.ok)
+            out.print(
+                f"{label}: {len(recording.samples):,} samples, {fitted} of {len(comparison)} methods fitted",
+                soft_wrap=True,
+            )
     if unfitted and not allow_unfitted:  # a failed run leaves an existing report as it was
         raise FitFailedError(
             f"no method could fit {', '.join(map(str, unfitted))}; the report is not written "

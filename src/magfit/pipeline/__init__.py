@@ -339,7 +339,6 @@ def calibrate_file(
     return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors)
 
 
-
 def _usable(source: Source) -> list[str | None]:
     """The compasses to fit when none is chosen: every usable one of a log that holds several, else the one
     :meth:`Source.magnetometer` picks (which names the problem when there is none)."""

@@ -71,7 +71,6 @@ BYTES_PER_FIT_SAMPLE = 256
 DEFAULT_FIT_SAMPLES = 500_000
 
 
-
 @dataclass(frozen=True, eq=False)
 class FileFit:
     """A samples file's fit and what was read: see :func:`fit_samples_file`."""
@@ -96,7 +95,6 @@ class _ReadResult(Protocol):
     def columns(self) -> Sequence[Any]: ...
     @property
     def format(self) -> Any: ...
-
 
 
 def fit_samples_file(
@@ -506,5 +504,3 @@ def _require_rows(path: Path, n_samples: int, read: _ReadResult) -> None:
             f"{path}: all {read.n_skipped} data rows hold NaN or inf values; nothing is left to calibrate"
         )
     raise DataFileError(f"{path}: the file holds no data rows")
-
-

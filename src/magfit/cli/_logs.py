@@ -1,0 +1,118 @@
+"""The samples a command reads from FILE: a samples file's columns, or a flight log's or bag's compasses.
+
+``plot``, ``compare``, ``report`` and ``apply`` take a log as ``calibrate`` does: ``--sensor ID`` chooses a
+compass (:meth:`magfit.sources.Source.read`), and what the log says about it (a compass logged too slowly, a
+calibration undone with the log's parameters) is printed as a warning.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError
+from ._common import Nonfinite, warn
+
+#: ``--sensor`` of the commands that read samples.
+sensor_option = click.option(
+    "--sensor",
+    metavar="ID",
+    help="The compass of a flight log or bag (its id or device id, as 'magfit inspect FILE' lists them). Default: "
+    "each compass of the log (plot: the only one).",
+)
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """One magnetometer's samples as a command reads them.
+
+    Attributes
+    ----------
+    name : str
+        ``mag.csv``, or ``flight.bin (MAG/1)`` for a log's compass.
+    samples : ndarray, shape (N, 3)
+    columns : tuple
+        The columns or fields they came from.
+    n_rows, n_skipped : int
+        Rows read and rows skipped (NaN or inf).
+    column_note : str or None
+        For a file without a header, why these columns.
+    unit : str or None
+        A log's own unit (``mG``, ``G``, ``uT``), None for a samples file.
+    sensor : str or None
+        The log's compass id.
+    time_s : ndarray or None
+        A log's time stamps, seconds on its time base.
+    """
+
+    name: str
+    samples: NDArray[np.float64]
+    columns: tuple[Any, ...]
+    n_rows: int
+    n_skipped: int = 0
+    column_note: str | None = None
+    unit: str | None = None
+    sensor: str | None = None
+    time_s: NDArray[np.float64] | None = None
+
+
+def is_log(path: Path) -> bool:
+    """True when ``path`` is a flight log or bag (by its first bytes)."""
+    from ..sources import log_kind
+
+    return log_kind(path) is not None
+
+
+def read_recordings(
+    path: Path,
+    *,
+    columns: list[str | int] | None,
+    nonfinite: Nonfinite,
+    sensor: str | None,
+    every: bool = True,
+) -> list[Recording]:
+    """``path``'s magnetometers: a samples file's three columns, or a log's compass ``sensor`` names; without it
+    every usable compass of a log (``every``) or the only one (several refused, naming them)."""
+    if not is_log(path):
+        if sensor is not None:
+            raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
+        from ..io import read_samples
+
+        table = read_samples(path, columns=columns, nonfinite=nonfinite)
+        if table.n_skipped:
+            warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
+        return [
+            Recording(path.name, table.samples, tuple(table.columns), table.n_rows, table.n_skipped, table.column_note)
+        ]
+    if columns is not None:
+        raise click.UsageError("--columns chooses the columns of a samples file; a log's compass is chosen by --sensor")
+    from ..sources import open_source
+
+    source = open_source(path, everything=False)
+    usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
+    chosen: list[str | None] = [sensor] if sensor is not None or not every or len(usable) < 2 else list(usable)
+    recordings = []
+    for sensor_id in chosen:
+        read = source.read(sensor_id)
+        magnetometer = read.magnetometer
+        for note in (*source.notes, *read.notes):
+            warn(f"{path} ({magnetometer.id}): {note}")
+        if len(read.samples) == 0:
+            raise DataFileError(f"{path} ({magnetometer.id}): holds no finite samples")
+        recordings.append(
+            Recording(
+                name=f"{path.name} ({magnetometer.id})",
+                samples=read.samples,
+                columns=read.columns,
+                n_rows=len(read.samples),
+                unit=magnetometer.unit or None,
+                sensor=magnetometer.id,
+                time_s=read.time_s,
+            )
+        )
+    return recordings
