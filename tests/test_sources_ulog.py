@@ -25,7 +25,7 @@ SAMPLE = Path(__file__).parent / "data" / "px4_pyulog" / "sample_log_small.ulg"
 
 
 #: ULog field types and their struct letters.
-ULOG_TYPES = {"uint64_t": "Q", "uint32_t": "I", "int32_t": "i", "float": "f", "uint8_t": "B"}
+ULOG_TYPES = {"uint64_t": "Q", "uint32_t": "I", "int32_t": "i", "float": "f", "uint8_t": "B", "int16_t": "h"}
 
 
 class ULogWriter:
@@ -231,6 +231,31 @@ def test_a_rotated_calibrated_stream_is_undone_to_the_sensor_frame(
     motion = source.read_motion("vehicle_magnetometer/0")
     assert motion.magnetometer_frame == "sensor"
     np.testing.assert_allclose(motion.mounting, ROTATE_3F[applied], atol=1e-12)
+
+
+def test_an_old_px4_sensor_mag_calibrated_by_its_driver_is_undone(tmp_path: Path) -> None:
+    # Before v1.11 PX4Magnetometer::update published x = SCALE · (raw - OFF) (diagonal SCALE) beside x_raw.
+    simulation = magfit.simulate(
+        400, soft_iron=np.diag([1.1, 0.9, 1.0]), hard_iron=[0.1, -0.2, 0.3], field_strength=0.5, seed=4
+    )
+    off, scale = np.array([0.05, -0.1, 0.2]), np.array([1.03, 0.98, 1.01])
+    writer = ULogWriter()
+    fields = [("uint64_t", "timestamp"), ("uint32_t", "device_id"), *(("float", a) for a in "xyz")]
+    writer.format("sensor_mag", [*fields, *(("int16_t", f"{a}_raw") for a in "xyz")])
+    writer.parameter("CAL_MAG0_ID", DEVICE)
+    for axis, i in zip("XYZ", range(3), strict=True):
+        writer.parameter(f"CAL_MAG0_{axis}OFF", float(off[i]))
+        writer.parameter(f"CAL_MAG0_{axis}SCALE", float(scale[i]))
+    writer.subscribe("sensor_mag", 0)
+    for j, raw in enumerate(simulation.samples):
+        writer.data("sensor_mag", 0, 1_000_000 + j * 20_000, DEVICE, *(scale * (raw - off)), 0, 0, 0)
+    path = tmp_path / "old.ulg"
+    path.write_bytes(writer.bytes())
+    source = open_source(path)
+    magnetometer = source.magnetometers[0]
+    assert not magnetometer.raw and "calibrated by the driver" in magnetometer.description
+    assert "undone with CAL_MAG0_*OFF and *SCALE" in magnetometer.notes[0]
+    np.testing.assert_allclose(source.read().samples, simulation.samples, atol=1e-6)
 
 
 def test_a_fine_tuned_board_rotation_is_refused_with_the_reason(tmp_path: Path) -> None:

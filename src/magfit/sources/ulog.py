@@ -3,10 +3,11 @@
 Two topics carry the magnetometers:
 
 - ``sensor_mag`` (one instance per compass): the raw field in gauss in the sensor's own frame, with the
-  ``device_id`` that PX4's ``CAL_MAGn_ID`` refers to. This is what a calibration is fitted to. PX4's
-  default logging profile records it at about **1 Hz**, too slow for a fit: set ``SDLOG_PROFILE`` to
-  include "high rate" (bit 1) or "sensor comparison" (bit 6), or list ``sensor_mag`` with a rate in
-  ``etc/logging/logger_topics.txt`` on the SD card, then record the tumble again.
+  ``device_id`` that PX4's ``CAL_MAGn_ID`` refers to (before v1.11, when the topic also had ``x_raw``, the
+  driver published it already corrected by ``CAL_MAGn_*OFF``/``*SCALE``: undone here as below). This is
+  what a calibration is fitted to. PX4's default logging profile records it at about **1 Hz**, too slow for
+  a fit: set ``SDLOG_PROFILE`` to include "high rate" (bit 1) or "sensor comparison" (bit 6), or list
+  ``sensor_mag`` with a rate in ``etc/logging/logger_topics.txt`` on the SD card, then record the tumble again.
 - ``vehicle_magnetometer``: the field **after** PX4's calibration, at 15-50 Hz, in the body frame.
   PX4 corrects (``calibration::Magnetometer::Correct``)::
 
@@ -163,7 +164,7 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
         if data.name == "sensor_mag":
             sid = f"sensor_mag/{data.multi_id}"
             streams[sid] = data
-            magnetometers.append(_raw(sid, data))
+            magnetometers.append(_raw(sid, data, parameters))
     for data in sorted(ulog.data_list, key=lambda d: (d.name, d.multi_id)):
         if data.name == "vehicle_magnetometer":
             sid = f"vehicle_magnetometer/{data.multi_id}"
@@ -191,6 +192,10 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
             with np.errstate(invalid="ignore"):  # damaged values become NaN: dropped below as non-finite samples
                 samples = np.column_stack([np.asarray(data.data[axis], dtype=np.float64) for axis in "xyz"])
             columns: tuple[str, ...] = ("x", "y", "z")
+            if not magnetometer.raw:  # calibrated by an old PX4's driver (_raw): undone, no rotation involved
+                index = _calibration_index(parameters, magnetometer.device_id)
+                assert index is not None  # _raw made it a problem otherwise; Source.read refused it
+                samples = undo_px4_calibration(samples, **_cal(parameters, index))
         else:
             columns = tuple(f"magnetometer_ga[{i}]" for i in range(3))
             with np.errstate(invalid="ignore"):  # as above: damaged values become NaN, dropped below
@@ -420,25 +425,51 @@ def _device(data: Any) -> int | None:
     return int(np.asarray(ids)[-1])
 
 
-def _raw(sid: str, data: Any) -> Magnetometer:
+def _raw(sid: str, data: Any, parameters: dict[str, Any]) -> Magnetometer:
     n, start, end = _span(data)
     device = _device(data)
+    problem = _lacking(data)
+    notes: list[str] = []
+    raw = "x_raw" not in data.data
+    if not raw and problem is None:
+        # PX4 before v1.11 calibrated sensor_mag in the driver: PX4Magnetometer::update publishes
+        # x = SCALE · (rotated raw - OFF), with the CAL_MAGn_*OFF/*SCALE the sensors module set (MAGIOCSSCALE),
+        # and x_raw, the ADC counts, beside it (src/lib/drivers/magnetometer/PX4Magnetometer.cpp, v1.10).
+        index = _calibration_index(parameters, device)
+        if index is None:
+            problem = (
+                f"this PX4 version calibrates sensor_mag in its driver (the topic has x_raw) and no CAL_MAGn_ID holds "
+                f"its device_id {device}, so the calibration cannot be undone"
+            )
+        elif not all(f"CAL_MAG{index}_{a}{k}" in parameters for k in ("OFF", "SCALE") for a in "XYZ") or not (
+            _invertible(_cal(parameters, index))
+        ):
+            problem = (
+                f"this PX4 version calibrates sensor_mag in its driver and CAL_MAG{index}_*OFF/*SCALE are unusable"
+            )
+        else:
+            notes.append(
+                f"this PX4 version (before v1.11: the topic has x_raw) calibrates sensor_mag in its driver; undone "
+                f"with CAL_MAG{index}_*OFF and *SCALE from the log's parameters"
+            )
     magnetometer = Magnetometer(
         id=sid,
-        description="raw sensor_mag" + (f", device_id {device}" if device is not None else ""),
+        description=("raw sensor_mag" if raw else "sensor_mag, calibrated by the driver")
+        + (f", device_id {device}" if device is not None else ""),
         unit="G",
         n_samples=n,
         start_s=start,
         end_s=end,
         device_id=device,
-        raw=True,
-        problem=_lacking(data),
+        raw=raw,
+        notes=tuple(notes),
+        problem=problem,
     )
     rate = magnetometer.rate_hz
     if n < 2 or (np.isfinite(rate) and rate < SLOW_RATE_HZ):
         how = f"logged at only {rate:.1f} Hz" if np.isfinite(rate) else f"only {n} sample(s) logged"
         note = f"{how} (PX4's default logging profile): too few samples for a fit; {_HOW_TO_LOG_MORE}"
-        magnetometer = replace(magnetometer, notes=(note,))
+        magnetometer = replace(magnetometer, notes=(*notes, note))
     return magnetometer
 
 
