@@ -310,12 +310,33 @@ def judge_reference_fit(
 
     refusals: list[str] = []
     weaknesses: list[str] = []
+    if residual_rms > NO_ELLIPSOID_RMS:
+        refusals.append(
+            f"the samples do not follow the reference: after the best G and V they still differ from it by "
+            f"{100 * residual_rms:.0f} % of the field (RMS), where an attitude good to a degree leaves about 2 %; "
+            "the reference is likely in the wrong frame (the world's instead of the vehicle's), its attitude "
+            "transposed (vehicle-to-world used as world-to-vehicle), on another time base, or the field changed "
+            "(motors, a magnet)"
+            + (
+                ""
+                if rate is not None
+                else "; a lag between the attitude and the samples does this too: give time_s to fit it"
+            )
+        )
+    elif residual_rms > LARGE_RESIDUAL_RMS:
+        weaknesses.append(
+            f"the residuals are large: {100 * residual_rms:.1f} % of the field (RMS) where an attitude good to a "
+            "degree leaves about 2 %: the attitude errs by several degrees, the time bases drift, or the field "
+            "changed while recording; expect heading errors of a few degrees"
+        )
     worst = max(heading, tilted)
     effect = (
         f"the heading one-sigma that follows is ±{heading:.2g}° at level and ±{tilted:.2g}° at {TILT_DEG:.0f}° of tilt"
     )
-    if worst > HEADING_LIMIT_DEG:
+    named = 0  # weak directions already named by a refusal
+    if worst > HEADING_LIMIT_DEG and not refusals:  # a reference the samples do not follow: that is the cause
         if weak:
+            named = 1
             first = weak[0]
             refusals.append(
                 f"the reference does not determine {first.description} (one-sigma {100 * (first.sigma or 0.0):.2g} % "
@@ -325,27 +346,14 @@ def judge_reference_fit(
         else:
             refusals.append(
                 f"the reference's error leaves the calibration uncertain: {effect} (the attitude's error does not "
-                "average out over so short a recording); record longer, through every heading"
+                "average out over so short a recording, or the reference lags the samples: give time_s); record "
+                "longer, through every heading"
             )
-    for direction in weak[1 if refusals and weak else 0 :]:
+    for direction in weak[named:]:
         weaknesses.append(
             f"{direction.description} is weakly determined (one-sigma {100 * (direction.sigma or 0.0):.2g} % of the "
             f"field; the reference carries {_share(direction.relative_information)} of the information a full "
             f"tumble gives): the calibration holds near the attitudes recorded; {effect}"
-        )
-    if not refusals and residual_rms > NO_ELLIPSOID_RMS:
-        refusals.append(
-            f"the samples do not follow the reference: after the best G and V they still differ from it by "
-            f"{100 * residual_rms:.0f} % of the field (RMS), where an attitude good to a degree leaves about 2 %; "
-            "the reference is likely in the wrong frame (the world's instead of the vehicle's), its attitude "
-            "transposed (vehicle-to-world used as world-to-vehicle), on another time base, or the field changed "
-            "(motors, a magnet)"
-        )
-    elif residual_rms > LARGE_RESIDUAL_RMS:
-        weaknesses.append(
-            f"the residuals are large: {100 * residual_rms:.1f} % of the field (RMS) where an attitude good to a "
-            "degree leaves about 2 %: the attitude errs by several degrees, the time bases drift, or the field "
-            "changed while recording; expect heading errors of a few degrees"
         )
     mixup = unit_mixup(scale)
     if mixup is not None:
