@@ -335,16 +335,21 @@ def test_ulog_motion_gives_back_the_truth_in_the_sensor_frame(tmp_path: Path, mo
 # --- ROS bags --------------------------------------------------------------------------------------------
 
 
-def write_bag(path: Path, n: int = 1200) -> None:
+def write_bag(path: Path, kind: str, n: int = 1200) -> Path:
+    """A ROS 1 bag (``kind`` "ros1") or a ROS 2 bag folder with MCAP storage ("mcap") of the tumble."""
     pytest.importorskip("rosbags")
-    from rosbags.rosbag1 import Writer
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
     from rosbags.typesys import Stores, get_typestore
 
-    typestore = get_typestore(Stores.ROS1_NOETIC)
+    ros1 = kind == "ros1"
+    typestore = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    serialize = typestore.serialize_ros1 if ros1 else typestore.serialize_cdr
     types = typestore.types
     start = 1_767_225_600_000_000_000
-    # REP-103: the body frame is x forward, y left, z up (FLU) and the world ENU. FLU = F · FRD, ENU = F · NED,
-    # with F = diag(1, -1, -1) and C (ENU <-> NED): R_enu = C · R_ned · F.
+    # REP-103: the body frame is x forward, y left, z up (FLU) and the world ENU: v_flu = F · v_frd with
+    # F = diag(1, -1, -1), v_enu = C · v_ned with C swapping x and y and negating z, so R_enu_flu = C · R_ned_frd · F.
     flip = np.diag([1.0, -1.0, -1.0])
     swap = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
     t_mag = np.arange(n) / 20.0
@@ -353,14 +358,16 @@ def write_bag(path: Path, n: int = 1200) -> None:
     r_enu = swap @ attitude(t_imu) @ flip
     q = Rotation.from_matrix(r_enu).as_quat()
     gyro, accel = body_rates(t_imu) @ flip, specific_force(t_imu) @ flip
-    with Writer(path) as writer:
+    writer_cls = Writer1(path) if ros1 else Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    with writer_cls as writer:
         mag_conn = writer.add_connection("/imu/mag", "sensor_msgs/msg/MagneticField", typestore=typestore)
         imu_conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=typestore)
 
         def header(time: float, seq: int):
             ns = start + round(time * 1e9)
             stamp = types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
-            return types["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id="imu_link"), ns
+            counter = {"seq": seq} if ros1 else {}  # a ROS 1 header counts its messages; a ROS 2 one does not
+            return types["std_msgs/msg/Header"](stamp=stamp, frame_id="imu_link", **counter), ns
 
         vector, quaternion = types["geometry_msgs/msg/Vector3"], types["geometry_msgs/msg/Quaternion"]
         for j, time in enumerate(t_mag):
@@ -369,7 +376,7 @@ def write_bag(path: Path, n: int = 1200) -> None:
             message = types["sensor_msgs/msg/MagneticField"](
                 header=head, magnetic_field=vector(x=x, y=y, z=z), magnetic_field_covariance=np.zeros(9)
             )
-            writer.write(mag_conn, ns, typestore.serialize_ros1(message, "sensor_msgs/msg/MagneticField"))
+            writer.write(mag_conn, ns, serialize(message, "sensor_msgs/msg/MagneticField"))
         for j, time in enumerate(t_imu):
             head, ns = header(time, j)
             message = types["sensor_msgs/msg/Imu"](
@@ -381,12 +388,13 @@ def write_bag(path: Path, n: int = 1200) -> None:
                 linear_acceleration=vector(x=accel[j, 0], y=accel[j, 1], z=accel[j, 2]),
                 linear_acceleration_covariance=np.zeros(9),
             )
-            writer.write(imu_conn, ns, typestore.serialize_ros1(message, "sensor_msgs/msg/Imu"))
+            writer.write(imu_conn, ns, serialize(message, "sensor_msgs/msg/Imu"))
+    return path
 
 
-def test_bag_motion_turns_rep_103_into_ned(tmp_path: Path) -> None:
-    path = tmp_path / "tumble.bag"
-    write_bag(path)
+@pytest.mark.parametrize("kind", ["ros1", "mcap"])
+def test_bag_motion_turns_rep_103_into_ned(tmp_path: Path, kind: str) -> None:
+    path = write_bag(tmp_path / ("tumble.bag" if kind == "ros1" else "tumble"), kind)
     motion = open_source(path).read_motion("/imu/mag")
     assert motion.magnetometer_frame == "body" and motion.unit == "uT"
     assert any("same frame_id" in note for note in motion.notes)
