@@ -55,7 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import CalibrationError, OptionError, SampleError
 from .rotations import FIRMWARES, StandardRotation, angle_between_deg, euler_angles, nearest_rotation
 
-__all__ = ["ACCEL_TOLERANCE", "Alignment", "FirmwareRotation", "align"]
+__all__ = ["ACCEL_TOLERANCE", "Alignment", "FirmwareRotation", "align", "nearest_rotations"]
 
 #: Largest relative deviation of |a| from g for a sample to count as "the accelerometer sees gravity".
 ACCEL_TOLERANCE = 0.03
@@ -66,6 +66,8 @@ MIN_SAMPLES = 50
 #: A rotation axis determined worse than this (one-sigma, degrees) is refused; worse than WEAK is weak.
 UNDETERMINED_SIGMA_DEG = 10.0
 WEAK_SIGMA_DEG = 1.0
+#: RMS dip residual (degrees) beyond which the samples' scatter is named (1° of accelerometer noise gives about 1°).
+LARGE_RESIDUAL_DEG = 3.0
 #: An inclination fitted worse than this (one-sigma, degrees) is not determined.
 INCLINATION_UNDETERMINED_DEG = 10.0
 #: Contiguous blocks of the recording for the batch-means covariance.
@@ -417,7 +419,7 @@ def _mirror_axis(matrix: NDArray[np.float64]) -> tuple[str, tuple[FirmwareRotati
     tables share their 90° entries), and the nearest entries of that rotation."""
     best: tuple[float, str, tuple[FirmwareRotation, ...]] | None = None
     for axis in _AXES:
-        nearest = _nearest(matrix @ _flip(axis))
+        nearest = nearest_rotations(matrix @ _flip(axis))
         angle = nearest[0].rotation.angle_deg
         if best is None or angle < best[0] - 1e-6:
             best = (angle, axis, nearest)
@@ -428,7 +430,8 @@ def _mirror_axis(matrix: NDArray[np.float64]) -> tuple[str, tuple[FirmwareRotati
 _PARAMETERS = {"ardupilot": "COMPASS_ORIENT", "px4": "CAL_MAG0_ROT", "betaflight": "align_mag", "inav": "align_mag"}
 
 
-def _nearest(rotation: NDArray[np.float64]) -> tuple[FirmwareRotation, ...]:
+def nearest_rotations(rotation: NDArray[np.float64]) -> tuple[FirmwareRotation, ...]:
+    """The nearest table entry of each firmware to the proper rotation ``rotation`` (``body = rotation @ sensor``)."""
     return tuple(
         FirmwareRotation(firmware, nearest_rotation(rotation, firmware), _PARAMETERS[firmware])
         for firmware in FIRMWARES
@@ -620,7 +623,7 @@ def align(
             "gravity instead of the specific force: its sign inverted)"
         )
     else:
-        inverted, nearest = None, _nearest(best.matrix)
+        inverted, nearest = None, nearest_rotations(best.matrix)
     proper = best.matrix @ _flip(inverted)
     roll, pitch, yaw = euler_angles(proper)
     # Flipping a sensor axis is a reflection on the right, which does not change the body-frame θ.
@@ -629,6 +632,12 @@ def align(
     dips = np.degrees(np.arcsin(np.clip(residuals + s, -1.0, 1.0))) - inclination
     residual_deg = float(np.sqrt(np.mean(dips**2)))
 
+    if residual_deg > LARGE_RESIDUAL_DEG:
+        weak.append(
+            f"the dip angles scatter by {residual_deg:.1f}° RMS: an accelerometer not calibrated (offsets, scales), "
+            "accelerations left in the samples used, or a magnetometer calibration that does not fit them; the "
+            "one-sigma counts this scatter, not a bias it may hide"
+        )
     verdict = "refused" if refusals else "weak" if len(weak) > len(notes) else "supported"
     if refusals and not allow_undetermined:
         raise CalibrationError(f"the alignment is refused: {refusals[0]}")
@@ -663,7 +672,7 @@ def _far_minimum(
     scale = _robust_scale(r)
     best_loss = _huber_loss(r, scale)
     worst = None
-    for angle in np.arange(10.0, 360.0, 5.0):
+    for angle in np.arange(10.0, 351.0, 5.0):
         turned = _exp(np.radians(angle) * axis) @ best.matrix
         excess = 2.0 * (_huber_loss(_residuals(down, mhat, turned, best.s), scale) - best_loss) / scale**2
         if excess < 25.0 * inflation:

@@ -94,6 +94,7 @@ def cli(debug: bool) -> None:
 
 
 def _register_commands() -> None:
+    from .align import align_command
     from .apply import apply_command
     from .calibrate import calibrate_command
     from .compare import compare_command
@@ -114,6 +115,7 @@ def _register_commands() -> None:
         report_command,
         live_command,
         inspect_command,
+        align_command,
     ):
         cli.add_command(command)
 
