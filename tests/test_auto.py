@@ -70,16 +70,20 @@ def test_axis_aligned_scale_picks_diag() -> None:
     np.testing.assert_allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, rtol=0.01, atol=1e-3)
 
 
-def test_restricted_attitude_with_strong_soft_iron_is_refused() -> None:
-    # ±20° of tilt on the paper's steel case: the full model's vertical scale is not determined (one-sigma
-    # 12-14 % of the field), and a sphere would leave the soft iron in the heading (74° measured when auto
-    # fell back to it): no model is both determined and adequate.
+def test_restricted_attitude_with_strong_soft_iron_names_what_it_holds_for() -> None:
+    # ±20° of tilt on the paper's steel case: the full model's vertical scale is not determined apart from
+    # its vertical offset, and a sphere would leave the soft iron in the heading (74° measured when auto fell
+    # back to it). The full model pins the level heading (±1°): returned, weak, the combination named.
     sim = magfit.scenario("ellipse2a", "steel").simulate(2000, seed=0, orientations="restricted")
-    with pytest.raises(magfit.CalibrationError) as caught:
-        magfit.fit(sim.samples, "auto")
-    message = str(caught.value)
-    assert "the full model: the samples do not determine the scale along z" in message
-    assert "the sphere model: it leaves residuals" in message and "soft iron" in message
+    calibration = magfit.fit(sim.samples, "auto")
+    report = calibration.diagnostics
+    assert report is not None and report.support is not None
+    assert calibration.details["chosen"] == "full" and report.support.verdict == "weak"
+    assert any(
+        "do not determine the scale along z" in w and "near the attitudes recorded" in w
+        for w in report.support.weaknesses
+    )
+    assert "the sphere model was passed over: it leaves residuals" in calibration.details["reason"]
 
 
 @pytest.mark.parametrize(("sensor", "disturbance"), [("mpu9250", "none")])

@@ -42,7 +42,7 @@ from ..calibration import Calibration
 from ..diagnostics import diagnose
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import unchecked_sphere_distances
-from ..findings import Support
+from ..findings import Diagnostics, Support
 from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..sampling import thin
 from ..statistics import Statistics
@@ -145,13 +145,26 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     ranked = sorted(bic, key=bic.__getitem__)
     best = ranked[0]
     inadequate = _inadequate(rss, m)  # first: no need to judge a model that cannot stand in for a richer one
+    reports = {model: _candidate_report(optima[model], kept) for model in optima if model not in inadequate}
     verdicts = {
-        model: Support("refused", (inadequate[model],), (), "") if model in inadequate
-        else _candidate_support(optima[model], kept)
+        model: Support("refused", (inadequate[model],), (), "") if model in inadequate else _support(reports[model])
         for model in CANDIDATES
         if model in optima
     }
-    determined = [model for model in CANDIDATES if model in verdicts and verdicts[model].verdict != "refused"]
+    # A full model with a combination the samples do not determine is returned (weak) only when it pins the
+    # heading near the attitudes recorded (the verdict's rule); auto takes it only as the witness below, when
+    # every determined model misses a distortion: chosen on held-out blocks, its undetermined scale along z
+    # follows a drifting field (level flight ±15°, ±0.5 % drift: 3.6° of heading against the sphere's 0.9°).
+    determined = [
+        model
+        for model in CANDIDATES
+        if model in verdicts and verdicts[model].verdict != "refused" and not _undetermined(reports[model])
+    ]
+    returned_weak = [
+        m for m in CANDIDATES if m in verdicts and verdicts[m].verdict != "refused" and m not in determined
+    ]
+    if not determined and returned_weak:  # e.g. the steel case tilted ±20°: the sphere inadequate, the full weak
+        determined = returned_weak[-1:]
     if not determined:
         raise CalibrationError(
             "the samples determine no calibration model: "
@@ -168,6 +181,10 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     held_out = _blocked_scores(kept, optima, compared) if len(compared) > 1 else {}  # one left: no choice
     chosen, steps = _choose(determined, held_out)
     missed = _missed(chosen, witnesses, held_out)
+    standing = [w for w in witnesses if verdicts[w].verdict != "refused"]  # returned by the verdict, weak
+    if missed is not None and standing:
+        steps.append(f"the {chosen} model {missed}, which is returned: it pins the heading near the attitudes recorded")
+        chosen, missed = standing[-1], None
     if missed is not None:
         raise CalibrationError(
             f"the samples determine no model that describes them: the {chosen} model, the richest they "
@@ -441,19 +458,25 @@ def _fit_candidate(model: str, samples: NDArray[np.float64], robust: bool, stati
     return fit_model(model, samples, statistics)
 
 
-def _candidate_support(optimum: Calibration, kept: NDArray[np.float64]) -> Support:
-    """The verdict on one candidate, as :func:`magfit.fit` reaches it for any calibration (cheap checks only).
+def _support(report: Diagnostics) -> Support:
+    assert report.support is not None
+    return report.support
+
+
+def _undetermined(report: Diagnostics) -> bool:
+    """Whether a combination of the model's parameters is not determined (the verdict may still return it)."""
+    return report.observability is not None and any(not w.determined for w in report.observability.weak)
+
+
+def _candidate_report(optimum: Calibration, kept: NDArray[np.float64]) -> Diagnostics:
+    """The diagnosis of one candidate, as :func:`magfit.fit` reaches it for any calibration (cheap checks only).
 
     Judged at the model's maximum-likelihood optimum: an algebraic fit that drifted along a weak direction
     (e.g. stretched along z to hug a cap of samples) makes the samples look better spread than they are;
     the distances to the ellipsoid cannot shrink by such a stretch, so the optimum does not drift that way.
     """
     rows = _stride(kept, CHOICE_ROWS)  # in recording order, each row standing for the same share of them
-    report = diagnose(
-        optimum, rows, thorough=False, compare_ml=False, max_samples=CHOICE_ROWS, represents=kept.shape[0]
-    )
-    assert report.support is not None
-    return report.support
+    return diagnose(optimum, rows, thorough=False, compare_ml=False, max_samples=CHOICE_ROWS, represents=kept.shape[0])
 
 
 def _inadequate(rss: dict[str, float], n: int) -> dict[str, str]:
