@@ -26,6 +26,8 @@ from test_sources_dataflash import COMPASSES, DataFlashWriter, correct_field
 
 DATA = Path(__file__).parent / "data"
 SITL = DATA / "ardupilot_sitl" / "sitl_three_compasses.bin"
+#: The same log as pymavlink's mavlogdump.py prints it (tests/data/ardupilot_sitl/README.md), gzip-compressed.
+SITL_DUMP = DATA / "ardupilot_sitl" / "sitl_three_compasses_mavlogdump.txt.gz"
 PX4_SAMPLE = DATA / "px4_pyulog" / "sample_log_small.ulg"
 
 #: The Earth's field in NED, mG (about Zurich's): north, east, down.
@@ -446,6 +448,24 @@ def test_ardupilot_sitl_log_gravity_and_field_in_ned() -> None:
         declination = np.degrees(np.arctan2(world[1], world[0]))
         assert inclination == pytest.approx(63.9, abs=0.3) and declination == pytest.approx(10.6, abs=0.3)
         assert motion.position is not None and motion.position.lat_deg == pytest.approx(37.24, abs=0.01)
+
+
+def test_the_real_mavlogdump_output_reads_as_its_bin() -> None:
+    # The text pymavlink's own mavlogdump.py printed for the SITL log (compressed: read as it is): the same
+    # compasses, device ids, slots, raw samples, time stamps, motion and position as the .bin.
+    binary, text = open_source(SITL), open_source(SITL_DUMP)
+    assert text.kind == "dataflash" and text.format == "ArduPilot log as mavlogdump.py text" and not text.notes
+    assert text.other == binary.other and text.position == binary.position
+    assert [(m.id, m.device_id, m.slot, m.n_samples) for m in text.magnetometers] == [
+        (m.id, m.device_id, m.slot, m.n_samples) for m in binary.magnetometers
+    ]
+    for magnetometer in binary.magnetometers:
+        a, b = binary.read_motion(magnetometer.id), text.read_motion(magnetometer.id)
+        np.testing.assert_array_equal(b.samples, a.samples)
+        np.testing.assert_array_equal(b.time_s, a.time_s)
+        np.testing.assert_allclose(b.attitude, a.attitude, atol=1e-12)  # ATT in centidegrees, printed as degrees
+        np.testing.assert_array_equal(b.gyro, a.gyro)
+        np.testing.assert_array_equal(b.accel, a.accel)
 
 
 def test_px4_sample_log_gravity_in_ned() -> None:
