@@ -155,3 +155,52 @@ def test_rate_gate_from_the_field_and_gravity_without_a_gyroscope():
 def test_bad_input_is_named(mag, accel, options, error, match):
     with pytest.raises(error, match=match):
         align(mag, accel, **options)
+
+
+# --- magfit align ----------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def roll_180_csv(tmp_path_factory):
+    """A hand-held tumble, magnetometer turned 180° about x, soft and hard iron, in µT, with accelerometer."""
+    sim = simulate_vehicle(
+        3000, "tumble", mounting=euler_matrix(180.0, 0.0, 0.0), soft_iron=np.diag([1.1, 0.95, 1.0]),
+        hard_iron=[12.0, -8.0, 4.0], field_strength=50.0, noise=0.2, accel_noise=ONE_DEGREE, seed=11,
+    )  # fmt: skip
+    path = tmp_path_factory.mktemp("align") / "imu.csv"
+    table = np.column_stack([sim.time_s, sim.samples, sim.accel])
+    np.savetxt(path, table, delimiter=",", header="t,mx,my,mz,ax,ay,az", comments="")
+    return path
+
+
+def _run(capsys, *args):
+    from magfit.cli import main
+
+    status = main(["align", *map(str, args)])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def test_cli_prints_the_rotation_and_each_firmware_parameter(roll_180_csv, capsys):
+    status, out, err = _run(capsys, roll_180_csv, "--inclination", "64", "--max-rate", "none")
+    assert status == 0, err
+    assert "COMPASS_ORIENT 8   # ROTATION_ROLL_180" in out
+    assert "CAL_MAG0_ROT 8" in out
+    assert "set align_mag = CW180FLIP" in out
+    assert "verdict          supported" in out
+    roll = float(out.split("roll pitch yaw")[1].split("±")[0])
+    assert abs(abs(roll) - 180.0) < 0.5
+
+
+def test_cli_exit_statuses(roll_180_csv, tmp_path, capsys):
+    # The tumble turns all the time: with the default rate gate nothing is still -> the data cannot (1).
+    status, _, err = _run(capsys, roll_180_csv, "--inclination", "64")
+    assert status == 1 and "see gravity alone" in err and "--max-rate" in err and "Traceback" not in err
+    status, _, err = _run(capsys, roll_180_csv, "--max-rate", "fast")
+    assert status == 2 and "--max-rate takes a number" in err
+    no_accel = tmp_path / "mag.csv"
+    no_accel.write_text("mx,my,mz\n1,2,3\n2,3,4\n")
+    status, _, err = _run(capsys, no_accel)
+    assert status == 2 and "no accelerometer columns found" in err and "--accel-columns" in err
+    status, _, err = _run(capsys, roll_180_csv, "--inclination", "64", "--location", "47.4,8.5")
+    assert status == 2 and "not both" in err

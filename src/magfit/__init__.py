@@ -12,6 +12,7 @@ True
 
 from __future__ import annotations
 
+from .alignment import align
 from .calibration import CONVENTION, Calibration
 from .diagnostics import Diagnostics
 from .errors import CalibrationError, DataFileError, ExportError, MagfitError, OptionError, SampleError
@@ -44,6 +45,7 @@ __all__ = [
     "Simulation",
     "Statistics",
     "__version__",
+    "align",
     "calibrate_file",
     "diagnose",
     "evaluate",
