@@ -423,6 +423,15 @@ def test_align_leaves_out_a_stream_with_one_message_and_says_so() -> None:
     assert any("fewer than two usable messages; left out" in note for note in motion.notes)
 
 
+def test_align_leaves_out_an_attitude_of_zero_quaternions() -> None:
+    # Found by fuzzing a mavlogdump file: every quaternion unusable left an empty stream that could not be cleaned.
+    time = np.linspace(0, 1, 11)
+    attitude_stream = Stream("damaged", time, np.zeros((11, 4)))
+    motion = align("m", "uT", time, np.ones((11, 3)), magnetometer_frame="body", attitude=attitude_stream)
+    assert motion.attitude is None and len(motion.samples) == 11
+    assert any(note.startswith("attitude: damaged has fewer than two usable messages") for note in motion.notes)
+
+
 def test_a_samples_file_has_no_motion(tmp_path: Path) -> None:
     path = tmp_path / "samples.csv"
     path.write_text("mx,my,mz\n" + "\n".join(f"{i},{2 * i},{3 * i + 1}" for i in range(20)) + "\n")

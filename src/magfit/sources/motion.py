@@ -130,7 +130,7 @@ class Motion:
 
 def _clean(stream: Stream) -> Stream:
     """Finite rows, in increasing time, one per stamp (the first): what interpolation needs."""
-    finite = np.isfinite(stream.time_s) & np.all(np.isfinite(stream.values.reshape(len(stream.time_s), -1)), axis=1)
+    finite = np.isfinite(stream.time_s) & np.all(np.isfinite(stream.values), axis=tuple(range(1, stream.values.ndim)))
     time, values = stream.time_s[finite], stream.values[finite]
     order = np.argsort(time, kind="stable")
     time, values = time[order], values[order]
