@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 import magfit
 from magfit.errors import ExportError
 from magfit.export import FORMATS, export
-from magfit.rotations import euler_matrix, standard_rotations
+from magfit.rotations import angle_between_deg, euler_matrix, polar_decomposition, standard_rotations
 
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 #: Float32 text (9 significant digits) on the firmware's side, relative to max|raw|.
@@ -365,3 +365,64 @@ def test_every_format_carries_or_refuses_a_vehicle_frame() -> None:
             if name == "adafruit-json":  # JSON without comments: the header export states it
                 continue
             assert "vehicle" in text, (name, unit)
+
+
+# ---------------------------------------------------------------------- samples logged after a mounting rotation
+
+
+def test_a_rotation_applied_before_logging_is_included(real_data_dir: Path) -> None:
+    """ArduPilot logs MAG after COMPASS_ORIENT: a fit on those samples must not lose the rotation in force."""
+    sensor_raw = _fxos(real_data_dir)
+    fitted = magfit.fit(sensor_raw, method="ellipsoid").with_unit("uT")
+    r0 = np.asarray(standard_rotations("ardupilot")[4].matrix)  # YAW_180 in force when the log was made
+    logged = sensor_raw @ r0.T
+    # the vehicle-frame calibration of the logged (already turned) samples: a further 6 deg of roll
+    residual = euler_matrix(6.0, 0.0, 0.0)
+    on_logged = magfit.Calibration(
+        "vector", r0 @ fitted.offset, residual @ r0 @ fitted.matrix @ r0.T, fitted.field_strength, unit="uT",
+        frame="vehicle",
+    )  # fmt: skip
+    truth = on_logged.apply(logged)
+    text = export(on_logged, "ardupilot", applied_rotation=r0)
+    assert "mounting rotation of 180.00 deg (applied_rotation)" in text
+    # the firmware now turns the sensor's own readings by the written rotation alone
+    _close(ardupilot_field(parse_ardupilot(text), 10 * sensor_raw), 10 * truth, 10 * sensor_raw, RTOL_FLOAT32)
+    # the same from details["sensor"], as the pipeline fills it
+    details = {"sensor": {"id": "MAG/0", "slot": 0, "device_id": None, "applied_rotation": r0.tolist()}}
+    with_details = magfit.Calibration(
+        "vector", on_logged.offset, on_logged.matrix, on_logged.field_strength, unit="uT", frame="vehicle",
+        details=details,
+    )  # fmt: skip
+    assert export(with_details, "ardupilot") == text.replace("compass 1:", "compass 1 (MAG/0):")
+    # without it, the file would be for samples with COMPASS_ORIENT = 0, and says so
+    assert "logged with COMPASS_ORIENT = 0" in export(on_logged, "ardupilot")
+    with pytest.raises(magfit.OptionError, match="applied_rotation must be the 3x3 rotation"):
+        export(on_logged, "ardupilot", applied_rotation=np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(magfit.OptionError, match="the c export takes no applied_rotation"):
+        export(on_logged, "c", applied_rotation=r0)
+
+
+# ---------------------------------------------------------------------- a real rig with two magnetometers
+
+
+def test_two_real_magnetometers_on_one_rig(real_data_dir: Path) -> None:
+    """The MXL rig: an RM3100 fitted against the MPU-9250's corrected field, a real sensor-to-sensor alignment.
+
+    The vector fit finds the RM3100 2-3 deg from the MPU-9250's axes (measured: 2.50 deg with the current
+    fits): ArduPilot takes it as its custom rotation, exactly; PX4, whose fixed table has nothing closer than
+    ROTATION_NONE, refuses with the reason.
+    """
+    folder = real_data_dir / "mxl_umich_mpu9250_rm3100"
+    imu = np.loadtxt(folder / "preflight_data_original_imu.csv", delimiter=",", skiprows=1, encoding="utf-8-sig")
+    pni = np.loadtxt(folder / "preflight_data_original_pni.csv", delimiter=",", skiprows=1, encoding="utf-8-sig")
+    reference = magfit.fit(imu, method="ellipsoid").apply(imu)  # µT, in the MPU-9250's axes
+    cal = magfit.fit(pni, method="vector", reference=reference, allow_undetermined=True).with_unit("uT")
+    assert cal.frame == "vehicle"
+    params = parse_ardupilot(export(cal, "ardupilot"))
+    assert params["COMPASS_ORIENT"] == 101
+    _close(ardupilot_field(params, 10 * pni), 10 * cal.apply(pni), 10 * pni, RTOL_FLOAT32)
+    rotation, _ = polar_decomposition(cal.matrix)
+    angle = angle_between_deg(np.eye(3), rotation)
+    assert 1.0 < angle < 5.0
+    with pytest.raises(ExportError, match="from the nearest \\(0, ROTATION_NONE"):
+        export(cal, "px4")

@@ -38,8 +38,11 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
+from numpy.typing import ArrayLike
+
 from ..calibration import Calibration
 from ..errors import ExportError, MagfitError, OptionError
+from ._common import with_applied_rotation
 from .adafruit import write_adafruit, write_adafruit_json
 from .ardupilot import write_ardupilot, write_ardupilot_several
 from .betaflight import write_betaflight
@@ -95,11 +98,11 @@ _SPECS = (
     ),
     FormatSpec(
         "ardupilot", ".param", "ArduPilot COMPASS_OFS/DIA/ODI/SCALE parameters in milligauss (Mission Planner)",
-        "mG", write_ardupilot, ("slot", "device_id", "expected_field"),
+        "mG", write_ardupilot, ("slot", "device_id", "expected_field", "applied_rotation"),
     ),
     FormatSpec(
         "px4", ".params", "PX4 CAL_MAG0_OFF/SCALE/ODIAG parameters in gauss (QGroundControl parameter file)",
-        "G", write_px4, ("system_id", "slot", "device_id"),
+        "G", write_px4, ("system_id", "slot", "device_id", "applied_rotation"),
     ),
     FormatSpec(
         "fusion", ".h", "x-io Fusion softIronMatrix / hardIronOffset (C header) with the imufusion Python names",
@@ -119,11 +122,11 @@ _SPECS = (
     ),
     FormatSpec(
         "inav", ".txt", "INAV CLI set magzero_*/maggain_* in raw counts (diagonal only; the loss is stated)",
-        "counts", write_inav,
+        "counts", write_inav, ("applied_rotation",),
     ),
     FormatSpec(
         "betaflight", ".txt", "Betaflight CLI set mag_calibration in raw counts (hard iron only; the loss is stated)",
-        "counts", write_betaflight,
+        "counts", write_betaflight, ("applied_rotation",),
     ),
     FormatSpec(
         "rtimulib", ".ini", "RTIMULib.ini compass keys: compassCalOffset*/compassCalCorr* (ellipsoid stage) in uT",
@@ -152,6 +155,7 @@ def export(
     slot: int | None = None,
     device_id: int | None = None,
     expected_field: float | None = None,
+    applied_rotation: ArrayLike | None = None,
 ) -> str:
     """The text of a file that carries ``calibration`` in the convention of ``format``.
 
@@ -180,6 +184,11 @@ def export(
     expected_field : float or None
         ``ardupilot``: the local field strength (World Magnetic Model) in the calibration's unit;
         ``COMPASS_SCALE`` becomes expected / fitted field, as ArduPilot's calibrator sets it.
+    applied_rotation : array_like, shape (3, 3), or None
+        ``ardupilot``, ``px4``, ``betaflight``, ``inav``, vehicle frame only: the mounting rotation the
+        firmware had applied to the samples before they were logged (``board = R0 @ sensor``; ArduPilot
+        logs MAG after COMPASS_ORIENT). The rotation written replaces it, so it includes it. Default:
+        ``details["sensor"]["applied_rotation"]``, else none (the samples are the sensor's own readings).
 
     Returns
     -------
@@ -199,9 +208,11 @@ def export(
     spec = _spec(format)
     if not isinstance(calibration, Calibration):
         raise MagfitError(f"export() takes a magfit.Calibration, got {type(calibration).__name__}")
-    given = _options(
-        spec, {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field}
-    )
+    options = {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field}
+    given = _options(spec, {**options, "applied_rotation": applied_rotation})
+    given.pop("applied_rotation", None)
+    if "applied_rotation" in spec.options:
+        calibration = with_applied_rotation(calibration, applied_rotation)
     return spec.writer(calibration, unit, **given)
 
 
@@ -247,6 +258,8 @@ def export_several(
     calibrations = list(calibrations)
     if not calibrations or not all(isinstance(c, Calibration) for c in calibrations):
         raise MagfitError("export_several() takes a non-empty sequence of magfit.Calibration")
+    if format in ("ardupilot", "px4"):  # their mounting rotations, as in export()
+        calibrations = [with_applied_rotation(c, None) for c in calibrations]
     if format not in SEVERAL:
         raise ExportError(
             f"the {format} export holds one compass; export each calibration on its own with export(), or use "

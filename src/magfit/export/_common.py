@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import ExportError, OptionError
-from ..rotations import StandardRotation, nearest_rotation, polar_decomposition
+from ..rotations import StandardRotation, angle_between_deg, nearest_rotation, polar_decomposition
 from ..units import Unit, conversion_factor, get_unit
 from ._heading import ASSUMPTION, heading_error_deg
 
@@ -351,3 +351,52 @@ def sensor_slot(
 
 def _is_int(value: object) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def with_applied_rotation(calibration: Calibration, applied_rotation: object) -> Calibration:
+    """A vehicle-frame calibration re-expressed for the sensor's own readings, when its samples were turned first.
+
+    A flight log may hold the field after the firmware's mounting rotation R0 (ArduPilot logs MAG after
+    COMPASS_ORIENT or AHRS_ORIENTATION): a vector fit on those samples gives ``M @ (R0 raw - o)``. The
+    rotation an export writes replaces R0 in the firmware, so it must include it:
+    ``M @ (R0 raw - o) = (M R0) @ (raw - R0ᵀ o)``. ``applied_rotation`` is R0 (``board = R0 @ sensor``), or
+    None; it comes from the option or from ``details["sensor"]["applied_rotation"]``. A sensor-frame
+    calibration is returned unchanged: its firmware keeps the rotation in force.
+
+    Raises
+    ------
+    OptionError
+        ``applied_rotation`` is not a proper rotation matrix.
+    """
+    if applied_rotation is None:
+        sensor = calibration.details.get("sensor")
+        applied_rotation = sensor.get("applied_rotation") if isinstance(sensor, Mapping) else None
+    if applied_rotation is None or calibration.frame != "vehicle":
+        return calibration
+    try:
+        r0 = np.array(applied_rotation, dtype=np.float64)
+        angle = angle_between_deg(np.eye(3), r0)  # also checks: a proper rotation
+    except (ValueError, TypeError) as error:
+        raise OptionError(f"applied_rotation must be the 3x3 rotation applied before logging: {error}") from None
+    details = {**calibration.details, "applied_rotation": r0.tolist(), "applied_rotation_deg": angle}
+    return Calibration(
+        calibration.method,
+        r0.T @ calibration.offset,
+        calibration.matrix @ r0,
+        calibration.field_strength,
+        unit=calibration.unit,
+        n_samples=calibration.n_samples,
+        details=details,
+        frame="vehicle",
+    )
+
+
+def samples_note(calibration: Calibration, default: list[str]) -> list[str]:
+    """The comment lines on what the samples must be: ``default``, or the applied rotation's account."""
+    if "applied_rotation_deg" not in calibration.details:
+        return default
+    return [
+        f"# The samples were logged after a mounting rotation of {calibration.details['applied_rotation_deg']:.2f} deg "
+        "(applied_rotation); the rotation written here includes it",
+        "#   and replaces it: this file applies to the sensor's own readings.",
+    ]

@@ -95,6 +95,7 @@ from ._common import (
     float32_text,
     physical_unit,
     plain,
+    samples_note,
     sensor_slot,
     symmetric_matrix,
     vehicle_split,
@@ -390,7 +391,10 @@ def _file(calibrations: Sequence[Calibration], compasses: list[_Compass], unit: 
             "# after rotate_field has turned the sensor's reading by COMPASS_ORIENT (R): mag = R * raw first.",
             "# vehicle frame: magfit's matrix M = Q S (rotation Q after the soft-iron S) maps onto R = Q,",
             "#   DIA/ODI = Q S Q^T, OFS = -Q * offset * k: ArduPilot's corrected field = k * M (raw - offset).",
-            "# Samples must be the sensor's field logged with COMPASS_ORIENT = 0 and no calibration applied.",
+            *samples_note(
+                next(c for c in calibrations if c.frame == "vehicle"),
+                ["# Samples must be the sensor's field logged with COMPASS_ORIENT = 0 and no calibration applied."],
+            ),
         ]
     if any(c.frame == "sensor" for c in calibrations):
         lines += [

@@ -34,7 +34,7 @@ import numpy as np
 from ..calibration import Calibration
 from ..errors import ExportError
 from ..rotations import custom_angles, custom_rotation
-from ._common import ROTATION_TOLERANCE_DEG, describe, plain, raw_counts, unit_phrase, vehicle_split
+from ._common import ROTATION_TOLERANCE_DEG, describe, plain, raw_counts, samples_note, unit_phrase, vehicle_split
 from ._heading import ASSUMPTION, heading_error_deg
 
 INT16 = (-32768, 32767)
@@ -110,8 +110,14 @@ def write_betaflight(calibration: Calibration, unit: str | None = None) -> str:
         lines += [
             "# vehicle frame: magfit's matrix M = Q S (rotation Q after the soft iron S): align = Q,",
             "#   mag_calibration = round(Q * offset), in counts; S is dropped.",
-            f"# Samples: {unit_phrase(label)}; they must be Betaflight's magADC counts logged with align_mag = CW0,",
-            "#   no board alignment and mag_calibration = 0,0,0.",
+            *samples_note(
+                calibration,
+                [
+                    f"# Samples: {unit_phrase(label)}; they must be Betaflight's magADC counts logged with "
+                    "align_mag = CW0,",
+                    "#   no board alignment and mag_calibration = 0,0,0.",
+                ],
+            ),
             *comments,
         ]
     else:

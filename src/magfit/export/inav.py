@@ -36,7 +36,7 @@ import numpy as np
 from ..calibration import Calibration
 from ..errors import ExportError
 from ..rotations import custom_angles, custom_rotation
-from ._common import ROTATION_TOLERANCE_DEG, describe, plain, raw_counts, unit_phrase, vehicle_split
+from ._common import ROTATION_TOLERANCE_DEG, describe, plain, raw_counts, samples_note, unit_phrase, vehicle_split
 from ._heading import ASSUMPTION, heading_error_deg
 
 #: INAV's corrected scale: (raw - zero) * 1024 / gain.
@@ -129,6 +129,7 @@ def write_inav(calibration: Calibration, unit: str | None = None) -> str:
         lines += [
             "# vehicle frame: magfit's matrix M = Q S (rotation Q after the soft iron S): the gains come from",
             "#   diag(S), and INAV's alignment, applied after them, is Q.",
+            *samples_note(calibration, []),
             *comments,
         ]
     lines += [

@@ -80,6 +80,7 @@ from ._common import (
     float32_text,
     physical_unit,
     plain,
+    samples_note,
     sensor_slot,
     symmetric_matrix,
     vehicle_split,
@@ -335,6 +336,7 @@ def _file(calibrations: Sequence[Calibration], entries: list[_Slot], unit: str |
         lines.append(
             "# vehicle frame: magfit's matrix M = Q S (rotation Q after the soft-iron S): SCALE/ODIAG = S, R = Q"
         )
+        lines += samples_note(next(c for c in calibrations if c.frame == "vehicle"), [])
     lines.append("# Load: QGroundControl > Vehicle Setup > Parameters > Tools > Load from file.")
     lines.append(
         f"# PX4 takes a new OFF, SCALE or ODIAG vector only if it moves by more than {CHANGE_THRESHOLD} (Magnetometer)"
