@@ -241,6 +241,14 @@ def test_a_damaged_mavlogdump_line_is_skipped_and_said(tmp_path: Path) -> None:
     assert len(source.read_motion().samples) >= 198
 
 
+def test_a_dump_without_parm_lines_says_how_to_dump_again(tmp_path: Path) -> None:
+    formats, rows = dataflash_messages(100, att_start_s=0.5)
+    del rows["PARM"]
+    source = open_source(write_mavlogdump(tmp_path / "mag_only.txt", formats, rows))
+    with pytest.raises(DataFileError, match=r"no PARM lines.*mavlogdump.py --types MAG,PARM,ATT,IMU,GPS"):
+        source.read_motion()
+
+
 def test_inspect_lists_a_mavlogdump_file(dataflash: dict[str, Path]) -> None:
     from click.testing import CliRunner
 

@@ -19,6 +19,7 @@ A file is recognised by its content: its first non-empty line has that shape.
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -137,4 +138,14 @@ def open_mavlogdump(path: Path, file: Path) -> Source:
     except OSError as error:
         raise DataFileError(f"{path}: cannot be read ({error.strerror}); check the file's permissions") from None
     notes = (f"{log.skipped_lines} lines skipped: not a mavlogdump message line",) if log.skipped_lines else ()
-    return source_from_log(path, log, "ArduPilot log as mavlogdump.py text", notes=notes)
+    source = source_from_log(path, log, "ArduPilot log as mavlogdump.py text", notes=notes)
+    if "PARM" in log.names():
+        return source
+    # A dump made with --types MAG (a common way to cut a log down) lost the parameters the samples were
+    # corrected with: say how to dump again rather than how to log.
+    again = (
+        "the dump has no PARM lines, so the calibration ArduPilot applied to MagX/Y/Z cannot be undone; dump the "
+        "log again with the parameters: mavlogdump.py --types MAG,PARM,ATT,IMU,GPS log.bin"
+    )
+    magnetometers = tuple(replace(m, problem=again) for m in source.magnetometers)
+    return replace(source, magnetometers=magnetometers)
