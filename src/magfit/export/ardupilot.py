@@ -115,6 +115,8 @@ FIELD_RANGE_MG = (185.0, 875.0)
 #: COMPASS_MIN/MAX_SCALE_FACTOR (CompassCalibrator.h): outside, Compass::have_scale_factor() ignores SCALE
 #: and CompassCalibrator::fix_radius fails the calibration ("bad radius").
 SCALE_RANGE = (0.85, 1.4)
+#: The documented @Range of COMPASS_SCALE* (AP_Compass.cpp): Mission Planner asks before loading a value above it.
+SCALE_DOCUMENTED_MAX = 1.3
 #: The COMPASS_SCALE written without an expected field: magfit's corrected field is already in milligauss.
 SCALE = 1.0
 #: Compasses ArduPilot calibrates (COMPASS_OFS, OFS2, OFS3) and custom rotations it has (CUST_ROT1, CUST_ROT2).
@@ -127,6 +129,11 @@ ROTATION_CUSTOM_1 = 101
 def suffix(slot: int) -> str:
     """The parameter suffix of compass ``slot`` (0-based): ``""``, ``"2"``, ``"3"``."""
     return "" if slot == 0 else str(slot + 1)
+
+
+def external(slot: int) -> str:
+    """The parameter that marks compass ``slot`` external: COMPASS_EXTERNAL, then COMPASS_EXTERN2, EXTERN3."""
+    return "COMPASS_EXTERNAL" if slot == 0 else f"COMPASS_EXTERN{slot + 1}"
 
 
 def parameter_names(slot: int) -> tuple[str, ...]:
@@ -252,10 +259,11 @@ def _compass(
                 f"4.2+; reboot after loading), the fitted alignment exactly; the nearest fixed one, "
                 f"{split.standard.name}, is {split.standard.angle_deg:.2f} deg away"
             )
-        if split.standard.angle_deg > 1e-6 or not np.allclose(rotation, np.eye(3)):
+        if not np.allclose(rotation, np.eye(3)):
             comments.append(
-                f"# WARNING: ArduPilot applies COMPASS_ORIENT{n} to an external compass only (COMPASS_EXTERNAL{n} = 1, "
-                "AP_Compass_Backend::rotate_field); an internal one follows AHRS_ORIENTATION, which turns the board"
+                f"# WARNING: ArduPilot applies COMPASS_ORIENT{n} to an external compass only "
+                f"({external(where.slot)} = 1, AP_Compass_Backend::rotate_field); an internal one follows "
+                "AHRS_ORIENTATION, which turns the board"
             )
         matrix = rotation @ split.symmetric @ rotation.T  # D = R S R^T: symmetric, D R = R S
         offsets = -k * (rotation @ calibration.offset)  # ArduPilot adds its offsets, after the rotation
@@ -301,6 +309,11 @@ def _compass(
             "#   asks '<name> value is out of range. Do you want to continue?' when loading this file; answer Yes,",
             "#   or it keeps the old value (ArduPilot itself accepts offsets up to COMPASS_OFFS_MAX).",
         ]
+    if scale > SCALE_DOCUMENTED_MAX:
+        comments.append(
+            f"# WARNING: COMPASS_SCALE{n} = {scale:.3f} is above its documented range (0-{SCALE_DOCUMENTED_MAX}): "
+            "Mission Planner asks before loading it; ArduPilot itself uses it up to 1.4 (Compass::have_scale_factor)"
+        )
     note = symmetric_matrix(calibration, "ardupilot").note if calibration.frame == "sensor" else None
     if note is not None:
         comments.append(f"# NOTE: {plain(note)}")
