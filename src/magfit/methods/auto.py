@@ -68,6 +68,10 @@ _SCREEN_SIGMAS = 6.0
 #: A simpler model whose RMS distance is this many times a richer model's cannot stand in for it.
 INADEQUATE_RATIO = 2.0
 INADEQUATE_RMS = 0.05
+#: A model whose Σd² starts this many times the full ellipsoid's (its algebraic fit) stops after
+#: HOPELESS_ITERATIONS steps: it would need a 16 times smaller Σd² to become adequate (INADEQUATE_RATIO²).
+HOPELESS = 4.0 * INADEQUATE_RATIO**4
+HOPELESS_ITERATIONS = 10
 #: Contiguous blocks of the recording held out in turn to compare the models.
 BLOCKS = 10
 #: Rows (a regular stride of the recording) for the outlier screen, the models' optima and the held-out
@@ -265,15 +269,21 @@ def _optimal_rss(
     degenerate: dict[str, str] = {}
     previous: tuple[str, NDArray[np.float64]] | None = None
     widest = float(np.sqrt(np.linalg.eigvalsh(np.cov(z.T))[-1]))  # the samples' largest principal spread
+    richest = _cost(parameters(fits["full"], "full", frame), z, "full") if "full" in fits else math.inf
     for model in CANDIDATES:  # simplest first: each richer model also starts from the simpler optimum
         if model not in fits:
             continue
         starts = [parameters(fits[model], model, frame)]
         if previous is not None:
             starts.append(_embed(previous[1], previous[0], model))
+        start = min(starts, key=lambda p: _cost(p, z, model))
+        # A model that starts HOPELESS times above the full ellipsoid's algebraic fit in Σd² cannot come within
+        # INADEQUATE_RATIO of it: its Gauss-Newton steps crawl (large residuals), 80 of them for a sphere on the
+        # steel case (a third of auto's time), for a Σd² still 300 times the full one's. A few steps do.
+        hopeless = _cost(start, z, model) > HOPELESS * richest
         # From the better start only: the richer model still never scores worse than the simpler optimum.
         value, optimum = maximum_likelihood(
-            z, model, [min(starts, key=lambda p: _cost(p, z, model))], cost_tolerance=CHOICE_TOLERANCE
+            z, model, [start], cost_tolerance=CHOICE_TOLERANCE, max_iterations=HOPELESS_ITERATIONS if hopeless else None
         )
         eigenvalues, axes = np.linalg.eigh(unit_map(optimum, model))
         strongest = int(np.argmax(np.abs(eigenvalues)))
