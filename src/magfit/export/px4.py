@@ -190,11 +190,11 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
             f"# {prefix}ROT = {standard.id} ({standard.name}) is {standard.angle_deg:.2f} deg from the fitted "
             f"alignment (tolerance {ROTATION_TOLERANCE_DEG} deg): a heading error of up to {loss:.2f} deg"
         )
-        if standard.id != 0:
-            comments.append(
-                f"# WARNING: PX4 applies {prefix}ROT to an external magnetometer only; an internal one is reset to -1 "
-                "and follows SENS_BOARD_ROT (Magnetometer::ParametersUpdate)"
-            )
+        comments.append(
+            f"# WARNING: PX4 applies {prefix}ROT to an external magnetometer only; for an internal one it resets it "
+            "to -1 and applies SENS_BOARD_ROT (Magnetometer::ParametersUpdate): the alignment then holds only if "
+            f"SENS_BOARD_ROT = {standard.id}"
+        )
     else:
         matrix = symmetric_matrix(calibration, "px4").matrix
     diagonal = np.diag(matrix)
