@@ -3,6 +3,12 @@
     .venv/bin/python benchmarks/logs.py             # about half a minute on 2 cores
     .venv/bin/python benchmarks/logs.py --small     # the committed fixtures only, a few seconds
 
+pymavlink is no magfit dependency; install it *outside* the project's virtual environment, since it ships a
+script ``magfit.py`` that, once in ``.venv/bin``, shadows the magfit package for ``.venv/bin/magfit``:
+
+    .venv/bin/pip install --target /tmp/pymavlink pymavlink
+    PYTHONPATH=/tmp/pymavlink .venv/bin/python benchmarks/logs.py
+
 Issue 13's target: reading a log into samples costs at most 2x what its library alone needs to read the same
 topics. Both sides are timed in the same run, taking turns, best of ``--repeat`` (the least disturbed):
 
@@ -172,8 +178,8 @@ def write_results(rows: list[dict[str, Any]], args: argparse.Namespace, have_pym
     verdict = "PASS" if library and all(row["ratio"] <= TARGET for row in library) else "FAIL"
     worst = max((row["ratio"] for row in library), default=float("nan"))
     versions = f"pyulog {version('pyulog')}"
-    if have_pymavlink:  # not a magfit dependency: installed by hand for the comparison (pip install pymavlink)
-        versions += f", pymavlink {version('pymavlink')} (installed for this comparison, no magfit dependency)"
+    if have_pymavlink:  # not a magfit dependency: installed apart for the comparison (see the docstring)
+        versions += f", pymavlink {version('pymavlink')} (installed apart for this comparison, no magfit dependency)"
     lines = [
         "# Reading flight logs: magfit against the format libraries (benchmarks/logs.py)",
         "",
