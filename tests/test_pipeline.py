@@ -235,3 +235,23 @@ def test_inspect_shows_a_bags_time_as_a_utc_date() -> None:
     assert result.exit_code == 0, result.output
     assert "2021-07-19 18:55:36 to 18:55:54 UTC (18.0 s)" in result.stdout
     assert "1626720936" not in result.stdout  # not epoch seconds
+
+
+def test_with_a_compass_refused_nothing_is_written(tmp_path: Path) -> None:
+    # sensor_mag/1 of this ULog is refused: the other two are fitted and printed, no file is written, exit 1.
+    path = tmp_path / "flight.ulg"
+    write_log(path)
+    output = tmp_path / "cal.json"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "ellipsoid", "-o", str(output)])
+    assert result.exit_code == 1
+    assert "1 of 3 magnetometers could not be fitted (sensor_mag/1); nothing is written" in result.stderr
+    assert "sensor_mag/1: not fitted" in result.stdout and result.stdout.count("verdict          supported") == 2
+    assert list(tmp_path.glob("cal*")) == []
+
+
+def test_the_module_example_runs() -> None:
+    import doctest
+
+    import magfit.pipeline
+
+    assert doctest.testmod(magfit.pipeline).failed == 0
