@@ -54,6 +54,8 @@ HEADING_LIMIT_DEG = 5.0
 #: leaves G's response along its vertical confounded with the offset, harmless level, not at this tilt
 #: (simulate_vehicle, level turns with 0.2° of attitude error: ±0.1° level, ±41° at 10°).
 TILT_DEG = 10.0
+#: A reference whose direction stays within this angle of its mean: the vehicle hardly turned at all.
+STILL_DEG = 10.0
 #: The design columns, in words.
 _COLUMNS = (
     "the response to the field along the vehicle x axis (the matrix's column x)",
@@ -135,11 +137,29 @@ def _why(vector: NDArray[np.float64], reference: NDArray[np.float64], field: flo
     )
 
 
+def _hardly_turned(reference: NDArray[np.float64]) -> str | None:
+    """Words for a reference whose direction stayed within :data:`STILL_DEG` of its mean, else None."""
+    directions = reference / np.linalg.norm(reference, axis=1, keepdims=True)
+    mean = directions.mean(axis=0)
+    mean /= np.linalg.norm(mean)
+    spread = math.degrees(math.acos(float(np.clip(np.min(directions @ mean), -1.0, 1.0))))
+    if spread > STILL_DEG:
+        return None
+    return (
+        f"the vehicle hardly turned: the reference field stayed within {spread:.2g}° of one direction in the vehicle "
+        "frame, so it determines neither the matrix nor the offset (a vehicle standing still, a log of the "
+        "ground before take-off, or a reference left in the world frame, not turned into the vehicle's)"
+    )
+
+
 def design_singularity(reference: NDArray[np.float64], field: float) -> str | None:
     """The refusal when the reference directions cannot determine G and V at all (a singular design), else None."""
     values, vectors = _whitened_information(reference, field)
     if values[0] > SINGULAR_INFORMATION * max(values[-1], 1e-300):
         return None
+    still = _hardly_turned(reference)
+    if still is not None:
+        return still
     vector = vectors[:, 0]
     return f"the reference directions do not determine {_combination_words(vector)}: {_why(vector, reference, field)}"
 
@@ -337,7 +357,10 @@ def judge_reference_fit(
         f"the heading one-sigma that follows is ±{heading:.2g}° at level and ±{tilted:.2g}° at {TILT_DEG:.0f}° of tilt"
     )
     named = 0  # weak directions already named by a refusal
-    if worst > HEADING_LIMIT_DEG and not refusals:  # a reference the samples do not follow: that is the cause
+    still = _hardly_turned(reference)
+    if worst > HEADING_LIMIT_DEG and not refusals and still is not None:
+        refusals.append(f"{still}; {effect}")
+    elif worst > HEADING_LIMIT_DEG and not refusals:  # a reference the samples do not follow: that is the cause
         if weak:
             named = 1
             first = weak[0]

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..calibration import Calibration
-from ..diagnostics.reference import design_singularity, judge_reference_fit
+from ..diagnostics.reference import ADVICE, design_singularity, judge_reference_fit
 from ..errors import CalibrationError, OptionError
 from .registry import FitInput, register
 
@@ -251,7 +251,7 @@ def fit_vector(
             lag_limit = found.lag_s
     singular = design_singularity(used_ref, field)
     if singular is not None:  # nothing to return even when forced: the least-squares solution is arbitrary
-        raise CalibrationError(f"the samples do not support the vector calibration: {singular}")
+        raise CalibrationError(f"the samples do not support the vector calibration: {singular}; {ADVICE}")
     g, offset = _solve(used_raw, used_ref)
     if not abs(float(np.linalg.det(g))) > 1e-12 * float(np.max(np.abs(g))) ** 3:
         raise CalibrationError(
