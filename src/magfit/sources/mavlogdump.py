@@ -36,6 +36,8 @@ _LINE = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d(?:\.\d+)?: ([A-Z][A-Z0-9_]{
 _HEAD = re.compile(rb"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d(?:\.\d+)?: [A-Z][A-Z0-9_]{0,15} \{")
 #: The messages whose fields are read; the others are only counted (a MSG's text may hold ", " and " : ").
 _READ = frozenset({"MAG", "MAG2", "MAG3", "PARM", "ATT", "AHR2", "XKQ", "IMU", "GPS"})
+#: What precedes each value in a message's body: the start or ", ", a field name, " : ".
+_FIELD = re.compile(r"(?:^|, )[A-Za-z_][A-Za-z0-9_]* : ")
 
 
 def is_mavlogdump(head: bytes) -> bool:
@@ -66,47 +68,58 @@ class MavlogdumpLog:
         self.truncated = False
         self.skipped_lines = 0
         self._counts: dict[str, int] = {}
-        fields: dict[str, list[str]] = {}
-        rows: dict[str, list[dict[str, str]]] = {}
+        bodies: dict[str, list[str]] = {}
         for number, line in enumerate(lines, start=1):
-            if not line.strip():
-                continue
             match = _LINE.match(line)
             if match is None:
                 if number == 1 and line.startswith("\ufeff"):
                     match = _LINE.match(line[1:])
                 if match is None:
-                    self.skipped_lines += 1
+                    self.skipped_lines += bool(line.strip())
                     continue
-            name, body = match.group(1), match.group(2)
+            name = match.group(1)
             if name in ("FMT", "FMTU", "UNIT", "MULT"):
                 continue
             self._counts[name] = self._counts.get(name, 0) + 1
-            if name not in _READ:
-                continue
-            values: dict[str, str] = {}
-            for part in body.split(", "):
-                label, sep, value = part.partition(" : ")
-                if sep:
-                    values[label.strip()] = value.strip()
-            fields.setdefault(name, list(values))
-            rows.setdefault(name, []).append(values)
+            if name in _READ:
+                bodies.setdefault(name, []).append(match.group(2))
         if not self._counts:
             raise DataFileError(
                 f"{path}: starts like mavlogdump.py's text but holds no message line; dump the log again"
             )
-        self._parameters: dict[str, list[tuple[float, float]]] = {}
-        for values in rows.pop("PARM", []):
-            time = _number(values.get("TimeUS", "nan")) / 1e6
-            self._parameters.setdefault(values.get("Name", ""), []).append((time, _number(values.get("Value", "nan"))))
         self._records: dict[str, NDArray[Any]] = {}
-        for name, table in rows.items():
-            labels = fields[name]
-            dtype = np.dtype([(label, "<f8") for label in labels])
-            records = np.empty(len(table), dtype=dtype)
-            for label in labels:
-                records[label] = [_number(values.get(label, "nan")) for values in table]
-            self._records[name] = records
+        for name, lines_of_type in bodies.items():
+            self._records[name] = self._table(lines_of_type)
+        self._parameters: dict[str, list[tuple[float, float]]] = {}
+        parm = self._records.pop("PARM", None)
+        if parm is not None and {"Name", "Value"} <= set(parm.dtype.names or ()):
+            times = parm["TimeUS"] / 1e6 if "TimeUS" in (parm.dtype.names or ()) else np.full(len(parm), np.nan)
+            for label, value, time in zip(parm["Name"].tolist(), parm["Value"].tolist(), times.tolist(), strict=True):
+                self._parameters.setdefault(label, []).append((time, value))
+
+    def _table(self, bodies: list[str]) -> NDArray[Any]:
+        """The lines of one message type as a structured array: the fields of its first line, float64 (a PARM's
+        Name as text); a line with other fields (damaged, or a format that changed) is skipped and counted."""
+        labels = [part.partition(" : ")[0] for part in bodies[0].split(", ")]
+        # The values are what lies between " : " and the next ", Label : " (labels are identifiers): one split
+        # per line in C, then NumPy converts each column at once.
+        split = _FIELD.split
+        table = [split(body)[1:] for body in bodies]
+        kept = [row for row in table if len(row) == len(labels)]
+        self.skipped_lines += len(table) - len(kept)
+        text = np.array(kept, dtype=str).reshape(len(kept), len(labels))
+        dtype = np.dtype([(label, "U16" if label == "Name" else "<f8") for label in labels])
+        records = np.empty(len(kept), dtype=dtype)
+        for j, label in enumerate(labels):
+            column = text[:, j]
+            if label == "Name":
+                records[label] = column
+                continue
+            try:
+                records[label] = column.astype(np.float64)
+            except ValueError:  # 'qnan' (pymavlink's quiet NaN), or damaged text: those values are NaN
+                records[label] = [_number(value) for value in column]
+        return records
 
     def names(self) -> dict[str, int]:
         """Every message type in the file and how many lines of it."""
