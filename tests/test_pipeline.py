@@ -255,3 +255,39 @@ def test_the_module_example_runs() -> None:
     import magfit.pipeline
 
     assert doctest.testmod(magfit.pipeline).failed == 0
+
+
+def test_the_model_field_at_a_real_logs_own_fixes() -> None:
+    # PX4's sample log (pyulog's repository) flew near Trondheim on 2021-04-21; its raw sensor_mag is logged at
+    # 1 Hz, too few samples: no compass is fitted, but the model's field is that of the log's place and date.
+    pytest.importorskip("pyulog")
+    pytest.importorskip("pygeomag")
+    from magfit.geomag import field_at
+
+    sample = Path(__file__).parent / "data" / "px4_pyulog" / "sample_log_small.ulg"
+    result = magfit.calibrate_file(sample, "ellipsoid", location="log")
+    assert not result.compasses and {f.sensor for f in result.failures} == {"sensor_mag/0", "sensor_mag/1"}
+    assert all("SDLOG_PROFILE" in failure.reason for failure in result.failures)  # how to log more
+    assert result.model_field is not None
+    expected = field_at(63.41705, 10.40822, 0.064, date="2021-04-21")
+    assert result.model_field.field.total == pytest.approx(expected.total, rel=1e-4)
+    assert result.model_field.field.year == pytest.approx(expected.year)
+    printed = CliRunner().invoke(cli, ["calibrate", str(sample), "--location", "log"])
+    assert printed.exit_code == 1 and "2 of 2 magnetometers could not be fitted" in printed.stderr
+    assert f"model field      {expected.total / 1000:.6g} uT" in printed.stdout
+    assert "first at 2021-04-21 06:30 UTC" in printed.stdout
+
+
+def test_time_spans_in_words() -> None:
+    from magfit.cli._common import time_span
+
+    assert time_span(100.25, 125.0, "seconds since boot (TimeUS)") == "100.2 to 125.0 s after boot (24.8 s)"
+    # 2021-07-19 18:55:36 UTC is 1626720936 s after 1970-01-01.
+    assert time_span(1626720936.0, 1626720954.0, "seconds since the epoch (header.stamp)") == (
+        "2021-07-19 18:55:36 to 18:55:54 UTC (18.0 s)"
+    )
+    # PX4 SITL stamps a "boot" clock with the host's time: shown as the date it is.
+    assert time_span(1626720936.0, 1626807400.0, "seconds since boot (timestamp)") == (
+        "2021-07-19 18:55:36 to 2021-07-20 18:56:40 UTC (86464.0 s)"
+    )
+    assert time_span(float("nan"), float("nan"), "none (rows)") == "no time stamps"

@@ -161,7 +161,9 @@ def time_span(start_s: float, end_s: float, time_base: str) -> str:
     if not (math.isfinite(start_s) and math.isfinite(end_s)):
         return "no time stamps"
     span = f"({end_s - start_s:.1f} s)"
-    if time_base.startswith("seconds since the epoch"):
+    # A "boot" clock past 1e9 s (2001) is a wall clock: PX4's SITL stamps its ULogs with the host's time (pyulog's
+    # sample_px4_events.ulg: 1710773350 s, the day its GPS fixes give).
+    if time_base.startswith("seconds since the epoch") or start_s >= 1e9:
         utc = datetime.timezone.utc
         first = datetime.datetime.fromtimestamp(start_s, tz=utc)
         last = datetime.datetime.fromtimestamp(end_s, tz=utc)

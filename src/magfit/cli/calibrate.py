@@ -440,6 +440,14 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             model, unit = compass.model_field, compass.calibration.unit
             physical = unit if unit and get_unit(unit).is_physical else None
             _print_model_field(out, compass.calibration, model.field, physical, model.origin)
+    if not result.compasses and result.model_field is not None:  # nothing fitted: the model still says what to expect
+        field = result.model_field.field
+        out.print("")
+        out.print(
+            f"{'model field':<16} {significant(field.total_in('uT'), 6)} uT ({field.describe()}, inclination "
+            f"{field.inclination_deg:.1f}°) at {result.model_field.origin}",
+            soft_wrap=True,
+        )
 
 
 def _samples_drawn(
