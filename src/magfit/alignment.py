@@ -591,6 +591,19 @@ def align(
                 "record more tilt, or give the inclination (the World Magnetic Model at your place: --location)"
             )
 
+    mirror_refusal = (
+        "these samples cannot tell a rotation from a mirror image of the sensor's axes (gravity stays "
+        "near one body axis: a reflection across a plane that holds it changes no dip angle); record the "
+        "vehicle tilted in several attitudes, or state that the axes are right-handed (allow_mirror=False)"
+    )
+    if allow_mirror:
+        # A reflection across the plane the gravity directions keep to changes each dip by 2 (d·n)(n·R m̂): with
+        # d·n within a few times the accelerometer's noise, whatever the fit prefers is noise or bias (a wrong
+        # mirror is a sign flip, so three noise levels rather than the rotations' 1.5).
+        moments = np.linalg.eigvalsh(down.T @ down / len(down))
+        if math.sqrt(max(float(moments[0]), 0.0)) < 3.0 * direction_noise:
+            refusals.append(mirror_refusal)
+
     # Another minimum that fits as well but is a different rotation, or the mirror image: the data cannot
     # tell them apart. Compared by the Huber loss at the best fit's scale, as a chi-square with the
     # correlation of the samples counted (25: five one-sigmas).
@@ -600,11 +613,8 @@ def align(
         excess = 2.0 * (_huber_loss(_residuals(down, mhat, other.matrix, other.s), scale) - best_loss) / scale**2
         if excess < 25.0 * inflation:
             if np.linalg.det(other.matrix) * np.linalg.det(best.matrix) < 0:
-                refusals.append(
-                    "these samples cannot tell a rotation from a mirror image of the sensor's axes (gravity stays "
-                    "near one body axis: a reflection across a plane that holds it changes no dip angle); record the "
-                    "vehicle tilted in several attitudes, or state that the axes are right-handed (allow_mirror=False)"
-                )
+                if mirror_refusal not in refusals:
+                    refusals.append(mirror_refusal)
                 break
             angle = _relative_angle(best.matrix, other.matrix)
             if angle > 5.0:  # two starts that refined onto the same minimum are one
@@ -711,6 +721,14 @@ def _search(
     chosen = distinct[:3]
     handedness = {bool(np.linalg.det(c.matrix) < 0) for c in chosen}
     chosen += [c for c in distinct if bool(np.linalg.det(c.matrix) < 0) not in handedness][:1]
+    if allow_mirror:
+        # The reflections of the best fit across the planes the gravity directions keep to (the principal
+        # planes of their scatter) and the body's: a vehicle that stays level or pitches only fits them as
+        # well, and a start may miss their minimum.
+        _, principal = np.linalg.eigh(down.T @ down)
+        for normal in (*principal.T, *np.eye(3)):
+            mirror = np.eye(3) - 2.0 * np.outer(normal, normal)
+            chosen.append(_Solution(mirror @ chosen[0].matrix, chosen[0].s, math.inf))
     refined = [_northern(_solve(down, mhat, c.matrix, c.s, fit_s), fit_s, allow_mirror) for c in chosen]
     refined.sort(key=lambda f: f.cost)
     return refined
