@@ -186,7 +186,7 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
     position = _position(ulog)
     motion_log: list[Any] = [ulog] if everything else []
 
-    def read(magnetometer: Magnetometer) -> LogSamples:
+    def read(magnetometer: Magnetometer, stamp: str = "timestamp") -> LogSamples:
         data = streams[magnetometer.id]
         if magnetometer.id.startswith("sensor_mag/"):
             with np.errstate(invalid="ignore"):  # damaged values become NaN: dropped below as non-finite samples
@@ -205,14 +205,14 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
             rotation, _, problem = _rotation(parameters, index)
             assert problem is None  # likewise
             samples = undo_px4_calibration(corrected, **_cal(parameters, index), rotation=rotation)
-        times = np.asarray(data.data["timestamp"], dtype=np.float64) / 1e6
+        times = np.asarray(data.data[_stamp(data, stamp)], dtype=np.float64) / 1e6
         finite = np.all(np.isfinite(samples), axis=1)
         return LogSamples(magnetometer, samples[finite], times[finite], columns, magnetometer.notes)
 
     def motion(magnetometer: Magnetometer) -> Motion:
         if not motion_log:  # opened for the magnetometers only: the motion topics are read now, once
             motion_log.append(_parse(path, file, list(_MOTION_TOPICS)))
-        return _motion(motion_log[0], parameters, read(magnetometer), position)
+        return _motion(motion_log[0], parameters, read(magnetometer, "timestamp_sample"), position)
 
     return Source(
         path=path,
@@ -243,6 +243,13 @@ _ACCEL_TOPICS = (
 _MOTION_TOPICS = tuple(dict.fromkeys([*_ATTITUDE_TOPICS, *(t for t, _, _ in _GYRO_TOPICS + _ACCEL_TOPICS)]))
 
 
+def _stamp(data: Any, wanted: str) -> str:
+    """``wanted`` when the topic has it, else ``timestamp``. read_motion puts every stream on
+    ``timestamp_sample`` (when the sensor measured, PX4 1.11 on), not on ``timestamp`` (when the message was
+    published, a few ms later and by a different amount per topic)."""
+    return wanted if wanted in data.data else "timestamp"
+
+
 def _vector(data: Any, prefix: str) -> NDArray[np.float64] | None:
     """Fields ``prefix[0..2]`` (an array field), or ``x, y, z`` when ``prefix`` is empty; None when absent."""
     names = [f"{prefix}[{i}]" for i in range(3)] if prefix else ["x", "y", "z"]
@@ -264,9 +271,7 @@ def _vector_stream(ulog: Any, choices: tuple[tuple[str, str, str], ...], what: s
         data = _topic(ulog, name)
         values = _vector(data, prefix) if data is not None else None
         if values is not None:
-            # timestamp_sample is when the sensor measured (newer PX4); timestamp when the message was published.
-            stamp = "timestamp_sample" if "timestamp_sample" in data.data else "timestamp"
-            time = np.asarray(data.data[stamp], dtype=np.float64) / 1e6
+            time = np.asarray(data.data[_stamp(data, "timestamp_sample")], dtype=np.float64) / 1e6
             return Stream(f"{name}.{prefix or 'x/y/z'} ({what})", time, values, frame)
     return None
 
@@ -276,7 +281,7 @@ def _motion(ulog: Any, parameters: dict[str, Any], read: LogSamples, position: P
     data = _topic(ulog, "vehicle_attitude")
     quaternion = _vector4(data, "q") if data is not None else None
     if quaternion is not None:
-        time = np.asarray(data.data["timestamp"], dtype=np.float64) / 1e6
+        time = np.asarray(data.data[_stamp(data, "timestamp_sample")], dtype=np.float64) / 1e6
         attitude = Stream("vehicle_attitude.q", time, quaternion_wxyz(quaternion), "body (FRD)")
     index = _calibration_index(parameters, read.magnetometer.device_id)
     mounting, note = None, "the log has no CAL_MAGn_ID for this device: its mounting rotation is unknown"
