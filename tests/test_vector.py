@@ -163,7 +163,8 @@ def test_malformed_references_and_times_are_one_line_option_errors() -> None:
         ({"reference": reference, "time_s": sim.time_s[:-1]}, r"shape \(500,\)"),
         ({"reference": reference, "time_s": sim.time_s[::-1]}, "increase strictly"),
         ({"reference": reference, "max_lag_s": 0.0}, "max_lag_s"),
-        ({"reference": "north"}, "array"),
+        ({"reference": "north"}, "refitted only with a new reference"),
+        ({"reference": [[1.0, 2.0]] * 500}, r"shape \(500, 3\); got shape \(500, 2\)"),
     ]
     for options, words in cases:
         with pytest.raises(OptionError, match=words) as caught:
@@ -182,3 +183,10 @@ def test_a_vehicle_standing_still_is_refused_as_such() -> None:
     still = Rotation.from_rotvec(np.radians(0.5) * rng.normal(size=(600, 3))).apply(sim.reference[0])
     with pytest.raises(CalibrationError, match="hardly turned: the reference field stayed within"):
         magfit.fit(samples, method="vector", reference=still)
+
+
+def test_a_vector_calibration_is_not_refitted_without_a_reference() -> None:
+    sim = _vehicle("tumble", mount_deg=10.0, attitude_deg=0.3, lag_s=0.0, n=1000)
+    cal = magfit.fit(sim.samples, method="vector", reference=sim.reference)
+    with pytest.raises(OptionError, match="refitted only with a new reference"):
+        magfit.refit(cal, sim.samples)

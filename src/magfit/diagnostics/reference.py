@@ -85,16 +85,19 @@ class ReferenceReport:
 
     def diagnostics(self, n_samples: int) -> Diagnostics:
         """The typed :class:`Diagnostics` that ``calibration.diagnostics`` reads back."""
+        reached = self.coverage
         notes = (
             "Judged against the reference field: the design of the reference directions, the residuals and the "
             "uncertainty with batch means over the recording; the magnitude-only checks (distance to an "
             "ellipsoid, held-out refits) do not apply to a fit against a reference.",
-            "Coverage is that of the reference's directions in the vehicle frame.",
+            f"The reference's directions in the vehicle frame reach {reached.cells_reached} of {reached.cells} "
+            "equal-area cells: what a vector fit needs is the spread the observability above judges, not a full "
+            "sphere (a car or a boat never reaches most of it).",
         )
         return Diagnostics(
             n_samples=n_samples,
             n_used=n_samples,
-            coverage=self.coverage,
+            coverage=None,  # its summary speaks of turning the sensor to fill the sphere: not advice for a vehicle
             observability=self.observability,
             uncertainty=self.uncertainty,
             goodness=None,

@@ -78,6 +78,11 @@ def _reference_array(reference: Any, n: int) -> NDArray[np.float64]:
             "method 'vector' needs reference=: the field expected at each sample in the vehicle frame, an (N, 3) "
             "array in the samples' unit (the Earth's field rotated by each sample's attitude)"
         )
+    if isinstance(reference, str):  # what a refit finds recorded: the reference itself is not kept
+        raise OptionError(
+            "a vector calibration is refitted only with a new reference: call magfit.fit(samples, method='vector', "
+            "reference=...) with the field expected at each new sample"
+        )
     try:
         array = np.asarray(reference, dtype=np.float64)
     except (TypeError, ValueError):
