@@ -272,6 +272,12 @@ def _vector_stream(ulog: Any, choices: tuple[tuple[str, str, str], ...], what: s
         values = _vector(data, prefix) if data is not None else None
         if values is not None:
             time = np.asarray(data.data[_stamp(data, "timestamp_sample")], dtype=np.float64) / 1e6
+            relative = data.data.get("accelerometer_timestamp_relative") if prefix == "accelerometer_m_s2" else None
+            if relative is not None:
+                # sensor_combined's timestamp is the gyro's; its accelerometer was sampled this many µs later
+                # (sensor_combined.msg; RELATIVE_TIMESTAMP_INVALID, 0x7fffffff, when it was not).
+                offset = np.asarray(relative, dtype=np.float64)
+                time = time + np.where(offset == 2147483647, 0.0, offset) / 1e6
             return Stream(f"{name}.{prefix or 'x/y/z'} ({what})", time, values, frame)
     return None
 
