@@ -32,12 +32,13 @@ from ..calibration import Calibration
 from ..errors import CalibrationError, DataFileError, MagfitError, OptionError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
+from ..methods import get_method
+from ..sources import Magnetometer, Position, Source, log_kind, open_source
 from ..units import get_unit
 from .streaming import Nonfinite, Progress, fit_samples_file, no_progress, samples_for_fit
 
 if TYPE_CHECKING:
-    from ..geomag import Field
-    from ..sources import Magnetometer, Position, Source
+    from ..geomag import Field  # (imported when used: the wmm extra)
 
 __all__ = [
     "CompassCalibration",
@@ -282,9 +283,6 @@ def calibrate_file(
     OptionError
         Unknown method or option; ``field_strength="wmm"`` without a place or without a physical unit.
     """
-    from ..methods import get_method
-    from ..sources import log_kind
-
     path = Path(path)
     get_method(method)  # an unknown method, before the file is read
     options = dict(options or {})
@@ -296,7 +294,12 @@ def calibrate_file(
             "Model needs the place too"
         )
     say = notify or (lambda note: None)
-    if log_kind(path) is None:
+    from ..io.instances import head_sensors
+
+    kind = log_kind(path)
+    # A samples file that interleaves compasses (mavlogdump's I, device_id) is read one at a time, as a log is.
+    ids = head_sensors(path) if kind is None else ()
+    if kind is None and not (ids and (sensor is not None or len(ids) > 1)):
         if sensor is not None:
             raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
         model = _model(path, None, location, date)  # (no log: "wmm" without a place is refused below)
@@ -308,8 +311,6 @@ def calibrate_file(
         return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
     if columns is not None:
         raise OptionError(f"{path}: columns=[...] chooses the columns of a samples file; a log's compass by sensor=")
-    from ..sources import open_source
-
     source = open_source(path, everything=False)  # the magnetometers (and the GNSS): what a fit needs
     place: tuple[float, float, float] | Literal["log"] | None = location
     if place is None and field_strength == "wmm":
@@ -476,8 +477,7 @@ def log_position(source: Source) -> Position | None:
     """
     if source.position is not None or source.kind != "rosbag":
         return source.position
-    from ..sources import Position
-    from ..sources.rosbag import read_bag_contents
+    from ..sources.rosbag import read_bag_contents  # (the module imports no extra; reading a bag needs one)
 
     contents = read_bag_contents(source.path)
     found = contents.position()
