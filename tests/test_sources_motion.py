@@ -210,6 +210,7 @@ def test_dataflash_motion_gives_back_the_truth(dataflash: dict[str, Path], kind:
     assert "COMPASS_ORIENT 6" in motion.mounting_note and "already applied" in motion.mounting_note
     assert_motion_matches_truth(motion)
     assert_world_field(motion)
+    assert any("gravity where it belongs" in note for note in motion.notes)
 
 
 def test_mavlogdump_text_reads_as_its_bin(dataflash: dict[str, Path]) -> None:
@@ -414,6 +415,7 @@ def test_bag_motion_turns_rep_103_into_ned(tmp_path: Path, kind: str) -> None:
     assert np.max(angle_deg(motion.attitude, attitude(t) @ flip)) < 0.1
     np.testing.assert_allclose(motion.gyro, body_rates(t) @ flip, atol=2e-3)
     np.testing.assert_allclose(motion.accel, specific_force(t) @ flip, atol=0.02)
+    assert any("gravity where it belongs" in note for note in motion.notes)
     # attitude · calibrated (FLU) field = the NED field: the frames line up end to end.
     calibration = magfit.fit(motion.samples, method="ellipsoid")
     world = np.einsum("nij,nj->ni", motion.attitude, calibration.apply(motion.samples, normalized=True))
@@ -438,6 +440,15 @@ def test_align_leaves_out_an_attitude_of_zero_quaternions() -> None:
     motion = align("m", "uT", time, np.ones((11, 3)), magnetometer_frame="body", attitude=attitude_stream)
     assert motion.attitude is None and len(motion.samples) == 11
     assert any(note.startswith("attitude: damaged has fewer than two usable messages") for note in motion.notes)
+
+
+def test_an_accelerometer_in_another_frame_than_stated_fails_the_gravity_check() -> None:
+    # A z-up IMU (ROS's FLU) taken for a z-down one: gravity turned into NED points up; said, in words.
+    time = np.linspace(0, 1, 11)
+    level = Stream("level", time, np.tile([0.0, 0.0, 0.0, 1.0], (11, 1)))
+    up = Stream("z-up accel", time, np.tile([0.0, 0.0, 9.81], (11, 1)))
+    motion = align("m", "uT", time, np.ones((11, 3)), magnetometer_frame="body", attitude=level, accel=up)
+    assert any(note.startswith("check FAILED: attitude · accel = (0.00, 0.00, 9.81)") for note in motion.notes)
 
 
 def test_a_samples_file_has_no_motion(tmp_path: Path) -> None:

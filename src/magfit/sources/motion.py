@@ -225,6 +225,7 @@ def align(
         else:
             result[key] = np.column_stack([np.interp(time_kept, stream.time_s, stream.values[:, i]) for i in range(3)])
     frames = {used[k].frame for k in ("gyro", "accel") if k in used}
+    said += _gravity_check(result["attitude"], result["accel"])
     return Motion(
         sensor=sensor,
         unit=unit,
@@ -242,6 +243,28 @@ def align(
         n_dropped=dropped,
         notes=tuple(said),
     )
+
+
+#: Gravity turned into NED by the attitude further than this from (0, 0, -g) (m/s², the median over the
+#: recording, so that manoeuvres do not count) means the attitude and the accelerometer disagree on a frame.
+GRAVITY_TOLERANCE = 1.5
+STANDARD_GRAVITY = 9.80665
+
+
+def _gravity_check(attitude: NDArray[np.float64] | None, accel: NDArray[np.float64] | None) -> list[str]:
+    """The accelerometer's specific force turned into NED by the attitude, its median: (0, 0, -g) when the
+    attitude, the accelerometer and the frames stated agree; a note either way."""
+    if attitude is None or accel is None or not len(accel):
+        return []
+    gravity = np.median(np.einsum("nij,nj->ni", attitude, accel), axis=0)
+    shown = ", ".join(f"{g:.2f}" for g in gravity)
+    if np.linalg.norm(gravity - [0.0, 0.0, -STANDARD_GRAVITY]) <= GRAVITY_TOLERANCE:
+        return [f"check: attitude · accel = ({shown}) m/s² in NED (median), gravity where it belongs"]
+    return [
+        f"check FAILED: attitude · accel = ({shown}) m/s² in NED (median), not (0, 0, -9.81): the attitude and the "
+        "accelerometer are not in the frames stated (a driver outside REP-145, a rotated IMU); do not trust the "
+        "attitude with this magnetometer"
+    ]
 
 
 def quaternion_wxyz(values: NDArray[np.float64]) -> NDArray[np.float64]:
