@@ -626,11 +626,14 @@ def align(
     mirror = bool(np.linalg.det(best.matrix) < 0)
     if mirror:
         inverted, nearest = _mirror_axis(best.matrix)
+        flipped = nearest_rotation(-best.matrix, "ardupilot")  # -R is proper: (A1) with d -> -d
         weak.append(
             f"the magnetometer's axes are a mirror image of the body's (det -1): no firmware rotation can fix it; "
             f"invert its {inverted} axis (in the driver or the wiring), then the rotation is "
-            f"{nearest[0].rotation.name} + {nearest[0].rotation.angle_deg:.1f}° (or the accelerometer reports "
-            "gravity instead of the specific force: its sign inverted)"
+            f"{nearest[0].rotation.name} + {nearest[0].rotation.angle_deg:.1f}°; or the accelerometer reports "
+            "gravity instead of the specific force (its sign inverted"
+            + (", or the field points up: the southern magnetic hemisphere" if fit_s else "")
+            + f"), and the rotation is {flipped.name} + {flipped.angle_deg:.1f}° once the accelerometer is negated"
         )
     else:
         inverted, nearest = None, nearest_rotations(best.matrix)
