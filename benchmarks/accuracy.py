@@ -1478,6 +1478,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="issue 14's vehicle scenarios instead (attitude-aided, alignment, gyro-aided; accuracy_vehicle.py); "
         "--output defaults to results/vehicle",
     )
+    parser.add_argument(
+        "--broad-data",
+        type=Path,
+        default=os.environ.get("MAGFIT_BROAD_DATA"),
+        help="with --vehicle: BROAD's data_mat folder (git clone https://github.com/dlaidig/broad), real recordings "
+        "with an optical attitude reference; default $MAGFIT_BROAD_DATA",
+    )
     args = parser.parse_args(argv)
 
     command = _command_line(sys.argv[1:] if argv is None else list(argv))
@@ -1526,6 +1533,7 @@ def _main_vehicle(args: argparse.Namespace, command: str, parser: argparse.Argum
         seed=args.seed,
         command=command,
         progress=lambda message: print(message, file=sys.stderr, flush=True),
+        broad_data=None if (args.smoke or args.no_real or args.broad_data is None) else Path(args.broad_data),
     )
     output = args.output if args.output != HERE / "results" else HERE / "results" / "vehicle"
     output.mkdir(parents=True, exist_ok=True)
