@@ -57,6 +57,8 @@ __all__ = ["LagEstimate", "estimate_lag", "fit_vector"]
 MIN_SAMPLES = 80
 #: Samples the lag search must keep inside the window where every candidate lag has a reference.
 _MIN_WINDOW = 40
+#: A step between samples over this many sample periods is a gap in the recording.
+GAP_STEPS = 5.0
 #: Contiguous blocks of the block jackknife that gives the lag's one-sigma.
 LAG_BLOCKS = 8
 
@@ -164,21 +166,36 @@ def _refine(cost: Any, low: float, high: float, step: float) -> float:
     return float(result.x)
 
 
+def _inside_segments(time_s: NDArray[np.float64], margin: float) -> NDArray[np.bool_]:
+    """The samples at least ``margin`` seconds from the ends of their contiguous stretch of the recording.
+
+    A gap (a step over :data:`GAP_STEPS` sample periods: a log with dropouts, stretches cut out) is an end too:
+    the reference interpolated across it at ``t + τ`` would be a straight line through a turn never seen.
+    """
+    steps = np.diff(time_s)
+    gap = steps > GAP_STEPS * float(np.median(steps))
+    segment = np.concatenate([[0], np.cumsum(gap)])
+    starts = np.concatenate([[0], np.flatnonzero(gap) + 1])
+    ends = np.concatenate([np.flatnonzero(gap), [time_s.size - 1]])
+    return (time_s >= time_s[starts][segment] + margin) & (time_s <= time_s[ends][segment] - margin)
+
+
 def estimate_lag(raw: NDArray[np.float64], reference: NDArray[np.float64], time_s: NDArray[np.float64],
                  max_lag_s: float) -> LagEstimate:  # fmt: skip
     """The lag τ (s) for which ``raw(t) = G r(t + τ) + V`` fits best: τ > 0 when the reference lags the samples.
 
     The residual sum of squares is compared over the same samples for every candidate (those whose
-    ``t ± max_lag_s`` lies inside the recording), on a grid of one sample period, then refined between the
-    grid neighbours of the best point (scipy's bounded scalar minimisation). Its one-sigma is a block
-    jackknife: the lag found again without each of :data:`LAG_BLOCKS` contiguous stretches. (The Gauss-Newton
-    figure understates it: the reference's rate, the lag's column of the design, carries the attitude's jitter,
-    and a slow vehicle's lag trades with the attitude's wandering error. simulate_vehicle, flight at 1° of
-    attitude error, 5 min: the lag off by 0.09 s where Gauss-Newton said ±0.009 s.)
+    ``t ± max_lag_s`` lies inside their stretch of the recording, :func:`_inside_segments`), on a grid of
+    one sample period, then refined between the grid neighbours of the best point (scipy's bounded scalar
+    minimisation). Its one-sigma is a block jackknife: the lag found again without each of
+    :data:`LAG_BLOCKS` contiguous stretches. (The Gauss-Newton figure understates it: the reference's rate,
+    the lag's column of the design, carries the attitude's jitter, and a slow vehicle's lag trades with the
+    attitude's wandering error. simulate_vehicle, flight at 1° of attitude error, 5 min: the lag off by
+    0.09 s where Gauss-Newton said ±0.009 s.)
     """
     span = float(time_s[-1] - time_s[0])
     limit = min(max_lag_s, span / 4)  # a lag over a quarter of the recording leaves too little to fit
-    keep = (time_s >= time_s[0] + limit) & (time_s <= time_s[-1] - limit)
+    keep = _inside_segments(time_s, limit)
     if int(keep.sum()) < _MIN_WINDOW:
         raise CalibrationError(
             f"the recording is too short to search a lag of ±{limit:.3g} s: {int(keep.sum())} samples remain inside "
