@@ -79,11 +79,11 @@ def read_recordings(
     """``path``'s magnetometers: a samples file's three columns, or a log's compass ``sensor`` names; without it
     every usable compass of a log (``every``) or the only one (several refused, naming them)."""
     if not is_log(path):
-        if sensor is not None:
-            raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
         from ..io import read_samples
 
-        table = read_samples(path, columns=columns, nonfinite=nonfinite)
+        # --sensor picks one compass of a samples file that interleaves several (I=1); read_samples refuses it
+        # on a file that does not, and refuses an interleaved file without it.
+        table = read_samples(path, columns=columns, nonfinite=nonfinite, sensor=sensor)
         if table.n_skipped:
             warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
         return [

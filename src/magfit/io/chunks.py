@@ -19,7 +19,7 @@ import zipfile
 import zlib
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, Any, Literal, TypeVar
 
@@ -28,9 +28,35 @@ from numpy.typing import NDArray
 
 from .._validation import MAX_MAGNITUDE
 from ..errors import DataFileError, OptionError
-from .layout import NA_VALUES, FileFormat, cell_kind, decode_lines, read_head, sniff, split_fields, text_encoding
+from .instances import (
+    SensorColumn,
+    choose,
+    find_instance_column,
+    head_values,
+    interleaved_error,
+    sensor_id,
+    value_text,
+)
+from .layout import (
+    FileFormat,
+    cell_kind,
+    decode_lines,
+    pandas_module,
+    pandas_options,
+    read_head,
+    sniff,
+    split_fields,
+    text_encoding,
+)
 from .npy import BROKEN_NPY, NpyStream, check_npy_array, npy_info, npz_members, one_line
-from .selection import NpzSelection, npy_content_choice, resolve_npz_columns, resolve_table_columns, text_content_choice
+from .selection import (
+    NpzSelection,
+    columns_origin,
+    npy_content_choice,
+    resolve_npz_columns,
+    resolve_table_columns,
+    text_content_choice,
+)
 from .sources import check_file, file_error
 
 __all__ = ["MAX_PIECES", "MAX_REPORTED_LINES", "PARALLEL_BYTES", "ChunkReader", "PiecesRead", "read_pieces"]
@@ -42,14 +68,6 @@ MAX_REPORTED_LINES = 10
 PARALLEL_BYTES = 32 << 20
 #: At most this many pieces (threads) for one file.
 MAX_PIECES = 4
-
-
-def _pandas() -> Any:
-    try:
-        import pandas
-    except ImportError:  # pragma: no cover - pandas is in the cli extra
-        raise ImportError("reading text data files needs pandas: pip install 'magfit[cli]'") from None
-    return pandas
 
 
 # ---------------------------------------------------------------------------------------------- reading
@@ -73,6 +91,8 @@ class ChunkReader:
         The columns read, in x, y, z order (see :class:`SampleTable`).
     format : FileFormat
         The file's layout.
+    unit, column_note, sensor
+        As in :class:`SampleTable`.
     n_rows, n_skipped, skipped_lines
         As in :class:`SampleTable`; complete once the iteration has finished.
     """
@@ -85,6 +105,7 @@ class ChunkReader:
         nonfinite: Literal["skip", "error"] = "skip",
         chunk_rows: int = 1_000_000,
         block_bytes: int | None = None,
+        sensor: str | None = None,
     ) -> None:
         if nonfinite not in ("skip", "error"):
             raise OptionError(f"nonfinite must be 'skip' or 'error', got {nonfinite!r}")
@@ -103,9 +124,14 @@ class ChunkReader:
         self.skipped_lines: tuple[int, ...] = ()
         self._skipped: list[int] = []
         self.column_note: str | None = None
+        self.unit: str | None = None  # as the column names (or the converter that wrote them) say
+        self.sensor: str | None = None  # the magnetometer read, in a file that interleaves several (I=1)
+        self._sensor_column: SensorColumn | None = None
         if self.format.kind == "npz":
             self._npz = resolve_npz_columns(self.path, npz_members(self.path), columns)
             self.columns = self._npz.labels
+            if self._npz.key_columns is None:  # three 1-D keys, named like columns (mag_x_uT)
+                self.unit, _ = columns_origin(self._npz.keys, self.format.header)
         elif self.format.kind == "npy":
             self._check_npy_shape()
             content = (
@@ -120,6 +146,36 @@ class ChunkReader:
             self._indices, self.columns = resolve_table_columns(self.path, self.format, columns, content)
             if content is not None:
                 self.column_note = content.describe([self.format.column_label(i) for i in range(self.format.n_columns)])
+            self.unit, converter = columns_origin(self.columns, self.format.header)
+            if converter is not None:  # what the tool that wrote them says: the unit, a calibration already applied
+                self.column_note = converter.describe()
+            self._sensor_column = self._choose_sensor(sensor)
+        if sensor is not None and self._sensor_column is None:
+            raise file_error(
+                self.path,
+                "has no column that tells magnetometers apart (I, instance, device_id, sensor_id ...): sensor='ID' "
+                "chooses one of a file that interleaves several; this one is read whole without it",
+            )
+
+    def _choose_sensor(self, sensor: str | None) -> SensorColumn | None:
+        """The instance column of a text file (:mod:`magfit.io.instances`) and the magnetometer to read.
+
+        Several values in the head and none chosen is refused here, at once: the rows of two compasses
+        are not one cloud. One value is read with a guard against others further in (:meth:`_sensor_rows`).
+        """
+        column = find_instance_column(self.format.header, self._indices)
+        if column is None:
+            return None
+        assert self.format.header is not None
+        name = self.format.header[column]
+        values = head_values(self.path, self.format, column)
+        if sensor is None:
+            if len(values) > 1:
+                raise interleaved_error(self.path, name, values)
+            return SensorColumn(column, name, None, values[0] if values else None)
+        value = choose(self.path, name, sensor, values)
+        self.sensor = sensor_id(name, value)
+        return SensorColumn(column, name, value)
 
     @property
     def column_indices(self) -> tuple[int, int, int]:
@@ -222,7 +278,7 @@ class ChunkReader:
                 yield chunk
         self.skipped_lines = tuple(self._skipped)
         if self.n_rows == 0 and self._byte_range is None:  # a piece may hold blank lines only
-            raise file_error(self.path, "has no data rows; record some samples or give another file")
+            raise self.no_rows_error()
 
     # .................................................................. npy / npz
 
@@ -303,31 +359,29 @@ class ChunkReader:
                             f"line {number}, column {self.columns[axis]!r} (column {index + 1}): {cell!r} is not "
                             "a number; fix that cell, or choose other columns with columns=[...]",
                         )
+                instance = self._sensor_column
+                if (
+                    instance is not None
+                    and instance.index < len(fields)
+                    and cell_kind(fields[instance.index]) == "text"
+                ):
+                    return file_error(
+                        self.path,
+                        f"line {number}, column {instance.name!r} (column {instance.index + 1}): "
+                        f"{fields[instance.index]!r} is not a number, so the row's magnetometer is unknown; fix "
+                        "that cell",
+                    )
         return file_error(self.path, f"cannot read the numbers ({detail}); check the file's format")
 
     def _parse_block(self, block: bytes) -> NDArray[np.float64]:
         """The x, y, z values of a block of whole data lines (blank lines skipped), as the reader parses them."""
         used = sorted(set(self._indices))
-        frame = _pandas().read_csv(io.BytesIO(block), **self._read_options(used))
+        frame = pandas_module().read_csv(io.BytesIO(block), **self._read_options(used))
         return np.asarray(frame.to_numpy(dtype=np.float64)[:, [used.index(i) for i in self._indices]])
 
     def _read_options(self, used: list[int]) -> dict[str, Any]:
-        """pandas.read_csv options for the data lines: C engine, only the magnetometer columns, float64."""
-        fmt = self.format
-        assert fmt.delimiter is not None
-        return {
-            "sep": r"\s+" if fmt.delimiter == "whitespace" else fmt.delimiter[0],
-            "header": None,
-            "usecols": used,
-            "dtype": np.float64,
-            "engine": "c",
-            "encoding": self._text_encoding,
-            "decimal": fmt.decimal,
-            "skipinitialspace": self._blank_led_cells,
-            "skip_blank_lines": True,
-            "na_values": list(NA_VALUES),
-            "keep_default_na": False,
-        }
+        """pandas.read_csv options for the data lines: C engine, only the columns ``used``, float64."""
+        return pandas_options(self.format, used, strip_blanks=self._blank_led_cells)
 
     @functools.cached_property
     def _blank_led_cells(self) -> bool:
@@ -347,11 +401,13 @@ class ChunkReader:
         return text_encoding(self.format)
 
     def _iter_text(self) -> Iterator[NDArray[np.float64]]:
-        pandas = _pandas()
+        pandas = pandas_module()
         fmt = self.format
         assert fmt.delimiter is not None
-        used = sorted(set(self._indices))
+        instance = self._sensor_column
+        used = sorted({*self._indices, *([instance.index] if instance is not None else [])})
         order = [used.index(index) for index in self._indices]
+        rows_before = 0  # data rows pandas has given so far (all sensors'), for the line numbers
         with open(self.path, "rb") as handle:
             start, stop = self._byte_range if self._byte_range is not None else (fmt.data_offset, None)
             handle.seek(start)
@@ -375,9 +431,57 @@ class ChunkReader:
                             raise
                         raise self._bad_cell_error(str(error)) from None
                     values = frame.to_numpy(dtype=np.float64)
+                    to_line = source.line_of_rows
+                    if instance is not None:
+                        kept = self._sensor_rows(values[:, used.index(instance.index)], rows_before, to_line)
+                        if kept is not None:  # this sensor's rows; their line numbers through the rows kept
+                            to_line = functools.partial(_kept_lines, to_line, rows_before + kept, self.n_rows)
+                            values = values[kept]
+                        rows_before += len(frame)
                     if order != list(range(len(order))):  # columns asked in another order than the file's
                         values = values[:, order]
-                    yield self._filter(values, source.line_of_rows)
+                    yield self._filter(values, to_line)
+
+    def _sensor_rows(
+        self,
+        instance: NDArray[np.float64],
+        rows_before: int,
+        to_line: Callable[[NDArray[np.int64]], NDArray[np.int64]],
+    ) -> NDArray[np.int64] | None:
+        """The rows of a chunk from the magnetometer read (None: all of them), or an error when a file read
+        whole turns out to interleave several further in than its head."""
+        column = self._sensor_column
+        assert column is not None
+        if column.value is not None:
+            return np.flatnonzero(instance == column.value)
+        expected = column.expected
+        if expected is None:  # no value in the head (all missing): the first one seen is the one
+            seen = instance[np.isfinite(instance)]
+            if not seen.size:
+                return None
+            expected = float(seen[0])
+            self._sensor_column = replace(column, expected=expected)
+        other = np.flatnonzero(np.isfinite(instance) & (instance != expected))
+        if other.size:
+            line = int(to_line(np.array([rows_before + other[0]]))[0])
+            found = float(instance[other[0]])
+            raise interleaved_error(
+                self.path,
+                column.name,
+                sorted({expected, found}),
+                f"line {line}: column {column.name!r} changes from {value_text(expected)} to {value_text(found)}; "
+                "the file ",
+            )
+        return None
+
+    def no_rows_error(self) -> DataFileError:
+        """The error of a read that found no data rows (for the magnetometer chosen, in an interleaved file)."""
+        if self._sensor_column is not None and self._sensor_column.value is not None:
+            name = self._sensor_column.name
+            found = head_values(self.path, self.format, self._sensor_column.index)
+            held = ", ".join(sensor_id(name, value) for value in found) or "none in its first rows"
+            return file_error(self.path, f"has no rows with {self.sensor}; it holds {held}: choose one of them")
+        return file_error(self.path, "has no data rows; record some samples or give another file")
 
 
 class _Bounded:
@@ -407,6 +511,16 @@ def _count_lines(path: Path, start: int, stop: int) -> int:
             count += block.count(b"\n")
             left -= len(block)
     return count
+
+
+def _kept_lines(
+    line_of_rows: Callable[[NDArray[np.int64]], NDArray[np.int64]],
+    kept: NDArray[np.int64],
+    first: int,
+    rows: NDArray[np.int64],
+) -> NDArray[np.int64]:
+    """Line numbers of the rows a reader counted (from ``first``) among the data rows ``kept`` of a chunk."""
+    return line_of_rows(kept[rows - first])
 
 
 def _next_row(rows: NDArray[np.int64]) -> NDArray[np.int64]:

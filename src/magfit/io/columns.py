@@ -3,21 +3,27 @@ in a file without a header, by what the columns hold (:func:`choose_columns_by_c
 
 The rule, in words (docs/file-formats.md says the same for users):
 
-1. Every name is normalised: units in brackets are dropped (``MagX(uT)`` -> ``MagX``), camelCase is split
-   (``magX`` -> ``mag_X``, ``imuMx`` -> ``imu_Mx``) and the result is lower-cased.
+1. Every name is normalised: an array index 0, 1 or 2 is the axis x, y or z (``magADC[0]`` -> ``magADC_x``,
+   as blackbox_decode and ulog2csv write vectors), units in brackets are dropped (``MagX(uT)`` -> ``MagX``)
+   and so is a unit written as a word after the first (``mag_x_uT`` -> ``mag_x``, ``magnetometer_ga[0]``
+   -> ``magnetometer_x``; :func:`name_unit` keeps it), camelCase is split (``magX`` -> ``mag_X``,
+   ``imuMx`` -> ``imu_Mx``) and the result is lower-cased.
 2. An *axis letter* is an ``x``, ``y`` or ``z`` that ends the name or a word of it (``mx``, ``mag_x``,
    ``mx_raw``, ``mag.x``) or starts it (``x_mag``). What stands before and after it (``imu_m`` + ``x`` +
    ``""``) is the name's *stem*; three names with the same stem and the three axis letters form a triple.
 3. The words of the stem decide what the triple is. Words of another sensor or quantity (``a``, ``acc``,
    ``g``, ``gyro``, ``w``, ``omega``, ``euler``, ``vel``, ``pos`` ...) reject it: an accelerometer or a gyro
    is never taken for a magnetometer. A magnetometer word (``mag*``, ``compass``, ``field``, or a single
-   ``m`` / ``b`` glued before the axis: ``mx``, ``imu_mx``, ``Bx``, ``m_x``) scores 2; a stem made only of
-   neutral words (``""`` as in bare ``x``, ``imu``, ``sensor``, ``axis``, units, digits) scores 1; any other
-   word rejects the triple (magfit does not guess at names it does not know).
+   ``m`` / ``b`` / ``h`` glued before the axis: ``mx``, ``imu_mx``, ``Bx``, ``hx``, ``m_x``) scores 2; a stem
+   made only of neutral words (``""`` as in bare ``x``, ``imu``, ``sensor``, ``axis``, units, digits) scores 1;
+   any other word rejects the triple (magfit does not guess at names it does not know).
 4. ``raw`` / ``uncal`` add 0.5, ``cal`` / ``scaled`` / ``filtered`` / ``corrected`` ... subtract 0.5: the raw
    readings are the ones to calibrate.
 5. The single best-scoring triple wins. Several at the best score (two magnetometers: ``imu_mx..`` and
    ``mag_x..``) is an ambiguity that the caller reports, listing them, instead of picking one.
+
+The columns of the usual converters are recognised by their names and the header around them
+(:func:`recognise_converter`): their unit, and what the firmware did to the field before logging it.
 """
 
 from __future__ import annotations
@@ -30,20 +36,27 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import OptionError
+from ..units import get_unit
+
 __all__ = [
     "ColumnTriple",
     "ContentChoice",
+    "Converter",
     "choose_columns_by_content",
     "ellipsoid_spread",
     "find_magnetometer_columns",
+    "name_unit",
     "name_words",
+    "recognise_converter",
 ]
 
 _AXES = ("x", "y", "z")
 #: Words that mark a magnetometer anywhere in the stem (plus any word starting with "mag").
 _MAG_WORDS = frozenset({"compass", "field", "mfield", "bfield", "magnetic", "magnetometer", "mag", "magn"})
-#: Single letters that mean a magnetometer only when glued before the axis letter (mx, imu_mx, Bx, m_x).
-_MAG_LETTERS = frozenset({"m", "b"})
+#: Single letters that mean a magnetometer only when glued before the axis letter (mx, imu_mx, Bx, m_x; hx for
+#: the H field, as WitMotion and u-blox exports name it).
+_MAG_LETTERS = frozenset({"m", "b", "h"})
 #: Words of other sensors and quantities: a triple containing one is never a magnetometer.
 _OTHER_WORDS = frozenset(
     {
@@ -58,7 +71,7 @@ _OTHER_WORDS = frozenset(
 _NEUTRAL_WORDS = frozenset(
     {
         "imu", "sensor", "sens", "data", "value", "val", "axis", "reading", "meas", "measured",
-        "measurement", "sample", "body", "ut", "nt", "mt", "gauss", "mgauss", "counts", "count", "lsb", "adc",
+        "measurement", "sample", "body", "ut", "nt", "mt", "gauss", "mgauss", "ga", "counts", "count", "lsb", "adc",
     }
 )  # fmt: skip
 _RAW_WORDS = frozenset({"raw", "uncal", "uncalibrated", "uncomp", "uncompensated"})
@@ -71,6 +84,10 @@ _PROCESSED_WORDS = frozenset(
 )  # fmt: skip
 
 _UNITS_IN_BRACKETS = re.compile(r"[\(\[\{<][^\)\]\}>]*[\)\]\}>]")
+#: An array index 0, 1, 2 in brackets: blackbox_decode's ``magADC[0]``, ulog2csv's ``magnetometer_ga[0]``.
+_INDEX_AXIS = re.compile(r"\[\s*([012])\s*\]")
+#: Splits a name into its words and what separates them (kept, so that the name can be put back together).
+_TOKENS = re.compile(r"([^0-9A-Za-z\u00b5\u03bc]+)")
 _CAMEL_BOUNDARY = re.compile(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])")
 _WORD_SPLIT = re.compile(r"[^a-z0-9]+")
 
@@ -98,10 +115,50 @@ class ColumnTriple:
         return ",".join(self.names)
 
 
+def _unit_word(word: str) -> str | None:
+    """The physical unit a word of a name is (``uT``, ``nT``, ``mG``, ``ga``, ``gauss``, ``T``, ``G``), or None.
+
+    Single letters count only in capitals (``mag_x_T``): a lower-case ``t`` or ``g`` is more likely a time
+    or gravity. Raw counts are not a unit a name states (``mx_raw`` is a raw magnetometer, not a unit)."""
+    if len(word) == 1:
+        return word if word in ("T", "G") else None
+    try:
+        unit = get_unit(word)
+    except OptionError:
+        return None
+    return unit.name if unit.is_physical else None
+
+
+def name_unit(name: str) -> str | None:
+    """The unit a column name states, as :mod:`magfit.units` names it, or None.
+
+    In brackets (``MagX(uT)``, ``mag_x [mG]``) or as a word of its own after the first (``mag_x_uT``,
+    ``magnetometer_ga[0]``, ``Bx_nT``).
+    """
+    text = name.strip().lstrip("\ufeff")
+    for bracketed in _UNITS_IN_BRACKETS.findall(text):
+        unit = _unit_word(bracketed[1:-1].strip())
+        if unit is not None:
+            return unit
+    words = [word for word in _TOKENS.split(_UNITS_IN_BRACKETS.sub(" ", text))[::2] if word]
+    for word in words[1:]:
+        unit = _unit_word(word)
+        if unit is not None:
+            return unit
+    return None
+
+
 def normalise_name(name: str) -> str:
-    """Drop bracketed units, split camelCase and lower-case a column name (rule 1)."""
-    text = _UNITS_IN_BRACKETS.sub("", name.strip().lstrip("\ufeff"))
-    return _CAMEL_BOUNDARY.sub("_", text.strip()).lower()
+    """An index for the axis, bracketed units and unit words dropped, camelCase split, lower-cased (rule 1)."""
+    text = _INDEX_AXIS.sub(lambda match: "_" + _AXES[int(match.group(1))], name.strip().lstrip("\ufeff"))
+    text = _UNITS_IN_BRACKETS.sub("", text).strip()
+    # A unit word is dropped before camelCase is split (uT would become u_t); never the first word (G_x is a gyro).
+    parts = _TOKENS.split(text)
+    words = [i for i in range(0, len(parts), 2) if parts[i]]
+    for i in words[1:]:
+        if _unit_word(parts[i]) is not None:
+            parts[i] = ""
+    return _CAMEL_BOUNDARY.sub("_", "".join(parts)).lower()
 
 
 def name_words(text: str) -> list[str]:
@@ -176,6 +233,88 @@ def find_magnetometer_columns(names: Sequence[str]) -> list[ColumnTriple]:
             if len(set(combo)) == 3 and combo not in triples:
                 triples[combo] = ColumnTriple(combo, (names[combo[0]], names[combo[1]], names[combo[2]]), score)
     return sorted(triples.values(), key=lambda triple: (-triple.score, triple.indices))
+
+
+# ---------------------------------------------------------------------------------------------- converters
+
+
+@dataclass(frozen=True)
+class Converter:
+    """The tool that wrote a file's magnetometer columns, recognised by their names (:func:`recognise_converter`).
+
+    Attributes
+    ----------
+    name : str
+        The tool and the message or field, in words (``PX4 ulog2csv sensor_mag``).
+    unit : str or None
+        The unit the tool writes the field in, as :mod:`magfit.units` names it (``counts`` for raw ADC values).
+    note : str or None
+        What the firmware did to the field before it was logged, when a user must know it (a calibration
+        already applied: the fit is then a correction on top of it).
+    """
+
+    name: str
+    unit: str | None
+    note: str | None = None
+
+    def describe(self) -> str:
+        """``ArduPilot MAG (mavlogdump), mG; logged after ...`` for a message."""
+        text = self.name + (f", {self.unit}" if self.unit else "")
+        return text + (f"; {self.note}" if self.note else "")
+
+
+_BLACKBOX = Converter(
+    "Betaflight/INAV blackbox_decode magADC",
+    "counts",
+    # src/main/sensors/compass.c, compassUpdate: magADC = the chip's counts, board-aligned, minus magZero.
+    "raw counts after the board alignment, minus the offset the firmware stores (mag_calibration / magzero_*): "
+    "a fitted offset adds to that one",
+)
+_PX4_VEHICLE = Converter(
+    "PX4 ulog2csv magnetometer_ga (vehicle_magnetometer, or an old sensor_combined)",
+    "G",
+    # src/modules/sensors/vehicle_magnetometer/VehicleMagnetometer.cpp: published after the CAL_MAGn_* correction.
+    "PX4's calibrated field (CAL_MAGn_* applied, rotated into the vehicle frame): a fit on it is a correction "
+    "on top of that calibration; for a new one fit the .ulg itself (magfit undoes it) or its raw sensor_mag",
+)
+_PX4_SENSOR_MAG = Converter("PX4 ulog2csv sensor_mag (raw)", "G")
+_ARDUPILOT_MAG = Converter(
+    "ArduPilot DataFlash MAG (mavlogdump --format csv)",
+    "mG",
+    # libraries/AP_Compass/AP_Compass_Backend.cpp, correct_field: offsets, DIA/ODI, scale and motor compensation.
+    "logged after ArduPilot's current calibration (COMPASS_OFS*, DIA/ODI, SCALE, motor compensation): a fit on "
+    "it is a correction on top of it; for a new one fit the .bin log itself (magfit undoes it with its PARM)",
+)
+# sensor_msgs/MagneticField: "magnetic_field: x, y, and z components of the field vector in Tesla".
+_ROS = Converter("ROS sensor_msgs/MagneticField (CSV export)", "T")
+
+_BLACKBOX_NAME = re.compile(r"magADC\[\s*[012]\s*\]")
+_PX4_VEHICLE_NAME = re.compile(r"magnetometer_ga\[\s*[012]\s*\]")
+_ARDUPILOT_NAME = re.compile(r"(?P<prefix>MAG\d?\.)?Mag[XYZ]")
+
+
+def recognise_converter(names: Sequence[str], header: Sequence[str]) -> Converter | None:
+    """The converter that wrote the magnetometer columns ``names`` of a file with the columns ``header``, or None.
+
+    Blackbox_decode's ``magADC[0..2]`` (Betaflight, INAV); PX4's ulog2csv (``vehicle_magnetometer``'s
+    ``magnetometer_ga[0..2]``, ``sensor_mag``'s ``x, y, z`` beside ``device_id`` and ``error_count``);
+    mavlogdump's ArduPilot ``MagX..Z`` (beside ``TimeUS``); a ROS ``sensor_msgs/MagneticField`` exported to
+    CSV (``field.magnetic_field.x``, ``.magnetic_field.x``).
+    """
+    stripped = [name.strip().lstrip("\ufeff") for name in names]
+    others = {name.strip().lstrip("\ufeff") for name in header}
+    if all(_BLACKBOX_NAME.fullmatch(name) for name in stripped):
+        return _BLACKBOX
+    if all(_PX4_VEHICLE_NAME.fullmatch(name) for name in stripped):
+        return _PX4_VEHICLE
+    if stripped == ["x", "y", "z"] and "device_id" in others and others & {"error_count", "is_external"}:
+        return _PX4_SENSOR_MAG
+    matches = [_ARDUPILOT_NAME.fullmatch(name) for name in stripped]
+    if all(matches) and any(f"{match.group('prefix') or ''}TimeUS" in others for match in matches if match):
+        return _ARDUPILOT_MAG
+    if all({"magnetic", "field"} <= set(name_words(normalise_name(name))) for name in stripped):
+        return _ROS
+    return None
 
 
 # ---------------------------------------------------------------------------------------------- by content

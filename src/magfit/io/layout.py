@@ -16,7 +16,9 @@ from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
+
+import numpy as np
 
 from .npy import check_npy_array, npy_info, npz_members
 from .sources import check_file, file_error
@@ -104,6 +106,37 @@ class FileFormat:
 def text_encoding(fmt: FileFormat) -> str:
     """The codec for the data lines of a text file: past the byte-order mark, ``utf-8-sig`` reads as ``utf-8``."""
     return "utf-8" if fmt.encoding == "utf-8-sig" else fmt.encoding
+
+
+def pandas_module() -> Any:
+    """pandas, which parses the rows of text files (the ``cli`` extra), or a one-line install hint."""
+    try:
+        import pandas
+    except ImportError:  # pragma: no cover - pandas is in the cli extra
+        raise ImportError("reading text data files needs pandas: pip install 'magfit[cli]'") from None
+    return pandas
+
+
+def pandas_options(fmt: FileFormat, used: Sequence[int], *, strip_blanks: bool = True) -> dict[str, Any]:
+    """``pandas.read_csv`` options for the data lines of a text file: C engine, the columns ``used``, float64.
+
+    ``strip_blanks`` (pandas' ``skipinitialspace``) costs a quarter of the parse; only a missing value
+    written with a blank before it (``1, nan, 3``) needs it.
+    """
+    assert fmt.delimiter is not None
+    return {
+        "sep": r"\s+" if fmt.delimiter == "whitespace" else fmt.delimiter[0],
+        "header": None,
+        "usecols": list(used),
+        "dtype": np.float64,
+        "engine": "c",
+        "encoding": text_encoding(fmt),
+        "decimal": fmt.decimal,
+        "skipinitialspace": strip_blanks,
+        "skip_blank_lines": True,
+        "na_values": list(NA_VALUES),
+        "keep_default_na": False,
+    }
 
 
 def _kind_of(path: Path, head: bytes) -> _Kind:

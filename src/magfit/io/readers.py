@@ -64,7 +64,14 @@ class SampleTable:
         The file's layout.
     column_note : str or None
         For a file without a header, why its columns were chosen (``column 1 is monotonic: time or a
-        counter``); None when there was no choice to make or it was given.
+        counter``); for the columns of a known converter, which one and what the firmware did to the field
+        (``ArduPilot DataFlash MAG (mavlogdump --format csv), mG; logged after ...``); None otherwise.
+    unit : str or None
+        The samples' unit as the column names state it (``mag_x_uT``, ``MagX (mG)``) or as the converter that
+        wrote them defines it (``magnetometer_ga[0]``: gauss), named as :mod:`magfit.units` names it; None
+        when the file does not say.
+    sensor : str or None
+        The magnetometer read in a file that interleaves several (``I=1``); None otherwise.
     """
 
     path: Path
@@ -75,6 +82,8 @@ class SampleTable:
     skipped_lines: tuple[int, ...]
     format: FileFormat
     column_note: str | None = None
+    unit: str | None = None
+    sensor: str | None = None
 
 
 def iter_sample_chunks(
@@ -83,6 +92,7 @@ def iter_sample_chunks(
     columns: Sequence[str | int] | None = None,
     nonfinite: Literal["skip", "error"] = "skip",
     chunk_rows: int = 1_000_000,
+    sensor: str | None = None,
 ) -> ChunkReader:
     """Read the magnetometer samples of a file chunk by chunk (bounded memory).
 
@@ -96,6 +106,8 @@ def iter_sample_chunks(
         Rows with a NaN, infinite or empty magnetometer value are dropped and counted, or an error.
     chunk_rows : int
         Maximum rows per chunk.
+    sensor : str, optional
+        The magnetometer to read in a file that interleaves several (see :func:`read_samples`).
 
     Returns
     -------
@@ -103,7 +115,7 @@ def iter_sample_chunks(
         An iterable of (n, 3) float64 arrays; after the iteration its ``n_rows``, ``n_skipped`` and
         ``skipped_lines`` are complete.
     """
-    return ChunkReader(path, columns=columns, nonfinite=nonfinite, chunk_rows=chunk_rows)
+    return ChunkReader(path, columns=columns, nonfinite=nonfinite, chunk_rows=chunk_rows, sensor=sensor)
 
 
 def read_samples(
@@ -112,6 +124,7 @@ def read_samples(
     columns: Sequence[str | int] | None = None,
     nonfinite: Literal["skip", "error"] = "skip",
     progress: Callable[[int], object] | None = None,
+    sensor: str | None = None,
 ) -> SampleTable:
     """Read the magnetometer samples of a file.
 
@@ -132,6 +145,10 @@ def read_samples(
     progress : callable, optional
         Called with the number of rows of each chunk read (finite ones; from several threads for a large
         text file), e.g. to advance a progress bar.
+    sensor : str, optional
+        In a text file whose rows come from several magnetometers, told apart by a column such as
+        mavlogdump's ``I``, ``device_id``, ``instance`` or ``sensor_id`` (:mod:`magfit.io.instances`): the one
+        to read, ``"I=1"`` (or ``"1"``). Such a file is refused without it, naming the column and the ids.
 
     Returns
     -------
@@ -143,9 +160,10 @@ def read_samples(
     DataFileError
         Missing, unreadable or empty file; a header without rows; a cell that is not a number; a row with
         another number of fields; magnetometer columns not found or ambiguous; a column name or index that
-        is not in the file; fewer than three columns; every row non-finite.
+        is not in the file; fewer than three columns; every row non-finite; rows of several magnetometers
+        and no ``sensor`` chosen, or a ``sensor`` the file does not hold.
     """
-    reader = ChunkReader(path, columns=columns, nonfinite=nonfinite, chunk_rows=1_000_000)
+    reader = ChunkReader(path, columns=columns, nonfinite=nonfinite, chunk_rows=1_000_000, sensor=sensor)
     pieces = reader.parallel_pieces()
 
     def collect(piece: ChunkReader, stopped: Callable[[], bool]) -> list[NDArray[np.float64]]:
@@ -162,7 +180,7 @@ def read_samples(
     samples = np.concatenate(chunks) if chunks else np.empty((0, 3))
     read = PiecesRead(pieces)
     if read.n_rows == 0:
-        raise file_error(reader.path, "has no data rows; record some samples or give another file")
+        raise reader.no_rows_error()
     if len(samples) == 0:
         raise file_error(
             reader.path,
@@ -178,4 +196,6 @@ def read_samples(
         skipped_lines=read.skipped_lines,
         format=reader.format,
         column_note=reader.column_note,
+        unit=reader.unit,
+        sensor=reader.sensor,
     )

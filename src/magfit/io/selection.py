@@ -21,10 +21,13 @@ from .columns import (
     _MAG_WORDS,
     CONTENT_ROWS,
     ContentChoice,
+    Converter,
     choose_columns_by_content,
     find_magnetometer_columns,
+    name_unit,
     name_words,
     normalise_name,
+    recognise_converter,
 )
 from .layout import HEAD_BYTES, FileFormat, cell_kind, decode_lines, read_head, split_fields, text_encoding
 from .npy import NpyInfo, is_numeric_dtype
@@ -35,6 +38,7 @@ _COLUMN_LABEL = re.compile(r"^column (\d+)$")
 
 __all__ = [
     "NpzSelection",
+    "columns_origin",
     "npy_content_choice",
     "resolve_npz_columns",
     "resolve_table_columns",
@@ -140,6 +144,20 @@ def resolve_table_columns(
             raise OptionError(f"columns {chosen} name the same column twice; give three different columns")
         indices = (positions[0], positions[1], positions[2])
     return indices, (labels[indices[0]], labels[indices[1]], labels[indices[2]])
+
+
+def columns_origin(labels: Sequence[str], header: Sequence[str] | None) -> tuple[str | None, Converter | None]:
+    """The unit of the x, y, z columns ``labels`` and the converter that wrote them, as far as the names say.
+
+    The unit the three names state alike (``mag_x_uT``, ``MagX (mG)``), else the converter's
+    (:func:`magfit.io.columns.recognise_converter`); None, None for a file without a header.
+    """
+    if header is None:
+        return None, None
+    converter = recognise_converter(labels, header)
+    units = {name_unit(label) for label in labels}
+    stated = units.pop() if len(units) == 1 else None
+    return stated or (converter.unit if converter is not None else None), converter
 
 
 @dataclass(frozen=True)

@@ -356,12 +356,16 @@ def open_source(path: str | os.PathLike[str], *, everything: bool = True) -> Sou
 
 
 def _samples_source(path: Path) -> Source:
-    """A text, npy or npz file as a Source: one magnetometer, the three columns :mod:`magfit.io` finds."""
+    """A text, npy or npz file as a Source: the three columns :mod:`magfit.io` finds; one magnetometer per
+    value of a column that tells several apart (mavlogdump's ``I``, ``device_id``: :mod:`magfit.io.instances`),
+    each read with ``--sensor I=1``."""
     from ..io import read_samples, sniff
+    from ..io.instances import sensor_listing, value_text
 
     fmt = sniff(path)
     try:
-        table = read_samples(path)
+        listing = sensor_listing(path)
+        table = read_samples(path) if listing is None or len(listing.counts) == 1 else None
     except DataFileError as error:  # the layout is known, the magnetometer columns are not: say so
         unknown = Magnetometer(
             id="columns", description="no magnetometer columns", unit="", n_samples=0, problem=str(error)
@@ -369,15 +373,54 @@ def _samples_source(path: Path) -> Source:
         return Source(
             path=path, kind="samples", format=fmt.describe(), time_base="none (rows)", magnetometers=(unknown,)
         )
+
+    def read(magnetometer: Magnetometer) -> LogSamples:
+        chosen = read_samples(path, sensor=None if magnetometer.id == "columns" else magnetometer.id)
+        notes = (chosen.column_note,) if chosen.column_note else ()
+        times = np.full(len(chosen.samples), np.nan)  # a samples file has no time base
+        return LogSamples(magnetometer, chosen.samples, times, chosen.columns, notes)
+
+    if table is None:  # several magnetometers interleaved: one each, never one cloud
+        assert listing is not None
+        converter = listing.converter
+        ardupilot = converter is not None and converter.name.startswith("ArduPilot") and listing.column == "I"
+        magnetometers = tuple(
+            Magnetometer(
+                id=sensor,
+                description=f"{', '.join(listing.columns)} where {listing.column} = {value_text(value)}"
+                + (f" ({converter.name})" if converter is not None else ""),
+                unit=listing.unit or "",
+                n_samples=listing.counts[sensor],
+                device_id=int(value) if listing.column.lower().endswith("device_id") else None,
+                notes=(converter.note,) if converter is not None and converter.note else (),
+                slot=int(value) if ardupilot else None,  # ArduPilot's I is its compass index
+            )
+            for sensor, value in listing.values.items()
+        )
+        return Source(
+            path=path,
+            kind="samples",
+            format=fmt.describe(),
+            time_base="none (rows)",
+            magnetometers=magnetometers,
+            _reader=read,
+        )
     columns = ", ".join(str(c) for c in table.columns)
     note = (f"{table.n_skipped} rows skipped (NaN or inf)",) if table.n_skipped else ()
+    one = next(iter(listing.values.values())) if listing is not None else None  # PX4 sensor_mag: its device_id
     magnetometer = Magnetometer(
         id="columns",
         description=columns + (f" ({table.column_note})" if table.column_note else ""),
-        unit="",
+        unit=table.unit or "",
         n_samples=int(table.samples.shape[0]),
         notes=note,
+        device_id=int(one) if one is not None and listing and listing.column.lower().endswith("device_id") else None,
     )
     return Source(
-        path=path, kind="samples", format=fmt.describe(), time_base="none (rows)", magnetometers=(magnetometer,)
+        path=path,
+        kind="samples",
+        format=fmt.describe(),
+        time_base="none (rows)",
+        magnetometers=(magnetometer,),
+        _reader=read,
     )
