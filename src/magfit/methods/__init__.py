@@ -6,7 +6,7 @@ add a module and import it below.
 
 from __future__ import annotations
 
-from . import als, auto, diag, ellipsoid, minmax, ml, robust, sphere, vector  # noqa: F401  (registration)
+from . import als, auto, diag, ellipsoid, gyro, minmax, ml, robust, sphere, vector  # noqa: F401  (registration)
 from .registry import METHODS, FitInput, MethodSpec, get_method, register
 
 __all__ = ["METHODS", "FitInput", "MethodSpec", "get_method", "register"]
