@@ -204,3 +204,23 @@ def test_cli_exit_statuses(roll_180_csv, tmp_path, capsys):
     assert status == 2 and "no accelerometer columns found" in err and "--accel-columns" in err
     status, _, err = _run(capsys, roll_180_csv, "--inclination", "64", "--location", "47.4,8.5")
     assert status == 2 and "not both" in err
+
+
+def test_cli_on_a_dataflash_log_combines_the_orientation_the_firmware_applied(tmp_path, capsys):
+    # A synthetic ArduPilot log (tests/test_sources_motion.py): a tumble with IMU and ATT, COMPASS_ORIENT 6
+    # (YAW_270) already applied to MAG; here the compass is really turned 45° more, so the right setting is
+    # YAW_270 followed by 45°: ROTATION_YAW_315 (7).
+    from test_sources_motion import ORIENT, dataflash_messages, raw_field, write_bin
+
+    formats, rows = dataflash_messages()
+    extra = euler_matrix(0.0, 0.0, 45.0)
+    times = np.array([row[0] for row in rows["MAG"]]) / 1e6
+    rows["MAG"] = [(row[0], 0, *field) for row, field in zip(rows["MAG"], raw_field(times, extra), strict=True)]
+    log = write_bin(tmp_path / "turned.bin", formats, rows)
+    status, out, err = _run(capsys, log, "--max-rate", "none", "--inclination", "63.4")
+    assert status == 0, err
+    assert ORIENT == 6 and "COMPASS_ORIENT 6 (ROTATION_YAW_270" in out
+    assert "COMPASS_ORIENT 7   # ROTATION_YAW_315, 0.0° from the fit" in out
+    assert "CAL_MAG0_ROT 7" in out
+    yaw = float(out.split("roll pitch yaw")[1].split(",")[2].split("±")[0])
+    assert abs(yaw - 45.0) < 0.2  # the rotation found is the one left after the log's own
