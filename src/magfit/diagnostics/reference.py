@@ -45,6 +45,8 @@ __all__ = ["ReferenceReport", "design_singularity", "judge_reference_fit", "judg
 #: the residuals cannot show (it is a turned mounting to them). Ten batches: the estimate of the spread is not
 #: as noisy as with five, for the same understatement.
 BATCHES = 10
+#: Rows the covariance is computed on (a regular stride of a longer recording).
+MAX_ROWS = 200_000
 #: Relative information (share of a tumble's) below which the design is singular: nothing can be fitted.
 SINGULAR_INFORMATION = 1e-10
 #: Heading one-sigma (degrees, RMS over headings, at level or at :data:`TILT_DEG`) beyond which a vector
@@ -310,12 +312,18 @@ def judge_reference_fit(
     scale = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
     # In the samples' unit over the field in it: G⁻¹ would blow the residual up along an undetermined direction.
     residual_rms = float(np.sqrt(np.mean(np.sum(residuals**2, axis=1)))) / (scale * field)
-    jacobians = _jacobians(reference, rate, g)
-    covariance = _covariance(jacobians, residuals, BATCHES)
+    # The covariance on a regular stride of at most MAX_ROWS rows (its Jacobians take 3 x 13 numbers a row),
+    # scaled to all n: variance falls as 1 / samples; the batches still see correlations longer than a step.
+    stride = max(1, -(-n // MAX_ROWS))
+    rows = slice(None, None, stride)
+    jacobians = _jacobians(reference[rows], None if rate is None else rate[rows], g)
+    residuals = residuals[rows]
+    covariance = _covariance(jacobians, residuals, BATCHES) * (jacobians.shape[0] / n)
     weak, condition = _weak_directions(reference, field, covariance, scale)
     heading, heading_max = _heading_sigmas(covariance, g, field, inclination)
     tilted, _ = _heading_sigmas(covariance, g, field, inclination, TILT_DEG)
-    heading_independent, _ = _heading_sigmas(_covariance(jacobians, residuals, 0), g, field, inclination)
+    independent = _covariance(jacobians, residuals, 0) * (jacobians.shape[0] / n)
+    heading_independent, _ = _heading_sigmas(independent, g, field, inclination)
     effective = n * (heading_independent / heading) ** 2 if heading > 0 else float(n)
     scales = tuple(
         float(math.sqrt(max(covariance[3 * i + i, 3 * i + i], 0.0)) / np.linalg.norm(g[i])) for i in range(3)
