@@ -131,7 +131,7 @@ class Alignment:
         ``"supported"`` or ``"weak"`` (a refusal raises :class:`~magfit.CalibrationError`, unless
         ``allow_undetermined``, then ``"refused"``).
     warnings : tuple of str
-        What is weak or refused, in words.
+        What is refused, then what is weak, in words; then notes on the gates (no time stamps ...).
     """
 
     matrix: NDArray[np.float64]
@@ -510,131 +510,33 @@ def align(
     if np.any(norm_m <= 0):
         raise SampleError("calibrated_mag has zero rows: a field of zero has no direction")
 
-    keep, dropped, notes, width = _gates(mag, acc, rates, times, max_rate_dps, accel_tolerance)
-    n_used = int(np.sum(keep))
-    dropped = {reason: count for reason, count in dropped.items() if count}
-    if n_used < MIN_SAMPLES:
-        reasons = "; ".join(f"{count} {reason}" for reason, count in dropped.items()) or "none"
-        raise CalibrationError(
-            f"only {n_used} of {n} samples see gravity alone (dropped: {reasons}); the alignment needs at least "
-            f"{MIN_SAMPLES}: record the vehicle held still or moved slowly in several attitudes"
-            + ("" if max_rate_dps is None else ", or allow faster turns (max_rate_dps) if it turned about itself")
-        )
-    # The accelerometer's direction noise (radians per sample, from successive differences of still samples):
-    # tilt within it carries no information about the rotations, only noise that looks like some.
-    raw_down = -acc / np.linalg.norm(acc, axis=1, keepdims=True)
-    pairs = keep[1:] & keep[:-1]
-    steps = np.linalg.norm(np.diff(raw_down, axis=0)[pairs], axis=1) if np.any(pairs) else np.zeros(1)
-    direction_noise = math.sqrt(float(np.mean(steps**2)) / 4.0) / math.sqrt(max(1, width // 2))
-    if width > 1:
-        # Averaged over half a second of samples that turn slower than max_rate_dps (less than 0.5° apart):
-        # the accelerometer's noise would otherwise look like tilt, and information about the rotations the
-        # motion does not determine (the mount's yaw, for a level vehicle) would be made of noise.
-        half = max(1, width // 2)
-        acc = np.column_stack([_moving_mean(acc[:, i], half) for i in range(3)])
-        mag = np.column_stack([_moving_mean(mag[:, i], half) for i in range(3)])
-        norm_m = np.linalg.norm(mag, axis=1)
-    down = -acc[keep] / np.linalg.norm(acc[keep], axis=1, keepdims=True)
-    mhat = mag[keep] / norm_m[keep, None]
+    down, mhat, direction_noise, dropped, notes = _still_directions(
+        mag, acc, rates, times, max_rate_dps, accel_tolerance
+    )
     fit_s = inclination_deg is None
     s0 = math.sin(math.radians(inclination_deg)) if inclination_deg is not None else 0.0
 
     solutions = _search(down, mhat, s0, fit_s, allow_mirror)
     best = solutions[0]
     cov, info, residuals, inflation = _covariance(down, mhat, best, fit_s)
-    refusals: list[str] = []
-    weak: list[str] = list(notes)
+    refusals, weak = _judge_axes(down, mhat, best, cov, info, inflation, direction_noise, fit_s)
 
-    # Which rotations the samples determine: the eigen-directions of the information about θ.
-    info_theta = info[:3, :3] - (np.outer(info[:3, 3], info[3, :3]) / info[3, 3] if fit_s and info[3, 3] > 0 else 0.0)
-    values, vectors = np.linalg.eigh(info_theta)
-    lever_arms = np.cross(mhat @ best.matrix.T, down)
-    for value, vector in zip(values, vectors.T, strict=True):
-        sigma = math.degrees(1.0 / math.sqrt(value)) if value > 0 else math.inf
-        sigma_cov = math.degrees(math.sqrt(max(float(vector @ cov[:3, :3] @ vector), 0.0)))
-        sigma = max(sigma, sigma_cov)
-        # The lever of this rotation on the dips; against the noise of gravity's direction it is made of noise
-        # (its sigma then falls as 1/√N all the same: a level vehicle would "determine" its mount's yaw).
-        lever = math.sqrt(float(np.mean((lever_arms @ vector) ** 2)))
-        if lever < 1.5 * direction_noise:
-            sigma = math.inf
-        # Far along this axis (the sigma is local): another angle that fits as well leaves it undetermined.
-        far = _far_minimum(down, mhat, best, vector, inflation)
-        if far is not None:
-            sigma = max(sigma, far)
-        if sigma > UNDETERMINED_SIGMA_DEG:
-            refusals.append(
-                f"the rotation about {_axis_words(vector)} is not determined (one-sigma "
-                f"{'beyond 180' if sigma > 180 else f'{sigma:.0f}'}°): each sample pins only the rotation about its "
-                "magnetic east (normal to gravity and the field), and these samples' east directions do not reach "
-                "that axis"
-                + (
-                    " (a level vehicle turning in yaw sees gravity on body z only: its roll and pitch of the mount are "
-                    "determined, its yaw is not)"
-                    if abs(vector[2]) > 0.9
-                    else ""
-                )
-                + "; record the vehicle tilted (rolled and pitched) in several headings, or give the mount's rotation"
-            )
-        elif sigma > WEAK_SIGMA_DEG:
-            weak.append(f"the rotation about {_axis_words(vector)} is weakly determined (one-sigma {sigma:.1f}°)")
-
-    s = best.s
-    inclination = math.degrees(math.asin(max(-1.0, min(1.0, s))))
+    inclination = math.degrees(math.asin(max(-1.0, min(1.0, best.s))))
     inclination_sigma = 0.0
     if fit_s:
-        var_s = float(cov[3, 3])
-        inclination_sigma = math.degrees(math.sqrt(max(var_s, 0.0)) / max(math.cos(math.radians(inclination)), 1e-9))
+        cosine = max(math.cos(math.radians(inclination)), 1e-9)
+        inclination_sigma = math.degrees(math.sqrt(max(float(cov[3, 3]), 0.0)) / cosine)
         if inclination_sigma > INCLINATION_UNDETERMINED_DEG:
             refusals.append(
                 f"the inclination is not determined (fitted {inclination:.1f}° ± {inclination_sigma:.0f}°): "
                 "record more tilt, or give the inclination (the World Magnetic Model at your place: --location)"
             )
-
-    mirror_refusal = (
-        "these samples cannot tell a rotation from a mirror image of the sensor's axes (gravity stays "
-        "near one body axis: a reflection across a plane that holds it changes no dip angle); record the "
-        "vehicle tilted in several attitudes, or state that the axes are right-handed (allow_mirror=False)"
-    )
-    if allow_mirror:
-        # A reflection across the plane the gravity directions keep to changes each dip by 2 (d·n)(n·R m̂): with
-        # d·n within a few times the accelerometer's noise, whatever the fit prefers is noise or bias (a wrong
-        # mirror is a sign flip, so three noise levels rather than the rotations' 1.5).
-        moments = np.linalg.eigvalsh(down.T @ down / len(down))
-        if math.sqrt(max(float(moments[0]), 0.0)) < 3.0 * direction_noise:
-            refusals.append(mirror_refusal)
-
-    # Another minimum that fits as well but is a different rotation, or the mirror image: the data cannot
-    # tell them apart. Compared by the Huber loss at the best fit's scale, as a chi-square with the
-    # correlation of the samples counted (25: five one-sigmas).
-    scale = _robust_scale(residuals)
-    best_loss = _huber_loss(residuals, scale)
-    for other in solutions[1:]:
-        excess = 2.0 * (_huber_loss(_residuals(down, mhat, other.matrix, other.s), scale) - best_loss) / scale**2
-        if excess < 25.0 * inflation:
-            if np.linalg.det(other.matrix) * np.linalg.det(best.matrix) < 0:
-                if mirror_refusal not in refusals:
-                    refusals.append(mirror_refusal)
-                break
-            angle = _relative_angle(best.matrix, other.matrix)
-            if angle > 5.0:  # two starts that refined onto the same minimum are one
-                refusals.append(
-                    f"two rotations {angle:.0f}° apart fit these samples alike: record the vehicle in more attitudes"
-                )
-                break
+    refusals += _judge_alternatives(down, mhat, solutions, residuals, inflation, direction_noise, allow_mirror)
 
     mirror = bool(np.linalg.det(best.matrix) < 0)
     if mirror:
         inverted, nearest = _mirror_axis(best.matrix)
-        flipped = nearest_rotation(-best.matrix, "ardupilot")  # -R is proper: (A1) with d -> -d
-        weak.append(
-            f"the magnetometer's axes are a mirror image of the body's (det -1): no firmware rotation can fix it; "
-            f"invert its {inverted} axis (in the driver or the wiring), then the rotation is "
-            f"{nearest[0].rotation.name} + {nearest[0].rotation.angle_deg:.1f}°; or the accelerometer reports "
-            "gravity instead of the specific force (its sign inverted"
-            + (", or the field points up: the southern magnetic hemisphere" if fit_s else "")
-            + f"), and the rotation is {flipped.name} + {flipped.angle_deg:.1f}° once the accelerometer is negated"
-        )
+        weak.append(_mirror_warning(best.matrix, inverted, nearest[0].rotation, fit_s))
     else:
         inverted, nearest = None, nearest_rotations(best.matrix)
     proper = best.matrix @ _flip(inverted)
@@ -642,16 +544,15 @@ def align(
     # Flipping a sensor axis is a reflection on the right, which does not change the body-frame θ.
     axis_sigma = np.degrees(np.sqrt(np.clip(np.diag(cov[:3, :3]), 0.0, None)))
     euler_sigma = _euler_sigma(proper, cov[:3, :3])
-    dips = np.degrees(np.arcsin(np.clip(residuals + s, -1.0, 1.0))) - inclination
+    dips = np.degrees(np.arcsin(np.clip(residuals + best.s, -1.0, 1.0))) - inclination
     residual_deg = float(np.sqrt(np.mean(dips**2)))
-
     if residual_deg > LARGE_RESIDUAL_DEG:
         weak.append(
             f"the dip angles scatter by {residual_deg:.1f}° RMS: an accelerometer not calibrated (offsets, scales), "
             "accelerations left in the samples used, or a magnetometer calibration that does not fit them; the "
             "one-sigma counts this scatter, not a bias it may hide"
         )
-    verdict = "refused" if refusals else "weak" if len(weak) > len(notes) else "supported"
+    verdict = "refused" if refusals else "weak" if weak else "supported"
     if refusals and not allow_undetermined:
         raise CalibrationError(f"the alignment is refused: {refusals[0]}")
     return Alignment(
@@ -669,10 +570,163 @@ def align(
         nearest=nearest,
         residual_deg=residual_deg,
         n_samples=n,
-        n_used=n_used,
+        n_used=len(down),
         dropped=dropped,
         verdict=verdict,
-        warnings=tuple(refusals + weak),
+        warnings=tuple(refusals + weak + notes),
+    )
+
+
+def _still_directions(
+    mag: NDArray[np.float64],
+    acc: NDArray[np.float64],
+    gyro: NDArray[np.float64] | None,
+    time_s: NDArray[np.float64] | None,
+    max_rate_dps: float | None,
+    accel_tolerance: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, dict[str, int], list[str]]:
+    """The down and field directions (d, m̂) of the samples on which the accelerometer sees gravity alone,
+    the accelerometer's direction noise on them (radians), why the others were dropped, and notes.
+
+    Raises
+    ------
+    CalibrationError
+        Fewer than :data:`MIN_SAMPLES` are left.
+    """
+    n = len(mag)
+    keep, dropped, notes, width = _gates(mag, acc, gyro, time_s, max_rate_dps, accel_tolerance)
+    dropped = {reason: count for reason, count in dropped.items() if count}
+    n_used = int(np.sum(keep))
+    if n_used < MIN_SAMPLES:
+        reasons = "; ".join(f"{count} {reason}" for reason, count in dropped.items()) or "none"
+        raise CalibrationError(
+            f"only {n_used} of {n} samples see gravity alone (dropped: {reasons}); the alignment needs at least "
+            f"{MIN_SAMPLES}: record the vehicle held still or moved slowly in several attitudes"
+            + ("" if max_rate_dps is None else ", or allow faster turns (max_rate_dps) if it turned about itself")
+        )
+    # The accelerometer's direction noise (radians, from successive differences of still samples): tilt
+    # within it carries no information about the rotations, only noise that looks like some.
+    raw_down = -acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    pairs = keep[1:] & keep[:-1]
+    steps = np.linalg.norm(np.diff(raw_down, axis=0)[pairs], axis=1) if np.any(pairs) else np.zeros(1)
+    half = max(1, width // 2)
+    direction_noise = math.sqrt(float(np.mean(steps**2)) / 4.0) / math.sqrt(half)
+    if half > 1:
+        # Averaged over half a second of samples that turn slower than max_rate_dps (0.15° at 0.3°/s): the
+        # accelerometer's noise would otherwise read as tilt.
+        acc = np.column_stack([_moving_mean(acc[:, i], half) for i in range(3)])
+        mag = np.column_stack([_moving_mean(mag[:, i], half) for i in range(3)])
+    down = -acc[keep] / np.linalg.norm(acc[keep], axis=1, keepdims=True)
+    mhat = mag[keep] / np.linalg.norm(mag[keep], axis=1, keepdims=True)
+    return down, mhat, direction_noise, dropped, notes
+
+
+def _judge_axes(
+    down: NDArray[np.float64],
+    mhat: NDArray[np.float64],
+    best: _Solution,
+    cov: NDArray[np.float64],
+    info: NDArray[np.float64],
+    inflation: float,
+    direction_noise: float,
+    fit_s: bool,
+) -> tuple[list[str], list[str]]:
+    """(refusals, weaknesses) of the rotation about each eigen-direction of the information about θ."""
+    refusals: list[str] = []
+    weak: list[str] = []
+    info_theta = info[:3, :3]
+    if fit_s and info[3, 3] > 0:  # the information left about θ once δ is fitted too (Schur complement)
+        info_theta = info_theta - np.outer(info[:3, 3], info[3, :3]) / info[3, 3]
+    values, vectors = np.linalg.eigh(info_theta)
+    lever_arms = np.cross(mhat @ best.matrix.T, down)
+    for value, vector in zip(values, vectors.T, strict=True):
+        sigma = math.degrees(1.0 / math.sqrt(value)) if value > 0 else math.inf
+        sigma = max(sigma, math.degrees(math.sqrt(max(float(vector @ cov[:3, :3] @ vector), 0.0))))
+        # The lever of this rotation on the dips; against the noise of gravity's direction it is made of noise
+        # (its sigma then falls as 1/√N all the same: a level vehicle would "determine" its mount's yaw).
+        lever = math.sqrt(float(np.mean((lever_arms @ vector) ** 2)))
+        if lever < 1.5 * direction_noise:
+            sigma = math.inf
+        # Far along this axis (the sigma is local): another angle that fits as well leaves it undetermined.
+        far = _far_minimum(down, mhat, best, vector, inflation)
+        if far is not None:
+            sigma = max(sigma, far)
+        if sigma > UNDETERMINED_SIGMA_DEG:
+            level = (
+                " (a level vehicle turning in yaw sees gravity on body z only: its roll and pitch of the mount are "
+                "determined, its yaw is not)"
+                if abs(vector[2]) > 0.9
+                else ""
+            )
+            refusals.append(
+                f"the rotation about {_axis_words(vector)} is not determined (one-sigma "
+                f"{'beyond 180' if sigma > 180 else f'{sigma:.0f}'}°): each sample pins only the rotation about its "
+                "magnetic east (normal to gravity and the field), and these samples' east directions do not reach "
+                f"that axis{level}; record the vehicle tilted (rolled and pitched) in several headings, or give the "
+                "mount's rotation"
+            )
+        elif sigma > WEAK_SIGMA_DEG:
+            weak.append(f"the rotation about {_axis_words(vector)} is weakly determined (one-sigma {sigma:.1f}°)")
+    return refusals, weak
+
+
+_MIRROR_REFUSAL = (
+    "these samples cannot tell a rotation from a mirror image of the sensor's axes (gravity stays near one body "
+    "axis: a reflection across a plane that holds it changes no dip angle); record the vehicle tilted in several "
+    "attitudes, or state that the axes are right-handed (allow_mirror=False)"
+)
+
+
+def _judge_alternatives(
+    down: NDArray[np.float64],
+    mhat: NDArray[np.float64],
+    solutions: list[_Solution],
+    residuals: NDArray[np.float64],
+    inflation: float,
+    direction_noise: float,
+    allow_mirror: bool,
+) -> list[str]:
+    """Refusals for a mirror image or another rotation the samples cannot tell from the best fit."""
+    refusals: list[str] = []
+    if allow_mirror:
+        # A reflection across the plane the gravity directions keep to changes each dip by 2 (d·n)(n·R m̂): with
+        # d·n within a few times the accelerometer's noise, whatever the fit prefers is noise or bias (a wrong
+        # mirror is a sign flip, so three noise levels rather than the rotations' 1.5).
+        moments = np.linalg.eigvalsh(down.T @ down / len(down))
+        if math.sqrt(max(float(moments[0]), 0.0)) < 3.0 * direction_noise:
+            refusals.append(_MIRROR_REFUSAL)
+    # Another minimum that fits as well: compared by the Huber loss at the best fit's scale, as a chi-square
+    # with the correlation of the samples counted (25: five one-sigmas).
+    best = solutions[0]
+    scale = _robust_scale(residuals)
+    best_loss = _huber_loss(residuals, scale)
+    for other in solutions[1:]:
+        excess = 2.0 * (_huber_loss(_residuals(down, mhat, other.matrix, other.s), scale) - best_loss) / scale**2
+        if excess >= 25.0 * inflation:
+            continue
+        if np.linalg.det(other.matrix) * np.linalg.det(best.matrix) < 0:
+            if _MIRROR_REFUSAL not in refusals:
+                refusals.append(_MIRROR_REFUSAL)
+            break
+        angle = _relative_angle(best.matrix, other.matrix)
+        if angle > 5.0:  # two starts that refined onto the same minimum are one
+            refusals.append(
+                f"two rotations {angle:.0f}° apart fit these samples alike: record the vehicle in more attitudes"
+            )
+            break
+    return refusals
+
+
+def _mirror_warning(matrix: NDArray[np.float64], inverted: str, nearest: StandardRotation, fit_s: bool) -> str:
+    """A mirror in words, with its two readings: a sensor axis to invert, or an accelerometer to negate."""
+    flipped = nearest_rotation(-matrix, "ardupilot")  # -R is proper: (A1) with d -> -d
+    return (
+        f"the magnetometer's axes are a mirror image of the body's (det -1): no firmware rotation can fix it; "
+        f"invert its {inverted} axis (in the driver or the wiring), then the rotation is "
+        f"{nearest.name} + {nearest.angle_deg:.1f}°; or the accelerometer reports gravity instead of the specific "
+        "force (its sign inverted"
+        + (", or the field points up: the southern magnetic hemisphere" if fit_s else "")
+        + f"), and the rotation is {flipped.name} + {flipped.angle_deg:.1f}° once the accelerometer is negated"
     )
 
 
