@@ -351,7 +351,7 @@ def _recording_for(method: str) -> np.ndarray:
 
 
 @pytest.mark.parametrize("scale", [1e-35, 1e35])
-@pytest.mark.parametrize("method", sorted(magfit.METHODS))
+@pytest.mark.parametrize("method", sorted(name for name, spec in magfit.METHODS.items() if not spec.needs))
 def test_7_data_far_from_unit_scale_fit_without_warnings(method: str, scale: float) -> None:
     samples = _recording_for(method)
     reference = magfit.fit(samples, method=method, diagnostics=False)

@@ -54,6 +54,9 @@ class MethodSpec:
     #: Checks run by :func:`magfit.fit` before the method, each ``check(statistics, method_name)``
     #: raising :class:`~magfit.CalibrationError` when the data cannot support this method.
     checks: tuple[Callable[[Statistics, str], None], ...] = ()
+    #: Options the method cannot run without: inputs beyond the samples (``vector``'s reference field).
+    #: Methods that run on samples alone (every magnitude-only fit) need none.
+    needs: tuple[str, ...] = ()
 
     @property
     def options(self) -> tuple[str, ...]:
@@ -77,13 +80,14 @@ def register(
     data: Literal["statistics", "samples"],
     summary: str,
     checks: tuple[Callable[[Statistics, str], None], ...] = (),
+    needs: tuple[str, ...] = (),
 ) -> Callable[[Callable[..., Calibration]], Callable[..., Calibration]]:
     """Decorator that adds a method to :data:`METHODS` under ``name``."""
 
     def decorate(function: Callable[..., Calibration]) -> Callable[..., Calibration]:
         if name in METHODS:
             raise RuntimeError(f"method {name!r} registered twice")
-        METHODS[name] = MethodSpec(name, function, min_samples, data, summary, checks)
+        METHODS[name] = MethodSpec(name, function, min_samples, data, summary, checks, needs)
         return function
 
     return decorate

@@ -233,6 +233,7 @@ def estimate_lag(raw: NDArray[np.float64], reference: NDArray[np.float64], time_
     data="samples",
     summary="soft iron × misalignment (a general matrix into the vehicle frame), hard iron and the attitude's lag, "
     "by least squares against a reference field",
+    needs=("reference",),
 )
 def fit_vector(
     data: FitInput,
