@@ -8,6 +8,8 @@ firmware and the parameter lines to set.
 
 from __future__ import annotations
 
+import datetime
+import math
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -51,6 +53,7 @@ class _Recording:
     slot: int | None
     position: tuple[float, float, float] | None
     notes: tuple[str, ...]
+    recorded: datetime.datetime | None = None  # when the log's GNSS says it was recorded (for the model)
 
 
 def _columns_by_name(header: tuple[str, ...] | None, pattern: re.Pattern[str]) -> list[str] | None:
@@ -113,13 +116,20 @@ def _read_log(path: Path, sensor: str | None) -> _Recording:
         notes.append("the log's magnetometer is already rotated by an orientation it does not record: the rotation "
                      "found is what remains after it")  # fmt: skip
     slot = next((m.slot for m in source.magnetometers if m.id == motion.sensor), None)
-    position = None
+    position, recorded = None, None
     if motion.position is not None:
         position = (motion.position.lat_deg, motion.position.lon_deg, motion.position.alt_km)
+        if math.isfinite(motion.position.time_s):
+            recorded = datetime.datetime.fromtimestamp(motion.position.time_s, tz=datetime.timezone.utc)
     return _Recording(
         f"{path} ({source.format}, {motion.sensor})", motion.samples, motion.accel, motion.gyro, motion.time_s,
-        mounting, motion.mounting_note, slot, position, tuple(notes),
+        mounting, motion.mounting_note, slot, position, tuple(notes), recorded,
     )  # fmt: skip
+
+
+def _recorded_date(recording: _Recording) -> datetime.date | None:
+    """The date of a log's GNSS fixes (the model of that date), or None (today)."""
+    return recording.recorded.date() if recording.recorded is not None else None
 
 
 def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | None) -> list[str]:
@@ -217,7 +227,8 @@ def align_command(
     place = location or recording.position
     source_of_inclination = "given"
     if inclination is None and place is not None:
-        field = field_at(*place, date=date)  # type: ignore[arg-type]
+        when = date if date is not None or location is not None else _recorded_date(recording)
+        field = field_at(*place, date=when)  # type: ignore[arg-type]
         inclination = field.inclination_deg
         source_of_inclination = field.describe()
 
