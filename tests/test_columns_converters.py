@@ -257,6 +257,15 @@ def test_a_cell_of_the_instance_column_that_is_not_a_number_is_named(tmp_path: P
         read_samples(path, sensor="I=1")
 
 
+def test_a_column_named_i_that_holds_no_instance_is_just_another_column(tmp_path: Path) -> None:
+    path = tmp_path / "current.csv"  # I is a current in amperes here: many values, not whole numbers
+    rows = [f"{k},{12 + 0.01 * k:.2f},{1.5 + 0.37 * (k % 7):.2f},{k},{2 * k},{3 * k}" for k in range(60)]
+    path.write_text("t,V,I,mx,my,mz\n" + "\n".join(rows) + "\n")
+    table = read_samples(path)
+    assert table.columns == ("mx", "my", "mz") and table.n_rows == 60 and table.sensor is None
+    assert head_sensors(path) == () and sensor_listing(path) is None
+
+
 # ---------------------------------------------------------------------------------------------- command line
 
 

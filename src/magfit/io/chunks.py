@@ -31,8 +31,8 @@ from ..errors import DataFileError, OptionError
 from .instances import (
     SensorColumn,
     choose,
-    find_instance_column,
     head_values,
+    instance_column,
     interleaved_error,
     sensor_id,
     value_text,
@@ -163,12 +163,12 @@ class ChunkReader:
         Several values in the head and none chosen is refused here, at once: the rows of two compasses
         are not one cloud. One value is read with a guard against others further in (:meth:`_sensor_rows`).
         """
-        column = find_instance_column(self.format.header, self._indices)
-        if column is None:
+        found = instance_column(self.path, self.format, self._indices)
+        if found is None:
             return None
+        column, values = found
         assert self.format.header is not None
         name = self.format.header[column]
-        values = head_values(self.path, self.format, column)
         if sensor is None:
             if len(values) > 1:
                 raise interleaved_error(self.path, name, values)

@@ -5,7 +5,8 @@ often carries ``device_id``, ``instance`` or ``sensor_id``. Fitted as one cloud,
 calibration of neither: such a file is read one magnetometer at a time, chosen by a *sensor id* of the form
 ``NAME=VALUE`` (``I=1``, ``device_id=592905``) or by the value alone.
 
-The column is found by its name (:data:`INSTANCE_NAMES`); the values a file holds are listed from its head
+The column is found by its name (:data:`INSTANCE_NAMES`) and taken when its head holds a few whole numbers
+(:func:`instance_column`: ``I`` may be a current too). The values a file holds are listed from its head
 when a reader opens it (:func:`head_values`: interleaved compasses show there at once) and from the whole
 file by :func:`sensor_listing` (what ``magfit inspect`` shows).
 """
@@ -43,6 +44,7 @@ __all__ = [
     "find_instance_column",
     "head_sensors",
     "head_values",
+    "instance_column",
     "sensor_id",
     "sensor_listing",
 ]
@@ -55,6 +57,9 @@ INSTANCE_NAMES = frozenset(
         "device_id", "deviceid", "dev_id", "devid", "sensor_id", "sensorid", "mag_id", "compass_id", "imu_id",
     }
 )  # fmt: skip
+#: More distinct values than this in a file's head: the column is not an instance (a vehicle has up to 3 or 4
+#: compasses; a current or a counter named I has many values).
+MAX_INSTANCES = 8
 #: Rows read for the listing of a whole file, per block (one block in memory at a time).
 LISTING_ROWS = 1 << 20
 
@@ -100,6 +105,21 @@ def find_instance_column(header: Sequence[str] | None, exclude: Sequence[int] = 
         if index not in exclude and name.strip().lstrip("\ufeff").rsplit(".", 1)[-1].lower() in INSTANCE_NAMES:
             return index
     return None
+
+
+def instance_column(path: Path, fmt: FileFormat, exclude: Sequence[int]) -> tuple[int, list[float]] | None:
+    """The instance column of a text file and the values of its head, or None.
+
+    A column named like one whose head holds anything but a few whole numbers (at most
+    :data:`MAX_INSTANCES`, none negative) is not taken for one: ``I`` may as well be a current in amperes.
+    """
+    column = find_instance_column(fmt.header, exclude)
+    if column is None:
+        return None
+    values = head_values(path, fmt, column)
+    if len(values) > MAX_INSTANCES or not all(value >= 0 and value.is_integer() for value in values):
+        return None
+    return column, values
 
 
 def head_values(path: Path, fmt: FileFormat, column: int) -> list[float]:
@@ -158,10 +178,11 @@ def head_sensors(path: str | os.PathLike[str]) -> tuple[str, ...]:
         indices, _ = resolve_table_columns(file, fmt, None)
     except DataFileError:
         return ()
-    column = find_instance_column(fmt.header, indices)
-    if column is None:
+    found = instance_column(file, fmt, indices)
+    if found is None:
         return ()
-    return tuple(sensor_id(fmt.header[column], value) for value in head_values(file, fmt, column))
+    column, values = found
+    return tuple(sensor_id(fmt.header[column], value) for value in values)
 
 
 @dataclass(frozen=True)
@@ -205,9 +226,10 @@ def sensor_listing(path: str | os.PathLike[str]) -> SensorListing | None:
     if fmt.kind != "text" or fmt.header is None:
         return None
     indices, labels = resolve_table_columns(file, fmt, None)
-    column = find_instance_column(fmt.header, indices)
-    if column is None:
+    found = instance_column(file, fmt, indices)
+    if found is None:
         return None
+    column = found[0]
     used = sorted({*indices, column})
     counts: dict[float, int] = {}
     pandas = pandas_module()
