@@ -66,6 +66,8 @@ MIN_SAMPLES = 50
 #: A rotation axis determined worse than this (one-sigma, degrees) is refused; worse than WEAK is weak.
 UNDETERMINED_SIGMA_DEG = 10.0
 WEAK_SIGMA_DEG = 1.0
+#: A rotation whose lever on the dips (RMS of ``(R m̂ × d)·n``, radians) is shorter than this is weak: sin 3°.
+SHORT_LEVER = math.sin(math.radians(3.0))
 #: RMS dip residual (degrees) beyond which the samples' scatter is named (1° of accelerometer noise gives about 1°).
 LARGE_RESIDUAL_DEG = 3.0
 #: An inclination fitted worse than this (one-sigma, degrees) is not determined.
@@ -667,6 +669,15 @@ def _judge_axes(
             )
         elif sigma > WEAK_SIGMA_DEG:
             weak.append(f"the rotation about {_axis_words(vector)} is weakly determined (one-sigma {sigma:.1f}°)")
+        elif lever < SHORT_LEVER:
+            # The one-sigma counts the noise; a bias of the apparent gravity (the edge of a coordinated turn, an
+            # accelerometer offset) is magnified by 1/lever, and no scatter shows it (simulated level flight:
+            # errors about this axis 2-4 times its one-sigma).
+            weak.append(
+                f"the rotation about {_axis_words(vector)} is seen through only {math.degrees(lever):.1f}° of tilt: "
+                f"its one-sigma ({sigma:.2f}°) counts the noise, not a bias of the apparent gravity (turns, the "
+                f"accelerometer's offsets), which this lever magnifies {1.0 / lever:.0f} times"
+            )
     return refusals, weak
 
 
