@@ -266,6 +266,25 @@ def test_a_column_named_i_that_holds_no_instance_is_just_another_column(tmp_path
     assert head_sensors(path) == () and sensor_listing(path) is None
 
 
+@pytest.mark.parametrize("name", ["mavlogdump_mag.csv", "blackbox_magadc.csv", "px4_sensor_mag_1.csv"])
+def test_truncated_or_corrupted_converter_files_give_samples_or_one_clean_error(tmp_path: Path, name: str) -> None:
+    original = (DATA / name).read_bytes()
+    rng = np.random.default_rng(5)
+    for trial in range(12):
+        data = bytearray(original[: int(rng.integers(1, len(original)))])
+        for position in rng.integers(0, len(data), size=int(rng.integers(0, 4))):
+            data[position] = int(rng.choice(list(b",\n0xI=-\x00 ")))
+        path = tmp_path / f"{trial}-{name}"
+        path.write_bytes(bytes(data))
+        for sensor in (None, "I=1") if name.startswith("mavlogdump") else (None,):
+            try:
+                table = read_samples(path, sensor=sensor)
+            except magfit.MagfitError as error:  # a DataFileError, on one line naming the file
+                assert str(path) in str(error) and "\n" not in str(error)
+            else:
+                assert table.samples.ndim == 2 and np.isfinite(table.samples).all()
+
+
 # ---------------------------------------------------------------------------------------------- command line
 
 
