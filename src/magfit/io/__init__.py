@@ -6,8 +6,11 @@
 ((26407, 3), ('mx', 'my', 'mz'))
 
 Text files (any common delimiter, header or not, preamble lines, UTF-8 BOM, extra columns), ``.npy`` and
-``.npz`` are accepted; docs/file-formats.md describes how the magnetometer columns are found and every
-error. Reading text needs pandas (the ``cli`` extra); ``import magfit`` does not import this package.
+``.npz`` are accepted; docs/file-formats.md describes how the magnetometer columns are found (the usual
+converters' names too: blackbox_decode, ulog2csv, mavlogdump, ROS CSV, with their unit) and every error. A
+file that interleaves several compasses (an ``I`` or ``device_id`` column) is read one at a time,
+``read_samples(path, sensor="I=1")``. Reading text needs pandas (the ``cli`` extra); ``import magfit`` does
+not import this package.
 """
 
 from __future__ import annotations
