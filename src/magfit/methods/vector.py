@@ -269,9 +269,13 @@ def fit_vector(
     ref = _reference_array(reference, n)
     if not max_lag_s > 0:
         raise OptionError(f"max_lag_s must be a positive number of seconds, got {max_lag_s!r}")
-    field = float(np.median(np.linalg.norm(ref, axis=1)))
+    magnitudes = np.linalg.norm(ref, axis=1)
+    field = float(np.median(magnitudes))
     if not field > 0:
         raise OptionError("reference= is zero at most samples: it must be the field expected at each sample")
+    if np.any(magnitudes < 1e-6 * field):  # the Earth's field is never zero: a missing attitude written as 0
+        row = int(np.argmax(magnitudes < 1e-6 * field))
+        raise OptionError(f"reference= is zero in row {row} (0-based): drop the samples without an attitude")
     details: dict[str, Any] = {}
     rate = None
     lag_limit = None
