@@ -139,6 +139,34 @@ def test_rate_gate_from_the_field_and_gravity_without_a_gyroscope():
         assert without.verdict == "weak" and "body z" in without.warnings[0]
 
 
+def test_turning_the_magnetometer_frame_turns_the_result():
+    # Equivariance: m' = Q m is the same recording seen by a sensor turned by Qᵀ, so R' = R Qᵀ exactly.
+    sim, calibrated = _vehicle("tumble", euler_matrix(10.0, -20.0, 30.0), 2000, seed=12)
+    first = align(calibrated, sim.accel, inclination_deg=64.0, max_rate_dps=None)
+    turn = euler_matrix(33.0, -71.0, 140.0)
+    second = align(calibrated @ turn.T, sim.accel, inclination_deg=64.0, max_rate_dps=None)
+    np.testing.assert_allclose(second.matrix, first.matrix @ turn.T, atol=1e-6)
+    np.testing.assert_allclose(second.axis_sigma_deg, first.axis_sigma_deg, rtol=1e-4)
+
+
+def test_real_mpu9250_magnetometer_is_its_accelerometer_turned_180_about_x(real_data_dir):
+    # ../shared/data/real/mxl_umich_mpu9250_rm3100: raw counts, the accelerometer not calibrated (a 5-6° scatter
+    # of the dips, named), recorded in Ann Arbor (WMM inclination 68.5° in February 2025).
+    import magfit
+
+    path = real_data_dir / "mxl_umich_mpu9250_rm3100" / "preflight_data_original.csv"
+    table = np.genfromtxt(path, delimiter=",", names=True, usecols=range(19))
+    raw = np.column_stack([table["imu_mx"], table["imu_my"], table["imu_mz"]])
+    accel = np.column_stack([table["imu_ax"], table["imu_ay"], table["imu_az"]])
+    calibrated = magfit.fit(raw).apply(raw)
+    result = align(calibrated, accel, inclination_deg=68.5, max_rate_dps=None)
+    nearest = result.nearest_for("ardupilot").rotation
+    assert nearest.name == "ROTATION_ROLL_180" and nearest.angle_deg < 3.0
+    assert not result.mirror and result.verdict == "weak"
+    assert any("dip angles scatter" in w for w in result.warnings)
+    assert np.all(result.sigma_deg < 2.0)
+
+
 @pytest.mark.parametrize(
     ("mag", "accel", "options", "error", "match"),
     [
@@ -224,3 +252,22 @@ def test_cli_on_a_dataflash_log_combines_the_orientation_the_firmware_applied(tm
     assert "CAL_MAG0_ROT 7" in out
     yaw = float(out.split("roll pitch yaw")[1].split(",")[2].split("±")[0])
     assert abs(yaw - 45.0) < 0.2  # the rotation found is the one left after the log's own
+
+
+def test_cli_reads_a_magnitude_only_calibration_and_refuses_an_aligned_one(roll_180_csv, tmp_path, capsys):
+    import magfit
+    from magfit.io.readers import read_samples
+
+    raw = read_samples(roll_180_csv).samples
+    calibration = magfit.fit(raw, method="ellipsoid")
+    sensor = tmp_path / "cal.json"
+    sensor.write_text(calibration.to_json())
+    status, out, err = _run(capsys, roll_180_csv, "--calibration", sensor, "--inclination", "64", "--max-rate", "none")
+    assert status == 0, err
+    assert f"ellipsoid (read from {sensor})" in out and "COMPASS_ORIENT 8" in out
+    aligned = magfit.Calibration("truth", calibration.offset, calibration.matrix, calibration.field_strength,
+                                 frame="vehicle")  # fmt: skip
+    vehicle = tmp_path / "aligned.json"
+    vehicle.write_text(aligned.to_json())
+    status, _, err = _run(capsys, roll_180_csv, "--calibration", vehicle, "--inclination", "64")
+    assert status == 2 and "vehicle-frame calibration, already aligned" in err
