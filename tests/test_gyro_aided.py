@@ -1,0 +1,125 @@
+"""method='gyro': hard and soft iron and the magnetometer's axes from the rotation kinematics, against the truth
+of simulate_vehicle (gyro noise and bias included), its refusals, and its input errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import magfit
+from magfit.errors import CalibrationError, OptionError
+from magfit.methods.gyro import MAPPINGS, mapping_name
+from magfit.vehicle import simulate_vehicle
+
+SOFT_IRON = np.array([[1.15, 0.06, -0.04], [0.06, 0.9, 0.05], [-0.04, 0.05, 1.0]])
+HARD_IRON = np.array([0.3, -0.2, 0.25])  # the field is 1
+GYRO_BIAS = np.array([0.01, -0.02, 0.015])  # rad/s
+ROLL_180 = np.diag([1.0, -1.0, -1.0])  # the magnetometer turned 180° about x (as on the ensta IMU)
+
+
+def _simulate(n: int, motion: str, mounting: np.ndarray, seed: int = 7) -> magfit.vehicle.VehicleSimulation:
+    return simulate_vehicle(
+        n, motion, soft_iron=SOFT_IRON, hard_iron=HARD_IRON, mounting=mounting, noise=0.005, gyro_noise=0.003,
+        gyro_bias=GYRO_BIAS, seed=seed,
+    )  # fmt: skip
+
+
+def _fit(sim: magfit.vehicle.VehicleSimulation, **options: object) -> magfit.Calibration:
+    return magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s, **options)
+
+
+def _heading_error_deg(cal: magfit.Calibration, sim: magfit.vehicle.VehicleSimulation) -> float:
+    """RMS heading error: the calibrated body field against the truth's, both turned to the world by the true
+    attitude (the sign of a vehicle-frame calibration is the truth's: both are proper here)."""
+    ours = np.einsum("kij,kj->ki", sim.attitude, cal.apply(sim.clean))
+    truth = np.einsum("kij,kj->ki", sim.attitude, sim.truth.apply(sim.clean))
+    difference = np.arctan2(ours[:, 1], ours[:, 0]) - np.arctan2(truth[:, 1], truth[:, 0])
+    return float(np.degrees(np.sqrt(np.mean(np.angle(np.exp(1j * difference)) ** 2))))
+
+
+def test_mappings_are_the_24_proper_signed_permutations() -> None:
+    assert len(MAPPINGS) == 24
+    for name, matrix in MAPPINGS.items():
+        assert np.allclose(matrix @ matrix.T, np.eye(3)) and np.isclose(np.linalg.det(matrix), 1.0)
+        assert mapping_name(matrix) == name
+    assert np.array_equal(MAPPINGS["+x-y-z"], ROLL_180)
+
+
+def test_car_without_tumble_recovers_the_truth_and_the_half_turn_about_x() -> None:
+    # One minute of driving (turns, slopes and camber within 15°) with the magnetometer upside down.
+    sim = _simulate(3000, "car", ROLL_180)
+    cal = _fit(sim)
+    assert cal.frame == "vehicle" and cal.details["support"]["verdict"] == "supported"
+    assert cal.details["mapping"] == "+x-y-z"
+    assert np.linalg.norm(cal.offset - HARD_IRON) < 0.01
+    assert np.allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, atol=0.02)
+    truth = sim.truth.matrix / np.cbrt(np.linalg.det(sim.truth.matrix))  # the vehicle matrix, det 1
+    assert np.allclose(cal.matrix, truth, atol=0.02)
+    assert np.allclose(cal.details["gyro_bias"], GYRO_BIAS, atol=0.001)
+    assert _heading_error_deg(cal, sim) < 0.5
+    assert cal.details["options"]["gyro"] == "an array of 3000 rows"
+    assert magfit.Calibration.from_json(cal.to_json()) == cal
+
+
+def test_a_mounting_between_standard_rotations_is_fitted_as_a_general_rotation() -> None:
+    mounting = Rotation.from_euler("xyz", [20.0, -10.0, 15.0], degrees=True).as_matrix()
+    sim = _simulate(1500, "tumble", mounting)
+    cal = _fit(sim)
+    assert cal.details["mapping"] == "general"
+    rotation = np.array(cal.details["rotation"])
+    assert np.degrees(Rotation.from_matrix(rotation @ mounting.T).magnitude()) < 0.5
+    expected = np.degrees(Rotation.from_matrix(mounting).magnitude())  # from the nearest mapping, the identity
+    assert cal.details["nearest_mapping"] == "+x+y+z"
+    assert cal.details["angle_from_nearest_deg"] == pytest.approx(expected, abs=0.5)
+    assert np.linalg.norm(cal.offset - HARD_IRON) < 0.002
+    assert _heading_error_deg(cal, sim) < 0.1
+
+
+def test_a_mirrored_magnetometer_keeps_its_ellipsoid_and_is_returned_proper() -> None:
+    # A field and its negative turn alike: the kinematics see -M as well as M; the proper one is returned.
+    sim = _simulate(1500, "tumble", -ROLL_180)
+    cal = _fit(sim)
+    assert np.linalg.det(cal.matrix) > 0
+    assert np.allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, atol=0.005)
+    assert np.linalg.norm(cal.offset - HARD_IRON) < 0.002
+    truth = sim.truth.matrix / np.cbrt(abs(np.linalg.det(sim.truth.matrix)))  # a mirror: det -1
+    assert np.linalg.det(truth) < 0 and np.allclose(cal.matrix, -truth, atol=0.01)
+    assert "right-handed" in cal.details["mirror"]
+
+
+def test_turning_about_one_axis_only_is_refused_naming_it() -> None:
+    sim = _simulate(1500, "yaw", np.eye(3))
+    with pytest.raises(CalibrationError, match="turned about the gyro's z axis only") as error:
+        _fit(sim)
+    assert "offset and the scale along it" in str(error.value) and "\n" not in str(error.value)
+
+
+def test_a_short_flight_is_refused_not_guessed() -> None:
+    # One minute of level flight at ±3° of bank: the field turns too little in the sensor's frame.
+    sim = simulate_vehicle(3000, "flight", soft_iron=SOFT_IRON, hard_iron=HARD_IRON, max_tilt_deg=3.0,
+                           noise=0.005, gyro_noise=0.003, gyro_bias=GYRO_BIAS, seed=7)  # fmt: skip
+    with pytest.raises(CalibrationError, match="the gyro calibration"):
+        _fit(sim)
+    forced = _fit(sim, allow_undetermined=True)
+    assert forced.details["support"]["verdict"] == "refused" and forced.details["support"]["forced"]
+
+
+def test_bad_gyro_and_time_inputs_are_one_line_option_errors() -> None:
+    sim = simulate_vehicle(1200, "tumble", seed=1)
+    cases = [
+        ({"time_s": sim.time_s}, "needs gyro="),
+        ({"gyro": sim.gyro}, "needs time_s="),
+        ({"gyro": sim.gyro.T, "time_s": sim.time_s}, r"shape \(1200, 3\)"),
+        ({"gyro": sim.gyro[:-1], "time_s": sim.time_s}, r"shape \(1200, 3\)"),
+        ({"gyro": sim.gyro, "time_s": sim.time_s[::-1]}, "increase strictly"),
+        ({"gyro": np.where(np.arange(1200)[:, None] == 5, np.nan, sim.gyro), "time_s": sim.time_s}, "finite"),
+        ({"gyro": sim.gyro, "time_s": sim.time_s, "mapping": "sideways"}, "mapping='sideways' is not valid"),
+        ({"gyro": np.degrees(sim.gyro), "time_s": sim.time_s}, "degrees per second"),
+    ]
+    for options, message in cases:
+        with pytest.raises(OptionError, match=message) as error:
+            magfit.fit(sim.samples, method="gyro", **options)
+        assert "\n" not in str(error.value)
+    with pytest.raises(CalibrationError, match="too short"):
+        magfit.fit(sim.samples[:200], method="gyro", gyro=sim.gyro[:200], time_s=sim.time_s[:200])
