@@ -84,12 +84,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
 from ..rotations import custom_angles
 from ._common import (
     ROTATION_TOLERANCE_DEG,
+    VehicleSplit,
     describe,
     factor,
     float32_text,
@@ -228,43 +230,7 @@ def _compass(
     orientation: dict[str, float] = {}
     if calibration.frame == "vehicle":
         split = vehicle_split(calibration, "ardupilot", "ardupilot")
-        assert split.standard is not None
-        if split.standard.angle_deg <= ROTATION_TOLERANCE_DEG:
-            rotation = np.asarray(split.standard.matrix)
-            applied = rotation @ split.symmetric
-            loss = heading_error_deg(calibration, applied, calibration.offset)
-            orientation[f"COMPASS_ORIENT{n}"] = float(split.standard.id)
-            comments.append(
-                f"# COMPASS_ORIENT{n} = {split.standard.id} ({split.standard.name}) is "
-                f"{split.standard.angle_deg:.2f} deg from the fitted alignment (tolerance "
-                f"{ROTATION_TOLERANCE_DEG} deg): a heading error of up to {loss:.2f} deg ({ASSUMPTION})"
-            )
-        else:
-            if custom > CUSTOM_ROTATION_COUNT:
-                raise ExportError(
-                    f"ArduPilot has {CUSTOM_ROTATION_COUNT} custom rotations (CUST_ROT1, CUST_ROT2), and compass "
-                    f"slot {where.slot} would need a third (its alignment is {split.standard.angle_deg:.1f} deg from "
-                    "every fixed COMPASS_ORIENT); export that compass on its own, or align it to a fixed rotation"
-                )
-            rotation = split.rotation
-            roll, pitch, yaw = custom_angles(rotation, "ardupilot")
-            orientation[f"COMPASS_ORIENT{n}"] = float(ROTATION_CUSTOM_1 + custom - 1)
-            orientation["CUST_ROT_ENABLE"] = 1.0
-            orientation |= {
-                f"CUST_ROT{custom}_{axis}": value
-                for axis, value in zip(("ROLL", "PITCH", "YAW"), (roll, pitch, yaw), strict=True)
-            }
-            comments.append(
-                f"# COMPASS_ORIENT{n} = {ROTATION_CUSTOM_1 + custom - 1}: custom rotation CUST_ROT{custom} (ArduPilot "
-                f"4.2+; reboot after loading), the fitted alignment exactly; the nearest fixed one, "
-                f"{split.standard.name}, is {split.standard.angle_deg:.2f} deg away"
-            )
-        if not np.allclose(rotation, np.eye(3)):
-            comments.append(
-                f"# WARNING: ArduPilot applies COMPASS_ORIENT{n} to an external compass only "
-                f"({external(where.slot)} = 1, AP_Compass_Backend::rotate_field); an internal one follows "
-                "AHRS_ORIENTATION, which turns the board"
-            )
+        rotation, orientation, comments = _orientation(calibration, split, where.slot, custom)
         matrix = rotation @ split.symmetric @ rotation.T  # D = R S R^T: symmetric, D R = R S
         offsets = -k * (rotation @ calibration.offset)  # ArduPilot adds its offsets, after the rotation
     else:
@@ -318,6 +284,56 @@ def _compass(
     if note is not None:
         comments.append(f"# NOTE: {plain(note)}")
     return _Compass(where.slot, parameters, comments)
+
+
+def _orientation(
+    calibration: Calibration, split: VehicleSplit, slot: int, custom: int
+) -> tuple[NDArray[np.float64], dict[str, float], list[str]]:
+    """The rotation R ArduPilot will apply to compass ``slot``, its parameters and comment lines.
+
+    The nearest fixed COMPASS_ORIENT within the tolerance, else the custom rotation CUST_ROT``custom``.
+    """
+    n = suffix(slot)
+    comments: list[str] = []
+    orientation: dict[str, float] = {}
+    assert split.standard is not None
+    if split.standard.angle_deg <= ROTATION_TOLERANCE_DEG:
+        rotation = np.asarray(split.standard.matrix)
+        applied = rotation @ split.symmetric
+        loss = heading_error_deg(calibration, applied, calibration.offset)
+        orientation[f"COMPASS_ORIENT{n}"] = float(split.standard.id)
+        comments.append(
+            f"# COMPASS_ORIENT{n} = {split.standard.id} ({split.standard.name}) is "
+            f"{split.standard.angle_deg:.2f} deg from the fitted alignment (tolerance "
+            f"{ROTATION_TOLERANCE_DEG} deg): a heading error of up to {loss:.2f} deg ({ASSUMPTION})"
+        )
+    else:
+        if custom > CUSTOM_ROTATION_COUNT:
+            raise ExportError(
+                f"ArduPilot has {CUSTOM_ROTATION_COUNT} custom rotations (CUST_ROT1, CUST_ROT2), and compass "
+                f"slot {slot} would need a third (its alignment is {split.standard.angle_deg:.1f} deg from "
+                "every fixed COMPASS_ORIENT); export that compass on its own, or align it to a fixed rotation"
+            )
+        rotation = split.rotation
+        roll, pitch, yaw = custom_angles(rotation, "ardupilot")
+        orientation[f"COMPASS_ORIENT{n}"] = float(ROTATION_CUSTOM_1 + custom - 1)
+        orientation["CUST_ROT_ENABLE"] = 1.0
+        orientation |= {
+            f"CUST_ROT{custom}_{axis}": value
+            for axis, value in zip(("ROLL", "PITCH", "YAW"), (roll, pitch, yaw), strict=True)
+        }
+        comments.append(
+            f"# COMPASS_ORIENT{n} = {ROTATION_CUSTOM_1 + custom - 1}: custom rotation CUST_ROT{custom} (ArduPilot "
+            f"4.2+; reboot after loading), the fitted alignment exactly; the nearest fixed one, "
+            f"{split.standard.name}, is {split.standard.angle_deg:.2f} deg away"
+        )
+    if not np.allclose(rotation, np.eye(3)):
+        comments.append(
+            f"# WARNING: ArduPilot applies COMPASS_ORIENT{n} to an external compass only "
+            f"({external(slot)} = 1, AP_Compass_Backend::rotate_field); an internal one follows "
+            "AHRS_ORIENTATION, which turns the board"
+        )
+    return rotation, orientation, comments
 
 
 def _scale(calibration: Calibration, k: float, expected_field: float | None) -> float:
