@@ -515,7 +515,7 @@ def check_targets(
     magyc_items, magyc_ok, magyc_ran = [], True, False
     for case in cases:
         per_case = results[case.name]
-        if gyro is None:
+        if gyro is None or gyro not in per_case:  # not run on this case (see VehicleCase.gyro)
             continue
         if VECTOR in per_case and _complete(per_case[VECTOR]):
             ran = True
