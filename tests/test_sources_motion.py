@@ -416,6 +416,7 @@ def test_bag_motion_turns_rep_103_into_ned(tmp_path: Path, kind: str) -> None:
     np.testing.assert_allclose(motion.gyro, body_rates(t) @ flip, atol=2e-3)
     np.testing.assert_allclose(motion.accel, specific_force(t) @ flip, atol=0.02)
     assert any("gravity where it belongs" in note for note in motion.notes)
+    assert motion.date == datetime.date(2026, 1, 1)  # the header stamps' own date
     # attitude · calibrated (FLU) field = the NED field: the frames line up end to end.
     calibration = magfit.fit(motion.samples, method="ellipsoid")
     world = np.einsum("nij,nj->ni", motion.attitude, calibration.apply(motion.samples, normalized=True))
@@ -476,6 +477,7 @@ def test_ardupilot_sitl_log_gravity_and_field_in_ned() -> None:
         declination = np.degrees(np.arctan2(world[1], world[0]))
         assert inclination == pytest.approx(63.9, abs=0.3) and declination == pytest.approx(10.6, abs=0.3)
         assert motion.position is not None and motion.position.lat_deg == pytest.approx(37.24, abs=0.01)
+        assert motion.date == datetime.date(2026, 4, 14)  # the first GPS fix's week and milliseconds
 
 
 def test_the_real_mavlogdump_output_reads_as_its_bin() -> None:

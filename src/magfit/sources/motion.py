@@ -27,6 +27,7 @@ Frames (every reader states them in the notes too):
 
 from __future__ import annotations
 
+import datetime
 from dataclasses import dataclass
 
 import numpy as np
@@ -100,6 +101,9 @@ class Motion:
         For each of ``attitude``, ``gyro``, ``accel`` present: the stream it came from and its rate.
     position : Position or None
         Where and when the log was recorded (its GNSS fixes), for the World Magnetic Model.
+    start_utc_s : float
+        UTC seconds since 1970 near the start of the recording (a bag's first stamp, else the first GNSS fix's
+        time), NaN when the log does not say: the date the World Magnetic Model needs.
     n_dropped : int
         Magnetometer samples dropped because another stream did not cover them.
     notes : tuple of str
@@ -119,8 +123,16 @@ class Motion:
     imu_frame: str = ""
     sources: dict[str, str] | None = None
     position: Position | None = None
+    start_utc_s: float = float("nan")
     n_dropped: int = 0
     notes: tuple[str, ...] = ()
+
+    @property
+    def date(self) -> datetime.date | None:
+        """The UTC date of :attr:`start_utc_s`, or None when it is not known."""
+        if not np.isfinite(self.start_utc_s):
+            return None
+        return datetime.datetime.fromtimestamp(self.start_utc_s, tz=datetime.timezone.utc).date()
 
     @property
     def world_frame(self) -> str:
@@ -176,12 +188,13 @@ def align(
     mounting: NDArray[np.float64] | None = None,
     mounting_note: str = "",
     position: Position | None = None,
+    start_utc_s: float | None = None,
     notes: tuple[str, ...] = (),
 ) -> Motion:
     """Put the other streams on the magnetometer's stamps (see the module's docstring) into a :class:`Motion`.
 
     A stream with fewer than two usable messages is left out (None) and said; the samples none of the
-    remaining streams cover are dropped.
+    remaining streams cover are dropped. ``start_utc_s`` None: the position's time.
     """
     from scipy.spatial.transform import Rotation, Slerp  # scipy is a dependency of magfit; only this needs it
 
@@ -240,6 +253,7 @@ def align(
         imu_frame=" / ".join(sorted(frames)),
         sources={key: f"{s.name} ({s.frame}, {_rate(s.time_s):.1f} Hz)" for key, s in used.items()},
         position=position,
+        start_utc_s=float(start_utc_s if start_utc_s is not None else (position.time_s if position else np.nan)),
         n_dropped=dropped,
         notes=tuple(said),
     )

@@ -366,6 +366,9 @@ def _motion(mag: MagneticTopic, imus: Sequence[ImuTopic], read: Any, position: A
         mounting=np.eye(3) if same else None,
         mounting_note="the same frame_id as the Imu" if same else "",
         position=position,
+        # header stamps are UTC seconds since the epoch (a bag's receive times too): the recording's own date,
+        # unless the clock was a simulation's (stamps from 0: before 2001 is no real recording's date)
+        start_utc_s=float(read.time_s[0]) if len(read.time_s) and read.time_s[0] > 1e9 else None,
         notes=tuple(notes),
     )
 
