@@ -430,3 +430,36 @@ def test_two_real_magnetometers_on_one_rig(real_data_dir: Path) -> None:
     assert 1.0 < angle < 5.0
     with pytest.raises(ExportError, match="from the nearest \\(0, ROTATION_NONE"):
         export(cal, "px4")
+
+
+# ---------------------------------------------------------------------- random vehicle-frame calibrations
+
+
+def _random_vehicle(rng: np.random.Generator, rotation: NDArray[np.float64]) -> magfit.Calibration:
+    """A random soft iron (within ArduPilot's DIA/ODI limits) after which ``rotation`` turns into the vehicle."""
+    a = np.eye(3) + 0.08 * rng.normal(size=(3, 3))
+    soft = sqrtm_spd(a @ a.T)
+    soft /= np.cbrt(np.linalg.det(soft))
+    return magfit.Calibration(
+        "vector", rng.uniform(-40, 40, 3), rotation @ soft, rng.uniform(30, 60), unit="uT", frame="vehicle"
+    )
+
+
+def sqrtm_spd(m: NDArray[np.float64]) -> NDArray[np.float64]:
+    values, vectors = np.linalg.eigh(m)
+    return (vectors * np.sqrt(values)) @ vectors.T
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_random_vehicle_calibrations_through_ardupilot_and_px4(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    raw = rng.normal(size=(300, 3)) * 50 + rng.uniform(-40, 40, 3)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    free = _random_vehicle(rng, q * np.sign(np.linalg.det(q)))  # any rotation: ArduPilot's custom one
+    _close(ardupilot_field(parse_ardupilot(export(free, "ardupilot")), 10 * raw), 10 * free.apply(raw), 10 * raw,
+           RTOL_FLOAT32)  # fmt: skip
+    entry = standard_rotations("px4")[int(rng.integers(0, 48))]
+    fixed = _random_vehicle(rng, np.asarray(entry.matrix))  # on PX4's table: exact
+    _close(px4_correct(parse_px4(export(fixed, "px4")), 0.01 * raw), 0.01 * fixed.apply(raw), 0.01 * raw, RTOL_FLOAT32)
+    _close(ardupilot_field(parse_ardupilot(export(fixed, "ardupilot")), 10 * raw), 10 * fixed.apply(raw), 10 * raw,
+           RTOL_FLOAT32)  # fmt: skip
