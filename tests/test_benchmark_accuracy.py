@@ -389,3 +389,24 @@ def test_the_vehicle_smoke_grid_runs_and_reports_every_target(tmp_path: Path) ->
     assert data["outcomes"]["flight, attitude ±1°"]["regression"][0]["alignment_deg"] is not None
     assert accuracy.main(["--vehicle", "--smoke", "--no-peers", "--methods", "sphere", "--output", str(tmp_path)]) == 0
     assert "accuracy.py --vehicle --smoke" in (tmp_path / "accuracy.md").read_text()
+
+
+def test_real_recording_scoring_recovers_an_exact_reference() -> None:
+    # A simulated tumble as a "recording with an attitude reference": noise-free, no lag, the magnetometer
+    # in the body's axes. The world field is estimated from the ml fit (exact here), so the plain
+    # regression on the reference it gives is exact, and the raw samples are charged their iron.
+    simulation = vehicle.simulate_vehicle(
+        3000, "tumble", rate_hz=50.0, soft_iron=np.diag([1.1, 0.95, 0.9]), hard_iron=[0.3, 0.1, -0.2], seed=4
+    )
+    recording = vehicle.AttitudeRecording(
+        "simulated", simulation.time_s, simulation.samples, simulation.attitude, simulation.gyro, simulation.accel
+    )
+    result = vehicle.run_real(recording, methods=["ml"])
+    # Its direction: a magnitude-only fit knows the field strength only up to the soft iron's scale.
+    field = np.asarray(result["field_enu"])
+    np.testing.assert_allclose(field / np.linalg.norm(field), simulation.field_world, atol=1e-6)
+    assert result["methods"]["regression"]["heading_deg"] < 1e-6
+    assert result["methods"]["ml"]["heading_deg"] < 1e-6
+    assert result["methods"]["as logged"]["heading_deg"] > 5.0
+    assert set(result["methods"]) == {"as logged", "ml", "regression"}  # the methods asked for and the yardsticks
+    assert result["fit_samples"] == pytest.approx(1500 / vehicle.BROAD_STRIDE, abs=2)  # alternate 10 s of 60 s
