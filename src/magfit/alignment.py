@@ -75,7 +75,7 @@ INCLINATION_UNDETERMINED_DEG = 10.0
 #: Contiguous blocks of the recording for the batch-means covariance.
 _BATCHES = 20
 #: Samples fitted from each of the 48 starts before the best is refined on all of them.
-_START_SAMPLES = 1500
+_START_SAMPLES = 800
 _AXES = "xyz"
 
 
