@@ -258,6 +258,24 @@ def test_an_old_px4_sensor_mag_calibrated_by_its_driver_is_undone(tmp_path: Path
     np.testing.assert_allclose(source.read().samples, simulation.samples, atol=1e-6)
 
 
+def test_an_older_px4_compass_only_in_sensor_combined_is_listed_with_the_reason(tmp_path: Path) -> None:
+    # PX4's oldest ULogs (pyulog's sample.ulg) have no sensor_mag: only the primary compass, calibrated and
+    # rotated, in sensor_combined.magnetometer_ga. Listed, refused with the reason, even when only the
+    # magnetometer topics were asked for.
+    writer = ULogWriter()
+    writer.format("sensor_combined", [("uint64_t", "timestamp"), ("float[3]", "magnetometer_ga")])
+    writer.subscribe("sensor_combined", 0)
+    for j in range(50):
+        writer.data("sensor_combined", 0, 1_000_000 + j * 4_000, 0.2, 0.01, 0.43)
+    path = tmp_path / "old.ulg"
+    path.write_bytes(writer.bytes())
+    for everything in (True, False):
+        source = open_source(path, everything=everything)
+        assert [(m.id, m.n_samples, m.raw) for m in source.magnetometers] == [("sensor_combined/0", 50, False)]
+        with pytest.raises(DataFileError, match="older PX4 logs only its primary compass's field"):
+            source.read()
+
+
 def test_a_fine_tuned_board_rotation_is_refused_with_the_reason(tmp_path: Path) -> None:
     path = tmp_path / "tilted.ulg"
     write_log(path, n=100, board_rot=4, board_tilt=2.5, second=False)

@@ -170,6 +170,11 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
             sid = f"vehicle_magnetometer/{data.multi_id}"
             streams[sid] = data
             magnetometers.append(_calibrated(sid, data, parameters, changed))
+    for data in ulog.data_list:
+        if data.name == "sensor_combined" and data.multi_id == 0 and "magnetometer_ga[0]" in data.data:
+            magnetometers.append(_combined(data))
+    if not magnetometers and not everything:  # an older PX4 logs its compass only in sensor_combined: say so
+        return open_ulog(path, file, everything=True)
     slots = _slots(parameters, [m.device_id for m in magnetometers])
     magnetometers = [replace(m, slot=slots.get(m.device_id)) if m.device_id else m for m in magnetometers]
     counts: dict[str, int] = {}
@@ -482,6 +487,25 @@ def _raw(sid: str, data: Any, parameters: dict[str, Any]) -> Magnetometer:
         note = f"{how} (PX4's default logging profile): too few samples for a fit; {_HOW_TO_LOG_MORE}"
         magnetometer = replace(magnetometer, notes=(*notes, note))
     return magnetometer
+
+
+def _combined(data: Any) -> Magnetometer:
+    """An older PX4's sensor_combined.magnetometer_ga, listed with the reason it cannot be fitted."""
+    n, start, end = _span(data)
+    return Magnetometer(
+        id="sensor_combined/0",
+        description="calibrated sensor_combined.magnetometer_ga (an older PX4: its primary compass)",
+        unit="G",
+        n_samples=n,
+        start_s=start,
+        end_s=end,
+        raw=False,
+        problem=(
+            "this older PX4 logs only its primary compass's field after the calibration and the rotation, at the "
+            "sensor_combined rate, without saying which compass it is: it cannot be undone; log sensor_mag "
+            "(a PX4 that has it) or fit a recording of the raw field"
+        ),
+    )
 
 
 def _calibration_index(parameters: dict[str, Any], device: int | None) -> int | None:
