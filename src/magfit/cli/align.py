@@ -146,6 +146,8 @@ def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | 
         lines.append(f"{firmware:10s} {setting}   # {rotation.name}, {rotation.angle_deg:.1f}° from the fit")
         custom = CUSTOM[firmware]
         if custom is None:
+            # An internal compass follows the board: CAL_MAGn_ROT = -1 (sensor_calibration/Magnetometer.cpp).
+            lines.append(f"{'':10s} # an external compass; an internal one follows SENS_BOARD_ROT")
             if rotation.angle_deg > 2.0:
                 lines.append(f"{'':10s} # PX4 has no custom compass rotation: {rotation.angle_deg:.1f}° remain")
             continue
