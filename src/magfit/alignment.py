@@ -11,9 +11,9 @@ forward-right-down body; the field points down in the northern magnetic hemisphe
 
     d_kᵀ R m_k / |m_k| = sin δ          for every sample k                                 (A1)
 
-R (``body = R @ sensor``, the firmwares' convention, :mod:`magfit.rotations`) is fitted by robust
-Gauss-Newton over rotations from the 24 axis-aligned starts (and their 24 mirror images), with δ known
-(the World Magnetic Model, :mod:`magfit.geomag`) or fitted as a fourth parameter.
+R (``body = R @ sensor``, the firmwares' convention, :mod:`magfit.rotations`) is fitted by a robust (Huber)
+Levenberg-Marquardt over rotations from the 24 axis-aligned starts (and their 24 mirror images), with δ
+known (the World Magnetic Model, :mod:`magfit.geomag`) or fitted as a fourth parameter.
 
 What the samples determine. Turning R by a small angle θ (body frame) changes (A1) by ``θ · (R m̂_k × d_k)``:
 each sample constrains only the rotation about its *magnetic east* direction ``m̂ × d`` (normal to the plane of
@@ -25,20 +25,27 @@ number of samples. A boat rolling on a steady heading sees east near one body di
 rotation about the axis normal to that plane is weakly determined. The information matrix ``Σ w_k j_k j_kᵀ``,
 ``j_k = R m̂_k × d_k``, gives those directions and their one-sigma; a rotation axis with a one-sigma beyond
 :data:`UNDETERMINED_SIGMA_DEG` is refused (``CalibrationError``) naming it, one beyond
-:data:`WEAK_SIGMA_DEG` is weak.
+:data:`WEAK_SIGMA_DEG` is weak. Two traps of that local view: the lever ``RMS(j_k · n)`` of an axis made of
+the accelerometer's noise alone still gives a sigma that falls as 1/√N (below 1.5 noise levels the axis is
+refused as not determined), and a lever shorter than :data:`SHORT_LEVER` (3° of tilt) magnifies any bias of
+the apparent gravity beyond what the sigma counts (weak, named). The loss is also scanned along each axis
+for another angle that fits as well.
 
 The accelerometer sees gravity alone only when the vehicle does not accelerate: samples are kept where
 ``|a|`` is within :data:`ACCEL_TOLERANCE` of g (the median |a|) and the rotation rate (the gyroscope, or the
 rate at which the field and gravity directions turn) is below ``max_rate_dps``: in a turn at speed v and
-rate ω the centripetal acceleration v ω tilts the apparent gravity by ``atan(v ω / g)`` (2.5° at 25 m/s and
-1°/s), and a coordinated turn hides it from |a| entirely. Remaining outliers are down-weighted (Huber).
+rate ω the centripetal acceleration v ω tilts the apparent gravity by ``atan(v ω / g)`` (0.75° at 25 m/s and
+the default 0.3°/s), and a coordinated turn hides it from |a| entirely. Kept samples are averaged over half
+a second. Remaining outliers are down-weighted (Huber).
 
 Mirrors. A magnetometer whose axes are left-handed relative to the body (one axis inverted, or two swapped)
 is an orthogonal R with det −1 that no firmware rotation can represent; it is fitted as such and reported
 with the sensor axis to invert. Without a known inclination, R with δ and −R with −δ fit (A1) alike: the
 field is then taken to point down (δ > 0, the northern magnetic hemisphere), and the mirror verdict rests
 on that. An accelerometer that reports gravity instead of the specific force (its sign inverted) also looks
-like a mirror.
+like a mirror: −R is proper, and both readings are reported. Gravity directions that keep to a plane (a level
+vehicle, one that only pitches) cannot tell a rotation from its reflection across that plane: refused unless
+``allow_mirror=False``.
 
 The one-sigma is honest for correlated samples: batch means of the score over contiguous blocks of the
 recording (the sandwich covariance, as in :func:`magfit.diagnostics.uncertainty.correlation_excess`).
