@@ -38,6 +38,8 @@ ARDUPILOT_CASES = {
     36: (3, -1, -2),  # ROLL_90_PITCH_180_YAW_90: (1,-3,2) -> (-1,-3,-2) -> (3,-1,-2)
     37: (-3, -1, 2),  # ROLL_90_YAW_270: (1,-3,2), then tmp = x; x = y; y = -tmp
     39: (H * (1 - 3), 2, H * (1 + 3)),  # PITCH_315: tmp = h(x - z); z = h(x + z); x = tmp
+    42: (1, H * (2 - 3), H * (2 + 3)),  # ROLL_45: tmp = h(y - z); z = h(y + z); y = tmp
+    43: (1, H * (2 + 3), H * (3 - 2)),  # ROLL_315: tmp = h(y + z); z = h(z - y); y = tmp
 }
 
 # PX4 src/lib/conversion/rotation.cpp, rotate_3f (the hand-written switch; get_rot_matrix is the Euler form):
