@@ -163,9 +163,9 @@ def _covered(stream: Stream, time: NDArray[np.float64]) -> tuple[NDArray[np.bool
     steps = np.diff(stream.time_s)
     limit = max(GAP_MIN_S, GAP_STEPS * float(np.median(steps)))
     gaps = np.flatnonzero(steps > limit)
-    in_gap = np.zeros(len(time), dtype=bool)
-    for g in gaps:
-        in_gap |= (time > stream.time_s[g]) & (time < stream.time_s[g + 1])
+    # The message at or before each stamp: the stamp is in a gap when the step after that message is one.
+    before = np.clip(np.searchsorted(stream.time_s, time, side="right") - 1, 0, len(steps) - 1)
+    in_gap = inside & (steps[before] > limit) & (time > stream.time_s[before]) & (time < stream.time_s[before + 1])
     said = []
     if np.any(~inside):
         said.append(f"{int(np.count_nonzero(~inside))} outside {stream.name}'s span")
