@@ -181,6 +181,24 @@ def test_each_compass_of_an_interleaved_file_is_its_own_truth(sensor: str) -> No
     assert_truth(magfit.fit(other.samples, method="ellipsoid"), truth, offset_tol=1.0, shape_tol=0.01)
 
 
+def test_real_mavlogdump_csv_of_three_compasses_reads_each_as_the_bin_holds_it() -> None:
+    path = DATA / "sitl_three_compasses_mag.csv"  # mavlogdump --format csv --types MAG on the SITL .bin
+    log = open_source(DATA.parent / "ardupilot_sitl" / "sitl_three_compasses.bin")
+    listing = sensor_listing(path)
+    assert listing is not None and listing.unit == "mG"
+    assert (
+        listing.counts
+        == {f"I={m.slot}": m.n_samples for m in log.magnetometers}
+        == {"I=0": 249, "I=1": 249, "I=2": 249}
+    )
+    for sensor in listing.counts:
+        table = read_samples(path, sensor=sensor)
+        assert table.samples.shape == (249, 3) and table.samples[0].tolist() == [195.0, 119.0, 427.0]
+    result = CliRunner().invoke(cli, ["calibrate", str(path)])  # a vehicle standing still: each refused, exit 1
+    assert result.exit_code == 1 and "3 of 3 magnetometers could not be fitted (I=0, I=1, I=2)" in result.stderr
+    assert "all 249 samples are identical" in result.stderr
+
+
 @pytest.mark.parametrize(
     ("sensor", "message"),
     [
