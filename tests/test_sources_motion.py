@@ -423,6 +423,18 @@ def test_bag_motion_turns_rep_103_into_ned(tmp_path: Path, kind: str) -> None:
     np.testing.assert_allclose(np.median(world, axis=0), FIELD_NED / np.linalg.norm(FIELD_NED), atol=0.01)
 
 
+def test_the_imu_with_an_orientation_goes_with_the_magnetometer() -> None:
+    from magfit.sources.rosbag import ImuTopic, MagneticTopic, _companion
+
+    time = np.arange(3.0)
+    raw = ImuTopic("/imu/a_raw", "imu_link", np.full((3, 4), np.nan), np.zeros((3, 3)), time)
+    fused = ImuTopic("/imu/data", "imu_link", np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)), np.zeros((3, 3)), time)
+    other = ImuTopic("/other/imu", "base_link", np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)), np.zeros((3, 3)), time)
+    mag = MagneticTopic("/imu/mag", "imu_link", np.zeros((3, 3)), time)
+    chosen, why = _companion(mag, [other, raw, fused])
+    assert chosen is fused and "same frame_id" in why
+
+
 # --- what align does on its own, and what a samples file says ---------------------------------------------
 
 

@@ -313,9 +313,12 @@ _ENU_TO_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
 def _companion(mag: MagneticTopic, imus: Sequence[ImuTopic]) -> tuple[ImuTopic | None, str]:
-    """The Imu topic that goes with a magnetometer: the same frame_id, else the same namespace, else the first."""
+    """The Imu topic that goes with a magnetometer: the same frame_id, else the same namespace, else the first;
+    among those, one that gives an orientation."""
     if not imus:
         return None, "the bag has no sensor_msgs/Imu topic"
+    # An Imu with an orientation first (imu/data before imu/data_raw, which has none by the message's rule).
+    imus = sorted(imus, key=lambda imu: not np.any(np.isfinite(imu.orientation)))
     for imu in imus:
         if imu.frame_id == mag.frame_id:
             return imu, f"{imu.topic}: the same frame_id as {mag.topic} ({mag.frame_id})"
