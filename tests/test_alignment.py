@@ -271,3 +271,16 @@ def test_cli_reads_a_magnitude_only_calibration_and_refuses_an_aligned_one(roll_
     vehicle.write_text(aligned.to_json())
     status, _, err = _run(capsys, roll_180_csv, "--calibration", vehicle, "--inclination", "64")
     assert status == 2 and "vehicle-frame calibration, already aligned" in err
+
+
+def test_cli_time_in_milliseconds(roll_180_csv, tmp_path, capsys):
+    table = np.loadtxt(roll_180_csv, delimiter=",", skiprows=1)
+    table[:, 0] *= 1000.0
+    in_ms = tmp_path / "imu_ms.csv"
+    np.savetxt(in_ms, table, delimiter=",", header="t,mx,my,mz,ax,ay,az", comments="")
+    # Read as seconds, the tumble would look slow enough to pass the rate gate: said on stderr.
+    status, _, err = _run(capsys, in_ms, "--inclination", "64")
+    assert "steps by 20 s" in err and "--time-unit ms" in err
+    # Read as milliseconds, it is the tumble it is: nothing turns slower than 0.3°/s.
+    status, out, err = _run(capsys, in_ms, "--inclination", "64", "--time-unit", "ms")
+    assert status == 1 and "see gravity alone" in err and "time t in ms" not in err

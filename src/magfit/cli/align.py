@@ -35,6 +35,9 @@ _ACCEL = re.compile(r"^(?:imu_?)?(?:a|acc|accel|accl|accelerometer)_?([xyz])$", 
 _TIME = re.compile(r"^(?:t|time|time_s|timestamp|seconds)$", re.IGNORECASE)
 
 
+#: Seconds per unit of a time column.
+_SECONDS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+
 #: The library's keywords in its messages, and the options that set them here.
 _OPTIONS = {"allow_mirror=False": "--no-mirror", "max_rate_dps": "--max-rate", "allow_undetermined": "--force"}
 
@@ -74,6 +77,7 @@ def _read_samples_file(
     gyro_columns: list[str | int] | None,
     gyro_unit: str,
     time_column: str | None,
+    time_unit: str,
 ) -> _Recording:
     header = sniff(path).header
     accel_columns = accel_columns or _columns_by_name(header, _ACCEL)  # type: ignore[assignment]
@@ -94,12 +98,16 @@ def _read_samples_file(
     if time_column is not None:
         # The reader reads triples of distinct columns: the time beside two of the magnetometer's.
         triple: list[str | int] = [time_column, *mag.columns[:2]]
-        time_s = read_samples(path, columns=triple, nonfinite="error").samples[:, 0]
+        time_s = read_samples(path, columns=triple, nonfinite="error").samples[:, 0] * _SECONDS[time_unit]
+        step = float(np.median(np.diff(time_s))) if len(time_s) > 1 else 0.0
+        if step >= 1.0:  # a 1 Hz magnetometer is rare; milliseconds read as seconds are not
+            warn(f"{path}: the time column {time_column} steps by {step:g} s between samples: if it counts "
+                 "milliseconds or microseconds, say so with --time-unit ms (or us); the rate gate uses it")  # fmt: skip
     described = f"{path} (magnetometer {', '.join(mag.columns)}; accelerometer {', '.join(map(str, accel_columns))}"
     if gyro_columns is not None:
         described += f"; gyroscope {', '.join(map(str, gyro_columns))} in {gyro_unit}"
     if time_column is not None:
-        described += f"; time {time_column} in s"
+        described += f"; time {time_column} in {time_unit}"
     return _Recording(described + ")", mag.samples, accel, gyro, time_s, None, "", None, None, ())
 
 
@@ -172,7 +180,8 @@ def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | 
 @click.option("--accel-columns", callback=parse_columns, help="Accelerometer columns (found by name by default).")
 @click.option("--gyro-columns", callback=parse_columns, help="Gyroscope columns, in --gyro-unit (not guessed).")
 @click.option("--gyro-unit", type=click.Choice(["rad/s", "deg/s"]), default="rad/s", show_default=True)
-@click.option("--time-column", help="Time column in seconds (found by name: t, time, timestamp).")
+@click.option("--time-column", help="Time column (found by name: t, time, timestamp).")
+@click.option("--time-unit", type=click.Choice(list(_SECONDS)), default="s", show_default=True)
 @click.option("--calibration", "calibration_path", type=click.Path(dir_okay=False, path_type=Path),
               help="A magnitude-only calibration (JSON) to correct the field with; fitted by default.")  # fmt: skip
 @click.option("--inclination", type=float, help="The field's inclination, degrees (positive down).")
@@ -191,6 +200,7 @@ def align_command(
     gyro_columns: list[str | int] | None,
     gyro_unit: str,
     time_column: str | None,
+    time_unit: str,
     calibration_path: Path | None,
     inclination: float | None,
     location: tuple[float, float, float] | None,
@@ -225,7 +235,7 @@ def align_command(
     if log_kind(file) is not None:
         recording = _read_log(file, sensor)
     else:
-        recording = _read_samples_file(file, columns, accel_columns, gyro_columns, gyro_unit, time_column)
+        recording = _read_samples_file(file, columns, accel_columns, gyro_columns, gyro_unit, time_column, time_unit)
     place = location or recording.position
     source_of_inclination = "given"
     if inclination is None and place is not None:
