@@ -346,8 +346,12 @@ def test_ulog_motion_gives_back_the_truth_in_the_sensor_frame(tmp_path: Path, mo
 # --- ROS bags --------------------------------------------------------------------------------------------
 
 
-def write_bag(path: Path, kind: str, n: int = 1200) -> Path:
-    """A ROS 1 bag (``kind`` "ros1") or a ROS 2 bag folder with MCAP storage ("mcap") of the tumble."""
+def write_bag(path: Path, kind: str, n: int = 1200, mag_mounting: np.ndarray | None = None) -> Path:
+    """A ROS 1 bag (``kind`` "ros1") or a ROS 2 bag folder with MCAP storage ("mcap") of the tumble.
+
+    ``mag_mounting``: the magnetometer in its own frame ``mag_link``, turned by this rotation within
+    ``imu_link`` (``v_imu = mag_mounting · v_mag``), which a /tf_static message states.
+    """
     pytest.importorskip("rosbags")
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
@@ -366,6 +370,8 @@ def write_bag(path: Path, kind: str, n: int = 1200) -> Path:
     t_mag = np.arange(n) / 20.0
     t_imu = np.arange(0.0, t_mag[-1] + 0.1, 0.01) + 0.004
     mag_flu = raw_field(t_mag) @ flip * 1e-7  # mG -> tesla; the FRD reading turned into FLU axes
+    if mag_mounting is not None:
+        mag_flu = mag_flu @ mag_mounting  # rows: (Mᵀ v)ᵀ = vᵀ M, the reading in mag_link's axes
     r_enu = swap @ attitude(t_imu) @ flip
     q = Rotation.from_matrix(r_enu).as_quat()
     gyro, accel = body_rates(t_imu) @ flip, specific_force(t_imu) @ flip
@@ -374,15 +380,37 @@ def write_bag(path: Path, kind: str, n: int = 1200) -> Path:
         mag_conn = writer.add_connection("/imu/mag", "sensor_msgs/msg/MagneticField", typestore=typestore)
         imu_conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=typestore)
 
-        def header(time: float, seq: int):
+        def header(time: float, seq: int, frame: str = "imu_link"):
             ns = start + round(time * 1e9)
             stamp = types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
             counter = {"seq": seq} if ros1 else {}  # a ROS 1 header counts its messages; a ROS 2 one does not
-            return types["std_msgs/msg/Header"](stamp=stamp, frame_id="imu_link", **counter), ns
+            return types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame, **counter), ns
+
+        mag_frame = "imu_link" if mag_mounting is None else "mag_link"
+        if mag_mounting is not None:
+            if "tf2_msgs/msg/TFMessage" not in types:  # rosbags' ROS 1 store lacks it (a bag carries its own)
+                from rosbags.typesys import get_types_from_msg
+
+                definition = "geometry_msgs/TransformStamped[] transforms"
+                typestore.register(get_types_from_msg(definition, "tf2_msgs/msg/TFMessage"))
+                types = typestore.types
+            tf_conn = writer.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=typestore)
+            qx, qy, qz, qw = Rotation.from_matrix(mag_mounting).as_quat()
+            head, ns = header(0.0, 0)
+            transform = types["geometry_msgs/msg/TransformStamped"](
+                header=head,
+                child_frame_id="mag_link",
+                transform=types["geometry_msgs/msg/Transform"](
+                    translation=types["geometry_msgs/msg/Vector3"](x=0.1, y=0.0, z=0.05),
+                    rotation=types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
+                ),
+            )
+            message = types["tf2_msgs/msg/TFMessage"](transforms=[transform])
+            writer.write(tf_conn, ns, serialize(message, "tf2_msgs/msg/TFMessage"))
 
         vector, quaternion = types["geometry_msgs/msg/Vector3"], types["geometry_msgs/msg/Quaternion"]
         for j, time in enumerate(t_mag):
-            head, ns = header(time, j)
+            head, ns = header(time, j, mag_frame)
             x, y, z = mag_flu[j]
             message = types["sensor_msgs/msg/MagneticField"](
                 header=head, magnetic_field=vector(x=x, y=y, z=z), magnetic_field_covariance=np.zeros(9)
@@ -433,6 +461,20 @@ def test_the_imu_with_an_orientation_goes_with_the_magnetometer() -> None:
     mag = MagneticTopic("/imu/mag", "imu_link", np.zeros((3, 3)), time)
     chosen, why = _companion(mag, [other, raw, fused])
     assert chosen is fused and "same frame_id" in why
+
+
+def test_bag_motion_takes_the_mounting_from_tf_static(tmp_path: Path) -> None:
+    # The magnetometer in its own frame, turned 30° about z and 180° about x within imu_link: /tf_static says so,
+    # read_motion gives it as the mounting, and attitude · mounting · calibrated is the NED field again.
+    mounting = Rotation.from_euler("ZX", [30, 180], degrees=True).as_matrix()
+    path = write_bag(tmp_path / "mounted.bag", "ros1", mag_mounting=mounting)
+    motion = open_source(path).read_motion("/imu/mag")
+    assert motion.magnetometer_frame == "sensor" and "/tf_static: mag_link -> imu_link" in motion.mounting_note
+    np.testing.assert_allclose(motion.mounting, mounting, atol=1e-9)
+    calibration = magfit.fit(motion.samples, method="ellipsoid")
+    body = calibration.apply(motion.samples, normalized=True) @ motion.mounting.T
+    world = np.einsum("nij,nj->ni", motion.attitude, body)
+    np.testing.assert_allclose(np.median(world, axis=0), FIELD_NED / np.linalg.norm(FIELD_NED), atol=0.01)
 
 
 # --- what align does on its own, and what a samples file says ---------------------------------------------

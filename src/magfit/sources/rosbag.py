@@ -41,7 +41,16 @@ from .motion import Motion, Stream, align
 if TYPE_CHECKING:
     from . import Source
 
-__all__ = ["BagContents", "ImuTopic", "MagneticTopic", "bag_kind", "open_rosbag", "read_bag", "read_bag_contents"]
+__all__ = [
+    "BagContents",
+    "ImuTopic",
+    "MagneticTopic",
+    "bag_kind",
+    "frame_rotation",
+    "open_rosbag",
+    "read_bag",
+    "read_bag_contents",
+]
 
 INSTALL_HINT = "pip install 'magfit[ros]'"
 
@@ -49,6 +58,7 @@ INSTALL_HINT = "pip install 'magfit[ros]'"
 MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
 IMU = "sensor_msgs/msg/Imu"
 NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 
 BagKind = Literal["ros1", "mcap", "sqlite3", "folder"]
 
@@ -150,6 +160,9 @@ class BagContents:
         The GNSS fixes of every ``sensor_msgs/NavSatFix`` topic whose status says there is one: latitude,
         longitude (degrees), altitude (m above the WGS-84 ellipsoid, NaN when not given) and time (seconds
         since the epoch); see :meth:`position`.
+    static_transforms : dict
+        The ``/tf_static`` transforms: child frame -> (parent frame, rotation quaternion x, y, z, w), where
+        ``v_parent = R(q) · v_child`` (geometry_msgs/Transform); the last one given for each child.
     """
 
     path: Path
@@ -158,6 +171,7 @@ class BagContents:
     imus: tuple[ImuTopic, ...]
     topics: dict[str, str]
     fixes: NDArray[np.float64] = field(default_factory=lambda: np.empty((0, 4)))
+    static_transforms: dict[str, tuple[str, tuple[float, float, float, float]]] = field(default_factory=dict)
 
     def position(self) -> tuple[float, float, float, float] | None:
         """Where and when the bag was recorded, from its ``sensor_msgs/NavSatFix`` messages with a fix:
@@ -292,7 +306,7 @@ def open_rosbag(path: str | os.PathLike[str]) -> Source:
     )
 
     def motion(magnetometer: Magnetometer) -> Motion:
-        return _motion(by_id[magnetometer.id], contents.imus, read(magnetometer), position)
+        return _motion(by_id[magnetometer.id], contents, read(magnetometer), position)
 
     names = {"ros1": "ROS 1 bag", "mcap": "MCAP file", "sqlite3": "ROS 2 sqlite3 bag", "folder": "ROS 2 bag folder"}
     return Source(
@@ -329,10 +343,10 @@ def _companion(mag: MagneticTopic, imus: Sequence[ImuTopic]) -> tuple[ImuTopic |
     return imus[0], f"{imus[0].topic}: the bag's first Imu topic (no Imu shares {mag.topic}'s frame_id or namespace)"
 
 
-def _motion(mag: MagneticTopic, imus: Sequence[ImuTopic], read: Any, position: Any) -> Motion:
+def _motion(mag: MagneticTopic, contents: BagContents, read: Any, position: Any) -> Motion:
     from scipy.spatial.transform import Rotation
 
-    imu, why = _companion(mag, imus)
+    imu, why = _companion(mag, contents.imus)
     attitude = gyro = accel = None
     notes = [f"imu: {why}"]
     same = imu is not None and imu.frame_id == mag.frame_id
@@ -352,11 +366,18 @@ def _motion(mag: MagneticTopic, imus: Sequence[ImuTopic], read: Any, position: A
             notes.append(f"attitude: {imu.topic} gives no orientation (orientation_covariance[0] = -1)")
         gyro = Stream(f"{imu.topic} angular_velocity", imu.timestamps, imu.angular_velocity, frame)
         accel = Stream(f"{imu.topic} linear_acceleration", imu.timestamps, imu.linear_acceleration, frame)
+    mounting: NDArray[np.float64] | None = np.eye(3) if same else None
+    mounting_note = "the same frame_id as the Imu" if same else ""
+    if imu is not None and not same:
+        mounting = frame_rotation(contents.static_transforms, mag.frame_id, imu.frame_id)
+        if mounting is not None:
+            mounting_note = (
+                f"/tf_static: {mag.frame_id} -> {imu.frame_id} (v_{imu.frame_id} = mounting · v_{mag.frame_id})"
+            )
+        else:
+            mounting_note = f"no /tf_static transform joins {mag.frame_id or '(none)'} and {imu.frame_id or '(none)'}"
     if not same:
-        notes.append(
-            f"magnetometer: frame_id {mag.frame_id or '(none)'} is not the Imu's; the transform between them (tf) "
-            "is not read"
-        )
+        notes.append(f"magnetometer: frame_id {mag.frame_id or '(none)'} is not the Imu's; mounting: {mounting_note}")
     return align(
         mag.topic,
         "uT",
@@ -366,8 +387,8 @@ def _motion(mag: MagneticTopic, imus: Sequence[ImuTopic], read: Any, position: A
         attitude=attitude,
         gyro=gyro,
         accel=accel,
-        mounting=np.eye(3) if same else None,
-        mounting_note="the same frame_id as the Imu" if same else "",
+        mounting=mounting,
+        mounting_note=mounting_note,
         position=position,
         # header stamps are UTC seconds since the epoch (a bag's receive times too): the recording's own date,
         # unless the clock was a simulation's (stamps from 0: before 2001 is no real recording's date)
@@ -414,6 +435,8 @@ def _read(path: Path, kind: BagKind, readable: Path, rosbags: Any) -> BagContent
     with AnyReader([readable], default_typestore=default) as reader:
         topics = {connection.topic: connection.msgtype for connection in reader.connections}
         wanted = [c for c in reader.connections if c.msgtype in (MAGNETIC_FIELD, IMU, NAV_SAT_FIX)]
+        wanted += [c for c in reader.connections if c.msgtype == TF_MESSAGE and c.topic.endswith("tf_static")]
+        static: dict[str, tuple[str, tuple[float, float, float, float]]] = {}
         mag: dict[str, _Collector] = {}
         imu: dict[str, _Collector] = {}
         fixes: list[tuple[float, float, float, float]] = []
@@ -427,6 +450,11 @@ def _read(path: Path, kind: BagKind, readable: Path, rosbags: Any) -> BagContent
                     fix = _fix(message, bag_time)
                     if fix is not None:
                         fixes.append(fix)
+                elif connection.msgtype == TF_MESSAGE:
+                    for transform in message.transforms:
+                        q = transform.transform.rotation
+                        parent, child = str(transform.header.frame_id), str(transform.child_frame_id)
+                        static[child.lstrip("/")] = (parent.lstrip("/"), (q.x, q.y, q.z, q.w))
                 else:
                     q, a, w = message.orientation, message.linear_acceleration, message.angular_velocity
                     # covariance[0] == -1: the IMU does not give this quantity (sensor_msgs/Imu's definition)
@@ -443,7 +471,33 @@ def _read(path: Path, kind: BagKind, readable: Path, rosbags: Any) -> BagContent
         imus=tuple(imu[name].imu(name) for name in sorted(imu)),
         topics=topics,
         fixes=np.array(sorted(fixes, key=lambda row: row[3]), dtype=np.float64).reshape(-1, 4),
+        static_transforms=static,
     )
+
+
+def frame_rotation(
+    transforms: dict[str, tuple[str, tuple[float, float, float, float]]], source: str, target: str
+) -> NDArray[np.float64] | None:
+    """R with ``v_target = R · v_source`` from the static transforms (both frames under one root), else None."""
+    from scipy.spatial.transform import Rotation
+
+    def to_root(frame: str) -> tuple[str, Any]:
+        rotation, seen = Rotation.identity(), {frame}
+        while frame in transforms:
+            parent, quaternion = transforms[frame]
+            rotation = Rotation.from_quat(quaternion) * rotation  # v_parent = R(q) · v_frame
+            frame = parent
+            if frame in seen:  # a cycle in a damaged tree: no answer rather than a loop
+                return "", rotation
+            seen.add(frame)
+        return frame, rotation
+
+    source_root, from_source = to_root(source.lstrip("/"))
+    target_root, from_target = to_root(target.lstrip("/"))
+    if not source_root or source_root != target_root:
+        return None
+    matrix: NDArray[np.float64] = (from_target.inv() * from_source).as_matrix()
+    return matrix
 
 
 def _fix(message: Any, bag_time: int) -> tuple[float, float, float, float] | None:
