@@ -7,35 +7,48 @@ magnetometer's), so with ``H = G⁻¹`` and ``c = H V``::
 
     H dy/dt = −ω × (H y − c)                                      (1)
 
-linear in (H, c) and homogeneous (the overall scale, and the sign, are free), MAGYC's equation (Rodríguez,
-Le Gentil, Pizarro, Kaess: "MAGYC: magnetometer and gyroscope calibration", 2024), which there takes H
-symmetric (gyro and magnetometer axes assumed the same) and the gyro's bias β in ``ω = ω_measured − β``.
-TWOSTEP (Alonso & Shuster 2002) uses the field's magnitude only; Huang, Hendeby & Skog (2025) calibrate the
-magnetometer and the IMU jointly from the same kinematics. Here, in three stages:
+linear in (H, c) and homogeneous (the overall scale, and the sign, are free): the equation of MAGYC
+(Rodríguez et al., "MAGYC: magnetometer and gyroscope calibration", IEEE J. Oceanic Eng. / arXiv:2410.13827,
+2024; the ``magyc`` package), which there takes H symmetric (gyro and magnetometer axes assumed the same),
+differentiates the samples (``diff(m)/dt``) and adds the gyro's bias β in ``ω = ω_measured − β``. TWOSTEP
+(Alonso & Shuster, J. Astronaut. Sci. 50(4), 2002) uses the field's magnitude only; Huang, Hendeby & Skog
+("Joint magnetometer-IMU calibration via maximum a posteriori estimation", arXiv:2505.16662, 2025) estimate
+the calibration with the orientation trajectory as unknowns, which stage 3 below does in a reduced form (the
+trajectory is the gyro's, integrated, with one unknown start per stretch). Here, in three stages:
 
 1. **Integrated, not differentiated.** (1) integrated over windows ``[a, b]`` of about a second:
    ``H (y_b − y_a) = −∫ ω × (H y − c) dt`` (trapezoids of ``ω yᵀ``, ``y``, ``ω``). A difference of two
    samples (MAGYC's ``diff(m)/dt``, L = 1) has the magnetometer noise of two samples for one sample's
    turn; measured on ``simulate_vehicle`` (6 000 samples at 50 Hz, 0.5 % noise, gyro 0.003 rad/s noise,
-   bias 0.02 rad/s) the offset error of this linear stage falls from 4 % of the field at L = 1 to 0.9 % at
-   L = 25 on a tumble, and a car's from 2 200 % to 98 %: only a tumble is pinned by the derivative at all.
+   bias up to 0.02 rad/s, a soft iron and a mounting turned 10/20/25°) the offset error of this linear stage
+   falls from 4.1 % of the field at L = 1 to 0.8 % at L = 25 on a tumble, and a car's from 2 200 % to 98 %:
+   only a tumble is pinned by the derivative at all.
    The total least-squares solution (smallest singular vector) gives H and c, then Gauss-Newton on the
    same residual adds the gyro bias.
-2. **The axis mapping.** A magnetometer is often mounted turned by a right angle (or soldered with its axes
-   read in another order) against the gyroscope. Each of the 24 proper signed permutations P is tried as
-   ``H = P S`` (S symmetric, MAGYC's model in the rotated frame) on the windowed residual; the best is
-   reported with the residual of the next best. A field and its negative turn alike, so (1) cannot tell a
-   mapping P from its mirror −P (the 24 mirrors of the 48): the magnetometer is taken to be right-handed,
-   and said so. Two mappings that fit alike (rotations about one axis cannot tell mappings that differ by a
-   turn about that axis) are a refusal: the alignment is not determined.
-3. **Maximum likelihood on the samples.** Integrating (1) over whole stretches of ``segment_s`` seconds:
+2. **Maximum likelihood on the samples.** Integrating (1) over whole stretches of ``segment_s`` seconds:
    ``b_k = R_kᵀ b₀`` with ``R_k`` the rotation from the stretch's start integrated from ``ω − β``, so
-   ``y_k = G R_kᵀ b₀ + V`` with ``|b₀| = 1`` (G carries the field's magnitude): Gauss-Newton (scipy's
-   trust region) on the samples' own residuals over G (general, 9), V, β and each stretch's b₀ (2 angles).
-   This uses that the field is one vector for many seconds, which the windows of stage 1 forget: on the
-   runs above the offset error falls from 0.7 % of the field to 0.2 % (car), 5.6 % to 1.2 % (flight: the
-   wings tilt ±15°, the yaw turns), and the heading error from 3.3° to 0.17° (flight). Stretches of 10 s
-   were best of 10, 30 and one stretch (the gyro's noise walks the integrated rotation away in long ones).
+   ``y_k = G R_kᵀ b₀ + V`` with ``|b₀| = 1`` (G carries the field's magnitude): Levenberg-Marquardt (the
+   project's, on the normal equations) on the samples' own residuals over G (general, 9), V, β and each
+   stretch's b₀ (2 angles). This uses that the field is one vector for many seconds, which the windows of
+   stage 1 forget: on the runs above (windows of 50 samples with the bias, then this stage) the offset error
+   falls from 7.4 % of the field to 0.2 % (car), 400 % to 1.2 % (flight: the wings tilt ±15° in turns), 17 %
+   to 0.45 % (boat), and the heading error from 3.3° to 0.17° (flight), 12.9° to 0.46° (boat). Stretches of
+   10 s gave the lowest heading error on three of the four motions against 30 s and one stretch for the
+   whole recording (the gyro's noise walks the integrated rotation away in long ones; each stretch adds two
+   unknowns).
+3. **The axis mapping.** A magnetometer is often mounted turned by a right angle (or soldered with its axes
+   read in another order) against the gyroscope. A standard mapping P (one of the 24 proper signed
+   permutations, :data:`MAPPINGS`) makes ``G = W Pᵀ`` with W symmetric and definite (MAGYC's model in the
+   turned frame): 3 unknowns fewer, which a vehicle that hardly tilts needs. The candidates (the mapping
+   nearest the general fit's rotation, and the two best of all 24 on the windows of stage 1, whose noise hides
+   the differences on a vehicle that hardly tilts) are fitted as in stage 2 and compared with the general G
+   by their likelihood ratio (the residual excess in noise variances, the variance from batch means of the
+   residuals): the best is kept unless the general G beats it by more than :data:`LIKELIHOOD_RATIO` (then the
+   mounting is turned in between, and the rotation and its angle from the nearest mapping are reported). A
+   field and its negative turn alike, so (1) cannot tell a mapping P from its mirror −P (the other 24 of the
+   48): the magnetometer is taken to be right-handed, and said so. Two candidates that fit alike but turn
+   differently (rotations about one axis cannot tell mappings that differ by a turn about it) are a refusal:
+   the alignment is not determined.
 
 What the motion determines (the verdict, in ``details["support"]``): turning about one axis ``a`` only,
 ``b``'s component along ``a`` stays constant, so ``G a`` and V along the plane's normal are confounded:
