@@ -209,3 +209,21 @@ def test_paper_table_is_complete() -> None:
     # Spot values from the paper's section V.
     assert PAPER_DISTANCES["steel", "sphere", "ellipse2a"] == (0.0251, 0.2228)
     assert PAPER_DISTANCES["none", "ellipsoid", "mpu9250"] == (0.0028, 0.0236)
+
+
+def test_methods_that_need_more_than_the_samples_run_where_it_is_given_and_say_why_not_otherwise() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from magfit.compare import compare
+    from magfit.vehicle import simulate_vehicle
+
+    mounting = Rotation.from_euler("x", 20, degrees=True).as_matrix()
+    sim = simulate_vehicle(3000, "tumble", hard_iron=[0.2, 0.1, -0.3], mounting=mounting, noise=0.01, seed=1)
+    alone = compare(sim.samples, ["auto", "vector", "gyro"])
+    assert alone["auto"].ok and not alone["vector"].ok and not alone["gyro"].ok
+    assert alone["vector"].error.startswith("not run: the vector method needs the field expected at each sample")
+    assert "gyroscope" in alone["gyro"].error and "time stamps" in alone["gyro"].error
+    streams = {"reference": sim.reference, "gyro": sim.gyro, "time_s": sim.time_s}
+    both = compare(sim.samples, ["auto", "vector", "gyro"], streams=streams)
+    assert all(result.ok for result in both)
+    np.testing.assert_allclose(both["vector"].calibration.matrix, sim.truth.matrix, atol=0.01)  # aligned too

@@ -125,6 +125,7 @@ def compare(
     *,
     options: Mapping[str, Mapping[str, Any]] | None = None,
     allow_undetermined: bool = False,
+    streams: Mapping[str, ArrayLike] | None = None,
 ) -> Comparison:
     """Fit each method to the same samples and score it with the paper's sphere-distance metric.
 
@@ -139,6 +140,10 @@ def compare(
     allow_undetermined : bool
         Score a fit the samples do not support instead of reporting its refusal (the paper's tables,
         which show every method on every case; the refusal is then in ``details["support"]``).
+    streams : mapping, optional
+        What was recorded beside the samples, one row per sample, by the option name the methods take
+        (``reference``: the expected field in the vehicle frame; ``gyro``: body rates, rad/s; ``time_s``).
+        A method that needs a stream not given is not run: its result says which and where it comes from.
 
     Returns
     -------
@@ -173,12 +178,19 @@ def compare(
             valid = ", ".join(get_method(name).options) or "none"
             raise OptionError(f"method {name!r} has no option {', '.join(map(repr, unknown))}; valid options: {valid}")
 
+    streams = dict(streams or {})
     results = []
     for name in names:
+        spec = get_method(name)
+        missing = [need for need in spec.needs if need not in streams and need not in options.get(name, {})]
+        if missing:
+            results.append(MethodResult(name, None, None, _not_run(name, missing), 0.0))
+            continue
+        given: dict[str, Any] = {option: value for option, value in streams.items() if option in spec.options}
         start = time.perf_counter()
         try:
             calibration = fit(
-                array, method=name, allow_undetermined=allow_undetermined, **dict(options.get(name, {}))
+                array, method=name, allow_undetermined=allow_undetermined, **given, **dict(options.get(name, {}))
             )
         except CalibrationError as error:
             results.append(MethodResult(name, None, None, str(error), time.perf_counter() - start))
@@ -186,6 +198,21 @@ def compare(
         seconds = time.perf_counter() - start
         results.append(MethodResult(name, calibration, evaluate(calibration, array), None, seconds))
     return Comparison(int(array.shape[0]), tuple(results))
+
+
+#: Where each stream a method may need comes from, for the words of a method not run.
+_STREAM_WORDS = {
+    "reference": "the field expected at each sample in the vehicle frame (a flight log or bag with the attitude "
+    "and a position, or reference=)",
+    "gyro": "the gyroscope's rates beside each sample (a log or bag with the gyroscope, or gyro=)",
+    "time_s": "the samples' time stamps (a log or bag, or time_s=)",
+}
+
+
+def _not_run(method: str, missing: list[str]) -> str:
+    """Why a method that needs more than the samples was not run, in words."""
+    needs = "; ".join(_STREAM_WORDS.get(need, f"{need}=") for need in missing)
+    return f"not run: the {method} method needs {needs}"
 
 
 #: Rows scored at a time: the temporaries of one slice stay at a few MB whatever the reader's chunk size.
