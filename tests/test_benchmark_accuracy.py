@@ -382,7 +382,7 @@ def test_the_vehicle_smoke_grid_runs_and_reports_every_target(tmp_path: Path) ->
     assert tumble["ml"].heading_deg < 0.3
     # The 5-35° mounting that no magnitude-only fit sees: degrees of heading, unless it is applied.
     assert flight["auto"].trials == 2
-    assert flight["sphere"].heading_deg > 3.0 > flight["sphere"].heading_mounted_deg
+    assert flight["sphere"].heading_deg > flight["sphere"].heading_mounted_deg + 3.0
     text = vehicle.render_markdown(report)
     assert "## Targets" in text and "vector ≤ 0.5 ×" in text and "alignment (" in text and "gyro-aided" in text
     data = json.loads(vehicle.report_json(report))
