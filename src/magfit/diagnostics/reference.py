@@ -33,7 +33,7 @@ from ..errors import CalibrationError
 from ..findings import Coverage, Diagnostics, Observability, Support, Uncertainty, WeakDirection
 from .coverage import coverage
 from .uncertainty import DEFAULT_INCLINATION_DEG, UNDETERMINED_SIGMA, WEAK_INFORMATION
-from .verdict import LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
+from .verdict import BIASED_HEADING_DEG, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
 
 __all__ = ["ReferenceReport", "design_singularity", "judge_reference_fit", "judged", "reference_inclination"]
 
@@ -50,8 +50,8 @@ MAX_ROWS = 200_000
 #: Relative information (share of a tumble's) below which the design is singular: nothing can be fitted.
 SINGULAR_INFORMATION = 1e-10
 #: Heading one-sigma (degrees, RMS over headings, at level or at :data:`TILT_DEG`) beyond which a vector
-#: calibration is refused: worse than what a magnitude-only fit of a tumble gives.
-HEADING_LIMIT_DEG = 5.0
+#: calibration is refused: the heading error at which the magnitude-only verdict refuses a biased fit.
+HEADING_LIMIT_DEG = BIASED_HEADING_DEG
 #: The tilt at which the heading is also judged: a banked turn, a slope, a wave. A vehicle that never tilted
 #: leaves G's response along its vertical confounded with the offset, harmless level, not at this tilt
 #: (simulate_vehicle, level turns with 0.2° of attitude error: ±0.1° level, ±41° at 10°).
