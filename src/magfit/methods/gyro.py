@@ -376,27 +376,65 @@ class _Trajectory:
         b, _, _ = self.field(p)
         return (np.einsum("ij,kj->ki", self.distortion(p), b) + p[self.k : self.k + 3] - self.y[self.rows]).ravel()
 
-    def jacobian(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
+    def blocks(
+        self, p: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The residual (rows, 3), its Jacobian in (q, V, β) (rows, 3, k + 6), and in the row's own stretch's
+        two angles (rows, 3, 2): every other angle column of a row is zero."""
         k = self.k
         g = self.distortion(p)
         b, turns, d_beta = self.field(p)
         rows = self.rows.size
-        jac = np.zeros((rows, 3, p.size))
+        residual = np.einsum("ij,kj->ki", g, b) + p[k : k + 3] - self.y[self.rows]
+        dense = np.zeros((rows, 3, k + 6))
         for i in range(3):
             # ∂(G b)_i / ∂G_ij = b_j, through the basis
-            jac[:, i, :k] = np.einsum("kj,jq->kq", b, self.basis[3 * i : 3 * i + 3])
-        jac[:, :, k : k + 3] = np.eye(3)
+            dense[:, i, :k] = np.einsum("kj,jq->kq", b, self.basis[3 * i : 3 * i + 3])
+        dense[:, :, k : k + 3] = np.eye(3)
+        dense[:, :, k + 3 :] = np.einsum("ij,kjm->kim", g, d_beta)
         angles = p[k + 6 :].reshape(self.count, 2)[self.segment[self.rows]]
         elevation, azimuth = angles[:, 0], angles[:, 1]
-        d_elevation = np.column_stack([-np.sin(elevation) * np.cos(azimuth), -np.sin(elevation) * np.sin(azimuth),
-                                       np.cos(elevation)])  # fmt: skip
-        d_azimuth = np.column_stack([-np.cos(elevation) * np.sin(azimuth), np.cos(elevation) * np.cos(azimuth),
-                                     np.zeros(rows)])  # fmt: skip
-        columns = k + 6 + 2 * self.segment[self.rows]
-        for shift, derivative in ((0, d_elevation), (1, d_azimuth)):
-            jac[np.arange(rows), :, columns + shift] = np.einsum("ij,kmj,km->ki", g, turns, derivative)  # G R_kᵀ ∂b₀
-        jac[:, :, k + 3 : k + 6] = np.einsum("ij,kjm->kim", g, d_beta)
+        up, across = np.sin(elevation), np.cos(elevation)
+        d_start = np.stack([
+            np.column_stack([-up * np.cos(azimuth), -up * np.sin(azimuth), across]),
+            np.column_stack([-across * np.sin(azimuth), across * np.cos(azimuth), np.zeros(rows)]),
+        ], axis=2)  # fmt: skip
+        angular = np.einsum("ij,kmj,kmn->kin", g, turns, d_start)  # G R_kᵀ ∂b₀
+        return residual, dense, angular
+
+    def jacobian(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The whole Jacobian (3·rows, p.size), zeros included (the covariance's sandwich needs it row by row)."""
+        _, dense, angular = self.blocks(p)
+        rows = self.rows.size
+        jac = np.zeros((rows, 3, p.size))
+        jac[:, :, : self.k + 6] = dense
+        columns = self.k + 6 + 2 * self.segment[self.rows]
+        for shift in range(2):
+            jac[np.arange(rows), :, columns + shift] = angular[:, :, shift]
         return jac.reshape(3 * rows, p.size)
+
+    def normal_equations(self, p: NDArray[np.float64]) -> Evaluation:
+        """½ Σ r², JᵀJ and Jᵀr from the blocks: the angle columns of a stretch only meet its own rows.
+
+        einsum, not BLAS: a threaded gemm on a tall, narrow Jacobian is 10-100x slower when cores are shared.
+        """
+        residual, dense, angular = self.blocks(p)
+        k6 = self.k + 6
+        starts = np.searchsorted(self.segment[self.rows], np.arange(self.count))  # rows ascend in stretch
+        normal = np.zeros((p.size, p.size))
+        normal[:k6, :k6] = np.einsum("kip,kiq->pq", dense, dense)
+        cross = np.add.reduceat(np.einsum("kip,kin->kpn", dense, angular), starts, axis=0)  # (count, k6, 2)
+        own = np.add.reduceat(np.einsum("kim,kin->kmn", angular, angular), starts, axis=0)  # (count, 2, 2)
+        for s in range(self.count):
+            columns = slice(k6 + 2 * s, k6 + 2 * s + 2)
+            normal[:k6, columns] = cross[s]
+            normal[columns, :k6] = cross[s].T
+            normal[columns, columns] = own[s]
+        gradient = np.concatenate([
+            np.einsum("kip,ki->p", dense, residual),
+            np.add.reduceat(np.einsum("kin,ki->kn", angular, residual), starts, axis=0).ravel(),
+        ])  # fmt: skip
+        return Evaluation(0.5 * float(np.sum(residual**2)), normal, gradient)
 
 
 def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
@@ -425,12 +463,7 @@ def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iteration
     """Levenberg-Marquardt on the samples' residuals (the project's solver: normal equations, k ≤ 135)."""
 
     def evaluate(p: NDArray[np.float64], warm: Any) -> Evaluation:
-        residual = traj.residual(p)
-        jac = traj.jacobian(p)
-        # einsum, not BLAS: a threaded gemm on a tall, narrow Jacobian is 10-100x slower when cores are shared
-        return Evaluation(
-            0.5 * float(residual @ residual), np.einsum("rp,rq->pq", jac, jac), np.einsum("rp,r->p", jac, residual)
-        )
+        return traj.normal_equations(p)
 
     return levenberg_marquardt(evaluate, start, n_residuals=3 * traj.rows.size, max_iterations=iterations)
 
