@@ -302,6 +302,13 @@ def calibrate_file(
     if kind is None and not (ids and (sensor is not None or len(ids) > 1)):
         if sensor is not None:
             raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
+        needs = get_method(method).needs
+        if needs and not all(need in options for need in needs):
+            raise OptionError(
+                f"{path}: the {method} method needs {', '.join(needs)} beside the samples, which a samples file does "
+                "not hold: give a flight log or bag that logs the attitude and GPS (vector) or the gyroscope (gyro), "
+                f"or call magfit.fit(samples, method={method!r}, {'=..., '.join(needs)}=...) from Python"
+            )
         model = _model(path, None, location, date)  # (no log: "wmm" without a place is refused below)
         if field_strength == "wmm":
             options["field_strength"] = _model_strength(model, unit)
@@ -327,7 +334,7 @@ def calibrate_file(
         elif field_strength is not None:
             compass_options["field_strength"] = field_strength
         try:
-            compass = _calibrate_compass(source, magnetometer, method, compass_options, unit, even, say)
+            compass = _calibrate_compass(source, magnetometer, method, compass_options, unit, even, say, date)
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
@@ -360,8 +367,13 @@ def _calibrate_compass(
     unit: str | None,
     even: bool,
     say: Callable[[str], None],
+    date: datetime.date | str | None = None,
 ) -> CompassCalibration:
-    """Fit one magnetometer of a flight log or bag (docs/file-formats.md): its raw field, read by magfit.sources."""
+    """Fit one magnetometer of a flight log or bag (docs/file-formats.md): its raw field, read by magfit.sources.
+
+    A method that needs more than the samples (``vector``, ``gyro``) gets the log's streams on the compass's
+    stamps (:func:`magfit.pipeline.streams.method_streams`; ``date`` for the model's field, else the log's).
+    """
     path = source.path
     where = f"{path} ({magnetometer.id}, {magnetometer.description})"
     try:
@@ -376,14 +388,27 @@ def _calibrate_compass(
         say(note)
     if len(read.samples) == 0:
         raise DataFileError(f"{where}: holds no finite samples")
+    needs = get_method(method).needs
+    fitted, frame_details = read.samples, {}
+    if needs:  # vector, gyro: the log's attitude, gyroscope and time on the compass's stamps (docs/file-formats.md)
+        from .streams import method_streams
+
+        streams = method_streams(source, magnetometer.id, needs, unit=unit, date=date)
+        for note in streams.notes:
+            say(note)
+        notes += streams.notes
+        fitted, frame_details = streams.samples, streams.sensor_details
+        options = {**options, **streams.options}
+    elif even:
+        fitted = samples_for_fit(read.samples, even)
     try:
-        calibration = fit(samples_for_fit(read.samples, even), method=method, **options)
+        calibration = fit(fitted, method=method, **options)
     except CalibrationError as error:
         advice = "".join(f"; {note}" for note in magnetometer.notes if "logged at only" in note or "only " in note)
         raise CalibrationError(f"{where}: {error}{advice}") from None
     label = unit or magnetometer.unit
     calibration = calibration.with_unit(label) if label else calibration
-    sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id}
+    sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
     source_details = {"file": path.name, "sensor": magnetometer.id, "device_id": magnetometer.device_id}
     source_details["unit"] = calibration.unit
     calibration = replace(calibration, details={**calibration.details, "source": source_details, "sensor": sensor})
