@@ -87,3 +87,23 @@ def test_the_command_fits_the_vector_method_on_a_log_and_refuses_it_on_a_samples
     np.savetxt(csv, np.random.default_rng(0).normal(size=(100, 3)), delimiter=",")
     result = CliRunner().invoke(cli, ["calibrate", str(csv), "--method", "vector"])
     assert result.exit_code == 2 and "a samples file does not hold" in result.output
+
+
+def test_compare_on_a_log_runs_vector_with_the_logs_streams_and_says_why_gyro_or_vector_cannot(
+    tmp_path, monkeypatch
+) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    path, _ = _log_with_gps(tmp_path / "gps.bin", monkeypatch)
+    result = CliRunner().invoke(
+        cli, ["compare", str(path), "--sensor", "MAG/0", "--methods", "auto,vector", "--format", "json"]
+    )
+    assert result.exit_code == 0, result.output
+    assert '"method": "vector"' in result.output and "not run" not in result.output
+    formats, rows = motion_log.dataflash_messages(n_mag=600)
+    no_gps = motion_log.write_bin(tmp_path / "nogps.bin", formats, rows)
+    result = CliRunner().invoke(cli, ["compare", str(no_gps), "--sensor", "MAG/0", "--methods", "auto,vector"])
+    assert result.exit_code == 0, result.output
+    assert "no 3-D GNSS fix" in result.output and "not run: the vector method needs" in result.output

@@ -11,6 +11,8 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
+from numpy.typing import NDArray
 from rich.table import Table
 from rich.text import Text
 
@@ -27,8 +29,9 @@ from ._common import (
     parse_columns,
     significant,
     vector,
+    warn,
 )
-from ._logs import read_recordings, sensor_option
+from ._logs import Recording, read_recordings, sensor_option
 
 OUTPUT_FORMATS = ("table", "markdown", "csv", "json")
 _CSV_FIELDS = (
@@ -156,7 +159,8 @@ def compare_command(
     results = []
     for path in files:
         for recording in read_recordings(path, columns=columns, nonfinite=nonfinite, sensor=sensor):
-            comparison = compare(recording.samples, methods, allow_undetermined=force)
+            samples, streams = _with_streams(path, recording, methods, unit)
+            comparison = compare(samples, methods, allow_undetermined=force, streams=streams)
             name = str(path) if recording.sensor is None else f"{path} ({recording.sensor})"
             results.append(
                 FileComparison(
@@ -173,6 +177,27 @@ def compare_command(
     render[output_format](results)
     if not all(result.comparison.any_succeeded for result in results):
         ctx.exit(EXIT_FIT_FAILED)
+
+
+def _with_streams(
+    path: Path, recording: Recording, methods: tuple[str, ...], unit: str | None
+) -> tuple[NDArray[np.float64], dict[str, Any]]:
+    """The samples and the log's streams for the methods that need them (vector, gyro), where the log has them.
+
+    All the methods are then compared on the samples those streams cover; a samples file has none.
+    """
+    from ..methods import get_method
+
+    needs = sorted({need for method in methods for need in get_method(method).needs})
+    if not needs or recording.sensor is None:
+        return recording.samples, {}
+    from ..pipeline.streams import method_streams
+    from ..sources import open_source
+
+    found = method_streams(open_source(path), recording.sensor, needs, unit=unit or recording.unit, available=True)
+    for note in found.notes:
+        warn(note)
+    return found.samples, found.options
 
 
 def _reason(result: MethodResult) -> str:

@@ -55,8 +55,12 @@ def method_streams(
     *,
     unit: str | None,
     date: datetime.date | str | None = None,
+    available: bool = False,
 ) -> MethodStreams:
     """Read ``sensor``'s samples with the streams ``needs`` names (``reference``, ``gyro``, ``time_s``).
+
+    ``available``: give the streams the log holds and say in ``notes`` why the others are missing (a
+    comparison of several methods runs those it can), instead of raising.
 
     Raises
     ------
@@ -72,15 +76,25 @@ def method_streams(
     notes = [f"{where}: {note}" for note in motion.notes]
     if "time_s" in needs:
         options["time_s"] = motion.time_s
-    if "gyro" in needs:
-        if motion.gyro is None:
-            raise DataFileError(
-                f"{where}: the log holds no gyroscope beside this compass; the gyro method needs one (log the IMU: "
-                "ArduPilot LOG_BITMASK's IMU bit, PX4's sensor_combined or vehicle_angular_velocity)"
-            )
-        options["gyro"] = motion.gyro
-    if "reference" in needs:
-        options["reference"] = _reference(source, motion, where, unit, date, notes)
+    try:
+        if "gyro" in needs:
+            if motion.gyro is None:
+                raise DataFileError(
+                    f"{where}: the log holds no gyroscope beside this compass; the gyro method needs one (log the "
+                    "IMU: ArduPilot LOG_BITMASK's IMU bit, PX4's sensor_combined or vehicle_angular_velocity)"
+                )
+            options["gyro"] = motion.gyro
+    except DataFileError as error:
+        if not available:
+            raise
+        notes.append(str(error))
+    try:
+        if "reference" in needs:
+            options["reference"] = _reference(source, motion, where, unit, date, notes)
+    except (DataFileError, OptionError) as error:
+        if not available:
+            raise
+        notes.append(str(error))
     details: dict[str, Any] = {}
     if motion.magnetometer_frame == "body" and motion.mounting is not None:
         details["applied_rotation"] = np.asarray(motion.mounting).tolist()
