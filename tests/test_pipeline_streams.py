@@ -107,3 +107,18 @@ def test_compare_on_a_log_runs_vector_with_the_logs_streams_and_says_why_gyro_or
     result = CliRunner().invoke(cli, ["compare", str(no_gps), "--sensor", "MAG/0", "--methods", "auto,vector"])
     assert result.exit_code == 0, result.output
     assert "no 3-D GNSS fix" in result.output and "not run: the vector method needs" in result.output
+
+
+def test_report_on_a_log_includes_the_vector_method(tmp_path, monkeypatch) -> None:
+    pytest.importorskip("plotly")
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    path, _ = _log_with_gps(tmp_path / "gps.bin", monkeypatch)
+    out = tmp_path / "report.html"
+    result = CliRunner().invoke(
+        cli, ["report", str(path), "--sensor", "MAG/0", "--methods", "auto,vector", "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "2 of 2 methods fitted" in result.output and "vector" in out.read_text()

@@ -159,7 +159,7 @@ def compare_command(
     results = []
     for path in files:
         for recording in read_recordings(path, columns=columns, nonfinite=nonfinite, sensor=sensor):
-            samples, streams = _with_streams(path, recording, methods, unit)
+            samples, streams = with_streams(path, recording, methods, unit)
             comparison = compare(samples, methods, allow_undetermined=force, streams=streams)
             name = str(path) if recording.sensor is None else f"{path} ({recording.sensor})"
             results.append(
@@ -179,7 +179,7 @@ def compare_command(
         ctx.exit(EXIT_FIT_FAILED)
 
 
-def _with_streams(
+def with_streams(
     path: Path, recording: Recording, methods: tuple[str, ...], unit: str | None
 ) -> tuple[NDArray[np.float64], dict[str, Any]]:
     """The samples and the log's streams for the methods that need them (vector, gyro), where the log has them.

@@ -21,7 +21,7 @@ from ._common import (
 )
 from ._extras import require
 from ._logs import read_recordings, sensor_option
-from .compare import parse_methods
+from .compare import parse_methods, with_streams
 from .plot import methods_in_order
 
 if TYPE_CHECKING:
@@ -136,20 +136,19 @@ def report_command(
             if recording.n_skipped:
                 notes.append(f"{recording.n_skipped:,} rows with NaN or inf values were skipped.")
             # A method that fails is listed in the report with its reason; the first that succeeds is the main one.
-            comparison = compare(recording.samples, compared)
+            samples, streams = with_streams(path, recording, compared, unit)  # vector, gyro: the log's streams
+            comparison = compare(samples, compared, streams=streams)
             for result in comparison:
                 if not result.ok:
                     warn(f"{label}: {result.method} could not fit these samples: {result.error}")
             if not comparison.any_succeeded:
                 unfitted.append(label)
             sections.append(
-                section_from_comparison(
-                    recording.name, recording.samples, comparison, unit=unit or recording.unit, notes=notes
-                )
+                section_from_comparison(recording.name, samples, comparison, unit=unit or recording.unit, notes=notes)
             )
             fitted = sum(1 for result in comparison if result.ok)
             out.print(
-                f"{label}: {len(recording.samples):,} samples, {fitted} of {len(comparison)} methods fitted",
+                f"{label}: {len(samples):,} samples, {fitted} of {len(comparison)} methods fitted",
                 soft_wrap=True,
             )
     if unfitted and not allow_unfitted:  # a failed run leaves an existing report as it was
