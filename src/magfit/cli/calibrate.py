@@ -142,17 +142,15 @@ def several_outputs(
 
     ids = ", ".join(compass.sensor or "?" for compass in result.compasses)
     if export_format in SEVERAL_IN_ONE_FILE:
-        from .. import export as exports
+        from ..export import export_several
 
-        several = getattr(exports, "export_several", None)
-        if several is None:  # (until magfit.export writes several compasses)
-            fail(f"{file}: this magfit writes one compass per {export_format} file: choose it with --sensor ID ({ids})")
         # One expected field for the file: the compasses of a log share its unit.
         units = {compass.calibration.unit for compass in result.compasses}
         options = _export_options(result.compasses[0], export_format, system_id)
         if len(units) != 1:
             options.pop("expected_field", None)
-        text = several([compass.calibration for compass in result.compasses], export_format, unit=unit, **options)
+        calibrations = [compass.calibration for compass in result.compasses]
+        text = export_several(calibrations, export_format, unit=unit, **options)
         return [(output if output is not None else Path(STDOUT), text.encode("utf-8"))]
     what = f"the {export_format} format" if export_format else "a JSON calibration"
     if output is None or str(output) == STDOUT:
