@@ -123,3 +123,13 @@ def test_bad_gyro_and_time_inputs_are_one_line_option_errors() -> None:
         assert "\n" not in str(error.value)
     with pytest.raises(CalibrationError, match="too short"):
         magfit.fit(sim.samples[:200], method="gyro", gyro=sim.gyro[:200], time_s=sim.time_s[:200])
+
+
+def test_a_magnetometer_late_behind_the_gyro_is_found_and_undone() -> None:
+    sim = _simulate(1500, "tumble", np.eye(3))
+    late = np.column_stack([np.interp(sim.time_s - 0.04, sim.time_s, sim.samples[:, i]) for i in range(3)])
+    cal = magfit.fit(late[10:], method="gyro", gyro=sim.gyro[10:], time_s=sim.time_s[10:])
+    assert cal.details["lag_s"] == pytest.approx(0.04, abs=0.004)
+    assert np.linalg.norm(cal.offset - HARD_IRON) < 0.002
+    unchanged = _fit(sim)  # no delay: none is applied (the gate keeps a shallow minimum out)
+    assert unchanged.details["lag_s"] == 0.0
