@@ -133,3 +133,10 @@ def test_a_magnetometer_late_behind_the_gyro_is_found_and_undone() -> None:
     assert np.linalg.norm(cal.offset - HARD_IRON) < 0.002
     unchanged = _fit(sim)  # no delay: none is applied (the gate keeps a shallow minimum out)
     assert unchanged.details["lag_s"] == 0.0
+
+
+def test_an_imposed_mapping_the_samples_contradict_is_refused() -> None:
+    sim = _simulate(1500, "tumble", ROLL_180)
+    with pytest.raises(CalibrationError, match=r"mapping='\+x\+y\+z'.*leave mapping='search'"):
+        _fit(sim, mapping="+x+y+z")
+    assert _fit(sim, mapping="+x-y-z").details["mapping"] == "+x-y-z"

@@ -64,7 +64,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -748,6 +748,12 @@ def _choose(
         # W = G P must be definite (a soft iron; negative for a mirrored sensor): an indefinite W is P times a
         # half turn about W's eigenvectors, another mounting that this label does not stand for.
         screened = sorted((m for m in fitted if _definite(m)), key=lambda m: m.rss)
+        if mapping in MAPPINGS and not screened:
+            raise CalibrationError(
+                f"the samples do not support the gyro calibration with mapping={mapping!r}: with the magnetometer's "
+                "axes turned that way no soft iron fits (the fitted one is not positive definite: the mounting is "
+                "another); leave mapping='search' to find it"
+            )
         if not screened:
             return _fit_model(y, w, t, segment_s, "general", *_parts(general)), {}, None
         variance = _noise_variance(general)
@@ -903,6 +909,12 @@ def fit_gyro(
     spread = np.arccos(np.clip(np.einsum("kj,j->k", directions, mean / max(float(np.linalg.norm(mean)), 1e-12)), -1, 1))
     span_deg = 2.0 * float(np.degrees(spread.max()))
     support = _support(ambiguous, offset_sigma, vectors, heading_sigma, residual_rms, span_deg, lag)
+    if mapping in MAPPINGS and excess.get(mapping, 0.0) > LIKELIHOOD_RATIO:
+        support = replace(support, verdict="weak" if support.verdict == "supported" else support.verdict,
+                          weaknesses=(*support.weaknesses,
+                                      f"the mapping given ({mapping}) fits {excess[mapping]:.0f} noise variances worse "
+                                      "than a general rotation of the axes: the mounting is likely turned from it "
+                                      "(mapping='search' reports by how much)"))  # fmt: skip
     diagonal = np.sqrt(np.clip(np.diag(covariance), 0, None))
     details: dict[str, Any] = {
         "mapping": "general" if model.name == "general" else nearest,
