@@ -135,7 +135,13 @@ def test_blackbox_csv_on_the_command_line_names_its_converter_and_unit(tmp_path:
     assert "magADC[0], magADC[1], magADC[2] (Betaflight/INAV blackbox_decode magADC, counts;" in result.stdout
     assert "minus the offset the firmware stores" in result.stdout  # the trap, told
     calibration = magfit.Calibration.from_json(output.read_text())
+    assert calibration.unit == "counts"  # the converter's unit labels the calibration
     assert_truth(calibration, TRUTH["blackbox_magadc.csv"], offset_tol=1.5, shape_tol=0.01)
+    labelled = tmp_path / "ros.json"
+    result = CliRunner().invoke(cli, ["calibrate", str(DATA / "ros_magnetic_field.csv"), "-o", str(labelled)])
+    assert result.exit_code == 0 and magfit.Calibration.from_json(labelled.read_text()).unit == "T"
+    (strength,) = [line for line in result.stdout.splitlines() if line.startswith("field strength")]
+    assert strength.endswith("e-05 T")  # about 49 µT, printed in the file's tesla
 
 
 def test_ulog2csv_output_is_pyulogs_data_in_gauss() -> None:

@@ -466,6 +466,7 @@ def _calibrate_samples(
         used += f"; {chosen.column_note}" if chosen.column_note else ""
         raise CalibrationError(f"{path} ({used}): {error}") from None
     calibration = fitted.calibration
+    unit = unit if unit is not None else chosen.unit  # the file's own when its column names say it (mag_x_uT)
     if unit is not None:
         calibration = calibration.with_unit(unit)
     # Where the samples came from, so that `magfit apply` reads the same columns (details["source"]).
