@@ -106,14 +106,18 @@ def test_level_yaw_turns_leave_the_mount_yaw_undetermined():
     assert np.degrees(np.arccos(np.clip(down_fitted @ down_true, -1, 1))) < 0.5
 
 
-def test_level_flight_with_right_handed_axes_within_half_a_degree():
+def test_level_flight_within_half_a_degree():
     mounting = euler_matrix(-15.0, 25.0, 35.0)
     sim, calibrated = _vehicle("flight", mounting, 20000, seed=8)
     kwargs = {"inclination_deg": 64.0, "gyro": sim.gyro, "time_s": sim.time_s}
-    # Nearly level: a reflection across the vertical plane of the pitching changes no dip angle.
+    # Nearly level: a reflection across the vertical plane of the pitching changes no dip angle. By default
+    # right-handed axes are then assumed (weak, said); allow_mirror=True insists on knowing (refused).
     with pytest.raises(CalibrationError, match="mirror image"):
-        align(calibrated, sim.accel, **kwargs)
+        align(calibrated, sim.accel, allow_mirror=True, **kwargs)
+    assumed = align(calibrated, sim.accel, **kwargs)
+    assert assumed.verdict == "weak" and "right-handed axes are assumed" in assumed.warnings[-1]
     result = align(calibrated, sim.accel, allow_mirror=False, **kwargs)
+    np.testing.assert_allclose(assumed.matrix, result.matrix)
     assert angle_between_deg(result.matrix, mounting) < 0.5
     assert sum(result.dropped.values()) + result.n_used == result.n_samples
     assert any("turning faster than 0.3°/s" in reason for reason in result.dropped)

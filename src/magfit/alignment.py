@@ -44,8 +44,8 @@ with the sensor axis to invert. Without a known inclination, R with δ and −R 
 field is then taken to point down (δ > 0, the northern magnetic hemisphere), and the mirror verdict rests
 on that. An accelerometer that reports gravity instead of the specific force (its sign inverted) also looks
 like a mirror: −R is proper, and both readings are reported. Gravity directions that keep to a plane (a level
-vehicle, one that only pitches) cannot tell a rotation from its reflection across that plane: refused unless
-``allow_mirror=False``.
+vehicle, one that only pitches) cannot tell a rotation from its reflection across that plane: right-handed
+axes are then assumed and the result is weak, saying so (``allow_mirror=True`` refuses instead).
 
 The one-sigma is honest for correlated samples: batch means of the score over contiguous blocks of the
 recording (the sandwich covariance, as in :func:`magfit.diagnostics.uncertainty.correlation_excess`).
@@ -54,7 +54,7 @@ recording (the sandwich covariance, as in :func:`magfit.diagnostics.uncertainty.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -273,8 +273,17 @@ def _gates(
     else:
         width = 5
     if gyro is not None:
-        rate = np.linalg.norm(gyro, axis=1)
+        # An uncalibrated gyroscope's bias (tenths of a degree per second, above the gate) would read as turning
+        # on every sample: its median rate is taken as the bias (a vehicle turns both ways, or holds still).
+        bias = np.median(gyro, axis=0)
+        rate = np.linalg.norm(gyro - bias, axis=1)
         source = "the gyroscope"
+        if np.degrees(np.linalg.norm(bias)) > 0.05:
+            notes.append(
+                "the gyroscope's median rate ({:+.2f}, {:+.2f}, {:+.2f})°/s is taken as its bias".format(
+                    *np.degrees(bias)
+                )
+            )
     elif time_s is not None:
         # The field direction misses a rotation about the field, gravity's one about gravity: the larger
         # sees every turn (a level yaw turn moves the field direction at ω cos δ). Over two seconds, so that
@@ -456,7 +465,7 @@ def align(
     time_s: ArrayLike | None = None,
     max_rate_dps: float | None = MAX_RATE_DPS,
     accel_tolerance: float = ACCEL_TOLERANCE,
-    allow_mirror: bool = True,
+    allow_mirror: bool | None = None,
     allow_undetermined: bool = False,
 ) -> Alignment:
     """The rotation of the magnetometer into the accelerometer's frame, from gravity and the inclination (A1).
@@ -480,9 +489,11 @@ def align(
         hand-held rotation about the sensor itself, which has no centripetal acceleration to speak of).
     accel_tolerance : float
         Largest relative deviation of |a| from g (the median |a|) of a sample used.
-    allow_mirror : bool
-        Consider mirror images (det −1) of the sensor's axes too (default). False when the axes are known to be
-        right-handed: a vehicle that stays nearly level cannot tell a rotation from its mirror image.
+    allow_mirror : bool or None
+        Whether a mirror image (det −1) of the sensor's axes may be the answer. None (default): yes where the
+        samples can tell; where they cannot (a vehicle that stays nearly level), the proper rotation is returned
+        as weak, the assumption named. True: a mirror must be ruled in or out (refused when the samples cannot).
+        False: the axes are known to be right-handed.
     allow_undetermined : bool
         Return a refused alignment (``verdict="refused"``, the reason first in ``warnings``) instead of raising.
 
@@ -525,7 +536,8 @@ def align(
     fit_s = inclination_deg is None
     s0 = math.sin(math.radians(inclination_deg)) if inclination_deg is not None else 0.0
 
-    solutions = _search(down, mhat, s0, fit_s, allow_mirror)
+    search_mirrors = allow_mirror is not False
+    solutions = _search(down, mhat, s0, fit_s, search_mirrors)
     best = solutions[0]
     cov, info, residuals, inflation = _covariance(down, mhat, best, fit_s)
     refusals, weak = _judge_axes(down, mhat, best, cov, info, inflation, direction_noise, fit_s)
@@ -540,7 +552,24 @@ def align(
                 f"the inclination is not determined (fitted {inclination:.1f}° ± {inclination_sigma:.0f}°): "
                 "record more tilt, or give the inclination (the World Magnetic Model at your place: --location)"
             )
-    refusals += _judge_alternatives(down, mhat, solutions, residuals, inflation, direction_noise, allow_mirror)
+    refusals += _judge_alternatives(down, mhat, solutions, residuals, inflation, direction_noise, search_mirrors)
+    if allow_mirror is None and _MIRROR_REFUSAL in refusals:
+        # The samples cannot tell: right-handed axes, by far the commoner, are assumed and the result says so.
+        right_handed = align(
+            calibrated_mag, accel, inclination_deg=inclination_deg, gyro=gyro, time_s=time_s,
+            max_rate_dps=max_rate_dps, accel_tolerance=accel_tolerance, allow_mirror=False,
+            allow_undetermined=allow_undetermined,
+        )  # fmt: skip
+        assumed = (
+            "these samples cannot tell a rotation from a mirror image of the sensor's axes (gravity stays near one "
+            "body plane): right-handed axes are assumed; if the sensor's axes may be left-handed, record it tilted "
+            "in several attitudes"
+        )
+        return replace(
+            right_handed,
+            verdict="weak" if right_handed.verdict == "supported" else right_handed.verdict,
+            warnings=(*right_handed.warnings, assumed),
+        )
 
     mirror = bool(np.linalg.det(best.matrix) < 0)
     if mirror:

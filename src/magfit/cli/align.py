@@ -190,7 +190,8 @@ def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | 
 @click.option("--date", callback=geomag_option(parse_date), help="YYYY-MM-DD for --location (default: today).")
 @click.option("--max-rate", default="0.3", show_default=True,
               help="Fastest turn (°/s) of a sample used; 'none': a hand-held rotation about the sensor.")  # fmt: skip
-@click.option("--no-mirror", is_flag=True, help="The sensor's axes are right-handed: do not consider mirror images.")
+@click.option("--no-mirror", is_flag=True,
+              help="Right-handed sensor axes (by default a mirror is named where the samples tell).")  # fmt: skip
 @click.option("--force", is_flag=True, help="Print an alignment the samples do not determine, its refusal first.")
 def align_command(
     file: Path,
@@ -254,7 +255,7 @@ def align_command(
     try:
         result = align(
             corrected, recording.accel, inclination_deg=inclination, gyro=recording.gyro, time_s=recording.time_s,
-            max_rate_dps=max_rate_dps, allow_mirror=not no_mirror, allow_undetermined=force,
+            max_rate_dps=max_rate_dps, allow_mirror=False if no_mirror else None, allow_undetermined=force,
         )  # fmt: skip
     except CalibrationError as error:  # the library's keywords as this command's options
         message = str(error)
