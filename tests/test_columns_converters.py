@@ -343,5 +343,7 @@ def test_compare_refuses_an_interleaved_file_without_sensor_in_one_line() -> Non
     assert result.exit_code == 2
     assert "interleaves 2 magnetometers in column 'I' (I=0, I=1)" in result.stderr
     assert "--sensor I=0" in result.stderr and "Traceback" not in result.output
-    one = CliRunner().invoke(cli, ["compare", str(DATA / "mavlogdump_mag.csv"), "--sensor", "I=0"])
+    one = CliRunner().invoke(cli, ["compare", str(DATA / "mavlogdump_mag.csv"), "--sensor", "I=0", "--format", "json"])
     assert one.exit_code == 0, one.output
+    (compared,) = json.loads(one.stdout)
+    assert compared["unit"] == "mG" and compared["n_rows"] == 500

@@ -87,7 +87,15 @@ def read_recordings(
         if table.n_skipped:
             warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
         return [
-            Recording(path.name, table.samples, tuple(table.columns), table.n_rows, table.n_skipped, table.column_note)
+            Recording(
+                path.name,
+                table.samples,
+                tuple(table.columns),
+                table.n_rows,
+                table.n_skipped,
+                table.column_note,
+                unit=table.unit,  # as the column names (or their converter) state it
+            )
         ]
     if columns is not None:
         raise click.UsageError("--columns chooses the columns of a samples file; a log's compass is chosen by --sensor")
