@@ -39,14 +39,18 @@ from .sources import check_file, file_error
 
 __all__ = [
     "INSTANCE_NAMES",
+    "MAX_INSTANCES",
     "SensorColumn",
     "SensorListing",
+    "choose",
     "find_instance_column",
     "head_sensors",
     "head_values",
     "instance_column",
+    "interleaved_error",
     "sensor_id",
     "sensor_listing",
+    "value_text",
 ]
 
 #: Column names (lower-case, the part after the last ``.``: ``MAG.I`` is ``i``) that say which sensor a row is
