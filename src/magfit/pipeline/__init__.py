@@ -19,6 +19,7 @@ the place given, or at the log's own GNSS fixes. Nothing here prints: notes reac
 from __future__ import annotations
 
 import datetime
+import importlib.util
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -322,6 +323,8 @@ def calibrate_file(
     place: tuple[float, float, float] | Literal["log"] | None = location
     if place is None and field_strength == "wmm":
         place = FROM_LOG
+    elif place is None and importlib.util.find_spec("pygeomag") is not None and log_position(source) is not None:
+        place = FROM_LOG  # a log that knows where it was: the fitted field is checked against the model's there
     model = _model(path, source, place, date)
     chosen = [sensor] if sensor is not None else _usable(source)
     compasses: list[CompassCalibration] = []
