@@ -239,17 +239,20 @@ def _constrained(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """H = basis @ h with |h| = 1 and the best c minimising the windowed residual: (H, c, residual²).
 
-    c is eliminated by projection and h is the smallest right-singular vector of what is left, so the
-    residuals of different models of H (general, or ``P S`` for each mapping) are on one scale (|H|_F = 1).
+    c is eliminated (the Schur complement of the normal equations) and h is the eigenvector of the smallest
+    eigenvalue of what is left, so the residuals of different models of H (general, or ``P S`` for each
+    mapping) are on one scale (|H|_F = 1). Normal equations through einsum, not an SVD or QR of the tall
+    design: LAPACK's threads on a shared machine made those 80 % of a long recording's fit.
     """
     d_h = np.einsum("rj,jk->rk", design[:, :9], basis)
     d_c = design[:, 9:]
-    q, _ = np.linalg.qr(d_c)
-    projected = d_h - np.einsum("rj,jk->rk", q, np.einsum("rj,rk->jk", q, d_h))
-    _, singular, vt = np.linalg.svd(projected, full_matrices=False)
-    h = vt[-1]
-    c, *_ = np.linalg.lstsq(d_c, -np.einsum("rk,k->r", d_h, h), rcond=None)
-    return (basis @ h).reshape(3, 3), c, float(singular[-1] ** 2)
+    n_hh = np.einsum("rj,rk->jk", d_h, d_h)
+    n_hc = np.einsum("rj,rk->jk", d_h, d_c)
+    n_cc = np.einsum("rj,rk->jk", d_c, d_c)
+    eliminate = np.linalg.solve(n_cc, n_hc.T)  # c = −N_cc⁻¹ N_chᵀ h
+    values, vectors = np.linalg.eigh(n_hh - n_hc @ eliminate)
+    h = vectors[:, 0]
+    return (basis @ h).reshape(3, 3), -eliminate @ h, float(max(values[0], 0.0))
 
 
 def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -270,7 +273,8 @@ def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.floa
         q, _ = np.linalg.qr(np.column_stack([theta, np.eye(12)]))
         tangent = q[:, 1:12]
         jac = np.column_stack([np.einsum("rj,jk->rk", jac_theta, tangent), jac_beta])
-        step, *_ = np.linalg.lstsq(jac, -residual, rcond=None)
+        normal = np.einsum("rp,rq->pq", jac, jac)
+        step, *_ = np.linalg.lstsq(normal, -np.einsum("rp,r->p", jac, residual), rcond=None)
         theta = theta + tangent @ step[:11]
         theta = theta / np.linalg.norm(theta)
         beta = beta + step[11:]
