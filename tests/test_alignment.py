@@ -171,6 +171,20 @@ def test_real_mpu9250_magnetometer_is_its_accelerometer_turned_180_about_x(real_
     assert np.all(result.sigma_deg < 2.0)
 
 
+def test_an_uncalibrated_gyroscope_bias_is_taken_off():
+    # 0.5°/s of bias per axis, above the 0.3°/s gate: without taking it off no sample would be kept.
+    bias = np.radians([0.5, -0.4, 0.45])
+    sim, calibrated = _vehicle("flight", euler_matrix(5.0, -10.0, 20.0), 20000, seed=13, gyro_bias=bias)
+    result = align(calibrated, sim.accel, inclination_deg=64.0, gyro=sim.gyro, time_s=sim.time_s, allow_mirror=False)
+    note = next(w for w in result.warnings if "gyroscope's bias" in w)
+    found = np.array([float(v) for v in note.split("(")[-1].split(")")[0].split(",")])
+    np.testing.assert_allclose(found, np.degrees(bias), atol=0.05)
+    assert np.degrees(np.arccos(min(1.0, (result.matrix.T @ [0, 0, 1]) @ (sim.mounting.T @ [0, 0, 1])))) < 0.5
+    # Without time stamps the still samples cannot be found independently of the gyroscope: no bias is taken.
+    with pytest.raises(CalibrationError, match="turning faster than 0.3°/s"):
+        align(calibrated, sim.accel, inclination_deg=64.0, gyro=sim.gyro, allow_mirror=False)
+
+
 @pytest.mark.parametrize(
     ("mag", "accel", "options", "error", "match"),
     [

@@ -272,23 +272,30 @@ def _gates(
         width = max(1, round(1.0 / step)) if step > 0 else 1
     else:
         width = 5
-    if gyro is not None:
-        # An uncalibrated gyroscope's bias (tenths of a degree per second, above the gate) would read as turning
-        # on every sample: its median rate is taken as the bias (a vehicle turns both ways, or holds still).
-        bias = np.median(gyro, axis=0)
-        rate = np.linalg.norm(gyro - bias, axis=1)
-        source = "the gyroscope"
-        if np.degrees(np.linalg.norm(bias)) > 0.05:
-            notes.append(
-                "the gyroscope's median rate ({:+.2f}, {:+.2f}, {:+.2f})°/s is taken as its bias".format(
-                    *np.degrees(bias)
-                )
-            )
-    elif time_s is not None:
+    turning = None
+    if time_s is not None:
         # The field direction misses a rotation about the field, gravity's one about gravity: the larger
         # sees every turn (a level yaw turn moves the field direction at ω cos δ). Over two seconds, so that
         # the accelerometer's noise stays below the gate.
-        rate = np.maximum(_direction_rate(mag, time_s, 2 * width), _direction_rate(accel, time_s, 2 * width))
+        turning = np.maximum(_direction_rate(mag, time_s, 2 * width), _direction_rate(accel, time_s, 2 * width))
+    if gyro is not None:
+        rate = np.linalg.norm(gyro, axis=1)
+        source = "the gyroscope"
+        if turning is not None:
+            # An uncalibrated gyroscope's bias (tenths of a degree per second, above the gate) reads as turning
+            # on every sample: its median on the samples whose field and gravity directions hold still (which no
+            # bias reaches) is taken as the bias. Without time stamps there are no such samples: none is taken.
+            steady = keep & (_moving_mean(turning, width) <= math.radians(max_rate_dps))
+            if np.sum(steady) >= MIN_SAMPLES:
+                bias = np.median(gyro[steady], axis=0)
+                rate = np.linalg.norm(gyro - bias, axis=1)
+                if np.degrees(np.linalg.norm(bias)) > 0.05:
+                    notes.append(
+                        "the gyroscope's bias, its median rate where the field and gravity directions hold still: "
+                        "({:+.2f}, {:+.2f}, {:+.2f})°/s, taken off".format(*np.degrees(bias))
+                    )
+    elif turning is not None:
+        rate = turning
         source = "the turning of the field and gravity directions"
     else:
         notes.append(
