@@ -61,8 +61,8 @@ MAGNITUDE_METHODS = ("sphere", "diag", "als", "ml", "auto")
 NOT_FORCED = ("auto",)
 REGRESSION = "regression"
 VECTOR = "vector"
-#: The gyro-aided magfit method(s), by the names they may be registered under.
-GYRO_METHOD_NAMES = ("gyro", "magyc", "gyro_aided", "kinematic")
+#: magfit's gyro-aided method.
+GYRO = "gyro"
 #: MAGYC's gyro-aided methods (magyc 1.0.0, Rodríguez et al. 2024).
 MAGYC_METHODS = ("magyc_ls", "magyc_nls", "magyc_bfg", "magyc_ifg")
 #: ``magfit.alignment.align`` on the samples corrected by the true magnitude-only calibration (the
@@ -216,7 +216,7 @@ class VehicleOutcome:
     details: dict[str, Any] | None = None
 
 
-#: A fitter returns a calibration and, for ``align``, the fitted rotation instead.
+#: A method run on a simulated recording (the samples and whatever else of the recording it uses).
 Fitter = Callable[[VehicleSimulation], magfit.Calibration]
 
 
@@ -267,20 +267,14 @@ def _magyc(function: str) -> Fitter:
     return run
 
 
-def gyro_method() -> str | None:
-    """The gyro-aided method magfit registers, if any."""
-    return next((name for name in GYRO_METHOD_NAMES if name in magfit.METHODS), None)
-
-
 def method_table(methods: Sequence[str] | None = None, peers: bool = True) -> dict[str, Fitter]:
     """Every fitter that exists in this checkout, by column name (a method not yet in magfit is left out)."""
     table: dict[str, Fitter] = {name: _magfit(name) for name in MAGNITUDE_METHODS if name in magfit.METHODS}
     table[REGRESSION] = regression
     if VECTOR in magfit.METHODS:
         table[VECTOR] = _magfit(VECTOR, reference=lambda s: s.reference, time_s=lambda s: s.time_s)
-    gyro = gyro_method()
-    if gyro is not None:
-        table[gyro] = _magfit(gyro, gyro=lambda s: s.gyro, time_s=lambda s: s.time_s)
+    if GYRO in magfit.METHODS:
+        table[GYRO] = _magfit(GYRO, gyro=lambda s: s.gyro, time_s=lambda s: s.time_s)
     if peers:
         for function in MAGYC_METHODS:
             table[f"magyc.{function}"] = _magyc(function)
@@ -330,7 +324,7 @@ def score(calibration: magfit.Calibration, simulation: VehicleSimulation) -> Veh
     return outcome
 
 
-KEPT_DETAILS = ("lag_s", "time_offset_s", "chosen", "method_used", "axis_mapping", "reason")
+KEPT_DETAILS = ("lag_s", "chosen", "mapping", "reason")
 
 
 def run_case(case: VehicleCase, fitters: Mapping[str, Fitter], root_seed: int) -> dict[str, list[VehicleOutcome]]:
@@ -349,7 +343,7 @@ def run_case(case: VehicleCase, fitters: Mapping[str, Fitter], root_seed: int) -
         for name, fitter in fitters.items():
             if name.startswith("magyc.") and name.removeprefix("magyc.") not in case.magyc:
                 continue
-            if name in GYRO_METHOD_NAMES and not case.gyro:
+            if name == GYRO and not case.gyro:
                 continue
             start = time.perf_counter()
             try:
@@ -518,7 +512,7 @@ def check_targets(
                               _status(ok) if ran else "NOT RUN", "RMS over trials", items))  # fmt: skip
 
     # 3. gyro-aided within 1.2x of vector where both apply; better than MAGYC's methods.
-    gyro = next((name for name in GYRO_METHOD_NAMES if any(name in r for r in results.values())), None)
+    gyro = GYRO if any(GYRO in per_case for per_case in results.values()) else None
     items, ok, ran = [], True, False
     magyc_items, magyc_ok, magyc_ran = [], True, False
     for case in cases:
