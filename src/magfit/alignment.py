@@ -270,6 +270,8 @@ def _gates(
     if time_s is not None and time_s.size > 1:
         step = float(np.median(np.diff(time_s)))
         width = max(1, round(1.0 / step)) if step > 0 else 1
+        if step >= 1.0:  # milliseconds given as seconds would let every turn through the gate
+            notes.append(f"the samples are {step:g} s apart: if time_s is not in seconds, the rate gate is wrong")
     else:
         width = 5
     turning = None
@@ -316,7 +318,7 @@ def _gates(
 class _Solution:
     matrix: NDArray[np.float64]  # orthogonal, possibly a mirror
     s: float  # sin δ
-    cost: float
+    cost: float  # median squared residual of (A1): comparable between solutions, unlike a robust loss's scale
 
 
 def _huber_weights(r: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
