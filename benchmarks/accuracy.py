@@ -1535,7 +1535,9 @@ def _main_vehicle(args: argparse.Namespace, command: str, parser: argparse.Argum
         progress=lambda message: print(message, file=sys.stderr, flush=True),
         broad_data=None if (args.smoke or args.no_real or args.broad_data is None) else Path(args.broad_data),
     )
-    output = args.output if args.output != HERE / "results" else HERE / "results" / "vehicle"
+    # Never over the main grid's accuracy.md: the main results folder, however it is spelled, means its vehicle/.
+    main_results = (HERE / "results").resolve()
+    output = main_results / "vehicle" if args.output.resolve() == main_results else args.output
     output.mkdir(parents=True, exist_ok=True)
     (output / "accuracy.md").write_text(vehicle.render_markdown(report), encoding="utf-8")
     (output / "accuracy.json").write_text(vehicle.report_json(report), encoding="utf-8")
