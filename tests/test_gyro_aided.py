@@ -3,6 +3,8 @@ of simulate_vehicle (gyro noise and bias included), its refusals, and its input 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -140,3 +142,22 @@ def test_an_imposed_mapping_the_samples_contradict_is_refused() -> None:
     with pytest.raises(CalibrationError, match=r"mapping='\+x\+y\+z'.*leave mapping='search'"):
         _fit(sim, mapping="+x+y+z")
     assert _fit(sim, mapping="+x-y-z").details["mapping"] == "+x-y-z"
+
+
+def test_real_betaflight_quadcopter_and_ensta_imu(real_data_dir: Path) -> None:
+    # pichim/dev_mag_calib's bf_mag_calibration.m resamples the blackbox to fs_mag = 200 Hz and writes the gyro in
+    # rad/s before these text files: mx, my, mz, gx, gy, gz.
+    flight = np.loadtxt(real_data_dir / "betaflight_apex5_qmc5883" / "20231014_apex5_mag_on_tpu_03.txt", delimiter=",")
+    cal = magfit.fit(flight[:, :3], method="gyro", gyro=flight[:, 3:], time_s=np.arange(len(flight)) / 200.0)
+    controller = np.array([957.0, 417.0, 502.0])  # the flight controller's own hard iron (the recordings' README)
+    assert np.linalg.norm(cal.offset - controller) < 0.015 * cal.field_strength
+    assert cal.details["lag_s"] == pytest.approx(0.006, abs=0.002)  # its magnetometer samples are held
+    assert cal.details["nearest_mapping"] == "+x+y+z" and cal.details["angle_from_nearest_deg"] < 8.0
+    # The ENSTA IMU: the magnetometer is the gyroscope's frame turned 180° about x; its gyro is in deg/s.
+    imu = np.load(real_data_dir / "ensta_tlefloch_imu" / "raw_data.npz")
+    mag = np.column_stack([imu["mag_x"], imu["mag_y"], imu["mag_z"]])
+    rates = np.column_stack([imu["gyro_x"], imu["gyro_y"], imu["gyro_z"]])
+    with pytest.raises(OptionError, match="degrees per second"):
+        magfit.fit(mag, method="gyro", gyro=rates, time_s=imu["time"])
+    cal = magfit.fit(mag, method="gyro", gyro=np.radians(rates), time_s=imu["time"])
+    assert cal.details["mapping"] == "+x-y-z"
