@@ -13,7 +13,7 @@ linear in (H, c) and homogeneous (the overall scale, and the sign, are free): th
 differentiates the samples (``diff(m)/dt``) and adds the gyro's bias β in ``ω = ω_measured − β``. TWOSTEP
 (Alonso & Shuster, J. Astronaut. Sci. 50(4), 2002) uses the field's magnitude only; Huang, Hendeby & Skog
 ("Joint magnetometer-IMU calibration via maximum a posteriori estimation", arXiv:2505.16662, 2025) estimate
-the calibration with the orientation trajectory as unknowns, which stage 3 below does in a reduced form (the
+the calibration with the orientation trajectory as unknowns, which stage 2 below does in a reduced form (the
 trajectory is the gyro's, integrated, with one unknown start per stretch). Here, in three stages:
 
 1. **Integrated, not differentiated.** (1) integrated over windows ``[a, b]`` of about a second:
@@ -55,7 +55,7 @@ What the motion determines (the verdict, in ``details["support"]``): turning abo
 the kinematics fix the offset across ``a`` and the distortion of the plane perpendicular to ``a`` (even from
 part of a turn: the gyroscope says how far it turned), never the offset along the normal nor the scale
 along ``a``. A second rotation axis, even ±15° of bank, makes everything determined in principle; how well
-is the covariance of stage 3 (the sandwich of batch sums over the recording, as the diagnostics of the
+is the covariance of stage 2 (the sandwich of batch sums over the recording, as the diagnostics of the
 magnitude-only methods do, for the gyro's noise walks and is correlated in time): an offset one-sigma above
 5 % of the field is a refusal, above 1 % a weakness, each with the heading error it causes.
 """
@@ -175,7 +175,7 @@ def _motion(
     steps = np.diff(t)
     if np.any(steps <= 0):
         at = int(np.argmax(steps <= 0)) + 1
-        raise OptionError(f"time_s= must increase strictly; row {at} ({t[at]!r} s) does not: sort or de-duplicate")
+        raise OptionError(f"time_s= must increase strictly; row {at} ({t[at]:g} s) does not: sort or de-duplicate")
     return w, t
 
 
@@ -283,7 +283,7 @@ def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.floa
     return theta, beta
 
 
-# ----------------------------------------------------------------------- stage 3: maximum likelihood
+# ----------------------------------------------------------------------- stage 2: maximum likelihood
 
 
 def _quaternion_product(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -384,9 +384,7 @@ class _Trajectory:
         b, _, _ = self.field(p)
         return (np.einsum("ij,kj->ki", self.distortion(p), b) + p[self.k : self.k + 3] - self.y[self.rows]).ravel()
 
-    def blocks(
-        self, p: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    def blocks(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """The residual (rows, 3), its Jacobian in (q, V, β) (rows, 3, k + 6), and in the row's own stretch's
         two angles (rows, 3, 2): every other angle column of a row is zero."""
         k = self.k
@@ -499,7 +497,7 @@ def _larger(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float6
     return b + (vectors * np.clip(values, 0, None)) @ vectors.T
 
 
-# ------------------------------------------------------------------------------------------ the method
+# ------------------------------------------------------------------------------- stage 3: the axis mapping
 
 
 def _windowed_ranking(design: NDArray[np.float64]) -> list[str]:
@@ -548,6 +546,93 @@ def _noise_variance(model: _Model) -> float:
     means = residual[: blocks * block].reshape(blocks, block, 3).mean(axis=1)
     excess = block * float(np.mean(means**2)) / max(float(np.mean(residual**2)), 1e-300)
     return variance * max(1.0, excess)
+
+
+def _choose(
+    y: NDArray[np.float64],
+    w: NDArray[np.float64],
+    t: NDArray[np.float64],
+    win: _Windows,
+    mapping: str,
+    segment_s: float,
+) -> tuple[_Model, dict[str, float], tuple[str, str, float] | None]:
+    """The model kept: the general G, or ``W Pᵀ`` for the standard mapping the samples prefer (module docstring).
+
+    Returns the model, each candidate's residual excess over the general fit in noise variances (a
+    likelihood ratio: χ² with 3 degrees of freedom when the mapping is right), and the two mappings that
+    are not told apart, with their separation, when searching found two.
+    """
+    _, beta = _windowed_bias(win)
+    design = _design(win, beta)
+    h, c, _ = _constrained(design, np.eye(9))
+    # Every model is first fitted on a stride of the recording (SCREEN_ROWS rows): the general one from the
+    # windows, each candidate mapping from the general one (the right mapping starts at its optimum, a wrong
+    # one stays far off), so that the likelihood ratios compare like with like; the one kept is refitted on
+    # every row (up to MAX_RESIDUAL_SAMPLES) from there.
+    offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
+    inverse = np.asarray(np.linalg.inv(h), dtype=np.float64)
+    general = _fit_model(y, w, t, segment_s, "general", inverse, offset, beta, SCREEN_ROWS)
+    chosen, excess, ambiguous = general, {}, None
+    if mapping != "general":
+        if mapping in MAPPINGS:
+            names = [mapping]
+        else:
+            g = general.traj.distortion(general.solution.params)
+            rotation, _ = polar_decomposition(np.linalg.inv(g) * np.sign(np.linalg.det(g)))
+            names = list(dict.fromkeys([mapping_name(rotation), *_windowed_ranking(design)[:2]]))
+        start = _parts(general)
+        fitted = [_fit_model(y, w, t, segment_s, name, *start, SCREEN_ROWS, SCREEN_ITER) for name in names]
+        # W = G P must be definite (a soft iron; negative for a mirrored sensor): an indefinite W is P times a
+        # half turn about W's eigenvectors, another mounting that this label does not stand for.
+        screened = sorted((m for m in fitted if _definite(m)), key=lambda m: m.rss)
+        if mapping in MAPPINGS and not screened:
+            raise CalibrationError(
+                f"the samples do not support the gyro calibration with mapping={mapping!r}: with the magnetometer's "
+                "axes turned that way no soft iron fits (the fitted one is not positive definite: the mounting is "
+                "another); leave mapping='search' to find it"
+            )
+        if not screened:
+            return _fit_model(y, w, t, segment_s, "general", *_parts(general)), {}, None
+        variance = _noise_variance(general)
+        excess = {m.name: (m.rss - general.rss) / variance for m in screened}
+        best = screened[0]
+        if mapping in MAPPINGS or excess[best.name] <= LIKELIHOOD_RATIO:  # else: turned in between
+            chosen = best
+            # Two labels can fit one matrix (P S with S indefinite is another mapping's P' S'): a rival is a
+            # candidate whose fitted rotation differs from the best one's, not merely its label.
+            rivals = [m for m in screened[1:] if _angle_deg(_rotation(m), _rotation(best)) > 10.0]
+            if mapping == "search" and rivals:
+                separation = excess[rivals[0].name] - excess[best.name]
+                if separation < LIKELIHOOD_RATIO:
+                    ambiguous = (mapping_name(_rotation(best)), mapping_name(_rotation(rivals[0])), separation)
+    return _fit_model(y, w, t, segment_s, chosen.name, *_parts(chosen)), excess, ambiguous
+
+
+def _definite(model: _Model) -> bool:
+    """True when the symmetric W of a mapping's model ``G = W Pᵀ`` has eigenvalues of one sign."""
+    w = model.traj.distortion(model.solution.params) @ MAPPINGS[model.name]
+    values = np.linalg.eigvalsh(0.5 * (w + w.T))
+    return bool(values.min() > 0 or values.max() < 0)
+
+
+def _rotation(model: _Model) -> NDArray[np.float64]:
+    """The rotation part of a fitted model's correction, taken proper (module docstring: the sign is free)."""
+    g = model.traj.distortion(model.solution.params)
+    h = np.linalg.inv(g)
+    return polar_decomposition(h * np.sign(np.linalg.det(h)))[0]
+
+
+def _angle_deg(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def _parts(model: _Model) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """G, V and β of a fitted model."""
+    params, k = model.solution.params, model.traj.k
+    return model.traj.distortion(params), params[k : k + 3], params[k + 3 : k + 6]
+
+
+# ------------------------------------------------------------------------------------------ the verdict
 
 
 def _turn_axes(win: _Windows, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -666,6 +751,9 @@ def _support(
     return Support(verdict=verdict, refusals=tuple(refusals), weaknesses=tuple(weak), advice=_ADVICE)
 
 
+# --------------------------------------------------------------- the delay, the gyro's unit, the method
+
+
 def _delayed(w: NDArray[np.float64], t: NDArray[np.float64], lag: float) -> NDArray[np.float64]:
     """The gyro read ``lag`` seconds earlier at each sample time (linear interpolation; the ends held)."""
     if lag == 0.0:
@@ -713,90 +801,6 @@ def _check_rate_unit(win: _Windows) -> None:
             f"{rss['rad/s'] / max(rss['deg/s'], 1e-300):.0f} times better after dividing by 57.3): give it in rad/s "
             "(numpy.radians(gyro))"
         )
-
-
-def _choose(
-    y: NDArray[np.float64],
-    w: NDArray[np.float64],
-    t: NDArray[np.float64],
-    win: _Windows,
-    mapping: str,
-    segment_s: float,
-) -> tuple[_Model, dict[str, float], tuple[str, str, float] | None]:
-    """The model kept: the general G, or ``W Pᵀ`` for the standard mapping the samples prefer (module docstring).
-
-    Returns the model, each candidate's residual excess over the general fit in noise variances (a
-    likelihood ratio: χ² with 3 degrees of freedom when the mapping is right), and the two mappings that
-    are not told apart, with their separation, when searching found two.
-    """
-    _, beta = _windowed_bias(win)
-    design = _design(win, beta)
-    h, c, _ = _constrained(design, np.eye(9))
-    # Every model is first fitted on a stride of the recording (SCREEN_ROWS rows): the general one from the
-    # windows, each candidate mapping from the general one (the right mapping starts at its optimum, a wrong
-    # one stays far off), so that the likelihood ratios compare like with like; the one kept is refitted on
-    # every row (up to MAX_RESIDUAL_SAMPLES) from there.
-    offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
-    inverse = np.asarray(np.linalg.inv(h), dtype=np.float64)
-    general = _fit_model(y, w, t, segment_s, "general", inverse, offset, beta, SCREEN_ROWS)
-    chosen, excess, ambiguous = general, {}, None
-    if mapping != "general":
-        if mapping in MAPPINGS:
-            names = [mapping]
-        else:
-            g = general.traj.distortion(general.solution.params)
-            rotation, _ = polar_decomposition(np.linalg.inv(g) * np.sign(np.linalg.det(g)))
-            names = list(dict.fromkeys([mapping_name(rotation), *_windowed_ranking(design)[:2]]))
-        start = _parts(general)
-        fitted = [_fit_model(y, w, t, segment_s, name, *start, SCREEN_ROWS, SCREEN_ITER) for name in names]
-        # W = G P must be definite (a soft iron; negative for a mirrored sensor): an indefinite W is P times a
-        # half turn about W's eigenvectors, another mounting that this label does not stand for.
-        screened = sorted((m for m in fitted if _definite(m)), key=lambda m: m.rss)
-        if mapping in MAPPINGS and not screened:
-            raise CalibrationError(
-                f"the samples do not support the gyro calibration with mapping={mapping!r}: with the magnetometer's "
-                "axes turned that way no soft iron fits (the fitted one is not positive definite: the mounting is "
-                "another); leave mapping='search' to find it"
-            )
-        if not screened:
-            return _fit_model(y, w, t, segment_s, "general", *_parts(general)), {}, None
-        variance = _noise_variance(general)
-        excess = {m.name: (m.rss - general.rss) / variance for m in screened}
-        best = screened[0]
-        if mapping in MAPPINGS or excess[best.name] <= LIKELIHOOD_RATIO:  # else: turned in between
-            chosen = best
-            # Two labels can fit one matrix (P S with S indefinite is another mapping's P' S'): a rival is a
-            # candidate whose fitted rotation differs from the best one's, not merely its label.
-            rivals = [m for m in screened[1:] if _angle_deg(_rotation(m), _rotation(best)) > 10.0]
-            if mapping == "search" and rivals:
-                separation = excess[rivals[0].name] - excess[best.name]
-                if separation < LIKELIHOOD_RATIO:
-                    ambiguous = (mapping_name(_rotation(best)), mapping_name(_rotation(rivals[0])), separation)
-    return _fit_model(y, w, t, segment_s, chosen.name, *_parts(chosen)), excess, ambiguous
-
-
-def _definite(model: _Model) -> bool:
-    """True when the symmetric W of a mapping's model ``G = W Pᵀ`` has eigenvalues of one sign."""
-    w = model.traj.distortion(model.solution.params) @ MAPPINGS[model.name]
-    values = np.linalg.eigvalsh(0.5 * (w + w.T))
-    return bool(values.min() > 0 or values.max() < 0)
-
-
-def _rotation(model: _Model) -> NDArray[np.float64]:
-    """The rotation part of a fitted model's correction, taken proper (module docstring: the sign is free)."""
-    g = model.traj.distortion(model.solution.params)
-    h = np.linalg.inv(g)
-    return polar_decomposition(h * np.sign(np.linalg.det(h)))[0]
-
-
-def _angle_deg(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    return float(np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1.0) / 2.0, -1.0, 1.0))))
-
-
-def _parts(model: _Model) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """G, V and β of a fitted model."""
-    params, k = model.solution.params, model.traj.k
-    return model.traj.distortion(params), params[k : k + 3], params[k + 3 : k + 6]
 
 
 @register(
