@@ -161,3 +161,11 @@ def test_real_betaflight_quadcopter_and_ensta_imu(real_data_dir: Path) -> None:
         magfit.fit(mag, method="gyro", gyro=rates, time_s=imu["time"])
     cal = magfit.fit(mag, method="gyro", gyro=np.radians(rates), time_s=imu["time"])
     assert cal.details["mapping"] == "+x-y-z"
+
+
+def test_a_slow_vehicle_s_gyro_in_degrees_per_second_is_caught_by_the_fit() -> None:
+    # On a flight the one-second windows cannot tell the unit (both read the planar motion alike): the samples'
+    # own fit leaves almost the whole field off the predicted turning, and 1 % after dividing by 57.3.
+    sim = _simulate(3000, "flight", np.eye(3), seed=3)
+    with pytest.raises(OptionError, match="degrees per second.*after dividing it by 57.3"):
+        magfit.fit(sim.samples, method="gyro", gyro=np.degrees(sim.gyro), time_s=sim.time_s)

@@ -790,15 +790,46 @@ def _search_lag(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.fl
 
 
 def _check_rate_unit(win: _Windows) -> None:
-    """A gyro given in degrees per second turns the field 57 times too fast: refuse with the fix."""
+    """A gyro given in degrees per second turns the field 57 times too fast: refuse with the fix.
+
+    Only a correction that is a soft iron counts: samples that move in a plane (turns about one axis) are
+    also fitted by a rank-one H that ignores the rates altogether, which a gyro 57 times too slow favours.
+    """
     rss = {}
     for unit, factor in (("rad/s", 1.0), ("deg/s", math.pi / 180.0)):
         scaled = _Windows(win.dy, win.M * factor, win.Sy, win.Sw * factor, win.T)
-        rss[unit] = _constrained(_design(scaled, np.zeros(3)), np.eye(9))[2]
+        h, _, rss[unit] = _constrained(_design(scaled, np.zeros(3)), np.eye(9))
+        singular = np.linalg.svd(h, compute_uv=False)
+        if singular[-1] < 0.05 * singular[0]:  # no soft iron squeezes an axis 20 times
+            rss[unit] = math.inf
     if rss["deg/s"] < 0.25 * rss["rad/s"]:
+        better = "only" if math.isinf(rss["rad/s"]) else f"{rss['rad/s'] / max(rss['deg/s'], 1e-300):.0f} times better"
         raise OptionError(
-            "gyro= looks like degrees per second (the kinematics fit "
-            f"{rss['rad/s'] / max(rss['deg/s'], 1e-300):.0f} times better after dividing by 57.3): give it in rad/s "
+            f"gyro= looks like degrees per second (the kinematics fit {better} after dividing it by 57.3): give it "
+            "in rad/s (numpy.radians(gyro))"
+        )
+
+
+def _check_rate_unit_by_fit(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], win: _Windows,
+                            segment_s: float, residual_rms: float) -> None:  # fmt: skip
+    """The general fit of stage 2 with the gyro divided by 57.3: far better means degrees per second."""
+    scale = math.pi / 180.0
+    slow = _Windows(win.dy, win.M * scale, win.Sy, win.Sw * scale, win.T)
+    _, beta = _windowed_bias(slow)
+    h, c, _ = _constrained(_design(slow, beta), np.eye(9))
+    try:
+        offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
+        start = np.asarray(np.linalg.inv(h), dtype=np.float64)
+        model = _fit_model(y, w * scale, t, segment_s, "general", start, offset, beta, SCREEN_ROWS)
+    except np.linalg.LinAlgError:
+        return
+    g = model.traj.distortion(model.solution.params)
+    strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
+    rms = math.sqrt(model.rss / model.traj.rows.size) / strength
+    if rms < residual_rms / 3.0:
+        raise OptionError(
+            f"gyro= looks like degrees per second: the samples leave {100 * residual_rms:.0f} % of the field off the "
+            f"turning the gyro predicts, {100 * rms:.1f} % after dividing it by 57.3; give it in rad/s "
             "(numpy.radians(gyro))"
         )
 
@@ -908,6 +939,8 @@ def fit_gyro(
 
     residual = traj.residual(p).reshape(-1, 3)
     residual_rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))) / strength
+    if residual_rms > 0.15:  # the windows cannot tell the unit on a slow vehicle: ask the samples' own fit
+        _check_rate_unit_by_fit(y, w, t, win, segment_s, residual_rms)
     values, vectors = np.linalg.eigh(covariance[k : k + 3, k : k + 3])
     offset_sigma = np.sqrt(np.clip(values, 0, None)) / strength
     heading_sigma = _heading_sigma(g, offset, covariance, traj)
