@@ -537,6 +537,8 @@ def method_table(methods: Sequence[str] | None, peers: bool) -> dict[str, Fitter
     table: dict[str, Fitter] = {}
     ordered = [name for name in PREFERRED_ORDER if name in magfit.METHODS]
     for name in ordered + [name for name in magfit.METHODS if name not in ordered]:
+        if magfit.METHODS[name].needs:  # vector, gyro: they need the vehicle's streams (accuracy_vehicle.py)
+            continue
         if methods is None or name in methods:
             table[name] = _magfit_fitter(name)
     if peers:
