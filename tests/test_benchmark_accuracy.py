@@ -256,7 +256,9 @@ def test_the_flight_target_compares_auto_with_the_best_model_and_with_no_calibra
 def test_smoke_run_of_the_harness_on_magfit_methods(tmp_path: Path) -> None:
     report = accuracy.run(accuracy.smoke_grid(), peers=False, real_data=None, command="test", floor_points=20_000)
     tumble = report["summaries"]["tumble σ=0.5% N=1000"]
-    assert set(report["methods"]) == set(magfit.METHODS)
+    # Every method that fits the samples alone; vector and gyro need a vehicle's streams (accuracy_vehicle.py).
+    assert set(report["methods"]) == {name for name, spec in magfit.METHODS.items() if not spec.needs}
+    assert {"ellipsoid", "sphere", "auto"} <= set(report["methods"])
     # σ = 0.5 %, N = 1000: the floor is 0.054°; 2 trials of the algebraic fit stay well under 0.2°.
     assert tumble["ellipsoid"].heading_deg < 0.2
     assert tumble["ellipsoid"].failed == 0
