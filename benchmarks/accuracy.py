@@ -8,7 +8,9 @@ It simulates the paper's model (eq. 1), ``B_p = W R B (cos δ, 0, sin δ)ᵀ + V
 every method to the same samples and scores the fits against the truth; then it fits the real recordings
 in ``../shared/data/real`` and scores them on held-out samples. It writes ``benchmarks/results/accuracy.md``
 (the tables and the targets, PASS/FAIL) and ``accuracy.json`` (every number), headed by the command
-line and the versions. ``--smoke`` runs a tiny grid in seconds (what the test runs).
+line and the versions. ``--smoke`` runs a tiny grid in seconds (what the test runs). ``--vehicle`` runs
+issue 14's vehicle scenarios instead (attitude-aided, alignment and gyro-aided fits: ``accuracy_vehicle.py``),
+into ``results/vehicle``.
 
 Metrics (each per trial, then aggregated over the seeded trials of a case)
 --------------------------------------------------------------------------
