@@ -240,3 +240,12 @@ def test_samples_that_do_not_fix_the_ellipsoid_are_a_calibration_error_not_a_cra
     except magfit.CalibrationError:
         return  # auto may refuse too; what it must not do is crash
     assert np.all(np.isfinite(calibration.offset)) and np.all(np.isfinite(calibration.matrix))
+
+
+def test_an_unconverged_fit_is_refused_by_the_verdict_in_the_solvers_words() -> None:
+    sim = magfit.simulate(2000, soft_iron=np.diag([1.3, 1.0, 0.8]), hard_iron=[0.4, -0.2, 0.3], noise=0.02, seed=3)
+    with pytest.raises(magfit.CalibrationError, match="the ml fit did not converge"):
+        magfit.fit(sim.samples, "ml", max_iterations=1)
+    forced = magfit.fit(sim.samples, "ml", max_iterations=1, allow_undetermined=True)
+    assert forced.details["converged"] is False and forced.details["support"]["verdict"] == "refused"
+    assert magfit.fit(sim.samples, "ml").details["converged"] is True

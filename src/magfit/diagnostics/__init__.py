@@ -224,6 +224,7 @@ def diagnose(
         field_strength=calibration.field_strength,
         flat=flat_axis(raw, weights),
         axis_ratio=float(np.max(calibration.semi_axes) / np.min(calibration.semi_axes)),
+        solver_problem=calibration.details.get("solver_problem"),
     )
     support = judge(evidence)
     return Diagnostics(

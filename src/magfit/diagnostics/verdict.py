@@ -120,6 +120,8 @@ class Evidence:
         The fitted ellipsoid's longest semi-axis over its shortest.
     method : str or None
         The method that fitted the calibration, for messages.
+    solver_problem : str or None
+        The method's solver did not converge (``details["solver_problem"]``): refused, in its words.
     field_strength : float or None
         The calibration's field strength (input units), to judge offsets by.
     """
@@ -139,11 +141,12 @@ class Evidence:
     axis_ratio: float | None = None
     method: str | None = None
     field_strength: float | None = None
+    solver_problem: str | None = None
 
 
 def judge(evidence: Evidence) -> Support:
     """The verdict on one calibration from its evidence (see the module docstring for the rules)."""
-    refusals: list[str] = []
+    refusals: list[str] = [evidence.solver_problem] if evidence.solver_problem else []
     weak: list[str] = []
     cover, observability, uncertainty = evidence.coverage, evidence.observability, evidence.uncertainty
     label = f" {evidence.unit}" if evidence.unit else ""

@@ -334,7 +334,9 @@ def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) 
     rows = samples[thin(samples.shape[0], MAX_SAMPLES)]
     if model == "full" and "ml" in METHODS:
         try:
-            return METHODS["ml"].function(FitInput(Statistics.from_samples(rows), rows))
+            fitted = METHODS["ml"].function(FitInput(Statistics.from_samples(rows), rows))
+            if fitted.details.get("converged", True):
+                return fitted
         except (MagfitError, np.linalg.LinAlgError):
             pass  # e.g. no ellipsoid to start from, or too few directions: the first-order fit below
     frame = Frame.of(rows)

@@ -368,14 +368,18 @@ def fit_ml(
         solution = levenberg_marquardt(
             model.evaluate, params, n_residuals=zt.shape[1], max_iterations=int(max_iterations), current=current
         )
+        polish = None
         if solution.status > 0 and model.variance > 0:
-            solution = _solve_estimating_equation(model, solution, int(max_iterations))
+            polished = _solve_estimating_equation(model, solution, int(max_iterations))
+            # Where the polish finds no root (it crawled along a direction the samples hardly inform: level flight
+            # with a drifting field), Levenberg-Marquardt's minimum of the corrected residuals stands.
+            solution, polish = (polished, None) if polished.status > 0 else (solution, polished.message)
     except np.linalg.LinAlgError as error:  # JᵀJ singular at the optimum: the samples do not fix all 9 parameters
         raise CalibrationError(
             f"the ml fit cannot determine the ellipsoid from these samples ({error}); they cover too few "
             "directions: rotate the sensor through more attitudes, or use method='auto'"
         ) from None
-    if solution.status <= 0 or not np.all(np.isfinite(solution.params)):
+    if not np.all(np.isfinite(solution.params)):
         raise CalibrationError(
             f"the ml fit did not converge ({solution.message}, after {solution.iterations} iterations); "
             "raise max_iterations, or use method='als' (no iterations)"
@@ -395,7 +399,16 @@ def fit_ml(
         "noise_std": math.sqrt(residual_variance) * scale,
         "covariance_parameters": list(COVARIANCE_PARAMETERS),
         "covariance": _covariance(model, solution, residual_variance, scale),
+        "converged": solution.status > 0,
     }
+    if polish is not None:
+        details["polish"] = f"the bias-corrected estimating equation was not solved further ({polish})"
+    if solution.status <= 0:  # judged by the verdict, which refuses it (or returns it forced, marked)
+        details["solver_problem"] = (
+            f"the ml fit did not converge ({solution.message}, after {solution.iterations} iterations): it crawled "
+            "along a combination the samples hardly determine; record more attitudes, raise max_iterations, or use "
+            "method='auto'"
+        )
     return calibration_from_ellipsoid(
         "ml",
         statistics.centre + scale * centre_z,
