@@ -187,7 +187,9 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     missed = _missed(chosen, witnesses, held_out)
     standing = [w for w in witnesses if verdicts[w].verdict != "refused"]  # returned by the verdict, weak
     if missed is not None and standing:
-        steps.append(f"the {chosen} model {missed}, which is returned: it pins the heading near the attitudes recorded")
+        steps.append(
+            f"the {chosen} model {missed}; that model is returned: it pins the heading near the attitudes recorded"
+        )
         chosen, missed = standing[-1], None
     if missed is not None:
         raise CalibrationError(
@@ -204,9 +206,16 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     passed_over = [
         f"the {model} model was passed over: {'; '.join(verdicts[model].refusals)}"
         for model in verdicts
-        if model not in determined
+        if model not in determined and verdicts[model].refusals
     ]
-    reason = _reason(best, chosen, bic, steps, passed_over, weak, failed, screen_note)
+    opening = (
+        "the simplest the samples determine that no richer one predicts held-out stretches of the recording "
+        "clearly better"
+        if chosen in determined and not _undetermined(reports[chosen])
+        else "not determined in every direction, returned because no model the samples determine describes them "
+        "(see below)"
+    )
+    reason = _reason(best, chosen, opening, bic, steps, passed_over, weak, failed, screen_note)
     details: dict[str, Any] = {
         "chosen": prefix + chosen,
         "chosen_model": chosen,
@@ -471,6 +480,7 @@ def _fit_candidate(model: str, samples: NDArray[np.float64], robust: bool, stati
 
 
 def _support(report: Diagnostics) -> Support:
+    """The verdict of a candidate's diagnosis (always reached by :func:`magfit.diagnostics.diagnose`)."""
     assert report.support is not None
     return report.support
 
@@ -628,6 +638,7 @@ def _flatness(samples: NDArray[np.float64]) -> str:
 def _reason(
     best: str,
     chosen: str,
+    opening: str,
     bic: dict[str, float],
     steps: list[str],
     passed_over: list[str],
@@ -636,10 +647,7 @@ def _reason(
     screen_note: str,
 ) -> str:
     scores = ", ".join(f"{model} {value:.1f}" for model, value in sorted(bic.items(), key=lambda item: item[1]))
-    parts = [
-        f"{chosen} model: the simplest the samples determine that no richer one predicts held-out stretches of "
-        "the recording clearly better"
-    ]
+    parts = [f"{chosen} model: {opening}"]
     parts.extend(passed_over)
     parts.extend(steps)
     parts.append(f"lowest BIC: {best} (BIC {scores})")
