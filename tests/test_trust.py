@@ -333,6 +333,7 @@ def test_auto_returns_the_full_model_near_the_attitudes_recorded_and_says_so() -
     assert calibration.details["chosen"] == "full" and report.support.verdict == "weak"
     named = [w for w in report.support.weaknesses if "do not determine the scale along z together with the offset" in w]
     assert named and "holds only near the attitudes recorded" in named[0]
+    assert calibration.details["reason"].startswith("full model: not determined in every direction, returned because")
     stated = report.uncertainty.heading_sigma_deg
     assert stated is not None and _level_heading_error_deg(calibration, sim) < 2.0 * stated < 6.0
 
