@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -296,6 +296,22 @@ def vehicle_split(calibration: Calibration, target: str, firmware: str | None) -
         )
     standard = nearest_rotation(rotation, firmware) if firmware is not None else None
     return VehicleSplit(rotation, symmetric, standard)
+
+
+@dataclass(frozen=True)
+class SlotParameters:
+    """One compass's parameters (in file order) in its firmware slot, and the comment lines that explain them."""
+
+    slot: int
+    parameters: dict[str, float]
+    comments: list[str]
+
+
+def check_distinct_slots(slots: Sequence[int], slot_name: Callable[[int], str]) -> None:
+    """Refuse two calibrations for one slot of a multi-compass file (``slot_name(2)``: how the firmware names it)."""
+    for slot in slots:
+        if slots.count(slot) > 1:
+            raise ExportError(f"two calibrations are for {slot_name(slot)}; give each compass its own slot (slots=...)")
 
 
 @dataclass(frozen=True)

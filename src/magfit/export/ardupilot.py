@@ -1,6 +1,6 @@
 """ArduPilot compass parameters (``.param``): COMPASS_OFS_*, COMPASS_DIA_*, COMPASS_ODI_*, COMPASS_SCALE.
 
-ArduPilot's convention, from ``AP_Compass_Backend::correct_field`` (libraries/AP_Compass), applied
+ArduPilot's convention, from ``APSlotParameters_Backend::correct_field`` (libraries/APSlotParameters), applied
 to every sample in milligauss, in the body frame (after COMPASS_ORIENT / AHRS_ORIENTATION)::
 
     mag += (OFS_X, OFS_Y, OFS_Z)                  # offsets are ADDED
@@ -25,7 +25,7 @@ Refused, rather than written wrong (ArduPilot would reject, ignore or fail to ar
 
 - no unit or raw counts: ArduPilot needs milligauss;
 - ``|OFS| > 1800`` mG: the arming check fails when the offset length exceeds COMPASS_OFFS_MAX
-  (default 1800, AP_Compass.cpp) and the calibrator rejects any axis beyond it;
+  (default 1800, APSlotParameters.cpp) and the calibrator rejects any axis beyond it;
 - a diagonal outside (0.2, 5) or an off-diagonal with ``|ODI| >= 1``: outside what
   ``CompassCalibrator::fit_acceptable`` accepts;
 - a field strength outside [185, 875] mG: the arming check "Check mag field"
@@ -33,7 +33,7 @@ Refused, rather than written wrong (ArduPilot would reject, ignore or fail to ar
 - a non-symmetric matrix other than a Cholesky root.
 
 Written with a ``# WARNING`` line: an offset axis beyond +-400 mG, the ``@Range`` of COMPASS_OFS_*
-in AP_Compass.cpp's parameter documentation. ArduPilot itself accepts it, but Mission Planner checks
+in APSlotParameters.cpp's parameter documentation. ArduPilot itself accepts it, but Mission Planner checks
 the documented range when a value is loaded or edited (ConfigRawParams.cs) and asks "COMPASS_OFS_X
 value is out of range. Do you want to continue?"; answering No keeps the old value.
 
@@ -43,7 +43,7 @@ value is out of range. Do you want to continue?"; answering No keeps the old val
 ``slot=`` / ``device_id=`` options or from ``details["sensor"]`` (filled from a flight log);
 :func:`magfit.export.export_several` writes several compasses in one file. ``COMPASS_DEV_ID*`` is written
 as a comment, not a parameter: ArduPilot sets it itself at boot (``@ReadOnly``) from the detected sensor,
-and ``Compass::configured`` (AP_Compass.cpp) treats a compass whose stored ``COMPASS_DEV_ID`` differs from
+and ``Compass::configured`` (APSlotParameters.cpp) treats a compass whose stored ``COMPASS_DEV_ID`` differs from
 the detected one as not calibrated ("Compass not calibrated" at arming), so a loaded id can only break a
 vehicle whose compass order differs; the comment tells the user which id to check before loading.
 
@@ -56,7 +56,7 @@ outside 0.85-1.4 with the reason. Without ``expected_field``, SCALE = 1 (ArduPil
 "no scale", when it has no GPS position; both leave the field as fitted).
 
 **A vehicle-frame calibration** (``frame == "vehicle"``: ``corrected_vehicle = M @ (raw - offset)``, M
-general). ``AP_Compass_Backend::accumulate_sample`` calls ``rotate_field`` (the driver's rotation, then,
+general). ``APSlotParameters_Backend::accumulate_sample`` calls ``rotate_field`` (the driver's rotation, then,
 for an external compass, ``COMPASS_ORIENT``) *before* ``correct_field``, so ArduPilot applies::
 
     corrected = D @ (SCALE * (R @ raw + OFS))
@@ -81,7 +81,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -91,7 +90,9 @@ from ..errors import ExportError, OptionError
 from ..rotations import custom_angles
 from ._common import (
     ROTATION_TOLERANCE_DEG,
+    SlotParameters,
     VehicleSplit,
+    check_distinct_slots,
     describe,
     factor,
     float32_text,
@@ -117,7 +118,7 @@ FIELD_RANGE_MG = (185.0, 875.0)
 #: COMPASS_MIN/MAX_SCALE_FACTOR (CompassCalibrator.h): outside, Compass::have_scale_factor() ignores SCALE
 #: and CompassCalibrator::fix_radius fails the calibration ("bad radius").
 SCALE_RANGE = (0.85, 1.4)
-#: The documented @Range of COMPASS_SCALE* (AP_Compass.cpp): Mission Planner asks before loading a value above it.
+#: The documented @Range of COMPASS_SCALE* (APSlotParameters.cpp): Mission Planner asks before loading a value above it.
 SCALE_DOCUMENTED_MAX = 1.3
 #: The COMPASS_SCALE written without an expected field: magfit's corrected field is already in milligauss.
 SCALE = 1.0
@@ -150,15 +151,6 @@ def parameter_names(slot: int) -> tuple[str, ...]:
 
 
 NAMES = parameter_names(0)
-
-
-@dataclass(frozen=True)
-class _Compass:
-    """One compass's parameters (in file order) and the comment lines that explain them."""
-
-    slot: int
-    parameters: dict[str, float]
-    comments: list[str]
 
 
 def ardupilot_parameters(
@@ -206,7 +198,7 @@ def _compass(
     device_id: int | None,
     expected_field: float | None,
     custom: int,
-) -> _Compass:
+) -> SlotParameters:
     """The parameters and comments of one compass; ``custom`` is the CUST_ROTn it may use."""
     where = sensor_slot(calibration, "ardupilot", COMPASS_COUNT, slot, device_id)
     source = physical_unit(calibration, unit, "ardupilot", "milligauss")
@@ -283,7 +275,7 @@ def _compass(
     note = symmetric_matrix(calibration, "ardupilot").note if calibration.frame == "sensor" else None
     if note is not None:
         comments.append(f"# NOTE: {plain(note)}")
-    return _Compass(where.slot, parameters, comments)
+    return SlotParameters(where.slot, parameters, comments)
 
 
 def _orientation(
@@ -330,7 +322,7 @@ def _orientation(
     if not np.allclose(rotation, np.eye(3)):
         comments.append(
             f"# WARNING: ArduPilot applies COMPASS_ORIENT{n} to an external compass only "
-            f"({external(slot)} = 1, AP_Compass_Backend::rotate_field); an internal one follows "
+            f"({external(slot)} = 1, APSlotParameters_Backend::rotate_field); an internal one follows "
             "AHRS_ORIENTATION, which turns the board"
         )
     return rotation, orientation, comments
@@ -379,7 +371,7 @@ def write_ardupilot_several(
     expected_field: float | None = None,
 ) -> str:
     """Several compasses of one vehicle in one ``.param`` file; each in its own slot."""
-    compasses: list[_Compass] = []
+    compasses: list[SlotParameters] = []
     custom = 1
     calibrations = list(calibrations)
     for index, calibration in enumerate(calibrations):
@@ -389,20 +381,12 @@ def write_ardupilot_several(
         if any(name.startswith("CUST_ROT") for name in compass.parameters):
             custom += 1
         compasses.append(compass)
-    _check_distinct([c.slot for c in compasses], "ardupilot")
+    check_distinct_slots([c.slot for c in compasses], lambda slot: f"ardupilot compass slot {slot}")
     order = sorted(range(len(compasses)), key=lambda i: compasses[i].slot)
     return _file([calibrations[i] for i in order], [compasses[i] for i in order], unit)
 
 
-def _check_distinct(slots: list[int], target: str) -> None:
-    for slot in slots:
-        if slots.count(slot) > 1:
-            raise ExportError(
-                f"two calibrations are for {target} compass slot {slot}; give each compass its own slot (slots=...)"
-            )
-
-
-def _file(calibrations: Sequence[Calibration], compasses: list[_Compass], unit: str | None) -> str:
+def _file(calibrations: Sequence[Calibration], compasses: list[SlotParameters], unit: str | None) -> str:
     first = calibrations[0]
     source = physical_unit(first, unit, "ardupilot", "milligauss")
     k = factor(source, "mG")
@@ -410,7 +394,7 @@ def _file(calibrations: Sequence[Calibration], compasses: list[_Compass], unit: 
     lines = [
         f"# ArduPilot compass calibration: compass {which}",
         *(f"# {line}" for line in describe(first, source.name) if len(compasses) == 1),
-        "# ArduPilot corrects each sample (AP_Compass_Backend::correct_field), in milligauss, body frame:",
+        "# ArduPilot corrects each sample (APSlotParameters_Backend::correct_field), in milligauss, body frame:",
         "#   mag += (OFS_X, OFS_Y, OFS_Z)",
         f"#   mag *= SCALE   (only if {SCALE_RANGE[0]} <= SCALE <= {SCALE_RANGE[1]}: Compass::have_scale_factor)",
         "#   mag = [[DIA_X, ODI_X, ODI_Y], [ODI_X, DIA_Y, ODI_Z], [ODI_Y, ODI_Z, DIA_Z]] * mag",

@@ -66,7 +66,6 @@ the file says when R is not the identity. A mirror is refused.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -75,6 +74,8 @@ from ..calibration import Calibration
 from ..errors import ExportError, OptionError
 from ._common import (
     ROTATION_TOLERANCE_DEG,
+    SlotParameters,
+    check_distinct_slots,
     describe,
     factor,
     float32_text,
@@ -119,13 +120,6 @@ def parameter_names(slot: int) -> tuple[str, ...]:
 NAMES = parameter_names(0)
 
 
-@dataclass(frozen=True)
-class _Slot:
-    slot: int
-    parameters: dict[str, float]
-    comments: list[str]
-
-
 def px4_parameters(
     calibration: Calibration, unit: str | None = None, *, slot: int | None = None, device_id: int | None = None
 ) -> dict[str, float]:
@@ -158,7 +152,7 @@ def px4_parameters(
     return _slot(calibration, unit, slot, device_id).parameters
 
 
-def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_id: int | None) -> _Slot:
+def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_id: int | None) -> SlotParameters:
     where = sensor_slot(calibration, "px4", SLOT_COUNT, slot, device_id)
     source = physical_unit(calibration, unit, "px4", "gauss")
     k = factor(source, "G")
@@ -216,7 +210,7 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
             f"# magnetometer slot {where.slot}{sensor}: device id not known; PX4 applies {prefix}* only to the sensor "
             f"whose id is {prefix}ID: calibrate once in QGroundControl first",
         )
-    return _Slot(where.slot, parameters, comments)
+    return SlotParameters(where.slot, parameters, comments)
 
 
 def ignored_vectors(parameters: dict[str, float], slot: int = 0) -> list[str]:
@@ -308,15 +302,12 @@ def write_px4_several(
         _slot(c, unit, None if slots is None else slots[i], None if device_ids is None else device_ids[i])
         for i, c in enumerate(calibrations)
     ]
-    taken = [entry.slot for entry in entries]
-    for slot in taken:
-        if taken.count(slot) > 1:
-            raise ExportError(f"two calibrations are for PX4 slot CAL_MAG{slot}; give each its own slot (slots=...)")
+    check_distinct_slots([entry.slot for entry in entries], lambda slot: f"PX4 slot CAL_MAG{slot}")
     order = sorted(range(len(entries)), key=lambda i: entries[i].slot)
     return _file([calibrations[i] for i in order], [entries[i] for i in order], unit, system_id)
 
 
-def _file(calibrations: Sequence[Calibration], entries: list[_Slot], unit: str | None, system_id: int) -> str:
+def _file(calibrations: Sequence[Calibration], entries: list[SlotParameters], unit: str | None, system_id: int) -> str:
     first = calibrations[0]
     source = physical_unit(first, unit, "px4", "gauss")
     k = factor(source, "G")
@@ -356,7 +347,7 @@ def _file(calibrations: Sequence[Calibration], entries: list[_Slot], unit: str |
     return "\n".join(lines) + "\n"
 
 
-def _warnings(calibration: Calibration, entry: _Slot, k: float) -> list[str]:
+def _warnings(calibration: Calibration, entry: SlotParameters, k: float) -> list[str]:
     """The NOTE and WARNING lines of one slot: a Cholesky root, large offsets, terms PX4 would ignore."""
     lines = []
     parameters = entry.parameters
