@@ -34,7 +34,7 @@ from ..errors import CalibrationError, DataFileError, MagfitError, OptionError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
 from ..methods import get_method
-from ..sources import Magnetometer, Position, Source, log_kind, open_source
+from ..sources import Magnetometer, Source, log_kind, open_source
 from ..units import get_unit
 from .streaming import Nonfinite, Progress, fit_samples_file, no_progress, samples_for_fit
 
@@ -48,7 +48,6 @@ __all__ = [
     "ModelField",
     "Progress",
     "calibrate_file",
-    "log_position",
     "no_progress",
 ]
 
@@ -323,7 +322,7 @@ def calibrate_file(
     place: tuple[float, float, float] | Literal["log"] | None = location
     if place is None and field_strength == "wmm":
         place = FROM_LOG
-    elif place is None and importlib.util.find_spec("pygeomag") is not None and log_position(source) is not None:
+    elif place is None and importlib.util.find_spec("pygeomag") is not None and source.position is not None:
         place = FROM_LOG  # a log that knows where it was: the fitted field is checked against the model's there
     model = _model(path, source, place, date)
     chosen = [sensor] if sensor is not None else _usable(source)
@@ -498,24 +497,6 @@ def _calibrate_samples(
     )
 
 
-def log_position(source: Source) -> Position | None:
-    """Where and when a flight log or bag was recorded, from its own GNSS fixes; None without a fix.
-
-    ``Source.position`` for ULog and DataFlash; a ROS bag's ``sensor_msgs/NavSatFix`` fixes
-    (:meth:`magfit.sources.rosbag.BagContents.position`) otherwise.
-    """
-    if source.position is not None or source.kind != "rosbag":
-        return source.position
-    from ..sources.rosbag import read_bag_contents  # (the module imports no extra; reading a bag needs one)
-
-    contents = read_bag_contents(source.path)
-    found = contents.position()
-    if found is None:
-        return None
-    lat, lon, alt_km, time_s = found
-    return Position(lat, lon, alt_km, time_s, len(contents.fixes))
-
-
 def _model(
     path: Path,
     source: Source | None,
@@ -533,7 +514,7 @@ def _model(
     if location != FROM_LOG:
         lat, lon, alt_km = location
         return ModelField(field_at(lat, lon, alt_km, date=date), "the location given")
-    position = log_position(source) if source is not None else None
+    position = source.position if source is not None else None
     if position is None:
         what = "this file is no flight log or bag" if source is None else "this log holds no 3-D GNSS fix"
         raise OptionError(
