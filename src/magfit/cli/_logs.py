@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 import numpy as np
@@ -17,6 +17,9 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError
 from ._common import Nonfinite, warn
+
+if TYPE_CHECKING:
+    from ..sources import Source
 
 #: ``--sensor`` of the commands that read samples.
 sensor_option = click.option(
@@ -48,6 +51,8 @@ class Recording:
         The log's compass id.
     time_s : ndarray or None
         A log's time stamps, seconds on its time base.
+    source : Source or None
+        The log it was read from (opened once: its other streams are read from it when a method needs them).
     """
 
     name: str
@@ -59,6 +64,7 @@ class Recording:
     unit: str | None = None
     sensor: str | None = None
     time_s: NDArray[np.float64] | None = None
+    source: Source | None = None
 
 
 def is_log(path: Path) -> bool:
@@ -121,6 +127,7 @@ def read_recordings(
                 unit=magnetometer.unit or None,
                 sensor=magnetometer.id,
                 time_s=read.time_s,
+                source=source,
             )
         )
     return recordings

@@ -159,7 +159,7 @@ def compare_command(
     results = []
     for path in files:
         for recording in read_recordings(path, columns=columns, nonfinite=nonfinite, sensor=sensor):
-            samples, streams = with_streams(path, recording, methods, unit)
+            samples, streams = with_streams(recording, methods, unit)
             comparison = compare(samples, methods, allow_undetermined=force, streams=streams)
             name = str(path) if recording.sensor is None else f"{path} ({recording.sensor})"
             results.append(
@@ -180,7 +180,7 @@ def compare_command(
 
 
 def with_streams(
-    path: Path, recording: Recording, methods: tuple[str, ...], unit: str | None
+    recording: Recording, methods: tuple[str, ...], unit: str | None
 ) -> tuple[NDArray[np.float64], dict[str, Any]]:
     """The samples and the log's streams for the methods that need them (vector, gyro), where the log has them.
 
@@ -189,12 +189,11 @@ def with_streams(
     from ..methods import get_method
 
     needs = sorted({need for method in methods for need in get_method(method).needs})
-    if not needs or recording.sensor is None:
+    if not needs or recording.source is None or recording.sensor is None:
         return recording.samples, {}
     from ..pipeline.streams import method_streams
-    from ..sources import open_source
 
-    found = method_streams(open_source(path), recording.sensor, needs, unit=unit or recording.unit, available=True)
+    found = method_streams(recording.source, recording.sensor, needs, unit=unit or recording.unit, available=True)
     for note in found.notes:
         warn(note)
     return found.samples, found.options

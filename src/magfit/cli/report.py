@@ -136,7 +136,7 @@ def report_command(
             if recording.n_skipped:
                 notes.append(f"{recording.n_skipped:,} rows with NaN or inf values were skipped.")
             # A method that fails is listed in the report with its reason; the first that succeeds is the main one.
-            samples, streams = with_streams(path, recording, compared, unit)  # vector, gyro: the log's streams
+            samples, streams = with_streams(recording, compared, unit)  # vector, gyro: the log's streams
             comparison = compare(samples, compared, streams=streams)
             for result in comparison:
                 if not result.ok:
