@@ -105,13 +105,13 @@ def _smooth_noise(n: int, correlation_samples: float, rng: np.random.Generator) 
     white = rng.normal(size=(n, 3))
     if correlation_samples <= 1.0:
         return white
+    from scipy.signal import lfilter
+
     keep = np.exp(-1.0 / correlation_samples)
-    out = np.empty_like(white)
-    out[0] = white[0]
     innovation = np.sqrt(1.0 - keep**2)
-    for k in range(1, n):  # n is at most a few hundred thousand: a loop of 3-vectors is fast enough
-        out[k] = keep * out[k - 1] + innovation * white[k]
-    return out
+    # out[k] = keep·out[k−1] + innovation·white[k], starting at out[0] = white[0] (stationary from the start)
+    start = (1.0 - innovation) * white[:1]
+    return np.asarray(lfilter([innovation], [1.0, -keep], white, axis=0, zi=start)[0], dtype=np.float64)
 
 
 def _euler_profile(motion: str, t: NDArray[np.float64], max_tilt_deg: float, speed: float,
