@@ -31,11 +31,13 @@ refused as not determined), and a lever shorter than :data:`SHORT_LEVER` (3° of
 the apparent gravity beyond what the sigma counts (weak, named). The loss is also scanned along each axis
 for another angle that fits as well.
 
-The accelerometer sees gravity alone only when the vehicle does not accelerate: samples are kept where
-``|a|`` is within :data:`ACCEL_TOLERANCE` of g (the median |a|) and the rotation rate (the gyroscope, or the
-rate at which the field and gravity directions turn) is below ``max_rate_dps``: in a turn at speed v and
-rate ω the centripetal acceleration v ω tilts the apparent gravity by ``atan(v ω / g)`` (0.75° at 25 m/s and
-the default 0.3°/s), and a coordinated turn hides it from |a| entirely. Kept samples are averaged over half
+The accelerometer sees gravity alone only when the vehicle does not accelerate (:mod:`magfit.gravity`):
+samples are kept where ``|a|`` is within :data:`ACCEL_TOLERANCE` of g (the median |a|) and the vehicle turns
+about the vertical slower than ``max_rate_dps`` (with a gyroscope; without one, the rate at which the field and
+gravity directions turn): in a turn at speed v and rate ω the centripetal acceleration v ω tilts the apparent
+gravity by ``atan(v ω / g)`` (0.75° at 25 m/s and the default 0.3°/s), and a coordinated turn hides it from
+|a| entirely. Rolling and pitching (a boat in waves) accelerate a sensor only through its lever arm and are
+kept up to ``max_tilt_rate_dps``. Kept samples are averaged over half
 a second. Remaining outliers are down-weighted (Huber).
 
 Mirrors. A magnetometer whose axes are left-handed relative to the body (one axis inverted, or two swapped)
@@ -60,14 +62,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import CalibrationError, OptionError, SampleError
+from .gravity import ACCEL_TOLERANCE, MAX_RATE_DPS, MAX_TILT_RATE_DPS, moving_mean, still_samples
 from .rotations import FIRMWARES, StandardRotation, angle_between_deg, euler_angles, nearest_rotation
 
 __all__ = ["ACCEL_TOLERANCE", "Alignment", "FirmwareRotation", "align", "nearest_rotations"]
 
-#: Largest relative deviation of |a| from g for a sample to count as "the accelerometer sees gravity".
-ACCEL_TOLERANCE = 0.03
-#: Default largest rotation rate (°/s) of a sample used: at 25 m/s a 0.3°/s turn tilts gravity by 0.75°.
-MAX_RATE_DPS = 0.3
 #: Fewest samples the fit needs after the gates.
 MIN_SAMPLES = 50
 #: A rotation axis determined worse than this (one-sigma, degrees) is refused; worse than WEAK is weak.
@@ -222,93 +221,6 @@ def _axis_words(axis: NDArray[np.float64]) -> str:
 
 
 # --- the gates ----------------------------------------------------------------------------------------------
-
-
-def _moving_mean(values: NDArray[np.float64], width: int) -> NDArray[np.float64]:
-    if width <= 1:
-        return values
-    kernel = np.ones(width) / width
-    padded = np.pad(values, (width // 2, width - 1 - width // 2), mode="edge")
-    return np.convolve(padded, kernel, mode="valid")
-
-
-def _direction_rate(vectors: NDArray[np.float64], time_s: NDArray[np.float64], width: int) -> NDArray[np.float64]:
-    """How fast (rad/s) the direction of ``vectors`` turns at each sample: the angle between the mean
-    directions ``width`` samples apart (means over ``width`` samples: one sample's noise would read as tens
-    of degrees per second at 50 Hz)."""
-    unit = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)
-    mean = np.column_stack([_moving_mean(unit[:, i], width) for i in range(3)])
-    n = len(unit)
-    ahead = np.minimum(np.arange(n) + width // 2, n - 1)
-    behind = np.maximum(np.arange(n) - width // 2, 0)
-    dt = time_s[ahead] - time_s[behind]
-    turned = np.linalg.norm(mean[ahead] - mean[behind], axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(dt > 0, turned / dt, np.inf)
-
-
-def _gates(
-    mag: NDArray[np.float64],
-    accel: NDArray[np.float64],
-    gyro: NDArray[np.float64] | None,
-    time_s: NDArray[np.float64] | None,
-    max_rate_dps: float | None,
-    accel_tolerance: float,
-) -> tuple[NDArray[np.bool_], dict[str, int], list[str], int]:
-    """The samples on which the accelerometer sees gravity alone, why the others were dropped, notes, and
-    the number of samples in about a second (1 when the rate is not gated: nothing may be averaged)."""
-    notes: list[str] = []
-    dropped: dict[str, int] = {}
-    norm_a = np.linalg.norm(accel, axis=1)
-    g = float(np.median(norm_a))
-    if not g > 0:
-        raise SampleError("the accelerometer reads zero on most samples: no gravity to align with")
-    keep = np.abs(norm_a / g - 1.0) <= accel_tolerance
-    dropped[f"|a| more than {100 * accel_tolerance:g} % away from g (the median |a|)"] = int(np.sum(~keep))
-    if max_rate_dps is None:
-        return keep, dropped, notes, 1
-    if time_s is not None and time_s.size > 1:
-        step = float(np.median(np.diff(time_s)))
-        width = max(1, round(1.0 / step)) if step > 0 else 1
-        if step >= 1.0:  # milliseconds given as seconds would let every turn through the gate
-            notes.append(f"the samples are {step:g} s apart: if time_s is not in seconds, the rate gate is wrong")
-    else:
-        width = 5
-    turning = None
-    if time_s is not None:
-        # The field direction misses a rotation about the field, gravity's one about gravity: the larger
-        # sees every turn (a level yaw turn moves the field direction at ω cos δ). Over two seconds, so that
-        # the accelerometer's noise stays below the gate.
-        turning = np.maximum(_direction_rate(mag, time_s, 2 * width), _direction_rate(accel, time_s, 2 * width))
-    if gyro is not None:
-        rate = np.linalg.norm(gyro, axis=1)
-        source = "the gyroscope"
-        if turning is not None:
-            # An uncalibrated gyroscope's bias (tenths of a degree per second, above the gate) reads as turning
-            # on every sample: its median on the samples whose field and gravity directions hold still (which no
-            # bias reaches) is taken as the bias. Without time stamps there are no such samples: none is taken.
-            steady = keep & (_moving_mean(turning, width) <= math.radians(max_rate_dps))
-            if np.sum(steady) >= MIN_SAMPLES:
-                bias = np.median(gyro[steady], axis=0)
-                rate = np.linalg.norm(gyro - bias, axis=1)
-                if np.degrees(np.linalg.norm(bias)) > 0.05:
-                    notes.append(
-                        "the gyroscope's bias, its median rate where the field and gravity directions hold still: "
-                        "({:+.2f}, {:+.2f}, {:+.2f})°/s, taken off".format(*np.degrees(bias))
-                    )
-    elif turning is not None:
-        rate = turning
-        source = "the turning of the field and gravity directions"
-    else:
-        notes.append(
-            "no gyroscope and no time stamps: samples taken while turning cannot be recognised, their "
-            "centripetal accelerations are only down-weighted as outliers"
-        )
-        return keep, dropped, notes, 1
-    smooth = _moving_mean(rate, width)  # over about a second: gyro noise averages out, turn edges widen
-    still = smooth <= math.radians(max_rate_dps)
-    dropped[f"turning faster than {max_rate_dps:g}°/s (from {source})"] = int(np.sum(keep & ~still))
-    return keep & still, dropped, notes, width
 
 
 # --- the fit ------------------------------------------------------------------------------------------------
@@ -473,6 +385,7 @@ def align(
     gyro: ArrayLike | None = None,
     time_s: ArrayLike | None = None,
     max_rate_dps: float | None = MAX_RATE_DPS,
+    max_tilt_rate_dps: float = MAX_TILT_RATE_DPS,
     accel_tolerance: float = ACCEL_TOLERANCE,
     allow_mirror: bool | None = None,
     allow_undetermined: bool = False,
@@ -490,7 +403,8 @@ def align(
         The field's inclination δ, positive downwards (the World Magnetic Model: :func:`magfit.geomag.field_at`).
         Fitted when not given, which needs the vehicle tilted; the field is then taken to point down.
     gyro : array_like, shape (N, 3), optional
-        Body rates in rad/s: samples turning faster than ``max_rate_dps`` are left out.
+        Body rates in rad/s: samples turning about the vertical faster than ``max_rate_dps``, or about the
+        horizontal axes faster than ``max_tilt_rate_dps``, are left out (:mod:`magfit.gravity`).
     time_s : array_like, shape (N,), optional
         Sample times in seconds: without a gyroscope, the rate is that of the field and gravity directions.
     max_rate_dps : float or None
@@ -535,12 +449,14 @@ def align(
         raise OptionError(f"accel_tolerance must be within (0, 1), got {accel_tolerance}")
     if max_rate_dps is not None and not max_rate_dps > 0:
         raise OptionError(f"max_rate_dps must be positive (or None), got {max_rate_dps}")
+    if not max_tilt_rate_dps > 0:
+        raise OptionError(f"max_tilt_rate_dps must be positive, got {max_tilt_rate_dps}")
     norm_m = np.linalg.norm(mag, axis=1)
     if np.any(norm_m <= 0):
         raise SampleError("calibrated_mag has zero rows: a field of zero has no direction")
 
     down, mhat, direction_noise, dropped, notes = _still_directions(
-        mag, acc, rates, times, max_rate_dps, accel_tolerance
+        mag, acc, rates, times, max_rate_dps, max_tilt_rate_dps, accel_tolerance
     )
     fit_s = inclination_deg is None
     s0 = math.sin(math.radians(inclination_deg)) if inclination_deg is not None else 0.0
@@ -566,7 +482,8 @@ def align(
         # The samples cannot tell: right-handed axes, by far the commoner, are assumed and the result says so.
         right_handed = align(
             calibrated_mag, accel, inclination_deg=inclination_deg, gyro=gyro, time_s=time_s,
-            max_rate_dps=max_rate_dps, accel_tolerance=accel_tolerance, allow_mirror=False,
+            max_rate_dps=max_rate_dps, max_tilt_rate_dps=max_tilt_rate_dps, accel_tolerance=accel_tolerance,
+            allow_mirror=False,
             allow_undetermined=allow_undetermined,
         )  # fmt: skip
         assumed = (
@@ -630,6 +547,7 @@ def _still_directions(
     gyro: NDArray[np.float64] | None,
     time_s: NDArray[np.float64] | None,
     max_rate_dps: float | None,
+    max_tilt_rate_dps: float,
     accel_tolerance: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, dict[str, int], list[str]]:
     """The down and field directions (d, m̂) of the samples on which the accelerometer sees gravity alone,
@@ -641,7 +559,11 @@ def _still_directions(
         Fewer than :data:`MIN_SAMPLES` are left.
     """
     n = len(mag)
-    keep, dropped, notes, width = _gates(mag, acc, gyro, time_s, max_rate_dps, accel_tolerance)
+    gate = still_samples(
+        acc, mag=mag, gyro=gyro, time_s=time_s, max_rate_dps=max_rate_dps, max_tilt_rate_dps=max_tilt_rate_dps,
+        accel_tolerance=accel_tolerance,
+    )  # fmt: skip
+    keep, dropped, notes, width = gate.keep, gate.dropped, list(gate.notes), gate.width
     dropped = {reason: count for reason, count in dropped.items() if count}
     n_used = int(np.sum(keep))
     if n_used < MIN_SAMPLES:
@@ -661,8 +583,8 @@ def _still_directions(
     if half > 1:
         # Averaged over half a second of samples that turn slower than max_rate_dps (0.15° at 0.3°/s): the
         # accelerometer's noise would otherwise read as tilt.
-        acc = np.column_stack([_moving_mean(acc[:, i], half) for i in range(3)])
-        mag = np.column_stack([_moving_mean(mag[:, i], half) for i in range(3)])
+        acc = np.column_stack([moving_mean(acc[:, i], half) for i in range(3)])
+        mag = np.column_stack([moving_mean(mag[:, i], half) for i in range(3)])
     down = -acc[keep] / np.linalg.norm(acc[keep], axis=1, keepdims=True)
     mhat = mag[keep] / np.linalg.norm(mag[keep], axis=1, keepdims=True)
     return down, mhat, direction_noise, dropped, notes
