@@ -39,7 +39,12 @@ _TIME = re.compile(r"^(?:t|time|time_s|timestamp|seconds)$", re.IGNORECASE)
 _SECONDS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 
 #: The library's keywords in its messages, and the options that set them here.
-_OPTIONS = {"allow_mirror=False": "--no-mirror", "max_rate_dps": "--max-rate", "allow_undetermined": "--force"}
+_OPTIONS = {
+    "allow_mirror=False": "--no-mirror",
+    "max_tilt_rate_dps": "--max-tilt-rate",
+    "max_rate_dps": "--max-rate",
+    "allow_undetermined": "--force",
+}
 
 
 @dataclass(frozen=True)
@@ -189,7 +194,9 @@ def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | 
               help="LAT,LON[,ALT]: the inclination of the World Magnetic Model ('magfit[wmm]').")  # fmt: skip
 @click.option("--date", callback=geomag_option(parse_date), help="YYYY-MM-DD for --location (default: today).")
 @click.option("--max-rate", default="0.3", show_default=True,
-              help="Fastest turn (°/s) of a sample used; 'none': a hand-held rotation about the sensor.")  # fmt: skip
+              help="Fastest turn in heading (°/s) of a sample used; 'none': turning about the sensor.")  # fmt: skip
+@click.option("--max-tilt-rate", default=30.0, show_default=True, type=click.FloatRange(min=0.0, min_open=True),
+              help="Fastest rotation (°/s) of a sample used, rolling and pitching too (with a gyroscope).")  # fmt: skip
 @click.option("--no-mirror", is_flag=True,
               help="Right-handed sensor axes (by default a mirror is named where the samples tell).")  # fmt: skip
 @click.option("--force", is_flag=True, help="Print an alignment the samples do not determine, its refusal first.")
@@ -207,6 +214,7 @@ def align_command(
     location: tuple[float, float, float] | None,
     date: object,
     max_rate: str,
+    max_tilt_rate: float,
     no_mirror: bool,
     force: bool,
 ) -> None:
@@ -255,7 +263,8 @@ def align_command(
     try:
         result = align(
             corrected, recording.accel, inclination_deg=inclination, gyro=recording.gyro, time_s=recording.time_s,
-            max_rate_dps=max_rate_dps, allow_mirror=False if no_mirror else None, allow_undetermined=force,
+            max_rate_dps=max_rate_dps, max_tilt_rate_dps=max_tilt_rate, allow_mirror=False if no_mirror else None,
+            allow_undetermined=force,
         )  # fmt: skip
     except CalibrationError as error:  # the library's keywords as this command's options
         message = str(error)
