@@ -266,6 +266,8 @@ def test_cli_exit_statuses(roll_180_csv, tmp_path, capsys):
     assert status == 1 and "see gravity alone" in err and "--max-rate" in err and "Traceback" not in err
     status, _, err = _run(capsys, roll_180_csv, "--max-rate", "fast")
     assert status == 2 and "--max-rate takes a number" in err
+    status, _, err = _run(capsys, roll_180_csv, "--max-tilt-rate", "0")
+    assert status == 2 and "--max-tilt-rate" in err and "Traceback" not in err
     no_accel = tmp_path / "mag.csv"
     no_accel.write_text("mx,my,mz\n1,2,3\n2,3,4\n")
     status, _, err = _run(capsys, no_accel)
