@@ -297,6 +297,18 @@ def test_refits_use_the_options_the_user_gave() -> None:
     assert report.goodness is not None and report.goodness.held_out is not None
 
 
+def test_diagnose_does_not_rejudge_a_vector_calibration_by_the_field_magnitude_alone() -> None:
+    # A flight covers a few percent of the directions: judged by |field| alone its calibration would be
+    # refused, which contradicts the verdict the reference gave it. diagnose says where the verdict is.
+    from magfit.vehicle import simulate_vehicle
+
+    sim = simulate_vehicle(3000, "flight", rate_hz=10.0, noise=0.005, attitude_noise_deg=0.5, seed=1)
+    calibration = magfit.fit(sim.samples, "vector", reference=sim.reference, time_s=sim.time_s)
+    assert calibration.diagnostics is not None and calibration.diagnostics.support.verdict != "refused"
+    with pytest.raises(magfit.OptionError, match=r"rests on reference: its verdict is calibration.diagnostics"):
+        magfit.diagnose(calibration, sim.samples)
+
+
 def test_refit_follows_new_samples_with_the_same_model_and_a_new_verdict() -> None:
     sim = magfit.simulate(4000, soft_iron=np.diag([1.1, 0.95, 1.0]), hard_iron=[0.3, 0.1, -0.2], noise=0.01, seed=3)
     first = magfit.fit(sim.samples[:1500], "auto", diagnostics="quick")

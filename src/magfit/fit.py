@@ -18,8 +18,8 @@ from .calibration import Calibration
 from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refit, diagnose_statistics, model_kind
 from .diagnostics import diagnose as diagnose_samples
 from .diagnostics.reference import judged as judged_against_reference
-from .errors import CalibrationError, MagfitError
-from .methods import FitInput, get_method
+from .errors import CalibrationError, MagfitError, OptionError
+from .methods import METHODS, FitInput, get_method
 from .methods.auto import refit_first_order
 from .methods.core import estimate, method_spec, prepare, refitter
 from .statistics import Statistics
@@ -183,7 +183,22 @@ def diagnose(
     The held-out evaluation and the two-halves check refit the calibration's method with the options it
     recorded (``details["options"]``); a calibration of an unknown method gets the other checks.
     See :func:`magfit.diagnostics.diagnose` for the parameters.
+
+    Raises
+    ------
+    OptionError
+        The calibration's method rests on more than the samples (``vector``: a reference field; ``gyro``: the
+        body rates): its verdict is the one made when it was fitted (``calibration.diagnostics``).
     """
+    spec = METHODS.get(calibration.method)
+    if spec is not None and spec.needs:
+        # These samples alone would be judged by |field| only, which the method does not rest on: the
+        # magnitude-only verdict (a flight "covers 7 % of the directions") would contradict its own.
+        raise OptionError(
+            f"magfit.diagnose judges a calibration from the samples alone; a {calibration.method!r} calibration also "
+            f"rests on {' and '.join(spec.needs)}: its verdict is calibration.diagnostics, made when it was fitted "
+            f"(fit it again with magfit.fit(samples, method={calibration.method!r}, ...) to judge it on new samples)"
+        )
     refit = None
     options = calibration.details.get("options", {})
     if isinstance(options, dict):
