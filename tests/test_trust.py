@@ -309,6 +309,25 @@ def test_diagnose_does_not_rejudge_a_vector_calibration_by_the_field_magnitude_a
         magfit.diagnose(calibration, sim.samples)
 
 
+def test_refit_of_a_vector_calibration_takes_the_new_samples_reference() -> None:
+    from magfit.vehicle import simulate_vehicle
+
+    sim = simulate_vehicle(3000, "flight", rate_hz=10.0, noise=0.005, attitude_noise_deg=0.2, seed=4)
+    first = magfit.fit(sim.samples[:1500], "vector", reference=sim.reference[:1500], time_s=sim.time_s[:1500])
+    with pytest.raises(magfit.OptionError, match=r"own reference and time_s: magfit.refit\(calibration, samples, "):
+        magfit.refit(first, sim.samples[1500:])
+    with pytest.raises(magfit.OptionError, match="not gyro"):
+        magfit.refit(first, sim.samples[1500:], reference=sim.reference[1500:], time_s=sim.time_s, gyro=sim.gyro)
+    again = magfit.refit(first, sim.samples[1500:], reference=sim.reference[1500:], time_s=sim.time_s[1500:])
+    assert again.frame == "vehicle" and again.diagnostics is not None
+    # Exactly the second half's own fit with the recorded options.
+    fresh = magfit.fit(sim.samples[1500:], "vector", reference=sim.reference[1500:], time_s=sim.time_s[1500:])
+    np.testing.assert_allclose(again.offset, fresh.offset, atol=1e-12)
+    np.testing.assert_allclose(again.matrix, fresh.matrix, atol=1e-12)
+    assert np.linalg.norm(again.offset - first.offset) > 0  # it did refit
+    assert again.details["options"]["reference"] == "an array of 1500 rows"
+
+
 def test_refit_follows_new_samples_with_the_same_model_and_a_new_verdict() -> None:
     sim = magfit.simulate(4000, soft_iron=np.diag([1.1, 0.95, 1.0]), hard_iron=[0.3, 0.1, -0.2], noise=0.01, seed=3)
     first = magfit.fit(sim.samples[:1500], "auto", diagnostics="quick")

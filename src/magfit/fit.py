@@ -90,16 +90,34 @@ def refit(
     *,
     diagnostics: bool | Literal["quick"] = "quick",
     allow_undetermined: bool = False,
+    **streams: ArrayLike,
 ) -> Calibration:
     """``calibration``'s method fitted again to ``samples`` with the options it recorded, judged as :func:`fit` judges.
 
     For an ``auto`` calibration the model it chose is refitted (its first-order maximum-likelihood fit,
     from ``calibration``: a few iterations) without a new model choice: what a live calibration does
-    between two full ``auto`` fits, as new samples arrive. Raises as :func:`fit` does.
+    between two full ``auto`` fits, as new samples arrive. A calibration fitted with arrays beside the samples
+    (``vector``: ``reference=``, ``time_s=``; ``gyro``: ``gyro=``, ``time_s=``) records only their length: the
+    new samples' own arrays are given as keywords (``streams``), the same ones. Raises as :func:`fit` does.
     """
     options = calibration.details.get("options", {})
     if not isinstance(options, dict):
         raise CalibrationError(f"the {calibration.method} calibration records no options to refit it with")
+    arrays = [name for name, value in options.items() if isinstance(value, str) and value.startswith("an array of ")]
+    unexpected = sorted(set(streams) - set(arrays))
+    if unexpected:
+        taken = f"only {', '.join(arrays)}" if arrays else "none"
+        raise OptionError(
+            f"refit takes the arrays the {calibration.method} calibration was fitted with ({taken}), not "
+            f"{', '.join(unexpected)}; to change other options call magfit.fit"
+        )
+    missing = [name for name in arrays if name not in streams]
+    if missing:
+        raise OptionError(
+            f"a {calibration.method} calibration is refitted with the new samples' own "
+            f"{' and '.join(missing)}: magfit.refit(calibration, samples, {', '.join(f'{m}=...' for m in missing)})"
+        )
+    options = {**options, **streams}
     spec = method_spec(calibration.method, options)
     data = prepare(samples, spec)
     assert data.samples is not None  # an array was given
