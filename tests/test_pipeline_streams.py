@@ -19,8 +19,9 @@ pytest.importorskip("pygeomag")
 LAT, LON, ALT_KM, DATE = 47.4, 8.5, 0.5, "2026-04-14"
 
 
-def _log_with_gps(path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, np.ndarray]:
-    """A DataFlash tumble (tests/test_sources_motion.py) whose field is the model's at its GPS fixes."""
+def _log_with_gps(path: Path, monkeypatch: pytest.MonkeyPatch, drop: tuple[str, ...] = ()) -> tuple[Path, np.ndarray]:
+    """A DataFlash tumble (tests/test_sources_motion.py) whose field is the model's at its GPS fixes, without the
+    messages ``drop`` names."""
     from magfit.geomag import field_at
 
     field = field_at(LAT, LON, ALT_KM, date=DATE).vector_in("mG")
@@ -31,6 +32,8 @@ def _log_with_gps(path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, np
         (round(t * 1e6), 3, 200_000_000 + int(t * 1000), 2414, round(LAT * 1e7), round(LON * 1e7), ALT_KM * 1000)
         for t in np.arange(1.0, 80.0, 0.2)
     ]
+    for name in drop:
+        del formats[name], rows[name]
     return motion_log.write_bin(path, formats, rows), field
 
 
@@ -58,6 +61,8 @@ def test_calibrate_file_fits_the_vector_method_on_a_log(tmp_path, monkeypatch) -
     np.testing.assert_allclose(calibration.offset, motion_log.HARD, atol=3.0)
     np.testing.assert_allclose(np.linalg.inv(calibration.matrix), motion_log.SOFT, atol=0.01)
     assert calibration.details["sensor"]["applied_rotation"] is not None
+    # the log's stamps are given: the attitude's lag is fitted (the synthetic ATT is on time)
+    assert calibration.details["lag_s"] is not None and abs(calibration.details["lag_s"]) < 0.02
 
 
 def test_what_is_missing_is_said(tmp_path, monkeypatch) -> None:
@@ -122,3 +127,124 @@ def test_report_on_a_log_includes_the_vector_method(tmp_path, monkeypatch) -> No
     )
     assert result.exit_code == 0, result.output
     assert "2 of 2 methods fitted" in result.output and "vector" in out.read_text()
+
+
+# ---------------------------------------------------------------------- the accelerometer (issue 14)
+
+
+def _probe(monkeypatch: pytest.MonkeyPatch, needs: tuple[str, ...]) -> list[dict]:
+    """A method registered for the test that takes ``accel=`` and fits ``vector`` (or a sphere): what it was
+    given is appended to the list returned. vector and gyro take the accelerometer the same way."""
+    from magfit.methods.registry import METHODS, MethodSpec
+    from magfit.methods.vector import fit_vector
+
+    seen: list[dict] = []
+
+    def probe(data, *, reference=None, gyro=None, time_s=None, accel=None):
+        seen.append({"reference": reference, "gyro": gyro, "time_s": time_s, "accel": accel})
+        if reference is not None:
+            return fit_vector(data, reference=reference, time_s=time_s)
+        return METHODS["sphere"].function(data)
+
+    monkeypatch.setitem(METHODS, "probe", MethodSpec("probe", probe, 50, "samples", "test", (), needs))
+    return seen
+
+
+def test_the_accelerometer_is_asked_of_the_methods_that_take_it_only(monkeypatch) -> None:
+    from magfit.pipeline.streams import stream_names
+
+    _probe(monkeypatch, ("reference",))
+    assert stream_names(["probe"]) == ("reference", "time_s", "accel")  # the stamps too: vector fits the lag
+    assert stream_names(["sphere", "auto"]) == ()  # the samples alone: no stream, the accelerometer neither
+    for method in ("vector", "gyro"):  # whatever their signature says today
+        spec = magfit.METHODS[method]
+        assert ("accel" in stream_names([method])) == ("accel" in spec.options)
+        assert set(spec.needs) <= set(stream_names([method]))
+
+
+def test_the_logs_accelerometer_is_given_in_the_body_frame_on_the_compass_stamps(tmp_path, monkeypatch) -> None:
+    path, _ = _log_with_gps(tmp_path / "gps.bin", monkeypatch)
+    streams = method_streams(open_source(path), "MAG/0", ("reference", "gyro", "time_s", "accel"), unit=None)
+    accel, t = streams.options["accel"], streams.options["time_s"]
+    assert accel.shape == streams.samples.shape
+    # The IMU is logged at 50 Hz in the body frame (FRD): the specific force of the tumble, interpolated.
+    np.testing.assert_allclose(accel, motion_log.specific_force(t), atol=0.05)
+    # ... so the attitude turns it into gravity in NED, sample by sample
+    gravity = np.einsum("nij,nj->ni", motion_log.attitude(t), accel)
+    np.testing.assert_allclose(gravity, np.tile([0.0, 0.0, -motion_log.G], (len(t), 1)), atol=0.05)
+    assert any("accelerometer: IMU[0] AccX/Y/Z" in note and "body (FRD)" in note for note in streams.notes)
+
+
+def test_a_log_without_an_accelerometer_is_fitted_without_one(tmp_path, monkeypatch) -> None:
+    path, _ = _log_with_gps(tmp_path / "noimu.bin", monkeypatch, drop=("IMU",))
+    seen = _probe(monkeypatch, ("reference",))
+    for available in (False, True):
+        streams = method_streams(open_source(path), "MAG/0", ("reference", "time_s", "accel"), unit=None,
+                                 available=available)  # fmt: skip
+        assert "accel" not in streams.options and "reference" in streams.options
+        assert any("no accelerometer beside this compass: the methods run without it" in n for n in streams.notes)
+    calibration = magfit.calibrate_file(path, "probe", sensor="MAG/0").calibration
+    assert seen[-1]["accel"] is None and seen[-1]["reference"] is not None
+    np.testing.assert_allclose(calibration.offset, motion_log.HARD, atol=3.0)
+
+
+def test_calibrate_file_gives_the_accelerometer_to_a_method_that_takes_it(tmp_path, monkeypatch) -> None:
+    path, _ = _log_with_gps(tmp_path / "gps.bin", monkeypatch)
+    seen = _probe(monkeypatch, ("reference",))
+    result = magfit.calibrate_file(path, "probe", sensor="MAG/0")
+    given = seen[-1]
+    assert given["accel"] is not None and given["accel"].shape == given["reference"].shape
+    np.testing.assert_allclose(given["accel"], motion_log.specific_force(given["time_s"]), atol=0.05)
+    assert any("accelerometer: IMU[0] AccX/Y/Z" in note for note in result.compasses[0].notes)
+
+
+def _ulog_with_raw_accel(path: Path) -> Path:
+    """The tumble as a PX4 log whose gyro is vehicle_angular_velocity (body frame) and whose accelerometer
+    is only the raw sensor_accel (the board's frame, before SENS_BOARD_ROT)."""
+    from test_sources_ulog import ULogWriter
+
+    writer = ULogWriter()
+    writer.format("sensor_mag", [("uint64_t", "timestamp"), ("uint32_t", "device_id"), *(("float", a) for a in "xyz")])
+    writer.format("vehicle_attitude", [("uint64_t", "timestamp"), ("float[4]", "q")])
+    writer.format("vehicle_angular_velocity", [("uint64_t", "timestamp"), ("float[3]", "xyz")])
+    writer.format("sensor_accel", [("uint64_t", "timestamp"), *(("float", a) for a in "xyz")])
+    writer.parameter("CAL_MAG0_ID", 592905)
+    writer.parameter("CAL_MAG0_ROT", 0)
+    for topic in ("sensor_mag", "vehicle_attitude", "vehicle_angular_velocity", "sensor_accel"):
+        writer.subscribe(topic, 0)
+    t_mag = 1.0 + np.arange(600) / 20.0
+    raw = motion_log.raw_field(t_mag) / 1000.0  # gauss
+    t_fast = np.arange(0.9, t_mag[-1] + 0.2, 0.01) + 0.003
+    q = motion_log.Rotation.from_matrix(motion_log.attitude(t_fast)).as_quat()  # x, y, z, w
+    gyro, accel = motion_log.body_rates(t_fast), motion_log.specific_force(t_fast)
+    events = [(t, 0, j) for j, t in enumerate(t_mag)] + [(t, 1, j) for j, t in enumerate(t_fast)]
+    for time, kind, j in sorted(events):
+        stamp = round(time * 1e6)
+        if kind == 0:
+            writer.data("sensor_mag", 0, stamp, 592905, *raw[j])
+        else:
+            writer.data("vehicle_attitude", 0, stamp, q[j, 3], q[j, 0], q[j, 1], q[j, 2])  # PX4: w, x, y, z
+            writer.data("vehicle_angular_velocity", 0, stamp, *gyro[j])
+            writer.data("sensor_accel", 0, stamp, *accel[j])
+    path.write_bytes(writer.bytes())
+    return path
+
+
+def test_an_accelerometer_in_another_frame_than_the_gyro_or_the_attitude_is_left_out(tmp_path) -> None:
+    pytest.importorskip("pyulog")
+    path = _ulog_with_raw_accel(tmp_path / "raw_accel.ulg")
+    # The frames are what the reader says of the topics (the values here happen to be the body's: only the
+    # frames stated decide), and the accelerometer is left out for either method, with the reason.
+    for needs, other in ((("gyro", "time_s", "accel"), "gyro"), (("time_s", "accel", "reference"), "attitude")):
+        streams = method_streams(open_source(path), "sensor_mag/0", needs, unit=None, available=True)
+        assert "accel" not in streams.options
+        assert any(
+            "left out: it is in the sensor (before SENS_BOARD_ROT" in note and f"the {other} in the body (FRD)" in note
+            for note in streams.notes
+        ), streams.notes
+    # sensor_combined (the rotated IMU, body frame) is given to the gyro method: the gyro's own frame
+    combined = tmp_path / "combined.ulg"
+    motion_log.write_ulog(combined, 0, n=600)
+    streams = method_streams(open_source(combined), "sensor_mag/0", ("gyro", "time_s", "accel"), unit=None)
+    np.testing.assert_allclose(streams.options["accel"], motion_log.specific_force(streams.options["time_s"]),
+                               atol=1e-3)  # fmt: skip

@@ -186,12 +186,11 @@ def with_streams(
 
     All the methods are then compared on the samples those streams cover; a samples file has none.
     """
-    from ..methods import get_method
+    from ..pipeline.streams import method_streams, stream_names
 
-    needs = sorted({need for method in methods for need in get_method(method).needs})
+    needs = stream_names(methods)  # what they need, and the optional streams they take (the accelerometer)
     if not needs or recording.source is None or recording.sensor is None:
         return recording.samples, {}
-    from ..pipeline.streams import method_streams
 
     found = method_streams(recording.source, recording.sensor, needs, unit=unit or recording.unit, available=True)
     for note in found.notes:

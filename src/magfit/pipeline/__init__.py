@@ -393,9 +393,9 @@ def _calibrate_compass(
     needs = get_method(method).needs
     fitted, frame_details = read.samples, {}
     if needs:  # vector, gyro: the log's attitude, gyroscope and time on the compass's stamps (docs/file-formats.md)
-        from .streams import method_streams
+        from .streams import method_streams, stream_names
 
-        streams = method_streams(source, magnetometer.id, needs, unit=unit, date=date)
+        streams = method_streams(source, magnetometer.id, stream_names([method]), unit=unit, date=date)
         for note in streams.notes:
             say(note)
         notes += streams.notes

@@ -6,6 +6,15 @@ the body frame by the logged attitude (``reference = attitudeᵀ · (north, east
 unit). ``gyro`` needs the body rates and the time stamps. :func:`method_streams` reads them once through
 :meth:`magfit.sources.Source.read_motion` (which puts every stream on the magnetometer's stamps) and says in
 words what is missing and how to log it.
+
+Both methods also *take* the accelerometer (``accel=``, optional): where the vehicle is still or slow it
+sees gravity alone, which pins the tilt of the mounting better than the attitude the estimator logs.
+:func:`stream_names` asks for it only of a method whose signature has it. It is given only in the frame the
+method expects: ``vector`` compares the samples with a reference in the body frame of the *attitude*, and
+``gyro`` relates them to the *gyroscope's* axes, so the accelerometer's frame must be that one (the logs
+give the rotated, calibrated IMU in the body frame: ArduPilot's IMU, PX4's ``sensor_combined``; PX4's raw
+``sensor_accel`` is in the board's frame before ``SENS_BOARD_ROT`` and is left out for ``vector``). A log
+without an accelerometer is no error: the methods run without it, and the notes say so.
 """
 
 from __future__ import annotations
@@ -19,10 +28,32 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError, OptionError
+from ..methods import get_method
 from ..sources import Source
 from ..units import get_unit
 
-__all__ = ["MethodStreams", "method_streams"]
+__all__ = ["OPTIONAL_STREAMS", "MethodStreams", "method_streams", "stream_names"]
+
+#: Streams a method may take beside those it needs: read from the log for a method whose options include them,
+#: and never a reason to refuse (a log without them is fitted without them). ``time_s``: vector estimates the
+#: attitude's lag behind the samples from the stamps.
+OPTIONAL_STREAMS = ("time_s", "accel")
+
+
+def stream_names(methods: Sequence[str]) -> tuple[str, ...]:
+    """The streams to read from a log for ``methods``: what each needs, and the optional streams it takes.
+
+    Only a method that needs a stream of the log (``vector``, ``gyro``) gets the optional ones: a
+    magnitude-only method reads the samples alone.
+    """
+    names: dict[str, None] = {}
+    for method in methods:
+        spec = get_method(method)
+        if not spec.needs:
+            continue
+        names.update(dict.fromkeys(spec.needs))
+        names.update(dict.fromkeys(stream for stream in OPTIONAL_STREAMS if stream in spec.options))
+    return tuple(names)
 
 
 @dataclass(frozen=True)
@@ -34,7 +65,8 @@ class MethodStreams:
     samples : ndarray, shape (N, 3)
         The compass's samples kept (those the other streams cover).
     options : dict
-        ``reference``, ``gyro`` and ``time_s`` as the methods take them (only those asked for).
+        ``reference``, ``gyro``, ``time_s`` and ``accel`` as the methods take them (only those asked for, and
+        ``accel`` only where the log has it in the frame the methods expect).
     sensor_details : dict
         What the exports need to know of the frame of the samples (``applied_rotation`` when the firmware
         had already turned them into the body frame: ArduPilot's MAG after ``COMPASS_ORIENT``).
@@ -57,10 +89,13 @@ def method_streams(
     date: datetime.date | str | None = None,
     available: bool = False,
 ) -> MethodStreams:
-    """Read ``sensor``'s samples with the streams ``needs`` names (``reference``, ``gyro``, ``time_s``).
+    """Read ``sensor``'s samples with the streams ``needs`` names (``reference``, ``gyro``, ``time_s``,
+    ``accel``; :func:`stream_names` gives them for a method).
 
     ``available``: give the streams the log holds and say in ``notes`` why the others are missing (a
-    comparison of several methods runs those it can), instead of raising.
+    comparison of several methods runs those it can), instead of raising. ``accel`` is optional either way:
+    missing, or in another frame than the attitude's (``reference``) or the gyroscope's (``gyro``) asked for
+    with it, it is left out and the notes say why.
 
     Raises
     ------
@@ -95,6 +130,11 @@ def method_streams(
         if not available:
             raise
         notes.append(str(error))
+    if "accel" in needs:
+        accel, said = _accel(motion, needs)
+        notes.append(f"{where}: {said}")
+        if accel is not None:
+            options["accel"] = accel
     details: dict[str, Any] = {}
     if motion.magnetometer_frame == "body" and motion.mounting is not None:
         details["applied_rotation"] = np.asarray(motion.mounting).tolist()
@@ -137,3 +177,31 @@ def _reference(
         f"logged attitude ({(motion.sources or {}).get('attitude', 'attitude')})"
     )
     return np.einsum("kji,j->ki", motion.attitude, field.vector_in(label))
+
+
+def _frame_name(frame: str) -> str:
+    """A stream's frame without its remarks: ``body (FRD), bias removed`` and ``body (FRD)`` are both the body
+    frame; PX4's raw ``sensor (before SENS_BOARD_ROT and the gyro calibration)`` is the board's ``sensor`` frame;
+    a ROS frame (``frame_id imu_link (REP-103 ...)``) is its frame_id."""
+    return frame.split(" (")[0].split(",")[0].strip()
+
+
+def _accel(motion: Any, needs: Sequence[str]) -> tuple[NDArray[np.float64] | None, str]:
+    """The accelerometer for the methods ``needs`` serves, when it is in the frame they expect, and a note."""
+    if motion.accel is None:
+        return None, "no accelerometer beside this compass: the methods run without it (gravity not used)"
+    frames = motion.frames or {}
+    came = (motion.sources or {}).get("accel", "the accelerometer")
+    mine = _frame_name(frames.get("accel", ""))
+    # vector's reference is in the attitude's body frame; gyro's rates in the gyroscope's: the accelerometer
+    # must be in the frame of each stream it is used with.
+    wanted = {"reference": "attitude", "gyro": "gyro"}
+    for need, stream in wanted.items():
+        if need in needs and stream in frames and _frame_name(frames[stream]) != mine:
+            return None, (
+                f"accelerometer {came} left out: it is in the {frames['accel']} frame, the {stream} in the "
+                f"{frames[stream]} frame (the methods run without it; log the rotated IMU: ArduPilot's IMU, PX4's "
+                "sensor_combined)"
+            )
+    frame = frames.get("accel", "IMU")
+    return np.asarray(motion.accel), f"accelerometer: {came}, m/s² in the {frame} frame, given to the fit (gravity)"

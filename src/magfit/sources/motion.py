@@ -99,6 +99,9 @@ class Motion:
         The frame of ``gyro`` and ``accel``.
     sources : dict
         For each of ``attitude``, ``gyro``, ``accel`` present: the stream it came from and its rate.
+    frames : dict
+        For each of ``attitude``, ``gyro``, ``accel`` present: its stream's frame (:attr:`Stream.frame`), so
+        that a user of two streams can tell whether they share a frame.
     position : Position or None
         Where and when the log was recorded (its GNSS fixes), for the World Magnetic Model.
     start_utc_s : float
@@ -122,6 +125,7 @@ class Motion:
     accel: NDArray[np.float64] | None = None
     imu_frame: str = ""
     sources: dict[str, str] | None = None
+    frames: dict[str, str] | None = None
     position: Position | None = None
     start_utc_s: float = float("nan")
     n_dropped: int = 0
@@ -252,6 +256,7 @@ def align(
         accel=result["accel"],
         imu_frame=" / ".join(sorted(frames)),
         sources={key: f"{s.name} ({s.frame}, {_rate(s.time_s):.1f} Hz)" for key, s in used.items()},
+        frames={key: s.frame for key, s in used.items()},
         position=position,
         start_utc_s=float(start_utc_s if start_utc_s is not None else (position.time_s if position else np.nan)),
         n_dropped=dropped,
