@@ -31,6 +31,13 @@ alignment error
 offset error
     ``|V_fit − V_true| / B``.
 
+``vector`` and ``gyro`` get every stream of the recording their options take: the reference, the time stamps,
+the gyro and the accelerometer (``sim.accel``, specific force in the vehicle frame: where the vehicle is
+still or slow it sees gravity alone, which pins the mounting's tilt better than the erring attitude). The
+``vector (no accel)`` column is ``vector`` given the reference and the time stamps only, as before the
+accelerometer was used: the difference between the two columns is what gravity adds. (A checkout whose
+``vector`` does not take ``accel=`` has no such column; neither method is given a stream it does not take.)
+
 The plain regression (``regression`` column) is no magfit method: the ordinary least-squares fit of
 ``raw = G r + V`` to the logged reference ``r`` (12 numbers, no lag, no noise model), the yardstick of
 issue 14's real-log target. MAGYC's gyro-aided methods (``magyc.magyc_*``) get the samples, the gyro and
@@ -61,6 +68,10 @@ MAGNITUDE_METHODS = ("sphere", "diag", "als", "ml", "auto")
 NOT_FORCED = ("auto",)
 REGRESSION = "regression"
 VECTOR = "vector"
+#: ``vector`` without the accelerometer (the reference and the time stamps only): what gravity adds.
+VECTOR_NO_ACCEL = "vector (no accel)"
+#: The magfit method behind each column not named after one.
+METHOD_OF = {VECTOR_NO_ACCEL: VECTOR}
 #: magfit's gyro-aided method.
 GYRO = "gyro"
 #: MAGYC's gyro-aided methods (magyc 1.0.0, Rodríguez et al. 2024).
@@ -230,6 +241,21 @@ def _magfit(name: str, **extra: Callable[[VehicleSimulation], Any]) -> Fitter:
     return run
 
 
+#: The recording's streams, by the name of the option that takes them.
+STREAMS: dict[str, Callable[[VehicleSimulation], Any]] = {
+    "reference": lambda s: s.reference,
+    "time_s": lambda s: s.time_s,
+    "gyro": lambda s: s.gyro,
+    "accel": lambda s: s.accel,
+}
+
+
+def _taken(name: str, without: Sequence[str] = ()) -> dict[str, Callable[[VehicleSimulation], Any]]:
+    """The streams method ``name`` takes (its options), but those in ``without``."""
+    options = magfit.METHODS[name].options
+    return {key: make for key, make in STREAMS.items() if key in options and key not in without}
+
+
 def regression(simulation: VehicleSimulation) -> magfit.Calibration:
     """The plain regression on the simulated recording's logged reference (see :func:`plain_regression`)."""
     return plain_regression(simulation.samples, simulation.reference)
@@ -267,18 +293,25 @@ def _magyc(function: str) -> Fitter:
     return run
 
 
+def _takes_accel(name: str) -> bool:
+    return name in magfit.METHODS and "accel" in magfit.METHODS[name].options
+
+
 def method_table(methods: Sequence[str] | None = None, peers: bool = True) -> dict[str, Fitter]:
     """Every fitter that exists in this checkout, by column name (a method not yet in magfit is left out)."""
     table: dict[str, Fitter] = {name: _magfit(name) for name in MAGNITUDE_METHODS if name in magfit.METHODS}
     table[REGRESSION] = regression
     if VECTOR in magfit.METHODS:
-        table[VECTOR] = _magfit(VECTOR, reference=lambda s: s.reference, time_s=lambda s: s.time_s)
+        table[VECTOR] = _magfit(VECTOR, **_taken(VECTOR))
+        if _takes_accel(VECTOR):
+            table[VECTOR_NO_ACCEL] = _magfit(VECTOR, **_taken(VECTOR, without=("accel", "gyro")))
     if GYRO in magfit.METHODS:
-        table[GYRO] = _magfit(GYRO, gyro=lambda s: s.gyro, time_s=lambda s: s.time_s)
+        table[GYRO] = _magfit(GYRO, **_taken(GYRO))
     if peers:
         for function in MAGYC_METHODS:
             table[f"magyc.{function}"] = _magyc(function)
-    return {name: fitter for name, fitter in table.items() if methods is None or name in methods}
+    wanted = None if methods is None else set(methods)
+    return {name: fitter for name, fitter in table.items() if wanted is None or {name, METHOD_OF.get(name)} & wanted}
 
 
 def alignment_available() -> bool:
@@ -356,9 +389,10 @@ def run_case(case: VehicleCase, fitters: Mapping[str, Fitter], root_seed: int) -
                 fitted[name] = calibration
                 outcome.details = {k: v for k, v in calibration.details.items() if k in KEPT_DETAILS} or None
             outcome.seconds = time.perf_counter() - start
-            if name in magfit.METHODS:
+            method = METHOD_OF.get(name, name)
+            if method in magfit.METHODS:
                 outcome.verdict, outcome.verdict_reason = verdict_of(
-                    calibration, outcome.error or "" if name in NOT_FORCED else ""
+                    calibration, outcome.error or "" if method in NOT_FORCED else ""
                 )
             outcomes[name].append(outcome)
         if aligning:
@@ -491,7 +525,8 @@ def check_targets(
                               f"{len(restricted)} restricted cases", items))  # fmt: skip
 
     # 2. alignment within 0.5° of the truth at 1° of attitude noise.
-    for name, label in ((VECTOR, "vector's rotation"), (ALIGN_TRUE, "align() on the truly calibrated field"),
+    vector_label = "vector's rotation" + (" (with the accelerometer)" if _takes_accel(VECTOR) else "")
+    for name, label in ((VECTOR, vector_label), (ALIGN_TRUE, "align() on the truly calibrated field"),
                         (ALIGN_AUTO, "align() after auto")):  # fmt: skip
         items, ok, ran = [], True, False
         for case in cases:
@@ -838,11 +873,16 @@ def run_real(recording: AttitudeRecording, methods: Sequence[str] | None = None)
         REGRESSION: lambda: plain_regression(samples, reference),
     }
     if VECTOR in magfit.METHODS:
-        fitters[VECTOR] = lambda: magfit.fit(samples, method=VECTOR, reference=reference,
-                                             time_s=recording.time_s[fit_rows], allow_undetermined=True)  # fmt: skip
+        streams = {"reference": reference, "time_s": recording.time_s[fit_rows], "gyro": recording.gyro[fit_rows],
+                   "accel": recording.accel[fit_rows]}  # fmt: skip
+        taken = {key: value for key, value in streams.items() if key in magfit.METHODS[VECTOR].options}
+        fitters[VECTOR] = lambda: magfit.fit(samples, method=VECTOR, allow_undetermined=True, **taken)
+        if _takes_accel(VECTOR):
+            alone = {key: value for key, value in taken.items() if key not in ("accel", "gyro")}
+            fitters[VECTOR_NO_ACCEL] = lambda: magfit.fit(samples, method=VECTOR, allow_undetermined=True, **alone)
     rows: dict[str, dict[str, Any]] = {}
     for name, fitter in fitters.items():
-        if methods is not None and name not in methods and name not in ("as logged", REGRESSION):
+        if methods is not None and not {name, METHOD_OF.get(name)} & {*methods, "as logged", REGRESSION}:
             continue
         start = time.perf_counter()
         try:

@@ -412,3 +412,30 @@ def test_real_recording_scoring_recovers_an_exact_reference() -> None:
     assert result["methods"]["as logged"]["heading_deg"] > 5.0
     assert set(result["methods"]) == {"as logged", "ml", "regression"}  # the methods asked for and the yardsticks
     assert result["fit_samples"] == pytest.approx(1500 / vehicle.BROAD_STRIDE, abs=2)  # alternate 10 s of 60 s
+
+
+def test_vector_and_gyro_get_the_streams_their_options_take_and_vector_runs_without_the_accelerometer_too(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from magfit.methods.registry import MethodSpec
+    from magfit.methods.vector import fit_vector
+
+    seen: list[dict] = []
+
+    def vector_with_accel(data, *, reference=None, time_s=None, accel=None, max_lag_s=1.0):
+        seen.append({"time_s": time_s, "accel": accel})
+        return fit_vector(data, reference=reference, time_s=time_s, max_lag_s=max_lag_s)
+
+    spec = magfit.METHODS["vector"]
+    probe = MethodSpec("vector", vector_with_accel, spec.min_samples, spec.data, spec.summary, spec.checks, spec.needs)
+    monkeypatch.setitem(magfit.METHODS, "vector", probe)
+    table = vehicle.method_table(["vector"], peers=False)
+    assert list(table) == ["vector", "vector (no accel)"]
+    simulation = vehicle.simulate_vehicle(600, "flight", seed=3)
+    with_accel, without = table["vector"](simulation), table["vector (no accel)"](simulation)
+    assert seen[0]["accel"] is simulation.accel and seen[0]["time_s"] is simulation.time_s
+    assert seen[1]["accel"] is None and seen[1]["time_s"] is simulation.time_s  # the stamps still: the lag
+    assert with_accel.frame == without.frame == "vehicle"
+    # a method whose options lack the accelerometer (or gyro) is never given it: no "unexpected keyword"
+    taken = vehicle._taken("gyro")
+    assert set(taken) == {"gyro", "time_s", "accel"} & set(magfit.METHODS["gyro"].options)
