@@ -74,6 +74,7 @@ from .._optimize import Evaluation, Solution, levenberg_marquardt
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..findings import Support
+from ..gravity import still_samples
 from ..rotations import polar_decomposition
 from .registry import FitInput, register
 
@@ -103,6 +104,8 @@ WEAK_OFFSET = 0.01
 #: walks, and the right mapping of a one-minute car drive on simulate_vehicle reached 24 against the general
 #: matrix with the batch-means variance: 50 keeps it.
 LIKELIHOOD_RATIO = 50.0
+#: Fewest samples on which the accelerometer sees gravity alone for the gravity rows to be used.
+MIN_GRAVITY_SAMPLES = 50
 #: Turning about the second principal axis below this share of the first: turned about one axis only.
 SINGLE_AXIS = 0.02
 #: Largest turn (degrees) of the field seen in the samples' frame below which the sensor hardly turned.
@@ -177,6 +180,47 @@ def _motion(
         at = int(np.argmax(steps <= 0)) + 1
         raise OptionError(f"time_s= must increase strictly; row {at} ({t[at]:g} s) does not: sort or de-duplicate")
     return w, t
+
+
+def _accel(accel: ArrayLike, n: int) -> NDArray[np.float64]:
+    """The accelerometer (n, 3), checked; one-line :class:`OptionError` naming what is wrong."""
+    try:
+        a = np.asarray(accel, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise OptionError("accel= must be a numeric array: the specific force, shape (N, 3), any unit") from None
+    if a.shape != (n, 3):
+        raise OptionError(
+            f"accel= must have shape ({n}, 3), one row per magnetometer sample in the gyroscope's axes, got shape "
+            f"{a.shape}; rows are samples, it is never transposed"
+        )
+    bad = ~np.all(np.isfinite(a), axis=1)
+    if np.any(bad):
+        raise OptionError(f"accel= row {int(np.argmax(bad))} is not finite (NaN or inf): drop or fill those rows first")
+    zero = np.linalg.norm(a, axis=1) == 0
+    if np.any(zero):
+        raise OptionError(
+            f"accel= row {int(np.argmax(zero))} is (0, 0, 0), which has no direction: a missing reading written as "
+            "zeros? drop or fill those rows first"
+        )
+    return a
+
+
+def _gravity(a: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float64],
+             t: NDArray[np.float64]) -> tuple[_Gravity | None, dict[str, Any]]:  # fmt: skip
+    """The gravity rows (module docstring, (2)) from the accelerometer, or None with the reason when too few
+    samples see gravity alone; what :func:`magfit.gravity.still_samples` dropped goes to the details."""
+    still = still_samples(a, mag=y, gyro=w, time_s=t)
+    facts: dict[str, Any] = {"still_samples": int(np.sum(still.keep)), "dropped": still.dropped,
+                             "notes": list(still.notes)}  # fmt: skip
+    if facts["still_samples"] < MIN_GRAVITY_SAMPLES:
+        facts["used"] = False
+        facts["reason"] = (
+            f"the accelerometer saw gravity alone on {facts['still_samples']} samples, fewer than "
+            f"{MIN_GRAVITY_SAMPLES}: not used"
+        )
+        return None, facts
+    facts["used"] = True
+    return _Gravity(-a / np.linalg.norm(a, axis=1)[:, None], still.keep), facts
 
 
 # -------------------------------------------------------------------------------- stage 1: windows
@@ -335,12 +379,44 @@ def _unit(angles: NDArray[np.float64]) -> NDArray[np.float64]:
     )
 
 
+def _cos(inclination: float) -> float:
+    """cos δ, held above 0.1 (a dip beyond 84°, near a magnetic pole, leaves the heading ill-defined anyway)."""
+    return max(math.cos(inclination), 0.1)
+
+
+def _gravity_angle(down: NDArray[np.float64], b: NDArray[np.float64], inclination: float) -> NDArray[np.float64]:
+    """(2) as an angle: ``(d · b − sin δ) / cos δ``, to first order the field's dip error in radians.
+
+    Divided by cos δ so that its noise (the accelerometer's direction noise across the field, ``σ cos δ`` in
+    ``d · b``) does not depend on δ: undivided, a fit lowers it by pulling the field towards the vertical
+    (measured on simulated boats: the dip came out 70-79° for 64°, the heading error 4x worse).
+    """
+    return np.asarray((np.einsum("ki,ki->k", down, b) - math.sin(inclination)) / _cos(inclination), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class _Gravity:
+    """The accelerometer's vertical where it sees gravity alone: stage 2's gravity rows (module docstring).
+
+    ``down`` (n, 3) is ``−a/|a|`` at every sample (unit), ``still`` (n,) where :func:`magfit.gravity.still_samples`
+    lets it through, ``weight`` the rows' weight: the magnetometer rows' noise over the gravity rows' (each
+    with its correlation in time), so that both are counted in noise units.
+    """
+
+    down: NDArray[np.float64]
+    still: NDArray[np.bool_]
+    weight: float = 1.0
+    notes: tuple[str, ...] = ()
+
+
 @dataclass(frozen=True)
 class _Trajectory:
     """What the maximum-likelihood residual needs: the recording, its stretches, the rows it is read at and
     the model of G (``G.ravel() = basis @ q``: general, or ``W Pᵀ`` with W symmetric for a standard mapping).
 
-    The parameters are ``p = (q, V, β, the stretches' (elevation, azimuth) of b₀)``.
+    The parameters are ``p = (q, V, β, [δ,] the stretches' (elevation, azimuth) of b₀)``, the inclination δ
+    only with gravity rows. Each row has three magnetometer residuals ``G b_k + V − y_k`` and, with gravity, a
+    fourth ``weight · (d_k · b_k − sin δ) / cos δ`` (zero where the accelerometer does not see gravity alone).
     """
 
     y: NDArray[np.float64]
@@ -350,10 +426,26 @@ class _Trajectory:
     rows: NDArray[np.int64]
     count: int
     basis: NDArray[np.float64]
+    gravity: _Gravity | None = None
 
     @property
     def k(self) -> int:
         return int(self.basis.shape[1])
+
+    @property
+    def head(self) -> int:
+        """Parameters every row may depend on: q, V, β (and δ with gravity); the stretches' angles follow."""
+        return self.k + 6 + (self.gravity is not None)
+
+    @property
+    def components(self) -> int:
+        """Residuals per row: the magnetometer's three, and the gravity row's."""
+        return 3 + (self.gravity is not None)
+
+    def n_residuals(self) -> int:
+        """Residuals that carry data (the gravity rows of moving samples are zeros)."""
+        gravity = 0 if self.gravity is None else int(np.sum(self.gravity.still[self.rows]))
+        return 3 * self.rows.size + gravity
 
     def distortion(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
         """G (3, 3) from the parameters."""
@@ -375,49 +467,75 @@ class _Trajectory:
         first = np.searchsorted(self.segment, self.segment)  # each sample's stretch start (segments ascend)
         running = (running - running[first])[self.rows]
         turns = turns[self.rows]
-        start = _unit(p[k + 6 :].reshape(self.count, 2))[self.segment[self.rows]]
+        start = _unit(p[self.head :].reshape(self.count, 2))[self.segment[self.rows]]
         skew = np.einsum("ijk,mj->mik", _EPS, start)  # [b₀]×: (b₀ × v)_i = ε_ijk b₀_j v_k
         d_beta = -np.einsum("kji,kjl,klm->kim", turns, skew, running)
         return np.einsum("kji,kj->ki", turns, start), turns, d_beta
 
+    def _gravity_rows(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """d_k (rows, 3) and each row's weight (rows,): 0 where the accelerometer is not still."""
+        assert self.gravity is not None
+        down = self.gravity.down[self.rows]
+        return down, self.gravity.weight * self.gravity.still[self.rows].astype(np.float64)
+
+    def _residual_of(self, p: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        magnetometer = np.einsum("ij,kj->ki", self.distortion(p), b) + p[self.k : self.k + 3] - self.y[self.rows]
+        if self.gravity is None:
+            return magnetometer
+        down, weight = self._gravity_rows()
+        return np.column_stack([magnetometer, weight * _gravity_angle(down, b, p[self.k + 6])])
+
     def residual(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
-        b, _, _ = self.field(p)
-        return (np.einsum("ij,kj->ki", self.distortion(p), b) + p[self.k : self.k + 3] - self.y[self.rows]).ravel()
+        """All residuals, (rows · components,): row by row, the magnetometer's three then the gravity row."""
+        return self._residual_of(p, self.field(p)[0]).ravel()
+
+    def magnetometer_residual(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The samples' own residuals ``G b_k + V − y_k``, (rows, 3), in the samples' unit."""
+        return self.residual(p).reshape(-1, self.components)[:, :3]
 
     def blocks(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """The residual (rows, 3), its Jacobian in (q, V, β) (rows, 3, k + 6), and in the row's own stretch's
-        two angles (rows, 3, 2): every other angle column of a row is zero."""
+        """The residual (rows, C), its Jacobian in (q, V, β[, s]) (rows, C, head), and in the row's own
+        stretch's two angles (rows, C, 2): every other angle column of a row is zero. C = :attr:`components`."""
         k = self.k
         g = self.distortion(p)
         b, turns, d_beta = self.field(p)
         rows = self.rows.size
-        residual = np.einsum("ij,kj->ki", g, b) + p[k : k + 3] - self.y[self.rows]
-        dense = np.zeros((rows, 3, k + 6))
+        residual = self._residual_of(p, b)
+        dense = np.zeros((rows, self.components, self.head))
         for i in range(3):
             # ∂(G b)_i / ∂G_ij = b_j, through the basis
             dense[:, i, :k] = np.einsum("kj,jq->kq", b, self.basis[3 * i : 3 * i + 3])
-        dense[:, :, k : k + 3] = np.eye(3)
-        dense[:, :, k + 3 :] = np.einsum("ij,kjm->kim", g, d_beta)
-        angles = p[k + 6 :].reshape(self.count, 2)[self.segment[self.rows]]
+        dense[:, :3, k : k + 3] = np.eye(3)
+        dense[:, :3, k + 3 : k + 6] = np.einsum("ij,kjm->kim", g, d_beta)
+        angles = p[self.head :].reshape(self.count, 2)[self.segment[self.rows]]
         elevation, azimuth = angles[:, 0], angles[:, 1]
         up, across = np.sin(elevation), np.cos(elevation)
         d_start = np.stack([
             np.column_stack([-up * np.cos(azimuth), -up * np.sin(azimuth), across]),
             np.column_stack([-across * np.sin(azimuth), across * np.cos(azimuth), np.zeros(rows)]),
         ], axis=2)  # fmt: skip
-        angular = np.einsum("ij,kmj,kmn->kin", g, turns, d_start)  # G R_kᵀ ∂b₀
+        angular = np.zeros((rows, self.components, 2))
+        angular[:, :3] = np.einsum("ij,kmj,kmn->kin", g, turns, d_start)  # G R_kᵀ ∂b₀
+        if self.gravity is not None:
+            down, weight = self._gravity_rows()
+            inclination = p[k + 6]
+            across = weight / _cos(inclination)
+            dense[:, 3, k + 3 : k + 6] = across[:, None] * np.einsum("ki,kim->km", down, d_beta)
+            # ∂/∂δ of (x − sin δ) / cos δ = −1 + tan δ · (x − sin δ) / cos δ
+            dense[:, 3, k + 6] = weight * (-1.0 + math.tan(inclination) * _gravity_angle(down, b, inclination))
+            angular[:, 3] = across[:, None] * np.einsum("ki,kmi,kmn->kn", down, turns, d_start)
         return residual, dense, angular
 
     def jacobian(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The whole Jacobian (3·rows, p.size), zeros included (the covariance's sandwich needs it row by row)."""
+        """The whole Jacobian (C·rows, p.size), zeros included (the covariance's sandwich needs it row by row)."""
         _, dense, angular = self.blocks(p)
         rows = self.rows.size
-        jac = np.zeros((rows, 3, p.size))
-        jac[:, :, : self.k + 6] = dense
-        columns = self.k + 6 + 2 * self.segment[self.rows]
+        jac = np.zeros((rows, self.components, p.size))
+        jac[:, :, : self.head] = dense
+        columns = self.head + 2 * self.segment[self.rows]
         for shift in range(2):
             jac[np.arange(rows), :, columns + shift] = angular[:, :, shift]
-        return jac.reshape(3 * rows, p.size)
+        return jac.reshape(self.components * rows, p.size)
 
     def normal_equations(self, p: NDArray[np.float64]) -> Evaluation:
         """½ Σ r², JᵀJ and Jᵀr from the blocks: the angle columns of a stretch only meet its own rows.
@@ -425,16 +543,16 @@ class _Trajectory:
         einsum, not BLAS: a threaded gemm on a tall, narrow Jacobian is 10-100x slower when cores are shared.
         """
         residual, dense, angular = self.blocks(p)
-        k6 = self.k + 6
+        head = self.head
         starts = np.searchsorted(self.segment[self.rows], np.arange(self.count))  # rows ascend in stretch
         normal = np.zeros((p.size, p.size))
-        normal[:k6, :k6] = np.einsum("kip,kiq->pq", dense, dense)
-        cross = np.add.reduceat(np.einsum("kip,kin->kpn", dense, angular), starts, axis=0)  # (count, k6, 2)
+        normal[:head, :head] = np.einsum("kip,kiq->pq", dense, dense)
+        cross = np.add.reduceat(np.einsum("kip,kin->kpn", dense, angular), starts, axis=0)  # (count, head, 2)
         own = np.add.reduceat(np.einsum("kim,kin->kmn", angular, angular), starts, axis=0)  # (count, 2, 2)
         for s in range(self.count):
-            columns = slice(k6 + 2 * s, k6 + 2 * s + 2)
-            normal[:k6, columns] = cross[s]
-            normal[columns, :k6] = cross[s].T
+            columns = slice(head + 2 * s, head + 2 * s + 2)
+            normal[:head, columns] = cross[s]
+            normal[columns, :head] = cross[s].T
             normal[columns, columns] = own[s]
         gradient = np.concatenate([
             np.einsum("kip,ki->p", dense, residual),
@@ -444,17 +562,20 @@ class _Trajectory:
 
 
 def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
-                basis: NDArray[np.float64], max_rows: int = MAX_RESIDUAL_SAMPLES) -> _Trajectory:  # fmt: skip
+                basis: NDArray[np.float64], max_rows: int = MAX_RESIDUAL_SAMPLES,
+                gravity: _Gravity | None = None) -> _Trajectory:  # fmt: skip
     span = float(t[-1] - t[0])
     length = max(segment_s, span / MAX_SEGMENTS)
     segment = np.minimum(((t - t[0]) // length).astype(np.int64), max(int(span // length) - 1, 0))
     stride = max(1, math.ceil(y.shape[0] / max_rows))
-    return _Trajectory(y, w, t, segment, np.arange(0, y.shape[0], stride), int(segment.max()) + 1, basis)
+    rows = np.arange(0, y.shape[0], stride)
+    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity)
 
 
 def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64],
            beta: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
-    """Parameters for ``traj`` from G (any scale: |b₀| = 1 rescales it), V and β; b₀ read off the samples."""
+    """Parameters for ``traj`` from G (any scale: |b₀| = 1 rescales it), V and β; b₀ (and s) read off the
+    samples."""
     h = np.linalg.inv(g)
     field = np.einsum("ij,kj->ki", h, traj.y - offset)
     radius = float(np.median(np.linalg.norm(field, axis=1)))
@@ -462,7 +583,13 @@ def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64
     first /= np.linalg.norm(first, axis=1)[:, None]
     angles = np.column_stack([np.arcsin(np.clip(first[:, 2], -1, 1)), np.arctan2(first[:, 1], first[:, 0])])
     q, *_ = np.linalg.lstsq(traj.basis, (g * radius).ravel(), rcond=None)
-    return np.concatenate([q, offset, beta, angles.ravel()])
+    head = [q, offset, beta]
+    if traj.gravity is not None:
+        still = traj.gravity.still
+        unit = field[still] / np.linalg.norm(field[still], axis=1)[:, None]
+        dots = np.einsum("ki,ki->k", traj.gravity.down[still], unit)
+        head.append(np.array([math.asin(float(np.clip(np.median(dots), -0.99, 0.99)))]))
+    return np.concatenate([*head, angles.ravel()])
 
 
 def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iterations: int = 60) -> Solution:
@@ -471,19 +598,20 @@ def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iteration
     def evaluate(p: NDArray[np.float64], warm: Any) -> Evaluation:
         return traj.normal_equations(p)
 
-    return levenberg_marquardt(evaluate, start, n_residuals=3 * traj.rows.size, max_iterations=iterations)
+    return levenberg_marquardt(evaluate, start, n_residuals=traj.n_residuals(), max_iterations=iterations)
 
 
 def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64]:
     """The sandwich covariance of p: batch sums of the score over 20-40 contiguous stretches of the recording."""
-    jac = traj.jacobian(p).reshape(traj.rows.size, 3, p.size)
-    residual = traj.residual(p).reshape(traj.rows.size, 3)
+    rows, components = traj.rows.size, traj.components
+    jac = traj.jacobian(p).reshape(rows, components, p.size)
+    residual = traj.residual(p).reshape(rows, components)
     information = np.einsum("kip,kiq->pq", jac, jac)
     inverse = np.linalg.pinv(information)
-    dof = max(3 * traj.rows.size - p.size, 1)
+    dof = max(traj.n_residuals() - p.size, 1)
     independent = inverse * float(np.sum(residual**2)) / dof
     score = np.einsum("kip,ki->kp", jac, residual)
-    batches = max(2, min(40, traj.rows.size // 50))
+    batches = max(2, min(40, rows // 50))
     sums = np.array([s.sum(axis=0) for s in np.array_split(score, batches)])
     middle = sums.T @ sums * batches / (batches - 1)
     sandwich = inverse @ middle @ inverse
@@ -522,30 +650,59 @@ class _Model:
 
 def _fit_model(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
                name: str, g: NDArray[np.float64], offset: NDArray[np.float64], beta: NDArray[np.float64],
-               max_rows: int = MAX_RESIDUAL_SAMPLES, iterations: int = 60) -> _Model:  # fmt: skip
+               max_rows: int = MAX_RESIDUAL_SAMPLES, iterations: int = 60,
+               gravity: _Gravity | None = None) -> _Model:  # fmt: skip
     basis = np.eye(9) if name == "general" else _symmetric(np.eye(3), MAPPINGS[name].T)  # G = W Pᵀ = (P S)⁻¹
-    traj = _trajectory(y, w, t, segment_s, basis, max_rows)
+    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity)
     return _Model(name, traj, _maximum_likelihood(traj, _start(traj, g, offset, beta), iterations))
 
 
-def _noise_variance(model: _Model) -> float:
-    """The residual variance per component, times the correlation excess of the residuals in time.
+def _effective_variance(residual: NDArray[np.float64], times: NDArray[np.float64], unknowns: int) -> float:
+    """The variance per component of ``residual`` (rows, m), times the correlation excess of the residuals in
+    time.
 
     Neighbouring residuals share the gyro's integrated noise (a random walk over each stretch) and the
     magnetometer's filtering: the variance of means over five-second blocks of rows, times the block length,
     over the plain variance (at least 1).
     """
-    traj = model.traj
-    residual = traj.residual(model.solution.params).reshape(-1, 3)
-    variance = float(np.sum(residual**2)) / max(residual.size - model.solution.params.size, 1)
-    step = float(np.median(np.diff(traj.t[traj.rows]))) if traj.rows.size > 1 else 1.0
+    variance = float(np.sum(residual**2)) / max(residual.size - unknowns, 1)
+    step = float(np.median(np.diff(times))) if times.size > 1 else 1.0
     block = max(1, round(5.0 / step))
     blocks = residual.shape[0] // block
     if blocks < 10:
         return variance
-    means = residual[: blocks * block].reshape(blocks, block, 3).mean(axis=1)
+    means = residual[: blocks * block].reshape(blocks, block, residual.shape[1]).mean(axis=1)
     excess = block * float(np.mean(means**2)) / max(float(np.mean(residual**2)), 1e-300)
     return variance * max(1.0, excess)
+
+
+def _noise_variance(model: _Model) -> float:
+    """The magnetometer residuals' variance per component, times their correlation excess in time."""
+    traj = model.traj
+    residual = traj.magnetometer_residual(model.solution.params)
+    return _effective_variance(residual, traj.t[traj.rows], model.solution.params.size)
+
+
+def _gravity_residual(model: _Model, gravity: _Gravity) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The gravity rows' residual (unweighted, radians) on the still rows of a model's trajectory, and those
+    rows; δ from the mean of d_k · b_k when the model has no gravity rows of its own."""
+    traj, p = model.traj, model.solution.params
+    b = traj.field(p)[0]
+    still = gravity.still[traj.rows]
+    down = gravity.down[traj.rows][still]
+    if traj.gravity is not None:
+        inclination = float(p[traj.k + 6])
+    else:
+        inclination = math.asin(float(np.clip(np.mean(np.einsum("ki,ki->k", down, b[still])), -0.99, 0.99)))
+    return _gravity_angle(down, b[still], inclination), traj.rows[still]
+
+
+def _weighted(model: _Model, gravity: _Gravity) -> _Gravity:
+    """The gravity rows weighted by the model's magnetometer noise over their own (each its effective
+    variance, correlation in time included): both kinds of row then count in noise units."""
+    residual, rows = _gravity_residual(model, gravity)
+    variance = _effective_variance(residual[:, None], model.traj.t[rows], 1)
+    return replace(gravity, weight=math.sqrt(_noise_variance(model) / max(variance, 1e-300)))
 
 
 def _choose(
@@ -555,6 +712,7 @@ def _choose(
     win: _Windows,
     mapping: str,
     segment_s: float,
+    gravity: _Gravity | None = None,
 ) -> tuple[_Model, dict[str, float], tuple[str, str, float] | None]:
     """The model kept: the general G, or ``W Pᵀ`` for the standard mapping the samples prefer (module docstring).
 
@@ -572,6 +730,12 @@ def _choose(
     offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
     inverse = np.asarray(np.linalg.inv(h), dtype=np.float64)
     general = _fit_model(y, w, t, segment_s, "general", inverse, offset, beta, SCREEN_ROWS)
+    if gravity is not None:
+        # The weight from the kinematic fit's residuals, then once more from the fit with the gravity rows:
+        # the first residuals carry the fit's own error in the direction the gravity rows pin.
+        for _ in range(2):
+            gravity = _weighted(general, gravity)
+            general = _fit_model(y, w, t, segment_s, "general", *_parts(general), SCREEN_ROWS, gravity=gravity)
     chosen, excess, ambiguous = general, {}, None
     if mapping != "general":
         if mapping in MAPPINGS:
@@ -581,7 +745,7 @@ def _choose(
             rotation, _ = polar_decomposition(np.linalg.inv(g) * np.sign(np.linalg.det(g)))
             names = list(dict.fromkeys([mapping_name(rotation), *_windowed_ranking(design)[:2]]))
         start = _parts(general)
-        fitted = [_fit_model(y, w, t, segment_s, name, *start, SCREEN_ROWS, SCREEN_ITER) for name in names]
+        fitted = [_fit_model(y, w, t, segment_s, name, *start, SCREEN_ROWS, SCREEN_ITER, gravity) for name in names]
         # W = G P must be definite (a soft iron; negative for a mirrored sensor): an indefinite W is P times a
         # half turn about W's eigenvectors, another mounting that this label does not stand for.
         screened = sorted((m for m in fitted if _definite(m)), key=lambda m: m.rss)
@@ -592,7 +756,7 @@ def _choose(
                 "another); leave mapping='search' to find it"
             )
         if not screened:
-            return _fit_model(y, w, t, segment_s, "general", *_parts(general)), {}, None
+            return _fit_model(y, w, t, segment_s, "general", *_parts(general), gravity=gravity), {}, None
         variance = _noise_variance(general)
         excess = {m.name: (m.rss - general.rss) / variance for m in screened}
         best = screened[0]
@@ -605,7 +769,7 @@ def _choose(
                 separation = excess[rivals[0].name] - excess[best.name]
                 if separation < LIKELIHOOD_RATIO:
                     ambiguous = (mapping_name(_rotation(best)), mapping_name(_rotation(rivals[0])), separation)
-    return _fit_model(y, w, t, segment_s, chosen.name, *_parts(chosen)), excess, ambiguous
+    return _fit_model(y, w, t, segment_s, chosen.name, *_parts(chosen), gravity=gravity), excess, ambiguous
 
 
 def _definite(model: _Model) -> bool:
@@ -849,6 +1013,7 @@ def fit_gyro(
     mapping: str = "search",
     segment_s: float = 10.0,
     lag_s: float | str = "search",
+    accel: ArrayLike | None = None,
 ) -> Calibration:
     """Hard iron, soft iron and the magnetometer's axes in the gyroscope's, from the rotation kinematics.
 
@@ -890,6 +1055,7 @@ def fit_gyro(
     y = data.require_samples("gyro")
     n = y.shape[0]
     w, t = _motion(gyro, time_s, n)
+    a = None if accel is None else _accel(accel, n)
     if mapping not in ("search", "general") and mapping not in MAPPINGS:
         raise OptionError(
             f"mapping={mapping!r} is not valid; choose 'search', 'general' or one of: {', '.join(MAPPINGS)}"
@@ -911,6 +1077,7 @@ def fit_gyro(
     else:
         raise OptionError(f"lag_s must be 'search' or a number of seconds, got {lag_s!r}")
     w = _delayed(w, t, lag)
+    gravity, gravity_facts = (None, {}) if a is None else _gravity(_delayed(a, t, lag), y, w, t)  # the IMU's clock
     win = _windows(y, w, t, length)
     turns_deg, axes = _turn_axes(win, _windowed_bias(win)[1])
     if turns_deg[1] < SINGLE_AXIS * turns_deg[0]:
@@ -921,7 +1088,7 @@ def fit_gyro(
             "axis and the distortion of the plane perpendicular to it, but the offset and the scale along it move "
             f"with the field's component along it, which never changes, so they are fixed by nothing; {_ADVICE}"
         )
-    model, excess, ambiguous = _choose(y, w, t, win, mapping, segment_s)
+    model, excess, ambiguous = _choose(y, w, t, win, mapping, segment_s, gravity)
     traj, solution = model.traj, model.solution
     p = solution.params
     k = traj.k
@@ -931,13 +1098,23 @@ def fit_gyro(
 
     strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
     matrix = np.linalg.inv(g) * strength
+    sign = 1.0
     if np.linalg.det(matrix) < 0:  # −H fits alike (a field and its negative turn alike): take the proper one
-        matrix = -matrix
+        matrix, sign = -matrix, -1.0
+    if traj.gravity is not None:
+        gravity_residual, _ = _gravity_residual(model, traj.gravity)
+        gravity_facts.update({
+            "weight": traj.gravity.weight,
+            "residual_rms_deg": math.degrees(float(np.sqrt(np.mean(gravity_residual**2)))),
+            # the calibrated field is sign · strength · b: its dip is sign · δ
+            "inclination_deg": sign * math.degrees(float(p[k + 6])),
+            "inclination_sigma_deg": math.degrees(math.sqrt(max(float(covariance[k + 6, k + 6]), 0.0))),
+        })  # fmt: skip
     rotation, symmetric = polar_decomposition(matrix)
     nearest = mapping_name(rotation)
     angle = _angle_deg(MAPPINGS[nearest], rotation)
 
-    residual = traj.residual(p).reshape(-1, 3)
+    residual = traj.magnetometer_residual(p)
     residual_rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))) / strength
     if residual_rms > 0.15:  # the windows cannot tell the unit on a slow vehicle: ask the samples' own fit
         _check_rate_unit_by_fit(y, w, t, win, segment_s, residual_rms)
@@ -977,4 +1154,6 @@ def fit_gyro(
         "solver": {"status": solution.status, "iterations": solution.iterations, "message": solution.message},
         "support": support.to_dict(),
     }
+    if gravity_facts:
+        details["gravity"] = gravity_facts
     return Calibration("gyro", offset, matrix, strength, n_samples=n, details=details, frame="vehicle")
