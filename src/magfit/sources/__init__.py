@@ -12,6 +12,8 @@ Formats are recognised by their first bytes, not by their names:
 - ArduPilot DataFlash ``.bin`` (``0xA3 0x95``, then a FMT message): :mod:`magfit.sources.dataflash`, a small
   reader built on the format's own FMT messages (no extra);
 - ROS 1 bags, MCAP and ROS 2 SQLite bags: :mod:`magfit.sources.rosbag`, needs ``rosbags`` (the ``ros`` extra);
+- MAVLink telemetry logs (``.tlog``, each record an 8-byte big-endian UNIX time in microseconds and a MAVLink
+  frame): :mod:`magfit.sources.tlog`, a small reader of the frames (no extra);
 - the text ``mavlogdump.py log.bin`` prints (``2023-05-01 10:00:00.12: MAG {TimeUS : ...}`` lines):
   :mod:`magfit.sources.mavlogdump`, read as the DataFlash log it came from (no extra);
 - anything else is a samples file for :mod:`magfit.io` (text, ``.npy``, ``.npz``).
@@ -189,7 +191,7 @@ class Source:
     path : Path
         The file, as the user named it.
     kind : str
-        ``"ulog"``, ``"dataflash"`` or ``"samples"`` (text, npy, npz: read by :mod:`magfit.io`).
+        ``"ulog"``, ``"dataflash"``, ``"tlog"`` or ``"samples"`` (text, npy, npz: read by :mod:`magfit.io`).
     format : str
         The format in words (``PX4 ULog, PX4 v1.14.0``).
     time_base : str
@@ -283,8 +285,8 @@ class Source:
 
 
 def log_kind(path: str | os.PathLike[str]) -> str | None:
-    """``"ulog"``, ``"dataflash"``, ``"rosbag"`` or ``"mavlogdump"`` when the file's first bytes are those of a
-    log, else None.
+    """``"ulog"``, ``"dataflash"``, ``"tlog"``, ``"rosbag"`` or ``"mavlogdump"`` when the file's first bytes are
+    those of a log, else None.
 
     A missing or unreadable file is None too: the samples readers report it with their own message.
     """
@@ -303,6 +305,10 @@ def log_kind(path: str | os.PathLike[str]) -> str | None:
         return "ulog"
     if head.startswith(DATAFLASH_MAGIC):
         return "dataflash"
+    from .tlog import is_tlog
+
+    if is_tlog(head):
+        return "tlog"
     from .mavlogdump import is_mavlogdump
 
     if is_mavlogdump(head):
@@ -320,8 +326,9 @@ def open_source(path: str | os.PathLike[str], *, everything: bool = True) -> Sou
     Parameters
     ----------
     path : str or path-like
-        A PX4 ULog, an ArduPilot DataFlash log, a ROS bag, or a samples file (text, ``.npy``, ``.npz``);
-        compressed files and standard input (``-``) as :func:`magfit.io.read_samples` takes them.
+        A PX4 ULog, an ArduPilot DataFlash log, a MAVLink telemetry log (.tlog), a ROS bag, or a samples file
+        (text, ``.npy``, ``.npz``); compressed files and standard input (``-``) as :func:`magfit.io.read_samples`
+        takes them.
     everything : bool
         False reads only the magnetometer topics of a ULog (``Source.other`` stays empty): what a fit needs,
         at the cost of pyulog reading those topics alone (a log busy with other topics is read in half the
@@ -344,6 +351,10 @@ def open_source(path: str | os.PathLike[str], *, everything: bool = True) -> Sou
         from .dataflash import open_dataflash
 
         return open_dataflash(Path(path), data_file(path))
+    if kind == "tlog":
+        from .tlog import open_tlog
+
+        return open_tlog(Path(path), data_file(path))
     if kind == "rosbag":
         from .rosbag import open_rosbag
 
