@@ -19,9 +19,11 @@ pytest.importorskip("pygeomag")
 LAT, LON, ALT_KM, DATE = 47.4, 8.5, 0.5, "2026-04-14"
 
 
-def _log_with_gps(path: Path, monkeypatch: pytest.MonkeyPatch, drop: tuple[str, ...] = ()) -> tuple[Path, np.ndarray]:
+def _log_with_gps(
+    path: Path, monkeypatch: pytest.MonkeyPatch, drop: tuple[str, ...] = (), trim_deg: tuple[float, float] = (0, 0)
+) -> tuple[Path, np.ndarray]:
     """A DataFlash tumble (tests/test_sources_motion.py) whose field is the model's at its GPS fixes, without the
-    messages ``drop`` names."""
+    messages ``drop`` names; ``trim_deg``: AHRS_TRIM_X/Y, subtracted from ATT's roll and pitch as the EKF does."""
     from magfit.geomag import field_at
 
     field = field_at(LAT, LON, ALT_KM, date=DATE).vector_in("mG")
@@ -34,6 +36,10 @@ def _log_with_gps(path: Path, monkeypatch: pytest.MonkeyPatch, drop: tuple[str, 
     ]
     for name in drop:
         del formats[name], rows[name]
+    if any(trim_deg):
+        rows["ATT"] = [(t, roll - trim_deg[0], pitch - trim_deg[1], yaw) for t, roll, pitch, yaw in rows["ATT"]]
+        trims = zip("XY", trim_deg, strict=True)
+        rows["PARM"] += [(500_000, f"AHRS_TRIM_{axis}", float(np.radians(d))) for axis, d in trims]
     return motion_log.write_bin(path, formats, rows), field
 
 
@@ -248,3 +254,17 @@ def test_an_accelerometer_in_another_frame_than_the_gyro_or_the_attitude_is_left
     streams = method_streams(open_source(combined), "sensor_mag/0", ("gyro", "time_s", "accel"), unit=None)
     np.testing.assert_allclose(streams.options["accel"], motion_log.specific_force(streams.options["time_s"]),
                                atol=1e-3)  # fmt: skip
+
+
+def test_an_ardupilot_trim_is_taken_off_the_attitude_so_it_shares_the_imus_frame(tmp_path, monkeypatch) -> None:
+    # ATT logs the EKF's angles minus AHRS_TRIM (NavEKF3_core::getEulerAngles); the IMU and MAG are logged in the
+    # autopilot's own body. A 2° pitch trim left on the attitude would turn the reference and gravity by 2°.
+    path, field = _log_with_gps(tmp_path / "trim.bin", monkeypatch, trim_deg=(0.7, -2.0))
+    streams = method_streams(open_source(path), "MAG/0", ("reference", "time_s", "accel"), unit=None)
+    truth = np.einsum("nji,j->ni", motion_log.attitude(streams.options["time_s"]), field)
+    cosines = np.sum(streams.options["reference"] * truth, axis=1) / np.linalg.norm(truth, axis=1) ** 2
+    assert np.degrees(np.max(np.arccos(np.clip(cosines, -1.0, 1.0)))) < 0.1  # the untrimmed attitude's field
+    motion = open_source(path).read_motion("MAG/0")
+    gravity = np.einsum("nij,nj->ni", motion.attitude, motion.accel)
+    np.testing.assert_allclose(gravity, np.tile([0.0, 0.0, -motion_log.G], (len(gravity), 1)), atol=0.03)
+    assert any("AHRS_TRIM_X/Y 0.70°, -2.00° taken off" in note for note in motion.notes)

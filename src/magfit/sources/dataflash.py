@@ -402,6 +402,34 @@ def _attitude_stream(log: Any) -> Stream | None:
     return None
 
 
+def _untrimmed(attitude: Stream | None, parameters: dict[str, list[tuple[float, float]]]) -> Stream | None:
+    """The attitude in the autopilot's body frame (the IMU's and MAG's), the trim AHRS_TRIM_X/Y taken off.
+
+    AP_AHRS reports the attitude of the *vehicle* body, the autopilot's turned by the trim, while the IMU and
+    the compasses are logged in the autopilot's body (board orientation only): the EKF's Euler angles have the
+    trim subtracted (``NavEKF3_core::getEulerAngles``: ``euler = euler - dal.get_trim()``,
+    libraries/AP_NavEKF3/AP_NavEKF3_Outputs.cpp), which ATT logs; the DCM's are those of
+    ``_dcm_matrix * get_rotation_vehicle_body_to_autopilot_body()`` (libraries/AP_AHRS/AP_AHRS_DCM.cpp), which
+    AHR2's angles log. XKQ's quaternion (and AHR2's) is the estimator's own, untrimmed. Left as it is, a trim
+    of a degree turns the reference field against the magnetometer and the accelerometer by that degree.
+    """
+    trim = [_latest(parameters, f"AHRS_TRIM_{axis}") for axis in "XY"]
+    if attitude is None or not any(trim) or "Roll/Pitch/Yaw" not in attitude.name:
+        return attitude
+    from scipy.spatial.transform import Rotation
+
+    trim_x, trim_y = (float(t or 0.0) for t in trim)
+    rotations = Rotation.from_quat(np.where(np.isfinite(attitude.values), attitude.values, [0.0, 0.0, 0.0, 1.0]))
+    if attitude.name.startswith("ATT"):  # the EKF's angles minus the trim: add it back (3-2-1, radians)
+        euler = rotations.as_euler("ZYX") + np.array([0.0, trim_y, trim_x])
+        untrimmed = Rotation.from_euler("ZYX", euler).as_quat()
+    else:  # the DCM's: body_dcm = dcm · Tᵀ, T = from_euler(trim_x, trim_y, 0) (AP_AHRS::update_trig)
+        untrimmed = (rotations * Rotation.from_euler("ZYX", [0.0, trim_y, trim_x])).as_quat()
+    untrimmed[~np.all(np.isfinite(attitude.values), axis=1)] = np.nan
+    shown = f"AHRS_TRIM_X/Y {np.degrees(trim_x):.2f}°, {np.degrees(trim_y):.2f}°"
+    return replace(attitude, name=f"{attitude.name}, {shown} taken off", values=untrimmed)
+
+
 def _imu_streams(log: Any) -> tuple[Stream | None, Stream | None]:
     """IMU instance 0: GyrX/Y/Z (rad/s) and AccX/Y/Z (m/s²), in the body frame: AP_InertialSensor rotates every
     IMU by its board orientation (AHRS_ORIENTATION) before it is logged (AP_InertialSensor_Backend::
@@ -469,7 +497,7 @@ def _motion(
         read.time_s,
         read.samples,
         magnetometer_frame="body",
-        attitude=_attitude_stream(log),
+        attitude=_untrimmed(_attitude_stream(log), parameters),
         gyro=gyro,
         accel=accel,
         mounting=mounting,
