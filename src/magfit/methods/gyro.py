@@ -110,6 +110,12 @@ MIN_GRAVITY_SAMPLES = 50
 SINGLE_AXIS = 0.02
 #: Largest turn (degrees) of the field seen in the samples' frame below which the sensor hardly turned.
 MIN_TURN_DEG = 30.0
+#: Without the accelerometer, turning about the third principal axis below this share of the first with a field
+#: direction spanning less than NARROW_TURN_DEG is weak: a boat rolling on one heading (0.07-0.15, 35-38° on
+#: simulate_vehicle) left 1.5° RMS heading error where the one-sigma said 0.8-1.7° (3.0° on one trial that said
+#: 0.8°); the cars and flights that met the one-sigma turned 0.09-0.48 about their third axis or spanned 69-107°.
+NARROW_THIRD_AXIS = 0.2
+NARROW_TURN_DEG = 60.0
 
 _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
@@ -869,6 +875,8 @@ def _support(
     residual_rms: float,
     span_deg: float,
     lag: float = 0.0,
+    turns_deg: NDArray[np.float64] | None = None,
+    gravity: bool = False,
 ) -> Support:
     """The verdict on what the rotations determine (module docstring)."""
     refusals: list[str] = []
@@ -900,6 +908,14 @@ def _support(
         )
     elif heading_sigma > 1.0:
         weak.append(f"the heading uncertainty the fit leaves is ±{heading_sigma:.2g}° (one-sigma, level, 60° dip)")
+    planar = turns_deg is not None and turns_deg[2] < NARROW_THIRD_AXIS * turns_deg[0]
+    if not gravity and planar and MIN_TURN_DEG <= span_deg < NARROW_TURN_DEG:
+        weak.append(
+            f"the field's direction spans only {span_deg:.0f}° in the magnetometer's frame, turning mostly about one "
+            "axis (as a boat rolling on one heading): the axes' rotation about that axis rests on the little turning "
+            "about the others and its one-sigma understates it; give accel= (the accelerometer, in the gyroscope's "
+            "axes) to pin it with gravity"
+        )
     if residual_rms > 0.05:
         weak.append(
             f"the samples leave {100 * residual_rms:.1f} % of the field (RMS) off the turning field the gyroscope "
@@ -1126,7 +1142,8 @@ def fit_gyro(
     mean = directions.mean(axis=0)
     spread = np.arccos(np.clip(np.einsum("kj,j->k", directions, mean / max(float(np.linalg.norm(mean)), 1e-12)), -1, 1))
     span_deg = 2.0 * float(np.degrees(spread.max()))
-    support = _support(ambiguous, offset_sigma, vectors, heading_sigma, residual_rms, span_deg, lag)
+    support = _support(ambiguous, offset_sigma, vectors, heading_sigma, residual_rms, span_deg, lag, turns_deg,
+                       gravity=traj.gravity is not None)
     if mapping in MAPPINGS and excess.get(mapping, 0.0) > LIKELIHOOD_RATIO:
         support = replace(support, verdict="weak" if support.verdict == "supported" else support.verdict,
                           weaknesses=(*support.weaknesses,
