@@ -192,6 +192,16 @@ def is_tlog(head: bytes) -> bool:
     return records == 3 or pos + 10 > len(head)  # or the records run to the end: a short or cut-short file
 
 
+def _magic_bytes(data: NDArray[np.uint8]) -> NDArray[np.int64]:
+    """Where 0xFE or 0xFD (a frame's first byte) occur, found 16 MiB at a time to bound the temporaries."""
+    found = []
+    chunk = 1 << 24
+    for begin in range(0, len(data), chunk):
+        piece = data[begin : begin + chunk]
+        found.append(np.flatnonzero((piece - np.uint8(0xFD)) < 2).astype(np.int64) + begin)  # wraps below 0xFD
+    return np.concatenate(found) if found else np.zeros(0, dtype=np.int64)
+
+
 def _accumulate(crc: NDArray[np.uint16], byte: NDArray[Any]) -> NDArray[np.uint16]:
     """One byte of MAVLink's X.25 checksum (crc_accumulate in mavlink's checksum.h), for many frames at once."""
     tmp = (byte.astype(np.uint16) ^ (crc & 0xFF)) & 0xFF
@@ -253,7 +263,7 @@ class TelemetryLog:
 
     def _scan(self) -> None:
         data, n = self._data, len(self._data)
-        candidate = np.flatnonzero((data == 0xFE) | (data == 0xFD)).astype(np.int64)
+        candidate = _magic_bytes(data)
         candidate = candidate[(candidate >= 8) & (candidate + 10 <= n)]  # a stamp before, a v2 header after
         v2 = data[candidate] == 0xFD
         length = data[candidate + 1].astype(np.int64)
@@ -265,26 +275,25 @@ class TelemetryLog:
             | (data[candidate + 9].astype(np.int64) << 16),
             data[candidate + 5],
         )
+        where = np.clip(np.searchsorted(_IDS, msgid), 0, len(_IDS) - 1)
         header = np.where(v2, 10, 6)
         size = header + length + 2 + np.where(incompat & 1, 13, 0)  # the signature follows the checksum
-        where = np.clip(np.searchsorted(_IDS, msgid), 0, len(_IDS) - 1)
-        known = (_IDS[where] == msgid) & (length >= 1) & (length <= _MAX_LENGTH[where]) & (incompat <= 1)
-        fits = candidate + size <= n
-        check = known & fits
-        ok = np.zeros(len(candidate), dtype=bool)
-        sent = data[np.minimum(candidate + header + length, n - 2)].astype(np.uint16) | (
-            data[np.minimum(candidate + header + length + 1, n - 1)].astype(np.uint16) << 8
+        check = (_IDS[where] == msgid) & (length >= 1) & (length <= _MAX_LENGTH[where]) & (incompat <= 1)
+        check &= candidate + size <= n
+        candidate, v2, length, msgid, where, header, size = (
+            a[check] for a in (candidate, v2, length, msgid, where, header, size)
         )
-        ok[check] = (
-            x25_checksums(data, candidate[check] + 1, (header + length - 1)[check], _CRC_EXTRA[where[check]])
-            == sent[check]
-        )
+        end = candidate + header + length
+        sent = data[end].astype(np.uint16) | (data[end + 1].astype(np.uint16) << 8)
+        ok = x25_checksums(data, candidate + 1, header + length - 1, _CRC_EXTRA[where]) == sent
         # A right checksum inside another frame is a coincidence (1 in 65 536): the earlier frame wins.
         index = np.flatnonzero(ok)
         ends = candidate[index] + size[index]
         before = np.concatenate([[0], np.maximum.accumulate(ends)[:-1]]) if len(index) else ends
         index = index[candidate[index] - 8 >= before]
-        stamps = data[candidate[index][:, None] - 8 + np.arange(8)].copy().view(">u8").reshape(-1)
+        stamps = np.zeros(len(index), dtype=np.uint64)
+        for byte in range(8):  # big-endian
+            stamps = (stamps << np.uint64(8)) | data[candidate[index] - 8 + byte].astype(np.uint64)
         plausible = (stamps >= _STAMP_RANGE[0]) & (stamps <= _STAMP_RANGE[1])
         self.bad_stamps = int(np.count_nonzero(~plausible))
         index, stamps = index[plausible], stamps[plausible]
@@ -294,25 +303,38 @@ class TelemetryLog:
         self.length = length[index]
         self.payload = c + header[index]
         self.msgid = msgid[index]
-        self.v2 = v2[index]
-        self.sysid = np.where(self.v2, data[c + 5], data[c + 3]).astype(np.int64)
-        self.compid = np.where(self.v2, data[c + 6], data[c + 4]).astype(np.int64)
-        self.seq = np.where(self.v2, data[c + 4], data[c + 2]).astype(np.int64)
+        v2 = v2[index]
+        self.sysid = np.where(v2, data[c + 5], data[c + 3]).astype(np.int64)
+        self.compid = np.where(v2, data[c + 6], data[c + 4]).astype(np.int64)
+        self.seq = np.where(v2, data[c + 4], data[c + 2]).astype(np.int64)
         self.receipt_s = stamps.astype(np.float64) / 1e6
-        self._account(candidate, size, known)
+        self._account()
 
-    def _account(self, candidate: NDArray[np.int64], size: NDArray[np.int64], known: NDArray[np.bool_]) -> None:
+    def _unknown_frame(self, pos: int, end: int) -> int:
+        """The size of the frame at ``pos`` when it is one of a message id this reader cannot check and ends by
+        ``end``, else 0."""
+        data = self._data
+        if pos + 10 > end or data[pos] not in (0xFE, 0xFD):
+            return 0
+        if data[pos] == 0xFE:
+            msgid, size = int(data[pos + 5]), int(data[pos + 1]) + 8
+        else:
+            msgid = int(data[pos + 7]) | int(data[pos + 8]) << 8 | int(data[pos + 9]) << 16
+            size = int(data[pos + 1]) + 12 + (13 if data[pos + 2] & 1 else 0)
+        where = min(int(np.searchsorted(_IDS, msgid)), len(_IDS) - 1)
+        return size if _IDS[where] != msgid and pos + size <= end else 0
+
+    def _account(self) -> None:
         """Count the bytes between accepted records: frames of unknown ids that fill a gap exactly are passed
         over whole (another dialect's messages); the rest is damage, or a last record cut short."""
         data, n = self._data, len(self._data)
         begins = np.concatenate([[0], self.start + self.size])
         ends = np.concatenate([self.start - 8, [n]])
         gaps = np.flatnonzero(ends > begins)
-        unknown_size = dict(zip(candidate[~known].tolist(), size[~known].tolist(), strict=True))
         for g in gaps.tolist():
             pos, end, frames = int(begins[g]), int(ends[g]), 0
-            while pos + 8 in unknown_size and pos + 8 + unknown_size[pos + 8] <= end:
-                pos += 8 + unknown_size[pos + 8]
+            while size := self._unknown_frame(pos + 8, end):
+                pos += 8 + size
                 frames += 1
             if pos == end:
                 self.unknown_frames += frames
@@ -324,8 +346,9 @@ class TelemetryLog:
 
     def sources(self) -> list[tuple[int, int]]:
         """The (system id, component id) pairs that sent frames, most frames first."""
-        pairs, counts = np.unique(np.column_stack([self.sysid, self.compid]), axis=0, return_counts=True)
-        return [(int(s), int(c)) for s, c in pairs[np.argsort(-counts, kind="stable")]]
+        counts = np.bincount(self.sysid * 256 + self.compid, minlength=65536)
+        present = np.flatnonzero(counts)
+        return [(int(k) // 256, int(k) % 256) for k in present[np.argsort(-counts[present], kind="stable")]]
 
     def counts(self, source: tuple[int, int]) -> dict[int, int]:
         """Message id -> number of frames from ``source``."""
@@ -343,11 +366,13 @@ class TelemetryLog:
         dropped from their ends put back."""
         dtype = _LAYOUTS[_ID_OF[name]][1]
         width = dtype.itemsize
-        columns = np.arange(width)
-        inside = columns < np.minimum(self.length[frames], width)[:, None]
-        where = np.minimum(self.payload[frames][:, None] + columns, len(self._data) - 1)
-        rows = np.where(inside, self._data[where], 0).astype(np.uint8)
-        return np.ascontiguousarray(rows).view(dtype).reshape(-1)
+        rows = np.zeros((len(frames), width), dtype=np.uint8)
+        payload, length = self.payload[frames], np.minimum(self.length[frames], width)
+        for sent in np.unique(length).tolist():  # a few lengths per message: one gather of whole rows each
+            which = np.flatnonzero(length == sent)
+            windows = np.lib.stride_tricks.sliding_window_view(self._data, sent)
+            rows[which, :sent] = windows[payload[which]]
+        return rows.view(dtype).reshape(-1)
 
     def lost_share(self, source: tuple[int, int]) -> float:
         """The share of ``source``'s frames the link lost, from the gaps in their sequence numbers."""
