@@ -40,8 +40,8 @@ body frame (src/modules/mavlink/streams/HIGHRES_IMU.hpp); it is read as calibrat
 
 Time: messages carry the vehicle's boot clock; the tlog's stamps carry the ground station's. Each message's
 time is its boot stamp plus the median difference between the two clocks over its stretch of the log (a
-reboot or a jump of either clock of more than ``_CLOCK_JUMP_S`` starts a new stretch), so the compass, the
-attitude and the IMU keep the vehicle's own spacing (no link jitter) on the station's UTC time line.
+reboot, the boot clock going back, starts a new stretch), so the compass, the attitude and the IMU keep the
+vehicle's own spacing (no link jitter) on the station's UTC time line.
 """
 
 from __future__ import annotations
@@ -158,9 +158,9 @@ _STAMP_RANGE = (946_684_800_000_000, 4_102_444_800_000_000)
 #: A MAVLink time_usec above this (about 31 years) counts from 1970, not from boot (the MAVLink definition:
 #: "the receiving end can infer timestamp format ... by checking for the magnitude of the number").
 _EPOCH_USEC = 1_000_000_000_000_000
-#: A change of the difference between the station's clock and the vehicle's larger than this is a reboot (or a
-#: clock set): a new stretch gets its own offset. Link latency varies by far less on a working link.
-_CLOCK_JUMP_S = 2.0
+#: The vehicle's boot clock going back by more than this between two frames is a reboot: a new stretch, with its
+#: own offset to the station's clock.
+_REBOOT_S = 1.0
 #: ArduPilot's GRAVITY_MSS, by which it divides the accelerometer to send milli-g (AP_Math/definitions.h).
 _GRAVITY_MSS = 9.80665
 #: Which priority slot each ArduPilot compass message carries (GCS_Common.cpp: get_field(0), (1), (2)).
@@ -436,12 +436,13 @@ def _vehicle_clock(log: TelemetryLog, source: tuple[int, int]) -> tuple[NDArray[
     order = np.argsort(frames, kind="stable")
     frames, boot = frames[order], np.concatenate(boot_list)[order]
     difference = log.receipt_s[frames] - boot
-    stretch = np.concatenate([[0], np.cumsum(np.abs(np.diff(difference)) > _CLOCK_JUMP_S)])
-    offsets = (
-        np.array([np.median(difference[stretch == s]) for s in range(int(stretch[-1]) + 1)])
-        if len(stretch)
-        else np.zeros(0)
-    )
+    # A new stretch where the boot clock goes back (a reboot). The receive stamps are not checked by any
+    # checksum: a damaged one is outvoted by the median, never followed.
+    breaks = np.flatnonzero(np.diff(boot) < -_REBOOT_S) + 1
+    stretch = np.zeros(len(boot), dtype=np.int64)
+    stretch[breaks] = 1
+    stretch = np.cumsum(stretch)
+    offsets = np.array([np.median(part) for part in np.split(difference, breaks)])
     clock[frames] = boot + offsets[stretch]
     return clock, int(stretch[-1]) + 1 if len(stretch) else 0
 
@@ -558,8 +559,8 @@ def _file_notes(log: TelemetryLog, vehicles: list[_Vehicle]) -> list[str]:
             )
         if vehicle.stretches > 1:
             notes.append(
-                f"system {vehicle.source[0]}'s clock restarted {vehicle.stretches - 1} time(s) (a reboot, or a "
-                "clock set): each stretch is placed on the station's clock by itself"
+                f"system {vehicle.source[0]}'s clock restarted {vehicle.stretches - 1} time(s) (a reboot): each "
+                "stretch is placed on the station's clock by itself"
             )
     return notes
 
