@@ -1093,9 +1093,9 @@ def fit_gyro(
     else:
         raise OptionError(f"lag_s must be 'search' or a number of seconds, got {lag_s!r}")
     w = _delayed(w, t, lag)
-    gravity, gravity_facts = (None, {}) if a is None else _gravity(_delayed(a, t, lag), y, w, t)  # the IMU's clock
     win = _windows(y, w, t, length)
-    turns_deg, axes = _turn_axes(win, _windowed_bias(win)[1])
+    beta = _windowed_bias(win)[1]
+    turns_deg, axes = _turn_axes(win, beta)
     if turns_deg[1] < SINGLE_AXIS * turns_deg[0]:
         raise CalibrationError(
             "the samples do not support the gyro calibration: the vehicle turned about "
@@ -1104,6 +1104,10 @@ def fit_gyro(
             "axis and the distortion of the plane perpendicular to it, but the offset and the scale along it move "
             f"with the field's component along it, which never changes, so they are fixed by nothing; {_ADVICE}"
         )
+    # The accelerometer on the gyroscope's clock; its still samples gated on the rates with stage 1's bias taken
+    # off (a rolling boat has no steady stretch for gravity.still_samples to take it from, and 1°/s of bias
+    # then reads as turning on every sample: none was kept on simulated boats).
+    gravity, gravity_facts = (None, {}) if a is None else _gravity(_delayed(a, t, lag), y, w - beta, t)
     model, excess, ambiguous = _choose(y, w, t, win, mapping, segment_s, gravity)
     traj, solution = model.traj, model.solution
     p = solution.params
@@ -1143,7 +1147,7 @@ def fit_gyro(
     spread = np.arccos(np.clip(np.einsum("kj,j->k", directions, mean / max(float(np.linalg.norm(mean)), 1e-12)), -1, 1))
     span_deg = 2.0 * float(np.degrees(spread.max()))
     support = _support(ambiguous, offset_sigma, vectors, heading_sigma, residual_rms, span_deg, lag, turns_deg,
-                       gravity=traj.gravity is not None)
+                       gravity=traj.gravity is not None)  # fmt: skip
     if mapping in MAPPINGS and excess.get(mapping, 0.0) > LIKELIHOOD_RATIO:
         support = replace(support, verdict="weak" if support.verdict == "supported" else support.verdict,
                           weaknesses=(*support.weaknesses,
