@@ -95,20 +95,27 @@ def write_vehicle(
     armed_from: int | None = None,
     compasses: bool = True,
     reboot_at: int | None = None,
+    soft_iron_parameters: bool = True,
+    second_imu: bool = True,
 ) -> list[magfit.Simulation]:
     """An ArduPilot vehicle turned in every direction, streamed at 10 Hz with a jittery link (20-300 ms): RAW_IMU
     (compass k = 0) and SCALED_IMU2 (k = 1), ATTITUDE, a HEARTBEAT and a 3-D GPS fix each second, and the
     COMPASS_* parameters first; ``armed_from``: the HEARTBEATs say armed from that sample on; ``reboot_at``:
-    the vehicle's clock restarts there (as after a reboot). Returns the raw truths (one per compass)."""
+    the vehicle's clock restarts there (as after a reboot); ``soft_iron_parameters`` False: a firmware without
+    COMPASS_DIA/ODI/SCALE, which applies the offsets alone; ``second_imu`` False: SCALED_IMU2 carries zeros for
+    its accelerometer and gyroscope, as ArduPilot sends for an IMU the board lacks. Returns the raw truths."""
     simulations = [
         magfit.simulate(
             n, soft_iron=c["soft_iron"], hard_iron=c["hard_iron"], field_strength=480.0, noise=1.5, seed=11 + k
         )
         for k, c in enumerate(COMPASSES)
     ]
+    applied = [
+        c if soft_iron_parameters else {**c, "dia": np.zeros(3), "odi": np.zeros(3), "scale": 0.0} for c in COMPASSES
+    ]
     logged = [
         np.trunc(correct_field(s.samples, c["ofs"], c["dia"], c["odi"], c["scale"]))  # int16(float): truncated
-        for s, c in zip(simulations, COMPASSES, strict=True)
+        for s, c in zip(simulations, applied, strict=True)
     ]
     writer = TlogWriter()
     rng = np.random.default_rng(5)
@@ -117,9 +124,11 @@ def write_vehicle(
         for k, c in enumerate(COMPASSES):
             s = "" if k == 0 else str(k + 1)
             for i, axis in enumerate("XYZ"):
-                names += [(f"COMPASS_OFS{s}_{axis}", c["ofs"][i]), (f"COMPASS_DIA{s}_{axis}", c["dia"][i])]
-                names += [(f"COMPASS_ODI{s}_{axis}", c["odi"][i])]
-            names += [(f"COMPASS_SCALE{s}", c["scale"]), (f"COMPASS_DEV_ID{s}", c["dev_id"])]
+                names += [(f"COMPASS_OFS{s}_{axis}", c["ofs"][i])]
+                if soft_iron_parameters:
+                    names += [(f"COMPASS_DIA{s}_{axis}", c["dia"][i]), (f"COMPASS_ODI{s}_{axis}", c["odi"][i])]
+            names += [(f"COMPASS_SCALE{s}", c["scale"])] if soft_iron_parameters else []
+            names += [(f"COMPASS_DEV_ID{s}", c["dev_id"])]
             names += [(f"COMPASS_EXTERN{s}", 1.0), (f"COMPASS_ORIENT{s}", 0.0)]
         names += [("COMPASS_MOTCT", float(motct)), ("AHRS_ORIENTATION", 0.0)]
         for index, (name, value) in enumerate(names):
@@ -135,7 +144,8 @@ def write_vehicle(
             mag0 = [int(v) for v in logged[0][i]]
             mag1 = [int(v) for v in logged[1][i]]
             writer.add(wall_us + latency, 27, boot_ms * 1000, *ACCEL_MG, 10, -20, 30, *mag0, 0, 0, v1=i % 3 == 0)
-            writer.add(wall_us + latency + 200, 116, boot_ms, *ACCEL_MG, 11, -21, 31, *mag1, 0)
+            imu2 = (*ACCEL_MG, 11, -21, 31) if second_imu else (0,) * 6
+            writer.add(wall_us + latency + 200, 116, boot_ms, *imu2, *mag1, 0)
         writer.add(wall_us + latency + 300, 30, boot_ms, *ROLL_PITCH_YAW, 0.0, 0.0, 0.0)
         if i % 10 == 0:
             armed = armed_from is not None and i >= armed_from
@@ -328,3 +338,34 @@ def test_inspect_lists_the_compasses_and_the_other_messages(tmp_path: Path) -> N
     assert result.exit_code == 0, result.output
     text = json.dumps(json.loads(result.output))
     assert "RAW_IMU" in text and "ATTITUDE" in text
+
+
+def test_a_firmware_without_soft_iron_parameters_applied_the_offsets_alone(tmp_path: Path) -> None:
+    # A complete parameter list (every index of param_count came) without COMPASS_DIA/ODI: ArduPilot before the
+    # soft-iron parameters. Only the offsets are undone; a partial list without them is refused instead.
+    path = tmp_path / "old.tlog"
+    simulations = write_vehicle(path, 300, soft_iron_parameters=False, second_imu=False)
+    source = open_source(path)
+    compass = source.magnetometer("RAW_IMU")
+    assert compass.problem is None and any("applied no soft-iron matrix" in note for note in compass.notes)
+    np.testing.assert_allclose(source.read("RAW_IMU").samples, simulations[0].samples, atol=1.0)
+    motion = source.read_motion("SCALED_IMU2")  # its IMU sends zeros: no stream rather than a still vehicle
+    assert motion.gyro is None and motion.accel is None and motion.attitude is not None
+    assert any("no such IMU on the board" in note for note in motion.notes)
+
+
+def test_frames_whose_checksum_never_matches_are_another_definition_not_damage(tmp_path: Path) -> None:
+    path = tmp_path / "flight.tlog"
+    write_vehicle(path, 100)
+    data = path.read_bytes()
+    # DISTANCE_SENSOR (132) from a companion (component 194), checksummed with another CRC_EXTRA: a sender whose
+    # definition of the message differs. Every one fails; nothing else is touched.
+    payload = struct.pack("<IHHHBBBB", 1000, 20, 700, 150, 0, 1, 25, 255)
+    body = struct.pack("<BBBBBBBHB", 0xFD, len(payload), 0, 0, 0, 1, 194, 132, 0) + payload
+    odd = body + struct.pack("<H", x25(body[1:] + bytes([0])))
+    records = [struct.pack(">Q", T0_US + 2_000_000 + k) + odd for k in range(5)]
+    path.write_bytes(data + b"".join(records))
+    source = open_source(path)
+    said = " ".join(source.notes)
+    assert "5 of message 132 from system 1 component 194" in said and "bytes skipped" not in said
+    assert source.magnetometer("RAW_IMU").n_samples == 100

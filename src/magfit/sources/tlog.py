@@ -251,7 +251,9 @@ class TelemetryLog:
         self.path = path
         self._data = np.frombuffer(data, dtype=np.uint8)
         self.skipped_bytes = 0  # bytes in no frame whose checksum is right
-        self.unknown_frames = 0  # frames of message ids outside _TABLE, passed over whole
+        #: (system, component, message id) -> (frames, bytes) of well-formed frames none of which passed its
+        #: checksum: another definition of the message (a dialect or version this reader does not share)
+        self.unchecked: dict[tuple[int, int, int], tuple[int, int]] = {}
         self.truncated = False
         self.bad_stamps = 0
         self._scan()
@@ -310,39 +312,56 @@ class TelemetryLog:
         self.receipt_s = stamps.astype(np.float64) / 1e6
         self._account()
 
-    def _unknown_frame(self, pos: int, end: int) -> int:
-        """The size of the frame at ``pos`` when it is one of a message id this reader cannot check and ends by
-        ``end``, else 0."""
+    def _frame_at(self, pos: int, end: int) -> tuple[int, tuple[int, int, int]] | None:
+        """The size and (system, component, message id) of a well-formed frame header at ``pos`` whose frame
+        ends by ``end``, whatever its checksum; None when there is none."""
         data = self._data
         if pos + 10 > end or data[pos] not in (0xFE, 0xFD):
-            return 0
+            return None
         if data[pos] == 0xFE:
-            msgid, size = int(data[pos + 5]), int(data[pos + 1]) + 8
-        else:
-            msgid = int(data[pos + 7]) | int(data[pos + 8]) << 8 | int(data[pos + 9]) << 16
+            key = (int(data[pos + 3]), int(data[pos + 4]), int(data[pos + 5]))
+            size = int(data[pos + 1]) + 8
+        elif data[pos + 2] <= 1:
+            key = (
+                int(data[pos + 5]),
+                int(data[pos + 6]),
+                int(data[pos + 7]) | int(data[pos + 8]) << 8 | int(data[pos + 9]) << 16,
+            )
             size = int(data[pos + 1]) + 12 + (13 if data[pos + 2] & 1 else 0)
-        where = min(int(np.searchsorted(_IDS, msgid)), len(_IDS) - 1)
-        return size if _IDS[where] != msgid and pos + size <= end else 0
+        else:
+            return None
+        return (size, key) if pos + size <= end else None
 
     def _account(self) -> None:
-        """Count the bytes between accepted records: frames of unknown ids that fill a gap exactly are passed
-        over whole (another dialect's messages); the rest is damage, or a last record cut short."""
+        """Sort the bytes between accepted records: a gap that well-formed frames fill exactly holds frames whose
+        checksum failed (``unchecked``, judged by :meth:`mismatched`); otherwise it is damage, or a last record
+        cut short."""
         data, n = self._data, len(self._data)
         begins = np.concatenate([[0], self.start + self.size])
         ends = np.concatenate([self.start - 8, [n]])
         gaps = np.flatnonzero(ends > begins)
         for g in gaps.tolist():
-            pos, end, frames = int(begins[g]), int(ends[g]), 0
-            while size := self._unknown_frame(pos + 8, end):
-                pos += 8 + size
-                frames += 1
+            pos, end = int(begins[g]), int(ends[g])
+            found = []
+            while (header := self._frame_at(pos + 8, end)) is not None:
+                found.append(header)
+                pos += 8 + header[0]
             if pos == end:
-                self.unknown_frames += frames
+                for size, key in found:
+                    frames, size_sum = self.unchecked.get(key, (0, 0))
+                    self.unchecked[key] = (frames + 1, size_sum + size + 8)
                 continue
             if end == n and n - pos < 8 + 12 + 255 + 13 and (pos + 8 >= n or data[pos + 8] in (0xFE, 0xFD)):
                 self.truncated = True  # the log was not closed: its last record is cut short
                 continue
             self.skipped_bytes += int(end - begins[g])
+        # Frames whose checksum failed while others of the same message from the same sender passed are damage;
+        # a message none of whose frames passes is sent with a definition this reader does not share.
+        for key, (_, size_sum) in list(self.unchecked.items()):
+            mine = (self.sysid == key[0]) & (self.compid == key[1]) & (self.msgid == key[2])
+            if np.any(mine):
+                self.skipped_bytes += size_sum
+                del self.unchecked[key]
 
     def sources(self) -> list[tuple[int, int]]:
         """The (system id, component id) pairs that sent frames, most frames first."""
@@ -394,6 +413,7 @@ class _Vehicle:
     clock: NDArray[np.float64]  # per accepted frame: UTC seconds on the vehicle's clock, NaN where none
     stretches: int
     parameters: dict[str, list[tuple[float, float]]]
+    no_soft_iron: bool  # a complete parameter list without COMPASS_DIA/ODI: offsets alone were applied
     armed: tuple[NDArray[np.float64], NDArray[np.bool_]]  # HEARTBEAT times and armed flags
 
     def records(self, name: str) -> tuple[NDArray[Any], NDArray[np.float64]]:
@@ -447,16 +467,29 @@ def _vehicle_clock(log: TelemetryLog, source: tuple[int, int]) -> tuple[NDArray[
     return clock, int(stretch[-1]) + 1 if len(stretch) else 0
 
 
-def _parameters(log: TelemetryLog, source: tuple[int, int]) -> dict[str, list[tuple[float, float]]]:
-    """PARAM_VALUE: name -> [(receive time, value), ...] in log order (as DataFlashLog.parameters gives them).
-    ArduPilot sends every value as a float cast (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST), integers too."""
+def _parameters(log: TelemetryLog, source: tuple[int, int]) -> tuple[dict[str, list[tuple[float, float]]], bool]:
+    """PARAM_VALUE: name -> [(receive time, value), ...] in log order (as DataFlashLog.parameters gives them),
+    and whether the firmware has no soft-iron parameters (a complete list without COMPASS_DIA/ODI: they are
+    added as zeros, which the firmware reads as no matrix). ArduPilot sends every value as a float cast
+    (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST), integers too."""
     frames = log.frames("PARAM_VALUE", source)
     records = log.messages("PARAM_VALUE", frames)
     table: dict[str, list[tuple[float, float]]] = {}
     values = records["param_value"].astype(np.float64)
     for name, value, time in zip(records["param_id"], values, log.receipt_s[frames], strict=True):
         table.setdefault(name.rstrip(b"\x00").decode("ascii", "replace"), []).append((float(time), float(value)))
-    return table
+    # The whole list was downloaded when every index below param_count came (65535 marks a value set, not listed).
+    counts = records["param_count"][records["param_index"] != 65535]
+    listed = np.unique(records["param_index"][records["param_index"] != 65535])
+    complete = len(counts) > 0 and len(listed) >= int(np.bincount(counts).argmax())
+    no_soft_iron = complete and "COMPASS_OFS_X" in table and "COMPASS_DIA_X" not in table
+    if no_soft_iron:  # a firmware older than the soft-iron parameters: it applied the offsets alone
+        first = table["COMPASS_OFS_X"][0][0]
+        for suffix in ("", "2", "3"):
+            for axis in "XYZ":
+                table[f"COMPASS_DIA{suffix}_{axis}"] = [(first, 0.0)]
+                table[f"COMPASS_ODI{suffix}_{axis}"] = [(first, 0.0)]
+    return table, no_soft_iron
 
 
 def _vehicle(log: TelemetryLog, source: tuple[int, int]) -> _Vehicle:
@@ -466,7 +499,8 @@ def _vehicle(log: TelemetryLog, source: tuple[int, int]) -> _Vehicle:
     autopilot = int(np.bincount(autopilots).argmax()) if len(autopilots) else None
     frames = log.frames("HEARTBEAT", source)
     armed = (log.receipt_s[frames], (beats["base_mode"] & _ARMED) != 0)
-    return _Vehicle(log, source, autopilot, clock, stretches, _parameters(log, source), armed)
+    parameters, no_soft_iron = _parameters(log, source)
+    return _Vehicle(log, source, autopilot, clock, stretches, parameters, no_soft_iron, armed)
 
 
 def open_tlog(path: Path, file: Path) -> Source:
@@ -541,11 +575,19 @@ def _file_notes(log: TelemetryLog, vehicles: list[_Vehicle]) -> list[str]:
     notes = []
     if log.skipped_bytes:
         notes.append(
-            f"{log.skipped_bytes} bytes skipped as damaged (no frame with a right checksum starts there): the link "
-            "dropped or garbled them"
+            f"{log.skipped_bytes} bytes skipped as damaged (no frame with a right checksum starts there): bytes the "
+            "link garbled or dropped, or a sender's broken frames"
         )
-    if log.unknown_frames:
-        notes.append(f"{log.unknown_frames} frames of message ids outside MAVLink's published dialects passed over")
+    if log.unchecked:
+        listed = sorted(log.unchecked.items(), key=lambda item: -item[1][0])
+        said = ", ".join(
+            f"{frames} of message {k[2]} from system {k[0]} component {k[1]}" for k, (frames, _) in listed[:4]
+        )
+        notes.append(
+            f"frames whose checksum never matches MAVLink's definition of their message ({said}"
+            + (f" and {len(listed) - 4} more" if len(listed) > 4 else "")
+            + "): their sender uses another dialect or version of it; passed over"
+        )
     if log.bad_stamps:
         notes.append(f"{log.bad_stamps} frames dropped: their tlog time stamp is not a date (a damaged record)")
     if log.truncated:
@@ -634,6 +676,10 @@ class _Compass:
                 notes.append(
                     f"{name}'s xmag/ymag/zmag are ArduPilot's field after its calibration; undone with COMPASS_OFS{s}, "
                     f"DIA{s}, ODI{s} and SCALE{s} from the parameters the ground station fetched (PARAM_VALUE)"
+                    if not vehicle.no_soft_iron
+                    else f"{name}'s xmag/ymag/zmag are ArduPilot's field after its offsets; undone with COMPASS_OFS{s} "
+                    "from the parameters the ground station fetched (PARAM_VALUE): their complete list has no "
+                    "COMPASS_DIA/ODI, so this firmware applied no soft-iron matrix"
                 )
                 problem = self._motor_compensation(notes)
             elif problem is not None:  # dataflash's words are for PARM messages: say it for a tlog
@@ -767,6 +813,8 @@ class _Compass:
                 quaternions[finite] = euler_quaternions(*(a[finite] for a in angles))
             attitude = Stream("ATTITUDE roll/pitch/yaw", attitude_time, quaternions, "body (FRD)")
         imu = f"{self.name} {'IMU' if self.px4 else 'IMU ' + str(self.slot)}"
+        # ArduPilot sends zeros for an IMU the board does not have (send_scaled_imu): no stream, not a still one.
+        absent = not np.any(accel) and not np.any(gyro)
         return align(
             self.sensor,
             self.unit,
@@ -774,15 +822,20 @@ class _Compass:
             read.samples,
             magnetometer_frame="body",
             attitude=attitude,
-            gyro=Stream(f"{imu} xgyro/ygyro/zgyro", self.time, gyro, "body (FRD)"),
-            accel=Stream(f"{imu} xacc/yacc/zacc", self.time, accel, "body (FRD)"),
+            gyro=None if absent else Stream(f"{imu} xgyro/ygyro/zgyro", self.time, gyro, "body (FRD)"),
+            accel=None if absent else Stream(f"{imu} xacc/yacc/zacc", self.time, accel, "body (FRD)"),
             mounting=mounting,
             mounting_note=mounting_note,
             position=position,
             start_utc_s=float(read.time_s[0]) if len(read.time_s) else float("nan"),
             notes=(
                 f"magnetometer: {self.name} is sent in the body frame (FRD), after the board or COMPASS_ORIENT "
-                f"rotation; mounting: {mounting_note}; gyro and accel from the same message (the same clock)",
+                f"rotation; mounting: {mounting_note}; "
+                + (
+                    f"{self.name}'s gyro and accel are all zero (no such IMU on the board): left out"
+                    if absent
+                    else "gyro and accel from the same message (the same clock)"
+                ),
             ),
         )
 
