@@ -53,7 +53,7 @@ trajectory is the gyro's, integrated, with one unknown start per stretch). Here,
    no rows of its own: ``|b₀| = 1`` holds it in every residual. A rotation about the boat's roll axis turns the
    field about that axis, which the kinematics cannot tell from the axes' own rotation about it; gravity turns
    with the boat too, but the field's angle to it changes with the axes' rotation: on ``accuracy_vehicle``'s
-   boat (rolling ±15°, one heading; 8 trials) the RMS heading error falls from 1.51° to 0.35° (``vector``
+   boat (rolling ±15°, one heading; 8 trials) the RMS heading error falls from 1.51° to 0.27° (``vector``
    with 1° of attitude error: 0.62°), flight 0.20° to 0.16°, car 0.082° to 0.068°; a tumble keeps no still
    sample (turning fast throughout) and is unchanged.
 3. **The axis mapping.** A magnetometer is often mounted turned by a right angle (or soldered with its axes
