@@ -299,11 +299,11 @@ def calibrate_command(
     """Fit a calibration to a recording and print it; save it with -o.
 
     FILE holds raw magnetometer samples recorded while turning the sensor in all directions (CSV, TSV,
-    whitespace-separated text, .npy or .npz), or is a flight log or bag (PX4 ULog, ArduPilot DataFlash .bin,
-    ROS 1/2 bag, MCAP): each compass of a log is fitted, or the one --sensor names. The summary gives the
-    offset, the matrix, the field strength, the ellipsoid semi-axes and the paper's mean/std of the distance
-    to the unit sphere (for a log also the time span and the share of directions covered). With --export and
-    no -o the export goes to stdout and the summary to stderr.
+    whitespace-separated text, .npy or .npz), or is a flight log or bag (PX4 ULog, ArduPilot DataFlash .bin, MAVLink
+    telemetry log .tlog, ROS 1/2 bag, MCAP): each compass of a log is fitted, or the one --sensor names. The summary
+    gives the offset, the matrix, the field strength, the ellipsoid semi-axes and the paper's mean/std of the
+    distance to the unit sphere (for a log also the time span and the share of directions covered). With --export
+    and no -o the export goes to stdout and the summary to stderr.
 
     \b
     Examples:

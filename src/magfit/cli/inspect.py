@@ -67,11 +67,11 @@ def source_lines(source: Source) -> list[tuple[str, str]]:
 def inspect_command(file: Path) -> None:
     """List what a recording holds: its magnetometers and what else is logged.
 
-    FILE is a PX4 ULog (.ulg, needs pip install 'magfit[ulog]'), an ArduPilot DataFlash log (.bin) or a
-    samples file (CSV, text, .npy, .npz); the format is recognised by its first bytes. For each
-    magnetometer: the id that 'magfit calibrate --sensor' takes, its unit, sample count, time span and
-    rate, and what stands in the way of a fit (a compass logged too slowly, a calibration that cannot be
-    undone).
+    FILE is a PX4 ULog (.ulg, needs pip install 'magfit[ulog]'), an ArduPilot DataFlash log (.bin), a MAVLink
+    telemetry log (.tlog, Mission Planner's or QGroundControl's) or a samples file (CSV, text, .npy, .npz);
+    the format is recognised by its first bytes. For each magnetometer: the id that 'magfit calibrate
+    --sensor' takes, its unit, sample count, time span and rate, and what stands in the way of a fit (a
+    compass logged too slowly, a calibration that cannot be undone).
 
     \b
     Examples:
