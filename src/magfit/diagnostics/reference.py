@@ -11,8 +11,10 @@ maximum-likelihood ellipsoid) do not apply to it. What decides whether the numbe
   multiple of the column 1, and the matrix's response to the field along z cannot be told from the offset.
 - **The uncertainty**, with samples that are not independent: the attitude behind the reference errs
   slowly (an estimator's error wanders over seconds), so neighbouring residuals share their error. The
-  Gauss-Newton covariance ``σ² H⁻¹`` is widened by batch means of the score over contiguous stretches
-  of the recording (the sandwich covariance; as in :func:`magfit.diagnostics.uncertainty.correlation_excess`).
+  Gauss-Newton covariance ``σ² H⁻¹`` is widened by a block jackknife over :data:`BLOCKS` contiguous
+  stretches of the recording (the fit again without each stretch); only the part beyond independent noise
+  is added (as :func:`magfit.diagnostics.uncertainty.correlation_excess` does). The one-sigma of the
+  magnetometer's rotation into the vehicle frame (the orthogonal polar factor of the matrix) follows from it.
 - **The residuals**: the samples must follow the reference (a reference in the world frame, a transposed
   attitude or another field leaves residuals of the order of the field).
 - **The scale**: G's scale is the samples' unit over the reference's; a factor of 10, 100 or 1000 is
@@ -21,6 +23,7 @@ maximum-likelihood ellipsoid) do not apply to it. What decides whether the numbe
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 from typing import Any
@@ -35,16 +38,26 @@ from .coverage import coverage
 from .uncertainty import DEFAULT_INCLINATION_DEG, UNDETERMINED_SIGMA, WEAK_INFORMATION
 from .verdict import BIASED_HEADING_DEG, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
 
-__all__ = ["ReferenceReport", "design_singularity", "judge_reference_fit", "judged", "reference_inclination"]
+__all__ = [
+    "BLOCKS",
+    "ReferenceReport",
+    "design_singularity",
+    "jackknife_covariance",
+    "judge_reference_fit",
+    "judged",
+    "reference_inclination",
+    "rotation_sigma_deg",
+]
 
-#: Contiguous batches for the batch-means covariance. The attitude's error is correlated over seconds, and
-#: still the level heading one-sigma understates the error: simulate_vehicle, 6000 samples at 50 Hz, 0.5° of
-#: attitude error correlated over 5 s, 10 seeds, actual RMS over the predicted one: flight 1.38, car 2.0,
-#: boat 1.31, tumble 1.38 with 10 batches; 5 batches 1.25 / 1.6 / 1.45 / 1.19; 20 batches with a Newey-West
-#: window of 2 or 4 batches 1.33-2.0. Part of the error is the mean attitude error over the recording, which
-#: the residuals cannot show (it is a turned mounting to them). Ten batches: the estimate of the spread is not
-#: as noisy as with five, for the same understatement.
-BATCHES = 10
+#: Contiguous blocks of the block jackknife behind the covariance. Batch means of the score (the sandwich
+#: used before) understated the error: benchmarks/accuracy_vehicle.py's flight, car and boat (6000 samples at
+#: 10 Hz, attitude error correlated over 5 s, lag 0.1 s), 8 trials, actual RMS over the stated one of the level
+#: heading: 1.25-1.31 on flight and car at 0.2° and 1° of attitude error with 10 batches; 0.99-1.00 (flight)
+#: and 1.15-1.20 (car) with a jackknife of 10 blocks, 1.04-1.32 with 20. The rotation (alignment) one-sigma
+#: with 10 blocks: 0.90-1.10 of the actual error on all three (the boat's level heading one-sigma is not
+#: comparable: it never turned through the headings it is averaged over). Batch means miss how much one
+#: stretch moves the fit: a weak direction (the tilt) is learned from a few turns, each in one stretch.
+BLOCKS = 10
 #: Rows the covariance is computed on (a regular stride of a longer recording).
 MAX_ROWS = 200_000
 #: Relative information (share of a tumble's) below which the design is singular: nothing can be fitted.
@@ -84,17 +97,22 @@ class ReferenceReport:
     covariance: NDArray[np.float64]
     residual_rms: float
     scale: float
+    #: One-sigma (degrees, RMS angle) of the rotation into the vehicle frame: the matrix's polar factor.
+    rotation_sigma_deg: float = math.nan
+    #: What the reader should know beyond the findings (how the fit used the accelerometer).
+    notes: tuple[str, ...] = ()
 
     def diagnostics(self, n_samples: int) -> Diagnostics:
         """The typed :class:`Diagnostics` that ``calibration.diagnostics`` reads back."""
         reached = self.coverage
         notes = (
             "Judged against the reference field: the design of the reference directions, the residuals and the "
-            "uncertainty with batch means over the recording; the magnitude-only checks (distance to an "
+            "uncertainty with a block jackknife over the recording; the magnitude-only checks (distance to an "
             "ellipsoid, held-out refits) do not apply to a fit against a reference.",
             f"The reference's directions in the vehicle frame reach {reached.cells_reached} of {reached.cells} "
             "equal-area cells: what a vector fit needs is the spread the observability above judges, not a full "
             "sphere (a car or a boat never reaches most of it).",
+            *self.notes,
         )
         return Diagnostics(
             n_samples=n_samples,
@@ -184,25 +202,66 @@ def _jacobians(
     return jac
 
 
-def _covariance(jac: NDArray[np.float64], residuals: NDArray[np.float64], batches: int) -> NDArray[np.float64]:
-    """Gauss-Newton covariance widened by batch means of the score over contiguous stretches of the recording."""
+def jackknife_covariance(estimates: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The block jackknife's covariance of the parameters estimated once without each block, (B, P) -> (P, P)."""
+    blocks = estimates.shape[0]
+    spread = estimates - estimates.mean(axis=0)
+    return np.asarray((blocks - 1) / blocks * spread.T @ spread, dtype=np.float64)
+
+
+def widened(independent: NDArray[np.float64], correlated: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``independent`` plus the positive part of ``correlated − independent``: a few blocks give a noisy
+    estimate of the spread, which must not shrink what the independent noise alone gives."""
+    excess = 0.5 * (correlated - independent + (correlated - independent).T)
+    values, vectors = np.linalg.eigh(excess)
+    return np.asarray(independent + (vectors * np.clip(values, 0.0, None)) @ vectors.T, dtype=np.float64)
+
+
+def _covariance(jac: NDArray[np.float64], residuals: NDArray[np.float64], blocks: int) -> NDArray[np.float64]:
+    """Gauss-Newton covariance widened by a block jackknife over contiguous stretches of the recording.
+
+    The fit is linear in its parameters (the lag linearised at its estimate), so each refit without a block
+    is one solve: ``Δp_b = (H − H_b)⁻¹ s_b`` with ``s_b`` the block's score (the whole score is zero at the
+    least-squares solution).
+    """
     n, _, count = jac.shape
     hessian = np.einsum("kap,kaq->pq", jac, jac)
     inverse = np.linalg.pinv(hessian)
     variance = float(np.sum(residuals**2)) / max(3 * n - count, 1)
     covariance = variance * inverse
-    blocks = min(batches, n // 20)
+    blocks = min(blocks, n // 20)
     if blocks < 4:
         return covariance
     scores = np.einsum("kap,ka->kp", jac, residuals)
     edges = np.linspace(0, n, blocks + 1).astype(np.int64)
-    sums = np.add.reduceat(scores, edges[:-1], axis=0)
-    sums -= sums.mean(axis=0)
-    sandwich = inverse @ (sums.T @ sums * blocks / (blocks - 1)) @ inverse
-    # Only the part beyond independent noise is added (as uncertainty.correlation_excess does): batch sums
-    # of few batches are noisy, and must not shrink what the independent noise alone gives.
-    values, vectors = np.linalg.eigh(0.5 * (sandwich - covariance + (sandwich - covariance).T))
-    return covariance + (vectors * np.clip(values, 0.0, None)) @ vectors.T
+    moves = []
+    for start, stop in itertools.pairwise(edges):
+        rest = hessian - np.einsum("kap,kaq->pq", jac[start:stop], jac[start:stop])
+        try:
+            moves.append(np.linalg.solve(rest, scores[start:stop].sum(axis=0)))
+        except np.linalg.LinAlgError:  # the rest of the recording does not determine the fit: no jackknife
+            return covariance
+    return widened(covariance, jackknife_covariance(np.asarray(moves)))
+
+
+def rotation_sigma_deg(covariance: NDArray[np.float64], g: NDArray[np.float64]) -> float:
+    """RMS angle one-sigma (degrees) of the orthogonal polar factor of ``G⁻¹`` (the magnetometer's rotation
+    into the vehicle frame), from the covariance of G (row-major, its first 9 parameters); finite differences."""
+    base = _polar(np.linalg.inv(g))
+    step = 1e-6 * max(float(np.max(np.abs(g))), 1e-300)
+    jac = np.zeros((3, 9))
+    for p in range(9):
+        moved = g.copy()
+        moved[p // 3, p % 3] += step
+        turn = _polar(np.linalg.inv(moved)) @ base.T
+        jac[:, p] = 0.5 * np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0], turn[1, 0] - turn[0, 1]]) / step
+    variance = float(np.trace(jac @ covariance[:9, :9] @ jac.T))
+    return math.degrees(math.sqrt(max(variance, 0.0)))
+
+
+def _polar(matrix: NDArray[Any]) -> NDArray[np.float64]:
+    u, _, vt = np.linalg.svd(matrix)
+    return np.asarray(u @ vt, dtype=np.float64)
 
 
 def _heading_sigmas(
@@ -297,13 +356,17 @@ def judge_reference_fit(
     rate: NDArray[np.float64] | None = None,
     lag_at_limit: float | None = None,
     inclination_deg: float | None = None,
+    covariance: NDArray[np.float64] | None = None,
+    notes: tuple[str, ...] = (),
 ) -> ReferenceReport:
     """The verdict on ``raw = G r + V`` fitted to ``raw`` against ``reference`` (both (N, 3), in recording order).
 
     ``rate`` is the reference's time derivative at the samples when a lag was fitted (its column joins the
     design, so the lag's uncertainty is part of the covariance: parameter 13, seconds); ``lag_at_limit`` the
     search limit when the lag ended on it; ``inclination_deg`` the field's (default: the reference's own,
-    :func:`reference_inclination`).
+    :func:`reference_inclination`); ``covariance`` that of (G row-major, V) when the fit is not the plain
+    regression on ``[r, 1]`` (the joint fit with the gravity equations computes its own, block jackknife
+    included), else it is computed here; ``notes`` go to the diagnostics' notes.
     """
     n = raw.shape[0]
     field = float(np.median(np.linalg.norm(reference, axis=1)))
@@ -313,16 +376,19 @@ def judge_reference_fit(
     # In the samples' unit over the field in it: G⁻¹ would blow the residual up along an undetermined direction.
     residual_rms = float(np.sqrt(np.mean(np.sum(residuals**2, axis=1)))) / (scale * field)
     # The covariance on a regular stride of at most MAX_ROWS rows (its Jacobians take 3 x 13 numbers a row),
-    # scaled to all n: variance falls as 1 / samples; the batches still see correlations longer than a step.
+    # scaled to all n: variance falls as 1 / samples; the blocks still see correlations longer than a step.
     stride = max(1, -(-n // MAX_ROWS))
     rows = slice(None, None, stride)
     jacobians = _jacobians(reference[rows], None if rate is None else rate[rows], g)
     residuals = residuals[rows]
-    covariance = _covariance(jacobians, residuals, BATCHES) * (jacobians.shape[0] / n)
+    independent = _covariance(jacobians, residuals, 0) * (jacobians.shape[0] / n)
+    if covariance is None:
+        covariance = _covariance(jacobians, residuals, BLOCKS) * (jacobians.shape[0] / n)
+    else:
+        covariance = widened(independent[:12, :12], covariance[:12, :12])
     weak, condition = _weak_directions(reference, field, covariance, scale)
     heading, heading_max = _heading_sigmas(covariance, g, field, inclination)
     tilted, _ = _heading_sigmas(covariance, g, field, inclination, TILT_DEG)
-    independent = _covariance(jacobians, residuals, 0) * (jacobians.shape[0] / n)
     heading_independent, _ = _heading_sigmas(independent, g, field, inclination)
     effective = n * (heading_independent / heading) ** 2 if heading > 0 else float(n)
     scales = tuple(
@@ -414,6 +480,8 @@ def judge_reference_fit(
         covariance=covariance,
         residual_rms=residual_rms,
         scale=scale,
+        rotation_sigma_deg=rotation_sigma_deg(covariance, g),
+        notes=notes,
     )
 
 
