@@ -4,12 +4,20 @@
 attitude); G is a general 3x3 matrix, the soft iron times the magnetometer's misalignment (a mirror for a
 sensor with left-handed axes), V the hard iron. The calibration returned is ``frame="vehicle"``:
 ``matrix = G⁻¹`` (absolute: the corrected samples equal the reference, in its unit), ``offset = V``,
-``field_strength`` the reference's median magnitude.
+``field_strength`` the reference's median magnitude. The equations::
 
-The estimator is linear least squares on the design ``[r, 1]``, one regression per axis of ``raw``
-(Vasconcelos et al. 2011 and Kok & Schön 2016 fit the same model by maximum likelihood). The variants
-measured on :func:`magfit.vehicle.simulate_vehicle` (3000 samples at 50 Hz, field 50, noise 0.3, soft iron
-±8 %, mounting 20°, attitude error correlated over 5 s; RMS heading error over 6 seeds, flight / car / boat):
+    raw_k = G r_k + V                                   (1)  the model
+    raw(t) = G r(t + τ) + V                             (2)  with the attitude's lag τ (time_s given)
+    M raw_k − c = r_k,        M = G⁻¹, c = M V          (3)  (1) solved for the field: the vector equations
+    d_k · (M raw_k − c) = s,  d_k = −a_k / |a_k|        (4)  the gravity equations (accel given)
+
+(4): where the accelerometer sees gravity alone (:func:`magfit.gravity.still_samples`), its down direction
+``d_k`` and the calibrated field make the constant angle of the field's inclination, ``s = B sin δ``.
+
+The estimator without ``accel``: linear least squares of (1) on the design ``[r, 1]``, one regression per
+axis of ``raw`` (Vasconcelos et al. 2011 and Kok & Schön 2016 fit the same model by maximum likelihood). The
+variants measured on :func:`magfit.vehicle.simulate_vehicle` (3000 samples at 50 Hz, field 50, noise 0.3, soft
+iron ±8 %, mounting 20°, attitude error correlated over 5 s; RMS heading error over 6 seeds, flight / car / boat):
 
 - least squares: 0.34 / 0.33 / 0.29° at 0.2° of attitude error, 0.85 / 0.82 / 0.71° at 0.5°, 1.7 / 1.7 /
   1.4° at 1°. The mean attitude error over the recording (0.16° and 0.79°) is the floor no estimator can
@@ -24,13 +32,46 @@ measured on :func:`magfit.vehicle.simulate_vehicle` (3000 samples at 50 Hz, fiel
 - least squares plus the magnitude equations ``|G⁻¹ (raw − V)| = |r|`` (attitude-free), each weighted by its
   own residual: 1-5 % better (0.81 / 0.79 / 0.70° at 0.5°), but its weight is not something the data pin
   (3x: 12 % better on flight, 4 % worse on boat; 10x: 2.5x worse) and it costs an iterative solve in the
-  lag search. Not kept.
+  lag search. Not kept. (Measured again for the alignment, benchmarks/accuracy_vehicle.py at 1°, 8 trials:
+  at 10-30x the vector equations' weight per row they take the flight's rotation error from 1.75° to
+  0.8-1.1° and the car's from 0.97° to 0.4-0.6°, but worsen the boat's heading 0.31° → 0.47° and the
+  flight's at 0.2° of attitude error 0.12° → 0.23°; at the weight their own scatter gives, the heading
+  error grows 2-5x: fitting them shrinks the matrix along what the restricted motion leaves weak.)
 
 Why least squares cannot do much better: an error in the attitude's roll or pitch turns the field's large
 vertical part into the horizontal plane, so the recording's mean tilt error becomes a tilt of the fitted
 mounting and costs ``tan δ`` times itself in heading (2x at δ = 64°). With the error on one axis at a time
 (car, 1°, 15 000 samples, 5 seeds): yaw errors alone 0.25°, tilt errors alone 0.74°; the floor from the
 mean errors ``√(ψ̄² + (tan δ θ̄)²)`` is 0.6°, least squares 0.77°.
+
+With ``accel``: the joint fit of (3) and (4) at the lag found from (2), linear in (M, c, s). Each kind of
+equation is weighted by its own noise and its time correlation: ``w = 1 / (σ² κ)``, σ² the residuals'
+scatter and κ how far their batch means exceed independent errors' (the vector equations carry the
+attitude's error, correlated over seconds: κ = 40-80 at 10 Hz; the gravity equations the accelerometer's
+and magnetometer's noise: κ ≈ 1), first from the regression and the sensors' noise, then from the joint
+fit's own residuals, with Huber weights on the gravity equations (accelerations the gate let through).
+Both kinds have noise in their regressors (the magnetometer's in ``raw``, the accelerometer's in ``d``):
+least squares would shrink M along what the motion leaves weak to fit that noise (measured: a boat's
+rotation 0.18° → 0.98° on the true reference), so its expected contribution is taken off the normal
+equations (adjusted least squares; the noises from third differences of the samples). The uncertainty
+is a block jackknife of the joint fit (:data:`magfit.diagnostics.reference.BLOCKS` stretches, each refit
+exactly).
+
+What the accelerometer can and cannot pin. (4) sees the calibrated field's component along gravity: it
+pins the response of the vehicle's vertical output to the horizontal field (M's row z), through the
+horizontal field turning under it as the vehicle holds still at different headings; used only when the
+still samples' headings spread across both horizontal axes (:data:`MIN_HEADING_SPREAD`; a boat rolling on
+one heading does not). It cannot pin the response of the horizontal outputs to the vertical field (M's
+column z), which on a vehicle that tilts ±15° is confounded with the offset in (3) and (4) alike (the
+vertical field hardly changes in the vehicle frame) and which dominates the rotation error at 1° of
+attitude error (flight, trial 3: 0.062 in M's (x, z) element against 0.010 in (z, x)). Measured on
+benchmarks/accuracy_vehicle.py (6000 samples at 10 Hz, lag 0.1 s, mounting 5-35°, 8 trials; RMS rotation
+error / heading error, without → with accel): flight 2.27 → 1.81° / 0.607 → 0.577° at 1° of attitude error,
+1.04 → 0.94° / 0.300 → 0.294° at 0.5°; car 1.01 → 0.77° / 0.505 → 0.427° at 1°, 0.50 → 0.47° / 0.255 →
+0.246° at 0.5°; 0.2°: unchanged within 0.01°; the boat and the tumble (no still samples) unchanged. Issue
+14's 0.5° at 1° is not reached: what is left is M's column z. A constant accelerometer bias of 0.1 m/s²
+(0.6° of tilt) goes into the vertical: car at 1° 1.38° / 0.618° (worse than without accel), flight 1.96° /
+0.639°.
 
 A lag between the attitude and the magnetometer (``time_s`` given) is searched on a grid of one sample
 period within ``±max_lag_s``, then refined by a bounded scalar minimisation of the residual sum of squares,
@@ -40,6 +81,8 @@ is its column of the design).
 
 from __future__ import annotations
 
+import itertools
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -47,11 +90,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..calibration import Calibration
-from ..diagnostics.reference import ADVICE, design_singularity, judge_reference_fit
-from ..errors import CalibrationError, OptionError
+from ..diagnostics.reference import ADVICE, BLOCKS, design_singularity, jackknife_covariance, judge_reference_fit
+from ..errors import CalibrationError, OptionError, SampleError
+from ..gravity import still_samples
 from .registry import FitInput, register
 
-__all__ = ["LagEstimate", "estimate_lag", "fit_vector"]
+__all__ = ["GravityFit", "LagEstimate", "estimate_lag", "fit_vector"]
 
 #: Fewest samples a vector fit takes: 12 parameters (13 with a lag), and the batch-means covariance needs 80.
 MIN_SAMPLES = 80
@@ -63,6 +107,19 @@ SEARCH_ROWS = 50_000
 GAP_STEPS = 5.0
 #: Contiguous blocks of the block jackknife that gives the lag's one-sigma.
 LAG_BLOCKS = 8
+#: Fewest samples on which the accelerometer sees gravity alone for the gravity equations (4) to join the fit.
+MIN_GRAVITY_ROWS = 50
+#: Smallest in-plane eigenvalue of the scatter of the horizontal field's direction over the still samples
+#: (a full circle of headings gives 0.5, headings within ±32° about 0.1, a boat's ±10° 0.01) for the gravity
+#: equations to be used: they pin the tilt of the vertical through the horizontal field turning under it, and
+#: from one heading they pin one combination of the weak directions and move the others (measured on
+#: benchmarks/accuracy_vehicle.py's boat, 8 trials at 1° of attitude error: alignment 1.88° → 3.28°).
+MIN_HEADING_SPREAD = 0.1
+#: Huber's tuning constant (in robust standard deviations) for the gravity equations: residual accelerations
+#: (a turn the gate missed, a lever arm) are down-weighted, not trusted.
+HUBER = 1.345
+#: Contiguous batches for the noise inflation of each kind of equation (the weights).
+WEIGHT_BATCHES = 20
 
 
 @dataclass(frozen=True)
@@ -237,6 +294,249 @@ def estimate_lag(raw: NDArray[np.float64], reference: NDArray[np.float64], time_
     return LagEstimate(lag, sigma, keep, _shifted(reference, time_s, at), _shifted(rate_full, time_s, at), at_limit)
 
 
+def _motion_array(value: Any, name: str, n: int, what: str) -> NDArray[np.float64]:
+    """``accel=`` or ``gyro=`` as an (n, 3) float array; a one-line :class:`OptionError` naming what is wrong."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise OptionError(f"{name}= must be an (N, 3) array of numbers ({what}), got {type(value).__name__}") from None
+    if array.shape != (n, 3):
+        raise OptionError(
+            f"{name}= must have one row (x, y, z) per sample, shape ({n}, 3), in the reference's (vehicle) frame; "
+            f"got shape {array.shape}" + ("; transpose it" if array.shape == (3, n) else "")
+        )
+    bad = ~np.all(np.isfinite(array), axis=1)
+    if bad.any():
+        raise OptionError(f"{name}= has NaN or inf in row {int(np.argmax(bad))} (0-based); drop or fill those rows")
+    return array
+
+
+def _noise_sigma(values: NDArray[np.float64], across: int) -> float:
+    """White noise per axis of a smooth signal from its third differences (robust: their median).
+
+    A third difference of white noise has variance 20 σ²; a turning field or a rolling boat at 10 Hz leaves
+    below a fiftieth of that. ``across`` axes carry the noise (3 for the magnetometer, 2 across a direction).
+    """
+    if values.shape[0] < 8:
+        return 0.0
+    third = np.diff(values, n=3, axis=0)
+    median_chi2 = {2: 1.3863, 3: 2.3660}[across]  # the median of χ² with 2 or 3 degrees of freedom
+    return float(np.sqrt(np.median(np.sum(third**2, axis=1)) / (20.0 * median_chi2)))
+
+
+def _inflation(residuals: NDArray[np.float64], weights: NDArray[np.float64] | None = None) -> tuple[float, float]:
+    """(σ², κ): the residuals' variance per component and how much their batch means exceed what independent
+    errors give (κ = 1: white; the attitude's error, correlated over seconds, gives tens)."""
+    e = residuals.reshape(residuals.shape[0], -1)
+    if weights is not None:
+        e = e * np.sqrt(weights)[:, None]
+    e = e - e.mean(axis=0)
+    variance = float(np.mean(e**2))
+    batches = min(WEIGHT_BATCHES, e.shape[0] // 10)
+    if batches < 4 or not variance > 0:
+        return max(variance, 1e-300), 1.0
+    edges = np.linspace(0, e.shape[0], batches + 1).astype(np.int64)
+    means = np.add.reduceat(e, edges[:-1], axis=0) / np.diff(edges)[:, None]
+    excess = float(np.mean(np.var(means, axis=0, ddof=1) * (e.shape[0] / batches))) / variance
+    return variance, max(excess, 1.0)
+
+
+@dataclass(frozen=True)
+class _Equations:
+    """The equations (3) and (4) in the 13 unknowns p = (M row 0, c₀, M row 1, c₁, M row 2, c₂, s), ready to be
+    summed over any subset of the samples (the block jackknife refits without a stretch)."""
+
+    design: NDArray[np.float64]  # (n, 4): x_k = (raw_k, −1)
+    reference: NDArray[np.float64]  # (n, 3)
+    rows: NDArray[np.int64]  # (m,): the gravity rows' samples (indices into design)
+    down: NDArray[np.float64]  # (m, 3)
+    mag_noise: float  # σ_m, raw units, per axis
+    down_noise: float  # σ_a, radians, per axis across gravity
+
+    def normal(self, w_vector: float, w_gravity: NDArray[np.float64],
+               select: NDArray[np.bool_] | None = None) -> tuple[NDArray[Any], NDArray[Any]]:  # fmt: skip
+        """H and b of the weighted least squares, corrected for the noise in the regressors (see the module
+        docstring): over the samples ``select`` (all when None)."""
+        x, r = self.design, self.reference
+        in_g = np.ones(self.rows.size, dtype=bool) if select is None else select[self.rows]
+        if select is not None:
+            x, r = x[select], r[select]
+        noisy = np.diag([1.0, 1.0, 1.0, 0.0])  # the magnetometer's noise is in raw, not in the −1
+        h = np.zeros((13, 13))
+        b = np.zeros(13)
+        scatter = w_vector * (x.T @ x - x.shape[0] * self.mag_noise**2 * noisy)
+        for i in range(3):
+            h[4 * i : 4 * i + 4, 4 * i : 4 * i + 4] = scatter
+            b[4 * i : 4 * i + 4] = w_vector * (x.T @ r[:, i])
+        d, w = self.down[in_g], w_gravity[in_g]
+        xg = self.design[self.rows[in_g]]
+        a = np.concatenate([(d[:, :, None] * xg[:, None, :]).reshape(-1, 12), -np.ones((d.shape[0], 1))], axis=1)
+        h += (a * w[:, None]).T @ a
+        # The regressors d_i x_j carry the magnetometer's noise (d_i n_j) and the accelerometer's (ν_i x_j, ν
+        # across d): their expected contributions to aᵀa, taken off (adjusted least squares).
+        dd = np.einsum("k,ki,kj->ij", w, d, d)
+        across = np.einsum("k,kab,ki,kj->aibj", w, np.eye(3)[None] - d[:, :, None] * d[:, None, :], xg, xg)
+        h[:12, :12] -= self.mag_noise**2 * np.kron(dd, noisy) + self.down_noise**2 * across.reshape(12, 12)
+        return h, b
+
+    def residuals(self, p: NDArray[np.float64]) -> tuple[NDArray[Any], NDArray[Any]]:
+        """(vector residuals (n, 3), gravity residuals (m,)) at p."""
+        beta = p[:12].reshape(3, 4)
+        body = self.design @ beta.T
+        return body - self.reference, np.einsum("ki,ki->k", self.down, body[self.rows]) - p[12]
+
+
+def _solve_normal(h: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """The solution, or None when the corrected normal matrix is not positive definite (the noise corrections
+    exceed what the samples determine along some direction)."""
+    # Scaled to a unit diagonal first: M is dimensionless and c in the samples' unit.
+    diagonal = np.sqrt(np.abs(np.diag(h)))
+    if not np.all(diagonal > 0):
+        return None
+    scaled = 0.5 * (h + h.T) / np.outer(diagonal, diagonal)
+    try:
+        lower = np.linalg.cholesky(scaled)
+    except np.linalg.LinAlgError:
+        return None
+    if not float(np.min(np.diag(lower))) ** 2 > 1e-13:
+        return None
+    return np.asarray(np.linalg.solve(scaled, b / diagonal) / diagonal, dtype=np.float64)
+
+
+def _vehicle_form(p: NDArray[np.float64]) -> tuple[NDArray[Any], NDArray[Any]]:
+    """(G, V) of ``raw = G r + V`` from p = (M, c) of ``M raw − c = r``: G = M⁻¹, V = M⁻¹ c."""
+    beta = p[:12].reshape(3, 4)
+    g = np.linalg.inv(beta[:, :3])
+    return g, g @ beta[:, 3]
+
+
+@dataclass(frozen=True)
+class GravityFit:
+    """What the accelerometer added to a vector fit (:func:`fit_vector` with ``accel=``).
+
+    ``g``, ``offset`` and ``covariance`` (of G row-major and V, block jackknife) are None when the gravity
+    equations were not used (too few samples where the accelerometer sees gravity alone); ``facts`` go to
+    ``details["gravity"]``, ``note`` to the diagnostics' notes.
+    """
+
+    g: NDArray[np.float64] | None
+    offset: NDArray[np.float64] | None
+    covariance: NDArray[np.float64] | None
+    facts: dict[str, Any]
+    note: str
+
+
+def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: NDArray[np.float64],
+                 used_ref: NDArray[np.float64], accel: NDArray[np.float64], gyro: NDArray[np.float64] | None,
+                 times: NDArray[np.float64] | None, g: NDArray[np.float64],
+                 offset: NDArray[np.float64]) -> GravityFit:  # fmt: skip
+    """The joint fit of equations (3) and (4) on the kept samples (module docstring), or the reason it is not made."""
+    corrected = (raw - offset) @ np.linalg.inv(g).T  # the field in the vehicle frame: the gate's rate of turn
+    try:
+        gate = still_samples(accel, mag=corrected, gyro=gyro, time_s=times)
+    except SampleError as error:
+        raise OptionError(f"accel=: {error}") from None
+    dropped = {reason: count for reason, count in gate.dropped.items() if count}
+    outside = int(np.sum(gate.keep)) - int(np.sum(gate.keep[kept]))
+    if outside:
+        dropped["outside the window of the lag search (the ends of the recording's stretches)"] = outside
+    still = np.flatnonzero(gate.keep[kept])
+    facts: dict[str, Any] = {"used": False, "rows": int(still.size), "of": int(kept.size), "dropped": dropped,
+                             "notes": list(gate.notes)}  # fmt: skip
+    reasons = "; ".join(f"{count} {reason}" for reason, count in dropped.items()) or "none"
+    if still.size < MIN_GRAVITY_ROWS:
+        note = (
+            f"The accelerometer sees gravity alone on {still.size} of {kept.size} samples (dropped: {reasons}), "
+            f"fewer than the {MIN_GRAVITY_ROWS} its equations need: the fit is the regression on the reference alone."
+        )
+        return GravityFit(None, None, None, {**facts, "note": note}, note)
+    a = accel[kept][still]
+    down = -a / np.linalg.norm(a, axis=1, keepdims=True)  # the specific force points up
+    body = (used_raw[still] - offset) @ np.linalg.inv(g).T
+    across = body - np.einsum("ki,ki->k", body, down)[:, None] * down
+    across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
+    spread = float(np.linalg.eigvalsh(across.T @ across / across.shape[0])[1])
+    facts["heading_spread"] = spread
+    if spread < MIN_HEADING_SPREAD:
+        note = (
+            f"The accelerometer sees gravity alone on {still.size} of {kept.size} samples, but at headings so close "
+            f"together (spread {spread:.2g}, under {MIN_HEADING_SPREAD:g}; a full circle gives 0.5) that its "
+            "equations cannot pin the tilt of the vertical: the fit is the regression on the reference alone; "
+            "hold still (or drive straight) at headings across both horizontal axes to use them."
+        )
+        return GravityFit(None, None, None, {**facts, "note": note}, note)
+    mag_noise = _noise_sigma(raw, 3)
+    down_noise = _noise_sigma(-accel / np.linalg.norm(accel, axis=1, keepdims=True), 2)
+    n = used_raw.shape[0]
+    equations = _Equations(np.column_stack([used_raw, -np.ones(n)]), used_ref, still, down, mag_noise, down_noise)
+    # Pass 1: the vector equations weighted by their scatter and its correlation (from the regression's
+    # residuals), the gravity equations by the noise the sensors predict for them (white).
+    m0 = np.linalg.inv(g)
+    v_var, v_kappa = _inflation((used_raw - offset) @ m0.T - used_ref)
+    # Noise-free data would give zero variances: floored far below any real sensor's noise.
+    floor = (1e-9 * float(np.median(np.linalg.norm(used_ref, axis=1)))) ** 2
+    v_var = max(v_var, floor)
+    g_var = mag_noise**2 * float(np.mean(np.sum((down @ m0) ** 2, axis=1)))
+    g_var += down_noise**2 * float(np.mean(np.sum(np.cross(down, body) ** 2, axis=1)))
+    g_var = max(g_var, floor)
+    p = _solve_normal(*equations.normal(1.0 / (v_var * v_kappa), np.full(still.size, 1.0 / g_var)))
+    huber = np.ones(still.size)
+    g_kappa = 1.0
+    outliers = 0
+    if p is not None:
+        # Pass 2: each kind weighted by its own residuals' scatter and correlation; the gravity equations'
+        # outliers (accelerations the gate let through) down-weighted by Huber's weights.
+        e_vector, e_gravity = equations.residuals(p)
+        v_var, v_kappa = _inflation(e_vector)
+        v_var = max(v_var, floor)
+        scale = 1.4826 * float(np.median(np.abs(e_gravity - np.median(e_gravity))))
+        if scale > 0:
+            huber = np.minimum(1.0, HUBER * scale / np.maximum(np.abs(e_gravity), 1e-300))
+            outliers = int(np.sum(np.abs(e_gravity) > 3.0 * scale))
+            g_var, g_kappa = _inflation(e_gravity, huber)
+            g_var = max(g_var / float(np.mean(huber)), floor)
+        weights = (1.0 / (v_var * v_kappa), huber / (g_var * g_kappa))
+        p = _solve_normal(*equations.normal(*weights))
+    if p is None or not abs(np.linalg.det(p[:12].reshape(3, 4)[:, :3])) > 0:
+        note = (
+            "The accelerometer's gravity equations were not used: corrected for the sensors' noise, they and the "
+            "reference do not determine the fit along some direction; the fit is the regression on the reference alone."
+        )
+        return GravityFit(None, None, None, {**facts, "note": note}, note)
+    g_joint, offset_joint = _vehicle_form(p)
+    # The block jackknife: the joint fit again without each contiguous stretch (its gravity rows with it).
+    edges = np.linspace(0, n, BLOCKS + 1).astype(np.int64)
+    estimates: list[NDArray[np.float64]] = []
+    for start, stop in itertools.pairwise(edges):
+        select = np.ones(n, dtype=bool)
+        select[start:stop] = False
+        partial = _solve_normal(*equations.normal(*weights, select=select))
+        if partial is None:
+            estimates = []
+            break
+        g_part, v_part = _vehicle_form(partial)
+        estimates.append(np.concatenate([g_part.ravel(), v_part]))
+    covariance = jackknife_covariance(np.asarray(estimates)) if estimates else None
+    facts.update(
+        used=True,
+        down_weighted=int(np.sum(huber < 1.0)),
+        outliers=outliers,
+        vertical_field=float(p[12]),
+        vector_sigma=math.sqrt(v_var),
+        vector_inflation=v_kappa,
+        gravity_sigma=math.sqrt(g_var),
+        gravity_inflation=g_kappa,
+        magnetometer_noise=mag_noise,
+        accelerometer_noise_deg=math.degrees(down_noise),
+    )
+    note = (
+        f"The accelerometer's gravity equations joined the fit on {still.size} of {kept.size} samples, where it "
+        f"sees gravity alone (dropped: {reasons}); {outliers} of them beyond 3 robust standard deviations (residual "
+        "accelerations), down-weighted."
+    )
+    return GravityFit(g_joint, offset_joint, covariance, {**facts, "note": note}, note)
+
+
 @register(
     "vector",
     min_samples=MIN_SAMPLES,
@@ -251,6 +551,8 @@ def fit_vector(
     reference: ArrayLike | None = None,
     time_s: ArrayLike | None = None,
     max_lag_s: float = 1.0,
+    accel: ArrayLike | None = None,
+    gyro: ArrayLike | None = None,
 ) -> Calibration:
     """Fit ``raw = G r + V`` against the reference field ``r`` (see the module docstring).
 
@@ -263,12 +565,25 @@ def fit_vector(
         is estimated within ``±max_lag_s`` and the fit made at it; not given, none is assumed.
     max_lag_s : float
         The largest lag searched, seconds.
+    accel : array_like, shape (N, 3), optional
+        The accelerometer's specific force at each sample in the reference's (vehicle) frame, any unit. Given,
+        its gravity equations (4) join the fit where it sees gravity alone (:func:`magfit.gravity.still_samples`):
+        ``details["gravity"]`` says on how many samples and why the others were left out.
+    gyro : array_like, shape (N, 3), optional
+        Body rates in rad/s in the same frame, for the still-sample gate (only with ``accel``).
     """
     raw = data.require_samples("vector")
     n = raw.shape[0]
     ref = _reference_array(reference, n)
     if not max_lag_s > 0:
         raise OptionError(f"max_lag_s must be a positive number of seconds, got {max_lag_s!r}")
+    acc = None if accel is None else _motion_array(accel, "accel", n, "the specific force, any unit")
+    rates = None if gyro is None else _motion_array(gyro, "gyro", n, "body rates in rad/s")
+    if rates is not None and acc is None:
+        raise OptionError("gyro= is used only to find where the accelerometer sees gravity alone: give accel= too")
+    if acc is not None and np.any(np.all(acc == 0.0, axis=1)):
+        row = int(np.argmax(np.all(acc == 0.0, axis=1)))
+        raise OptionError(f"accel= is (0, 0, 0) in row {row} (0-based), which has no direction: drop that sample")
     magnitudes = np.linalg.norm(ref, axis=1)
     field = float(np.median(magnitudes))
     if not field > 0:
@@ -281,6 +596,8 @@ def fit_vector(
     lag_limit = None
     jackknife = 0.0
     used_raw, used_ref = raw, ref
+    kept = np.arange(n)
+    times = None
     if time_s is None:
         details["lag_s"] = None
         details["lag_note"] = "no time_s given: the reference is taken as simultaneous with the samples (no lag fitted)"
@@ -288,6 +605,7 @@ def fit_vector(
         times = _time_array(time_s, n)
         found = estimate_lag(raw, ref, times, float(max_lag_s))
         used_raw, used_ref, rate = raw[found.keep], found.reference, found.rate
+        kept = np.flatnonzero(found.keep)
         details["lag_s"] = found.lag_s
         jackknife = found.lag_sigma_s
         if found.at_limit:
@@ -301,9 +619,21 @@ def fit_vector(
             "the samples do not support the vector calibration: the fitted matrix is singular (the samples do not "
             "change with the reference along some direction: a magnetometer axis that is dead or saturated?)"
         )
-    report = judge_reference_fit(used_raw, used_ref, g, offset, rate=rate, lag_at_limit=lag_limit)
-    if rate is not None:  # the larger of the jackknife's and the batch-means Gauss-Newton one-sigma
-        details["lag_sigma_s"] = max(jackknife, float(np.sqrt(max(report.covariance[12, 12], 0.0))))
+    covariance = None
+    notes: tuple[str, ...] = ()
+    if acc is not None:
+        joint = _gravity_fit(raw, kept, used_raw, used_ref, acc, rates, times, g, offset)
+        details["gravity"] = joint.facts
+        notes = (joint.note,)
+        if joint.g is not None and joint.offset is not None:
+            g, offset, covariance = joint.g, joint.offset, joint.covariance
+    report = judge_reference_fit(
+        used_raw, used_ref, g, offset, rate=rate, lag_at_limit=lag_limit, covariance=covariance, notes=notes
+    )
+    if rate is not None:  # the larger of the lag search's jackknife and the fit's covariance (when it has the lag)
+        lag_variance = report.covariance[12, 12] if report.covariance.shape[0] > 12 else 0.0
+        details["lag_sigma_s"] = max(jackknife, float(np.sqrt(max(lag_variance, 0.0))))
+    details["alignment_sigma_deg"] = report.rotation_sigma_deg
     details["residual_rms"] = report.residual_rms
     details["scale"] = report.scale
     details["support"] = report.support.to_dict()
