@@ -25,7 +25,7 @@ from magfit.sources.tlog import _CRC_EXTRA, _IDS, _LAYOUTS, _MAX_LENGTH, Telemet
 from test_sources_dataflash import COMPASSES, correct_field
 
 #: CRC_EXTRA of the messages written here (MAVLink's generated definitions: pymavlink's crc_extra).
-CRC_EXTRA = {0: 50, 22: 220, 24: 24, 27: 144, 30: 39, 116: 76, 129: 46}
+CRC_EXTRA = {0: 50, 22: 220, 24: 24, 27: 144, 30: 39, 105: 93, 116: 76, 129: 46}
 #: Payloads in wire order (largest fields first, then the extensions).
 PACK = {
     0: "<IBBBBB",  # HEARTBEAT: custom_mode, type, autopilot, base_mode, system_status, mavlink_version
@@ -33,6 +33,7 @@ PACK = {
     24: "<QiiiHHHHBB",  # GPS_RAW_INT (no extensions): time_usec, lat, lon, alt, eph, epv, vel, cog, fix, sats
     27: "<Q9hBh",  # RAW_IMU: time_usec, acc, gyro, mag, id, temperature
     30: "<I6f",  # ATTITUDE: time_boot_ms, roll, pitch, yaw, rates
+    105: "<Q13fHB",  # HIGHRES_IMU: time_usec, acc, gyro, mag, pressures, temperature, fields_updated, id
     116: "<I9hh",  # SCALED_IMU2: time_boot_ms, acc, gyro, mag, temperature
 }
 #: Frames pymavlink 2.4 packed (ardupilotmega dialect): RAW_IMU in MAVLink 2 (seq 7, its 3 trailing zero bytes
@@ -369,3 +370,51 @@ def test_frames_whose_checksum_never_matches_are_another_definition_not_damage(t
     said = " ".join(source.notes)
     assert "5 of message 132 from system 1 component 194" in said and "bytes skipped" not in said
     assert source.magnetometer("RAW_IMU").n_samples == 100
+
+
+def test_px4_highres_imu_is_read_as_calibrated_gauss_and_systems_are_told_apart(tmp_path: Path) -> None:
+    # Two vehicles on one link: system 1 a PX4 (HEARTBEAT autopilot 12) streaming HIGHRES_IMU in gauss, system 2
+    # an ArduPilot streaming RAW_IMU (and HIGHRES_IMU, which ArduPilot fills in microgauss: not read).
+    rng = np.random.default_rng(9)
+    field = rng.normal(size=(200, 3))
+    field = 0.48 * field / np.linalg.norm(field, axis=1, keepdims=True) + [0.05, -0.02, 0.1]
+    writer = TlogWriter()
+    for i in range(200):
+        t = T0_US + i * 50_000
+        if i % 20 == 0:
+            writer.add(t, 0, 0, 2, 12, 0, 3, 3, sysid=1)
+            writer.add(t, 0, 0, 2, 3, 0, 3, 3, sysid=2)
+        mag = [float(v) for v in field[i]]
+        writer.add(
+            t + 10, 105, 1_000_000 + i * 50_000, 0.0, 0.0, -9.8, 0.0, 0.0, 0.0, *mag, 0, 0, 0, 0, 0x1FF, 0, sysid=1
+        )
+        milli = [int(v) for v in np.trunc(field[i] * 1000)]
+        writer.add(t + 20, 27, 2_000_000 + i * 50_000, 0, 0, -1000, 0, 0, 0, *milli, 0, 0, sysid=2)
+        writer.add(
+            t + 30,
+            105,
+            2_000_000 + i * 50_000,
+            0.0,
+            0.0,
+            -9.8,
+            0.0,
+            0.0,
+            0.0,
+            *(v * 1e6 for v in mag),
+            0,
+            0,
+            0,
+            0,
+            0x1FF,
+            0,
+            sysid=2,
+        )
+    path = tmp_path / "two.tlog"
+    path.write_bytes(writer.bytes())
+    source = open_source(path)
+    assert [m.id for m in source.magnetometers] == ["HIGHRES_IMU@1.1", "RAW_IMU@2.1"]
+    px4 = source.magnetometer("HIGHRES_IMU@1.1")
+    assert px4.unit == "G" and px4.slot is None and any("residual correction" in note for note in px4.notes)
+    np.testing.assert_allclose(source.read("HIGHRES_IMU@1.1").samples, field, atol=1e-6)
+    ardupilot = source.read("RAW_IMU@2.1")
+    assert ardupilot.magnetometer.unit == "mG" and np.max(np.abs(ardupilot.samples - field * 1000)) < 1.0

@@ -525,8 +525,9 @@ def source_from_tlog(path: Path, log: TelemetryLog) -> Source:
     with_compass = [v for v in vehicles if _compass_messages(v)]
     chosen = with_compass or [v for v in vehicles if v.autopilot not in (None, 0)][:1] or vehicles[:1]
     several = len(chosen) > 1
+    main = chosen[0] if chosen else None  # the system that sent the most frames: its position, its messages
     compasses: dict[str, _Compass] = {}
-    for vehicle in chosen:
+    for vehicle in sorted(chosen, key=lambda v: v.source):
         for name in _compass_messages(vehicle):
             sensor = f"{name}@{vehicle.source[0]}.{vehicle.source[1]}" if several else name
             compasses[sensor] = _Compass(vehicle, name, sensor)
@@ -534,7 +535,6 @@ def source_from_tlog(path: Path, log: TelemetryLog) -> Source:
     if not compasses:
         magnetometers.append(_missing(chosen[0] if chosen else None))
     notes = _file_notes(log, chosen)
-    main = chosen[0] if chosen else None
     other: tuple[str, ...] = ()
     if main is not None:
         counts = log.counts(main.source)
