@@ -418,3 +418,17 @@ def test_px4_highres_imu_is_read_as_calibrated_gauss_and_systems_are_told_apart(
     np.testing.assert_allclose(source.read("HIGHRES_IMU@1.1").samples, field, atol=1e-6)
     ardupilot = source.read("RAW_IMU@2.1")
     assert ardupilot.magnetometer.unit == "mG" and np.max(np.abs(ardupilot.samples - field * 1000)) < 1.0
+
+
+def test_parameter_names_end_where_their_letters_end(tmp_path: Path) -> None:
+    # Old ArduPilot firmwares sent stack bytes after the name's NUL, or in place of it after a 15-letter name
+    # (dronekit's test.tlog): the names must still be found.
+    from magfit.sources.tlog import _parameters
+
+    writer = TlogWriter()
+    for index, (raw, value) in enumerate([(b"COMPASS_OFS_X\x00\x00\x90", 12.5), (b"COMPASS_AUTODEC\xdf", 1.0)]):
+        writer.add(T0_US + index, 22, value, 2, index, raw, 9)
+    path = tmp_path / "names.tlog"
+    path.write_bytes(writer.bytes())
+    table, _ = _parameters(TelemetryLog(path, path.read_bytes()), (1, 1))
+    assert table["COMPASS_OFS_X"][0][1] == 12.5 and table["COMPASS_AUTODEC"][0][1] == 1.0

@@ -46,6 +46,7 @@ vehicle's own spacing (no link jitter) on the station's UTC time line.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -147,6 +148,8 @@ _LAYOUTS: dict[int, tuple[str, np.dtype[Any]]] = {
     116: ("SCALED_IMU2", _layout(f"time_boot_ms:<u4 {_IMU} temperature:<i2")),
     129: ("SCALED_IMU3", _layout(f"time_boot_ms:<u4 {_IMU} temperature:<i2")),
 }
+#: What a parameter's name is made of (ArduPilot's and PX4's names: letters, digits and underscores).
+_NAME = re.compile(r"[A-Za-z0-9_]*")
 _ID_OF = {name: msgid for msgid, (name, _) in _LAYOUTS.items()}
 
 #: MAV_AUTOPILOT values (HEARTBEAT.autopilot).
@@ -477,7 +480,10 @@ def _parameters(log: TelemetryLog, source: tuple[int, int]) -> tuple[dict[str, l
     table: dict[str, list[tuple[float, float]]] = {}
     values = records["param_value"].astype(np.float64)
     for name, value, time in zip(records["param_id"], values, log.receipt_s[frames], strict=True):
-        table.setdefault(name.rstrip(b"\x00").decode("ascii", "replace"), []).append((float(time), float(value)))
+        # The name ends at its first byte outside a parameter name's letters: old firmwares sent stack bytes after
+        # the NUL, or in place of it after a 15-letter name (dronekit's test.tlog: b"COMPASS_AUTODEC\xdf").
+        text = _NAME.match(name.decode("latin-1"))
+        table.setdefault(text.group(0) if text else "", []).append((float(time), float(value)))
     # The whole list was downloaded when every index below param_count came (65535 marks a value set, not listed).
     counts = records["param_count"][records["param_index"] != 65535]
     listed = np.unique(records["param_index"][records["param_index"] != 65535])
