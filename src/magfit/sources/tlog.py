@@ -337,8 +337,8 @@ class TelemetryLog:
 
     def _account(self) -> None:
         """Sort the bytes between accepted records: a gap that well-formed frames fill exactly holds frames whose
-        checksum failed (``unchecked``, judged by :meth:`mismatched`); otherwise it is damage, or a last record
-        cut short."""
+        checksum failed (damage, or ``unchecked`` when no frame of that message from that sender passed);
+        otherwise it is damage, or a last record cut short."""
         data, n = self._data, len(self._data)
         begins = np.concatenate([[0], self.start + self.size])
         ends = np.concatenate([self.start - 8, [n]])
@@ -360,9 +360,9 @@ class TelemetryLog:
             self.skipped_bytes += int(end - begins[g])
         # Frames whose checksum failed while others of the same message from the same sender passed are damage;
         # a message none of whose frames passes is sent with a definition this reader does not share.
+        passed = set(np.unique((self.sysid << 32) | (self.compid << 24) | self.msgid).tolist())
         for key, (_, size_sum) in list(self.unchecked.items()):
-            mine = (self.sysid == key[0]) & (self.compid == key[1]) & (self.msgid == key[2])
-            if np.any(mine):
+            if (key[0] << 32) | (key[1] << 24) | key[2] in passed:
                 self.skipped_bytes += size_sum
                 del self.unchecked[key]
 
@@ -413,7 +413,7 @@ class _Vehicle:
     log: TelemetryLog
     source: tuple[int, int]
     autopilot: int | None
-    clock: NDArray[np.float64]  # per accepted frame: UTC seconds on the vehicle's clock, NaN where none
+    clock: NDArray[np.float64]  # per accepted frame: UTC seconds on the vehicle's clock (else its receive time)
     stretches: int
     parameters: dict[str, list[tuple[float, float]]]
     no_soft_iron: bool  # a complete parameter list without COMPASS_DIA/ODI: offsets alone were applied
