@@ -208,6 +208,46 @@ def _motion(
     return w, t
 
 
+def _own_rate(gyro: ArrayLike | None, gyro_time_s: ArrayLike, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A gyroscope logged at its own rate (M, 3) at ``gyro_time_s`` (M,): its mean rate over each magnetometer
+    sample's interval (the midpoints to its neighbours), (n, 3), from the running integral of its own samples.
+
+    Read at the magnetometer's stamps instead (interpolated), a fast gyro's vibration aliases into the slow
+    rate: the mean over the interval is what turns the field between two samples. The stages downstream then
+    take it as one rate per sample, as they take a gyro logged beside the magnetometer.
+    """
+    if gyro is None:
+        raise OptionError("gyro_time_s= was given without gyro=: the body rates in rad/s, shape (M, 3), at those times")
+    try:
+        w = np.asarray(gyro, dtype=np.float64)
+        tg = np.asarray(gyro_time_s, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise OptionError("gyro= and gyro_time_s= must be numeric arrays") from None
+    if tg.ndim != 1 or tg.size < 2 or w.shape != (tg.size, 3):
+        raise OptionError(
+            f"with gyro_time_s= of shape {tg.shape}, gyro= must have shape (M, 3) with M = len(gyro_time_s) ≥ 2, got "
+            f"shape {w.shape}; rows are samples, it is never transposed"
+        )
+    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(tg))):
+        raise OptionError("gyro= and gyro_time_s= must be finite (no NaN or inf): drop or fill those rows first")
+    steps = np.diff(tg)
+    if np.any(steps <= 0):
+        at = int(np.argmax(steps <= 0)) + 1
+        raise OptionError(
+            f"gyro_time_s= must increase strictly; row {at} ({tg[at]:g} s) does not: sort or de-duplicate"
+        )
+    if t[0] < tg[0] or t[-1] > tg[-1]:
+        raise OptionError(
+            f"gyro_time_s= spans {tg[0]:g}-{tg[-1]:g} s, the magnetometer's time_s= {t[0]:g}-{t[-1]:g} s: the gyro "
+            "must cover every sample (same clock, same unit); trim the samples to the gyro's span"
+        )
+    turned = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (w[:-1] + w[1:]) * steps[:, None], axis=0)])
+    edges = np.concatenate([[t[0] - 0.5 * (t[1] - t[0])], 0.5 * (t[:-1] + t[1:]), [t[-1] + 0.5 * (t[-1] - t[-2])]])
+    edges = np.clip(edges, tg[0], tg[-1])
+    at_edges = np.column_stack([np.interp(edges, tg, turned[:, axis]) for axis in range(3)])
+    return np.asarray(np.diff(at_edges, axis=0) / np.diff(edges)[:, None], dtype=np.float64)
+
+
 def _accel(accel: ArrayLike, n: int) -> NDArray[np.float64]:
     """The accelerometer (n, 3), checked; one-line :class:`OptionError` naming what is wrong."""
     try:
@@ -1050,6 +1090,7 @@ def fit_gyro(
     segment_s: float = 10.0,
     lag_s: float | str = "search",
     accel: ArrayLike | None = None,
+    gyro_time_s: ArrayLike | None = None,
 ) -> Calibration:
     """Hard iron, soft iron and the magnetometer's axes in the gyroscope's, from the rotation kinematics.
 
@@ -1058,7 +1099,8 @@ def fit_gyro(
     data : FitInput
         The magnetometer samples (N, 3), any unit, in recording order.
     gyro : array_like, shape (N, 3)
-        Body rates in rad/s, one row per sample (same clock). Its constant bias is estimated.
+        Body rates in rad/s, one row per sample (same clock), or (M, 3) at ``gyro_time_s``. Its constant bias
+        is estimated.
     time_s : array_like, shape (N,)
         Sample times in seconds, strictly increasing.
     mapping : str
@@ -1070,6 +1112,9 @@ def fit_gyro(
     lag_s : float or "search"
         The magnetometer's delay behind the gyroscope, seconds: searched within ±0.25 s on the windowed
         residual by default (``details["lag_s"]``), or given.
+    gyro_time_s : array_like, shape (M,), optional
+        The gyroscope's own times (seconds, the magnetometer's clock) when it is logged at its own rate: then
+        ``gyro`` is (M, 3) and is averaged over each magnetometer sample's interval, not interpolated.
     accel : array_like, shape (N, 3), optional
         The accelerometer's specific force in the gyroscope's axes, any unit, one row per sample, on the
         gyroscope's clock: adds the gravity rows (2) where it sees gravity alone (module docstring).
@@ -1090,12 +1135,16 @@ def fit_gyro(
     ------
     OptionError
         gyro= or time_s= missing, of the wrong shape, not finite, not increasing, or in degrees per second;
-        accel= of the wrong shape, not finite, or a row of zeros.
+        gyro_time_s= likewise, or not covering the samples; accel= of the wrong shape, not finite, or a row of
+        zeros.
     CalibrationError
         Too short a recording, or one that turned about one axis only (named).
     """
     y = data.require_samples("gyro")
     n = y.shape[0]
+    if gyro_time_s is not None:
+        _, t = _motion(np.zeros((n, 3)), time_s, n)  # the magnetometer's times checked first
+        gyro = _own_rate(gyro, gyro_time_s, t)
     w, t = _motion(gyro, time_s, n)
     a = None if accel is None else _accel(accel, n)
     if mapping not in ("search", "general") and mapping not in MAPPINGS:
