@@ -146,7 +146,7 @@ def _probe(monkeypatch: pytest.MonkeyPatch, needs: tuple[str, ...]) -> list[dict
 
     seen: list[dict] = []
 
-    def probe(data, *, reference=None, gyro=None, time_s=None, accel=None):
+    def probe(data, *, reference=None, time_s=None, gyro=None, accel=None):
         seen.append({"reference": reference, "gyro": gyro, "time_s": time_s, "accel": accel})
         if reference is not None:
             return fit_vector(data, reference=reference, time_s=time_s)
@@ -160,17 +160,22 @@ def test_the_accelerometer_is_asked_of_the_methods_that_take_it_only(monkeypatch
     from magfit.pipeline.streams import stream_names
 
     _probe(monkeypatch, ("reference",))
-    assert stream_names(["probe"]) == ("reference", "time_s", "accel")  # the stamps too: vector fits the lag
-    assert stream_names(["sphere", "auto"]) == ()  # the samples alone: no stream, the accelerometer neither
+    # the stamps too (vector fits the lag), the gyro (vector's still gate) and the accelerometer: only taken
+    assert stream_names(["probe"]) == (("reference",), ("time_s", "gyro", "accel"))
+    assert stream_names(["sphere", "auto"]) == ((), ())  # the samples alone: no stream, the accelerometer neither
+    assert stream_names(["probe", "gyro"]).needed == ("reference", "gyro", "time_s")  # needed by one: needed
     for method in ("vector", "gyro"):  # whatever their signature says today
         spec = magfit.METHODS[method]
-        assert ("accel" in stream_names([method])) == ("accel" in spec.options)
-        assert set(spec.needs) <= set(stream_names([method]))
+        names = stream_names([method])
+        assert ("accel" in names.optional) == ("accel" in spec.options)
+        assert names.needed == spec.needs and not set(names.needed) & set(names.optional)
 
 
 def test_the_logs_accelerometer_is_given_in_the_body_frame_on_the_compass_stamps(tmp_path, monkeypatch) -> None:
     path, _ = _log_with_gps(tmp_path / "gps.bin", monkeypatch)
-    streams = method_streams(open_source(path), "MAG/0", ("reference", "gyro", "time_s", "accel"), unit=None)
+    streams = method_streams(
+        open_source(path), "MAG/0", ("reference",), optional=("gyro", "time_s", "accel"), unit=None
+    )
     accel, t = streams.options["accel"], streams.options["time_s"]
     assert accel.shape == streams.samples.shape
     # The IMU is logged at 50 Hz in the body frame (FRD): the specific force of the tumble, interpolated.
@@ -185,10 +190,11 @@ def test_a_log_without_an_accelerometer_is_fitted_without_one(tmp_path, monkeypa
     path, _ = _log_with_gps(tmp_path / "noimu.bin", monkeypatch, drop=("IMU",))
     seen = _probe(monkeypatch, ("reference",))
     for available in (False, True):
-        streams = method_streams(open_source(path), "MAG/0", ("reference", "time_s", "accel"), unit=None,
-                                 available=available)  # fmt: skip
-        assert "accel" not in streams.options and "reference" in streams.options
+        streams = method_streams(open_source(path), "MAG/0", ("reference",), optional=("time_s", "gyro", "accel"),
+                                 unit=None, available=available)  # fmt: skip
+        assert "accel" not in streams.options and "gyro" not in streams.options and "reference" in streams.options
         assert any("no accelerometer beside this compass: the methods run without it" in n for n in streams.notes)
+        assert any("no gyroscope beside this compass: the methods that only take one" in n for n in streams.notes)
     calibration = magfit.calibrate_file(path, "probe", sensor="MAG/0").calibration
     assert seen[-1]["accel"] is None and seen[-1]["reference"] is not None
     np.testing.assert_allclose(calibration.offset, motion_log.HARD, atol=3.0)
@@ -200,6 +206,7 @@ def test_calibrate_file_gives_the_accelerometer_to_a_method_that_takes_it(tmp_pa
     result = magfit.calibrate_file(path, "probe", sensor="MAG/0")
     given = seen[-1]
     assert given["accel"] is not None and given["accel"].shape == given["reference"].shape
+    np.testing.assert_allclose(given["gyro"], motion_log.body_rates(given["time_s"]), atol=0.02)
     np.testing.assert_allclose(given["accel"], motion_log.specific_force(given["time_s"]), atol=0.05)
     assert any("accelerometer: IMU[0] AccX/Y/Z" in note for note in result.compasses[0].notes)
 
@@ -241,8 +248,9 @@ def test_an_accelerometer_in_another_frame_than_the_gyro_or_the_attitude_is_left
     path = _ulog_with_raw_accel(tmp_path / "raw_accel.ulg")
     # The frames are what the reader says of the topics (the values here happen to be the body's: only the
     # frames stated decide), and the accelerometer is left out for either method, with the reason.
-    for needs, other in ((("gyro", "time_s", "accel"), "gyro"), (("time_s", "accel", "reference"), "attitude")):
-        streams = method_streams(open_source(path), "sensor_mag/0", needs, unit=None, available=True)
+    for needs, other in ((("gyro", "time_s"), "gyro"), (("reference",), "attitude")):
+        streams = method_streams(open_source(path), "sensor_mag/0", needs, optional=("time_s", "accel"), unit=None,
+                                 available=True)  # fmt: skip
         assert "accel" not in streams.options
         assert any(
             "left out: it is in the sensor (before SENS_BOARD_ROT" in note and f"the {other} in the body (FRD)" in note
@@ -251,7 +259,7 @@ def test_an_accelerometer_in_another_frame_than_the_gyro_or_the_attitude_is_left
     # sensor_combined (the rotated IMU, body frame) is given to the gyro method: the gyro's own frame
     combined = tmp_path / "combined.ulg"
     motion_log.write_ulog(combined, 0, n=600)
-    streams = method_streams(open_source(combined), "sensor_mag/0", ("gyro", "time_s", "accel"), unit=None)
+    streams = method_streams(open_source(combined), "sensor_mag/0", ("gyro", "time_s"), optional=("accel",), unit=None)
     np.testing.assert_allclose(streams.options["accel"], motion_log.specific_force(streams.options["time_s"]),
                                atol=1e-3)  # fmt: skip
 
@@ -260,7 +268,7 @@ def test_an_ardupilot_trim_is_taken_off_the_attitude_so_it_shares_the_imus_frame
     # ATT logs the EKF's angles minus AHRS_TRIM (NavEKF3_core::getEulerAngles); the IMU and MAG are logged in the
     # autopilot's own body. A 2° pitch trim left on the attitude would turn the reference and gravity by 2°.
     path, field = _log_with_gps(tmp_path / "trim.bin", monkeypatch, trim_deg=(0.7, -2.0))
-    streams = method_streams(open_source(path), "MAG/0", ("reference", "time_s", "accel"), unit=None)
+    streams = method_streams(open_source(path), "MAG/0", ("reference", "time_s"), optional=("accel",), unit=None)
     truth = np.einsum("nji,j->ni", motion_log.attitude(streams.options["time_s"]), field)
     cosines = np.sum(streams.options["reference"] * truth, axis=1) / np.linalg.norm(truth, axis=1) ** 2
     assert np.degrees(np.max(np.arccos(np.clip(cosines, -1.0, 1.0)))) < 0.1  # the untrimmed attitude's field

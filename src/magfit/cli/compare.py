@@ -188,11 +188,18 @@ def with_streams(
     """
     from ..pipeline.streams import method_streams, stream_names
 
-    needs = stream_names(methods)  # what they need, and the optional streams they take (the accelerometer)
-    if not needs or recording.source is None or recording.sensor is None:
+    names = stream_names(methods)  # what they need, and the optional streams they take (the accelerometer)
+    if not names.needed or recording.source is None or recording.sensor is None:
         return recording.samples, {}
 
-    found = method_streams(recording.source, recording.sensor, needs, unit=unit or recording.unit, available=True)
+    found = method_streams(
+        recording.source,
+        recording.sensor,
+        names.needed,
+        optional=names.optional,
+        unit=unit or recording.unit,
+        available=True,
+    )
     for note in found.notes:
         warn(note)
     return found.samples, found.options

@@ -395,7 +395,8 @@ def _calibrate_compass(
     if needs:  # vector, gyro: the log's attitude, gyroscope and time on the compass's stamps (docs/file-formats.md)
         from .streams import method_streams, stream_names
 
-        streams = method_streams(source, magnetometer.id, stream_names([method]), unit=unit, date=date)
+        names = stream_names([method])
+        streams = method_streams(source, magnetometer.id, names.needed, optional=names.optional, unit=unit, date=date)
         for note in streams.notes:
             say(note)
         notes += streams.notes

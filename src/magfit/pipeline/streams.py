@@ -8,8 +8,10 @@ unit). ``gyro`` needs the body rates and the time stamps. :func:`method_streams`
 words what is missing and how to log it.
 
 Both methods also *take* the accelerometer (``accel=``, optional): where the vehicle is still or slow it
-sees gravity alone, which pins the tilt of the mounting better than the attitude the estimator logs.
-:func:`stream_names` asks for it only of a method whose signature has it. It is given only in the frame the
+sees gravity alone, which pins the tilt of the mounting better than the attitude the estimator logs
+(``vector`` takes the gyro too, optional, to find those samples). :func:`stream_names` says which streams
+methods need and which they only take (those their signature has); the latter are given when the log has
+them, never a reason to refuse. It is given only in the frame the
 method expects: ``vector`` compares the samples with a reference in the body frame of the *attitude*, and
 ``gyro`` relates them to the *gyroscope's* axes, so the accelerometer's frame must be that one (the logs
 give the rotated, calibrated IMU in the body frame: ArduPilot's IMU, PX4's ``sensor_combined``; PX4's raw
@@ -22,7 +24,7 @@ from __future__ import annotations
 import datetime
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,28 +34,37 @@ from ..methods import get_method
 from ..sources import Source
 from ..units import get_unit
 
-__all__ = ["OPTIONAL_STREAMS", "MethodStreams", "method_streams", "stream_names"]
+__all__ = ["OPTIONAL_STREAMS", "MethodStreams", "StreamNames", "method_streams", "stream_names"]
 
 #: Streams a method may take beside those it needs: read from the log for a method whose options include them,
 #: and never a reason to refuse (a log without them is fitted without them). ``time_s``: vector estimates the
-#: attitude's lag behind the samples from the stamps.
-OPTIONAL_STREAMS = ("time_s", "accel")
+#: attitude's lag behind the samples from the stamps; ``gyro``: vector's still-sample gate.
+OPTIONAL_STREAMS = ("time_s", "gyro", "accel")
 
 
-def stream_names(methods: Sequence[str]) -> tuple[str, ...]:
+class StreamNames(NamedTuple):
+    """The log's streams some methods need (``needed``) and those they only take (``optional``)."""
+
+    needed: tuple[str, ...]
+    optional: tuple[str, ...]
+
+
+def stream_names(methods: Sequence[str]) -> StreamNames:
     """The streams to read from a log for ``methods``: what each needs, and the optional streams it takes.
 
     Only a method that needs a stream of the log (``vector``, ``gyro``) gets the optional ones: a
-    magnitude-only method reads the samples alone.
+    magnitude-only method reads the samples alone. A stream one method needs is needed, whoever else only
+    takes it.
     """
-    names: dict[str, None] = {}
+    needed: dict[str, None] = {}
+    optional: dict[str, None] = {}
     for method in methods:
         spec = get_method(method)
         if not spec.needs:
             continue
-        names.update(dict.fromkeys(spec.needs))
-        names.update(dict.fromkeys(stream for stream in OPTIONAL_STREAMS if stream in spec.options))
-    return tuple(names)
+        needed.update(dict.fromkeys(spec.needs))
+        optional.update(dict.fromkeys(stream for stream in OPTIONAL_STREAMS if stream in spec.options))
+    return StreamNames(tuple(needed), tuple(name for name in optional if name not in needed))
 
 
 @dataclass(frozen=True)
@@ -85,17 +96,19 @@ def method_streams(
     sensor: str,
     needs: Sequence[str],
     *,
+    optional: Sequence[str] = (),
     unit: str | None,
     date: datetime.date | str | None = None,
     available: bool = False,
 ) -> MethodStreams:
-    """Read ``sensor``'s samples with the streams ``needs`` names (``reference``, ``gyro``, ``time_s``,
-    ``accel``; :func:`stream_names` gives them for a method).
+    """Read ``sensor``'s samples with the streams ``needs`` names (``reference``, ``gyro``, ``time_s``) and
+    those of ``optional`` the log holds (``time_s``, ``gyro``, ``accel``; :func:`stream_names` gives both for
+    some methods).
 
     ``available``: give the streams the log holds and say in ``notes`` why the others are missing (a
-    comparison of several methods runs those it can), instead of raising. ``accel`` is optional either way:
-    missing, or in another frame than the attitude's (``reference``) or the gyroscope's (``gyro``) asked for
-    with it, it is left out and the notes say why.
+    comparison of several methods runs those it can), instead of raising. An optional stream is never a
+    reason to raise: missing, or (``accel``) in another frame than the attitude's (``reference``) or the
+    gyroscope's (``gyro``) it is used with, it is left out and the notes say why.
 
     Raises
     ------
@@ -109,8 +122,14 @@ def method_streams(
     where = f"{source.path} ({sensor})"
     options: dict[str, Any] = {}
     notes = [f"{where}: {note}" for note in motion.notes]
-    if "time_s" in needs:
+    wanted = (*needs, *optional)
+    if "time_s" in wanted:
         options["time_s"] = motion.time_s
+    if "gyro" in optional and "gyro" not in needs:
+        if motion.gyro is not None:
+            options["gyro"] = motion.gyro
+        else:
+            notes.append(f"{where}: no gyroscope beside this compass: the methods that only take one run without it")
     try:
         if "gyro" in needs:
             if motion.gyro is None:
@@ -130,8 +149,8 @@ def method_streams(
         if not available:
             raise
         notes.append(str(error))
-    if "accel" in needs:
-        accel, said = _accel(motion, needs)
+    if "accel" in wanted:
+        accel, said = _accel(motion, wanted)
         notes.append(f"{where}: {said}")
         if accel is not None:
             options["accel"] = accel
