@@ -231,9 +231,27 @@ def _rotation_error_deg(matrix: np.ndarray, mounting: np.ndarray) -> float:
     return float(np.degrees(Rotation.from_matrix(_polar(matrix) @ mounting.T).magnitude()))
 
 
+def test_with_accel_a_flight_meets_issue_14s_alignment_target() -> None:
+    # 10 minutes at 10 Hz, 1° of attitude error correlated over 5 s (the benchmark's case): seeds 1-6 measured
+    # 1.71 / 2.28 / 1.84 / 0.94 / 2.17 / 2.49° without accel, 0.31 / 0.29 / 0.79 / 0.59 / 0.27 / 0.40° with it
+    # (RMS 0.48°, the target 0.5°); the heading error 0.41-0.63° without, 0.17-0.34° with.
+    plain, joint = [], []
+    for seed in range(1, 7):
+        sim = _driven("flight", attitude_deg=1.0, seed=seed, n=6000)
+        options = {"reference": sim.reference, "time_s": sim.time_s, "allow_undetermined": True}
+        without = magfit.fit(sim.samples, method="vector", **options)
+        cal = magfit.fit(sim.samples, method="vector", accel=sim.accel, gyro=sim.gyro, **options)
+        assert cal.details["gravity"]["used"], cal.details["gravity"]
+        plain.append(_rotation_error_deg(without.matrix, sim.mounting))
+        joint.append(_rotation_error_deg(cal.matrix, sim.mounting))
+        assert _heading_error_deg(sim, cal.apply(sim.clean)) < _heading_error_deg(sim, without.apply(sim.clean))
+    rms = float(np.sqrt(np.mean(np.square(joint))))
+    assert rms < 0.55 and rms < 0.3 * float(np.sqrt(np.mean(np.square(plain)))), (joint, plain)
+
+
 def test_the_accelerometer_pins_the_vertical_and_the_rotation_improves() -> None:
-    # Car, 1° of attitude error (seed 3): without accel the vertical output's response is 0.35° off and the
-    # rotation 1.17°; the still samples' gravity equations take them to 0.12° and 0.72°, the heading 0.53° → 0.50°.
+    # Car, 1° of attitude error (seed 3): without accel the vertical output's response is 0.35° off, the rotation
+    # 1.17° and the heading 0.53°; with the gravity and radial equations 0.11°, 0.43° and 0.26°.
     sim = _driven("car", attitude_deg=1.0, seed=3)
     plain = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s)
     joint = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s, accel=sim.accel,
@@ -243,8 +261,8 @@ def test_the_accelerometer_pins_the_vertical_and_the_rotation_improves() -> None
     assert any("turning faster" in reason for reason in gravity["dropped"]), gravity["dropped"]
     assert gravity["vertical_field"] == pytest.approx(FIELD * np.sin(np.radians(64.0)), rel=0.01)
     assert _vertical_tilt_deg(joint.matrix, sim.truth.matrix) < 0.2 < _vertical_tilt_deg(plain.matrix, sim.truth.matrix)
-    assert _rotation_error_deg(joint.matrix, sim.mounting) < 0.8 < _rotation_error_deg(plain.matrix, sim.mounting)
-    assert _heading_error_deg(sim, joint.apply(sim.clean)) <= _heading_error_deg(sim, plain.apply(sim.clean))
+    assert _rotation_error_deg(joint.matrix, sim.mounting) < 0.6 < _rotation_error_deg(plain.matrix, sim.mounting)
+    assert _heading_error_deg(sim, joint.apply(sim.clean)) < 0.7 * _heading_error_deg(sim, plain.apply(sim.clean))
     assert joint.details["alignment_sigma_deg"] > 0
     assert any("gravity equations joined the fit" in note for note in joint.diagnostics.notes)
     assert magfit.Calibration.from_json(joint.to_json()) == joint

@@ -44,34 +44,41 @@ mounting and costs ``tan δ`` times itself in heading (2x at δ = 64°). With th
 (car, 1°, 15 000 samples, 5 seeds): yaw errors alone 0.25°, tilt errors alone 0.74°; the floor from the
 mean errors ``√(ψ̄² + (tan δ θ̄)²)`` is 0.6°, least squares 0.77°.
 
-With ``accel``: the joint fit of (3) and (4) at the lag found from (2), linear in (M, c, s). Each kind of
-equation is weighted by its own noise and its time correlation: ``w = 1 / (σ² κ)``, σ² the residuals'
-scatter and κ how far their batch means exceed independent errors' (the vector equations carry the
-attitude's error, correlated over seconds: κ = 40-80 at 10 Hz; the gravity equations the accelerometer's
-and magnetometer's noise: κ ≈ 1), first from the regression and the sensors' noise, then from the joint
-fit's own residuals, with Huber weights on the gravity equations (accelerations the gate let through).
-Both kinds have noise in their regressors (the magnetometer's in ``raw``, the accelerometer's in ``d``):
-least squares would shrink M along what the motion leaves weak to fit that noise (measured: a boat's
-rotation 0.18° → 0.98° on the true reference), so its expected contribution is taken off the normal
-equations (adjusted least squares; the noises from third differences of the samples). The uncertainty
-is a block jackknife of the joint fit (:data:`magfit.diagnostics.reference.BLOCKS` stretches, each refit
-exactly).
+With ``accel``: the joint fit of (3) and (4) at the lag found from (2), linear in (M, c, s). (3) is taken
+in the frame of ``r_k``: its radial component ``r̂_k · (M raw_k − c) = |r_k|`` is free of the attitude's error
+(a small rotation of r changes its direction, not its length: the magnitude equation, linearised), its two
+tangential components carry it. Each kind of equation is weighted by its own noise and time correlation,
+``w = 1 / (σ² κ)``, σ² the residuals' scatter and κ how far their batch means exceed independent errors'
+(measured at 10 Hz: the tangential components κ = 40-80, the attitude's error correlated over seconds; the
+radial ones and the gravity equations κ ≈ 1-2, the magnetometer's and accelerometer's noise): first from the
+regression's residuals and the sensors' noise, then from the joint fit's own residuals, with Huber weights on
+the gravity equations (accelerations the still-sample gate let through). Both kinds have noise in their
+regressors (the magnetometer's in ``raw``, the accelerometer's in ``d``): least squares would shrink M along
+what the motion leaves weak to fit that noise (the radial equations at their weight without it: M 9 % too
+small on a flight, heading error 3°; a boat's rotation 0.18° → 0.98° on the true reference with the gravity
+equations), so its expected contribution is taken off the normal equations (adjusted least squares, the noises
+from third differences of the samples). The uncertainty is a block jackknife of the joint fit
+(:data:`magfit.diagnostics.reference.BLOCKS` stretches, each refitted exactly).
 
-What the accelerometer can and cannot pin. (4) sees the calibrated field's component along gravity: it
-pins the response of the vehicle's vertical output to the horizontal field (M's row z), through the
-horizontal field turning under it as the vehicle holds still at different headings; used only when the
-still samples' headings spread across both horizontal axes (:data:`MIN_HEADING_SPREAD`; a boat rolling on
-one heading does not). It cannot pin the response of the horizontal outputs to the vertical field (M's
-column z), which on a vehicle that tilts ±15° is confounded with the offset in (3) and (4) alike (the
-vertical field hardly changes in the vehicle frame) and which dominates the rotation error at 1° of
-attitude error (flight, trial 3: 0.062 in M's (x, z) element against 0.010 in (z, x)). Measured on
-benchmarks/accuracy_vehicle.py (6000 samples at 10 Hz, lag 0.1 s, mounting 5-35°, 8 trials; RMS rotation
-error / heading error, without → with accel): flight 2.27 → 1.81° / 0.607 → 0.577° at 1° of attitude error,
-1.04 → 0.94° / 0.300 → 0.294° at 0.5°; car 1.01 → 0.77° / 0.505 → 0.427° at 1°, 0.50 → 0.47° / 0.255 →
-0.246° at 0.5°; 0.2°: unchanged within 0.01°; the boat and the tumble (no still samples) unchanged. Issue
-14's 0.5° at 1° is not reached: what is left is M's column z. A constant accelerometer bias of 0.1 m/s²
-(0.6° of tilt) goes into the vertical: car at 1° 1.38° / 0.618° (worse than without accel), flight 1.96° /
-0.639°.
+What each kind pins. The tangential components give the rotation about the vertical (the heading), with
+the attitude's error. The gravity equations (4) see the calibrated field's component along gravity: they pin
+the response of the vehicle's vertical output to the horizontal field (M's row z) through the horizontal field
+turning under it as the vehicle holds still at different headings; the joint fit is made only when the still
+samples' headings spread across both horizontal axes (:data:`MIN_HEADING_SPREAD`: a boat rolling on one heading
+does not). Neither pins the response of the horizontal outputs to the vertical field (M's column z): on a
+vehicle that tilts ±15° the vertical field hardly changes in the vehicle frame, so in (3) and (4) alike it is
+confounded with the offset, and it dominated the rotation error of the regression at 1° of attitude error
+(flight, trial 3: 0.062 in M's (x, z) element against 0.010 in (z, x)). The radial equations pin it: the
+field's length does change with the tilt, and they carry no attitude error. Measured on
+benchmarks/accuracy_vehicle.py (6000 samples at 10 Hz, lag 0.1 s, mounting 5-35°, 8 trials; RMS rotation error
+/ heading error, without → with accel): flight 2.27 → 0.42° / 0.607 → 0.357° at 1° of attitude error, 1.04 →
+0.28° / 0.300 → 0.204° at 0.5°, 0.38 → 0.21° / 0.119 → 0.098° at 0.2°; car 1.01 → 0.39° / 0.505 → 0.188°,
+0.50 → 0.22° / 0.255 → 0.145°, 0.20 → 0.14° / 0.106 → 0.088°; the boat (one heading) and the tumble (never
+still) unchanged. The radial equations alone (no gravity) gave 0.48° / 0.511° (flight, 1°) and 0.44° / 0.401°
+(car): the rotation is theirs, the heading gain mostly the gravity equations'. The gravity equations align the
+magnetometer to the accelerometer, biases included: a constant 0.1 m/s² on its x axis (0.6° of tilt) gives
+0.65° / 0.719° on the flight and 0.61° / 0.682° on the car at 1°, a heading error worse than without accel
+(which the stated one-sigma, 0.38° and 0.26°, does not show): calibrate the accelerometer's offsets first.
 
 A lag between the attitude and the magnetometer (``time_s`` given) is searched on a grid of one sample
 period within ``±max_lag_s``, then refined by a bounded scalar minimisation of the residual sum of squares,
@@ -110,11 +117,12 @@ LAG_BLOCKS = 8
 #: Fewest samples on which the accelerometer sees gravity alone for the gravity equations (4) to join the fit.
 MIN_GRAVITY_ROWS = 50
 #: Smallest in-plane eigenvalue of the scatter of the horizontal field's direction over the still samples
-#: (a full circle of headings gives 0.5, headings within ±32° about 0.1, a boat's ±10° 0.01) for the gravity
-#: equations to be used: they pin the tilt of the vertical through the horizontal field turning under it, and
-#: from one heading they pin one combination of the weak directions and move the others (measured on
-#: benchmarks/accuracy_vehicle.py's boat, 8 trials at 1° of attitude error: alignment 1.88° → 3.28°).
-MIN_HEADING_SPREAD = 0.1
+#: (a full circle of headings gives 0.5, headings within ±22° about 0.05, a boat's ±10° 0.01) for the joint
+#: fit to be made: the gravity equations pin the tilt of the vertical through the horizontal field turning
+#: under it; from one heading they pin one combination of the weak directions and move the others.
+#: benchmarks/accuracy_vehicle.py, 8 trials each: the boat's spread 0.008-0.033 (its joint fit: rotation error
+#: 1.88° → 3.48° at 1° of attitude error, 0.33° → 1.06° at 0.2°), flights' and cars' 0.058-0.48.
+MIN_HEADING_SPREAD = 0.05
 #: Huber's tuning constant (in robust standard deviations) for the gravity equations: residual accelerations
 #: (a turn the gate missed, a lever arm) are down-weighted, not trusted.
 HUBER = 1.345
@@ -353,10 +361,11 @@ class _Equations:
     mag_noise: float  # σ_m, raw units, per axis
     down_noise: float  # σ_a, radians, per axis across gravity
 
-    def normal(self, w_vector: float, w_gravity: NDArray[np.float64],
+    def normal(self, w_vector: float, w_gravity: NDArray[np.float64], w_radial: float,
                select: NDArray[np.bool_] | None = None) -> tuple[NDArray[Any], NDArray[Any]]:  # fmt: skip
         """H and b of the weighted least squares, corrected for the noise in the regressors (see the module
-        docstring): over the samples ``select`` (all when None)."""
+        docstring): over the samples ``select`` (all when None). ``w_vector`` weighs the vector equations'
+        tangential components, ``w_radial`` their radial one, ``w_gravity`` each gravity equation."""
         x, r = self.design, self.reference
         in_g = np.ones(self.rows.size, dtype=bool) if select is None else select[self.rows]
         if select is not None:
@@ -364,14 +373,21 @@ class _Equations:
         noisy = np.diag([1.0, 1.0, 1.0, 0.0])  # the magnetometer's noise is in raw, not in the −1
         h = np.zeros((13, 13))
         b = np.zeros(13)
-        scatter = w_vector * (x.T @ x - x.shape[0] * self.mag_noise**2 * noisy)
-        for i in range(3):
-            h[4 * i : 4 * i + 4, 4 * i : 4 * i + 4] = scatter
-            b[4 * i : 4 * i + 4] = w_vector * (x.T @ r[:, i])
+        # (3) row by row in the frame of r_k: radial (weight w_radial, target |r_k|) and tangential (w_vector,
+        # target 0): Σ_k W_k ⊗ x_k x_kᵀ with W_k = w_vector (I − u uᵀ) + w_radial u uᵀ, u = r_k / |r_k|.
+        size = np.linalg.norm(r, axis=1)
+        u = r / size[:, None]
+        radial = u[:, :, None] * u[:, None, :]
+        mix = w_vector * (np.eye(3)[None] - radial) + w_radial * radial
+        h[:12, :12] += np.einsum("kab,ki,kj->aibj", mix, x, x).reshape(12, 12)
+        h[:12, :12] -= self.mag_noise**2 * np.kron(mix.sum(axis=0), noisy)  # the noise in raw, taken off
+        b[:12] += (w_radial * size[:, None, None] * u[:, :, None] * x[:, None, :]).sum(axis=0).reshape(12)
         d, w = self.down[in_g], w_gravity[in_g]
         xg = self.design[self.rows[in_g]]
         a = np.concatenate([(d[:, :, None] * xg[:, None, :]).reshape(-1, 12), -np.ones((d.shape[0], 1))], axis=1)
         h += (a * w[:, None]).T @ a
+        if not np.any(w > 0):  # no gravity equation in these samples: s is not an unknown
+            h[12, 12] = 1.0
         # The regressors d_i x_j carry the magnetometer's noise (d_i n_j) and the accelerometer's (ν_i x_j, ν
         # across d): their expected contributions to aᵀa, taken off (adjusted least squares).
         dd = np.einsum("k,ki,kj->ij", w, d, d)
@@ -384,6 +400,19 @@ class _Equations:
         beta = p[:12].reshape(3, 4)
         body = self.design @ beta.T
         return body - self.reference, np.einsum("ki,ki->k", self.down, body[self.rows]) - p[12]
+
+
+def _vector_weights(residuals: NDArray[np.float64], reference: NDArray[np.float64],
+                    floor: float) -> tuple[float, float, float]:  # fmt: skip
+    """The weights of the vector equations (3): (σ², κ) of their tangential components (per component) and the
+    radial component's own weight ``1 / (σ² κ)`` (see the module docstring)."""
+    u = reference / np.linalg.norm(reference, axis=1, keepdims=True)
+    radial = np.einsum("ki,ki->k", residuals, u)
+    tangential = residuals - radial[:, None] * u
+    t_var, t_kappa = _inflation(tangential)
+    r_var, r_kappa = _inflation(radial)
+    # _inflation averages over the 3 axes; the tangential scatter lives in 2 of them.
+    return max(1.5 * t_var, floor), t_kappa, 1.0 / (max(r_var, floor) * r_kappa)
 
 
 def _solve_normal(h: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64] | None:
@@ -472,14 +501,13 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
     # Pass 1: the vector equations weighted by their scatter and its correlation (from the regression's
     # residuals), the gravity equations by the noise the sensors predict for them (white).
     m0 = np.linalg.inv(g)
-    v_var, v_kappa = _inflation((used_raw - offset) @ m0.T - used_ref)
     # Noise-free data would give zero variances: floored far below any real sensor's noise.
     floor = (1e-9 * float(np.median(np.linalg.norm(used_ref, axis=1)))) ** 2
-    v_var = max(v_var, floor)
+    v_var, v_kappa, r_weight = _vector_weights((used_raw - offset) @ m0.T - used_ref, used_ref, floor)
     g_var = mag_noise**2 * float(np.mean(np.sum((down @ m0) ** 2, axis=1)))
     g_var += down_noise**2 * float(np.mean(np.sum(np.cross(down, body) ** 2, axis=1)))
     g_var = max(g_var, floor)
-    p = _solve_normal(*equations.normal(1.0 / (v_var * v_kappa), np.full(still.size, 1.0 / g_var)))
+    p = _solve_normal(*equations.normal(1.0 / (v_var * v_kappa), np.full(still.size, 1.0 / g_var), r_weight))
     huber = np.ones(still.size)
     g_kappa = 1.0
     outliers = 0
@@ -487,15 +515,14 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
         # Pass 2: each kind weighted by its own residuals' scatter and correlation; the gravity equations'
         # outliers (accelerations the gate let through) down-weighted by Huber's weights.
         e_vector, e_gravity = equations.residuals(p)
-        v_var, v_kappa = _inflation(e_vector)
-        v_var = max(v_var, floor)
+        v_var, v_kappa, r_weight = _vector_weights(e_vector, used_ref, floor)
         scale = 1.4826 * float(np.median(np.abs(e_gravity - np.median(e_gravity))))
         if scale > 0:
             huber = np.minimum(1.0, HUBER * scale / np.maximum(np.abs(e_gravity), 1e-300))
             outliers = int(np.sum(np.abs(e_gravity) > 3.0 * scale))
             g_var, g_kappa = _inflation(e_gravity, huber)
             g_var = max(g_var / float(np.mean(huber)), floor)
-        weights = (1.0 / (v_var * v_kappa), huber / (g_var * g_kappa))
+        weights = (1.0 / (v_var * v_kappa), huber / (g_var * g_kappa), r_weight)
         p = _solve_normal(*equations.normal(*weights))
     if p is None or not abs(np.linalg.det(p[:12].reshape(3, 4)[:, :3])) > 0:
         note = (
