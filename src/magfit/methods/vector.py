@@ -386,8 +386,6 @@ class _Equations:
         xg = self.design[self.rows[in_g]]
         a = np.concatenate([(d[:, :, None] * xg[:, None, :]).reshape(-1, 12), -np.ones((d.shape[0], 1))], axis=1)
         h += (a * w[:, None]).T @ a
-        if not np.any(w > 0):  # no gravity equation in these samples: s is not an unknown
-            h[12, 12] = 1.0
         # The regressors d_i x_j carry the magnetometer's noise (d_i n_j) and the accelerometer's (ν_i x_j, ν
         # across d): their expected contributions to aᵀa, taken off (adjusted least squares).
         dd = np.einsum("k,ki,kj->ij", w, d, d)
@@ -418,6 +416,9 @@ def _vector_weights(residuals: NDArray[np.float64], reference: NDArray[np.float6
 def _solve_normal(h: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """The solution, or None when the corrected normal matrix is not positive definite (the noise corrections
     exceed what the samples determine along some direction)."""
+    if not h[12, 12] > 0:  # no gravity equation among these samples: s is not an unknown
+        h = h.copy()
+        h[12, 12] = 1.0
     # Scaled to a unit diagonal first: M is dimensionless and c in the samples' unit.
     diagonal = np.sqrt(np.abs(np.diag(h)))
     if not np.all(diagonal > 0):
@@ -523,7 +524,8 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
             g_var, g_kappa = _inflation(e_gravity, huber)
             g_var = max(g_var / float(np.mean(huber)), floor)
         weights = (1.0 / (v_var * v_kappa), huber / (g_var * g_kappa), r_weight)
-        p = _solve_normal(*equations.normal(*weights))
+        whole_h, whole_b = equations.normal(*weights)
+        p = _solve_normal(whole_h, whole_b)
     if p is None or not abs(np.linalg.det(p[:12].reshape(3, 4)[:, :3])) > 0:
         note = (
             "The accelerometer's gravity equations were not used: corrected for the sensors' noise, they and the "
@@ -531,13 +533,15 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
         )
         return GravityFit(None, None, None, {**facts, "note": note}, note)
     g_joint, offset_joint = _vehicle_form(p)
-    # The block jackknife: the joint fit again without each contiguous stretch (its gravity rows with it).
+    # The block jackknife: the joint fit again without each contiguous stretch (its gravity rows with it); the
+    # normal equations are sums over the samples, so each refit takes its stretch's share off the whole's.
     edges = np.linspace(0, n, BLOCKS + 1).astype(np.int64)
     estimates: list[NDArray[np.float64]] = []
     for start, stop in itertools.pairwise(edges):
-        select = np.ones(n, dtype=bool)
-        select[start:stop] = False
-        partial = _solve_normal(*equations.normal(*weights, select=select))
+        select = np.zeros(n, dtype=bool)
+        select[start:stop] = True
+        block_h, block_b = equations.normal(*weights, select=select)
+        partial = _solve_normal(whole_h - block_h, whole_b - block_b)
         if partial is None:
             estimates = []
             break
