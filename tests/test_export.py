@@ -213,6 +213,8 @@ def test_ardupilot_correct_field_reproduces_apply_in_milligauss(
     _close(corrected, k * cal.apply(samples), k * samples, RTOL_TEXT)
     # ArduPilot adds its offsets: they are the negative of magfit's, in mG.
     np.testing.assert_allclose([params[f"COMPASS_OFS_{a}"] for a in "XYZ"], -k * cal.offset, rtol=1e-8)
+    # The header names the firmware function whose formula the file follows (a rename once garbled it).
+    assert "(AP_Compass_Backend::correct_field)" in export(cal, "ardupilot")
 
 
 def test_px4_correct_reproduces_apply_in_gauss(fitted: tuple[magfit.Calibration, NDArray[np.float64]]) -> None:

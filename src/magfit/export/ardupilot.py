@@ -1,6 +1,6 @@
 """ArduPilot compass parameters (``.param``): COMPASS_OFS_*, COMPASS_DIA_*, COMPASS_ODI_*, COMPASS_SCALE.
 
-ArduPilot's convention, from ``APSlotParameters_Backend::correct_field`` (libraries/APSlotParameters), applied
+ArduPilot's convention, from ``AP_Compass_Backend::correct_field`` (libraries/AP_Compass), applied
 to every sample in milligauss, in the body frame (after COMPASS_ORIENT / AHRS_ORIENTATION)::
 
     mag += (OFS_X, OFS_Y, OFS_Z)                  # offsets are ADDED
@@ -25,7 +25,7 @@ Refused, rather than written wrong (ArduPilot would reject, ignore or fail to ar
 
 - no unit or raw counts: ArduPilot needs milligauss;
 - ``|OFS| > 1800`` mG: the arming check fails when the offset length exceeds COMPASS_OFFS_MAX
-  (default 1800, APSlotParameters.cpp) and the calibrator rejects any axis beyond it;
+  (default 1800, AP_Compass.cpp) and the calibrator rejects any axis beyond it;
 - a diagonal outside (0.2, 5) or an off-diagonal with ``|ODI| >= 1``: outside what
   ``CompassCalibrator::fit_acceptable`` accepts;
 - a field strength outside [185, 875] mG: the arming check "Check mag field"
@@ -33,7 +33,7 @@ Refused, rather than written wrong (ArduPilot would reject, ignore or fail to ar
 - a non-symmetric matrix other than a Cholesky root.
 
 Written with a ``# WARNING`` line: an offset axis beyond +-400 mG, the ``@Range`` of COMPASS_OFS_*
-in APSlotParameters.cpp's parameter documentation. ArduPilot itself accepts it, but Mission Planner checks
+in AP_Compass.cpp's parameter documentation. ArduPilot itself accepts it, but Mission Planner checks
 the documented range when a value is loaded or edited (ConfigRawParams.cs) and asks "COMPASS_OFS_X
 value is out of range. Do you want to continue?"; answering No keeps the old value.
 
@@ -43,7 +43,7 @@ value is out of range. Do you want to continue?"; answering No keeps the old val
 ``slot=`` / ``device_id=`` options or from ``details["sensor"]`` (filled from a flight log);
 :func:`magfit.export.export_several` writes several compasses in one file. ``COMPASS_DEV_ID*`` is written
 as a comment, not a parameter: ArduPilot sets it itself at boot (``@ReadOnly``) from the detected sensor,
-and ``Compass::configured`` (APSlotParameters.cpp) treats a compass whose stored ``COMPASS_DEV_ID`` differs from
+and ``Compass::configured`` (AP_Compass.cpp) treats a compass whose stored ``COMPASS_DEV_ID`` differs from
 the detected one as not calibrated ("Compass not calibrated" at arming), so a loaded id can only break a
 vehicle whose compass order differs; the comment tells the user which id to check before loading.
 
@@ -56,7 +56,7 @@ outside 0.85-1.4 with the reason. Without ``expected_field``, SCALE = 1 (ArduPil
 "no scale", when it has no GPS position; both leave the field as fitted).
 
 **A vehicle-frame calibration** (``frame == "vehicle"``: ``corrected_vehicle = M @ (raw - offset)``, M
-general). ``APSlotParameters_Backend::accumulate_sample`` calls ``rotate_field`` (the driver's rotation, then,
+general). ``AP_Compass_Backend::accumulate_sample`` calls ``rotate_field`` (the driver's rotation, then,
 for an external compass, ``COMPASS_ORIENT``) *before* ``correct_field``, so ArduPilot applies::
 
     corrected = D @ (SCALE * (R @ raw + OFS))
@@ -118,7 +118,7 @@ FIELD_RANGE_MG = (185.0, 875.0)
 #: COMPASS_MIN/MAX_SCALE_FACTOR (CompassCalibrator.h): outside, Compass::have_scale_factor() ignores SCALE
 #: and CompassCalibrator::fix_radius fails the calibration ("bad radius").
 SCALE_RANGE = (0.85, 1.4)
-#: The documented @Range of COMPASS_SCALE* (APSlotParameters.cpp): Mission Planner asks before loading a value above it.
+#: The documented @Range of COMPASS_SCALE* (AP_Compass.cpp): Mission Planner asks before loading a value above it.
 SCALE_DOCUMENTED_MAX = 1.3
 #: The COMPASS_SCALE written without an expected field: magfit's corrected field is already in milligauss.
 SCALE = 1.0
@@ -322,7 +322,7 @@ def _orientation(
     if not np.allclose(rotation, np.eye(3)):
         comments.append(
             f"# WARNING: ArduPilot applies COMPASS_ORIENT{n} to an external compass only "
-            f"({external(slot)} = 1, APSlotParameters_Backend::rotate_field); an internal one follows "
+            f"({external(slot)} = 1, AP_Compass_Backend::rotate_field); an internal one follows "
             "AHRS_ORIENTATION, which turns the board"
         )
     return rotation, orientation, comments
@@ -394,7 +394,7 @@ def _file(calibrations: Sequence[Calibration], compasses: list[SlotParameters], 
     lines = [
         f"# ArduPilot compass calibration: compass {which}",
         *(f"# {line}" for line in describe(first, source.name) if len(compasses) == 1),
-        "# ArduPilot corrects each sample (APSlotParameters_Backend::correct_field), in milligauss, body frame:",
+        "# ArduPilot corrects each sample (AP_Compass_Backend::correct_field), in milligauss, body frame:",
         "#   mag += (OFS_X, OFS_Y, OFS_Z)",
         f"#   mag *= SCALE   (only if {SCALE_RANGE[0]} <= SCALE <= {SCALE_RANGE[1]}: Compass::have_scale_factor)",
         "#   mag = [[DIA_X, ODI_X, ODI_Y], [ODI_X, DIA_Y, ODI_Z], [ODI_Y, ODI_Z, DIA_Z]] * mag",
