@@ -567,7 +567,8 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
     note = (
         f"The accelerometer's gravity equations joined the fit on {still.size} of {kept.size} samples, where it "
         f"sees gravity alone (dropped: {reasons}); {outliers} of them beyond 3 robust standard deviations (residual "
-        "accelerations), down-weighted."
+        "accelerations), down-weighted. They align the magnetometer to the accelerometer, whose offsets go into "
+        "the calibration (0.1 m/s² tilts its vertical by 0.6°): calibrate the accelerometer first."
     )
     return GravityFit(g_joint, offset_joint, covariance, {**facts, "note": note}, note)
 
