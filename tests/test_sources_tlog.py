@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 import magfit
 from magfit.cli import cli
 from magfit.errors import DataFileError
+from magfit.export import export
 from magfit.sources import log_kind, open_source
 from magfit.sources.tlog import _CRC_EXTRA, _IDS, _LAYOUTS, _MAX_LENGTH, TelemetryLog
 from test_sources_dataflash import COMPASSES, correct_field
@@ -260,6 +261,20 @@ def test_without_parameters_the_samples_stay_calibrated_and_the_fit_is_a_residua
         correct_field(simulations[0].samples, **{k: COMPASSES[0][k] for k in ("ofs", "dia", "odi", "scale")})
     )
     np.testing.assert_array_equal(source.read("RAW_IMU").samples, expected)
+    # The residual must never be written as the firmware's calibration: it would replace the one in use.
+    assert compass.calibration_in_use is not None
+    output = tmp_path / "mag.param"
+    result = CliRunner().invoke(
+        cli, ["calibrate", str(path), "--sensor", "RAW_IMU", "--export", "ardupilot", "-o", str(output)]
+    )
+    assert result.exit_code != 0 and not output.exists(), result.output
+    assert "residual correction on top of that one" in result.output and "Traceback" not in result.output
+    fitted = magfit.calibrate_file(path, "ellipsoid", sensor="RAW_IMU").calibration
+    with pytest.raises(magfit.ExportError, match="written as px4 it would replace it"):
+        export(fitted, "px4")
+    kept = magfit.Calibration.from_json(export(fitted, "json"))  # json keeps it, and what it is
+    with pytest.raises(magfit.ExportError, match="already carry the firmware's calibration"):
+        export(kept, "c")
 
 
 def test_a_tlog_without_a_compass_says_what_to_stream(tmp_path: Path) -> None:

@@ -208,6 +208,7 @@ def export(
     spec = _spec(format)
     if not isinstance(calibration, Calibration):
         raise MagfitError(f"export() takes a magfit.Calibration, got {type(calibration).__name__}")
+    _refuse_residual(calibration, format)
     options = {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field}
     given = _options(spec, {**options, "applied_rotation": applied_rotation})
     given.pop("applied_rotation", None)
@@ -258,6 +259,8 @@ def export_several(
     calibrations = list(calibrations)
     if not calibrations or not all(isinstance(c, Calibration) for c in calibrations):
         raise MagfitError("export_several() takes a non-empty sequence of magfit.Calibration")
+    for calibration in calibrations:
+        _refuse_residual(calibration, format)
     if format in ("ardupilot", "px4"):  # their mounting rotations, as in export()
         calibrations = [with_applied_rotation(c, None) for c in calibrations]
     if format not in SEVERAL:
@@ -284,6 +287,18 @@ def export_several(
     return write_px4_several(
         calibrations, unit, system_id=1 if system_id is None else system_id, slots=slots, device_ids=device_ids
     )
+
+
+def _refuse_residual(calibration: Calibration, format: str) -> None:
+    """A fit on samples that still carry the firmware's calibration is a residual: only json may hold it."""
+    sensor = calibration.details.get("sensor")
+    in_use = sensor.get("calibration_in_use") if isinstance(sensor, Mapping) else None
+    if in_use and format != "json":
+        raise ExportError(
+            f"this calibration was fitted on samples that already carry the firmware's calibration ({in_use}): it "
+            f"is a residual correction on top of that one, and written as {format} it would replace it; record "
+            "the raw field (or the parameters with it) and calibrate again, or export json to keep the residual"
+        )
 
 
 def _spec(format: str) -> FormatSpec:

@@ -412,6 +412,8 @@ def _calibrate_compass(
     label = unit or magnetometer.unit
     calibration = calibration.with_unit(label) if label else calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
+    if magnetometer.calibration_in_use is not None:  # the exports refuse to write a residual in its place
+        sensor["calibration_in_use"] = magnetometer.calibration_in_use
     source_details = {"file": path.name, "sensor": magnetometer.id, "device_id": magnetometer.device_id}
     source_details["unit"] = calibration.unit
     calibration = replace(calibration, details={**calibration.details, "source": source_details, "sensor": sensor})

@@ -86,6 +86,10 @@ class Magnetometer:
         The firmware's calibration slot its calibration is written to, 0-based: ArduPilot's compass index
         (``COMPASS_OFS_*`` is 0, ``COMPASS_OFS2_*`` is 1), PX4's ``CAL_MAGn`` index (the one whose
         ``CAL_MAGn_ID`` is this device, else the first free one). None when unknown (a samples file).
+    calibration_in_use : str or None
+        Set when the samples carry the firmware's calibration and the log does not say which (a telemetry log
+        without the parameters): why, in words. A fit on them is a residual correction on top of that
+        calibration, which no firmware export may write in its place.
     """
 
     id: str
@@ -99,6 +103,7 @@ class Magnetometer:
     notes: tuple[str, ...] = ()
     problem: str | None = None
     slot: int | None = None
+    calibration_in_use: str | None = None
 
     @property
     def span_s(self) -> float:

@@ -656,16 +656,19 @@ class _Compass:
         self.unit = "G" if self.px4 else "mG"
         notes: list[str] = []
         problem: str | None = None
+        in_use: str | None = None  # the firmware's calibration left in the samples (a residual fit)
         self.compass: Any = None
         if vehicle.autopilot not in (_ARDUPILOT, _PX4):
             notes.append("no HEARTBEAT names the autopilot: read as ArduPilot's (the firmware that streams RAW_IMU)")
         if self.px4:
+            in_use = "PX4's HIGHRES_IMU field, already calibrated with CAL_MAGn_*"
             notes.append(
                 "HIGHRES_IMU's field is PX4's vehicle_magnetometer: calibrated with CAL_MAGn_* and in the body frame; "
                 "it is not undone, so a fit on it is a residual correction on top of the calibration in use (its "
                 "offset adds to CAL_MAGn_*OFF, not replaces it)"
             )
         elif not any(key.startswith("COMPASS_OFS") for key in vehicle.parameters):
+            in_use = f"ArduPilot's {name} field, already calibrated, and no COMPASS_* parameters in the log to undo it"
             notes.append(
                 f"{name}'s field is ArduPilot's calibrated field and the ground station fetched no COMPASS_* "
                 "parameters while recording, so the calibration in use cannot be undone: a fit on these samples is a "
@@ -713,6 +716,7 @@ class _Compass:
             notes=tuple(notes),
             problem=problem,
             slot=self.compass.index if self.compass is not None else self.slot,
+            calibration_in_use=in_use,
         )
         rate = self.magnetometer.rate_hz
         if np.isfinite(rate) and rate < SLOW_RATE_HZ:
