@@ -318,10 +318,12 @@ def test_malformed_accel_and_gyro_are_one_line_option_errors() -> None:
         ({"accel": np.where(np.arange(600)[:, None] == 4, np.nan, sim.accel)}, "accel= has NaN or inf in row 4"),
         ({"accel": np.where(np.arange(600)[:, None] == 6, 0.0, sim.accel)}, r"accel= is \(0, 0, 0\) in row 6"),
         ({"accel": "down"}, "accel= must"),
-        ({"gyro": sim.gyro}, "give accel= too"),
         ({"accel": sim.accel, "gyro": sim.gyro[:, :2]}, r"gyro= must have one row .*got shape \(600, 2\)"),
     ]
     for options, words in cases:
         with pytest.raises(OptionError, match=words) as caught:
             magfit.fit(sim.samples, method="vector", **base, **options)
         assert "\n" not in str(caught.value)
+    # The gyroscope alone (compare() passes every stream a method takes) is not used, and that is said.
+    alone = magfit.fit(sim.samples, method="vector", gyro=sim.gyro, allow_undetermined=True, **base)
+    assert "used only with accel=" in alone.details["gyro_note"] and "gravity" not in alone.details

@@ -606,7 +606,8 @@ def fit_vector(
         its gravity equations (4) join the fit where it sees gravity alone (:func:`magfit.gravity.still_samples`):
         ``details["gravity"]`` says on how many samples and why the others were left out.
     gyro : array_like, shape (N, 3), optional
-        Body rates in rad/s in the same frame, for the still-sample gate (only with ``accel``).
+        Body rates in rad/s in the same frame, for the still-sample gate (only with ``accel``; without it
+        unused, said in ``details["gyro_note"]``).
     """
     raw = data.require_samples("vector")
     n = raw.shape[0]
@@ -615,8 +616,6 @@ def fit_vector(
         raise OptionError(f"max_lag_s must be a positive number of seconds, got {max_lag_s!r}")
     acc = None if accel is None else _motion_array(accel, "accel", n, "the specific force, any unit")
     rates = None if gyro is None else _motion_array(gyro, "gyro", n, "body rates in rad/s")
-    if rates is not None and acc is None:
-        raise OptionError("gyro= is used only to find where the accelerometer sees gravity alone: give accel= too")
     if acc is not None and np.any(np.all(acc == 0.0, axis=1)):
         row = int(np.argmax(np.all(acc == 0.0, axis=1)))
         raise OptionError(f"accel= is (0, 0, 0) in row {row} (0-based), which has no direction: drop that sample")
@@ -628,6 +627,8 @@ def fit_vector(
         row = int(np.argmax(magnitudes < 1e-6 * field))
         raise OptionError(f"reference= is zero in row {row} (0-based): drop the samples without an attitude")
     details: dict[str, Any] = {}
+    if rates is not None and acc is None:  # compare() and the pipeline pass every stream a method takes
+        details["gyro_note"] = "gyro= is used only with accel= (to find where the accelerometer sees gravity alone)"
     rate = None
     lag_limit = None
     jackknife = 0.0
