@@ -32,7 +32,8 @@ the apparent gravity beyond what the sigma counts (weak, named). The loss is als
 for another angle that fits as well.
 
 The accelerometer sees gravity alone only when the vehicle does not accelerate (:mod:`magfit.gravity`):
-samples are kept where ``|a|`` is within :data:`ACCEL_TOLERANCE` of g (the median |a|) and the vehicle turns
+samples are kept where ``|a|`` is within :data:`ACCEL_TOLERANCE` of g (the median |a| of the samples that turn
+slowly) and the vehicle turns
 about the vertical slower than ``max_rate_dps`` (with a gyroscope; without one, the rate at which the field and
 gravity directions turn): in a turn at speed v and rate ω the centripetal acceleration v ω tilts the apparent
 gravity by ``atan(v ω / g)`` (0.75° at 25 m/s and the default 0.3°/s), and a coordinated turn hides it from
@@ -411,7 +412,7 @@ def align(
         Fastest rotation (°/s, averaged over about a second) of a sample used; None keeps every rate (a
         hand-held rotation about the sensor itself, which has no centripetal acceleration to speak of).
     accel_tolerance : float
-        Largest relative deviation of |a| from g (the median |a|) of a sample used.
+        Largest relative deviation of |a| from g (the median |a| of the samples that turn slowly) of a sample used.
     allow_mirror : bool or None
         Whether a mirror image (det −1) of the sensor's axes may be the answer. None (default): yes where the
         samples can tell; where they cannot (a vehicle that stays nearly level), the proper rotation is returned

@@ -13,7 +13,8 @@ acceleration is then horizontal, tilts the apparent gravity by ``atan(v Ω / g)`
 (rolling in waves, tilting by hand) accelerates nothing, and a sensor at a lever arm h from that axis only by
 ``α h`` (0.1 m/s², 0.5°, for a 15° roll every 6 s at 0.35 m). So the gates are:
 
-- ``|a|`` within ``accel_tolerance`` of g (the median |a|);
+- ``|a|`` within ``accel_tolerance`` of g (the median |a| of the samples the rate gates keep, when a gyroscope
+  is given: a car that turns most of the time reads more than g on most samples);
 - the heading's rate of turn (from the gyro, bias removed, and the accelerometer's tilt), averaged over about
   a second, at most ``max_rate_dps``: the track of a car, a boat or an aircraft turns with its heading;
 - the whole rate at most ``max_tilt_rate_dps`` (the lever arm's share grows with it).
@@ -153,7 +154,7 @@ def still_samples(
         # An uncalibrated gyroscope's bias (tenths of a degree per second, above the gate) reads as turning on
         # every sample: its median on the samples whose field and gravity directions hold still (which no bias
         # reaches) is taken as the bias. Without time stamps there are no such samples: none is taken.
-        steady = keep & (moving_mean(turning, width) <= limit)
+        steady = moving_mean(turning, width) <= limit
         if np.sum(steady) >= _MIN_STEADY:
             bias = np.median(gyro[steady], axis=0)
             rates = gyro - bias
@@ -179,6 +180,16 @@ def still_samples(
     # Averaged over about a second: the gyro's noise averages out, turn edges widen.
     turn = moving_mean(np.abs(heading_rate), width) <= limit
     tilt = moving_mean(np.linalg.norm(rates, axis=1), width) <= math.radians(max_tilt_rate_dps)
+    if np.sum(turn & tilt) >= _MIN_STEADY:
+        # g from the samples that neither turn nor tilt fast: a car that turns most of the time reads
+        # √(g² + (vΩ)²) on most samples, and their median would leave its straight stretches out.
+        g = float(np.median(norm_a[turn & tilt]))
+        keep = np.abs(norm_a / g - 1.0) <= accel_tolerance
+        dropped = {
+            f"|a| more than {100 * accel_tolerance:g} % away from g (the median |a| where it turns slowly)": int(
+                np.sum(~keep)
+            )
+        }
     dropped[f"turning faster than {max_rate_dps:g}°/s in heading (from the gyroscope)"] = int(np.sum(keep & ~turn))
     dropped[f"rotating faster than {max_tilt_rate_dps:g}°/s (from the gyroscope)"] = int(np.sum(keep & turn & ~tilt))
     return StillSamples(keep & turn & tilt, width, dropped, tuple(notes))
