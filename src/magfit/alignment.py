@@ -33,11 +33,11 @@ for another angle that fits as well.
 
 The accelerometer sees gravity alone only when the vehicle does not accelerate (:mod:`magfit.gravity`):
 samples are kept where ``|a|`` is within :data:`ACCEL_TOLERANCE` of g (the median |a| of the samples that turn
-slowly) and the vehicle's heading turns slower than ``max_rate_dps`` (with a gyroscope; without one, the rate at
-which the field and gravity directions turn): in a turn at speed v and rate ω the centripetal acceleration v ω tilts the apparent
-gravity by ``atan(v ω / g)`` (0.75° at 25 m/s and the default 0.3°/s), and a coordinated turn hides it from
-|a| entirely. Rolling and pitching (a boat in waves) accelerate a sensor only through its lever arm and are
-kept up to ``max_tilt_rate_dps``. Kept samples are averaged over half
+slowly) and the vehicle's heading turns slower than ``max_rate_dps`` (with a gyroscope; without one, the rate
+at which the field and gravity directions turn): in a turn at speed v and rate ω the centripetal acceleration
+v ω tilts the apparent gravity by ``atan(v ω / g)`` (0.75° at 25 m/s and the default 0.3°/s), and a
+coordinated turn hides it from |a| entirely. Rolling and pitching (a boat in waves) accelerate a sensor only
+through its lever arm and are kept up to ``max_tilt_rate_dps``. Kept samples are averaged over half
 a second. Remaining outliers are down-weighted (Huber).
 
 Mirrors. A magnetometer whose axes are left-handed relative to the body (one axis inverted, or two swapped)
