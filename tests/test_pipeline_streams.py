@@ -197,7 +197,6 @@ def test_a_log_without_an_accelerometer_is_fitted_without_one(tmp_path, monkeypa
                                  unit=None, available=available)  # fmt: skip
         assert "accel" not in streams.options and "gyro" not in streams.options and "reference" in streams.options
         assert any("no accelerometer beside this compass: the methods run without it" in n for n in streams.notes)
-        assert any("no gyroscope beside this compass: the methods that only take one" in n for n in streams.notes)
     calibration = magfit.calibrate_file(path, "probe", sensor="MAG/0").calibration
     assert seen[-1]["accel"] is None and seen[-1]["reference"] is not None
     np.testing.assert_allclose(calibration.offset, motion_log.HARD, atol=3.0)
@@ -252,9 +251,11 @@ def test_an_accelerometer_in_another_frame_than_the_gyro_or_the_attitude_is_left
     # The frames are what the reader says of the topics (the values here happen to be the body's: only the
     # frames stated decide), and the accelerometer is left out for either method, with the reason.
     for needs, other in ((("gyro", "time_s"), "gyro"), (("reference",), "attitude")):
-        streams = method_streams(open_source(path), "sensor_mag/0", needs, optional=("time_s", "accel"), unit=None,
-                                 available=True)  # fmt: skip
+        streams = method_streams(open_source(path), "sensor_mag/0", needs, optional=("time_s", "gyro", "accel"),
+                                 unit=None, available=True)  # fmt: skip
         assert "accel" not in streams.options
+        # vector takes the gyro only to find gravity alone: without the accelerometer it is not given
+        assert ("gyro" in streams.options) == ("gyro" in needs)
         assert any(
             "left out: it is in the sensor (before SENS_BOARD_ROT" in note and f"the {other} in the body (FRD)" in note
             for note in streams.notes

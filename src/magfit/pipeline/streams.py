@@ -125,11 +125,6 @@ def method_streams(
     wanted = (*needs, *optional)
     if "time_s" in wanted:
         options["time_s"] = motion.time_s
-    if "gyro" in optional and "gyro" not in needs:
-        if motion.gyro is not None:
-            options["gyro"] = motion.gyro
-        else:
-            notes.append(f"{where}: no gyroscope beside this compass: the methods that only take one run without it")
     try:
         if "gyro" in needs:
             if motion.gyro is None:
@@ -154,6 +149,13 @@ def method_streams(
         notes.append(f"{where}: {said}")
         if accel is not None:
             options["accel"] = accel
+    # A gyro only taken (vector's) finds where the accelerometer sees gravity alone: useless, and refused by
+    # vector, without the accelerometer.
+    if "gyro" in optional and "gyro" not in needs and "accel" in options:
+        if motion.gyro is not None:
+            options["gyro"] = motion.gyro
+        else:
+            notes.append(f"{where}: no gyroscope beside this compass: the methods that only take one run without it")
     details: dict[str, Any] = {}
     if motion.magnetometer_frame == "body" and motion.mounting is not None:
         details["applied_rotation"] = np.asarray(motion.mounting).tolist()
