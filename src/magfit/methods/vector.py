@@ -54,9 +54,9 @@ radial ones and the gravity equations κ ≈ 1-2, the magnetometer's and acceler
 regression's residuals and the sensors' noise, then from the joint fit's own residuals, with Huber weights on
 the gravity equations (accelerations the still-sample gate let through). These weights are where the
 measured optimum is: the radial equations' times 0.3 / 1 / 3 gave a rotation / heading error of 0.78 / 0.42 /
-0.47° and 0.390 / 0.357 / 0.443° on the flight at 1° below, 0.42 / 0.39 / 0.39° and 0.206 / 0.188 / 0.210° on
-the car; the gravity equations' 0.43 / 0.42 / 0.45° and 0.400 / 0.357 / 0.354° (flight), 0.40 / 0.39 / 0.40°
-and 0.249 / 0.188 / 0.213° (car). Both kinds have noise in their
+0.47° and 0.390 / 0.357 / 0.443° on the flight at 1° below, 0.26 / 0.17 / 0.18° and 0.198 / 0.180 / 0.199° on
+the car; the gravity equations' 0.43 / 0.42 / 0.45° and 0.400 / 0.357 / 0.354° (flight), 0.19 / 0.17 / 0.22°
+and 0.228 / 0.180 / 0.212° (car). Both kinds have noise in their
 regressors (the magnetometer's in ``raw``, the accelerometer's in ``d``): least squares would shrink M along
 what the motion leaves weak to fit that noise (the radial equations at their weight without it: M 9 % too
 small on a flight, heading error 3°; a boat's rotation 0.18° → 0.98° on the true reference with the gravity
@@ -76,13 +76,14 @@ confounded with the offset, and it dominated the rotation error of the regressio
 field's length does change with the tilt, and they carry no attitude error. Measured on
 benchmarks/accuracy_vehicle.py (6000 samples at 10 Hz, lag 0.1 s, mounting 5-35°, 8 trials; RMS rotation error
 / heading error, without → with accel): flight 2.27 → 0.42° / 0.607 → 0.357° at 1° of attitude error, 1.04 →
-0.28° / 0.300 → 0.204° at 0.5°, 0.38 → 0.21° / 0.119 → 0.098° at 0.2°; car 1.01 → 0.39° / 0.505 → 0.188°,
-0.50 → 0.22° / 0.255 → 0.145°, 0.20 → 0.14° / 0.106 → 0.088°; the boat (one heading) and the tumble (never
-still) unchanged. The radial equations alone (no gravity) gave 0.48° / 0.511° (flight, 1°) and 0.44° / 0.401°
-(car): the rotation is theirs, the heading gain mostly the gravity equations'. The gravity equations align the
-magnetometer to the accelerometer, biases included: a constant 0.1 m/s² on its x axis (0.6° of tilt) gives
-0.65° / 0.719° on the flight and 0.61° / 0.682° on the car at 1°, a heading error worse than without accel
-(which the stated one-sigma, 0.38° and 0.26°, does not show): calibrate the accelerometer's offsets first.
+0.28° / 0.300 → 0.204° at 0.5°, 0.38 → 0.21° / 0.119 → 0.098° at 0.2°; car 1.01 → 0.17° / 0.505 → 0.180°,
+0.50 → 0.15° / 0.255 → 0.140°, 0.20 → 0.13° / 0.106 → 0.086°; the boat (one heading) and the tumble (never
+still) unchanged. The radial equations alone (no gravity) gave 0.48° / 0.511° (flight, 1°) and 0.44° /
+0.401° (car, with the still-sample gate before the lead's f405fd5): the rotation is mostly theirs, the heading
+gain mostly the gravity equations'. The gravity equations align the magnetometer to the accelerometer, biases
+included: a constant 0.1 m/s² on its x axis (0.6° of tilt) gives 0.65° / 0.719° on the flight and 0.58° /
+0.764° on the car at 1°, a heading error worse than without accel
+(which the stated one-sigma, 0.38° and 0.24°, does not show): calibrate the accelerometer's offsets first.
 
 A lag between the attitude and the magnetometer (``time_s`` given) is searched on a grid of one sample
 period within ``±max_lag_s``, then refined by a bounded scalar minimisation of the residual sum of squares,
