@@ -292,3 +292,17 @@ def test_system_id_goes_into_the_px4_file_and_nowhere_else(tmp_path: Path) -> No
     refused = runner.invoke(cli, ["calibrate", str(path), "--system-id", "3", "-o", str(tmp_path / "cal.json")])
     assert refused.exit_code == 2 and "--system-id goes with --export px4" in refused.output
     assert not (tmp_path / "cal.json").exists()
+
+
+def test_a_self_judged_method_prints_its_weaknesses_as_warnings() -> None:
+    # gyro judges itself (details["support"], no Diagnostics): the summary's "weak: n weakness(es), in the
+    # warnings above" must have those warnings above it.
+    from magfit.cli.calibrate import _fit_warnings, _verdict
+    from magfit.vehicle import simulate_vehicle
+
+    sim = simulate_vehicle(3000, "boat", rate_hz=10.0, noise=0.005, gyro_noise=0.002, seed=3)
+    calibration = magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s)
+    weaknesses = calibration.details["support"]["weaknesses"]
+    assert calibration.details["support"]["verdict"] == "weak" and weaknesses
+    assert _fit_warnings(calibration) == weaknesses
+    assert _verdict(calibration) == [("verdict", f"weak: {len(weaknesses)} weakness(es), in the warnings above")]
