@@ -326,3 +326,14 @@ def test_cli_time_in_milliseconds(roll_180_csv, tmp_path, capsys):
     # Read as milliseconds, it is the tumble it is: nothing turns slower than 0.3°/s.
     status, _, err = _run(capsys, in_ms, "--inclination", "64", "--time-unit", "ms")
     assert status == 1 and "see gravity alone" in err and "steps by" not in err
+
+
+def test_cli_says_how_to_give_a_calibration_when_its_own_fit_is_refused(tmp_path, capsys):
+    # Level yaw turns: no magnitude-only calibration to start from; the advice is for `magfit calibrate`.
+    sim = simulate_vehicle(2000, "yaw", hard_iron=[12.0, -8.0, 4.0], field_strength=50.0, noise=0.2, seed=12)
+    path = tmp_path / "level.csv"
+    np.savetxt(path, np.column_stack([sim.samples, sim.accel]), delimiter=",", header="mx,my,mz,ax,ay,az", comments="")
+    status, _, err = _run(capsys, path, "--inclination", "64")
+    assert status == 1 and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "the magnitude-only calibration the alignment starts from could not be fitted" in err
+    assert err.strip().endswith("and give it with --calibration")

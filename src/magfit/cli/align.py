@@ -258,7 +258,13 @@ def align_command(
         if calibration.frame != "sensor":
             fail(f"{calibration_path}: is a vehicle-frame calibration, already aligned; give a magnitude-only one")
     else:
-        calibration = fit(recording.samples)
+        try:
+            calibration = fit(recording.samples)
+        except CalibrationError as error:  # its advice names fit's options, which align does not take
+            raise CalibrationError(
+                f"the magnitude-only calibration the alignment starts from could not be fitted ({error}); "
+                "calibrate first (magfit calibrate FILE --method ... -o cal.json) and give it with --calibration"
+            ) from None
     corrected = calibration.apply(recording.samples)
     try:
         result = align(
