@@ -99,13 +99,15 @@ def write_vehicle(
     reboot_at: int | None = None,
     soft_iron_parameters: bool = True,
     second_imu: bool = True,
+    trim_deg: tuple[float, float] = (0.0, 0.0),
 ) -> list[magfit.Simulation]:
     """An ArduPilot vehicle turned in every direction, streamed at 10 Hz with a jittery link (20-300 ms): RAW_IMU
     (compass k = 0) and SCALED_IMU2 (k = 1), ATTITUDE, a HEARTBEAT and a 3-D GPS fix each second, and the
     COMPASS_* parameters first; ``armed_from``: the HEARTBEATs say armed from that sample on; ``reboot_at``:
     the vehicle's clock restarts there (as after a reboot); ``soft_iron_parameters`` False: a firmware without
     COMPASS_DIA/ODI/SCALE, which applies the offsets alone; ``second_imu`` False: SCALED_IMU2 carries zeros for
-    its accelerometer and gyroscope, as ArduPilot sends for an IMU the board lacks. Returns the raw truths."""
+    its accelerometer and gyroscope, as ArduPilot sends for an IMU the board lacks; ``trim_deg``: AHRS_TRIM_X/Y,
+    subtracted from ATTITUDE's roll and pitch as the EKF does. Returns the raw truths."""
     simulations = [
         magfit.simulate(
             n, soft_iron=c["soft_iron"], hard_iron=c["hard_iron"], field_strength=480.0, noise=1.5, seed=11 + k
@@ -133,6 +135,7 @@ def write_vehicle(
             names += [(f"COMPASS_DEV_ID{s}", c["dev_id"])]
             names += [(f"COMPASS_EXTERN{s}", 1.0), (f"COMPASS_ORIENT{s}", 0.0)]
         names += [("COMPASS_MOTCT", float(motct)), ("AHRS_ORIENTATION", 0.0)]
+        names += [(f"AHRS_TRIM_{axis}", float(np.radians(d))) for axis, d in zip("XY", trim_deg, strict=True) if d]
         for index, (name, value) in enumerate(names):
             writer.add(T0_US + 5_000 * index, 22, float(value), len(names), index, name.encode(), 9, v1=index % 2 == 0)
     boot_start_ms, clock_shift_ms = 20_000, 0
@@ -148,7 +151,9 @@ def write_vehicle(
             writer.add(wall_us + latency, 27, boot_ms * 1000, *ACCEL_MG, 10, -20, 30, *mag0, 0, 0, v1=i % 3 == 0)
             imu2 = (*ACCEL_MG, 11, -21, 31) if second_imu else (0,) * 6
             writer.add(wall_us + latency + 200, 116, boot_ms, *imu2, *mag1, 0)
-        writer.add(wall_us + latency + 300, 30, boot_ms, *ROLL_PITCH_YAW, 0.0, 0.0, 0.0)
+        roll, pitch, yaw = ROLL_PITCH_YAW
+        trimmed = (roll - np.radians(trim_deg[0]), pitch - np.radians(trim_deg[1]), yaw)
+        writer.add(wall_us + latency + 300, 30, boot_ms, *trimmed, 0.0, 0.0, 0.0)
         if i % 10 == 0:
             armed = armed_from is not None and i >= armed_from
             writer.add(wall_us + latency + 400, 0, 0, 2, 3, 128 if armed else 0, 4, 3)
@@ -321,6 +326,15 @@ def test_motion_position_and_time_from_the_tlog(tmp_path: Path) -> None:
     assert any(note.startswith("check: attitude · accel") for note in motion.notes)  # gravity where it belongs
     assert motion.mounting is not None and np.allclose(motion.mounting, np.eye(3))
     assert motion.date is not None and str(motion.date) == "2026-05-01"
+
+
+def test_an_ardupilot_trim_is_taken_off_attitude(tmp_path: Path) -> None:
+    # ATTITUDE carries AP_AHRS's angles, the vehicle body's (the EKF's minus AHRS_TRIM); the IMU and the compass
+    # are sent in the autopilot's body: with the trim left on, the reference would turn against them by it.
+    path = tmp_path / "trim.tlog"
+    write_vehicle(path, 100, trim_deg=(0.7, -2.0))
+    motion = open_source(path).read_motion("RAW_IMU")
+    np.testing.assert_allclose(motion.attitude[0], BODY_TO_NED, atol=1e-6)
 
 
 def test_damaged_files_are_one_line_errors(tmp_path: Path) -> None:

@@ -800,7 +800,7 @@ class _Compass:
         )
 
     def motion(self, position: Position | None) -> Motion:
-        from .dataflash import _mounting
+        from .dataflash import _mounting, _untrimmed
 
         read = self.read()
         records = self.records
@@ -821,7 +821,9 @@ class _Compass:
             quaternions = np.full((len(attitude_records), 4), np.nan)
             if np.any(finite):
                 quaternions[finite] = euler_quaternions(*(a[finite] for a in angles))
-            attitude = Stream("ATTITUDE roll/pitch/yaw", attitude_time, quaternions, "body (FRD)")
+            attitude = Stream("ATTITUDE Roll/Pitch/Yaw", attitude_time, quaternions, "body (FRD)")
+            if not self.px4:  # ArduPilot sends AP_AHRS's angles, as ATT logs them: the vehicle body's, trimmed
+                attitude = _untrimmed(attitude, self.vehicle.parameters)
         imu = f"{self.name} {'IMU' if self.px4 else 'IMU ' + str(self.slot)}"
         # ArduPilot sends zeros for an IMU the board does not have (send_scaled_imu): no stream, not a still one.
         absent = not np.any(accel) and not np.any(gyro)
