@@ -80,6 +80,8 @@ MAGYC_METHODS = ("magyc_ls", "magyc_nls", "magyc_bfg", "magyc_ifg")
 #: alignment's own error) and by ``auto``'s (what a user gets; nothing when auto refuses).
 ALIGN_TRUE = "align (true cal)"
 ALIGN_AUTO = "align (auto cal)"
+#: ... and by the magnitude-only part of the trial's ``gyro`` fit (what ``magfit align`` starts from with a gyro).
+ALIGN_GYRO = "align (gyro cal)"
 MOUNTING_RANGE_DEG = (5.0, 35.0)
 
 
@@ -363,13 +365,14 @@ KEPT_DETAILS = ("lag_s", "chosen", "mapping", "reason")
 def run_case(case: VehicleCase, fitters: Mapping[str, Fitter], root_seed: int) -> dict[str, list[VehicleOutcome]]:
     """Every fitter on every trial of ``case`` (the same recording for all); outcomes by column name.
 
-    ``align`` (when magfit has it) runs on the samples corrected by the true magnitude-only calibration and
-    by the trial's ``auto`` fit (:data:`ALIGN_TRUE`, :data:`ALIGN_AUTO`).
+    ``align`` (when magfit has it) runs on the samples corrected by the true magnitude-only calibration, by
+    the trial's ``auto`` fit and by the magnitude-only part of its ``gyro`` fit (:data:`ALIGN_TRUE`,
+    :data:`ALIGN_AUTO`, :data:`ALIGN_GYRO`; the last where gyro ran).
     """
     outcomes: dict[str, list[VehicleOutcome]] = {name: [] for name in fitters}
     aligning = alignment_available()
     if aligning:
-        outcomes[ALIGN_TRUE], outcomes[ALIGN_AUTO] = [], []
+        outcomes[ALIGN_TRUE], outcomes[ALIGN_AUTO], outcomes[ALIGN_GYRO] = [], [], []
     for trial in range(case.trials):
         simulation = case.simulate(root_seed, trial)
         fitted: dict[str, magfit.Calibration] = {}
@@ -398,6 +401,13 @@ def run_case(case: VehicleCase, fitters: Mapping[str, Fitter], root_seed: int) -
         if aligning:
             outcomes[ALIGN_TRUE].append(_align_outcome(simulation, simulation.truth_sensor))
             outcomes[ALIGN_AUTO].append(_align_outcome(simulation, fitted.get("auto")))
+            if GYRO in fitted and "sensor_matrix" in fitted[GYRO].details:
+                kinematic = fitted[GYRO]
+                sensor_part = magfit.Calibration(
+                    "gyro (magnitude-only part)", kinematic.offset,
+                    np.asarray(kinematic.details["sensor_matrix"], dtype=np.float64), kinematic.field_strength,
+                )  # fmt: skip
+                outcomes[ALIGN_GYRO].append(_align_outcome(simulation, sensor_part))
     return {name: values for name, values in outcomes.items() if values}
 
 
@@ -528,7 +538,8 @@ def check_targets(
     vector_label = "vector's rotation" + (" (with the accelerometer)" if _takes_accel(VECTOR) else "")
     gyro_label = "gyro's rotation" + (" (with the accelerometer)" if _takes_accel(GYRO) else "")
     aligners = ((VECTOR, vector_label), (GYRO, gyro_label), (ALIGN_TRUE, "align() on the truly calibrated field"),
-                (ALIGN_AUTO, "align() after auto"))  # fmt: skip
+                (ALIGN_AUTO, "align() after auto"),
+                (ALIGN_GYRO, "align() after gyro's magnitude-only part (magfit align with a gyro)"))  # fmt: skip
     for name, label in aligners:
         items, ok, ran = [], True, False
         for case in cases:
