@@ -100,6 +100,7 @@ def write_vehicle(
     soft_iron_parameters: bool = True,
     second_imu: bool = True,
     trim_deg: tuple[float, float] = (0.0, 0.0),
+    trim_change: tuple[int, float] | None = None,
 ) -> list[magfit.Simulation]:
     """An ArduPilot vehicle turned in every direction, streamed at 10 Hz with a jittery link (20-300 ms): RAW_IMU
     (compass k = 0) and SCALED_IMU2 (k = 1), ATTITUDE, a HEARTBEAT and a 3-D GPS fix each second, and the
@@ -107,7 +108,8 @@ def write_vehicle(
     the vehicle's clock restarts there (as after a reboot); ``soft_iron_parameters`` False: a firmware without
     COMPASS_DIA/ODI/SCALE, which applies the offsets alone; ``second_imu`` False: SCALED_IMU2 carries zeros for
     its accelerometer and gyroscope, as ArduPilot sends for an IMU the board lacks; ``trim_deg``: AHRS_TRIM_X/Y,
-    subtracted from ATTITUDE's roll and pitch as the EKF does. Returns the raw truths."""
+    subtracted from ATTITUDE's roll and pitch as the EKF does; ``trim_change`` (sample, degrees): AHRS_TRIM_Y
+    set to that at that sample (a "Calibrate Level" while connected). Returns the raw truths."""
     simulations = [
         magfit.simulate(
             n, soft_iron=c["soft_iron"], hard_iron=c["hard_iron"], field_strength=480.0, noise=1.5, seed=11 + k
@@ -151,6 +153,9 @@ def write_vehicle(
             writer.add(wall_us + latency, 27, boot_ms * 1000, *ACCEL_MG, 10, -20, 30, *mag0, 0, 0, v1=i % 3 == 0)
             imu2 = (*ACCEL_MG, 11, -21, 31) if second_imu else (0,) * 6
             writer.add(wall_us + latency + 200, 116, boot_ms, *imu2, *mag1, 0)
+        if trim_change is not None and i == trim_change[0]:
+            trim_deg = (trim_deg[0], trim_change[1])
+            writer.add(wall_us + latency + 250, 22, float(np.radians(trim_change[1])), 1, 0, b"AHRS_TRIM_Y", 9)
         roll, pitch, yaw = ROLL_PITCH_YAW
         trimmed = (roll - np.radians(trim_deg[0]), pitch - np.radians(trim_deg[1]), yaw)
         writer.add(wall_us + latency + 300, 30, boot_ms, *trimmed, 0.0, 0.0, 0.0)
@@ -335,6 +340,13 @@ def test_an_ardupilot_trim_is_taken_off_attitude(tmp_path: Path) -> None:
     write_vehicle(path, 100, trim_deg=(0.7, -2.0))
     motion = open_source(path).read_motion("RAW_IMU")
     np.testing.assert_allclose(motion.attitude[0], BODY_TO_NED, atol=1e-6)
+    # A "Calibrate Level" halfway: each attitude with the trim then in effect.
+    path = tmp_path / "relevelled.tlog"
+    write_vehicle(path, 100, trim_deg=(0.7, -2.0), trim_change=(50, 1.5))
+    motion = open_source(path).read_motion("RAW_IMU")
+    away = np.abs(np.arange(len(motion.time_s)) - 50) > 3  # the change's own instant: the link's latency
+    np.testing.assert_allclose(motion.attitude[away], np.broadcast_to(BODY_TO_NED, (int(away.sum()), 3, 3)), atol=1e-6)
+    assert any("changed during the log" in note for note in motion.notes)
 
 
 def test_damaged_files_are_one_line_errors(tmp_path: Path) -> None:

@@ -413,20 +413,25 @@ def _untrimmed(attitude: Stream | None, parameters: dict[str, list[tuple[float, 
     AHR2's angles log. XKQ's quaternion (and AHR2's) is the estimator's own, untrimmed. Left as it is, a trim
     of a degree turns the reference field against the magnetometer and the accelerometer by that degree.
     """
-    trim = [_latest(parameters, f"AHRS_TRIM_{axis}") for axis in "XY"]
-    if attitude is None or not any(trim) or "Roll/Pitch/Yaw" not in attitude.name:
+    trim = [_first(parameters, f"AHRS_TRIM_{axis}") for axis in "XY"]
+    changed = any(len({value for _, value in parameters.get(f"AHRS_TRIM_{axis}", [])}) > 1 for axis in "XY")
+    if attitude is None or not (any(trim) or changed) or "Roll/Pitch/Yaw" not in attitude.name:
         return attitude
     from scipy.spatial.transform import Rotation
 
-    trim_x, trim_y = (float(t or 0.0) for t in trim)
+    # The trim in effect at each attitude: a "Calibrate Level" during the log changes it from then on.
+    trim_x, trim_y = (_in_effect(parameters, f"AHRS_TRIM_{axis}", attitude.time_s) for axis in "XY")
     rotations = Rotation.from_quat(np.where(np.isfinite(attitude.values), attitude.values, [0.0, 0.0, 0.0, 1.0]))
+    offsets = np.column_stack([np.zeros_like(trim_x), trim_y, trim_x])
     if attitude.name.startswith("ATT"):  # the EKF's angles minus the trim: add it back (3-2-1, radians)
-        euler = rotations.as_euler("ZYX") + np.array([0.0, trim_y, trim_x])
-        untrimmed = Rotation.from_euler("ZYX", euler).as_quat()
+        untrimmed = Rotation.from_euler("ZYX", rotations.as_euler("ZYX") + offsets).as_quat()
     else:  # the DCM's: body_dcm = dcm · Tᵀ, T = from_euler(trim_x, trim_y, 0) (AP_AHRS::update_trig)
-        untrimmed = (rotations * Rotation.from_euler("ZYX", [0.0, trim_y, trim_x])).as_quat()
+        untrimmed = (rotations * Rotation.from_euler("ZYX", offsets)).as_quat()
     untrimmed[~np.all(np.isfinite(attitude.values), axis=1)] = np.nan
-    shown = f"AHRS_TRIM_X/Y {np.degrees(trim_x):.2f}°, {np.degrees(trim_y):.2f}°"
+    shown = f"AHRS_TRIM_X/Y {np.degrees(trim_x[0]):.2f}°, {np.degrees(trim_y[0]):.2f}°"
+    if changed:
+        last = f"{np.degrees(trim_x[-1]):.2f}°, {np.degrees(trim_y[-1]):.2f}°"
+        shown += f" (changed during the log, to {last} at the end: each attitude with the trim then in effect)"
     return replace(attitude, name=f"{attitude.name}, {shown} taken off", values=untrimmed)
 
 
@@ -457,13 +462,13 @@ def _mounting(parameters: dict[str, list[tuple[float, float]]], index: int) -> t
     an internal one (the chip's own orientation on its board, MAG_BOARD_ORIENTATION, is the driver's and is
     not logged)."""
     s = _suffix(index)
-    external = _latest(parameters, f"COMPASS_EXTERN{s}")
+    external = _first(parameters, f"COMPASS_EXTERN{s}")
     if external is None:
-        external = _latest(parameters, f"COMPASS_EXTERNAL{s}")
+        external = _first(parameters, f"COMPASS_EXTERNAL{s}")
     if external is None:
         return None, f"the log has no COMPASS_EXTERN{s}: which orientation the firmware applied is unknown"
     name = f"COMPASS_ORIENT{s}" if external else "AHRS_ORIENTATION"
-    value = _latest(parameters, name)
+    value = _first(parameters, name)
     if value is None:
         return None, f"the log has no {name}"
     index_value = int(value)
@@ -475,7 +480,7 @@ def _mounting(parameters: dict[str, list[tuple[float, float]]], index: int) -> t
         )
     if index_value in (101, 102):  # ROTATION_CUSTOM_1/2: CUST_ROTn_ROLL/PITCH/YAW (AP_CustomRotations, 4.2 on)
         n = index_value - 100
-        angles = [_latest(parameters, f"CUST_ROT{n}_{axis}") for axis in ("ROLL", "PITCH", "YAW")]
+        angles = [_first(parameters, f"CUST_ROT{n}_{axis}") for axis in ("ROLL", "PITCH", "YAW")]
         if all(a is not None for a in angles):
             roll, pitch, yaw = (float(a) for a in angles)  # type: ignore[arg-type]
             return custom_rotation("ardupilot", roll, pitch, yaw), (
@@ -558,9 +563,19 @@ def _compass_streams(log: DataFlashLog) -> list[tuple[str, NDArray[Any]]]:
     return streams
 
 
-def _latest(parameters: dict[str, list[tuple[float, float]]], name: str) -> float | None:
+def _first(parameters: dict[str, list[tuple[float, float]]], name: str) -> float | None:
+    """The parameter's first value in the log (a change later on is the caller's to refuse or follow)."""
     values = parameters.get(name)
     return values[0][1] if values else None
+
+
+def _in_effect(parameters: dict[str, list[tuple[float, float]]], name: str, times: NDArray[np.float64]) -> Any:
+    """The parameter's value in effect at each of ``times`` (its first value before it was first logged), 0 when
+    the log does not have it."""
+    values = sorted(parameters.get(name) or [(0.0, 0.0)])
+    stamps = np.array([stamp for stamp, _ in values], dtype=np.float64)
+    settings = np.array([value for _, value in values], dtype=np.float64)
+    return settings[np.clip(np.searchsorted(stamps, times, side="right") - 1, 0, None)]
 
 
 def _compass_parameters(
@@ -568,9 +583,9 @@ def _compass_parameters(
 ) -> tuple[_Compass | None, str | None]:
     """The parameters compass slot ``slot`` was corrected with, or the reason they cannot be known."""
     k = slot
-    prio = _latest(parameters, f"COMPASS_PRIO{slot + 1}_ID")
+    prio = _first(parameters, f"COMPASS_PRIO{slot + 1}_ID")
     if prio is not None and prio != 0:
-        matches = [j for j in range(3) if _latest(parameters, f"COMPASS_DEV_ID{_suffix(j)}") == prio]
+        matches = [j for j in range(3) if _first(parameters, f"COMPASS_DEV_ID{_suffix(j)}") == prio]
         if not matches:
             return None, (
                 f"COMPASS_PRIO{slot + 1}_ID is {int(prio)} but no COMPASS_DEV_ID* holds it, so its calibration "
@@ -598,10 +613,10 @@ def _compass_parameters(
                 f"{name} changed during the log (at {changes[0][0]:.1f} s): the samples were corrected with two "
                 "calibrations; fit a log recorded after the change"
             )
-    used = [_latest(parameters, name) for name in every if name in parameters]
+    used = [_first(parameters, name) for name in every if name in parameters]
     matrix = _matrix(
-        [_latest(parameters, n) or 0.0 for n in names["diagonals"]],
-        [_latest(parameters, n) or 0.0 for n in names["offdiagonals"]],
+        [_first(parameters, n) or 0.0 for n in names["diagonals"]],
+        [_first(parameters, n) or 0.0 for n in names["offdiagonals"]],
     )
     if (
         not all(np.isfinite(v) for v in used if v is not None)
@@ -612,17 +627,17 @@ def _compass_parameters(
             f"its calibration parameters (COMPASS_OFS{s}, DIA{s}, ODI{s}, SCALE{s}) are not finite or form a "
             "singular matrix, so the logged field cannot be undone (a damaged log, or a calibration that lost an axis)"
         )
-    motor = (_latest(parameters, "COMPASS_MOTCT") or 0) != 0 or (
-        k == 0 and (_latest(parameters, "COMPASS_PMOT_EN") or 0)
+    motor = (_first(parameters, "COMPASS_MOTCT") or 0) != 0 or (
+        k == 0 and (_first(parameters, "COMPASS_PMOT_EN") or 0)
     )
-    device = _latest(parameters, f"COMPASS_DEV_ID{s}")
+    device = _first(parameters, f"COMPASS_DEV_ID{s}")
     return (
         _Compass(
             index=k,
-            offsets=np.array([_latest(parameters, n) for n in names["offsets"]], dtype=np.float64),
-            diagonals=np.array([_latest(parameters, n) for n in names["diagonals"]], dtype=np.float64),
-            offdiagonals=np.array([_latest(parameters, n) for n in names["offdiagonals"]], dtype=np.float64),
-            scale=float(_latest(parameters, f"COMPASS_SCALE{s}") or 0.0),
+            offsets=np.array([_first(parameters, n) for n in names["offsets"]], dtype=np.float64),
+            diagonals=np.array([_first(parameters, n) for n in names["diagonals"]], dtype=np.float64),
+            offdiagonals=np.array([_first(parameters, n) for n in names["offdiagonals"]], dtype=np.float64),
+            scale=float(_first(parameters, f"COMPASS_SCALE{s}") or 0.0),
             device_id=int(device) if device else None,
             motor_compensation=bool(motor),
         ),

@@ -742,11 +742,11 @@ class _Compass:
         """A tlog does not carry the motor compensation ArduPilot added (DataFlash's MOX/MOY/MOZ): with it
         configured, only the samples while disarmed are kept when it is throttle or per-motor based (both zero
         with the motors stopped, AP_Compass::motor_compensation); current-based compensation cannot be undone."""
-        from .dataflash import _latest
+        from .dataflash import _first
 
         if not self.compass.motor_compensation:
             return None
-        kind = int(_latest(self.vehicle.parameters, "COMPASS_MOTCT") or 0)
+        kind = int(_first(self.vehicle.parameters, "COMPASS_MOTCT") or 0)
         if kind == 2:
             return (
                 "motor compensation by current is active (COMPASS_MOTCT 2): it shifts the field by the current drawn, "
