@@ -16,7 +16,7 @@ import magfit
 from magfit.cli import cli
 from magfit.errors import DataFileError
 from magfit.sources import open_source
-from magfit.sources.dataflash import undo_calibration
+from magfit.sources.ardupilot import undo_calibration
 
 HEAD = b"\xa3\x95"
 _STRUCT = {

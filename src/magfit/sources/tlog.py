@@ -22,7 +22,7 @@ What ArduPilot streams (``libraries/GCS_MAVLink/GCS_Common.cpp``: ``send_raw_imu
   (129) = ``get_field(1)``, ``get_field(2)``: milligauss, **after** the firmware's calibration, in the body
   frame; ``get_field(i)`` is priority slot i (``_get_state(Priority(i))``, libraries/AP_Compass/AP_Compass.h),
   the same field and slot as DataFlash's ``MAG`` instance i. The calibration is undone exactly as for a
-  DataFlash log (:func:`magfit.sources.dataflash.undo_calibration`) with the ``COMPASS_*`` parameters the
+  DataFlash log (:func:`magfit.sources.ardupilot.undo_calibration`) with the ``COMPASS_*`` parameters the
   ground station fetched (``PARAM_VALUE``, 22). Without them the samples stay calibrated: a fit on them is a
   residual correction on top of the calibration in use, which the notes say.
 - The same messages carry IMU i's accelerometer (``accel * 1000 / GRAVITY_MSS``: milli-g) and gyroscope
@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError
 from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
+from .ardupilot import compass_mounting, compass_parameters, first_value, undo_calibration, untrimmed
 from .motion import Motion, Stream, align, euler_quaternions
 
 __all__ = ["TelemetryLog", "is_tlog", "open_tlog"]
@@ -635,7 +636,6 @@ class _Compass:
     """One compass message of one system: what it is, and how its samples are read."""
 
     def __init__(self, vehicle: _Vehicle, name: str, sensor: str) -> None:
-        from .dataflash import _compass_parameters
 
         self.vehicle, self.name, self.sensor = vehicle, name, sensor
         frames = vehicle.log.frames(name, vehicle.source)
@@ -679,7 +679,7 @@ class _Compass:
         else:
             first_time = float(self.time[0]) if len(self.time) else float("nan")
             assert self.slot is not None
-            self.compass, problem = _compass_parameters(vehicle.parameters, self.slot, first_time)
+            self.compass, problem = compass_parameters(vehicle.parameters, self.slot, first_time)
             if self.compass is not None:
                 s = "" if self.compass.index == 0 else str(self.compass.index + 1)
                 notes.append(
@@ -742,11 +742,10 @@ class _Compass:
         """A tlog does not carry the motor compensation ArduPilot added (DataFlash's MOX/MOY/MOZ): with it
         configured, only the samples while disarmed are kept when it is throttle or per-motor based (both zero
         with the motors stopped, AP_Compass::motor_compensation); current-based compensation cannot be undone."""
-        from .dataflash import _first
 
         if not self.compass.motor_compensation:
             return None
-        kind = int(_first(self.vehicle.parameters, "COMPASS_MOTCT") or 0)
+        kind = int(first_value(self.vehicle.parameters, "COMPASS_MOTCT") or 0)
         if kind == 2:
             return (
                 "motor compensation by current is active (COMPASS_MOTCT 2): it shifts the field by the current drawn, "
@@ -779,7 +778,6 @@ class _Compass:
         return None
 
     def read(self) -> LogSamples:
-        from .dataflash import undo_calibration
 
         samples = self.mag.copy()  # PX4: gauss as sent; ArduPilot: mG, calibrated
         if self.compass is not None:
@@ -800,7 +798,6 @@ class _Compass:
         )
 
     def motion(self, position: Position | None) -> Motion:
-        from .dataflash import _mounting, _untrimmed
 
         read = self.read()
         records = self.records
@@ -812,7 +809,7 @@ class _Compass:
             gyro = np.column_stack([records[f"{a}gyro"] for a in "xyz"]).astype(np.float64) / 1000  # mrad/s
             accel = np.column_stack([records[f"{a}acc"] for a in "xyz"]).astype(np.float64) * _GRAVITY_MSS / 1000
             slot = self.magnetometer.slot
-            mounting, mounting_note = _mounting(self.vehicle.parameters, slot if slot is not None else 0)
+            mounting, mounting_note = compass_mounting(self.vehicle.parameters, slot if slot is not None else 0)
         attitude_records, attitude_time = self.vehicle.records("ATTITUDE")
         attitude = None
         if len(attitude_records):
@@ -823,7 +820,7 @@ class _Compass:
                 quaternions[finite] = euler_quaternions(*(a[finite] for a in angles))
             attitude = Stream("ATTITUDE Roll/Pitch/Yaw", attitude_time, quaternions, "body (FRD)")
             if not self.px4:  # ArduPilot sends AP_AHRS's angles, as ATT logs them: the vehicle body's, trimmed
-                attitude = _untrimmed(attitude, self.vehicle.parameters)
+                attitude = untrimmed(attitude, self.vehicle.parameters)
         imu = f"{self.name} {'IMU' if self.px4 else 'IMU ' + str(self.slot)}"
         # ArduPilot sends zeros for an IMU the board does not have (send_scaled_imu): no stream, not a still one.
         absent = not np.any(accel) and not np.any(gyro)
