@@ -211,6 +211,11 @@ def test_dataflash_motion_gives_back_the_truth(dataflash: dict[str, Path], kind:
     assert_motion_matches_truth(motion)
     assert_world_field(motion)
     assert any("gravity where it belongs" in note for note in motion.notes)
+    # The gyro at its own stamps too, one message beyond each end of the samples kept: the truth there.
+    raw = motion.gyro_stream
+    assert raw is not None and raw.time_s[0] <= motion.time_s[0] and raw.time_s[-1] >= motion.time_s[-1]
+    assert raw.time_s[1] > motion.time_s[0] and raw.time_s[-2] < motion.time_s[-1]
+    np.testing.assert_allclose(raw.values, body_rates(raw.time_s), atol=2e-3)
 
 
 def test_mavlogdump_text_reads_as_its_bin(dataflash: dict[str, Path]) -> None:

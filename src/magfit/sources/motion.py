@@ -97,6 +97,9 @@ class Motion:
         ``imu_frame``, linearly interpolated.
     imu_frame : str
         The frame of ``gyro`` and ``accel``.
+    gyro_stream : Stream or None
+        The gyroscope at its own stamps (the messages that cover the samples kept, one beyond each end), for a
+        method that integrates the rates at their own rate instead of their values at the magnetometer's stamps.
     sources : dict
         For each of ``attitude``, ``gyro``, ``accel`` present: the stream it came from and its rate.
     frames : dict
@@ -124,6 +127,7 @@ class Motion:
     gyro: NDArray[np.float64] | None = None
     accel: NDArray[np.float64] | None = None
     imu_frame: str = ""
+    gyro_stream: Stream | None = None
     sources: dict[str, str] | None = None
     frames: dict[str, str] | None = None
     position: Position | None = None
@@ -243,6 +247,12 @@ def align(
             result[key] = np.column_stack([np.interp(time_kept, stream.time_s, stream.values[:, i]) for i in range(3)])
     frames = {used[k].frame for k in ("gyro", "accel") if k in used}
     said += _gravity_check(result["attitude"], result["accel"])
+    gyro_stream = None
+    if "gyro" in used and len(time_kept):
+        raw = used["gyro"]
+        first = max(int(np.searchsorted(raw.time_s, time_kept[0], side="right")) - 1, 0)
+        last = min(int(np.searchsorted(raw.time_s, time_kept[-1], side="left")) + 1, len(raw.time_s))
+        gyro_stream = Stream(raw.name, raw.time_s[first:last], raw.values[first:last], raw.frame)
     return Motion(
         sensor=sensor,
         unit=unit,
@@ -255,6 +265,7 @@ def align(
         gyro=result["gyro"],
         accel=result["accel"],
         imu_frame=" / ".join(sorted(frames)),
+        gyro_stream=gyro_stream,
         sources={key: f"{s.name} ({s.frame}, {_rate(s.time_s):.1f} Hz)" for key, s in used.items()},
         frames={key: s.frame for key, s in used.items()},
         position=position,
