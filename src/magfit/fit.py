@@ -21,7 +21,7 @@ from .diagnostics.reference import judged as judged_against_reference
 from .errors import CalibrationError, MagfitError, OptionError
 from .methods import METHODS, FitInput, get_method
 from .methods.auto import refit_first_order
-from .methods.core import estimate, method_spec, prepare, refitter
+from .methods.core import estimate, is_recorded_array, method_spec, prepare, refitter
 from .statistics import Statistics
 
 __all__ = ["diagnose", "fit", "refit"]
@@ -103,7 +103,7 @@ def refit(
     options = calibration.details.get("options", {})
     if not isinstance(options, dict):
         raise CalibrationError(f"the {calibration.method} calibration records no options to refit it with")
-    arrays = [name for name, value in options.items() if isinstance(value, str) and value.startswith("an array of ")]
+    arrays = [name for name, value in options.items() if is_recorded_array(value)]
     unexpected = sorted(set(streams) - set(arrays))
     if unexpected:
         taken = f"only {', '.join(arrays)}" if arrays else "none"

@@ -75,6 +75,16 @@ def estimate(data: FitInput, method: str, options: Mapping[str, Any] | None = No
     return replace(calibration, details={**calibration.details, "options": recorded_options(effective)})
 
 
+#: How :func:`recorded_options` records an array option (its length only: a refit takes the new one).
+_ARRAY_RECORD = "an array of {} rows"
+
+
+def is_recorded_array(value: Any) -> bool:
+    """Whether a recorded option stands for an array the method was given (which a refit must be given again)."""
+    prefix = _ARRAY_RECORD.split("{", 1)[0]
+    return isinstance(value, str) and value.startswith(prefix) and value.endswith(" rows")
+
+
 def recorded_options(options: Mapping[str, Any]) -> dict[str, Any]:
     """The options as JSON can hold them (numbers as floats, strings as they are)."""
     recorded: dict[str, Any] = {}
@@ -82,7 +92,7 @@ def recorded_options(options: Mapping[str, Any]) -> dict[str, Any]:
         if isinstance(value, (bool, str)) or value is None:
             recorded[name] = value
         elif isinstance(value, (np.ndarray, list, tuple)):  # vector's reference= and time_s=: their shape only
-            recorded[name] = f"an array of {len(value)} rows"
+            recorded[name] = _ARRAY_RECORD.format(len(value))
         elif isinstance(value, (int, float, np.integer, np.floating)) and math.isfinite(float(value)):
             recorded[name] = float(value) if not isinstance(value, (int, np.integer)) else int(value)
         else:
