@@ -271,7 +271,8 @@ def test_the_accelerometer_pins_the_vertical_and_the_rotation_improves() -> None
 def test_noise_free_data_with_accel_give_the_truth() -> None:
     sim = simulate_vehicle(3000, "car", rate_hz=10.0, mounting=Rotation.from_euler("xyz", [10, -20, 30], degrees=True)
                            .as_matrix(), hard_iron=[3.0, -2.0, 1.0], field_strength=FIELD, seed=5)  # fmt: skip
-    cal = magfit.fit(sim.clean, method="vector", reference=sim.reference, accel=sim.accel, allow_undetermined=True)
+    cal = magfit.fit(sim.clean, method="vector", reference=sim.reference, accel=sim.accel, gyro=sim.gyro,
+                     allow_undetermined=True)  # fmt: skip
     assert cal.details["gravity"]["used"]
     np.testing.assert_allclose(cal.matrix, sim.truth.matrix, atol=1e-6)
     np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=1e-4)

@@ -357,7 +357,9 @@ def judge_reference_fit(
     lag_at_limit: float | None = None,
     inclination_deg: float | None = None,
     covariance: NDArray[np.float64] | None = None,
+    prior: NDArray[np.float64] | None = None,
     notes: tuple[str, ...] = (),
+    cautions: tuple[str, ...] = (),
 ) -> ReferenceReport:
     """The verdict on ``raw = G r + V`` fitted to ``raw`` against ``reference`` (both (N, 3), in recording order).
 
@@ -366,7 +368,9 @@ def judge_reference_fit(
     search limit when the lag ended on it; ``inclination_deg`` the field's (default: the reference's own,
     :func:`reference_inclination`); ``covariance`` that of (G row-major, V) when the fit is not the plain
     regression on ``[r, 1]`` (the joint fit with the gravity equations computes its own, block jackknife
-    included), else it is computed here; ``notes`` go to the diagnostics' notes.
+    included), else it is computed here; ``prior`` (12, 12), added to the covariance of (G, V) either way, is
+    what an error outside the data costs (the accelerometer's calibration, for the joint fit); ``notes`` go to
+    the diagnostics' notes, ``cautions`` join the verdict's weaknesses (the caller's reasons to trust the fit less).
     """
     n = raw.shape[0]
     field = float(np.median(np.linalg.norm(reference, axis=1)))
@@ -386,6 +390,9 @@ def judge_reference_fit(
         covariance = _covariance(jacobians, residuals, BLOCKS) * (jacobians.shape[0] / n)
     else:
         covariance = widened(independent[:12, :12], covariance[:12, :12])
+    if prior is not None:
+        covariance = covariance.copy()
+        covariance[:12, :12] += prior
     weak, condition = _weak_directions(reference, field, covariance, scale)
     heading, heading_max = _heading_sigmas(covariance, g, field, inclination)
     tilted, _ = _heading_sigmas(covariance, g, field, inclination, TILT_DEG)
@@ -409,7 +416,7 @@ def judge_reference_fit(
     observability = Observability(model="vector", condition=condition, weak=weak, turn_axis=None)
 
     refusals: list[str] = []
-    weaknesses: list[str] = []
+    weaknesses: list[str] = list(cautions)
     if residual_rms > NO_ELLIPSOID_RMS:
         refusals.append(
             f"the samples do not follow the reference: after the best G and V they still differ from it by "

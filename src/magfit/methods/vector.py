@@ -95,7 +95,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -133,6 +133,20 @@ MIN_HEADING_SPREAD = 0.05
 HUBER = 1.345
 #: Contiguous batches for the noise inflation of each kind of equation (the weights).
 WEIGHT_BATCHES = 20
+#: Largest growth of the vector equations' residual RMS (the joint fit's over the plain regression's) for the
+#: gravity equations to be kept. An accelerometer whose vertical is not the reference's (an offset, a tilted
+#: frame) drags the fit's vertical with it and the vector equations pay for it; a right one only moves the
+#: fit off the attitude's mean tilt error. benchmarks/accuracy_vehicle.py (flight and car, 0.2 / 0.5 / 1° of
+#: attitude error, 3 trials each): a right accelerometer 1.001-1.029; 0.3 m/s² on one axis 1.001-1.60, 2° of
+#: tilt 1.001-1.82, 5° 1.001-3.5 (the low ones where the joint fit's error stays within its one-sigma).
+MAX_RESIDUAL_GROWTH = 1.05
+#: Default one-sigma (m/s², each horizontal axis) of the accelerometer's calibration, the offset that the gravity
+#: equations cannot see: it tilts their vertical by its ratio to g and goes into the calibration, so its cost
+#: is added to the joint fit's covariance (:func:`_tilt_prior`). 0.1 m/s² (0.58°) is what the residual growth
+#: cannot detect at 1° of attitude error (it costs 0.6-0.8° of heading there, see the module docstring).
+ACCEL_SIGMA = 0.1
+#: Standard gravity (m/s²): ``accel_sigma`` over it is the tilt of the accelerometer's vertical (radians).
+STANDARD_GRAVITY = 9.80665
 
 
 @dataclass(frozen=True)
@@ -324,6 +338,25 @@ def _motion_array(value: Any, name: str, n: int, what: str) -> NDArray[np.float6
     return array
 
 
+def _check_gyro_unit(reference: NDArray[np.float64], time_s: NDArray[np.float64], gyro: NDArray[np.float64]) -> None:
+    """A gyro in degrees per second: refused with the fix (the still-sample gate would read every row as a turn).
+
+    The reference, a fixed field seen from the turning vehicle, turns as ``ṙ = r × ω``; a gyro that predicts
+    it far better divided by 57.3 is in degrees per second (the test of :func:`magfit.methods.gyro`'s
+    ``_check_rate_unit``, on the reference instead of the samples). A vehicle that never turns fits both alike.
+    """
+    rate = np.gradient(reference, time_s, axis=0)
+    predicted = np.cross(reference, gyro)
+    rss = {unit: float(np.sum((rate - factor * predicted) ** 2)) for unit, factor in (("rad/s", 1.0),
+           ("deg/s", math.pi / 180.0))}  # fmt: skip
+    if rss["deg/s"] < 0.25 * rss["rad/s"]:
+        raise OptionError(
+            f"gyro= looks like degrees per second (the reference turns as it predicts "
+            f"{rss['rad/s'] / max(rss['deg/s'], 1e-300):.0f} times better after dividing it by 57.3): give it in "
+            "rad/s (numpy.radians(gyro))"
+        )
+
+
 def _noise_sigma(values: NDArray[np.float64], across: int) -> float:
     """White noise per axis of a smooth signal from its third differences (robust: their median).
 
@@ -449,9 +482,14 @@ def _vehicle_form(p: NDArray[np.float64]) -> tuple[NDArray[Any], NDArray[Any]]:
 class GravityFit:
     """What the accelerometer added to a vector fit (:func:`fit_vector` with ``accel=``).
 
-    ``g``, ``offset`` and ``covariance`` (of G row-major and V, block jackknife) are None when the gravity
-    equations were not used (too few samples where the accelerometer sees gravity alone); ``facts`` go to
-    ``details["gravity"]``, ``note`` to the diagnostics' notes.
+    ``g`` and ``offset`` are None when the gravity equations were not used: neither ``time_s`` nor ``gyro``
+    given, too few samples where the accelerometer sees gravity alone, their headings too close together,
+    a normal matrix not positive definite once corrected for the noise, or an accelerometer that disagrees
+    with the reference (``caution`` then says so, for the verdict's weaknesses). ``covariance`` (of G
+    row-major and V, block jackknife) is None also when one of the jackknife's refits had no solution: the
+    verdict then computes the regression's covariance at the joint fit (the note says so). ``prior`` (12, 12)
+    is the accelerometer's calibration cost (:func:`_tilt_prior`). ``facts`` go to ``details["gravity"]``,
+    ``note`` to the diagnostics' notes.
     """
 
     g: NDArray[np.float64] | None
@@ -459,13 +497,55 @@ class GravityFit:
     covariance: NDArray[np.float64] | None
     facts: dict[str, Any]
     note: str
+    prior: NDArray[np.float64] | None = None
+    caution: str | None = None
+
+
+def _relative_rms(raw: NDArray[np.float64], reference: NDArray[np.float64], g: NDArray[np.float64],
+                  offset: NDArray[np.float64]) -> float:  # fmt: skip
+    """The RMS of ``raw − G r − V`` over the field in the samples' unit (as the verdict's residual_rms)."""
+    residuals = raw - reference @ g.T - offset
+    scale = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
+    return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1)))) / scale
+
+
+def _tilt_prior(equations: _Equations, weights: tuple[float, NDArray[np.float64], float],
+                estimate: NDArray[np.float64], tilt_sigma: float) -> NDArray[np.float64] | None:  # fmt: skip
+    """The covariance of (G row-major, V) that a tilt of the accelerometer's vertical with one-sigma
+    ``tilt_sigma`` (radians, about the vehicle's x and y axes) causes: the joint fit again with the down
+    directions turned by a small angle about each axis (finite differences; None when a refit has no solution)."""
+    step = 1e-3
+    jac = np.zeros((12, 2))
+    for axis in (0, 1):
+        turn = np.eye(3)
+        i, j = (1, 2) if axis == 0 else (2, 0)  # the plane the rotation about x (or y) turns
+        turn[i, i] = turn[j, j] = math.cos(step)
+        turn[j, i], turn[i, j] = math.sin(step), -math.sin(step)
+        tilted = replace(equations, down=equations.down @ turn.T)
+        solution = _solve_normal(*tilted.normal(*weights))
+        if solution is None or not abs(np.linalg.det(solution[:12].reshape(3, 4)[:, :3])) > 0:
+            return None
+        g_tilted, v_tilted = _vehicle_form(solution)
+        jac[:, axis] = (np.concatenate([g_tilted.ravel(), v_tilted]) - estimate) / step
+    return np.asarray(tilt_sigma**2 * jac @ jac.T, dtype=np.float64)
 
 
 def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: NDArray[np.float64],
                  used_ref: NDArray[np.float64], accel: NDArray[np.float64], gyro: NDArray[np.float64] | None,
-                 times: NDArray[np.float64] | None, g: NDArray[np.float64],
-                 offset: NDArray[np.float64]) -> GravityFit:  # fmt: skip
+                 times: NDArray[np.float64] | None, g: NDArray[np.float64], offset: NDArray[np.float64],
+                 accel_sigma: float) -> GravityFit:  # fmt: skip
     """The joint fit of equations (3) and (4) on the kept samples (module docstring), or the reason it is not made."""
+    if gyro is None and times is None:
+        # Then the gate checks |a| alone, and a coordinated turn keeps |a| at g while it tilts the apparent
+        # vertical: benchmarks/accuracy_vehicle.py at 1° of attitude error, heading error 5.8-6.6° on a flight
+        # and 4.1-16.1° on a car with such rows (0.29-0.65° with time_s, 0.38° on the car without accel).
+        note = (
+            "The accelerometer's gravity equations were not used: without time_s= or gyro= the samples taken in a "
+            "turn (|a| stays near g while the apparent vertical tilts) cannot be told from the still ones; give "
+            "time_s= or gyro= to use them. The fit is the regression on the reference alone."
+        )
+        unused = {"used": False, "rows": 0, "of": int(kept.size), "dropped": {}, "notes": [], "note": note}
+        return GravityFit(None, None, None, unused, note)
     corrected = (raw - offset) @ np.linalg.inv(g).T  # the field in the vehicle frame: the gate's rate of turn
     try:
         gate = still_samples(accel, mag=corrected, gyro=gyro, time_s=times)
@@ -538,6 +618,26 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
         )
         return GravityFit(None, None, None, {**facts, "note": note}, note)
     g_joint, offset_joint = _vehicle_form(p)
+    # Floored: noise-free data leave rounding errors alone, whose ratio means nothing.
+    tiny = 1e-9 * float(np.median(np.linalg.norm(used_ref, axis=1)))
+    growth = max(_relative_rms(used_raw, used_ref, g_joint, offset_joint), tiny) / max(
+        _relative_rms(used_raw, used_ref, g, offset), tiny
+    )
+    facts["residual_growth"] = growth
+    if growth > MAX_RESIDUAL_GROWTH:
+        note = (
+            f"The accelerometer's gravity equations were not used: with them the samples follow the reference "
+            f"{100 * (growth - 1):.0f} % worse (RMS; a right accelerometer costs at most "
+            f"{100 * (MAX_RESIDUAL_GROWTH - 1):.0f} %): its vertical is not the reference's. The fit is the "
+            "regression on the reference alone."
+        )
+        caution = (
+            f"the accelerometer disagrees with the reference: its vertical would make the samples follow the "
+            f"reference {100 * (growth - 1):.0f} % worse, so its gravity equations were left out (the heading "
+            "is the reference's alone); calibrate the accelerometer's offsets and check that accel= is in the "
+            "reference's (vehicle) frame, mounted level with it"
+        )
+        return GravityFit(None, None, None, {**facts, "note": note}, note, caution=caution)
     # The block jackknife: the joint fit again without each contiguous stretch (its gravity rows with it); the
     # normal equations are sums over the samples, so each refit takes its stretch's share off the whole's.
     edges = np.linspace(0, n, BLOCKS + 1).astype(np.int64)
@@ -553,6 +653,8 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
         g_part, v_part = _vehicle_form(partial)
         estimates.append(np.concatenate([g_part.ravel(), v_part]))
     covariance = jackknife_covariance(np.asarray(estimates)) if estimates else None
+    estimate = np.concatenate([g_joint.ravel(), offset_joint])
+    prior = _tilt_prior(equations, weights, estimate, accel_sigma / STANDARD_GRAVITY) if accel_sigma > 0 else None
     facts.update(
         used=True,
         down_weighted=int(np.sum(huber < 1.0)),
@@ -564,14 +666,27 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
         gravity_inflation=g_kappa,
         magnetometer_noise=mag_noise,
         accelerometer_noise_deg=math.degrees(down_noise),
+        accel_sigma=accel_sigma,
+        jackknife=covariance is not None,
     )
+    cost = ""
+    if prior is not None:
+        sigma = math.degrees(accel_sigma / STANDARD_GRAVITY)
+        cost = f" (accel_sigma={accel_sigma:g} m/s², {sigma:.2g}° of tilt, is in the one-sigma)"
+    else:
+        cost = " (its cost is not in the one-sigma: accel_sigma=0 or a refit without a solution)"
     note = (
         f"The accelerometer's gravity equations joined the fit on {still.size} of {kept.size} samples, where it "
         f"sees gravity alone (dropped: {reasons}); {outliers} of them beyond 3 robust standard deviations (residual "
         "accelerations), down-weighted. They align the magnetometer to the accelerometer, whose offsets go into "
-        "the calibration (0.1 m/s² tilts its vertical by 0.6°): calibrate the accelerometer first."
+        f"the calibration{cost}: calibrate the accelerometer first."
     )
-    return GravityFit(g_joint, offset_joint, covariance, {**facts, "note": note}, note)
+    if covariance is None:
+        note += (
+            " The block jackknife had no solution without one stretch of the recording: the one-sigma is the "
+            "regression's (independent residuals, widened by its own jackknife) at the joint fit."
+        )
+    return GravityFit(g_joint, offset_joint, covariance, {**facts, "note": note}, note, prior=prior)
 
 
 @register(
@@ -590,6 +705,7 @@ def fit_vector(
     max_lag_s: float = 1.0,
     accel: ArrayLike | None = None,
     gyro: ArrayLike | None = None,
+    accel_sigma: float = ACCEL_SIGMA,
 ) -> Calibration:
     """Fit ``raw = G r + V`` against the reference field ``r`` (see the module docstring).
 
@@ -608,13 +724,19 @@ def fit_vector(
         ``details["gravity"]`` says on how many samples and why the others were left out.
     gyro : array_like, shape (N, 3), optional
         Body rates in rad/s in the same frame, for the still-sample gate (only with ``accel``; without it
-        unused, said in ``details["gyro_note"]``).
+        unused, said in ``details["gyro_note"]``). One that looks like degrees per second (the reference turns
+        57 times slower than it says) is refused.
+    accel_sigma : float
+        The accelerometer's calibration one-sigma in m/s² (each axis): its cost in the calibration (the gravity
+        equations take the accelerometer's vertical as the truth) is added to the stated uncertainty. 0 for none.
     """
     raw = data.require_samples("vector")
     n = raw.shape[0]
     ref = _reference_array(reference, n)
     if not max_lag_s > 0:
         raise OptionError(f"max_lag_s must be a positive number of seconds, got {max_lag_s!r}")
+    if not (isinstance(accel_sigma, (int, float)) and 0 <= accel_sigma < STANDARD_GRAVITY):
+        raise OptionError(f"accel_sigma must be the accelerometer's calibration one-sigma in m/s², got {accel_sigma!r}")
     acc = None if accel is None else _motion_array(accel, "accel", n, "the specific force, any unit")
     rates = None if gyro is None else _motion_array(gyro, "gyro", n, "body rates in rad/s")
     if acc is not None and np.any(np.all(acc == 0.0, axis=1)):
@@ -641,6 +763,8 @@ def fit_vector(
         details["lag_note"] = "no time_s given: the reference is taken as simultaneous with the samples (no lag fitted)"
     else:
         times = _time_array(time_s, n)
+        if rates is not None and acc is not None:
+            _check_gyro_unit(ref, times, rates)
         found = estimate_lag(raw, ref, times, float(max_lag_s))
         used_raw, used_ref, rate = raw[found.keep], found.reference, found.rate
         kept = np.flatnonzero(found.keep)
@@ -657,17 +781,20 @@ def fit_vector(
             "the samples do not support the vector calibration: the fitted matrix is singular (the samples do not "
             "change with the reference along some direction: a magnetometer axis that is dead or saturated?)"
         )
-    covariance = None
+    covariance = prior = None
     notes: tuple[str, ...] = ()
+    cautions: tuple[str, ...] = ()
     if acc is not None:
-        joint = _gravity_fit(raw, kept, used_raw, used_ref, acc, rates, times, g, offset)
+        joint = _gravity_fit(raw, kept, used_raw, used_ref, acc, rates, times, g, offset, float(accel_sigma))
         details["gravity"] = joint.facts
         notes = (joint.note,)
+        cautions = () if joint.caution is None else (joint.caution,)
         if joint.g is not None and joint.offset is not None:
-            g, offset, covariance = joint.g, joint.offset, joint.covariance
+            g, offset, covariance, prior = joint.g, joint.offset, joint.covariance, joint.prior
     report = judge_reference_fit(
-        used_raw, used_ref, g, offset, rate=rate, lag_at_limit=lag_limit, covariance=covariance, notes=notes
-    )
+        used_raw, used_ref, g, offset, rate=rate, lag_at_limit=lag_limit, covariance=covariance, prior=prior,
+        notes=notes, cautions=cautions,
+    )  # fmt: skip
     if rate is not None:  # the larger of the lag search's jackknife and the fit's covariance (when it has the lag)
         lag_variance = report.covariance[12, 12] if report.covariance.shape[0] > 12 else 0.0
         details["lag_sigma_s"] = max(jackknife, float(np.sqrt(max(lag_variance, 0.0))))
