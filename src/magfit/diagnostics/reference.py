@@ -46,6 +46,7 @@ __all__ = [
     "judge_reference_fit",
     "judged",
     "reference_inclination",
+    "regression_covariance",
     "rotation_sigma_deg",
 ]
 
@@ -242,6 +243,17 @@ def _covariance(jac: NDArray[np.float64], residuals: NDArray[np.float64], blocks
         except np.linalg.LinAlgError:  # the rest of the recording does not determine the fit: no jackknife
             return covariance
     return widened(covariance, jackknife_covariance(np.asarray(moves)))
+
+
+def regression_covariance(raw: NDArray[np.float64], reference: NDArray[np.float64], g: NDArray[np.float64],
+                          offset: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+    """The covariance of (G row-major, V) of the plain regression ``raw = G r + V`` at its solution (g, offset),
+    as :func:`judge_reference_fit` states it without a lag: Gauss-Newton widened by the block jackknife."""
+    n = raw.shape[0]
+    rows = slice(None, None, max(1, -(-n // MAX_ROWS)))
+    jacobians = _jacobians(reference[rows], None, g)
+    residuals = (raw - reference @ g.T - offset)[rows]
+    return _covariance(jacobians, residuals, BLOCKS) * (jacobians.shape[0] / n)
 
 
 def rotation_sigma_deg(covariance: NDArray[np.float64], g: NDArray[np.float64]) -> float:
