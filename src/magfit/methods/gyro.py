@@ -130,6 +130,16 @@ GAP_STEPS = 5.0
 GAP_MIN_S = 0.05
 #: Fewest samples on which the accelerometer sees gravity alone for the gravity rows to be used.
 MIN_GRAVITY_SAMPLES = 50
+#: The accelerometer's bias (m/s², over g = 9.81 a tilt of its vertical) and misalignment to the gyroscope taken as
+#: unknown in the covariance: a calibrated MEMS accelerometer's residual bias is of this order, and a tilt is
+#: invisible in the gravity rows' residual (it moves the fitted dip instead: 0.29° RMS with the accelerometer
+#: tilted 5° or not, on accuracy_vehicle's boat, for a dip 4.3° off and 2.8° of heading error).
+ACCEL_BIAS_PRIOR = 0.07
+#: The reference inclination's own error (the World Magnetic Model's is about 0.3° RMS, more near anomalies),
+#: and how many combined one-sigmas a fitted dip may differ from a given one before the accelerometer is
+#: taken to disagree (with its calibration or its alignment to the gyroscope) and its rows are dropped.
+INCLINATION_MODEL_DEG = 0.3
+INCLINATION_SIGMAS = 2.0
 #: Turning about the second principal axis below this share of the first: turned about one axis only.
 SINGLE_AXIS = 0.02
 #: Largest turn (degrees) of the field seen in the samples' frame below which the sensor hardly turned.
@@ -314,9 +324,10 @@ def _gravity(a: NDArray[np.float64], y: NDArray[np.float64], w: NDArray[np.float
                              "notes": list(still.notes)}  # fmt: skip
     if facts["still_samples"] < MIN_GRAVITY_SAMPLES:
         facts["used"] = False
+        dropped = "; ".join(f"{count} {why}" for why, count in still.dropped.items() if count)
         facts["reason"] = (
             f"the accelerometer saw gravity alone on {facts['still_samples']} samples, fewer than "
-            f"{MIN_GRAVITY_SAMPLES}: not used"
+            f"{MIN_GRAVITY_SAMPLES}, so it was not used (dropped: {dropped or 'none'})"
         )
         return None, facts
     facts["used"] = True
@@ -727,7 +738,17 @@ def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64
     middle = sums.T @ sums * batches / (batches - 1)
     sandwich = inverse @ middle @ inverse
     # Never below the independent-noise covariance (a few batches can understate it by chance).
-    return _larger(sandwich, independent)
+    covariance = _larger(sandwich, independent)
+    if traj.gravity is not None:
+        # An accelerometer tilted by θ (its bias over g, or its mounting against the gyro) moves every d_k by
+        # θ × d_k, which the fit absorbs: p moves by −(JᵀJ)⁻¹ Jᵀ ∂r/∂θ, added for θ of ACCEL_BIAS_PRIOR / g.
+        b = traj.field(p)[0]
+        down, weight = traj._gravity_rows()
+        tilt = np.zeros((rows, components, 3))
+        tilt[:, 3] = (weight / _cos(float(p[traj.k + 6])))[:, None] * np.cross(down, b)  # ∂(d·b)/∂θ = d × b
+        shift = -inverse @ np.einsum("kip,kiq->pq", jac, tilt)
+        covariance = covariance + (ACCEL_BIAS_PRIOR / 9.81) ** 2 * shift @ shift.T
+    return covariance
 
 
 def _larger(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -907,6 +928,43 @@ def _parts(model: _Model) -> tuple[NDArray[np.float64], NDArray[np.float64], NDA
     return model.traj.distortion(params), params[k : k + 3], params[k + 3 : k + 6]
 
 
+def _dip(model: _Model, covariance: NDArray[np.float64] | None = None) -> dict[str, float]:
+    """The fitted inclination and its one-sigma (degrees) of a model with gravity rows.
+
+    The calibrated field is ``sign · b`` with the sign that makes the correction proper (fit_gyro), so its dip
+    is ``sign · δ``.
+    """
+    traj, p = model.traj, model.solution.params
+    covariance = _covariance(traj, p) if covariance is None else covariance
+    sign = float(np.sign(np.linalg.det(traj.distortion(p))))
+    return {
+        "inclination_deg": sign * math.degrees(float(p[traj.k + 6])),
+        "inclination_sigma_deg": math.degrees(math.sqrt(max(float(covariance[traj.k + 6, traj.k + 6]), 0.0))),
+    }
+
+
+def _inclination_disagreement(model: _Model, given_deg: float) -> str | None:
+    """Why the accelerometer disagrees with the given inclination, or None when it agrees.
+
+    Magnitudes are compared: the dip's sign is the accelerometer's convention (specific force or gravity) and
+    the magnetometer's handedness, which the kinematics leave free. A tilted accelerometer leaves its rows'
+    residual as small as a true one (the tilt moves the fitted dip instead), so this is its only check.
+    """
+    if not math.isfinite(given_deg) or abs(given_deg) > 90.0:
+        raise OptionError(f"inclination_deg must be a number of degrees within ±90, got {given_deg!r}")
+    dip = _dip(model)
+    fitted, sigma = dip["inclination_deg"], dip["inclination_sigma_deg"]
+    difference = abs(fitted) - abs(given_deg)
+    allowed = INCLINATION_SIGMAS * math.hypot(sigma, INCLINATION_MODEL_DEG)
+    if abs(difference) <= allowed:
+        return None
+    return (
+        f"the accelerometer's gravity puts the field's dip at {abs(fitted):.1f}° ± {sigma:.1f}°, where "
+        f"inclination_deg= says {abs(given_deg):.1f}° ({difference:+.1f}°, beyond the {allowed:.1f}° allowed): its "
+        "calibration (a bias) or its alignment to the gyroscope is off, so its rows were not used"
+    )
+
+
 # ------------------------------------------------------------------------------------------ the verdict
 
 
@@ -989,6 +1047,9 @@ def _support(
     lag: float = 0.0,
     turns_deg: NDArray[np.float64] | None = None,
     gravity: bool = False,
+    accel_unused: str | None = None,
+    inclination_checked: bool = False,
+    disagreement: str | None = None,
 ) -> Support:
     """The verdict on what the rotations determine (module docstring)."""
     refusals: list[str] = []
@@ -1021,13 +1082,26 @@ def _support(
     elif heading_sigma > 1.0:
         weak.append(f"the heading uncertainty the fit leaves is ±{heading_sigma:.2g}° (one-sigma, level, 60° dip)")
     planar = turns_deg is not None and turns_deg[2] < NARROW_THIRD_AXIS * turns_deg[0]
-    if not gravity and planar and MIN_TURN_DEG <= span_deg < NARROW_TURN_DEG:
+    narrow = planar and MIN_TURN_DEG <= span_deg < NARROW_TURN_DEG
+    if not gravity and narrow:
+        fix = (
+            "give accel= (the accelerometer, in the gyroscope's axes) to pin it with gravity" if accel_unused is None
+            else f"accel= was given but {accel_unused}"
+        )  # fmt: skip
         weak.append(
             f"the field's direction spans only {span_deg:.0f}° in the magnetometer's frame, turning mostly about one "
             "axis (as a boat rolling on one heading): the axes' rotation about that axis rests on the little turning "
-            "about the others and its one-sigma understates it; give accel= (the accelerometer, in the gyroscope's "
-            "axes) to pin it with gravity"
+            f"about the others and its one-sigma understates it; {fix}"
         )
+    elif gravity and narrow and not inclination_checked:
+        weak.append(
+            f"the field's direction spans only {span_deg:.0f}° in the magnetometer's frame, turning mostly about one "
+            "axis: the axes' rotation about it rests on the accelerometer's gravity, whose bias and alignment to the "
+            f"gyroscope are not checked (taken within {ACCEL_BIAS_PRIOR:g} m/s² in the one-sigma; a 5° tilt costs "
+            "degrees of heading); give inclination_deg= (the World Magnetic Model's) to check them"
+        )
+    if disagreement is not None and not narrow:  # the calibration may be what is off: the user must know
+        weak.append(disagreement)
     if residual_rms > 0.05:
         weak.append(
             f"the samples leave {100 * residual_rms:.1f} % of the field (RMS) off the turning field the gyroscope "
@@ -1143,6 +1217,7 @@ def fit_gyro(
     lag_s: float | str = "search",
     accel: ArrayLike | None = None,
     gyro_time_s: ArrayLike | None = None,
+    inclination_deg: float | None = None,
 ) -> Calibration:
     """Hard iron, soft iron and the magnetometer's axes in the gyroscope's, from the rotation kinematics.
 
@@ -1170,6 +1245,13 @@ def fit_gyro(
     accel : array_like, shape (N, 3), optional
         The accelerometer's specific force in the gyroscope's axes, any unit, one row per sample, on the
         gyroscope's clock: adds the gravity rows (2) where it sees gravity alone (module docstring).
+    inclination_deg : float, optional
+        The local field's inclination (the World Magnetic Model's), degrees: with ``accel``, a fitted dip that
+        differs from it by more than :data:`INCLINATION_SIGMAS` times its one-sigma and
+        :data:`INCLINATION_MODEL_DEG` combined (signs aside: the accelerometer's sign is free) means the
+        accelerometer's calibration or alignment is off: its rows are dropped, the fit is the one without
+        them, and the verdict is at most weak, saying so. Without it that is not checked (a weakness where
+        the gravity rows carry the fit).
 
     Returns
     -------
@@ -1247,6 +1329,13 @@ def fit_gyro(
     # then reads as turning on every sample: none was kept on simulated boats).
     gravity, gravity_facts = (None, {}) if a is None else _gravity(_delayed(a, t, lag), y, w - beta, t)
     model, excess, ambiguous = _choose(y, w, t, win, mapping, segment_s, gravity)
+    disagreement = None
+    if model.traj.gravity is not None and inclination_deg is not None:
+        disagreement = _inclination_disagreement(model, inclination_deg)
+        gravity_facts["inclination_given_deg"] = float(inclination_deg)
+        if disagreement is not None:
+            gravity_facts.update({"used": False, "reason": disagreement, **_dip(model)})
+            model, excess, ambiguous = _choose(y, w, t, win, mapping, segment_s, None)
     traj, solution = model.traj, model.solution
     p = solution.params
     k = traj.k
@@ -1256,17 +1345,14 @@ def fit_gyro(
 
     strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
     matrix = np.linalg.inv(g) * strength
-    sign = 1.0
     if np.linalg.det(matrix) < 0:  # −H fits alike (a field and its negative turn alike): take the proper one
-        matrix, sign = -matrix, -1.0
+        matrix = -matrix
     if traj.gravity is not None:
         gravity_residual, _ = _gravity_residual(model, traj.gravity)
         gravity_facts.update({
             "weight": traj.gravity.weight,
             "residual_rms_deg": math.degrees(float(np.sqrt(np.mean(gravity_residual**2)))),
-            # the calibrated field is sign · strength · b: its dip is sign · δ
-            "inclination_deg": sign * math.degrees(float(p[k + 6])),
-            "inclination_sigma_deg": math.degrees(math.sqrt(max(float(covariance[k + 6, k + 6]), 0.0))),
+            **_dip(model, covariance),
         })  # fmt: skip
     rotation, symmetric = polar_decomposition(matrix)
     nearest = mapping_name(rotation)
@@ -1284,8 +1370,10 @@ def fit_gyro(
     mean = directions.mean(axis=0)
     spread = np.arccos(np.clip(np.einsum("kj,j->k", directions, mean / max(float(np.linalg.norm(mean)), 1e-12)), -1, 1))
     span_deg = 2.0 * float(np.degrees(spread.max()))
+    unused = None if a is None or traj.gravity is not None else str(gravity_facts.get("reason", ""))
     support = _support(ambiguous, offset_sigma, vectors, heading_sigma, residual_rms, span_deg, lag, turns_deg,
-                       gravity=traj.gravity is not None)  # fmt: skip
+                       gravity=traj.gravity is not None, accel_unused=unused,
+                       inclination_checked=inclination_deg is not None, disagreement=disagreement)  # fmt: skip
     if mapping in MAPPINGS and excess.get(mapping, 0.0) > LIKELIHOOD_RATIO:
         support = replace(support, verdict="weak" if support.verdict == "supported" else support.verdict,
                           weaknesses=(*support.weaknesses,
