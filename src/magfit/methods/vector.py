@@ -62,7 +62,8 @@ what the motion leaves weak to fit that noise (the radial equations at their wei
 small on a flight, heading error 3°; a boat's rotation 0.18° → 0.98° on the true reference with the gravity
 equations), so its expected contribution is taken off the normal equations (adjusted least squares, the noises
 from third differences of the samples). The uncertainty is a block jackknife of the joint fit
-(:data:`magfit.diagnostics.reference.BLOCKS` stretches, each refitted exactly).
+(:data:`magfit.diagnostics.reference.BLOCKS` stretches, each refitted exactly), plus the accelerometer's
+calibration prior (below).
 
 What each kind pins. The tangential components give the rotation about the vertical (the heading), with
 the attitude's error. The gravity equations (4) see the calibrated field's component along gravity: they pin
@@ -167,13 +168,13 @@ WEIGHT_BATCHES = 20
 #: benchmarks/accuracy_vehicle.py's cases and tests/test_vector.py's 5-minute ones (flight and car, 0.2 / 0.5 /
 #: 1° of attitude error; 90 fits with a right accelerometer, 36 per wrong one): a right one χ² 0.0-2.4,
 #: growth 0.999-1.081 (none refused); 0.3 m/s² on x χ² 0.7-13.3, growth 1.001-1.60; tilted 2° χ² 0.0-18.4,
-#: growth 1.001-1.82; 5° χ² 0.3-70, growth 1.002-3.5.
+#: growth 1.001-1.82; 5° χ² 0.3-70, growth 1.001-3.5.
 VERTICAL_CHI2 = 9.21
 MAX_RESIDUAL_GROWTH = 1.10
 #: Default one-sigma (m/s², each horizontal axis) of the accelerometer's calibration, the offset that the gravity
 #: equations cannot see: it tilts their vertical by its ratio to g and goes into the calibration, so its cost
-#: is added to the joint fit's covariance (:func:`_tilt_prior`). 0.1 m/s² (0.58°) is what the residual growth
-#: cannot detect at 1° of attitude error (it costs 0.6-0.8° of heading there, see the module docstring).
+#: is added to the joint fit's covariance (:func:`_tilt_prior`). 0.1 m/s² (0.58°) is what neither test below
+#: detects at 1° of attitude error (it costs 0.6-0.8° of heading there, see the module docstring).
 ACCEL_SIGMA = 0.1
 #: Standard gravity (m/s²): ``accel_sigma`` over it is the tilt of the accelerometer's vertical (radians).
 STANDARD_GRAVITY = 9.80665
