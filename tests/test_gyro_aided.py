@@ -337,6 +337,9 @@ def test_an_accelerometer_that_disagrees_with_the_given_inclination_is_dropped_a
     assert _heading_error_deg(true, sim) < true.details["heading_sigma_deg"]
     # the dip cannot see a tilt about the field's horizontal direction: the boat stays weak, saying so
     assert "not checked by the dip" in " ".join(true.details["support"]["weaknesses"])
+    for bad in (95.0, float("nan"), "64°"):
+        with pytest.raises(OptionError, match="inclination_deg must be the field's dip in degrees within ±90"):
+            _fit(sim, accel=sim.accel, inclination_deg=bad)
 
 
 def test_an_accelerometer_given_but_unused_is_said_with_why_not_asked_for() -> None:

@@ -56,6 +56,11 @@ trajectory is the gyro's, integrated, with one unknown start per stretch). Here,
    boat (rolling ±15°, one heading; 8 trials) the RMS heading error falls from 1.51° to 0.27° (``vector``
    with 1° of attitude error: 0.62°), flight 0.20° to 0.16°, car 0.082° to 0.068°; a tumble keeps no still
    sample (turning fast throughout) and is unchanged.
+   A tilted accelerometer (its bias over g, or its mounting) leaves (2)'s residual as small as a true one and
+   moves the fitted δ and the axes' rotation instead: the covariance takes it as tilted by an unknown
+   :data:`ACCEL_BIAS_PRIOR`, and ``inclination_deg=`` (the reference model's) checks δ, dropping the rows when
+   they disagree. δ sees only the tilt about the magnetic east-west axis (``∂(d·b)/∂θ = d × b``), so a fit
+   the gravity rows pin (the boat) stays weak, saying which tilt is unchecked.
 3. **The axis mapping.** A magnetometer is often mounted turned by a right angle (or soldered with its axes
    read in another order) against the gyroscope. A standard mapping P (one of the 24 proper signed
    permutations, :data:`MAPPINGS`) makes ``G = W Pᵀ`` with W symmetric and definite (MAGYC's model in the
@@ -950,8 +955,6 @@ def _inclination_disagreement(model: _Model, given_deg: float) -> str | None:
     the magnetometer's handedness, which the kinematics leave free. A tilted accelerometer leaves its rows'
     residual as small as a true one (the tilt moves the fitted dip instead), so this is its only check.
     """
-    if not math.isfinite(given_deg) or abs(given_deg) > 90.0:
-        raise OptionError(f"inclination_deg must be a number of degrees within ±90, got {given_deg!r}")
     dip = _dip(model)
     fitted, sigma = dip["inclination_deg"], dip["inclination_sigma_deg"]
     difference = abs(fitted) - abs(given_deg)
@@ -1272,14 +1275,16 @@ def fit_gyro(
         offset's one-sigma, ``sensor_matrix`` (the symmetric, magnitude-only root), and the verdict
         (``support``). With ``accel``: ``gravity`` (``used``, ``still_samples``, ``dropped``, ``notes``, and
         when used ``weight``, ``residual_rms_deg``, ``inclination_deg`` with ``inclination_sigma_deg``; when
-        not, the ``reason``).
+        not, the ``reason``; ``inclination_given_deg`` when checked). With ``gyro_time_s``: ``gyro_gaps``, a
+        line per gap of the gyro whose samples were dropped (``n_samples`` counts those kept).
 
     Raises
     ------
     OptionError
         gyro= or time_s= missing, of the wrong shape, not finite, not increasing, or in degrees per second;
-        gyro_time_s= likewise, or not covering the samples; accel= of the wrong shape, not finite, or a row of
-        zeros.
+        gyro_time_s= likewise, not covering the samples, or spanning more than 10 times or less than a tenth
+        of time_s= (another unit); accel= of the wrong shape, not finite, or a row of zeros; inclination_deg
+        beyond ±90.
     CalibrationError
         Too short a recording, or one that turned about one axis only (named).
     """
@@ -1307,6 +1312,14 @@ def fit_gyro(
         )
     if not segment_s > 0:
         raise OptionError(f"segment_s must be positive, got {segment_s!r}")
+    if inclination_deg is not None:
+        try:
+            dip = float(inclination_deg)
+        except (TypeError, ValueError):
+            dip = math.nan
+        if not -90.0 <= dip <= 90.0:  # NaN fails too
+            raise OptionError(f"inclination_deg must be the field's dip in degrees within ±90, got {inclination_deg!r}")
+        inclination_deg = dip
     length = max(_MIN_WINDOW, round(WINDOW_S / float(np.median(np.diff(t)))))
     win = _windows(y, w, t, length)
     if win.T.size < 20:
