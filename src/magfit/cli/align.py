@@ -178,7 +178,7 @@ def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | 
     return lines
 
 
-def _starting_calibration(recording: _Recording) -> Calibration:
+def _starting_calibration(recording: _Recording, inclination: float | None) -> Calibration:
     """The magnitude-only calibration the alignment starts from, fitted on the recording.
 
     With a gyroscope and time stamps, the gyro-aided fit's magnitude-only part (``details["sensor_matrix"]``):
@@ -190,8 +190,9 @@ def _starting_calibration(recording: _Recording) -> Calibration:
     if recording.gyro is not None and recording.time_s is not None:
         try:
             kinematic = fit(
-                recording.samples, method="gyro", gyro=recording.gyro, time_s=recording.time_s, accel=recording.accel
-            )
+                recording.samples, method="gyro", gyro=recording.gyro, time_s=recording.time_s, accel=recording.accel,
+                inclination_deg=inclination,  # the accelerometer's check, where it is known
+            )  # fmt: skip
         except CalibrationError:
             kinematic = None  # auto below, with its own refusal if it has one
         if kinematic is not None and "sensor_matrix" in kinematic.details:
@@ -314,7 +315,7 @@ def align_command(
         if calibration.frame != "sensor":
             fail(f"{calibration_path}: is a vehicle-frame calibration, already aligned; give a magnitude-only one")
     else:
-        calibration = _starting_calibration(recording)
+        calibration = _starting_calibration(recording, inclination)
     corrected = calibration.apply(recording.samples)
     try:
         result = align(
