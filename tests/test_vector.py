@@ -399,3 +399,9 @@ def test_a_gyro_in_degrees_per_second_is_a_one_line_option_error() -> None:
         magfit.fit(sim.samples, method="vector", gyro=np.degrees(sim.gyro), **options)
     assert "\n" not in str(caught.value)
     assert magfit.fit(sim.samples, method="vector", gyro=sim.gyro, **options).details["gravity"]["used"]
+    # Without time_s the reference cannot tell the unit: the note names it where the rows were all dropped.
+    del options["time_s"]
+    cal = magfit.fit(sim.samples, method="vector", gyro=np.degrees(sim.gyro), **options)
+    assert not cal.details["gravity"]["used"] and "degrees per second" in cal.details["gravity"]["note"]
+    assert "degrees per second" not in magfit.fit(sim.samples, method="vector", gyro=sim.gyro, **options).details[
+        "gravity"]["note"]  # fmt: skip

@@ -628,6 +628,11 @@ def _gravity_fit(raw: NDArray[np.float64], kept: NDArray[np.int64], used_raw: ND
             f"The accelerometer sees gravity alone on {still.size} of {kept.size} samples (dropped: {reasons}), "
             f"fewer than the {MIN_GRAVITY_ROWS} its equations need: the fit is the regression on the reference alone."
         )
+        if gyro is not None and times is None and float(np.median(np.linalg.norm(gyro, axis=1))) > 1.0:
+            # With time_s the reference tells the unit (_check_gyro_unit); without it, only the size does: no
+            # vehicle turns at a median 57°/s, a car's or a flight's median turn is 3-8°/s.
+            note += " gyro= turns at a median rate over 1 rad/s: if it is in degrees per second, give it in rad/s."
+
         return GravityFit(None, None, None, {**facts, "note": note}, note)
     a = accel[kept][still]
     down = -a / np.linalg.norm(a, axis=1, keepdims=True)  # the specific force points up
