@@ -280,3 +280,24 @@ def test_an_ardupilot_trim_is_taken_off_the_attitude_so_it_shares_the_imus_frame
     gravity = np.einsum("nij,nj->ni", motion.attitude, motion.accel)
     np.testing.assert_allclose(gravity, np.tile([0.0, 0.0, -motion_log.G], (len(gravity), 1)), atol=0.03)
     assert any("AHRS_TRIM_X/Y 0.70°, -2.00° taken off" in note for note in motion.notes)
+
+
+def test_the_gyro_method_gets_the_gyroscope_at_its_own_rate_and_the_models_inclination(tmp_path, monkeypatch) -> None:
+    # The IMU is logged at 50 Hz beside a 20 Hz compass: the gyro method integrates it at its own rate.
+    from magfit.geomag import field_at
+
+    path, _ = _log_with_gps(tmp_path / "gps.bin", monkeypatch)
+    streams = method_streams(open_source(path), "MAG/0", ("gyro", "time_s"), optional=("accel", "inclination_deg"),
+                             unit=None, gyro_own_rate=True)  # fmt: skip
+    own, stamps = streams.options["gyro"], streams.options["gyro_time_s"]
+    assert len(own) == len(stamps) > 2 * len(streams.options["time_s"])
+    assert stamps[0] <= streams.options["time_s"][0] and stamps[-1] >= streams.options["time_s"][-1]
+    np.testing.assert_allclose(own, motion_log.body_rates(stamps), atol=2e-3)
+    model = field_at(LAT, LON, ALT_KM, date=DATE)
+    assert streams.options["inclination_deg"] == pytest.approx(model.inclination_deg, abs=0.05)
+    assert any("at its own rate" in note for note in streams.notes)
+    # A comparison shares one gyro on the compass's stamps (vector takes it too): not at its own rate there.
+    shared = method_streams(open_source(path), "MAG/0", ("gyro", "time_s"), unit=None)
+    assert "gyro_time_s" not in shared.options and len(shared.options["gyro"]) == len(shared.options["time_s"])
+    fitted = magfit.calibrate_file(path, "gyro", sensor="MAG/0").calibration
+    np.testing.assert_allclose(fitted.offset, motion_log.HARD, atol=3.0)

@@ -396,7 +396,10 @@ def _calibrate_compass(
         from .streams import method_streams, stream_names
 
         names = stream_names([method])
-        streams = method_streams(source, magnetometer.id, names.needed, optional=names.optional, unit=unit, date=date)
+        streams = method_streams(
+            source, magnetometer.id, names.needed, optional=names.optional, unit=unit, date=date,
+            gyro_own_rate="gyro_time_s" in get_method(method).options,
+        )  # fmt: skip
         for note in streams.notes:
             say(note)
         notes += streams.notes

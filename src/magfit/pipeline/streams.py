@@ -39,7 +39,7 @@ __all__ = ["OPTIONAL_STREAMS", "MethodStreams", "StreamNames", "method_streams",
 #: Streams a method may take beside those it needs: read from the log for a method whose options include them,
 #: and never a reason to refuse (a log without them is fitted without them). ``time_s``: vector estimates the
 #: attitude's lag behind the samples from the stamps; ``gyro``: vector's still-sample gate.
-OPTIONAL_STREAMS = ("time_s", "gyro", "accel")
+OPTIONAL_STREAMS = ("time_s", "gyro", "accel", "inclination_deg")
 
 
 class StreamNames(NamedTuple):
@@ -100,15 +100,20 @@ def method_streams(
     unit: str | None,
     date: datetime.date | str | None = None,
     available: bool = False,
+    gyro_own_rate: bool = False,
 ) -> MethodStreams:
     """Read ``sensor``'s samples with the streams ``needs`` names (``reference``, ``gyro``, ``time_s``) and
     those of ``optional`` the log holds (``time_s``, ``gyro``, ``accel``; :func:`stream_names` gives both for
     some methods).
 
     ``available``: give the streams the log holds and say in ``notes`` why the others are missing (a
-    comparison of several methods runs those it can), instead of raising. An optional stream is never a
-    reason to raise: missing, or (``accel``) in another frame than the attitude's (``reference``) or the
-    gyroscope's (``gyro``) it is used with, it is left out and the notes say why.
+    comparison of several methods runs those it can), instead of raising. ``gyro_own_rate``: for one method
+    that takes ``gyro_time_s`` (``gyro``), the gyroscope at its own stamps (``gyro`` then has its own rows)
+    where it is logged faster than the compass; a comparison shares one ``gyro`` on the compass's stamps.
+    ``inclination_deg`` is the World Magnetic Model's at the log's fixes (the accelerometer's check of
+    ``gyro``). An optional stream is never a reason to raise: missing, or (``accel``) in another frame than the
+    attitude's (``reference``) or the gyroscope's (``gyro``) it is used with, it is left out and the notes say
+    why.
 
     Raises
     ------
@@ -156,10 +161,37 @@ def method_streams(
             options["gyro"] = motion.gyro
         else:
             notes.append(f"{where}: no gyroscope beside this compass: the methods that only take one run without it")
+    if gyro_own_rate and "gyro" in options and motion.gyro_stream is not None and len(motion.time_s) > 1:
+        own = motion.gyro_stream
+        faster = np.median(np.diff(motion.time_s)) / max(float(np.median(np.diff(own.time_s))), 1e-12)
+        if faster >= 1.5:  # integrated at its own rate: what happens between two compass samples counts
+            options["gyro"], options["gyro_time_s"] = own.values, own.time_s
+            notes.append(f"{where}: the gyroscope at its own rate ({faster:.1f}x the compass's), integrated in between")
+    if "inclination_deg" in wanted:
+        inclination, said = _inclination(source, motion, date)
+        notes.append(f"{where}: {said}")
+        if inclination is not None:
+            options["inclination_deg"] = inclination
     details: dict[str, Any] = {}
     if motion.magnetometer_frame == "body" and motion.mounting is not None:
         details["applied_rotation"] = np.asarray(motion.mounting).tolist()
     return MethodStreams(np.asarray(motion.samples), options, details, tuple(notes))
+
+
+def _inclination(source: Source, motion: Any, date: datetime.date | str | None) -> tuple[float | None, str]:
+    """The World Magnetic Model's inclination at the log's fixes, and a note; None where it cannot be known."""
+    position = motion.position or source.position
+    if position is None:
+        return None, "no GNSS fix: the accelerometer is not checked against the model's inclination"
+    from ..errors import MagfitError
+    from ..geomag import field_at
+
+    try:
+        field = field_at(position.lat_deg, position.lon_deg, position.alt_km, date=date or motion.date)
+    except MagfitError as error:  # the wmm extra missing, a date out of the model's range
+        return None, f"the accelerometer is not checked against the model's inclination: {error}"
+    said = f"inclination {field.inclination_deg:.1f}° ({field.describe()}), the accelerometer's check"
+    return field.inclination_deg, said
 
 
 def _reference(
