@@ -163,3 +163,41 @@ def check_choice(option: str, value: object, choices: tuple[str, ...]) -> None:
     """Raise an :class:`OptionError` when ``value`` is not one of ``choices``."""
     if value not in choices:
         raise OptionError(f"{option}={value!r} is not valid; choose one of: {', '.join(choices)}")
+
+
+def check_rows(value: object, name: str, n: int, what: str) -> NDArray[np.float64]:
+    """``name=`` as an (n, 3) float array, one finite row per sample (``what`` says what the rows are); a
+    one-line :class:`OptionError` naming what is wrong (the streams ``vector`` and ``gyro`` take)."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise OptionError(f"{name}= must be an (N, 3) array of numbers ({what}), got {type(value).__name__}") from None
+    if array.shape != (n, 3):
+        raise OptionError(
+            f"{name}= must have one row (x, y, z) per sample, shape ({n}, 3) ({what}); got shape {array.shape}"
+            + ("; transpose it" if array.shape == (3, n) else "")
+        )
+    bad = ~np.all(np.isfinite(array), axis=1)
+    if bad.any():
+        raise OptionError(f"{name}= has NaN or inf in row {int(np.argmax(bad))} (0-based); drop or fill those rows")
+    return array
+
+
+def check_times(value: object, name: str, n: int) -> NDArray[np.float64]:
+    """``name=`` as (n,) finite seconds that increase strictly; a one-line :class:`OptionError` otherwise."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise OptionError(f"{name}= must be an array of seconds, got {type(value).__name__}") from None
+    if array.shape != (n,):
+        raise OptionError(f"{name}= must have one time per sample, shape ({n},); got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise OptionError(f"{name}= has NaN or inf in row {int(np.argmax(~np.isfinite(array)))} (0-based)")
+    steps = np.diff(array)
+    if np.any(steps <= 0):
+        row = int(np.argmax(steps <= 0)) + 1
+        raise OptionError(
+            f"{name}= must increase strictly: row {row} (0-based) is {array[row]:g} s after {array[row - 1]:g} s; "
+            "sort the samples by time and drop repeated ones"
+        )
+    return array

@@ -96,6 +96,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._optimize import Evaluation, Solution, levenberg_marquardt
+from .._validation import check_rows, check_times
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..findings import Support
@@ -206,25 +207,8 @@ def _motion(
         )
     if time_s is None:
         raise OptionError("method 'gyro' needs time_s=: the sample times in seconds, shape (N,)")
-    try:
-        w = np.asarray(gyro, dtype=np.float64)
-        t = np.asarray(time_s, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise OptionError("gyro= and time_s= must be numeric arrays") from None
-    if w.shape != (n, 3):
-        raise OptionError(
-            f"gyro= must have shape ({n}, 3), one row per magnetometer sample (rad/s), got shape {w.shape}; "
-            "rows are samples, it is never transposed"
-        )
-    if t.shape != (n,):
-        raise OptionError(f"time_s= must have shape ({n},), one time per sample in seconds, got shape {t.shape}")
-    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(t))):
-        raise OptionError("gyro= and time_s= must be finite (no NaN or inf): drop or fill those rows first")
-    steps = np.diff(t)
-    if np.any(steps <= 0):
-        at = int(np.argmax(steps <= 0)) + 1
-        raise OptionError(f"time_s= must increase strictly; row {at} ({t[at]:g} s) does not: sort or de-duplicate")
-    return w, t
+    w = check_rows(gyro, "gyro", n, "body rates in rad/s, one row per magnetometer sample")
+    return w, check_times(time_s, "time_s", n)
 
 
 def _own_rate(gyro: ArrayLike | None, gyro_time_s: ArrayLike,
@@ -299,18 +283,7 @@ def _own_rate(gyro: ArrayLike | None, gyro_time_s: ArrayLike,
 
 def _accel(accel: ArrayLike, n: int) -> NDArray[np.float64]:
     """The accelerometer (n, 3), checked; one-line :class:`OptionError` naming what is wrong."""
-    try:
-        a = np.asarray(accel, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise OptionError("accel= must be a numeric array: the specific force, shape (N, 3), any unit") from None
-    if a.shape != (n, 3):
-        raise OptionError(
-            f"accel= must have shape ({n}, 3), one row per magnetometer sample in the gyroscope's axes, got shape "
-            f"{a.shape}; rows are samples, it is never transposed"
-        )
-    bad = ~np.all(np.isfinite(a), axis=1)
-    if np.any(bad):
-        raise OptionError(f"accel= row {int(np.argmax(bad))} is not finite (NaN or inf): drop or fill those rows first")
+    a = check_rows(accel, "accel", n, "the specific force in the gyroscope's axes, any unit")
     zero = np.linalg.norm(a, axis=1) == 0
     if np.any(zero):
         raise OptionError(

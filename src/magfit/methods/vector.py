@@ -120,6 +120,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._validation import check_rows, check_times
 from ..calibration import Calibration
 from ..diagnostics.reference import (
     ADVICE,
@@ -208,41 +209,7 @@ def _reference_array(reference: Any, n: int) -> NDArray[np.float64]:
             "a vector calibration is refitted only with a new reference: call magfit.fit(samples, method='vector', "
             "reference=...) with the field expected at each new sample"
         )
-    try:
-        array = np.asarray(reference, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise OptionError(
-            f"reference= must be an (N, 3) array of numbers (the field expected at each sample), got "
-            f"{type(reference).__name__}"
-        ) from None
-    if array.shape != (n, 3):
-        raise OptionError(
-            f"reference= must have one row (x, y, z) per sample, shape ({n}, 3); got shape {array.shape}"
-            + ("; transpose it" if array.shape == (3, n) else "")
-        )
-    bad = ~np.all(np.isfinite(array), axis=1)
-    if bad.any():
-        raise OptionError(f"reference= has NaN or inf in row {int(np.argmax(bad))} (0-based); drop those samples")
-    return array
-
-
-def _time_array(time_s: Any, n: int) -> NDArray[np.float64]:
-    try:
-        array = np.asarray(time_s, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise OptionError(f"time_s= must be an array of seconds, got {type(time_s).__name__}") from None
-    if array.shape != (n,):
-        raise OptionError(f"time_s= must have one time per sample, shape ({n},); got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise OptionError(f"time_s= has NaN or inf in row {int(np.argmax(~np.isfinite(array)))} (0-based)")
-    steps = np.diff(array)
-    if np.any(steps <= 0):
-        row = int(np.argmax(steps <= 0)) + 1
-        raise OptionError(
-            f"time_s= must increase strictly: row {row} (0-based) is {array[row]:g} s after {array[row - 1]:g} s; "
-            "sort the samples by time and drop repeated ones"
-        )
-    return array
+    return check_rows(reference, "reference", n, "the field expected at each sample")
 
 
 def _design(reference: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -350,23 +317,6 @@ def estimate_lag(raw: NDArray[np.float64], reference: NDArray[np.float64], time_
     at = kept_t + lag
     at_limit = best in (0, grid.size - 1)
     return LagEstimate(lag, sigma, keep, _shifted(reference, time_s, at), _shifted(rate_full, time_s, at), at_limit)
-
-
-def _motion_array(value: Any, name: str, n: int, what: str) -> NDArray[np.float64]:
-    """``accel=`` or ``gyro=`` as an (n, 3) float array; a one-line :class:`OptionError` naming what is wrong."""
-    try:
-        array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise OptionError(f"{name}= must be an (N, 3) array of numbers ({what}), got {type(value).__name__}") from None
-    if array.shape != (n, 3):
-        raise OptionError(
-            f"{name}= must have one row (x, y, z) per sample, shape ({n}, 3), in the reference's (vehicle) frame; "
-            f"got shape {array.shape}" + ("; transpose it" if array.shape == (3, n) else "")
-        )
-    bad = ~np.all(np.isfinite(array), axis=1)
-    if bad.any():
-        raise OptionError(f"{name}= has NaN or inf in row {int(np.argmax(bad))} (0-based); drop or fill those rows")
-    return array
 
 
 def _check_gyro_unit(reference: NDArray[np.float64], time_s: NDArray[np.float64], gyro: NDArray[np.float64]) -> None:
@@ -810,8 +760,9 @@ def fit_vector(
         raise OptionError(f"max_lag_s must be a positive number of seconds, got {max_lag_s!r}")
     if not (isinstance(accel_sigma, (int, float)) and 0 <= accel_sigma < STANDARD_GRAVITY):
         raise OptionError(f"accel_sigma must be the accelerometer's calibration one-sigma in m/s², got {accel_sigma!r}")
-    acc = None if accel is None else _motion_array(accel, "accel", n, "the specific force, any unit")
-    rates = None if gyro is None else _motion_array(gyro, "gyro", n, "body rates in rad/s")
+    frame = "in the reference's (vehicle) frame"
+    acc = None if accel is None else check_rows(accel, "accel", n, f"the specific force, any unit, {frame}")
+    rates = None if gyro is None else check_rows(gyro, "gyro", n, f"body rates in rad/s, {frame}")
     if acc is not None and np.any(np.all(acc == 0.0, axis=1)):
         row = int(np.argmax(np.all(acc == 0.0, axis=1)))
         raise OptionError(f"accel= is (0, 0, 0) in row {row} (0-based), which has no direction: drop that sample")
@@ -835,7 +786,7 @@ def fit_vector(
         details["lag_s"] = None
         details["lag_note"] = "no time_s given: the reference is taken as simultaneous with the samples (no lag fitted)"
     else:
-        times = _time_array(time_s, n)
+        times = check_times(time_s, "time_s", n)
         if rates is not None and acc is not None:
             _check_gyro_unit(ref, times, rates)
         found = estimate_lag(raw, ref, times, float(max_lag_s))
