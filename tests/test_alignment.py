@@ -379,3 +379,11 @@ def test_an_alignment_is_no_better_supported_than_its_calibration(tmp_path, caps
                             "--no-mirror")  # fmt: skip
     assert status == 0, err
     assert re.search(r"verdict\s+weak", out) and "the calibration it starts from (auto) is weak" in out
+    # A calibration forced past its refusal: the alignment from it says so, weak at best.
+    forced = weak.to_dict()
+    forced["details"]["support"] = {**forced["details"]["support"], "verdict": "refused", "refusals": ["too few"]}
+    given.write_text(magfit.Calibration.from_dict(forced).to_json())
+    status, out, err = _run(capsys, path, "--calibration", given, "--gyro-columns", "gx,gy,gz", "--inclination", "64",
+                            "--no-mirror")  # fmt: skip
+    assert status == 0, err
+    assert re.search(r"verdict\s+weak", out) and "was refused by its samples (forced) (too few)" in out

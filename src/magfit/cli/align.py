@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -183,9 +184,9 @@ def _starting_calibration(recording: _Recording, inclination: float | None) -> C
 
     With a gyroscope and time stamps, the gyro-aided fit's magnitude-only part (``details["sensor_matrix"]``):
     a vehicle that cannot tumble leaves ``auto`` the field's vertical part, which the dip angles rest on,
-    poorly pinned, while the rotation kinematics pin it (simulated flight, car and boat at 6 000 samples, 8
-    trials each: the alignment 0.38°, 0.15°, 0.33° RMS from the true mounting starting from it, 2.5°, 1.9°,
-    1.5° starting from ``auto``). Otherwise, or where the gyro-aided fit is refused, ``auto``.
+    poorly pinned, while the rotation kinematics pin it (benchmarks/results/vehicle: flight, car and boat at
+    6 000 samples, 8 trials each, the alignment 0.45°, 0.15°, 0.32° RMS from the true mounting starting from it,
+    2.5°, 1.9°, 1.5° starting from ``auto``). Otherwise, or where the gyro-aided fit is refused, ``auto``.
     """
     if recording.gyro is not None and recording.time_s is not None:
         try:
@@ -214,19 +215,21 @@ def _starting_calibration(recording: _Recording, inclination: float | None) -> C
 
 def _verdict_of(calibration: Calibration) -> str | None:
     support = calibration.details.get("support")
-    return str(support["verdict"]) if isinstance(support, dict) and "verdict" in support else None
+    return str(support["verdict"]) if isinstance(support, Mapping) and "verdict" in support else None
 
 
 def _capped_by_calibration(result: Alignment, calibration: Calibration) -> Alignment:
     """An alignment is no better supported than the calibration it starts from: its one-sigma counts the dips'
     scatter, not an error of the calibrated field's vertical part, which turns every dip alike (simulated
     car, auto's weak calibration: 5.0° off where the alignment alone said supported ±0.9°)."""
-    if _verdict_of(calibration) != "weak":
+    verdict_of_calibration = _verdict_of(calibration)
+    if verdict_of_calibration not in ("weak", "refused"):
         return result
     support = calibration.details["support"]
-    first = (support.get("weaknesses") or [""])[0]
+    first = ((support.get("refusals") or []) + (support.get("weaknesses") or []) + [""])[0]
+    said = "is weak" if verdict_of_calibration == "weak" else "was refused by its samples (forced)"
     warning = (
-        f"the calibration it starts from ({calibration.method}) is weak"
+        f"the calibration it starts from ({calibration.method}) {said}"
         + (f" ({first})" if first else "")
         + ": its error in the field's vertical part turns the dip angles, which the one-sigma above does not "
         "count; calibrate with a tumble first and give it with --calibration"
