@@ -206,7 +206,7 @@ def diagnose(
     ------
     OptionError
         The calibration's method rests on more than the samples (``vector``: a reference field; ``gyro``: the
-        body rates): its verdict is the one made when it was fitted (``calibration.diagnostics``).
+        body rates): its verdict is the one made when it was fitted (``details["support"]``).
     """
     spec = METHODS.get(calibration.method)
     if spec is not None and spec.needs:
@@ -214,7 +214,7 @@ def diagnose(
         # magnitude-only verdict (a flight "covers 7 % of the directions") would contradict its own.
         raise OptionError(
             f"magfit.diagnose judges a calibration from the samples alone; a {calibration.method!r} calibration also "
-            f"rests on {' and '.join(spec.needs)}: its verdict is calibration.diagnostics, made when it was fitted "
+            f"rests on {' and '.join(spec.needs)}: its verdict, made when it was fitted, is details['support'] "
             f"(fit it again with magfit.fit(samples, method={calibration.method!r}, ...) to judge it on new samples)"
         )
     refit = None
