@@ -23,7 +23,7 @@ from magfit.errors import DataFileError
 from magfit.export import export
 from magfit.sources import log_kind, open_source
 from magfit.sources.tlog import _CRC_EXTRA, _IDS, _LAYOUTS, _MAX_LENGTH, TelemetryLog
-from test_sources_dataflash import COMPASSES, correct_field
+from test_sources_dataflash import COMPASSES, _assert_recovers, correct_field
 
 #: CRC_EXTRA of the messages written here (MAVLink's generated definitions: pymavlink's crc_extra).
 CRC_EXTRA = {0: 50, 22: 220, 24: 24, 27: 144, 30: 39, 105: 93, 116: 76, 129: 46}
@@ -165,14 +165,6 @@ def write_vehicle(
             writer.add(wall_us + latency + 500, 24, boot_ms * 1000, 473_977_000, 85_403_000, 488_500, 1, 1, 0, 0, 3, 12)
     path.write_bytes(writer.bytes())
     return simulations
-
-
-def _assert_recovers(calibration: magfit.Calibration, truth: magfit.Calibration) -> None:
-    # 1.5 mG noise and whole-mG truncation on 1200 samples of a 480 mG field: the ellipsoid within 1 % of its
-    # largest entry and the offset within 1 % of the field; a compass, sign or parameter mix-up is far outside.
-    scale = float(np.max(np.abs(truth.ellipsoid_matrix)))
-    np.testing.assert_allclose(calibration.ellipsoid_matrix, truth.ellipsoid_matrix, atol=0.01 * scale)
-    np.testing.assert_allclose(calibration.offset, truth.offset, atol=0.01 * truth.field_strength)
 
 
 # ------------------------------------------------------------------------------------------------ the format
