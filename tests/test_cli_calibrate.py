@@ -295,8 +295,8 @@ def test_system_id_goes_into_the_px4_file_and_nowhere_else(tmp_path: Path) -> No
 
 
 def test_a_self_judged_method_prints_its_weaknesses_as_warnings() -> None:
-    # gyro judges itself (details["support"], no Diagnostics): the summary's "weak: n weakness(es), in the
-    # warnings above" must have those warnings above it.
+    # gyro judges itself (details["support"], no report of its own): its diagnostics carry that verdict, and the
+    # summary's "weak: n weakness(es), in the warnings above" must have those warnings above it.
     from magfit.cli.calibrate import _fit_warnings, _verdict
     from magfit.vehicle import simulate_vehicle
 
@@ -304,5 +304,6 @@ def test_a_self_judged_method_prints_its_weaknesses_as_warnings() -> None:
     calibration = magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s)
     weaknesses = calibration.details["support"]["weaknesses"]
     assert calibration.details["support"]["verdict"] == "weak" and weaknesses
+    assert calibration.diagnostics is not None and calibration.diagnostics.support.verdict == "weak"
     assert _fit_warnings(calibration) == weaknesses
     assert _verdict(calibration) == [("verdict", f"weak: {len(weaknesses)} weakness(es), in the warnings above")]

@@ -501,12 +501,9 @@ def _print_model_field(
 def _fit_warnings(calibration: Calibration) -> list[str]:
     """The warnings the fit's diagnostics attached (poor coverage, weak directions ...), if any."""
     diagnostics = calibration.details.get("diagnostics")
-    if isinstance(diagnostics, Mapping):
-        return [str(message) for message in diagnostics.get("warnings") or []]
-    support = calibration.details.get("support")  # a method that judges itself (gyro): its verdict's words
-    if isinstance(support, Mapping):
-        return [str(message) for message in support.get("weaknesses") or []]
-    return []
+    if not isinstance(diagnostics, Mapping):
+        return []
+    return [str(message) for message in diagnostics.get("warnings") or []]
 
 
 def _check_extension(output: Path, export_format: str) -> None:

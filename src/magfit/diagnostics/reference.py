@@ -509,10 +509,12 @@ def _share(value: float) -> str:
 
 
 def judged(calibration: Calibration, method: str, diagnostics: bool | str, allow_undetermined: bool) -> Calibration:
-    """A vector calibration with the verdict its method reached: raised when refused (unless forced).
+    """A vehicle-frame calibration with the verdict its method reached: raised when refused (unless forced).
 
     What :func:`magfit.fit` does for a calibration in the vehicle frame, in place of the magnitude-only
     diagnosis: the method judged it against its reference (``details["support"]``, ``details["diagnostics"]``).
+    A method with a verdict but no report of its own (``gyro``) gets diagnostics that carry the verdict and its
+    warnings only, so that every fit's ``calibration.diagnostics`` says what to read before trusting it.
     """
     stored = calibration.details.get("support")
     if not isinstance(stored, dict):
@@ -525,7 +527,12 @@ def judged(calibration: Calibration, method: str, diagnostics: bool | str, allow
     details = {key: value for key, value in calibration.details.items() if key != "diagnostics"}
     details["support"] = support.to_dict()
     report = calibration.details.get("diagnostics")
-    if diagnostics and isinstance(report, dict):
-        typed = replace(Diagnostics.from_dict(report), support=support, warnings=support.warnings)
+    if diagnostics:
+        if isinstance(report, dict):
+            typed = replace(Diagnostics.from_dict(report), support=support, warnings=support.warnings)
+        else:  # a method that judged itself without a report of its own (gyro): its verdict is the whole of it
+            used = int(calibration.n_samples or 0)
+            typed = Diagnostics(used, used, None, None, None, None, support.warnings, (), calibration.unit,
+                                support=support)  # fmt: skip
         details["diagnostics"] = typed.to_dict()
     return replace(calibration, details=details)
