@@ -396,6 +396,9 @@ def align(
     ----------
     calibrated_mag : array_like, shape (N, 3)
         The field corrected by a magnitude-only calibration (``cal.apply(raw)``), magnetometer axes, any unit.
+        The one-sigma takes that calibration as exact: an error in its vertical part turns every dip alike
+        (from a weak ``auto`` fit on a car, 5° off at a stated ±0.9°); ``magfit align`` caps the verdict at the
+        calibration's own and starts from the gyro-aided fit's magnitude-only part where it has a gyroscope.
     accel : array_like, shape (N, 3)
         The accelerometer's specific force at the same instants, in the body (vehicle) frame, any unit
         (gravity reads about (0, 0, −1 g) in a level forward-right-down body).
