@@ -17,6 +17,7 @@ from .calibration import CONVENTION, Calibration
 from .diagnostics import Diagnostics
 from .errors import CalibrationError, DataFileError, ExportError, MagfitError, OptionError, SampleError
 from .evaluate import Evaluation, evaluate, sphere_distances
+from .findings import REASON_CODES, Reason, Support
 from .fit import diagnose, fit, refit
 from .methods import METHODS
 from .pipeline import CompassCalibration, FileCalibration, calibrate_file
@@ -29,6 +30,7 @@ __all__ = [
     "CONVENTION",
     "DISTURBANCES",
     "METHODS",
+    "REASON_CODES",
     "SENSORS",
     "Calibration",
     "CalibrationError",
@@ -40,10 +42,12 @@ __all__ = [
     "FileCalibration",
     "MagfitError",
     "OptionError",
+    "Reason",
     "SampleError",
     "Scenario",
     "Simulation",
     "Statistics",
+    "Support",
     "__version__",
     "align",
     "calibrate_file",

@@ -10,7 +10,17 @@ __all__ = ["CalibrationError", "DataFileError", "ExportError", "MagfitError", "O
 
 
 class MagfitError(ValueError):
-    """Base class of every error magfit raises on purpose."""
+    """Base class of every error magfit raises on purpose.
+
+    Besides its one-line message, an error carries its reasons as data: ``codes`` (the stable reason codes of
+    :data:`magfit.REASON_CODES`, empty where none was given) and ``remedy`` (``(argument, value)`` pairs the
+    command line renders as ``--flags`` and Python as keywords). Code that decides reads these, not the words.
+    """
+
+    def __init__(self, *args: object, codes: tuple[str, ...] = (), remedy: tuple[tuple[str, str], ...] = ()) -> None:
+        super().__init__(*args)
+        self.codes = tuple(codes)
+        self.remedy = tuple(remedy)
 
 
 class SampleError(MagfitError):

@@ -9,22 +9,27 @@ diagnostics back typed), so it imports nothing of magfit but the errors.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 from .errors import MagfitError
 
 __all__ = [
     "AXIS_DIRECTIONS",
+    "REASON_CODES",
     "Consistency",
     "Coverage",
     "Diagnostics",
     "Evaluation",
     "Goodness",
     "Observability",
+    "Reason",
+    "ReasonList",
     "Support",
     "Uncertainty",
     "WeakDirection",
+    "reasons",
 ]
 
 _SCHEMA = 1
@@ -469,6 +474,106 @@ class Consistency:
         ]
 
 
+class Reason(str):
+    """One reason of a verdict: the clause in words, with a stable machine-readable ``code``.
+
+    A ``Reason`` *is* its words (a ``str``), so every reader that prints or joins reasons keeps working;
+    code that decides reads :attr:`code` instead of the wording. Codes are listed in
+    :data:`REASON_CODES` (and docs/diagnostics.md); tests assert codes, not wording.
+
+    Parameters
+    ----------
+    text : str
+        The clause in words, with its consequence.
+    code : str
+        A stable identifier (``"single_axis"``, ``"no_ellipsoid"``, ``"undetermined"``, ...).
+    remedy : tuple of (str, str) pairs, optional
+        What to change, as data: ``(argument, value)`` pairs (a keyword argument in Python, rendered as a
+        ``--flag`` by the command line), e.g. ``(("method", "vector"),)``. Empty when the remedy is to record
+        again.
+    """
+
+    code: str
+    remedy: tuple[tuple[str, str], ...]
+
+    def __new__(cls, text: str, code: str = "unclassified", remedy: tuple[tuple[str, str], ...] = ()) -> Reason:
+        self = super().__new__(cls, text)
+        self.code = str(code)
+        self.remedy = tuple((str(name), str(value)) for name, value in remedy)
+        return self
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (Reason, (str(self), self.code, self.remedy))
+
+    @property
+    def text(self) -> str:
+        return str.__str__(self)
+
+    def to_dict(self) -> dict[str, Any]:
+        data: dict[str, Any] = {"code": self.code, "text": self.text}
+        if self.remedy:
+            data["remedy"] = [list(pair) for pair in self.remedy]
+        return data
+
+    @classmethod
+    def from_value(cls, value: Any) -> Reason:
+        """A reason from its JSON form: ``{"code", "text"[, "remedy"]}``, or the bare words of schema 1."""
+        if isinstance(value, Reason):
+            return value
+        if isinstance(value, dict):
+            remedy = tuple((str(pair[0]), str(pair[1])) for pair in value.get("remedy", ()))
+            return cls(str(value["text"]), str(value.get("code", "unclassified")), remedy)
+        return cls(str(value))
+
+
+def reasons(values: Any, code: str = "unclassified") -> tuple[Reason, ...]:
+    """Each value as a :class:`Reason` (plain words get ``code``); a Reason keeps its own code."""
+    return tuple(value if isinstance(value, Reason) else Reason(str(value), code) for value in values)
+
+
+class ReasonList(list[Reason]):
+    """The reasons a judge collects: ``add(code, text)`` appends a :class:`Reason`."""
+
+    def add(self, code: str, text: str, remedy: tuple[tuple[str, str], ...] = ()) -> None:
+        if code not in REASON_CODES:
+            raise KeyError(f"unknown reason code {code!r}: add it to REASON_CODES with its meaning")
+        self.append(Reason(text, code, remedy))
+
+    def extend_last(self, code: str, text: str) -> None:
+        """Append ``text`` to the last reason's words, giving it ``code``."""
+        last = self[-1]
+        self[-1] = Reason(last + text, code, last.remedy)
+
+
+#: The stable reason codes, each with what it means. A refusal or weakness carries one of these.
+REASON_CODES: dict[str, str] = {
+    "too_few_samples": "fewer samples than the model needs",
+    "no_ellipsoid": "the samples lie on no ellipsoid (a cloud, a still sensor, a changing field)",
+    "large_residual": "the samples lie on an ellipsoid only loosely",
+    "single_axis": "the sensor turned about one axis only",
+    "undetermined": "a combination of parameters is not determined by the samples",
+    "weakly_determined": "a combination of parameters is weakly determined",
+    "restricted_attitude": "the calibration holds only near the attitudes recorded",
+    "model_inadequate": "a restricted model (sphere, axis-aligned, min/max) cannot describe the distortion",
+    "field_mismatch": "the fitted field strength contradicts the known one",
+    "unit_mismatch": "the fitted field strength is not the Earth's field in the declared unit",
+    "biased": "the method is biased on these samples (far from the maximum-likelihood fit of its model)",
+    "low_coverage": "the samples cover a small share of directions",
+    "overfit": "the fit does much worse on held-out samples than on its own",
+    "inconsistent_halves": "two parts of the recording give different calibrations",
+    "saturated": "samples clipped at the sensor's full scale",
+    "solver": "the solver did not converge",
+    "lag_at_edge": "the attitude's lag lies at the edge of the search",
+    "reference": "the reference field or attitude does not explain the samples",
+    "accelerometer": "the accelerometer disagrees with the reference or the gyroscope",
+    "gyro": "the gyroscope does not explain the magnetometer's turning",
+    "inclination": "the inclination given disagrees with the samples",
+    "logging_rate": "the compass was logged too slowly for the motion",
+    "calibration_in_use": "the fit corrects an unknown calibration already applied",
+    "unclassified": "a reason without a code of its own yet",
+}
+
+
 @dataclass(frozen=True)
 class Support:
     """The verdict on a calibration: do the samples determine it? (see :mod:`magfit.diagnostics.verdict`)
@@ -477,26 +582,46 @@ class Support:
     ----------
     verdict : {"supported", "weak", "refused"}
         ``"refused"`` calibrations are not returned by :func:`magfit.fit` unless forced.
-    refusals : tuple of str
-        Why the samples do not support the calibration, each a clause in words.
-    weaknesses : tuple of str
-        What is weakly determined or suspicious, each a clause with its consequence.
+    refusals : tuple of Reason
+        Why the samples do not support the calibration, each a clause in words with its code.
+    weaknesses : tuple of Reason
+        What is weakly determined or suspicious, each a clause with its consequence and its code.
     advice : str
         What to record instead.
     forced : bool
         True when the calibration was returned although refused (``allow_undetermined=True``, ``--force``).
     """
 
-    verdict: str
-    refusals: tuple[str, ...]
-    weaknesses: tuple[str, ...]
+    verdict: Literal["supported", "weak", "refused"]
+    refusals: tuple[Reason, ...]
+    weaknesses: tuple[Reason, ...]
     advice: str
     forced: bool = False
+
+    def __post_init__(self) -> None:
+        if self.verdict not in ("supported", "weak", "refused"):
+            raise ValueError(f"a verdict is supported, weak or refused, not {self.verdict!r}")
+        object.__setattr__(self, "refusals", reasons(self.refusals))
+        object.__setattr__(self, "weaknesses", reasons(self.weaknesses))
+
+    @classmethod
+    def judged(cls, refusals: Iterable[Reason], weaknesses: Iterable[Reason], advice: str) -> Support:
+        """The verdict that follows from the reasons: refused if any refusal, weak if any weakness, else supported."""
+        refused, weak = tuple(refusals), tuple(weaknesses)
+        verdict: Literal["supported", "weak", "refused"] = "refused" if refused else "weak" if weak else "supported"
+        return cls(verdict=verdict, refusals=refused, weaknesses=weak, advice=advice)
+
+    @property
+    def codes(self) -> tuple[str, ...]:
+        """The codes of the refusals, then of the weaknesses, in order, each once."""
+        return tuple(dict.fromkeys(reason.code for reason in (*self.refusals, *self.weaknesses)))
 
     @property
     def warnings(self) -> tuple[str, ...]:
         """What a user must read before trusting the calibration: refusals (when forced) then weaknesses."""
-        forced = tuple(f"NOT SUPPORTED (forced): {reason}" for reason in self.refusals)
+        forced = tuple(
+            Reason(f"NOT SUPPORTED (forced): {reason}", reason.code, reason.remedy) for reason in self.refusals
+        )
         return forced + self.weaknesses
 
     def message(self, method: str) -> str:
@@ -506,18 +631,30 @@ class Support:
     def to_dict(self) -> dict[str, Any]:
         return {
             "verdict": self.verdict,
-            "refusals": list(self.refusals),
-            "weaknesses": list(self.weaknesses),
+            "refusals": [str(r) for r in self.refusals],
+            "weaknesses": [str(w) for w in self.weaknesses],
+            "refusal_codes": [r.code for r in self.refusals],
+            "weakness_codes": [w.code for w in self.weaknesses],
             "advice": self.advice,
             "forced": self.forced,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Support:
+        def read(texts: Any, codes: Any) -> tuple[Reason, ...]:
+            texts = list(texts)
+            codes = list(codes) if codes is not None else []
+            codes = [str(c) for c in codes] + ["unclassified"] * (len(texts) - len(codes))
+            pairs = zip(texts, codes, strict=True)
+            return tuple(Reason.from_value(t) if isinstance(t, dict) else Reason(str(t), c) for t, c in pairs)
+
+        verdict = str(data["verdict"])
+        if verdict not in ("supported", "weak", "refused"):
+            raise ValueError(f"a verdict is supported, weak or refused, not {verdict!r}")
         return cls(
-            verdict=str(data["verdict"]),
-            refusals=tuple(str(r) for r in data["refusals"]),
-            weaknesses=tuple(str(w) for w in data["weaknesses"]),
+            verdict=verdict,  # type: ignore[arg-type]
+            refusals=read(data["refusals"], data.get("refusal_codes")),
+            weaknesses=read(data["weaknesses"], data.get("weakness_codes")),
             advice=str(data["advice"]),
             forced=bool(data.get("forced", False)),
         )

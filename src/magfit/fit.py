@@ -162,7 +162,7 @@ def _judged(
     assert support is not None  # both diagnoses reach a verdict
     if support.verdict == "refused":
         if not allow_undetermined:
-            raise CalibrationError(support.message(method))
+            raise CalibrationError(support.message(method), codes=support.codes)
         support = replace(support, forced=True)
         report = replace(report, support=support, warnings=support.warnings)
     details: dict[str, Any] = {**calibration.details, "support": support.to_dict()}

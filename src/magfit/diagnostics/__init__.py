@@ -27,7 +27,7 @@ from .._validation import check_finite, check_shape
 from ..calibration import Calibration
 from ..errors import MagfitError, SampleError
 from ..evaluate import Evaluation, unchecked_sphere_distances
-from ..findings import Diagnostics, Goodness, Support
+from ..findings import Diagnostics, Goodness, Reason, ReasonList, Support
 from ..geometry.frame import Frame
 from ..geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
 from ..sampling import MAX_ANALYSED, thin, weighted_even_subsample
@@ -370,29 +370,29 @@ def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Dia
     from .moments import analyse_statistics
 
     observability, mean, std = analyse_statistics(statistics, calibration, model_kind(calibration))
-    refusals = []
+    refusals = ReasonList()
     undetermined = [w.description for w in observability.weak if not w.determined]
     if undetermined:
-        refusals.append(f"the samples do not determine {'; '.join(undetermined)}: those numbers would be noise")
+        words = "; ".join(undetermined)
+        refusals.add("undetermined", f"the samples do not determine {words}: those numbers would be noise")
     if std > NO_ELLIPSOID_RMS:
         best = std if model_kind(calibration) == "full" else _algebraic_ellipsoid_std(statistics)
         if best is not None and best <= NO_ELLIPSOID_RMS:
-            refusals.append(
+            refusals.add("model_inadequate",
                 f"the {calibration.method} fit cannot describe these samples: its algebraic distance to them is "
                 f"{100 * std:.0f} % of the field (RMS) where a full ellipsoid's is {100 * best:.1f} %; the auto or "
                 "ellipsoid method would not leave that"
             )
         else:
-            refusals.append(
+            refusals.add("no_ellipsoid",
                 f"the samples lie on no ellipsoid: their algebraic distance to the fitted one is {100 * std:.0f} % of "
                 "the field (RMS)"
             )
-    weaknesses = tuple(f"{w.description} is weakly determined" for w in observability.weak if w.determined)
-    support = Support(
-        verdict="refused" if refusals else "weak" if weaknesses else "supported",
-        refusals=tuple(refusals),
-        weaknesses=weaknesses,
-        advice="record again turning the sensor through all attitudes (a full tumble is best)",
+    weaknesses = [
+        Reason(f"{w.description} is weakly determined", "weakly_determined") for w in observability.weak if w.determined
+    ]
+    support = Support.judged(
+        refusals, weaknesses, "record again turning the sensor through all attitudes (a full tumble is best)"
     )
     return Diagnostics(
         n_samples=statistics.n,

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
-from ..findings import Coverage, Diagnostics, Observability, Support, Uncertainty, WeakDirection
+from ..findings import Coverage, Diagnostics, Observability, ReasonList, Support, Uncertainty, WeakDirection, reasons
 from .coverage import coverage
 from .uncertainty import DEFAULT_INCLINATION_DEG, UNDETERMINED_SIGMA, WEAK_INFORMATION
 from .verdict import BIASED_HEADING_DEG, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
@@ -427,10 +427,10 @@ def judge_reference_fit(
     )
     observability = Observability(model="vector", condition=condition, weak=weak, turn_axis=None)
 
-    refusals: list[str] = []
-    weaknesses: list[str] = list(cautions)
+    refusals = ReasonList()
+    weaknesses = ReasonList(reasons(cautions, "reference"))
     if residual_rms > NO_ELLIPSOID_RMS:
-        refusals.append(
+        refusals.add("reference",
             f"the samples do not follow the reference: after the best G and V they still differ from it by "
             f"{100 * residual_rms:.0f} % of the field (RMS), where an attitude good to a degree leaves about 2 %; "
             "the reference is likely in the wrong frame (the world's instead of the vehicle's), its attitude "
@@ -443,7 +443,7 @@ def judge_reference_fit(
             )
         )
     elif residual_rms > LARGE_RESIDUAL_RMS:
-        weaknesses.append(
+        weaknesses.add("large_residual",
             f"the residuals are large: {100 * residual_rms:.1f} % of the field (RMS) where an attitude good to a "
             "degree leaves about 2 %: the attitude errs by several degrees, the time bases drift, or the field "
             "changed while recording; expect heading errors of a few degrees"
@@ -455,41 +455,40 @@ def judge_reference_fit(
     named = 0  # weak directions already named by a refusal
     still = _hardly_turned(reference)
     if worst > HEADING_LIMIT_DEG and not refusals and still is not None:
-        refusals.append(f"{still}; {effect}")
+        refusals.add("single_axis", f"{still}; {effect}")
     elif worst > HEADING_LIMIT_DEG and not refusals:  # a reference the samples do not follow: that is the cause
         if weak:
             named = 1
             first = weak[0]
-            refusals.append(
+            refusals.add("undetermined",
                 f"the reference does not determine {first.description} (one-sigma {100 * (first.sigma or 0.0):.2g} % "
                 f"of the field; the reference carries {_share(first.relative_information)} of the information a full "
                 f"tumble gives): {_why(np.array(first.vector), reference, field)}; {effect}"
             )
         else:
-            refusals.append(
+            refusals.add("undetermined",
                 f"the reference's error leaves the calibration uncertain: {effect} (the attitude's error does not "
                 "average out over so short a recording, or the reference lags the samples: give time_s); record "
                 "longer, through every heading"
             )
     for direction in weak[named:]:
-        weaknesses.append(
+        weaknesses.add("weakly_determined",
             f"{direction.description} is weakly determined (one-sigma {100 * (direction.sigma or 0.0):.2g} % of the "
             f"field; the reference carries {_share(direction.relative_information)} of the information a full "
             f"tumble gives): the calibration holds near the attitudes recorded; {effect}"
         )
     mixup = unit_mixup(scale)
     if mixup is not None:
-        weaknesses.append(
+        weaknesses.add("unit_mismatch",
             f"the samples are {scale:.3g} times the reference field: {mixup}; the calibration converts the samples "
             "into the reference's unit (if the samples are raw counts, this is the sensor's gain)"
         )
     if lag_at_limit is not None:
-        weaknesses.append(
+        weaknesses.add("lag_at_edge",
             f"the lag between the reference and the samples reached the search limit ({lag_at_limit:+.3g} s): the "
             "true lag may be larger; give a larger max_lag_s or check the two time bases"
         )
-    verdict = "refused" if refusals else "weak" if weaknesses else "supported"
-    support = Support(verdict=verdict, refusals=tuple(refusals), weaknesses=tuple(weaknesses), advice=ADVICE)
+    support = Support.judged(refusals, weaknesses, ADVICE)
     directions = reference / np.linalg.norm(reference, axis=1, keepdims=True)
     return ReferenceReport(
         support=support,
@@ -522,7 +521,7 @@ def judged(calibration: Calibration, method: str, diagnostics: bool | str, allow
     support = Support.from_dict(stored)
     if support.verdict == "refused":
         if not allow_undetermined:
-            raise CalibrationError(support.message(method))
+            raise CalibrationError(support.message(method), codes=support.codes)
         support = replace(support, forced=True)
     details = {key: value for key, value in calibration.details.items() if key != "diagnostics"}
     details["support"] = support.to_dict()

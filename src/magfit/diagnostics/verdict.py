@@ -52,7 +52,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..findings import Consistency, Coverage, Goodness, Observability, Support, Uncertainty
+from ..findings import Consistency, Coverage, Goodness, Observability, ReasonList, Support, Uncertainty
 
 __all__ = [
     "FIELD_TOLERANCE",
@@ -146,27 +146,29 @@ class Evidence:
 
 def judge(evidence: Evidence) -> Support:
     """The verdict on one calibration from its evidence (see the module docstring for the rules)."""
-    refusals: list[str] = [evidence.solver_problem] if evidence.solver_problem else []
-    weak: list[str] = []
+    refusals = ReasonList()
+    if evidence.solver_problem:
+        refusals.add("solver", evidence.solver_problem)
+    weak = ReasonList()
     cover, observability, uncertainty = evidence.coverage, evidence.observability, evidence.uncertainty
     label = f" {evidence.unit}" if evidence.unit else ""
     best = min(evidence.residual_rms, evidence.ellipsoid_rms or math.inf)
     if best > NO_ELLIPSOID_RMS and evidence.flat is not None:
         axis, ratio = evidence.flat
-        refusals.append(
+        refusals.add("no_ellipsoid",
             f"the samples lie close to a plane (their spread along {axis} is {100 * ratio:.0f} % of the largest): the "
             f"sensor turned mostly about {axis}, so no ellipsoid through them is determined (the best one misses them "
             f"by {100 * best:.0f} % of the field); tilt the sensor so that both ends of {axis} face the field in turn"
         )
     elif best > NO_ELLIPSOID_RMS:
-        refusals.append(
+        refusals.add("no_ellipsoid",
             f"the samples lie on no ellipsoid: their distance to the best one is {100 * best:.0f} % of the field "
             "(RMS), where a sensor turned in a steady field gives a few per cent; the field or the distortion changed "
             "while recording (a magnet, motors, a moving part), the sensor barely moved, or these are not "
             "magnetometer readings"
         )
     elif evidence.residual_rms > NO_ELLIPSOID_RMS:
-        refusals.append(
+        refusals.add("model_inadequate",
             f"the {_fit_name(evidence)} cannot describe these samples: it leaves "
             f"{100 * evidence.residual_rms:.0f} % of the field (RMS) where a full ellipsoid leaves {100 * best:.1f} %: "
             "it misplaces the ellipsoid the samples lie on (a sphere ignores the soft iron; min/max centred on "
@@ -174,13 +176,13 @@ def judge(evidence: Evidence) -> Support:
             "error; the auto method would not"
         )
     elif best > LARGE_RESIDUAL_RMS:
-        weak.append(
+        weak.add("large_residual",
             f"the residuals are large: {100 * best:.1f} % of the field (RMS) where a few per cent are usual; the field "
             "or the distortion changed while recording (motors, a magnet nearby) or the sensor is noisy: expect "
             "heading errors of a few degrees"
         )
     if evidence.axis_ratio is not None and evidence.axis_ratio > MAX_AXIS_RATIO:
-        refusals.append(
+        refusals.add("undetermined",
             f"the fitted ellipsoid is {evidence.axis_ratio:.0f} times longer than it is thick, where the strongest "
             "soft iron squeezes an axis about 7 times: the samples hardly reach along its short axis, and the fit "
             "scaled their noise up to the field there"
@@ -189,7 +191,7 @@ def judge(evidence: Evidence) -> Support:
     if not band and observability.turn_axis is not None:
         band.append(observability.turn_axis.lstrip("+"))
     for axis in band:
-        refusals.append(
+        refusals.add("single_axis",
             f"the sensor only turned about {axis}: the field was never seen near +{axis} or −{axis}, so the offset "
             f"and scale along {axis} are fixed by nothing in the samples; tilt the sensor so that both ends of {axis} "
             "face the field in turn"
@@ -205,18 +207,18 @@ def judge(evidence: Evidence) -> Support:
         # hold (a sphere on the generic sensor tilted ±10°: ±2° stated, 12° wrong).
         relaxed = evidence.kind == "full" and heading is not None and heading <= UNDETERMINED_HEADING_DEG
         if relaxed and all(w.sigma for w in undetermined):
-            weak.append(
+            weak.add("restricted_attitude",
                 f"the samples do not determine {parts}: the calibration holds only near the attitudes recorded "
                 f"(there the heading uncertainty at level is ±{heading:.2g}°); do not trust those numbers on their "
                 "own (an offset along that axis, the field's vertical part) nor the heading at steeper tilts than "
                 "recorded; tilt the sensor further while recording to determine them"
             )
         else:
-            refusals.append(f"the samples do not determine {parts}: those numbers would be noise")
+            refusals.add("undetermined", f"the samples do not determine {parts}: those numbers would be noise")
     for w in observability.weak:
         if w.determined:
             effect = "" if heading is None else f"; the heading uncertainty that follows is ±{heading:.2g}°"
-            weak.append(
+            weak.add("weakly_determined",
                 f"{w.description} is weakly determined (one-sigma {100 * (w.sigma or 0.0):.1f} % of the field; "
                 f"the samples carry {w.relative_information:.2g} of the information of a full tumble){effect}"
             )
@@ -224,38 +226,38 @@ def judge(evidence: Evidence) -> Support:
         given, fitted = evidence.known_field
         ratio = fitted / given
         if abs(ratio - 1.0) > FIELD_TOLERANCE:
-            refusals.append(
+            refusals.add("field_mismatch",
                 f"the field strength given ({given:.6g}{label}) is {ratio:.3g} times smaller than the samples show "
                 f"({fitted:.6g}{label})" if ratio > 1 else
                 f"the field strength given ({given:.6g}{label}) is {1 / ratio:.3g} times larger than the samples show "
                 f"({fitted:.6g}{label})"
             )
             mixup = unit_mixup(ratio)
-            refusals[-1] += (
+            refusals.extend_last("unit_mismatch" if mixup else "field_mismatch", (
                 f": {mixup}"
                 if mixup
                 else ": check the value and the samples' unit (iron that scales the whole field, such as a steel "
                 "plate against the sensor, does this too: then leave the field strength out)"
-            )
+            ))
     if (
         evidence.kind != "full"
         and evidence.ellipsoid_rms is not None
         and evidence.residual_rms > RESTRICTED_RESIDUAL_RATIO * evidence.ellipsoid_rms
         and LARGE_RESIDUAL_RMS / 2 < evidence.residual_rms <= NO_ELLIPSOID_RMS
     ):
-        weak.append(
+        weak.add("model_inadequate",
             f"the {_fit_name(evidence)} leaves residuals of {100 * evidence.residual_rms:.1f} % of the field where a "
             f"full ellipsoid leaves {100 * evidence.ellipsoid_rms:.1f} %: there is soft iron this model cannot "
             "remove; the ellipsoid or auto method would"
         )
     if cover.share < 0.5:
-        weak.append(
+        weak.add("low_coverage",
             f"the samples cover only {100 * cover.share:.0f} % of the directions: the calibration is extrapolated over "
             "the rest"
         )
     goodness = evidence.goodness
     if goodness is not None and goodness.held_out is not None and goodness.held_out.std > 1.25 * goodness.fitted.std:
-        weak.append(
+        weak.add("overfit",
             "the fit does much better on its own samples than on held-out ones: it is over-fitted (too many parameters "
             "for the directions covered)"
         )
@@ -266,14 +268,14 @@ def judge(evidence: Evidence) -> Support:
     if adequate and check is not None and not check.consistent and (  # else its own model's ML fit runs off
         check.heading_difference_deg > BIASED_HEADING_DEG or shift > BIASED_OFFSET
     ):
-        refusals.append(
+        refusals.add("biased",
             f"this method is biased on these samples: its fit is {check.heading_difference_deg:.2g}° of level heading "
             f"and {100 * shift:.0f} % of the field in offset away from the maximum-likelihood fit of the same model "
             "(a method that only averages or scales the samples, or an algebraic fit of a cap of directions); the "
             "auto or ml method is not"
         )
     elif check is not None and not check.consistent and check.sigmas is not None:
-        weak.append(
+        weak.add("biased",
             f"the fit is {check.sigmas:.0f} one-sigmas ({check.heading_difference_deg:.2g}° of level heading) away "
             "from the maximum-likelihood fit of the same model: this method is biased on these samples; the auto, "
             "ml or als method is not"
@@ -283,13 +285,12 @@ def judge(evidence: Evidence) -> Support:
         distance = max(abs(d) / max(s, 1e-300) for d, s in zip(difference, sigma, strict=True))
         if distance > HALVES_SIGMAS:
             shown = ", ".join(f"{d:+.3g}" for d in difference)
-            weak.append(
+            weak.add("inconsistent_halves",
                 f"the two halves of the recording give offsets that differ by ({shown}){label}, {distance:.0f} times "
                 "their one-sigma: the distortion or the field changed while recording (a magnet moved, motors, "
                 "temperature); calibrate on a recording where nothing near the sensor changes"
             )
-    verdict = "refused" if refusals else "weak" if weak else "supported"
-    return Support(verdict=verdict, refusals=tuple(refusals), weaknesses=tuple(weak), advice=_RECORD_ADVICE)
+    return Support.judged(refusals, weak, _RECORD_ADVICE)
 
 
 def _fit_name(evidence: Evidence) -> str:

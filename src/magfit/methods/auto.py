@@ -32,6 +32,7 @@ standard deviations, every candidate is fitted robustly and the choice uses the 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -42,7 +43,7 @@ from ..calibration import Calibration
 from ..diagnostics import diagnose
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import unchecked_sphere_distances
-from ..findings import Diagnostics, Support
+from ..findings import Diagnostics, Reason, Support
 from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..sampling import thin
 from ..statistics import Statistics
@@ -151,7 +152,9 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     inadequate = _inadequate(rss, m)  # first: no need to judge a model that cannot stand in for a richer one
     reports = {model: _candidate_report(optima[model], kept) for model in optima if model not in inadequate}
     verdicts = {
-        model: Support("refused", (inadequate[model],), (), "") if model in inadequate else _support(reports[model])
+        model: Support("refused", (Reason(inadequate[model], "model_inadequate"),), (), "")
+        if model in inadequate
+        else _support(reports[model])
         for model in CANDIDATES
         if model in optima
     }
@@ -642,7 +645,7 @@ def _reason(
     bic: dict[str, float],
     steps: list[str],
     passed_over: list[str],
-    weak: list[str],
+    weak: Sequence[str],
     failed: dict[str, str],
     screen_note: str,
 ) -> str:

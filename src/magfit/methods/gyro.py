@@ -99,7 +99,7 @@ from .._optimize import Evaluation, Solution, levenberg_marquardt
 from .._validation import check_rows, check_times
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
-from ..findings import Support
+from ..findings import Reason, ReasonList, Support
 from ..gravity import still_samples
 from ..rotations import polar_decomposition
 from .registry import FitInput, register
@@ -1028,16 +1028,16 @@ def _support(
     disagreement: str | None = None,
 ) -> Support:
     """The verdict on what the rotations determine (module docstring)."""
-    refusals: list[str] = []
-    weak: list[str] = []
+    refusals = ReasonList()
+    weak = ReasonList()
     if span_deg < MIN_TURN_DEG:
-        refusals.append(
+        refusals.add("single_axis",
             f"the sensor hardly turned: the field's direction in its frame spans {span_deg:.0f}°, where the "
             f"kinematics need turns of {MIN_TURN_DEG:.0f}° or more"
         )
     if ambiguous is not None:
         first, second, separation = ambiguous
-        refusals.append(
+        refusals.add("gyro",
             f"the rotations do not tell the axis mapping {first} from {second} (the samples fit both within "
             f"{separation:.1f} noise variances, where {LIKELIHOOD_RATIO:.0f} would tell them apart): the "
             "magnetometer's alignment to the gyroscope is not determined; turn about a second axis, or give "
@@ -1046,17 +1046,20 @@ def _support(
     worst = int(np.argmax(offset_sigma))
     where = _axis_words(offset_axes[:, worst], "magnetometer")
     if offset_sigma[worst] > UNDETERMINED_OFFSET:
-        refusals.append(
+        refusals.add("undetermined",
             f"the samples do not determine the offset along {where} (one-sigma {100 * offset_sigma[worst]:.0f} % of "
             "the field): that number would be noise"
         )
     elif offset_sigma[worst] > WEAK_OFFSET:
-        weak.append(
+        weak.add("weakly_determined",
             f"the offset along {where} is weakly determined (one-sigma {100 * offset_sigma[worst]:.1f} % of the "
             f"field); the heading uncertainty that follows is ±{heading_sigma:.2g}°"
         )
     elif heading_sigma > 1.0:
-        weak.append(f"the heading uncertainty the fit leaves is ±{heading_sigma:.2g}° (one-sigma, level, 60° dip)")
+        weak.add(
+            "weakly_determined",
+            f"the heading uncertainty the fit leaves is ±{heading_sigma:.2g}° (one-sigma, level, 60° dip)",
+        )
     planar = turns_deg is not None and turns_deg[2] < NARROW_THIRD_AXIS * turns_deg[0]
     narrow = planar and MIN_TURN_DEG <= span_deg < NARROW_TURN_DEG
     if not gravity and narrow:
@@ -1064,7 +1067,7 @@ def _support(
             "give accel= (the accelerometer, in the gyroscope's axes) to pin it with gravity" if accel_unused is None
             else f"accel= was given but {accel_unused}"
         )  # fmt: skip
-        weak.append(
+        weak.add("accelerometer",
             f"the field's direction spans only {span_deg:.0f}° in the magnetometer's frame, turning mostly about one "
             "axis (as a boat rolling on one heading): the axes' rotation about that axis rests on the little turning "
             f"about the others and its one-sigma understates it; {fix}"
@@ -1079,27 +1082,26 @@ def _support(
             else "its bias and alignment to the gyroscope are not checked; give inclination_deg= (the World "
             "Magnetic Model's) to check them across the field's horizontal direction"
         )  # fmt: skip
-        weak.append(
+        weak.add("accelerometer",
             f"the field's direction spans only {span_deg:.0f}° in the magnetometer's frame, turning mostly about one "
             "axis: the axes' rotation about it rests on the accelerometer's gravity, taken true within "
             f"{ACCEL_BIAS_PRIOR:g} m/s² in the one-sigma (a 1° tilt or a 0.3 m/s² bias left up to 1.8° or 3.4° of "
             f"heading error on simulated boats); {checked}"
         )
     if disagreement is not None and not narrow:  # the calibration may be what is off: the user must know
-        weak.append(disagreement)
+        weak.add("inclination", disagreement)
     if residual_rms > 0.05:
-        weak.append(
+        weak.add("large_residual",
             f"the samples leave {100 * residual_rms:.1f} % of the field (RMS) off the turning field the gyroscope "
             "predicts: the gyro and magnetometer are not on one clock, or the field changed while recording (motors, "
             "a magnet); expect heading errors of a few degrees"
         )
     if abs(lag) >= MAX_LAG_S - 1e-9:
-        weak.append(
+        weak.add("lag_at_edge",
             f"the magnetometer and the gyroscope fit best {lag:+.2f} s apart, the end of the range searched: their "
             "time stamps are not on one clock; check them (or give lag_s=)"
         )
-    verdict = "refused" if refusals else "weak" if weak else "supported"
-    return Support(verdict=verdict, refusals=tuple(refusals), weaknesses=tuple(weak), advice=_ADVICE)
+    return Support.judged(refusals, weak, _ADVICE)
 
 
 # --------------------------------------------------------------- the delay, the gyro's unit, the method
@@ -1371,10 +1373,10 @@ def fit_gyro(
                        inclination_checked=inclination_deg is not None, disagreement=disagreement)  # fmt: skip
     if mapping in MAPPINGS and excess.get(mapping, 0.0) > LIKELIHOOD_RATIO:
         support = replace(support, verdict="weak" if support.verdict == "supported" else support.verdict,
-                          weaknesses=(*support.weaknesses,
+                          weaknesses=(*support.weaknesses, Reason(
                                       f"the mapping given ({mapping}) fits {excess[mapping]:.0f} noise variances worse "
                                       "than a general rotation of the axes: the mounting is likely turned from it "
-                                      "(mapping='search' reports by how much)"))  # fmt: skip
+                                      "(mapping='search' reports by how much)", "gyro")))  # fmt: skip
     diagonal = np.sqrt(np.clip(np.diag(covariance), 0, None))
     details: dict[str, Any] = {
         "mapping": "general" if model.name == "general" else nearest,

@@ -488,7 +488,7 @@ def _with_diagnostics(
     if support is not None:
         if support.verdict == "refused":
             if not allow_undetermined:
-                raise CalibrationError(support.message(calibration.method))
+                raise CalibrationError(support.message(calibration.method), codes=support.codes)
             support = replace(support, forced=True)
             report = replace(report, support=support, warnings=support.warnings)
         details["support"] = support.to_dict()
