@@ -204,10 +204,10 @@ def diagnose(
         goodness = _goodness(fitted, raw, weights, refit if held_out else None)
         vary = variation_refit or refit
         if vary is not None and check is not None and check.consistent:  # a biased method's halves differ anyway
-            halves = _halves(rows, vary, uncertainty)
+            halves = _halves(rows, vary, uncertainty, total)
         if vary is not None and uncertainty.offset_sigma is not None:
             # After the halves: a change between them is named as such, not hidden in a wider one-sigma.
-            uncertainty = _with_block_jackknife(uncertainty, rows, vary)
+            uncertainty = _with_block_jackknife(uncertainty, rows, vary, total)
     evidence = Evidence(
         kind=kind,
         residual_rms=fitted.rms,
@@ -289,7 +289,9 @@ JACKKNIFE_BLOCKS = 8
 JACKKNIFE_SAMPLES = 2_000
 
 
-def _with_block_jackknife(uncertainty: Uncertainty, rows: NDArray[np.float64], refit: Refit) -> Uncertainty:
+def _with_block_jackknife(
+    uncertainty: Uncertainty, rows: NDArray[np.float64], refit: Refit, total: int | None = None
+) -> Uncertainty:
     """``uncertainty`` widened to what leaving out one stretch of the recording at a time shows.
 
     The batch-means covariance sees correlation within a stretch of a twentieth of the recording. What
@@ -299,7 +301,8 @@ def _with_block_jackknife(uncertainty: Uncertainty, rows: NDArray[np.float64], r
     (Künsch, Ann. Statist. 17, 1989), ``Var = (K − 1) / K Σ (V₍ₖ₎ − V̄)²`` for the offset V. When it
     exceeds the stated offset variance, every one-sigma is scaled by the mean ratio of the two (the
     heading and scale figures come from the same fit). The refits see a regular stride of at most
-    :data:`JACKKNIFE_SAMPLES` rows, their variance divided by the stride. Refits that fail leave the
+    :data:`JACKKNIFE_SAMPLES` rows, their variance scaled by their count over the ``total`` samples the
+    stated uncertainty is for (``rows`` may itself be a stride of the recording). Refits that fail leave the
     uncertainty as it is.
     """
     assert uncertainty.offset_sigma is not None
@@ -318,8 +321,8 @@ def _with_block_jackknife(uncertainty: Uncertainty, rows: NDArray[np.float64], r
             return uncertainty
     leave_one_out = np.array(offsets)
     spread = np.sum((leave_one_out - leave_one_out.mean(axis=0)) ** 2, axis=0)
-    # Refits on one row in ``step`` vary ``step`` times more than fits on every row would.
-    variance = (JACKKNIFE_BLOCKS - 1) / JACKKNIFE_BLOCKS * spread / step
+    # Refits on s of the ``total`` samples vary total / s times more than the fit on all of them.
+    variance = (JACKKNIFE_BLOCKS - 1) / JACKKNIFE_BLOCKS * spread * series.shape[0] / (total or m)
     stated = np.maximum(np.asarray(uncertainty.offset_sigma) ** 2, 1e-300)
     factor = float(np.mean(variance / stated))
     if not factor > 1.0:
@@ -328,13 +331,14 @@ def _with_block_jackknife(uncertainty: Uncertainty, rows: NDArray[np.float64], r
 
 
 def _halves(
-    rows: NDArray[np.float64], refit: Refit, uncertainty: Uncertainty
+    rows: NDArray[np.float64], refit: Refit, uncertainty: Uncertainty, total: int | None = None
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
     """Offset of the second half of the recording minus the first's, and the one-sigma of that difference.
 
     Each half holds half the samples, so its offset has √2 times the whole recording's one-sigma (the
     honest one, with the correlation in time counted); their difference 2 times (more when a half is
-    refitted on a stride of it). None when a half cannot be fitted (too few samples, or too few directions
+    refitted on a stride of it: a fit on s of the ``total`` samples the one-sigma is for varies total / s times
+    more, and ``rows`` may itself be a stride of the recording). None when a half cannot be fitted (too few samples, or too few directions
     in one half: that is the coverage's to report).
     """
     if uncertainty.offset_sigma is None or rows.shape[0] < 100:
@@ -349,8 +353,8 @@ def _halves(
             offsets.append(refit(fitted_on).offset)
         except (MagfitError, np.linalg.LinAlgError):
             return None
-        # rows is a regular stride of the recording: a fit on a share s of them varies 1 / s times more.
-        variance_factor += rows.shape[0] / fitted_on.shape[0]
+        # A fit on s of the total samples varies total / s times more than the whole recording's.
+        variance_factor += (total or rows.shape[0]) / fitted_on.shape[0]
     difference = offsets[1] - offsets[0]
     sigma = math.sqrt(variance_factor) * np.asarray(uncertainty.offset_sigma)
     return (
