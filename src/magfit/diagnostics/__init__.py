@@ -337,9 +337,9 @@ def _halves(
 
     Each half holds half the samples, so its offset has √2 times the whole recording's one-sigma (the
     honest one, with the correlation in time counted); their difference 2 times (more when a half is
-    refitted on a stride of it: a fit on s of the ``total`` samples the one-sigma is for varies total / s times
-    more, and ``rows`` may itself be a stride of the recording). None when a half cannot be fitted (too few samples, or too few directions
-    in one half: that is the coverage's to report).
+    refitted on a stride of it: a fit on s of the ``total`` samples the one-sigma is for varies total / s
+    times more, and ``rows`` may itself be a stride of the recording). None when a half cannot be fitted
+    (too few samples, or too few directions in one half: that is the coverage's to report).
     """
     if uncertainty.offset_sigma is None or rows.shape[0] < 100:
         return None
