@@ -364,6 +364,43 @@ class Statistics:
         duplicate._maximum = self._maximum.copy()
         return duplicate
 
+    def to_dict(self) -> dict[str, object]:
+        """The statistics as plain numbers (JSON-serialisable), exactly: :meth:`from_dict` restores them."""
+        self._require_samples()
+        assert self._centre is not None
+        return {
+            "n": self._n,
+            "centre": self._centre.tolist(),
+            "scale": self._scale,
+            "scatter": self._scatter.tolist(),
+            "minimum": self._minimum.tolist(),
+            "maximum": self._maximum.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, object]) -> Statistics:
+        """Statistics from :meth:`to_dict`'s numbers (a :class:`SampleError` naming what is malformed)."""
+        try:
+            n = int(data["n"])  # type: ignore[call-overload]
+            centre = np.asarray(data["centre"], dtype=np.float64).reshape(3)
+            scale = float(data["scale"])  # type: ignore[arg-type]
+            scatter = np.asarray(data["scatter"], dtype=np.float64).reshape(10, 10)
+            minimum = np.asarray(data["minimum"], dtype=np.float64).reshape(3)
+            maximum = np.asarray(data["maximum"], dtype=np.float64).reshape(3)
+        except (KeyError, TypeError, ValueError) as error:
+            raise SampleError(f"not the numbers of a Statistics ({error}): expected Statistics.to_dict()'s") from None
+        numbers = (centre, scatter, minimum, maximum, np.array([scale]))
+        if n < 1 or not all(np.all(np.isfinite(a)) for a in numbers) or not scale > 0:
+            raise SampleError("not the numbers of a Statistics: a count below 1, a non-finite value or a scale <= 0")
+        statistics = cls()
+        statistics._n = n
+        statistics._centre = centre
+        statistics._scale = scale
+        statistics._scatter = 0.5 * (scatter + scatter.T)
+        statistics._minimum = minimum
+        statistics._maximum = maximum
+        return statistics
+
     # ------------------------------------------------------------------ what the fits read
     #
     # The fits read the scatter in the canonical frame of the samples: centre = their mean, unit = their

@@ -99,6 +99,7 @@ def _register_commands() -> None:
     from .calibrate import calibrate_command
     from .compare import compare_command
     from .demo import demo_command
+    from .fleet import fleet_command
     from .inspect import inspect_command
     from .live import live_command
     from .plot import plot_command
@@ -116,6 +117,7 @@ def _register_commands() -> None:
         live_command,
         inspect_command,
         align_command,
+        fleet_command,
     ):
         cli.add_command(command)
 

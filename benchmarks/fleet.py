@@ -1,0 +1,199 @@
+"""The fleet benchmark: partial flights merged, a magnetisation found, and the fleet run's cost against its fits.
+
+Three measurements, each against a reference measured in the same run (the machines are shared and noisy):
+
+1. **Partial flights merged.** A vehicle flies 5 times, each flight covering 15-30 % of the sphere of
+   directions (a cap around another axis each time), with noise that leaves no single flight determined.
+   ``magfit.fleet`` combines them; the combined calibration's heading error (worst over level headings and
+   inclinations up to 70°, against the simulated truth) is compared with one full tumble's calibration
+   (the same sensor, noise and number of samples). Target: determined where each alone is not, and within 1.2× the
+   tumble's heading error (median over trials).
+2. **A magnetisation event.** A vehicle's offset moves by a few per cent of the field between its second
+   and third flight: named, with the date and the offset's move. Target: found in every trial, and no event
+   on the vehicles without one.
+3. **Cost.** 200 small recordings (2 000 samples, 10 vehicles): ``fleet(workers=2)`` against the sum of the
+   fits alone (``calibrate_file`` on each, one process, after a warm-up). Target: at most 1.3×. Also on
+   ``workers=1`` and, with ``--dask``, on a 4-worker local Dask cluster.
+
+Run: ``python benchmarks/fleet.py [--trials 5] [--recordings 200] [--dask] [--write]``; ``--write`` puts the
+results in ``benchmarks/results/fleet.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+import magfit
+from magfit.export._heading import heading_error_deg
+from magfit.fleet import fleet
+
+SOFT_IRON = np.array([[1.10, 0.05, 0.02], [0.05, 0.95, -0.03], [0.02, -0.03, 1.00]])
+HARD_IRON = np.array([12.0, -8.0, 20.0])
+FIELD = 50.0
+CAP_AXES = ([1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, -1, 0], [0, -1, -1])
+START = 1_700_000_000  # the first flight's time stamp (2023-11-14), a day between flights
+
+
+def truth(soft_iron: NDArray[np.float64] = SOFT_IRON, hard_iron: NDArray[np.float64] = HARD_IRON) -> magfit.Calibration:
+    return magfit.Calibration("truth", hard_iron, np.linalg.inv(soft_iron), FIELD * np.linalg.det(soft_iron) ** (1 / 3))
+
+
+def partial_flight(
+    n: int, axis: NDArray[np.float64], share: float, noise: float, seed: int, hard_iron: NDArray[np.float64] = HARD_IRON
+) -> NDArray[np.float64]:
+    """``n`` samples whose true field directions lie in a cap around ``axis`` covering ``share`` of the sphere."""
+    rng = np.random.default_rng(seed)
+    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    kept: list[NDArray[np.float64]] = []
+    while sum(len(k) for k in kept) < n:
+        directions = rng.normal(size=(4 * n, 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        kept.append(directions[directions @ axis > 1.0 - 2.0 * share])  # a cap's area share is (1 − cos)/2
+    field = FIELD * np.concatenate(kept)[:n]
+    return field @ SOFT_IRON.T + hard_iron + rng.normal(scale=noise, size=(n, 3))
+
+
+def tumble(n: int, noise: float, seed: int) -> NDArray[np.float64]:
+    return partial_flight(n, np.array([0.0, 0.0, 1.0]), 1.0, noise, seed)
+
+
+def write_flight(path: Path, samples: NDArray[np.float64], day: int) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(path, samples, delimiter=",", header="mx,my,mz", comments="", fmt="%.5f")
+    os.utime(path, (START + 86400 * day, START + 86400 * day))
+
+
+def partial_vehicle(folder: Path, seed: int, n: int = 2000, noise: float = 2.5) -> None:
+    """Vehicle ``folder``: 5 flights covering 15-30 % of directions each."""
+    for index, axis in enumerate(CAP_AXES):
+        share = 0.15 + 0.15 * index / (len(CAP_AXES) - 1)
+        samples = partial_flight(n, np.array(axis), share, noise, seed * 10 + index)
+        write_flight(folder / f"flight{index}.csv", samples, index)
+
+
+def magnetised_vehicle(folder: Path, seed: int, move: NDArray[np.float64], n: int = 2000, noise: float = 0.3) -> None:
+    """Vehicle ``folder``: 4 full flights, the offset moved by ``move`` from the third on."""
+    for index in range(4):
+        offset = HARD_IRON + (move if index >= 2 else 0.0)
+        write_flight(folder / f"flight{index}.csv", partial_flight(n, np.array([0, 0, 1.0]), 1.0, noise,
+                                                                   seed * 10 + index, offset), index)  # fmt: skip
+
+
+def merged_trial(seed: int, root: Path) -> dict[str, float]:
+    partial_vehicle(root / "partial", seed)
+    result = fleet([root / "partial"], workers=1, unit="uT")
+    flights = result.flights()
+    combined = result.combined()
+    alone_determined = sum(row.verdict in ("supported", "weak") and "undetermined" not in row.codes for row in flights)
+    reference = magfit.fit(tumble(10_000, 2.5, seed + 999), method="als")  # as many samples as the 5 flights
+    true = truth()
+    tumble_error = heading_error_deg(true, reference.matrix, reference.offset)
+    if len(combined) != 1 or combined[0].verdict == "refused":
+        return {"alone_determined": alone_determined, "combined_error": float("inf"), "tumble_error": tumble_error}
+    row = combined[0]
+    matrix = np.array([[row.matrix_xx, row.matrix_xy, row.matrix_xz], [row.matrix_yx, row.matrix_yy, row.matrix_yz],
+                       [row.matrix_zx, row.matrix_zy, row.matrix_zz]])  # fmt: skip
+    return {
+        "alone_determined": alone_determined,
+        "combined_error": heading_error_deg(true, matrix, row.offset),
+        "tumble_error": tumble_error,
+        "verdict": row.verdict,  # type: ignore[dict-item]
+    }
+
+
+def magnetisation_trial(seed: int, root: Path) -> tuple[bool, bool, str]:
+    magnetised_vehicle(root / "magnetised", seed, np.array([2.0, -1.5, 1.0]))
+    magnetised_vehicle(root / "steady", seed + 50, np.zeros(3))
+    result = fleet([root / "magnetised", root / "steady"], workers=1, unit="uT")
+    found = [e for e in result.events if e.startswith("magnetised") and "flight2.csv" in e]
+    false = [e for e in result.events if e.startswith("steady")]
+    return bool(found), not false, (found[0] if found else "")
+
+
+def cost(recordings: int, root: Path, dask: bool) -> dict[str, float]:
+    for index in range(recordings):
+        vehicle = root / f"vehicle{index % 10}"
+        write_flight(vehicle / f"r{index}.csv", tumble(2000, 0.3, 5000 + index), index // 10)
+    files = sorted(root.rglob("*.csv"))
+    magfit.calibrate_file(files[0])  # warm-up: imports, caches
+    start = time.perf_counter()
+    for path in files:
+        magfit.calibrate_file(path)
+    alone = time.perf_counter() - start
+    timings = {"fits_alone_s": alone}
+    for workers in (1, 2):
+        start = time.perf_counter()
+        fleet([root], workers=workers)
+        timings[f"fleet_{workers}_s"] = time.perf_counter() - start
+    if dask:
+        from distributed import Client, LocalCluster
+
+        with LocalCluster(n_workers=4, threads_per_worker=1, processes=True) as cluster, Client(cluster) as client:
+            start = time.perf_counter()
+            fleet([root], scheduler=client)
+            timings["fleet_dask4_s"] = time.perf_counter() - start
+    return timings
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=5)
+    parser.add_argument("--recordings", type=int, default=200)
+    parser.add_argument("--dask", action="store_true")
+    parser.add_argument("--write", action="store_true")
+    args = parser.parse_args(argv)
+    lines = ["# Fleet benchmark", "", f"`python benchmarks/fleet.py --trials {args.trials} --recordings "
+             f"{args.recordings}{' --dask' if args.dask else ''}`, {os.cpu_count()} cores.", ""]  # fmt: skip
+    ratios, alone = [], []
+    lines += ["## 1. Five partial flights (15-30 % of directions each) merged", "",
+              "| trial | flights determined alone | combined verdict | combined heading error | one tumble's | ratio |",
+              "|---|---|---|---|---|---|"]  # fmt: skip
+    for trial in range(args.trials):
+        with tempfile.TemporaryDirectory() as folder:
+            r = merged_trial(trial, Path(folder))
+        ratio = r["combined_error"] / r["tumble_error"]
+        ratios.append(ratio)
+        alone.append(r["alone_determined"])
+        lines.append(f"| {trial} | {int(r['alone_determined'])} of 5 | {r.get('verdict', 'refused')} | "
+                     f"{r['combined_error']:.2f}° | {r['tumble_error']:.2f}° | {ratio:.2f} |")  # fmt: skip
+    median = statistics.median(ratios)
+    lines += ["", f"Median ratio {median:.2f} (target ≤ 1.2): {'PASS' if median <= 1.2 else 'FAIL'}; flights "
+              f"determined alone: {max(alone):.0f} of 5 at most.", ""]  # fmt: skip
+    lines += ["## 2. A magnetisation between the second and third flight", ""]
+    found_all, clean_all = True, True
+    example = ""
+    for trial in range(args.trials):
+        with tempfile.TemporaryDirectory() as folder:
+            found, clean, words = magnetisation_trial(trial, Path(folder))
+        found_all &= found
+        clean_all &= clean
+        example = example or words
+    lines += [f"Found in every trial: {'PASS' if found_all else 'FAIL'}; no event on the steady vehicle: "
+              f"{'PASS' if clean_all else 'FAIL'}.", "", f"> {example}", ""]  # fmt: skip
+    with tempfile.TemporaryDirectory() as folder:
+        timings = cost(args.recordings, Path(folder), args.dask)
+    ratio2 = timings["fleet_2_s"] / timings["fits_alone_s"]
+    lines += [f"## 3. Cost: {args.recordings} recordings of 2 000 samples, 10 vehicles", "",
+              "| run | seconds | / fits alone |", "|---|---|---|"]  # fmt: skip
+    for name, seconds in timings.items():
+        lines.append(f"| {name} | {seconds:.1f} | {seconds / timings['fits_alone_s']:.2f} |")
+    lines += ["", f"fleet on 2 processes / the fits alone in one: {ratio2:.2f} (target ≤ 1.3): "
+              f"{'PASS' if ratio2 <= 1.3 else 'FAIL'}.", ""]  # fmt: skip
+    text = "\n".join(lines)
+    print(text)
+    if args.write:
+        Path(__file__).with_name("results").joinpath("fleet.md").write_text(text, encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
