@@ -125,7 +125,8 @@ def test_local_processes_give_the_rows_of_one_process(vehicles: Path) -> None:
 def test_a_dask_cluster_gives_the_rows_of_one_process(vehicles: Path) -> None:
     distributed = pytest.importorskip("distributed")
     one = fleet([vehicles / "steady"], workers=1)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None)
+    with cluster:
         other = fleet([vehicles / "steady"], scheduler=cluster.scheduler_address)
     assert [(r.path, r.verdict) for r in one.rows] == [(r.path, r.verdict) for r in other.rows]
     np.testing.assert_allclose([r.offset for r in one.rows], [r.offset for r in other.rows], rtol=1e-12)
