@@ -155,9 +155,13 @@ def test_recordings_from_folders_globs_and_lists(tmp_path: Path, vehicles: Path)
 
 
 def test_the_command(tmp_path: Path, vehicles: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    table = tmp_path / "fleet.csv"
-    assert main(["fleet", str(vehicles / "magnetised"), "-o", str(table), "--workers", "1", "--unit", "uT"]) == 0
+    table, report = tmp_path / "fleet.csv", tmp_path / "fleet.html"
+    argv = ["fleet", str(vehicles / "magnetised"), "-o", str(table), "--workers", "1", "--unit", "uT"]
+    assert main([*argv, "--report", str(report)]) == 0
     out = capsys.readouterr().out
     assert "2 flights combined" in out and "change: magnetised" in out and f"wrote {table}" in out
+    page = report.read_text(encoding="utf-8")
+    assert "Content-Security-Policy" in page and "data:image/png;base64," in page
+    assert "offset moved by" in page and page.count("<tr>") >= 4 + 2
     assert main(["fleet", str(vehicles / "magnetised"), "-o", str(tmp_path / "t.xls")]) == 2
     assert ".csv, .parquet or .jsonl" in capsys.readouterr().err

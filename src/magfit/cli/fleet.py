@@ -28,6 +28,8 @@ from ._common import console
 @click.option("--no-resume", "no_resume", is_flag=True,
               help="Start afresh: do not skip the recordings the table's journal already holds.")  # fmt: skip
 @click.option("--no-combine", "no_combine", is_flag=True, help="Do not combine each vehicle's flights.")
+@click.option("--report", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write the fleet's HTML report: combined calibrations, changes, each vehicle's history.")
 def fleet_command(
     paths: tuple[str, ...],
     output: Path,
@@ -38,6 +40,7 @@ def fleet_command(
     scheduler: str | None,
     no_resume: bool,
     no_combine: bool,
+    report: Path | None,
 ) -> None:
     """Calibrate every compass of every recording given, and each vehicle's compasses over all its flights.
 
@@ -55,7 +58,7 @@ def fleet_command(
 
     \b
     Examples:
-      magfit fleet logs/ -o fleet.csv
+      magfit fleet logs/ -o fleet.csv --report fleet.html
       magfit fleet 'survey/**/*.bin' -o fleet.parquet --field-strength wmm
       magfit fleet @flights.txt -o fleet.jsonl --scheduler tcp://10.0.0.5:8786
     """
@@ -82,6 +85,10 @@ def fleet_command(
             workers=workers, scheduler=scheduler, resume=not no_resume, combine=not no_combine, progress=advance,
         )  # fmt: skip
     _summary(out, result)
+    if report is not None:
+        from ..report.fleet import write_fleet_report
+
+        out.print(f"wrote {write_fleet_report(report, result)}", soft_wrap=True)
 
 
 def _summary(out: Console, result: FleetResult) -> None:
