@@ -65,6 +65,18 @@ def test_the_entry_point_skips_a_magfit_py_beside_the_script(tmp_path: Path) -> 
     assert "pymavlink" not in after.stdout + after.stderr
 
 
+def test_only_a_folder_whose_magfit_is_a_plain_module_is_taken_off_the_path(tmp_path: Path) -> None:
+    import _magfit_entry
+
+    script_only, with_package, neither = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    for folder in (script_only, with_package / "magfit", neither):
+        folder.mkdir(parents=True)
+    (script_only / "magfit.py").write_text(SHADOW, encoding="utf-8")
+    (with_package / "magfit.py").write_text(SHADOW, encoding="utf-8")
+    (with_package / "magfit" / "__init__.py").write_text("", encoding="utf-8")  # the package wins there
+    assert [_magfit_entry._shadows(str(f)) for f in (script_only, with_package, neither)] == [True, False, False]
+
+
 def test_python_dash_m_magfit_runs_the_command_line(tmp_path: Path) -> None:
     env = {**_clean_environment(), "PYTHONPATH": str(SRC)}
     result = _run([sys.executable, "-m", "magfit", "--version"], tmp_path, env)
