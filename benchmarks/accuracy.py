@@ -55,12 +55,8 @@ floor
 from __future__ import annotations
 
 import argparse
-import importlib.metadata
-import json
 import os
-import platform
 import shlex
-import subprocess
 import sys
 import time
 import zlib
@@ -70,6 +66,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _common import Ratio, Target, mild_distortion, paired_ratio, report_json, verdict_of, versions
+from _common import failure_message as _failure_message
+from _common import note as _note
+from _common import pass_fail as _status
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
@@ -221,18 +221,6 @@ class Case:
         if self.spikes:
             samples = add_spikes(samples, simulation.field_strength, np.random.default_rng(streams[2]))
         return simulation, samples, heldout
-
-
-def mild_distortion(rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A random mild sensor, (W, V): scales within ±2 %, cross terms within ±1 %, hard iron U(−0.4, 0.4)·B.
-
-    W is symmetric (a soft iron has no rotation of its own that a calibration could see), B = 1.
-    """
-    cross = rng.uniform(-0.01, 0.01, 3)
-    soft_iron = np.diag(1.0 + rng.uniform(-0.02, 0.02, 3))
-    soft_iron[[0, 0, 1], [1, 2, 2]] = cross
-    soft_iron[[1, 2, 2], [0, 0, 1]] = cross
-    return soft_iron, rng.uniform(-0.4, 0.4, 3)
 
 
 def add_spikes(
@@ -564,28 +552,6 @@ def _magfit_fitter(name: str) -> Fitter:
     return run
 
 
-def verdict_of(calibration: magfit.Calibration | None, error: str) -> tuple[str | None, str | None]:
-    """(verdict, its first reason) of a magfit fit, from ``details["support"]`` or a refusal's message.
-
-    A forced fit keeps the verdict "refused" (with ``forced``); a ``CalibrationError`` of an unforced fit
-    is a refusal too. A peer's calibration carries no verdict: (None, None).
-    """
-    if calibration is None:
-        if error.startswith("CalibrationError"):
-            return "refused", error.removeprefix("CalibrationError: ")
-        return None, None
-    support = calibration.details.get("support")
-    if not isinstance(support, Mapping):
-        return None, None
-    reasons = [*support.get("refusals", []), *support.get("weaknesses", [])]
-    return str(support.get("verdict")), (str(reasons[0]) if reasons else None)
-
-
-def _failure_message(error: BaseException) -> str:
-    message = str(error).strip().splitlines()[0] if str(error).strip() else ""
-    return f"{type(error).__name__}: {message}" if message else type(error).__name__
-
-
 def fit_once(
     fitter: Fitter, samples: NDArray[np.float64], context: Any
 ) -> tuple[magfit.Calibration | None, str, float]:
@@ -731,42 +697,6 @@ def summarise(outcomes: Sequence[Outcome]) -> Summary:
     )
 
 
-@dataclass(frozen=True)
-class Ratio:
-    """A ratio of RMS heading errors with its standard error (delta method), on ``pairs`` trials."""
-
-    value: float
-    se: float
-    pairs: int
-
-    def __str__(self) -> str:
-        return f"{self.value:.3f} ± {self.se:.3f}"
-
-
-def paired_ratio(numerator: Sequence[Outcome], denominator: Sequence[Outcome]) -> Ratio | None:
-    """RMS heading error of ``numerator`` over that of ``denominator``, on the trials both fitted.
-
-    The trials are paired (same samples), so the standard error comes from the per-trial differences
-    ``a²/mean(a²) − b²/mean(b²)``: ``se(log R) ≈ ½ sd(·) / √n``.
-    """
-    pairs = np.array(
-        [
-            (a.heading_deg, b.heading_deg)
-            for a, b in zip(numerator, denominator, strict=True)
-            if a.heading_deg is not None and b.heading_deg is not None
-        ]
-    )
-    if len(pairs) == 0:
-        return None
-    squares = pairs**2
-    means = squares.mean(axis=0)
-    if not means[1] > 0:
-        return None
-    value = float(np.sqrt(means[0] / means[1]))
-    spread = np.std(squares[:, 0] / means[0] - squares[:, 1] / means[1], ddof=1) if len(pairs) > 1 else np.nan
-    return Ratio(value, float(value * 0.5 * spread / np.sqrt(len(pairs))), len(pairs))
-
-
 def floor_ratio(outcomes: Sequence[Outcome], floor: float) -> Ratio | None:
     """RMS heading error over the floor, with the standard error of the RMS."""
     summary = summarise(outcomes)
@@ -777,20 +707,6 @@ def floor_ratio(outcomes: Sequence[Outcome], floor: float) -> Ratio | None:
 
 
 # ====================================================================== targets
-
-
-@dataclass
-class Target:
-    """One checked target: PASS, FAIL or NOT RUN, with the numbers behind it."""
-
-    name: str
-    status: str
-    detail: str
-    items: list[str] = field(default_factory=list)
-
-
-def _status(ok: bool) -> str:
-    return "PASS" if ok else "FAIL"
 
 
 def weak_direction(details: Mapping[str, Any] | None) -> str | None:
@@ -1142,12 +1058,6 @@ def _cell(summary: Summary, text: str, notes: dict[str, int]) -> str:
     return text
 
 
-def _note(notes: dict[str, int], message: str) -> int:
-    if message not in notes:
-        notes[message] = len(notes) + 1
-    return notes[message]
-
-
 def _signed(value: float | None) -> str:
     return "—" if value is None else f"{value:+.2g}"
 
@@ -1353,26 +1263,6 @@ def _real_section(real: Mapping[str, Any], methods: Sequence[str], notes: dict[s
     return lines
 
 
-def versions(peers: bool) -> dict[str, str]:
-    """Python, numpy, scipy, magfit (with its git commit) and the peers' versions."""
-    found = {"python": platform.python_version(), "numpy": np.__version__}
-    for name in ("scipy",):
-        found[name] = importlib.metadata.version(name)
-    commit = "unknown"
-    try:
-        commit = subprocess.run(
-            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        pass
-    found["magfit"] = f"{magfit.__version__} (commit {commit})"
-    if peers:
-        from peers import peer_versions
-
-        found.update(peer_versions())
-    return found
-
-
 # ====================================================================== main
 
 
@@ -1429,26 +1319,6 @@ def run(
         "targets": targets,
         "real": real,
     }
-
-
-def report_json(report: Mapping[str, Any]) -> str:
-    """Every number of the report as compact JSON (trial-level outcomes included, 6 significant digits)."""
-
-    def convert(value: Any) -> Any:
-        if isinstance(value, (Outcome, Summary, Target)):
-            return convert(asdict(value))
-        if isinstance(value, Mapping):
-            return {str(k): convert(v) for k, v in value.items()}
-        if isinstance(value, (list, tuple)):
-            return [convert(v) for v in value]
-        if isinstance(value, (np.floating, np.integer)):
-            return convert(value.item())
-        if isinstance(value, float):
-            # Six significant digits: far below the trial-to-trial spread, and a file a third the size.
-            return float(f"{value:.6g}") if np.isfinite(value) else None
-        return value
-
-    return json.dumps(convert(report), separators=(",", ":"), allow_nan=False)
 
 
 def _command_line(arguments: list[str]) -> str:

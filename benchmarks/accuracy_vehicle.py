@@ -1,4 +1,4 @@
-"""Accuracy of the calibrations that use what a vehicle knows (issue 14), against a known truth.
+"""Accuracy of the calibrations that use what a vehicle knows, against a known truth.
 
 Run through the accuracy benchmark (in the peers' environment, for MAGYC)::
 
@@ -40,7 +40,7 @@ accelerometer was used: the difference between the two columns is what gravity a
 
 The plain regression (``regression`` column) is no magfit method: the ordinary least-squares fit of
 ``raw = G r + V`` to the logged reference ``r`` (12 numbers, no lag, no noise model), the yardstick of
-issue 14's real-log target. MAGYC's gyro-aided methods (``magyc.magyc_*``) get the samples, the gyro and
+the real-log target. MAGYC's gyro-aided methods (``magyc.magyc_*``) get the samples, the gyro and
 the time stamps; their calibrated field is in the gyroscope's (the vehicle's) axes, so they are scored
 "as given" in the vehicle frame.
 """
@@ -55,8 +55,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from accuracy import Outcome as _PairedOutcome
-from accuracy import Ratio, Target, _failure_message, _note, _status, mild_distortion, paired_ratio, verdict_of
+from _common import (
+    Ratio,
+    Target,
+    failure_message,
+    mild_distortion,
+    note,
+    paired_ratio,
+    pass_fail,
+    verdict_of,
+    versions,
+)
+from _common import report_json as report_json  # accuracy.py writes the vehicle report with it
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
@@ -147,7 +157,7 @@ def _key(name: str) -> int:
 
 
 def vehicle_grid(trials_scale: float = 1.0) -> list[VehicleCase]:
-    """Issue 14's scenarios: flight, car and boat at three attitude noises; a tumble for the gyro-aided fits."""
+    """The scenarios: flight, car and boat at three attitude noises; a tumble for the gyro-aided fits."""
     # 8 trials: the default run stays under 5 minutes (3 trials took 74 s with the gyro-aided fits at 1-3 s
     # each); the ratios carry their standard errors.
     trials = max(1, round(8 * trials_scale))
@@ -318,7 +328,7 @@ def method_table(methods: Sequence[str] | None = None, peers: bool = True) -> di
 
 def alignment_available() -> bool:
     try:
-        import magfit.alignment  # noqa: F401  (issue 14's alignment from gravity; may not exist yet)
+        import magfit.alignment  # noqa: F401  (the alignment from gravity; may not exist yet)
     except ImportError:
         return False
     return True
@@ -385,7 +395,7 @@ def run_case(case: VehicleCase, fitters: Mapping[str, Fitter], root_seed: int) -
             try:
                 calibration = fitter(simulation)
             except Exception as error:  # a failing method is a result, recorded with its reason
-                outcome = VehicleOutcome(error=_failure_message(error))
+                outcome = VehicleOutcome(error=failure_message(error))
                 calibration = None
             else:
                 outcome = score(calibration, simulation)
@@ -418,7 +428,7 @@ def _align_outcome(simulation: VehicleSimulation, calibration: magfit.Calibratio
     try:
         rotation = fit_alignment(simulation, calibration)
     except Exception as error:
-        return VehicleOutcome(error=_failure_message(error), seconds=time.perf_counter() - start)
+        return VehicleOutcome(error=failure_message(error), seconds=time.perf_counter() - start)
     corrected = calibration.apply(simulation.clean) @ rotation.T
     return VehicleOutcome(
         heading_deg=heading_error_deg(corrected, simulation),
@@ -474,11 +484,15 @@ def summarise(outcomes: Sequence[VehicleOutcome]) -> VehicleSummary:
     )
 
 
-def _paired(outcomes: Sequence[VehicleOutcome], mounted: bool = False) -> list[_PairedOutcome]:
-    """The heading errors as the main grid's outcomes, for its paired ratio (same trials, same samples)."""
+@dataclass(frozen=True)
+class _Heading:
+    heading_deg: float | None
+
+
+def _paired(outcomes: Sequence[VehicleOutcome], mounted: bool = False) -> list[_Heading]:
+    """The heading errors (as given or with the true mounting) for the paired ratio (same trials, same samples)."""
     return [
-        _PairedOutcome(heading_deg=(o.heading_mounted_deg if mounted else o.heading_deg) if o.error is None else None)
-        for o in outcomes
+        _Heading((o.heading_mounted_deg if mounted else o.heading_deg) if o.error is None else None) for o in outcomes
     ]
 
 
@@ -505,7 +519,7 @@ def _ratio_text(ratio: Ratio | None) -> str:
 def check_targets(
     cases: Sequence[VehicleCase], results: Mapping[str, Mapping[str, Sequence[VehicleOutcome]]]
 ) -> list[Target]:
-    """Issue 14's targets, PASS/FAIL/NOT RUN, with the numbers behind each."""
+    """The vehicle targets, PASS/FAIL/NOT RUN, with the numbers behind each."""
     targets: list[Target] = []
     restricted = [case for case in cases if case.motion != "tumble"]
 
@@ -528,9 +542,10 @@ def check_targets(
             passed = ratio is not None and ratio.value <= 0.5 and failed == 0
             ok = ok and passed
             items.append(f"{case.name}: vector / {best} = {_ratio_text(ratio)}"
-                         + (f", vector failed {failed} trials" if failed else "") + f" {_status(passed)}")  # fmt: skip
+                         + (f", vector failed {failed} trials" if failed else "")
+                         + f" {pass_fail(passed)}")  # fmt: skip
         how = "with the TRUE mounting applied to it" if mounted else "as it gives it (its axes taken as the vehicle's)"
-        status = _status(ok) if ran else "NOT RUN"
+        status = pass_fail(ok) if ran else "NOT RUN"
         targets.append(Target(f"vector ≤ 0.5 × the best magnitude-only method, {how}", status,
                               f"{len(restricted)} restricted cases", items))  # fmt: skip
 
@@ -557,9 +572,9 @@ def check_targets(
             ok = ok and passed
             shown = "—" if summary.alignment_deg is None else f"{summary.alignment_deg:.3f}°"
             items.append(f"{case.name}: {shown} RMS" + (f", failed {summary.failed}" if summary.failed else "")
-                         + f" {_status(passed)}")  # fmt: skip
+                         + f" {pass_fail(passed)}")  # fmt: skip
         targets.append(Target(f"alignment ({label}) within 0.5° of the true mounting at 1° of attitude noise",
-                              _status(ok) if ran else "NOT RUN", "RMS over trials", items))  # fmt: skip
+                              pass_fail(ok) if ran else "NOT RUN", "RMS over trials", items))  # fmt: skip
 
     # 3. gyro-aided within 1.2x of vector where both apply; better than MAGYC's methods.
     gyro = GYRO if any(GYRO in per_case for per_case in results.values()) else None
@@ -576,7 +591,8 @@ def check_targets(
             passed = ratio is not None and ratio.value <= 1.2 and failed == 0
             ok = ok and passed
             items.append(f"{case.name}: {gyro} / vector = {_ratio_text(ratio)}"
-                         + (f", {gyro} failed {failed} trials" if failed else "") + f" {_status(passed)}")  # fmt: skip
+                         + (f", {gyro} failed {failed} trials" if failed else "")
+                         + f" {pass_fail(passed)}")  # fmt: skip
         peers = [name for name in per_case if name.startswith("magyc.") and _complete(per_case[name])]
         if peers:
             magyc_ran = True
@@ -585,11 +601,11 @@ def check_targets(
             passed = ratio is not None and ratio.value < 1.0 and _complete(per_case[gyro])
             magyc_ok = magyc_ok and passed
             magyc_items.append(f"{case.name}: {gyro} (true mounting if sensor frame) / {best} = "
-                               f"{_ratio_text(ratio)} {_status(passed)}")  # fmt: skip
-    targets.append(Target("gyro-aided ≤ 1.2 × vector where both apply", _status(ok) if ran else "NOT RUN",
+                               f"{_ratio_text(ratio)} {pass_fail(passed)}")  # fmt: skip
+    targets.append(Target("gyro-aided ≤ 1.2 × vector where both apply", pass_fail(ok) if ran else "NOT RUN",
                           "gyro-aided method: " + (gyro or "not in this checkout"), items))  # fmt: skip
     targets.append(Target("gyro-aided more accurate than the best of MAGYC's methods that fitted every trial",
-                          _status(magyc_ok) if magyc_ran and gyro else "NOT RUN",
+                          pass_fail(magyc_ok) if magyc_ran and gyro else "NOT RUN",
                           "where MAGYC ran" if magyc_ran else "MAGYC not run", magyc_items))  # fmt: skip
     return targets
 
@@ -612,8 +628,6 @@ def run(
     ``broad_data``: the folder of BROAD's ``data_mat`` files (``git clone https://github.com/dlaidig/broad``);
     the trials of :data:`BROAD_TRIALS` found there are scored by :func:`run_real`.
     """
-    from accuracy import versions
-
     start = time.perf_counter()
     found_versions = versions(peers)
     fitters = method_table(methods, peers)
@@ -650,7 +664,7 @@ def run(
 
 
 def real_target(real: Mapping[str, Any]) -> Target:
-    """Issue 14's real-log target: vector's heading error within 1.3 × the plain regression's, per recording."""
+    """The real-log target: vector's heading error within 1.3 × the plain regression's, per recording."""
     items, ok, ran = [], True, False
     for trial, result in real.items():
         rows = result["methods"]
@@ -664,9 +678,9 @@ def real_target(real: Mapping[str, Any]) -> Target:
         passed = ratio <= 1.3
         ok = ok and passed
         items.append(f"{trial}: vector {vector['heading_deg']:.3g}° / regression {baseline['heading_deg']:.3g}° = "
-                     f"{ratio:.3f} {_status(passed)}")  # fmt: skip
+                     f"{ratio:.3f} {pass_fail(passed)}")  # fmt: skip
     return Target("real recordings with an independent attitude (BROAD): vector ≤ 1.3 × the plain regression",
-                  _status(ok) if ran else "NOT RUN", f"{len(real)} recordings", items)  # fmt: skip
+                  pass_fail(ok) if ran else "NOT RUN", f"{len(real)} recordings", items)  # fmt: skip
 
 
 def _deg(value: float | None) -> str:
@@ -677,9 +691,9 @@ def _cell(summary: VehicleSummary | None, text: str, notes: dict[str, int]) -> s
     if summary is None:
         return "not run"
     if summary.failed == summary.trials:
-        return f"fails [{_note(notes, summary.first_error or 'failed')}]"
+        return f"fails [{note(notes, summary.first_error or 'failed')}]"
     if summary.failed:
-        text += f" ({summary.failed}/{summary.trials} failed [{_note(notes, summary.first_error or 'failed')}])"
+        text += f" ({summary.failed}/{summary.trials} failed [{note(notes, summary.first_error or 'failed')}])"
     return text
 
 
@@ -703,7 +717,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     """The results file: header, scenarios, tables, targets, footnotes."""
     notes: dict[str, int] = {}
     lines = [
-        "# Vehicle-aided calibration accuracy (issue 14)",
+        "# Vehicle-aided calibration accuracy",
         "",
         f"`{report['command']}` — {report['date']} UTC, {report['runtime_s']:.0f} s, seed {report['seed']}.",
         "",
@@ -767,28 +781,13 @@ def _real_section(real: Mapping[str, Any], notes: dict[str, int]) -> list[str]:
             if row is None:
                 cells.append("not run")
             elif "error" in row:
-                cells.append(f"fails [{_note(notes, row['error'])}]")
+                cells.append(f"fails [{note(notes, row['error'])}]")
             else:
                 rotation = f" ({row['rotation_deg']:.2f}°)" if "rotation_deg" in row else ""
                 verdict = f" {row['verdict']}" if row.get("verdict") and row["verdict"] != "supported" else ""
                 cells.append(f"{row['heading_deg']:.3g}{rotation}{verdict}")
         lines.append(f"| {trial} | {result['fit_samples']} / {result['test_samples']} | " + " | ".join(cells) + " |")
     return [*lines, ""]
-
-
-def report_json(report: Mapping[str, Any]) -> str:
-    from accuracy import report_json as _main_json
-
-    def convert(value: Any) -> Any:
-        if isinstance(value, (VehicleOutcome, VehicleSummary)):
-            return asdict(value)
-        if isinstance(value, Mapping):
-            return {str(k): convert(v) for k, v in value.items()}
-        if isinstance(value, (list, tuple)):
-            return [convert(v) for v in value]
-        return value
-
-    return _main_json(convert(report))
 
 
 # ====================================================================== a real recording with an independent attitude
@@ -868,7 +867,7 @@ def run_real(recording: AttitudeRecording, methods: Sequence[str] | None = None)
     The Earth's field in the reference frame is not given: it is the mean, over the fitting stretches, of
     the field that the forced ``ml`` fit corrects, turned into ENU by the optical attitude (three numbers
     taken from the magnetometer; the attitude stays the reference's). Every method that needs a reference
-    gets ``attitudeᵀ f`` from it; the plain regression is the yardstick of issue 14 (vector ≤ 1.3 × it).
+    gets ``attitudeᵀ f`` from it; the plain regression is the yardstick of the real-log target (vector ≤ 1.3 × it).
     """
     elapsed = recording.time_s - recording.time_s[0]
     block = np.floor(elapsed / BROAD_BLOCK_S).astype(int)
@@ -903,7 +902,7 @@ def run_real(recording: AttitudeRecording, methods: Sequence[str] | None = None)
         try:
             calibration = fitter()
         except Exception as error:
-            rows[name] = {"error": _failure_message(error)}
+            rows[name] = {"error": failure_message(error)}
             continue
         body = calibration.apply(recording.samples[test_rows])
         row: dict[str, Any] = {

@@ -28,6 +28,7 @@ def _vehicle(motion: str, mounting: np.ndarray, n: int, seed: int = 1, **options
     "angles",
     [(5.0, 0.0, 0.0), (10.0, -20.0, 30.0), (-35.0, 12.0, -25.0), (180.0, 0.0, 90.0), (0.0, 90.0, 0.0)],
 )
+@pytest.mark.slow
 def test_tumble_recovers_the_mounting_within_half_a_degree(angles):
     mounting = euler_matrix(*angles)
     sim, calibrated = _vehicle("tumble", mounting, 4000)
@@ -278,6 +279,7 @@ def test_cli_exit_statuses(roll_180_csv, tmp_path, capsys):
     assert status == 2 and "not both" in err
 
 
+@pytest.mark.slow
 def test_cli_on_a_dataflash_log_combines_the_orientation_the_firmware_applied(tmp_path, capsys):
     # A synthetic ArduPilot log (tests/test_sources_motion.py): a tumble with IMU and ATT, COMPASS_ORIENT 6
     # (YAW_270) already applied to MAG; here the compass is really turned 45° more, so the right setting is
@@ -354,6 +356,7 @@ def _boat_csv(tmp_path, mounting):
     return sim, path
 
 
+@pytest.mark.slow
 def test_cli_starts_from_the_gyro_aided_calibration_where_it_has_a_gyroscope(tmp_path, capsys):
     # A boat cannot tumble: auto leaves the field's vertical part loose, which the dips rest on; the gyro-aided
     # fit's magnitude-only part pins it (accuracy_vehicle's boats: 0.33° RMS against auto's 1.5°).

@@ -79,6 +79,7 @@ def test_als_recovers_every_scenario(sensor: str, disturbance: str) -> None:
 
 
 @pytest.mark.parametrize("orientations", ["uniform", "restricted"])
+@pytest.mark.slow
 def test_als_is_consistent_where_the_algebraic_fit_is_biased(orientations: str) -> None:
     # 10 % noise, many samples: the variance is small, so what is left of the error is bias.
     n, noise = 100_000, 0.1

@@ -98,6 +98,7 @@ def test_the_floor_scales_as_noise_over_root_n() -> None:
     assert floor_high / floor_low == pytest.approx(4.0, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_the_algebraic_fit_reaches_the_floor_at_low_noise() -> None:
     # At σ = 0.5 % the bias of the algebraic fit (∝ σ²) is negligible and on a full tumble it is close
     # to efficient: its RMS heading error over 30 trials must sit near the Cramér–Rao floor. The RMS of
@@ -253,6 +254,7 @@ def test_the_flight_target_compares_auto_with_the_best_model_and_with_no_calibra
     assert refused.status == "FAIL" and "auto refused 1/3" in refused.detail
 
 
+@pytest.mark.slow
 def test_smoke_run_of_the_harness_on_magfit_methods(tmp_path: Path) -> None:
     report = accuracy.run(accuracy.smoke_grid(), peers=False, real_data=None, command="test", floor_points=20_000)
     tumble = report["summaries"]["tumble σ=0.5% N=1000"]
@@ -375,6 +377,7 @@ def test_plain_regression_recovers_the_truth_from_an_exact_reference() -> None:
     np.testing.assert_allclose(fitted.offset, simulation.hard_iron, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_the_vehicle_smoke_grid_runs_and_reports_every_target(tmp_path: Path) -> None:
     report = vehicle.run(vehicle.vehicle_smoke_grid(), peers=False, command="test")
     tumble = report["summaries"]["tumble, attitude ±0.5°"]

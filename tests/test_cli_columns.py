@@ -210,6 +210,7 @@ def test_an_npy_array_with_a_time_column_first(tmp_path: Path) -> None:
     np.testing.assert_array_equal(table.samples, samples)
 
 
+@pytest.mark.slow
 def test_plot_names_its_columns_in_its_output_and_its_refusals(tmp_path: Path) -> None:
     samples = magnetometer(seed=14)
     good = write(tmp_path / "txyz.txt", [np.arange(len(samples), dtype=float), samples])

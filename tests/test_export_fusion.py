@@ -140,6 +140,7 @@ def fitted(request: pytest.FixtureRequest, real_data_dir: Path) -> tuple[magfit.
 
 
 @pytest.mark.parametrize("language", ["c", "c++"])
+@pytest.mark.external
 def test_current_fusion_applies_the_export_as_magfit_does(
     tmp_path: Path, fitted: tuple[magfit.Calibration, NDArray[np.float64]], language: str
 ) -> None:
@@ -152,6 +153,7 @@ def test_current_fusion_applies_the_export_as_magfit_does(
 
 
 @pytest.mark.parametrize("language", ["c", "c++"])
+@pytest.mark.external
 def test_fusion_before_1_3_applies_the_export_as_magfit_does(
     tmp_path: Path, fitted: tuple[magfit.Calibration, NDArray[np.float64]], language: str
 ) -> None:
@@ -163,6 +165,7 @@ def test_fusion_before_1_3_applies_the_export_as_magfit_does(
     _close(out, cal.apply(samples), samples)
 
 
+@pytest.mark.external
 def test_nested_row_braces_are_wrong_for_current_fusion(tmp_path: Path, real_data_dir: Path) -> None:
     # The form magfit wrote before issue 12, {{{a, b, c}, {d, e, f}, {g, h, i}}}: with Fusion 1.3 it fills
     # the first column only in C and does not compile in C++. The tests above would catch it.

@@ -19,6 +19,8 @@ import pytest
 import magfit
 from magfit.export import export
 
+pytestmark = pytest.mark.external
+
 
 @pytest.mark.parametrize("root", ["sqrt", "cholesky"])
 def test_octave_runs_the_magcal_file(tmp_path: Path, real_data_dir: Path, root: str) -> None:

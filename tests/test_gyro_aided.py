@@ -163,6 +163,7 @@ def test_real_betaflight_quadcopter_and_ensta_imu(real_data_dir: Path) -> None:
     assert cal.details["mapping"] == "+x-y-z"
 
 
+@pytest.mark.slow
 def test_a_slow_vehicle_s_gyro_in_degrees_per_second_is_caught_by_the_fit() -> None:
     # On a flight the one-second windows cannot tell the unit (both read the planar motion alike): the samples'
     # own fit leaves almost the whole field off the predicted turning, and 1 % after dividing by 57.3.
@@ -180,6 +181,7 @@ def _boat(seed: int = 0) -> magfit.vehicle.VehicleSimulation:
                             seed=seed)  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_boat_rolling_on_one_heading_is_pinned_by_the_accelerometer() -> None:
     # Measured on seeds 0-4 of this boat: 0.06-0.40° of heading error with accel=, 0.31-3.2° without (seed 0:
     # 0.06° and 3.2°); the dip within 1.3° of the truth (one-sigma 0.29-0.50°); 2 256-2 444 still samples.
@@ -231,6 +233,7 @@ def test_bad_accelerometer_inputs_are_one_line_option_errors() -> None:
         assert "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 def test_a_fast_gyro_is_averaged_over_each_magnetometer_interval_not_interpolated() -> None:
     # 150 s of driving: the gyro at 200 Hz (noise 0.01 rad/s, a 47 Hz vibration of 0.5 rad/s: 0.1° of angle),
     # the magnetometer at 10 Hz. Measured on seeds 0-2: 0.04-0.10° of heading error with gyro_time_s=,
@@ -275,6 +278,7 @@ def _car_with_a_fast_gyro() -> tuple[magfit.vehicle.VehicleSimulation, np.ndarra
     return sim, np.arange(0, 15_000, 5)
 
 
+@pytest.mark.slow
 def test_a_gap_in_a_fast_gyro_drops_the_samples_it_spans_and_restarts_the_integration() -> None:
     # Measured (a distortion of benchmarks/accuracy.py's, seed 3): with the gap bridged by a straight line,
     # 0.47° of heading error where 0.21° was stated (6 s gap), a refusal for turning about one axis (15 s);
@@ -314,6 +318,7 @@ def _heading_error_deg_at(cal: magfit.Calibration, sim: magfit.vehicle.VehicleSi
     return float(np.degrees(np.sqrt(np.mean(np.angle(np.exp(1j * difference)) ** 2))))
 
 
+@pytest.mark.slow
 def test_an_accelerometer_that_disagrees_with_the_given_inclination_is_dropped_and_said() -> None:
     # accuracy_vehicle's boat (seed 4 here): the accelerometer tilted 5° against the gyro leaves its rows' residual
     # as small as a true one (0.3°) and moves the fitted dip instead (60.3° for 64°): 2.9° of heading error
@@ -342,6 +347,7 @@ def test_an_accelerometer_that_disagrees_with_the_given_inclination_is_dropped_a
             _fit(sim, accel=sim.accel, inclination_deg=bad)
 
 
+@pytest.mark.slow
 def test_an_accelerometer_given_but_unused_is_said_with_why_not_asked_for() -> None:
     # A boat whose accelerometer heaves ±30 m/s² (1.3 Hz): |a| is within 3 % of g on too few samples.
     sim = _boat(seed=4)

@@ -24,6 +24,7 @@ def tilted_only(max_tilt_deg: float, seed: int = 0) -> magfit.Simulation:
 
 
 @pytest.mark.parametrize("method", ["auto", "robust"])
+@pytest.mark.slow
 def test_auto_and_robust_scale_to_the_given_field(method: str) -> None:
     sim = magfit.scenario("ellipse2a", "smartphone").simulate(2000, seed=1)
     free = magfit.fit(sim.samples, method=method)

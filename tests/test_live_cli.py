@@ -159,6 +159,7 @@ def _expected_packet(cal: magfit.Calibration) -> bytes:
     return body + bytes([crc & 0xFF, crc >> 8])
 
 
+@pytest.mark.slow
 def test_live_on_a_pty_with_noise_and_a_reboot_calibrates_and_sends(pty_board: object, tmp_path: Path) -> None:
     port, board = pty_board([2000, NOISE, 2000, REBOOT, 2000])  # type: ignore[operator]
     output, record = tmp_path / "cal.json", tmp_path / "raw.csv"
@@ -183,6 +184,7 @@ def test_live_on_a_pty_with_noise_and_a_reboot_calibrates_and_sends(pty_board: o
     np.testing.assert_allclose(stored["softiron"], cal.matrix, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_hangup_keeps_the_samples_and_writes_no_calibration(
     pty_board: object, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -246,6 +248,7 @@ def test_tcp_socket_source(tmp_path: Path) -> None:
     _check_truth(output, board)
 
 
+@pytest.mark.slow
 def test_simulate_sends_and_the_board_confirms(tmp_path: Path) -> None:
     output = tmp_path / "cal.json"
     result = CliRunner().invoke(
@@ -333,6 +336,8 @@ def test_a_stream_that_cannot_support_a_fit_exits_1(tmp_path: Path) -> None:
     assert not (tmp_path / "cal.json").exists()
 
 
+@pytest.mark.external
+@pytest.mark.slow
 def test_interactive_keys_through_a_terminal(tmp_path: Path) -> None:
     """The view on a real terminal (a pty): wait for GOOD ENOUGH, press s, then q; the file saved is the truth's."""
     import subprocess
@@ -389,6 +394,7 @@ def test_outputs_are_checked_before_the_session(tmp_path: Path) -> None:
         assert time.monotonic() - started < 5  # refused at once, not after 100 000 samples
 
 
+@pytest.mark.slow
 def test_a_usb_board_that_reboots_is_opened_again(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """A board with native USB leaves and comes back under the same name: here a link re-pointed to a new pty."""
     opens: list[threading.Event] = [threading.Event(), threading.Event()]
@@ -458,6 +464,8 @@ def test_a_usb_board_that_reboots_is_opened_again(monkeypatch: pytest.MonkeyPatc
     _check_truth(output, board)
 
 
+@pytest.mark.external
+@pytest.mark.slow
 def test_ctrl_c_exits_130_and_keeps_the_recording(tmp_path: Path) -> None:
     """Ctrl-C stops a session as it stops every command (status 130), the samples so far kept on disk."""
     import signal

@@ -28,6 +28,7 @@ def page() -> Iterator[WebView]:
         run.close()
 
 
+@pytest.mark.slow
 def test_state_follows_the_session_and_the_server_listens_on_loopback_only(page: WebView) -> None:
     assert page.url.startswith("http://127.0.0.1:")
     assert page._server.server_address[0] == "127.0.0.1"
@@ -71,6 +72,7 @@ def browser(tmp_path: Path) -> Iterator[Any]:
         driver.quit()
 
 
+@pytest.mark.external
 def test_page_draws_the_sphere_and_turns_green(page: WebView, browser: Any) -> None:
     browser.get(page.url)
     deadline = time.monotonic() + 60

@@ -60,6 +60,7 @@ def test_noise_free_samples_give_the_exact_ellipsoid() -> None:
 
 
 @pytest.mark.parametrize(("sensor", "disturbance"), SCENARIOS)
+@pytest.mark.slow
 def test_ml_recovers_every_scenario(sensor: str, disturbance: str) -> None:
     scenario = magfit.scenario(sensor, disturbance)
     n = 3000
@@ -229,6 +230,7 @@ def _few_directions(seed: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize("seed", [4, 46, 55])
+@pytest.mark.slow
 def test_samples_that_do_not_fix_the_ellipsoid_are_a_calibration_error_not_a_crash(seed: int) -> None:
     # Found by fuzzing: a singular JᵀJ (LinAlgError) and a trial step whose ellipsoid lost positive
     # definiteness (math domain error) escaped ml as tracebacks, and through it auto's final refinement.

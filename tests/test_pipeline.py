@@ -203,6 +203,7 @@ def test_apply_writes_a_logs_corrected_samples_with_their_time_stamps(two_compas
     assert np.load(array).shape == (1500, 4)
 
 
+@pytest.mark.slow
 def test_plot_compare_and_report_take_a_log(two_compasses, tmp_path: Path) -> None:
     path, simulations = two_compasses
     runner = CliRunner()

@@ -123,6 +123,7 @@ def test_compare_on_a_log_runs_vector_with_the_logs_streams_and_says_why_gyro_or
     assert "no 3-D GNSS fix" in result.output and "not run: the vector method needs" in result.output
 
 
+@pytest.mark.slow
 def test_report_on_a_log_includes_the_vector_method(tmp_path, monkeypatch) -> None:
     pytest.importorskip("plotly")
     from click.testing import CliRunner

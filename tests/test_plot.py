@@ -167,6 +167,7 @@ def _png_pixels(path: Path) -> np.ndarray:
         return np.asarray(image.convert("RGB"), dtype=np.float64)
 
 
+@pytest.mark.slow
 def test_calibration_figure_png_has_the_requested_size_and_is_not_blank(steel, tmp_path) -> None:
     simulation, fits = steel
     figure = plot.calibration_figure(simulation.samples, fits, title="steel", max_points=800, size=(16, 12), dpi=50)
@@ -261,6 +262,7 @@ def test_method_labels_number_repeated_methods() -> None:
     assert plot.method_labels([identity, identity, identity]) == ("identity", "identity #2", "identity #3")
 
 
+@pytest.mark.slow
 def test_the_figure_and_the_cli_give_the_same_coverage(real_data_dir: Path, tmp_path: Path) -> None:
     """A half-sphere recording: the figure said 8 % (its own fine grid), the CLI 13 %; now one number."""
     from click.testing import CliRunner
@@ -282,6 +284,7 @@ def test_the_figure_and_the_cli_give_the_same_coverage(real_data_dir: Path, tmp_
     assert f"{share:.0%}" == f"{100 * share:.0f}%"
 
 
+@pytest.mark.slow
 def test_plot_draws_unsupported_comparisons_marked_and_refuses_an_unsupported_main_fit(steel, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     from click.testing import CliRunner
 

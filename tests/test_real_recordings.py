@@ -75,6 +75,7 @@ REFUSED = {
 
 @pytest.mark.parametrize("name", GOOD)
 @pytest.mark.parametrize("method", PAPER_METHODS)
+@pytest.mark.slow
 def test_every_recording_calibrates_or_is_refused_with_its_reason(real_data_dir: Path, name: str, method: str) -> None:
     samples = load(real_data_dir, name)
     reason = REFUSED.get((method, name))

@@ -108,6 +108,7 @@ def test_2_same_path_for_two_outputs_is_a_usage_error(tmp_path: Path) -> None:
     assert same.read_bytes() == b"OLD"
 
 
+@pytest.mark.slow
 def test_2_calibrate_writes_both_outputs_on_success(tmp_path: Path) -> None:
     pytest.importorskip("matplotlib")
     data = _csv(tmp_path / "s.csv", _samples())
@@ -267,6 +268,7 @@ def test_4_from_json_refuses_what_is_no_calibration(case: str) -> None:
     assert len(message) < 400
 
 
+@pytest.mark.slow
 def test_4_broken_calibration_file_through_apply(tmp_path: Path) -> None:
     data = _csv(tmp_path / "s.csv", _samples())
     for case, (make, _) in BROKEN_CALIBRATIONS.items():
@@ -281,6 +283,7 @@ def test_4_broken_calibration_file_through_apply(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs")
+@pytest.mark.slow
 def test_6_a_silent_fifo_as_input_is_refused_after_a_short_wait(tmp_path: Path) -> None:
     fifo = tmp_path / "in.fifo"
     os.mkfifo(fifo)
@@ -352,6 +355,7 @@ def _recording_for(method: str) -> np.ndarray:
 
 @pytest.mark.parametrize("scale", [1e-35, 1e35])
 @pytest.mark.parametrize("method", sorted(name for name, spec in magfit.METHODS.items() if not spec.needs))
+@pytest.mark.slow
 def test_7_data_far_from_unit_scale_fit_without_warnings(method: str, scale: float) -> None:
     samples = _recording_for(method)
     reference = magfit.fit(samples, method=method, diagnostics=False)
@@ -407,6 +411,8 @@ def long_recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 @pytest.mark.parametrize(("signum", "status"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+@pytest.mark.external
+@pytest.mark.slow
 def test_6_a_signal_while_writing_leaves_no_temporary_file(
     long_recording: tuple[Path, Path], tmp_path: Path, signum: int, status: int
 ) -> None:
@@ -486,6 +492,7 @@ def test_2_simulate_checks_both_outputs_before_writing(tmp_path: Path) -> None:
     assert keep.read_text() == "OLD\n"
 
 
+@pytest.mark.slow
 def test_2_plot_checks_its_output_first_and_writes_it_atomically(tmp_path: Path) -> None:
     pytest.importorskip("matplotlib")
     data = _csv(tmp_path / "s.csv", _samples())

@@ -107,6 +107,7 @@ def steel_page(steel_case, tmp_path_factory):
     return html, _parse(html)
 
 
+@pytest.mark.slow
 def test_report_is_self_contained_and_forbids_network_access(steel_page) -> None:
     html, page = steel_page
     # Every src/href is in the page itself: in-page anchors or data: URIs; no CDN, no http(s), no file path.
@@ -258,6 +259,7 @@ def test_plot_command_refuses_a_non_figure_output_its_own_input_and_a_failed_mai
     assert not (tmp_path / "flat.png").exists()
 
 
+@pytest.mark.slow
 def test_report_command_writes_one_html_for_several_files(recording, tmp_path) -> None:
     from magfit.cli import cli
 
@@ -293,6 +295,7 @@ def test_report_command_writes_one_html_for_several_files(recording, tmp_path) -
     assert bad.exit_code == 2 and "'report.pdf' is not an .html file name" in bad.output
 
 
+@pytest.mark.slow
 def test_plot_command_on_a_real_recording(real_data_dir: Path, tmp_path: Path) -> None:
     from magfit.cli import cli
     from magfit.io import read_samples
@@ -318,6 +321,7 @@ def test_plot_command_on_a_real_recording(real_data_dir: Path, tmp_path: Path) -
     assert f"All 324 samples shown. Wrote the figure to {output}" in result.output
 
 
+@pytest.mark.slow
 def test_calibrate_plot_draws_the_fit_it_saved(recording, tmp_path) -> None:
     from magfit.cli import cli
 

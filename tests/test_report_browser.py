@@ -21,6 +21,8 @@ import pytest
 
 import magfit
 
+pytestmark = pytest.mark.external
+
 CHROMIUM = os.environ.get("MAGFIT_CHROMIUM", "/usr/bin/chromium")
 CHROMEDRIVER = os.environ.get("MAGFIT_CHROMEDRIVER", "/usr/bin/chromedriver")
 # No sandbox (containers run as root), no GPU (WebGL falls back to SwiftShader, in software), and nothing

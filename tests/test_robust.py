@@ -30,6 +30,7 @@ def _heading_error_deg(calibration: magfit.Calibration, simulation: magfit.Simul
     return float(np.degrees(np.sqrt(np.mean(error**2))))
 
 
+@pytest.mark.slow
 def test_robust_flags_the_spikes_and_recovers_the_truth() -> None:
     sim = magfit.scenario("mpu9250", "smartphone").simulate(3000, seed=11)
     spiked, injected = _with_spikes(sim.samples, 0.02, seed=12)
@@ -51,6 +52,7 @@ def test_robust_flags_the_spikes_and_recovers_the_truth() -> None:
 
 
 @pytest.mark.parametrize("seed", [21, 22, 23])
+@pytest.mark.slow
 def test_heading_error_with_spikes_within_the_benchmark_target(seed: int) -> None:
     sim = magfit.scenario("mpu9250", "steel").simulate(2000, seed=seed)
     spiked, _ = _with_spikes(sim.samples, 0.02, seed=seed + 100)

@@ -203,6 +203,7 @@ def _assert_one_clean_line(path: Path) -> None:
 
 
 @pytest.mark.parametrize("kind", ["ros1", "mcap_file", "db3_file"])
+@pytest.mark.slow
 def test_truncated_and_corrupted_bags_give_one_clean_line(
     kind: str, bags: dict[str, Path], tmp_path: Path, simulation: magfit.Simulation
 ) -> None:

@@ -83,6 +83,7 @@ def _forced(samples: np.ndarray, method: str) -> magfit.Calibration:
     return magfit.fit(samples, method, allow_undetermined=True, diagnostics=False)
 
 
+@pytest.mark.slow
 def test_thinning_removes_the_pull_of_a_long_stay() -> None:
     # 80 % of the samples in one attitude. Ground truth: the simulated offset. Over 8 recordings the
     # thinned fits land closer to it: the ellipsoid fit by a factor 2.2 on average (0.0114 -> 0.0051 of

@@ -327,6 +327,7 @@ def write_ulog(path: Path, mounting_rot: int, n: int = 2400) -> None:
 
 
 @pytest.mark.parametrize("mounting_rot", [0, 6, 10])
+@pytest.mark.slow
 def test_ulog_motion_gives_back_the_truth_in_the_sensor_frame(tmp_path: Path, mounting_rot: int) -> None:
     pytest.importorskip("pyulog")
     path = tmp_path / "tumble.ulg"
@@ -437,6 +438,7 @@ def write_bag(path: Path, kind: str, n: int = 1200, mag_mounting: np.ndarray | N
 
 
 @pytest.mark.parametrize("kind", ["ros1", "mcap"])
+@pytest.mark.slow
 def test_bag_motion_turns_rep_103_into_ned(tmp_path: Path, kind: str) -> None:
     path = write_bag(tmp_path / ("tumble.bag" if kind == "ros1" else "tumble"), kind)
     motion = open_source(path).read_motion("/imu/mag")
@@ -468,6 +470,7 @@ def test_the_imu_with_an_orientation_goes_with_the_magnetometer() -> None:
     assert chosen is fused and "same frame_id" in why
 
 
+@pytest.mark.slow
 def test_bag_motion_takes_the_mounting_from_tf_static(tmp_path: Path) -> None:
     # The magnetometer in its own frame, turned 30° about z and 180° about x within imu_link: /tf_static says so,
     # read_motion gives it as the mounting, and attitude · mounting · calibrated is the NED field again.

@@ -338,6 +338,7 @@ def test_without_pyulog_the_error_is_the_install_hint(tmp_path: Path, monkeypatc
     assert "pip install 'magfit[ulog]'" in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_a_log_that_sends_pyulog_round_in_circles_is_one_line() -> None:
     # Found by the long fuzz run: a synthetic log (written by ULogWriter) with a few bytes overwritten in its
     # definitions section makes pyulog seek back as far as it read, for ever. Run in a subprocess with a time

@@ -211,6 +211,7 @@ def _fit_peak_memory(samples: np.ndarray, method: str) -> tuple[magfit.Calibrati
 
 
 @pytest.mark.parametrize("method", ["ellipsoid", "auto"])
+@pytest.mark.slow
 def test_fit_of_float32_samples_makes_no_whole_float64_copy(method: str) -> None:
     # fit() itself, diagnostics included: the linear methods read float32 through Statistics' chunks and
     # the diagnostics convert only the rows they analyse, so float32 input costs what float64 input does;

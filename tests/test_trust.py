@@ -80,6 +80,7 @@ def test_unsupported_data_are_refused_or_named(method: str, case: str) -> None:
 
 
 @pytest.mark.parametrize("method", METHODS)
+@pytest.mark.slow
 def test_a_field_strength_in_the_wrong_unit_is_refused_by_every_method_that_takes_one(method: str) -> None:
     if "field_strength" not in magfit.METHODS[method].options:
         pytest.skip(f"{method} takes no field strength")
@@ -149,6 +150,7 @@ def _level_heading_error_deg(calibration: magfit.Calibration, sim: magfit.Simula
     return float(np.sqrt(np.mean(((difference + 180.0) % 360.0 - 180.0) ** 2)))
 
 
+@pytest.mark.slow
 def test_auto_on_level_flight_with_a_drifting_field_is_near_the_best_model_and_beats_none() -> None:
     # Level flight with banked turns (±15°) and a field strength drifting by ±0.5 % along the recording:
     # the BIC alone picks the full model (3.6° here, 4.4 times the best); auto must stay near the best of

@@ -1,0 +1,174 @@
+"""What the accuracy benchmarks share: the mild random sensor, magfit's verdict on a fit, paired ratios of RMS
+heading errors, checked targets, the versions line and the compact JSON of a report.
+
+``accuracy.py`` (the magnitude-only grid) and ``accuracy_vehicle.py`` (the vehicle scenarios) both import from
+here and not from each other.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.metadata
+import json
+import platform
+import subprocess
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+import magfit
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def mild_distortion(rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A random mild sensor, (W, V): scales within ±2 %, cross terms within ±1 %, hard iron U(−0.4, 0.4)·B.
+
+    W is symmetric (a soft iron has no rotation of its own that a calibration could see), B = 1.
+    """
+    cross = rng.uniform(-0.01, 0.01, 3)
+    soft_iron = np.diag(1.0 + rng.uniform(-0.02, 0.02, 3))
+    soft_iron[[0, 0, 1], [1, 2, 2]] = cross
+    soft_iron[[1, 2, 2], [0, 0, 1]] = cross
+    return soft_iron, rng.uniform(-0.4, 0.4, 3)
+
+
+def verdict_of(calibration: magfit.Calibration | None, error: str) -> tuple[str | None, str | None]:
+    """(verdict, its first reason) of a magfit fit, from ``details["support"]`` or a refusal's message.
+
+    A forced fit keeps the verdict "refused" (with ``forced``); a ``CalibrationError`` of an unforced fit
+    is a refusal too. A peer's calibration carries no verdict: (None, None).
+    """
+    if calibration is None:
+        if error.startswith("CalibrationError"):
+            return "refused", error.removeprefix("CalibrationError: ")
+        return None, None
+    support = calibration.details.get("support")
+    if not isinstance(support, Mapping):
+        return None, None
+    reasons = [*support.get("refusals", []), *support.get("weaknesses", [])]
+    return str(support.get("verdict")), (str(reasons[0]) if reasons else None)
+
+
+def failure_message(error: BaseException) -> str:
+    """``Type: first line of the message``: how a failed fit is recorded (a result, with its reason)."""
+    message = str(error).strip().splitlines()[0] if str(error).strip() else ""
+    return f"{type(error).__name__}: {message}" if message else type(error).__name__
+
+
+# ====================================================================== ratios and targets
+
+
+class Scored(Protocol):
+    """One trial's score: its RMS heading error in degrees, None when the method failed on the trial."""
+
+    @property
+    def heading_deg(self) -> float | None: ...
+
+
+@dataclass(frozen=True)
+class Ratio:
+    """A ratio of RMS heading errors with its standard error (delta method), on ``pairs`` trials."""
+
+    value: float
+    se: float
+    pairs: int
+
+    def __str__(self) -> str:
+        return f"{self.value:.3f} ± {self.se:.3f}"
+
+
+def paired_ratio(numerator: Sequence[Scored], denominator: Sequence[Scored]) -> Ratio | None:
+    """RMS heading error of ``numerator`` over that of ``denominator``, on the trials both fitted.
+
+    The trials are paired (same samples), so the standard error comes from the per-trial differences
+    ``a²/mean(a²) − b²/mean(b²)``: ``se(log R) ≈ ½ sd(·) / √n``.
+    """
+    pairs = np.array(
+        [
+            (a.heading_deg, b.heading_deg)
+            for a, b in zip(numerator, denominator, strict=True)
+            if a.heading_deg is not None and b.heading_deg is not None
+        ]
+    )
+    if len(pairs) == 0:
+        return None
+    squares = pairs**2
+    means = squares.mean(axis=0)
+    if not means[1] > 0:
+        return None
+    value = float(np.sqrt(means[0] / means[1]))
+    spread = np.std(squares[:, 0] / means[0] - squares[:, 1] / means[1], ddof=1) if len(pairs) > 1 else np.nan
+    return Ratio(value, float(value * 0.5 * spread / np.sqrt(len(pairs))), len(pairs))
+
+
+@dataclass
+class Target:
+    """One checked target: PASS, FAIL or NOT RUN, with the numbers behind it."""
+
+    name: str
+    status: str
+    detail: str
+    items: list[str] = field(default_factory=list)
+
+
+def pass_fail(ok: bool) -> str:
+    """A target's status when it ran: PASS or FAIL."""
+    return "PASS" if ok else "FAIL"
+
+
+def note(notes: dict[str, int], message: str) -> int:
+    """The number of ``message`` among a table's footnotes (added at the end when new)."""
+    if message not in notes:
+        notes[message] = len(notes) + 1
+    return notes[message]
+
+
+# ====================================================================== the report
+
+
+def versions(peers: bool) -> dict[str, str]:
+    """Python, numpy, scipy, magfit (with its git commit) and the peers' versions."""
+    found = {"python": platform.python_version(), "numpy": np.__version__}
+    for name in ("scipy",):
+        found[name] = importlib.metadata.version(name)
+    commit = "unknown"
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    found["magfit"] = f"{magfit.__version__} (commit {commit})"
+    if peers:
+        from peers import peer_versions  # the sibling module; imported here so that magfit-only runs need no peer
+
+        found.update(peer_versions())
+    return found
+
+
+def report_json(report: Mapping[str, Any]) -> str:
+    """Every number of the report as compact JSON (trial-level outcomes included, 6 significant digits).
+
+    Dataclass instances (outcomes, summaries, targets) become their fields.
+    """
+
+    def convert(value: Any) -> Any:
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            return convert(dataclasses.asdict(value))
+        if isinstance(value, Mapping):
+            return {str(k): convert(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [convert(v) for v in value]
+        if isinstance(value, (np.floating, np.integer)):
+            return convert(value.item())
+        if isinstance(value, float):
+            # Six significant digits: far below the trial-to-trial spread, and a file a third the size.
+            return float(f"{value:.6g}") if np.isfinite(value) else None
+        return value
+
+    return json.dumps(convert(report), separators=(",", ":"), allow_nan=False)
