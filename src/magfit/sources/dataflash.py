@@ -42,8 +42,10 @@ from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_p
 from .ardupilot import (
     compass_mounting,
     compass_parameters,
+    describe_parameters,
     parameter_suffix,
     undo_calibration,
+    undo_records,
     untrimmed,
 )
 from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
@@ -452,13 +454,18 @@ def _describe(
     labels = records.dtype.names or ()
     notes: list[str] = []
     if compass is not None:
-        s = parameter_suffix(compass.index)
-        notes.append(
-            f"MagX/Y/Z are logged after ArduPilot's calibration; undone with COMPASS_OFS{s}, DIA{s}, ODI{s} and "
-            f"SCALE{s} from the log's parameters"
+        notes.extend(
+            ("MagX/Y/Z are logged after ArduPilot's calibration; " + note if i == 0 else note)
+            for i, note in enumerate(describe_parameters(compass, "from the log's parameters"))
         )
+        if any(change.endswith("(no time)") for change in compass.changes) and not _has_offsets(labels):
+            problem = (
+                "the compass offsets changed during the log, its PARM messages carry no time and its MAG records "
+                "not the offsets applied (OfsX/Y/Z), so which records were corrected with which offsets is unknown; "
+                "fit a log recorded after the change"
+            )
         if compass.motor_compensation:
-            if {"MOX", "MOY", "MOZ"} <= set(labels):
+            if _motor_labels(labels) is not None:
                 notes.append("motor compensation was active: undone with the motor offsets logged per sample (MOX/Y/Z)")
             else:
                 problem = (
@@ -510,34 +517,36 @@ def _read(
         raise DataFileError(f"{log.path}: {magnetometer.id} cannot be fitted: {problem}")
     with np.errstate(invalid="ignore"):  # damaged values become NaN: dropped below as non-finite samples
         logged = np.column_stack([log.value(records, name, axis) for axis in ("MagX", "MagY", "MagZ")])
-    labels = records.dtype.names or ()
-    motor = None
-    if compass.motor_compensation:
-        motor = np.column_stack([log.value(records, name, axis) for axis in ("MOX", "MOY", "MOZ")])
-    samples = undo_calibration(
-        logged,
-        offsets=compass.offsets,
-        diagonals=compass.diagonals,
-        offdiagonals=compass.offdiagonals,
-        scale=compass.scale,
-        motor_offsets=motor,
+        labels = records.dtype.names or ()
+        motor = None
+        motor_labels = _motor_labels(labels)
+        if compass.motor_compensation and motor_labels is not None:
+            motor = np.column_stack([log.value(records, name, axis) for axis in motor_labels])
+        used = None
+        if _has_offsets(labels):  # the offsets each record was corrected with (whole mG)
+            used = np.column_stack([log.value(records, name, axis) for axis in ("OfsX", "OfsY", "OfsZ")])
+    times = _time_s(log, name, records)
+    undone = undo_records(
+        logged, times, parameters=parameters, compass=compass, motor_offsets=motor, logged_offsets=used
     )
-    notes = list(magnetometer.notes)
-    if {"OfsX", "OfsY", "OfsZ"} <= set(labels):
-        # The offsets in use are logged with each sample (truncated to whole mG): they must be the parameters'.
-        used = np.column_stack([log.value(records, name, axis) for axis in ("OfsX", "OfsY", "OfsZ")])
-        if np.any(np.abs(used - np.trunc(compass.offsets)) > 1.0):
-            raise DataFileError(
-                f"{log.path}: {magnetometer.id}: the offsets logged with the samples (OfsX/Y/Z, e.g. "
-                f"{used[0].tolist()}) are not COMPASS_OFS{parameter_suffix(compass.index)} from the log's parameters "
-                f"({np.round(compass.offsets, 1).tolist()}), so the calibration cannot be undone with confidence; "
-                "please report the log"
-            )
-    finite = np.all(np.isfinite(samples), axis=1)
+    samples = undone.samples
+    finite = np.all(np.isfinite(samples), axis=1) & ~undone.damaged
     return LogSamples(
         magnetometer=magnetometer,
         samples=samples[finite],
-        time_s=_time_s(log, name, records)[finite],
+        time_s=times[finite],
         columns=("MagX", "MagY", "MagZ"),
-        notes=tuple(notes),
+        notes=(*magnetometer.notes, *undone.notes),
     )
+
+
+def _has_offsets(labels: tuple[str, ...]) -> bool:
+    return {"OfsX", "OfsY", "OfsZ"} <= set(labels)
+
+
+def _motor_labels(labels: tuple[str, ...]) -> tuple[str, str, str] | None:
+    """MAG's motor compensation fields: MOX/MOY/MOZ, or MOfsX/MOfsY/MOfsZ in logs before ArduPilot 3.5."""
+    for names in (("MOX", "MOY", "MOZ"), ("MOfsX", "MOfsY", "MOfsZ")):
+        if set(names) <= set(labels):
+            return names
+    return None

@@ -56,7 +56,14 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError
 from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
-from .ardupilot import compass_mounting, compass_parameters, first_value, undo_calibration, untrimmed
+from .ardupilot import (
+    compass_mounting,
+    compass_parameters,
+    describe_parameters,
+    first_value,
+    undo_records,
+    untrimmed,
+)
 from .motion import Motion, Stream, align, euler_quaternions
 
 __all__ = ["TelemetryLog", "is_tlog", "open_tlog"]
@@ -679,17 +686,22 @@ class _Compass:
         else:
             first_time = float(self.time[0]) if len(self.time) else float("nan")
             assert self.slot is not None
-            self.compass, problem = compass_parameters(vehicle.parameters, self.slot, first_time)
+            # A list the station did not download whole may lack a parameter the firmware has: only a complete one
+            # (vehicle.no_soft_iron: already given the firmware's defaults) says what the firmware did not have.
+            self.compass, problem = compass_parameters(
+                vehicle.parameters, self.slot, first_time, absent_means_default=False
+            )
             if self.compass is not None:
                 s = "" if self.compass.index == 0 else str(self.compass.index + 1)
+                said = describe_parameters(self.compass, "from the parameters the ground station fetched (PARAM_VALUE)")
                 notes.append(
-                    f"{name}'s xmag/ymag/zmag are ArduPilot's field after its calibration; undone with COMPASS_OFS{s}, "
-                    f"DIA{s}, ODI{s} and SCALE{s} from the parameters the ground station fetched (PARAM_VALUE)"
+                    f"{name}'s xmag/ymag/zmag are ArduPilot's field after its calibration; {said[0]}"
                     if not vehicle.no_soft_iron
                     else f"{name}'s xmag/ymag/zmag are ArduPilot's field after its offsets; undone with COMPASS_OFS{s} "
                     "from the parameters the ground station fetched (PARAM_VALUE): their complete list has no "
                     "COMPASS_DIA/ODI, so this firmware applied no soft-iron matrix"
                 )
+                notes.extend(said[1:])
                 problem = self._motor_compensation(notes)
             elif problem is not None:  # dataflash's words are for PARM messages: say it for a tlog
                 problem = problem.replace(
@@ -780,21 +792,20 @@ class _Compass:
     def read(self) -> LogSamples:
 
         samples = self.mag.copy()  # PX4: gauss as sent; ArduPilot: mG, calibrated
+        notes = tuple(self.notes)
+        keep = np.ones(len(samples), dtype=bool)
         if self.compass is not None:
-            samples = undo_calibration(
-                samples,
-                offsets=self.compass.offsets,
-                diagonals=self.compass.diagonals,
-                offdiagonals=self.compass.offdiagonals,
-                scale=self.compass.scale,
-            )
-        finite = np.all(np.isfinite(samples), axis=1)
+            # Each sample undone with the parameters in effect when it was measured: its time is on the ground
+            # station's clock (module docstring), as PARAM_VALUE's receipt times are, within the link's latency.
+            undone = undo_records(samples, self.time, parameters=self.vehicle.parameters, compass=self.compass)
+            samples, keep, notes = undone.samples, ~undone.damaged, (*notes, *undone.notes)
+        finite = np.all(np.isfinite(samples), axis=1) & keep
         return LogSamples(
             magnetometer=self.magnetometer,
             samples=samples[finite],
             time_s=self.time[finite],
             columns=("xmag", "ymag", "zmag"),
-            notes=tuple(self.notes),
+            notes=notes,
         )
 
     def motion(self, position: Position | None) -> Motion:
