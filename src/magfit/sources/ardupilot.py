@@ -217,9 +217,7 @@ def compass_parameters(
             index=k,
             offsets=np.array([first_value(parameters, n) or 0.0 for n in names["offsets"]], dtype=np.float64),
             diagonals=np.array([first_value(parameters, n) or 0.0 for n in names["diagonals"]], dtype=np.float64),
-            offdiagonals=np.array(
-                [first_value(parameters, n) or 0.0 for n in names["offdiagonals"]], dtype=np.float64
-            ),
+            offdiagonals=np.array([first_value(parameters, n) or 0.0 for n in names["offdiagonals"]], dtype=np.float64),
             scale=float(first_value(parameters, f"COMPASS_SCALE{s}") or 0.0),
             device_id=int(device) if device else None,
             motor_compensation=bool(motor),
