@@ -423,8 +423,10 @@ def _gps_position(log: DataFlashLog) -> Position | None:
     with np.errstate(invalid="ignore"):
         lat, lon = log.value(records, "GPS", "Lat"), log.value(records, "GPS", "Lng")
         alt = log.value(records, "GPS", "Alt") if "Alt" in labels else np.full(len(records), np.nan)
-        if {"GWk", "GMS"} <= labels:
-            weeks, ms = records["GWk"].astype(np.float64), records["GMS"].astype(np.float64)
+        # GWk, GMS (ArduPilot 3.4 on); Week, TimeMS before (TimeMS was the GPS time of week then, T the boot time)
+        week_ms = ("GWk", "GMS") if {"GWk", "GMS"} <= labels else ("Week", "TimeMS")
+        if set(week_ms) <= labels:
+            weeks, ms = records[week_ms[0]].astype(np.float64), records[week_ms[1]].astype(np.float64)
             time = np.where(weeks > 0, _GPS_EPOCH_S + weeks * 604_800 + ms / 1000 - _GPS_LEAP_S, np.nan)
         else:
             time = np.full(len(records), np.nan)
