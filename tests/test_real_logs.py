@@ -222,3 +222,84 @@ def test_damaged_records_in_the_real_flight_are_skipped_and_counted(
     result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "MAG/0"])
     assert result.exit_code == 0, result.output
     assert "2 of 2384 records skipped as damaged" in result.stderr
+
+
+def _half(data: bytes, name: str, which: int) -> bytes:
+    """The log with compass message ``name``'s first (0) or second (1) half of its time span: the compass and
+    motion messages (MAG*, ATT, IMU, AHR2, XKQ) outside that half are dropped, every other message kept."""
+    log = DataFlashLog(COPTER33, data)
+    own = log.messages(name)
+    label, factor = ("TimeUS", 1e-6) if "TimeUS" in (own.dtype.names or ()) else ("TimeMS", 1e-3)
+    times = own[label].astype(float) * factor
+    middle = (times.min() + times.max()) / 2
+    keep: list[int] = []
+    for type_id, starts in log._offsets.items():
+        fmt = log.formats[type_id]
+        timed = next((lab for lab in ("TimeUS", "TimeMS") if lab in fmt.labels), None)
+        if fmt.name not in ("MAG", "MAG2", "MAG3", "ATT", "IMU", "AHR2", "XKQ") or timed is None:
+            keep.extend(int(s) for s in starts)
+            continue
+        stamps = log.messages(fmt.name)[timed].astype(float) * (1e-6 if timed == "TimeUS" else 1e-3)
+        inside = stamps < middle if which == 0 else stamps >= middle
+        keep.extend(int(s) for s in starts[inside])
+    length = {type_id: fmt.length for type_id, fmt in log.formats.items()}
+    return b"".join(data[s : s + length[data[s + 2]]] for s in sorted(keep))
+
+
+#: Offsets of the two halves this far apart, in combined stated one-sigmas, must be named (issue: honest
+#: uncertainty on real logs).
+HALVES_SIGMAS = 3.5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("sensor", "method"),
+    [
+        ("MAG/0", "auto"),
+        pytest.param(
+            "MAG/1",
+            "auto",
+            marks=pytest.mark.xfail(
+                reason="measured: the halves' auto offsets differ by (-172, -118, +351) mG, 11.2, 4.0 and 26.6 "
+                "combined stated sigmas (each half: sphere, weak; sigmas (6, 12, 11) and (14, 27, 7) mG), and the "
+                "whole log's fit names no inconsistent_halves (weak: large_residual, low_coverage); the halves' "
+                "stated uncertainty is the diagnostics' (outside magfit.sources)",
+                strict=True,
+            ),
+        ),
+        ("MAG/0", "vector"),
+        ("MAG/1", "vector"),
+    ],
+)
+def test_the_halves_of_a_real_flight_agree_or_the_disagreement_is_named(
+    tmp_path: Path, sensor: str, method: str
+) -> None:
+    data = COPTER33.read_bytes()
+    name = _NAMES[sensor][0]
+    fits = []
+    for which in (0, 1):
+        path = tmp_path / f"half{which}.bin"
+        path.write_bytes(_half(data, name, which))
+        try:
+            fits.append(magfit.calibrate_file(path, method, sensor=sensor).calibration)
+        except CalibrationError:
+            fits.append(None)  # a half the samples do not support: nothing stated, nothing to contradict
+    if any(c is None or c.diagnostics is None or c.diagnostics.uncertainty is None for c in fits):
+        return
+    first, second = fits
+    assert first is not None and second is not None
+    sigmas = [c.diagnostics.uncertainty.offset_sigma for c in fits]  # type: ignore[union-attr]
+    if any(s is None for s in sigmas):
+        return
+    combined = np.hypot(np.asarray(sigmas[0]), np.asarray(sigmas[1]))
+    apart = float(np.max(np.abs(np.asarray(first.offset) - np.asarray(second.offset)) / combined))
+    if apart <= HALVES_SIGMAS:
+        return
+    try:
+        whole = magfit.calibrate_file(COPTER33, method, sensor=sensor).calibration
+    except CalibrationError as refused:
+        assert "inconsistent_halves" in refused.codes, f"halves {apart:.1f} sigmas apart, refused for: {refused}"
+        return
+    support = whole.details["support"]
+    named = [*support["refusal_codes"], *support["weakness_codes"]]
+    assert "inconsistent_halves" in named, f"halves {apart:.1f} sigmas apart; the whole log's fit names {named}"
