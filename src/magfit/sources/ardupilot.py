@@ -237,10 +237,12 @@ def describe_parameters(compass: CompassParameters, where: str) -> list[str]:
     if lacked:
         groups = sorted({name.split("_")[1].rstrip("0123456789") for name in lacked})
         what = {"OFS": "no offsets", "DIA": "no soft-iron matrix", "ODI": "no soft-iron matrix"}
+        default = {"OFS": "zero offsets", "DIA": "the identity matrix", "ODI": "the identity matrix"}
         applied = sorted({what[g] for g in groups if g in what})
+        defaults = sorted({default[g] for g in groups if g in default}, reverse=True)
         notes.append(
             f"this firmware has no {', '.join(f'COMPASS_{g}{s}' for g in groups)} parameters, so it applied "
-            f"{' and '.join(applied)} (their defaults: zero offsets, the identity matrix)"
+            f"{' and '.join(applied)} (the default{'s' if len(defaults) > 1 else ''}: {', '.join(defaults)})"
         )
     if compass.changes:
         notes.append(
