@@ -195,7 +195,9 @@ def compass_parameters(
                 f"{name} changed during the log and its PARM messages carry no time, so which records were "
                 "corrected with which value is unknown; fit a log recorded after the change"
             )
-        changes.append(f"{name} at {later[0][0]:.1f} s" if np.isfinite(later[0][0]) else f"{name} (no time)")
+        during = [(t, v) for t, v in later if not (np.isfinite(t) and np.isfinite(first_time) and t <= first_time)]
+        if during:  # (a change before the first record is the calibration every record had)
+            changes.append(f"{name} at {during[0][0]:.1f} s" if np.isfinite(during[0][0]) else f"{name} (no time)")
     values = [v for name in every for _, v in parameters.get(name, [])]
     # Every calibration the log applied must be invertible: the first, and each one a change brought.
     moments = sorted({t for name in every for t, _ in parameters.get(name, []) if np.isfinite(t)} | {first_time})

@@ -475,7 +475,7 @@ def _raw(sid: str, data: Any, parameters: dict[str, Any], changed: list[tuple[in
                 f"this PX4 version (before v1.11: the topic has x_raw) calibrates sensor_mag in its driver; undone "
                 f"with CAL_MAG{index}_*OFF and *SCALE from the log's parameters"
             )
-            notes.extend(_changes_note(changed, index, start))
+            notes.extend(_changes_note(parameters, changed, index, start))
     magnetometer = Magnetometer(
         id=sid,
         description=("raw sensor_mag" if raw else "sensor_mag, calibrated by the driver")
@@ -563,9 +563,8 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
         elif comp != 0:
             problem = f"power compensation is configured (CAL_MAG_COMP_TYP {comp}) and cannot be undone from the log"
         else:
-            moved = sorted(
-                {p for t, p, _ in changed if p in (f"{name}_ROT", f"{name}_ID", "SENS_BOARD_ROT") and t > start * 1e6}
-            )
+            turned = (f"{name}_ROT", f"{name}_ID", "SENS_BOARD_ROT")
+            moved = sorted({p for t, p, v in changed if p in turned and t > start * 1e6 and v != parameters.get(p)})
             if moved:
                 problem = (
                     f"{', '.join(moved)} changed during the log: the samples were turned or attributed two ways, which "
@@ -577,7 +576,7 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
             f"calibrated by PX4 (body frame); undone to the sensor's frame with CAL_MAG{index}_*OFF, *SCALE, *ODIAG "
             f"and {_rotation(parameters, index)[1]} from the log's parameters"
         )
-        notes.extend(_changes_note(changed, index, start))
+        notes.extend(_changes_note(parameters, changed, index, start))
     return Magnetometer(
         id=sid,
         description="calibrated vehicle_magnetometer" + (f", device_id {device}" if device is not None else ""),
@@ -646,10 +645,15 @@ def _undo_in_effect(
     return samples
 
 
-def _changes_note(changed: list[tuple[int, str, float]], index: int, start_s: float) -> list[str]:
+def _changes_note(
+    parameters: dict[str, Any], changed: list[tuple[int, str, float]], index: int, start_s: float
+) -> list[str]:
     """The note that CAL_MAG{index}'s calibration changed during the log, when it did."""
     kinds = tuple(f"{axis}{kind}" for kind, _ in _CAL_KINDS for axis in "XYZ")
     moved = sorted({(t, p) for t, p, _ in changed if p.startswith(f"CAL_MAG{index}_") and p.endswith(kinds)})
+    values = _calibration_at(parameters, changed, index, np.array([-np.inf, *(t for t, _ in moved)], dtype=float))
+    if len(np.unique(values, axis=0)) < 2:  # set again to the values it had: no change
+        return []
     later = [(t, p) for t, p in moved if not np.isfinite(start_s) or t > start_s * 1e6]
     if not later:
         return []
