@@ -321,6 +321,22 @@ def test_a_damaged_record_is_skipped_and_counted_not_a_refusal(tmp_path: Path) -
     assert result.exit_code == 0, result.output
 
 
+def test_a_damaged_parm_message_is_skipped_not_a_refusal(tmp_path: Path) -> None:
+    # A PARM message whose value is not a number, after the parameter's first: skipped and counted.
+    path = tmp_path / "damaged_parm.bin"
+    simulations = write_new_style(path)
+    data = bytearray(path.read_bytes())
+    starts = DataFlashLog(path, bytes(data))._offsets[129]
+    # COMPASS_OFS_X's PARM message (TimeUS, Name, Value): a copy of it, its value NaN, inserted after it.
+    at = next(int(a) for a in starts if data[a + 11 : a + 27].rstrip(b"\0") == b"COMPASS_OFS_X")
+    copy = bytearray(data[at : at + 3 + 8 + 16 + 4])
+    struct.pack_into("<f", copy, 3 + 8 + 16, float("nan"))
+    path.write_bytes(bytes(data[: at + len(copy)]) + bytes(copy) + bytes(data[at + len(copy) :]))
+    source = open_source(path)
+    assert "1 PARM messages skipped as damaged (a value that is not a number)" in source.notes
+    np.testing.assert_allclose(source.read("MAG/0").samples, simulations[0].samples, atol=1.5)
+
+
 def test_a_firmware_without_soft_iron_parameters_applied_the_offsets_alone(tmp_path: Path) -> None:
     # ArduCopter 3.2 had COMPASS_OFS but no COMPASS_DIA/ODI (nor SCALE, nor DEV_ID): they are its defaults.
     writer = DataFlashWriter()

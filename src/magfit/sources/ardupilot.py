@@ -44,6 +44,7 @@ __all__ = [
     "undo_records",
     "untrimmed",
     "value_in_effect",
+    "without_damaged_changes",
 ]
 
 #: A log's parameters: name -> [(time_s, value), ...] in the log's order.
@@ -76,6 +77,19 @@ def value_in_effect(
     moments = np.asarray(times, dtype=np.float64)
     index = np.clip(np.searchsorted(stamps, moments, side="right") - 1, 0, None)
     return settings[np.where(np.isfinite(moments), index, 0)]
+
+
+def without_damaged_changes(parameters: Parameters) -> tuple[Parameters, int]:
+    """The parameters without the values logged after a parameter's first that are not numbers (NaN, inf: a
+    damaged PARM message, since a firmware stores none), and how many were dropped. A first value that is not a
+    number stays: what the firmware had is then unknown, and the stream that needs it is refused."""
+    kept: Parameters = {}
+    dropped = 0
+    for name, values in parameters.items():
+        sound = [pair for i, pair in enumerate(values) if i == 0 or np.isfinite(pair[1])]
+        dropped += len(values) - len(sound)
+        kept[name] = sound
+    return kept, dropped
 
 
 def parameter_suffix(k: int) -> str:

@@ -47,6 +47,7 @@ from .ardupilot import (
     undo_calibration,
     undo_records,
     untrimmed,
+    without_damaged_changes,
 )
 from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
 
@@ -271,12 +272,14 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
     """The :class:`~magfit.sources.Source` of a DataFlash log already read: a :class:`DataFlashLog`, or anything
     with its ``has``, ``messages``, ``value``, ``parameters``, ``names``, ``skipped_bytes`` and ``truncated``
     (the text of ``mavlogdump.py``, :mod:`magfit.sources.mavlogdump`); ``notes``: what to say of the file."""
-    parameters = log.parameters()
+    parameters, damaged = without_damaged_changes(log.parameters())
     streams = _compass_streams(log)
     magnetometers = []
     for slot, (name, records) in enumerate(streams):
         magnetometers.append(_describe(log, parameters, slot, name, records))
     said = list(notes)
+    if damaged:
+        said.append(f"{damaged} PARM messages skipped as damaged (a value that is not a number)")
     if log.skipped_bytes:
         said.append(f"{log.skipped_bytes} bytes skipped as damaged (no message starts there)")
     if log.truncated:
