@@ -304,13 +304,23 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
         position=position,
         kind="dataflash",
         format=described,
-        time_base="seconds since boot (TimeUS)",
+        time_base=_time_base(streams),
         magnetometers=tuple(magnetometers),
         other=other,
         notes=tuple(said),
         _reader=read,
         _motion=motion,
     )
+
+
+def _time_base(streams: list[tuple[str, NDArray[Any]]]) -> str:
+    """What the compasses' time stamps count: TimeUS (3.4 on), TimeMS (before), or nothing (before 3.1)."""
+    labels = set(streams[0][1].dtype.names or ()) if streams else {"TimeUS"}
+    if "TimeUS" in labels:
+        return "seconds since boot (TimeUS)"
+    if "TimeMS" in labels:
+        return "seconds since boot (TimeMS)"
+    return "none: the compass messages carry no time stamp"
 
 
 def _first_instance(records: NDArray[Any]) -> NDArray[Any]:
