@@ -54,7 +54,7 @@ SCALE_RANGE = (0.85, 1.4)
 
 
 def first_value(parameters: Parameters, name: str) -> float | None:
-    """The parameter's first value in the log (a change later on is the caller's to refuse or follow)."""
+    """The parameter's first value in the log (:func:`value_in_effect` follows the changes after it)."""
     values = parameters.get(name)
     return values[0][1] if values else None
 

@@ -19,7 +19,10 @@ COMPASS_ODI*_X/Y/Z (off-diagonal: xy, xz, yz), and ``motor_offset`` the motor co
 1 throttle / 2 current, or COMPASS_PMOT_EN per motor), which the log records per sample in ``MOX, MOY,
 MOZ``. :func:`undo_calibration` inverts it to the field in the board frame, the frame in which ArduPilot's
 own calibration (and magfit's ArduPilot export) is expressed. Logged values are truncated to whole
-milligauss (int16): the undone field carries up to 1 mG of that rounding.
+milligauss (int16): the undone field carries up to 1 mG of that rounding. Every record is undone with the
+calibration in effect when it was logged, the parameters a firmware did not have at their defaults, and a
+damaged record skipped (:mod:`magfit.sources.ardupilot`); ``OfsX/Y/Z``, logged with each record, are the
+offsets it was corrected with.
 
 Parameters of compass k (0-based) are ``COMPASS_OFS_X`` (k = 0), ``COMPASS_OFS2_X`` (k = 1),
 ``COMPASS_OFS3_X`` (k = 2), and so on. Since ArduPilot 4.1 the logged instance is a *priority* slot: slot i
