@@ -41,8 +41,8 @@ def _field_at(fmt: Any, label: str) -> int:
     return 3 + int(fmt.dtype.fields[label][1])
 
 
-def _parameter(source_bytes: bytes, name: str) -> float:
-    values = DataFlashLog(COPTER33, source_bytes).parameters()[name]
+def _parameter(source_bytes: bytes, name: str, path: Path = COPTER33) -> float:
+    values = DataFlashLog(path, source_bytes).parameters()[name]
     return values[0][1]
 
 
@@ -90,6 +90,34 @@ def _parm_message(data: bytes, name: str, value: float) -> bytes:
 def original() -> dict[str, np.ndarray]:
     source = open_source(COPTER33)
     return {sensor: source.read(sensor).samples for sensor in ("MAG/0", "MAG/1", "MAG/2")}
+
+
+COPTER462 = DATA / "copter462_head_80k.bin"
+
+
+def test_a_real_copter462_log_is_undone_and_refused_only_for_its_four_samples() -> None:
+    # ArduCopter 4.6.2: MAG instances mapped through COMPASS_PRIOn_ID, compass 2 with an onboard calibration's
+    # DIA2/ODI2. The truth: the records themselves, corrected again as the firmware does.
+    source = open_source(COPTER462)
+    assert [(m.id, m.device_id, m.problem) for m in source.magnetometers] == [
+        ("MAG/0", 592905, None),
+        ("MAG/1", 658945, None),
+    ]
+    data = COPTER462.read_bytes()
+    records = DataFlashLog(COPTER462, data).messages("MAG")
+    for slot, suffix in ((0, ""), (1, "2")):
+        read = source.read(f"MAG/{slot}")
+        mine = records[records["I"] == slot]
+        logged = np.column_stack([mine[axis].astype(float) for axis in ("MagX", "MagY", "MagZ")])
+        offsets = np.array([_parameter(data, f"COMPASS_OFS{suffix}_{a}", COPTER462) for a in "XYZ"])
+        matrix = soft_iron_matrix(
+            [_parameter(data, f"COMPASS_DIA{suffix}_{a}", COPTER462) for a in "XYZ"],
+            [_parameter(data, f"COMPASS_ODI{suffix}_{a}", COPTER462) for a in "XYZ"],
+        )
+        np.testing.assert_allclose((read.samples + offsets) @ matrix.T, logged, atol=1e-3)
+    result = CliRunner().invoke(cli, ["calibrate", str(COPTER462)])
+    assert result.exit_code == 1 and "needs at least" in result.stderr and "got 4" in result.stderr
+    assert "log the parameters" not in result.output and "Traceback" not in result.output
 
 
 def test_a_real_copter33_flight_undoes_every_compass_to_what_the_firmware_logged() -> None:
