@@ -321,6 +321,30 @@ def test_a_damaged_record_is_skipped_and_counted_not_a_refusal(tmp_path: Path) -
     assert result.exit_code == 0, result.output
 
 
+def test_records_of_an_unhealthy_compass_are_skipped_and_counted(tmp_path: Path) -> None:
+    # MAG's Health 0: AP_Compass logged the last field again (stale). Those records are skipped; a compass
+    # unhealthy throughout is refused with that reason.
+    path = tmp_path / "unhealthy.bin"
+    simulations = write_new_style(path)
+    data = bytearray(path.read_bytes())
+    log = DataFlashLog(path, bytes(data))
+    starts = log._offsets[log._by_name["MAG"]]
+    health = 3 + 8 + 1 + 6 * 3  # TimeUS, I, MagX/Y/Z, OfsX/Y/Z, MOX/Y/Z
+    for j in range(300, 340):
+        data[int(starts[2 * j]) + health] = 0  # compass in slot 0
+    for j in range(1500):
+        data[int(starts[2 * j + 1]) + health] = 0  # slot 1: unhealthy throughout
+    path.write_bytes(bytes(data))
+    source = open_source(path)
+    read = source.read("MAG/0")
+    assert any("40 of 1500 records skipped: the compass was unhealthy (Health 0)" in n for n in read.notes)
+    keep = np.ones(1500, dtype=bool)
+    keep[300:340] = False
+    np.testing.assert_allclose(read.samples, simulations[0].samples[keep], atol=1.5)
+    problem = source.magnetometer("MAG/1").problem
+    assert problem is not None and "unhealthy (Health 0) in every MAG record" in problem
+
+
 def test_a_damaged_parm_message_is_skipped_not_a_refusal(tmp_path: Path) -> None:
     # A PARM message whose value is not a number, after the parameter's first: skipped and counted.
     path = tmp_path / "damaged_parm.bin"

@@ -491,6 +491,11 @@ def _describe(
                     "the motor offsets it added (no MOX/MOY/MOZ), so the raw field cannot be recovered; record with "
                     "COMPASS_MOTCT 0, or use the onboard calibrator (COMPASS_CAL_FIT)"
                 )
+    if "Health" in labels and len(records) and not np.any(records["Health"]):
+        problem = (
+            f"the compass was unhealthy (Health 0) in every {name} record: the field it logged is stale, not a "
+            "measurement; check its connection and record again"
+        )
     missing = [axis for axis in ("MagX", "MagY", "MagZ") if axis not in labels]
     if missing:
         problem = f"the {name} messages have no {', '.join(missing)} field"
@@ -549,12 +554,21 @@ def _read(
     )
     samples = undone.samples
     finite = np.all(np.isfinite(samples), axis=1) & ~undone.damaged
+    notes = [*magnetometer.notes, *undone.notes]
+    if "Health" in labels:  # AP_Compass's healthy(): an unhealthy compass logs its last field again, stale
+        unhealthy = records["Health"] == 0
+        if np.any(unhealthy):
+            finite &= ~unhealthy
+            notes.append(
+                f"{int(np.count_nonzero(unhealthy))} of {len(records)} records skipped: the compass was unhealthy "
+                "(Health 0) when they were logged, so the field they carry is stale"
+            )
     return LogSamples(
         magnetometer=magnetometer,
         samples=samples[finite],
         time_s=times[finite],
         columns=("MagX", "MagY", "MagZ"),
-        notes=(*magnetometer.notes, *undone.notes),
+        notes=tuple(notes),
     )
 
 
