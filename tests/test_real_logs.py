@@ -120,6 +120,21 @@ def test_a_real_copter462_log_is_undone_and_refused_only_for_its_four_samples() 
     assert "log the parameters" not in result.output and "Traceback" not in result.output
 
 
+def test_a_real_tlog_is_undone_with_the_fetched_parameters_and_refused_for_its_few_directions() -> None:
+    # The ground station fetched the whole parameter list: both compasses undone with it (the same logic as a
+    # .bin's PARM messages); 27 samples at 1.2 Hz on the ground determine no model: exit 1, with that reason.
+    path = DATA / "fs_batt_2016.tlog"
+    source = open_source(path)
+    assert [(m.id, m.device_id, m.problem) for m in source.magnetometers] == [
+        ("RAW_IMU", 73225, None),
+        ("SCALED_IMU2", 131594, None),
+    ]
+    assert all(any("undone with COMPASS_OFS" in note for note in m.notes) for m in source.magnetometers)
+    result = CliRunner().invoke(cli, ["calibrate", str(path)])
+    assert result.exit_code == 1 and result.stderr.count("the samples determine no calibration model") == 2
+    assert "log the parameters" not in result.output and "lack" not in result.output
+
+
 def test_a_real_copter33_flight_undoes_every_compass_to_what_the_firmware_logged() -> None:
     source = open_source(COPTER33)
     assert [m.id for m in source.magnetometers] == ["MAG/0", "MAG/1", "MAG/2"]
