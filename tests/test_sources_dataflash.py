@@ -17,6 +17,7 @@ from magfit.cli import cli
 from magfit.errors import DataFileError
 from magfit.sources import open_source
 from magfit.sources.ardupilot import undo_calibration
+from magfit.sources.dataflash import DataFlashLog
 
 HEAD = b"\xa3\x95"
 _STRUCT = {
@@ -122,8 +123,20 @@ def _simulations(n: int) -> list[magfit.Simulation]:
     ]
 
 
-def write_new_style(path: Path, n: int = 1500, *, motct: int = 0, swap_priority: bool = False) -> list:
-    """MAG with instance field I (ArduPilot 4.x), 20 Hz; returns the simulations (raw truth per compass k)."""
+def write_new_style(
+    path: Path,
+    n: int = 1500,
+    *,
+    motct: int = 0,
+    swap_priority: bool = False,
+    change: tuple[int, dict[str, np.ndarray], bool] | None = None,
+) -> list:
+    """MAG with instance field I (ArduPilot 4.x), 20 Hz; returns the simulations (raw truth per compass k).
+
+    ``change``: (j, calibration, logged): from record j on, compass 0 is corrected with ``calibration`` (ofs, dia,
+    odi) and its MAG records carry the new offsets; with ``logged`` its PARM messages say so at that time (a
+    recalibration), without it they do not (offsets learned in flight and not saved).
+    """
     writer = DataFlashWriter()
     writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
     writer.define(130, "MAG", "QBhhhhhhhhhBI", "TimeUS,I,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOX,MOY,MOZ,Health,S")
@@ -139,12 +152,23 @@ def write_new_style(path: Path, n: int = 1500, *, motct: int = 0, swap_priority:
     for k, compass in enumerate(COMPASSES):
         field = correct_field(simulations[k].samples, compass["ofs"], compass["dia"], compass["odi"], compass["scale"])
         logged[k] = np.trunc(field + motor)
+    if change is not None:
+        start, new, _ = change
+        c = {**COMPASSES[0], **new}
+        field = correct_field(simulations[0].samples[start:], c["ofs"], c["dia"], c["odi"], c["scale"])
+        logged[0][start:] = np.trunc(field + motor[start:])
     for j in range(n):
         time = 2_000_000 + j * 50_000
+        if change is not None and j == change[0] and change[2]:
+            for name, values in (("OFS", change[1]["ofs"]), ("DIA", change[1]["dia"]), ("ODI", change[1]["odi"])):
+                for axis, value in zip("XYZ", values, strict=True):
+                    writer.write("PARM", time, f"COMPASS_{name}_{axis}", float(value))
         writer.write("ATT", time, 1.0, 2.0)
         for slot, k in enumerate(order):
-            ofs = np.trunc(COMPASSES[k]["ofs"]).astype(int)
-            writer.write("MAG", time, slot, *logged[k][j].astype(int), *ofs, *motor[j].astype(int), 1, time)
+            ofs = change[1]["ofs"] if change is not None and k == 0 and j >= change[0] else COMPASSES[k]["ofs"]
+            writer.write(
+                "MAG", time, slot, *logged[k][j].astype(int), *np.trunc(ofs).astype(int), *motor[j].astype(int), 1, time
+            )
     path.write_bytes(writer.bytes())
     return simulations
 
@@ -233,6 +257,141 @@ def test_old_style_log_recovers_the_truth(tmp_path: Path) -> None:
     for slot in range(2):
         read = source.read(f"MAG/{slot}")
         np.testing.assert_allclose(read.samples, simulations[slot].samples, atol=1.5)
+
+
+#: A recalibration: compass 0's new offsets and soft-iron matrix.
+RECALIBRATED = {
+    "ofs": np.array([40.0, -75.0, 12.0]),
+    "dia": np.array([0.98, 1.04, 0.99]),
+    "odi": np.array([0.01, 0, -0.02]),
+}
+
+
+def test_a_recalibration_half_way_undoes_each_record_with_the_calibration_then_in_effect(tmp_path: Path) -> None:
+    # PARM messages change COMPASS_OFS/DIA/ODI at record 700: before, the old calibration; from then, the new.
+    path = tmp_path / "recalibrated.bin"
+    simulations = write_new_style(path, change=(700, RECALIBRATED, True))
+    source = open_source(path)
+    magnetometer = source.magnetometer("MAG/0")
+    assert magnetometer.problem is None
+    assert any("the calibration changed during the log (COMPASS_OFS_X at 37.0 s" in n for n in magnetometer.notes)
+    read = source.read("MAG/0")
+    np.testing.assert_allclose(read.samples, simulations[0].samples, atol=1.5)
+    _assert_recovers(magfit.calibrate_file(path, "ellipsoid", sensor="MAG/0").calibration, simulations[0].truth)
+    # Undone with the first calibration throughout, the second half would be tens of mG off: the test can fail.
+    c = COMPASSES[0]
+    wrong = undo_calibration(
+        correct_field(simulations[0].samples[700:], RECALIBRATED["ofs"], RECALIBRATED["dia"], RECALIBRATED["odi"], 1.1),
+        offsets=c["ofs"],
+        diagonals=c["dia"],
+        offdiagonals=c["odi"],
+        scale=c["scale"],
+    )
+    assert np.median(np.linalg.norm(wrong - simulations[0].samples[700:], axis=1)) > 50
+
+
+def test_offsets_learned_in_flight_are_undone_with_each_records_own(tmp_path: Path) -> None:
+    # The offsets change at record 700 without a PARM message (learned and not saved): MAG's OfsX/Y/Z say which.
+    path = tmp_path / "learned.bin"
+    learned = {"ofs": np.array([-20.0, 95.0, -61.0]), "dia": COMPASSES[0]["dia"], "odi": COMPASSES[0]["odi"]}
+    simulations = write_new_style(path, change=(700, learned, False))
+    read = open_source(path).read("MAG/0")
+    assert any("800 of 1500 records were corrected with offsets that are not" in note for note in read.notes)
+    np.testing.assert_allclose(read.samples, simulations[0].samples, atol=1.5)
+
+
+def test_a_damaged_record_is_skipped_and_counted_not_a_refusal(tmp_path: Path) -> None:
+    # One MAG record's offsets and another's time stamp overwritten: each unlike both its neighbours.
+    path = tmp_path / "damaged.bin"
+    simulations = write_new_style(path)
+    data = bytearray(path.read_bytes())
+    log = DataFlashLog(path, bytes(data))
+    starts = log._offsets[log._by_name["MAG"]]  # the MAG records' byte offsets, slot 0 at even indices
+    # MAG payload: TimeUS Q, I B, MagX/Y/Z h, OfsX/Y/Z h ...: OfsX at +3+8+1+6, TimeUS at +3.
+    struct.pack_into("<hhh", data, int(starts[2 * 400]) + 18, 5, 13, -18)
+    struct.pack_into("<Q", data, int(starts[2 * 900]) + 3, 10**12)
+    path.write_bytes(bytes(data))
+    read = open_source(path).read("MAG/0")
+    assert any("2 of 1500 records skipped as damaged" in note for note in read.notes)
+    assert len(read.samples) == 1498
+    keep = np.ones(1500, dtype=bool)
+    keep[[400, 900]] = False
+    np.testing.assert_allclose(read.samples, simulations[0].samples[keep], atol=1.5)
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "MAG/0", "-m", "ellipsoid"])
+    assert result.exit_code == 0, result.output
+
+
+def test_records_of_an_unhealthy_compass_are_skipped_and_counted(tmp_path: Path) -> None:
+    # MAG's Health 0: AP_Compass logged the last field again (stale). Those records are skipped; a compass
+    # unhealthy throughout is refused with that reason.
+    path = tmp_path / "unhealthy.bin"
+    simulations = write_new_style(path)
+    data = bytearray(path.read_bytes())
+    log = DataFlashLog(path, bytes(data))
+    starts = log._offsets[log._by_name["MAG"]]
+    health = 3 + 8 + 1 + 6 * 3  # TimeUS, I, MagX/Y/Z, OfsX/Y/Z, MOX/Y/Z
+    for j in range(300, 340):
+        data[int(starts[2 * j]) + health] = 0  # compass in slot 0
+    for j in range(1500):
+        data[int(starts[2 * j + 1]) + health] = 0  # slot 1: unhealthy throughout
+    path.write_bytes(bytes(data))
+    source = open_source(path)
+    read = source.read("MAG/0")
+    assert any("40 of 1500 records skipped: the compass was unhealthy (Health 0)" in n for n in read.notes)
+    keep = np.ones(1500, dtype=bool)
+    keep[300:340] = False
+    np.testing.assert_allclose(read.samples, simulations[0].samples[keep], atol=1.5)
+    problem = source.magnetometer("MAG/1").problem
+    assert problem is not None and "unhealthy (Health 0) in every MAG record" in problem
+
+
+def test_a_damaged_parm_message_is_skipped_not_a_refusal(tmp_path: Path) -> None:
+    # A PARM message whose value is not a number, after the parameter's first: skipped and counted.
+    path = tmp_path / "damaged_parm.bin"
+    simulations = write_new_style(path)
+    data = bytearray(path.read_bytes())
+    starts = DataFlashLog(path, bytes(data))._offsets[129]
+    # COMPASS_OFS_X's PARM message (TimeUS, Name, Value): a copy of it, its value NaN, inserted after it.
+    at = next(int(a) for a in starts if data[a + 11 : a + 27].rstrip(b"\0") == b"COMPASS_OFS_X")
+    copy = bytearray(data[at : at + 3 + 8 + 16 + 4])
+    struct.pack_into("<f", copy, 3 + 8 + 16, float("nan"))
+    path.write_bytes(bytes(data[: at + len(copy)]) + bytes(copy) + bytes(data[at + len(copy) :]))
+    source = open_source(path)
+    assert "1 PARM messages skipped as damaged (a value that is not a number)" in source.notes
+    np.testing.assert_allclose(source.read("MAG/0").samples, simulations[0].samples, atol=1.5)
+
+
+def test_a_firmware_without_soft_iron_parameters_applied_the_offsets_alone(tmp_path: Path) -> None:
+    # ArduCopter 3.2 had COMPASS_OFS but no COMPASS_DIA/ODI (nor SCALE, nor DEV_ID): they are its defaults.
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "Ihhhhhh", "TimeMS,MagX,MagY,MagZ,OfsX,OfsY,OfsZ")
+    c = COMPASSES[0]
+    for axis, value in zip("XYZ", c["ofs"], strict=True):
+        writer.write("PARM", 500, f"COMPASS_OFS_{axis}", float(value))
+    simulation = _simulations(800)[0]
+    logged = np.trunc(simulation.samples + c["ofs"])
+    for j in range(800):
+        writer.write("MAG", 1000 + j * 100, *logged[j].astype(int), *np.trunc(c["ofs"]).astype(int))
+    path = tmp_path / "copter32.bin"
+    path.write_bytes(writer.bytes())
+    (magnetometer,) = open_source(path).magnetometers
+    assert magnetometer.problem is None
+    assert any(
+        "no COMPASS_DIA, COMPASS_ODI parameters, so it applied no soft-iron matrix" in n for n in magnetometer.notes
+    )
+    read = open_source(path).read("MAG/0")
+    np.testing.assert_allclose(read.samples, simulation.samples, atol=1.0)
+    # A log whose PARM messages hold no compass parameter at all still cannot say what was applied.
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "Qhhh", "TimeUS,MagX,MagY,MagZ")
+    writer.write("PARM", 0, "LOG_BITMASK", 830.0)
+    for j in range(100):
+        writer.write("MAG", j * 50_000, 100 + j, 0, 300)
+    path.write_bytes(writer.bytes())
+    (magnetometer,) = open_source(path).magnetometers
+    assert magnetometer.problem is not None and "lack COMPASS_OFS_X" in magnetometer.problem
 
 
 def test_calibrate_on_a_log_fits_each_compass_or_the_chosen_one(tmp_path: Path) -> None:

@@ -101,6 +101,7 @@ def write_vehicle(
     second_imu: bool = True,
     trim_deg: tuple[float, float] = (0.0, 0.0),
     trim_change: tuple[int, float] | None = None,
+    offsets_change: tuple[int, np.ndarray] | None = None,
 ) -> list[magfit.Simulation]:
     """An ArduPilot vehicle turned in every direction, streamed at 10 Hz with a jittery link (20-300 ms): RAW_IMU
     (compass k = 0) and SCALED_IMU2 (k = 1), ATTITUDE, a HEARTBEAT and a 3-D GPS fix each second, and the
@@ -109,7 +110,9 @@ def write_vehicle(
     COMPASS_DIA/ODI/SCALE, which applies the offsets alone; ``second_imu`` False: SCALED_IMU2 carries zeros for
     its accelerometer and gyroscope, as ArduPilot sends for an IMU the board lacks; ``trim_deg``: AHRS_TRIM_X/Y,
     subtracted from ATTITUDE's roll and pitch as the EKF does; ``trim_change`` (sample, degrees): AHRS_TRIM_Y
-    set to that at that sample (a "Calibrate Level" while connected). Returns the raw truths."""
+    set to that at that sample (a "Calibrate Level" while connected); ``offsets_change`` (sample, offsets):
+    COMPASS_OFS_X/Y/Z set to those at that sample (sent as PARAM_VALUE), compass 0 corrected with them from then
+    on. Returns the raw truths."""
     simulations = [
         magfit.simulate(
             n, soft_iron=c["soft_iron"], hard_iron=c["hard_iron"], field_strength=480.0, noise=1.5, seed=11 + k
@@ -123,6 +126,10 @@ def write_vehicle(
         np.trunc(correct_field(s.samples, c["ofs"], c["dia"], c["odi"], c["scale"]))  # int16(float): truncated
         for s, c in zip(simulations, applied, strict=True)
     ]
+    if offsets_change is not None:
+        start, new = offsets_change
+        c = applied[0]
+        logged[0][start:] = np.trunc(correct_field(simulations[0].samples[start:], new, c["dia"], c["odi"], c["scale"]))
     writer = TlogWriter()
     rng = np.random.default_rng(5)
     if parameters:
@@ -153,6 +160,9 @@ def write_vehicle(
             writer.add(wall_us + latency, 27, boot_ms * 1000, *ACCEL_MG, 10, -20, 30, *mag0, 0, 0, v1=i % 3 == 0)
             imu2 = (*ACCEL_MG, 11, -21, 31) if second_imu else (0,) * 6
             writer.add(wall_us + latency + 200, 116, boot_ms, *imu2, *mag1, 0)
+        if offsets_change is not None and i == offsets_change[0]:
+            for axis, value in zip("XYZ", offsets_change[1], strict=True):
+                writer.add(wall_us + latency + 250, 22, float(value), 1, 65535, f"COMPASS_OFS_{axis}".encode(), 9)
         if trim_change is not None and i == trim_change[0]:
             trim_deg = (trim_deg[0], trim_change[1])
             writer.add(wall_us + latency + 250, 22, float(np.radians(trim_change[1])), 1, 0, b"AHRS_TRIM_Y", 9)
@@ -339,6 +349,25 @@ def test_an_ardupilot_trim_is_taken_off_attitude(tmp_path: Path) -> None:
     away = np.abs(np.arange(len(motion.time_s)) - 50) > 3  # the change's own instant: the link's latency
     np.testing.assert_allclose(motion.attitude[away], np.broadcast_to(BODY_TO_NED, (int(away.sum()), 3, 3)), atol=1e-6)
     assert any("changed during the log" in note for note in motion.notes)
+
+
+def test_offsets_set_while_connected_undo_each_sample_with_those_in_effect(tmp_path: Path) -> None:
+    # COMPASS_OFS_X/Y/Z set half-way (a recalibration while the station recorded): before, refused ("fit a log
+    # recorded after the change"); now each sample is undone with the offsets in effect when it was measured.
+    path = tmp_path / "recalibrated.tlog"
+    new = np.array([60.0, -15.0, 140.0])
+    simulations = write_vehicle(path, offsets_change=(600, new))
+    source = open_source(path)
+    assert source.magnetometer("RAW_IMU").problem is None
+    assert any(
+        "the calibration changed during the log (COMPASS_OFS_X at" in n for n in source.magnetometer("RAW_IMU").notes
+    )
+    read = source.read("RAW_IMU")
+    # The change's own instant is known to the link's latency (20-300 ms): a few samples either side may be
+    # undone with the other offsets; the rest to the int16 truncation.
+    away = np.abs(np.arange(len(read.samples)) - 600) > 4
+    assert np.max(np.abs(read.samples[away] - simulations[0].samples[away])) < 1.5
+    _assert_recovers(magfit.calibrate_file(path, "ellipsoid", sensor="RAW_IMU").calibration, simulations[0].truth)
 
 
 def test_damaged_files_are_one_line_errors(tmp_path: Path) -> None:

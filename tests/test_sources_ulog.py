@@ -99,11 +99,14 @@ def write_log(
     cal_rot: int = -1,
     board_tilt: float = 0.0,
     rotation: np.ndarray | None = None,
+    recalibrated: tuple[int, dict[str, np.ndarray]] | None = None,
 ) -> magfit.Simulation:
     """sensor_mag at 50 Hz (two instances) and vehicle_magnetometer (corrected) beside it, in gauss.
 
     ``rotation``: the R of PX4's Correct that CAL_MAG0_ROT ``cal_rot`` or SENS_BOARD_ROT ``board_rot`` stands
     for, written here from PX4's rotate_3f cases (not from magfit's table), applied to vehicle_magnetometer.
+    ``recalibrated``: (j, calibration): from sample j on, CAL_MAG0_* change to ``calibration`` (parameter
+    messages in the data section, as PX4's logger writes a change) and vehicle_magnetometer is corrected with it.
     """
     simulation = magfit.simulate(
         n,
@@ -138,10 +141,18 @@ def write_log(
     writer.subscribe("vehicle_magnetometer", 0)
     writer.subscribe("vehicle_attitude", 0)
     corrected = px4_correct(simulation.samples, CAL["off"], CAL["scale"], CAL["odiag"])
+    if recalibrated is not None:
+        start, new = recalibrated
+        corrected[start:] = px4_correct(simulation.samples[start:], new["off"], new["scale"], new["odiag"])
     if rotation is not None:
         corrected = corrected @ rotation.T
     for j in range(n):
         time = 1_000_000 + j * 20_000
+        if recalibrated is not None and j == recalibrated[0]:
+            for axis, i in zip("XYZ", range(3), strict=True):  # pyulog stamps them with the last data's time
+                writer.parameter(f"CAL_MAG0_{axis}OFF", float(recalibrated[1]["off"][i]))
+                writer.parameter(f"CAL_MAG0_{axis}SCALE", float(recalibrated[1]["scale"][i]))
+                writer.parameter(f"CAL_MAG0_{axis}ODIAG", float(recalibrated[1]["odiag"][i]))
         writer.data("sensor_mag", 0, time, DEVICE, *simulation.samples[j])
         if second:
             writer.data("sensor_mag", 1, time, 12345, 0.2, 0.1, 0.4)
@@ -179,6 +190,39 @@ def test_raw_and_calibrated_streams_both_recover_the_truth(tmp_path: Path) -> No
     np.testing.assert_allclose(undone.samples, simulation.samples, atol=1e-6)
     for read in (raw, undone):
         _assert_recovers(magfit.fit(read.samples, method="ellipsoid"), simulation.truth)
+
+
+def test_a_calibration_changed_half_way_undoes_each_sample_with_the_one_in_effect(tmp_path: Path) -> None:
+    # A recalibration in flight: CAL_MAG0_* change at sample 700 (a changed_parameters entry with its time).
+    # Every sample is undone with the calibration it was corrected with, and the whole log is fitted.
+    path = tmp_path / "recalibrated.ulg"
+    new = {"off": np.array([-0.2, 0.1, 0.33]), "scale": np.array([0.95, 1.08, 0.99]), "odiag": np.array([0.0, 0.04, 0])}
+    simulation = write_log(path, second=False, recalibrated=(700, new))
+    source = open_source(path)
+    stream = source.magnetometer("vehicle_magnetometer/0")
+    assert stream.problem is None
+    assert any("calibration changed during the log" in note for note in stream.notes)
+    undone = source.read("vehicle_magnetometer/0")
+    # The changes are stamped with the last data message's time: sample 699's vehicle_attitude, before 699's
+    # vehicle_magnetometer (100 µs later). So that one sample reads as the new calibration: the reader follows
+    # the log's own stamps, which put the change before it.
+    np.testing.assert_allclose(undone.samples[:699], simulation.samples[:699], atol=1e-6)
+    np.testing.assert_allclose(undone.samples[700:], simulation.samples[700:], atol=1e-6)
+    _assert_recovers(
+        magfit.calibrate_file(path, "ellipsoid", sensor="vehicle_magnetometer/0").calibration, simulation.truth
+    )
+    # The same log with the samples after the change undone with the first calibration is visibly wrong: the
+    # test can fail.
+    assert np.max(np.abs(undone.samples[700:] - simulation.samples[700:])) < 1e-5
+    assert (
+        np.max(
+            np.abs(
+                px4_correct(simulation.samples[700:], CAL["off"], CAL["scale"], CAL["odiag"])
+                - px4_correct(simulation.samples[700:], new["off"], new["scale"], new["odiag"])
+            )
+        )
+        > 0.1
+    )
 
 
 def test_calibrate_by_device_id_and_inspect(tmp_path: Path) -> None:

@@ -3,6 +3,19 @@ compass calibration the firmware applied and how to undo it, the compass's mount
 
 ``parameters`` maps a name to its ``(time_s, value)`` pairs in the order the log gave them. Shared by
 :mod:`magfit.sources.dataflash` and :mod:`magfit.sources.tlog`: the firmware is the same, only the log differs.
+
+Logs as they are:
+
+- A parameter the firmware did not have means its default. COMPASS_DIA/ODI came with the onboard calibrator
+  (Copter 3.3), COMPASS_SCALE later (4.0): a log whose parameters hold COMPASS_OFS_X but no COMPASS_DIA_X was
+  written by a firmware that applied no soft-iron matrix (all-zero diagonals are the identity, as the firmware
+  reads them), and no scale.
+- A calibration changed during the log (a recalibration, COMPASS_LEARN): each record is undone with the
+  parameters in effect when it was logged (:func:`value_in_effect`). Where the record carries the offsets it was
+  corrected with (DataFlash MAG's OfsX/Y/Z) and they are not the parameters' (offsets learned in flight and not
+  saved), the record's own are used.
+- A damaged record (offsets or a time stamp unlike both its neighbours, which agree) is skipped and counted
+  (:func:`undo_records`).
 """
 
 from __future__ import annotations
@@ -20,14 +33,18 @@ __all__ = [
     "SCALE_RANGE",
     "CompassParameters",
     "Parameters",
+    "UndoneRecords",
     "compass_mounting",
     "compass_parameters",
+    "describe_parameters",
     "first_value",
     "parameter_suffix",
     "soft_iron_matrix",
     "undo_calibration",
+    "undo_records",
     "untrimmed",
     "value_in_effect",
+    "without_damaged_changes",
 ]
 
 #: A log's parameters: name -> [(time_s, value), ...] in the log's order.
@@ -37,18 +54,42 @@ SCALE_RANGE = (0.85, 1.4)
 
 
 def first_value(parameters: Parameters, name: str) -> float | None:
-    """The parameter's first value in the log (a change later on is the caller's to refuse or follow)."""
+    """The parameter's first value in the log (:func:`value_in_effect` follows the changes after it)."""
     values = parameters.get(name)
     return values[0][1] if values else None
 
 
-def value_in_effect(parameters: Parameters, name: str, times: NDArray[np.float64]) -> Any:
-    """The parameter's value in effect at each of ``times`` (its first value before it was first logged), 0 when
-    the log does not have it."""
-    values = sorted(parameters.get(name) or [(0.0, 0.0)])
-    stamps = np.array([stamp for stamp, _ in values], dtype=np.float64)
+def value_in_effect(
+    parameters: Parameters, name: str, times: NDArray[np.float64], default: float = 0.0
+) -> NDArray[np.float64]:
+    """The parameter's value in effect at each of ``times`` (its first value before it was first logged),
+    ``default`` when the log does not have it.
+
+    Values logged at the same time keep the log's order (the later one wins); a value logged without a time
+    (a firmware whose PARM has no time stamp) cannot be placed and counts only when it is the first."""
+    logged = parameters.get(name) or []
+    values = [pair for i, pair in enumerate(logged) if i == 0 or np.isfinite(pair[0])]
+    if not values:
+        return np.full(np.shape(times), default, dtype=np.float64)
+    values = sorted(values, key=lambda pair: pair[0] if np.isfinite(pair[0]) else -np.inf)
+    stamps = np.array([stamp if np.isfinite(stamp) else -np.inf for stamp, _ in values], dtype=np.float64)
     settings = np.array([value for _, value in values], dtype=np.float64)
-    return settings[np.clip(np.searchsorted(stamps, times, side="right") - 1, 0, None)]
+    moments = np.asarray(times, dtype=np.float64)
+    index = np.clip(np.searchsorted(stamps, moments, side="right") - 1, 0, None)
+    return settings[np.where(np.isfinite(moments), index, 0)]
+
+
+def without_damaged_changes(parameters: Parameters) -> tuple[Parameters, int]:
+    """The parameters without the values logged after a parameter's first that are not numbers (NaN, inf: a
+    damaged PARM message, since a firmware stores none), and how many were dropped. A first value that is not a
+    number stays: what the firmware had is then unknown, and the stream that needs it is refused."""
+    kept: Parameters = {}
+    dropped = 0
+    for name, values in parameters.items():
+        sound = [pair for i, pair in enumerate(values) if i == 0 or np.isfinite(pair[1])]
+        dropped += len(values) - len(sound)
+        kept[name] = sound
+    return kept, dropped
 
 
 def parameter_suffix(k: int) -> str:
@@ -58,7 +99,8 @@ def parameter_suffix(k: int) -> str:
 
 @dataclass(frozen=True)
 class CompassParameters:
-    """The parameters ArduPilot corrected one compass with, read from PARM."""
+    """The parameters ArduPilot corrected one compass with, read from PARM (their first values; ``changes``
+    says which changed later, :func:`undo_records` follows them)."""
 
     index: int  # k: the parameter set (COMPASS_OFS{k}...)
     offsets: NDArray[np.float64]
@@ -67,6 +109,23 @@ class CompassParameters:
     scale: float
     device_id: int | None
     motor_compensation: bool
+    defaults: tuple[str, ...] = ()  # the parameters this firmware did not have, taken at their defaults
+    changes: tuple[str, ...] = ()  # "COMPASS_OFS_X at 120.3 s": the calibration parameters changed in the log
+
+    @property
+    def names(self) -> dict[str, list[str]]:
+        """The parameter names of this compass: offsets, diagonals, offdiagonals (X, Y, Z each) and scale."""
+        return _names(self.index)
+
+
+def _names(k: int) -> dict[str, list[str]]:
+    s = parameter_suffix(k)
+    return {
+        "offsets": [f"COMPASS_OFS{s}_{axis}" for axis in "XYZ"],
+        "diagonals": [f"COMPASS_DIA{s}_{axis}" for axis in "XYZ"],
+        "offdiagonals": [f"COMPASS_ODI{s}_{axis}" for axis in "XYZ"],
+        "scale": [f"COMPASS_SCALE{s}"],
+    }
 
 
 def soft_iron_matrix(diagonals: Any, offdiagonals: Any) -> NDArray[np.float64]:
@@ -109,9 +168,14 @@ def undo_calibration(
 
 
 def compass_parameters(
-    parameters: Parameters, slot: int, first_time: float
+    parameters: Parameters, slot: int, first_time: float, *, absent_means_default: bool = True
 ) -> tuple[CompassParameters | None, str | None]:
-    """The parameters compass slot ``slot`` was corrected with, or the reason they cannot be known."""
+    """The parameters compass slot ``slot`` was corrected with, or the reason they cannot be known.
+
+    ``absent_means_default``: the log holds every parameter the firmware had (a DataFlash log's PARM dump, a
+    telemetry log's complete list), so one it lacks is one the firmware did not have, at its default. It
+    applies only when the log holds COMPASS_OFS_X at all: without it the log carries no compass parameters.
+    """
     k = slot
     prio = first_value(parameters, f"COMPASS_PRIO{slot + 1}_ID")
     if prio is not None and prio != 0:
@@ -123,36 +187,39 @@ def compass_parameters(
             )
         k = matches[0]
     s = parameter_suffix(k)
-    names = {
-        "offsets": [f"COMPASS_OFS{s}_{axis}" for axis in "XYZ"],
-        "diagonals": [f"COMPASS_DIA{s}_{axis}" for axis in "XYZ"],
-        "offdiagonals": [f"COMPASS_ODI{s}_{axis}" for axis in "XYZ"],
-    }
-    missing = [name for group in names.values() for name in group if name not in parameters]
-    if missing:
+    names = _names(k)
+    calibration = [*names["offsets"], *names["diagonals"], *names["offdiagonals"]]
+    missing = [name for name in calibration if name not in parameters]
+    complete = absent_means_default and "COMPASS_OFS_X" in parameters
+    if missing and not complete:
         return None, (
             f"the log's PARM messages lack {', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}, so the "
             "calibration the firmware applied cannot be undone; log the parameters (ArduPilot writes them at the "
             "start of every log)"
         )
-    every = [*names["offsets"], *names["diagonals"], *names["offdiagonals"], f"COMPASS_SCALE{s}"]
+    defaults = tuple(name for name in [*calibration, *names["scale"]] if name not in parameters)
+    every = [*calibration, *names["scale"]]
+    changes = []
     for name in every:
-        changes = [(t, v) for t, v in parameters.get(name, []) if t > first_time]
-        if changes and any(v != parameters[name][0][1] for _, v in changes):
+        later = [(t, v) for t, v in parameters.get(name, [])[1:] if v != parameters[name][0][1]]
+        if not later:
+            continue
+        if not all(np.isfinite(t) for t, _ in parameters[name]) and name not in names["offsets"]:
             return None, (
-                f"{name} changed during the log (at {changes[0][0]:.1f} s): the samples were corrected with two "
-                "calibrations; fit a log recorded after the change"
+                f"{name} changed during the log and its PARM messages carry no time, so which records were "
+                "corrected with which value is unknown; fit a log recorded after the change"
             )
-    used = [first_value(parameters, name) for name in every if name in parameters]
-    matrix = soft_iron_matrix(
-        [first_value(parameters, n) or 0.0 for n in names["diagonals"]],
-        [first_value(parameters, n) or 0.0 for n in names["offdiagonals"]],
-    )
-    if (
-        not all(np.isfinite(v) for v in used if v is not None)
-        or not np.isfinite(np.linalg.cond(matrix))
-        or np.linalg.cond(matrix) > 1e6
-    ):
+        during = [(t, v) for t, v in later if not (np.isfinite(t) and np.isfinite(first_time) and t <= first_time)]
+        if during:  # (a change before the first record is the calibration every record had)
+            changes.append(f"{name} at {during[0][0]:.1f} s" if np.isfinite(during[0][0]) else f"{name} (no time)")
+    values = [v for name in every for _, v in parameters.get(name, [])]
+    # Every calibration the log applied must be invertible: the first, and each one a change brought.
+    moments = sorted({t for name in every for t, _ in parameters.get(name, []) if np.isfinite(t)} | {first_time})
+    moments_array = np.array([m for m in moments if np.isfinite(m)] or [np.nan])
+    diagonals = np.column_stack([value_in_effect(parameters, n, moments_array) for n in names["diagonals"]])
+    offdiagonals = np.column_stack([value_in_effect(parameters, n, moments_array) for n in names["offdiagonals"]])
+    conditions = [np.linalg.cond(soft_iron_matrix(d, o)) for d, o in zip(diagonals, offdiagonals, strict=True)]
+    if not all(np.isfinite(v) for v in values) or not all(np.isfinite(c) and c <= 1e6 for c in conditions):
         return None, (
             f"its calibration parameters (COMPASS_OFS{s}, DIA{s}, ODI{s}, SCALE{s}) are not finite or form a "
             "singular matrix, so the logged field cannot be undone (a damaged log, or a calibration that lost an axis)"
@@ -164,15 +231,159 @@ def compass_parameters(
     return (
         CompassParameters(
             index=k,
-            offsets=np.array([first_value(parameters, n) for n in names["offsets"]], dtype=np.float64),
-            diagonals=np.array([first_value(parameters, n) for n in names["diagonals"]], dtype=np.float64),
-            offdiagonals=np.array([first_value(parameters, n) for n in names["offdiagonals"]], dtype=np.float64),
+            offsets=np.array([first_value(parameters, n) or 0.0 for n in names["offsets"]], dtype=np.float64),
+            diagonals=np.array([first_value(parameters, n) or 0.0 for n in names["diagonals"]], dtype=np.float64),
+            offdiagonals=np.array([first_value(parameters, n) or 0.0 for n in names["offdiagonals"]], dtype=np.float64),
             scale=float(first_value(parameters, f"COMPASS_SCALE{s}") or 0.0),
             device_id=int(device) if device else None,
             motor_compensation=bool(motor),
+            defaults=defaults,
+            changes=tuple(changes),
         ),
         None,
     )
+
+
+def describe_parameters(compass: CompassParameters, where: str) -> list[str]:
+    """The notes that say how a compass's calibration was undone: with which parameters (``where``: from the
+    log's parameters, from PARAM_VALUE), which the firmware did not have, and which changed during the log."""
+    s = parameter_suffix(compass.index)
+    notes = [f"undone with COMPASS_OFS{s}, DIA{s}, ODI{s} and SCALE{s} {where}"]
+    lacked = [name for name in compass.defaults if not name.startswith("COMPASS_SCALE")]
+    if lacked:
+        groups = sorted({name.split("_")[1].rstrip("0123456789") for name in lacked})
+        what = {"OFS": "no offsets", "DIA": "no soft-iron matrix", "ODI": "no soft-iron matrix"}
+        default = {"OFS": "zero offsets", "DIA": "the identity matrix", "ODI": "the identity matrix"}
+        applied = sorted({what[g] for g in groups if g in what})
+        defaults = sorted({default[g] for g in groups if g in default}, reverse=True)
+        notes.append(
+            f"this firmware has no {', '.join(f'COMPASS_{g}{s}' for g in groups)} parameters, so it applied "
+            f"{' and '.join(applied)} (the default{'s' if len(defaults) > 1 else ''}: {', '.join(defaults)})"
+        )
+    if compass.changes:
+        notes.append(
+            f"the calibration changed during the log ({', '.join(compass.changes[:3])}"
+            f"{' ...' if len(compass.changes) > 3 else ''}): each record undone with the parameters in effect when "
+            "it was logged"
+        )
+    return notes
+
+
+@dataclass(frozen=True)
+class UndoneRecords:
+    """The raw field of a compass's records (:func:`undo_records`).
+
+    Attributes
+    ----------
+    samples : ndarray, shape (N, 3)
+        The board-frame raw field of every record (NaN where a record could not be undone).
+    damaged : ndarray of bool, shape (N,)
+        Records skipped as damaged.
+    notes : tuple of str
+        What was done: records undone with their own logged offsets, damaged records skipped.
+    """
+
+    samples: NDArray[np.float64]
+    damaged: NDArray[np.bool_]
+    notes: tuple[str, ...]
+
+
+#: A record's logged offsets (whole mG) are the parameters' when they differ by at most this (int16 truncation).
+_OFFSET_TOLERANCE = 1.0
+#: A record whose offsets differ from both its neighbours' (which agree) by more than this is damaged, not
+#: learning: in-flight learning moves the offsets by a milligauss or so between records.
+_DAMAGE_STEP = 3.0
+
+
+def _isolated(values: NDArray[np.float64], step: float) -> NDArray[np.bool_]:
+    """Rows unlike both neighbours (by more than ``step`` on some axis) while the neighbours agree with each
+    other (within ``step``): a single damaged record, not a change that lasts."""
+    n = len(values)
+    flagged = np.zeros(n, dtype=bool)
+    if n < 3:
+        return flagged
+    before, here, after = values[:-2], values[1:-1], values[2:]
+    with np.errstate(invalid="ignore"):
+        unlike = np.any(np.abs(here - before) > step, axis=1) & np.any(np.abs(here - after) > step, axis=1)
+        agree = np.all(np.abs(after - before) <= step, axis=1)
+    flagged[1:-1] = unlike & agree
+    return flagged
+
+
+def undo_records(
+    logged: NDArray[np.float64],
+    times: NDArray[np.float64],
+    *,
+    parameters: Parameters,
+    compass: CompassParameters,
+    motor_offsets: NDArray[np.float64] | None = None,
+    logged_offsets: NDArray[np.float64] | None = None,
+) -> UndoneRecords:
+    """The board-frame raw field of each record, undone with the calibration in effect when it was logged.
+
+    Parameters
+    ----------
+    logged : ndarray, shape (N, 3)
+        The logged field (mG), after the firmware's calibration.
+    times : ndarray, shape (N,)
+        The records' times, on the clock of the parameters' times (NaN: the first values apply).
+    parameters, compass : the log's parameters and the compass's (:func:`compass_parameters`).
+    motor_offsets : ndarray, shape (N, 3), optional
+        The motor compensation added to each record (MAG's MOX/MOY/MOZ).
+    logged_offsets : ndarray, shape (N, 3), optional
+        The offsets each record was corrected with (MAG's OfsX/Y/Z, whole mG). A record whose offsets are not
+        the parameters' in effect is undone with its own (offsets learned in flight and not saved, or saved
+        without a PARM message); one unlike both its neighbours is damaged and skipped.
+    """
+    field = np.asarray(logged, dtype=np.float64)
+    n = len(field)
+    moments = np.asarray(times, dtype=np.float64)
+    names = compass.names
+    offsets = np.column_stack([value_in_effect(parameters, name, moments) for name in names["offsets"]])
+    diagonals = np.column_stack([value_in_effect(parameters, name, moments) for name in names["diagonals"]])
+    offdiagonals = np.column_stack([value_in_effect(parameters, name, moments) for name in names["offdiagonals"]])
+    scale = value_in_effect(parameters, names["scale"][0], moments)
+    damaged = np.zeros(n, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        if np.any(np.isfinite(moments)):  # a time stamp unlike both neighbours' (which run on) is damage
+            damaged |= ~np.isfinite(moments) | _isolated(moments[:, None], _time_step(moments))
+    notes: list[str] = []
+    if logged_offsets is not None:
+        used = np.asarray(logged_offsets, dtype=np.float64)
+        damaged |= ~np.all(np.isfinite(used), axis=1) | _isolated(used, _DAMAGE_STEP)
+        with np.errstate(invalid="ignore"):
+            own = ~damaged & np.any(np.abs(used - np.trunc(offsets)) > _OFFSET_TOLERANCE, axis=1)
+        if np.any(own):
+            offsets = np.where(own[:, None], used, offsets)
+            notes.append(
+                f"{int(np.count_nonzero(own))} of {n} records were corrected with offsets that are not the "
+                f"COMPASS_OFS{parameter_suffix(compass.index)} parameters then in effect (learned in flight, or "
+                "changed without a PARM message): undone with the offsets each record logged (OfsX/Y/Z, whole mG)"
+            )
+    if motor_offsets is not None:
+        motor = np.asarray(motor_offsets, dtype=np.float64)
+        field = field - np.where(np.isfinite(motor), motor, np.nan)
+    samples = np.full((n, 3), np.nan)
+    settings = np.column_stack([diagonals, offdiagonals, scale])
+    for setting in np.unique(settings, axis=0):
+        rows = np.all(settings == setting, axis=1)
+        samples[rows] = undo_calibration(
+            field[rows], offsets=offsets[rows], diagonals=setting[:3], offdiagonals=setting[3:6], scale=setting[6]
+        )
+    if np.any(damaged):
+        notes.append(
+            f"{int(np.count_nonzero(damaged))} of {n} records skipped as damaged (their offsets or time stamp "
+            "unlike both neighbours')"
+        )
+    return UndoneRecords(samples=samples, damaged=damaged, notes=tuple(notes))
+
+
+def _time_step(times: NDArray[np.float64]) -> float:
+    """How far a time stamp may stray from its neighbours before it is damage: ten times the median interval."""
+    finite = times[np.isfinite(times)]
+    steps = np.diff(finite)
+    steps = steps[steps > 0]
+    return float(10 * np.median(steps)) if len(steps) else np.inf
 
 
 def compass_mounting(parameters: Parameters, index: int) -> tuple[NDArray[np.float64] | None, str]:

@@ -19,7 +19,10 @@ COMPASS_ODI*_X/Y/Z (off-diagonal: xy, xz, yz), and ``motor_offset`` the motor co
 1 throttle / 2 current, or COMPASS_PMOT_EN per motor), which the log records per sample in ``MOX, MOY,
 MOZ``. :func:`undo_calibration` inverts it to the field in the board frame, the frame in which ArduPilot's
 own calibration (and magfit's ArduPilot export) is expressed. Logged values are truncated to whole
-milligauss (int16): the undone field carries up to 1 mG of that rounding.
+milligauss (int16): the undone field carries up to 1 mG of that rounding. Every record is undone with the
+calibration in effect when it was logged, the parameters a firmware did not have at their defaults, and a
+damaged record skipped (:mod:`magfit.sources.ardupilot`); ``OfsX/Y/Z``, logged with each record, are the
+offsets it was corrected with.
 
 Parameters of compass k (0-based) are ``COMPASS_OFS_X`` (k = 0), ``COMPASS_OFS2_X`` (k = 1),
 ``COMPASS_OFS3_X`` (k = 2), and so on. Since ArduPilot 4.1 the logged instance is a *priority* slot: slot i
@@ -42,9 +45,12 @@ from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_p
 from .ardupilot import (
     compass_mounting,
     compass_parameters,
+    describe_parameters,
     parameter_suffix,
     undo_calibration,
+    undo_records,
     untrimmed,
+    without_damaged_changes,
 )
 from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
 
@@ -269,12 +275,14 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
     """The :class:`~magfit.sources.Source` of a DataFlash log already read: a :class:`DataFlashLog`, or anything
     with its ``has``, ``messages``, ``value``, ``parameters``, ``names``, ``skipped_bytes`` and ``truncated``
     (the text of ``mavlogdump.py``, :mod:`magfit.sources.mavlogdump`); ``notes``: what to say of the file."""
-    parameters = log.parameters()
+    parameters, damaged = without_damaged_changes(log.parameters())
     streams = _compass_streams(log)
     magnetometers = []
     for slot, (name, records) in enumerate(streams):
         magnetometers.append(_describe(log, parameters, slot, name, records))
     said = list(notes)
+    if damaged:
+        said.append(f"{damaged} PARM messages skipped as damaged (a value that is not a number)")
     if log.skipped_bytes:
         said.append(f"{log.skipped_bytes} bytes skipped as damaged (no message starts there)")
     if log.truncated:
@@ -299,13 +307,23 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
         position=position,
         kind="dataflash",
         format=described,
-        time_base="seconds since boot (TimeUS)",
+        time_base=_time_base(streams),
         magnetometers=tuple(magnetometers),
         other=other,
         notes=tuple(said),
         _reader=read,
         _motion=motion,
     )
+
+
+def _time_base(streams: list[tuple[str, NDArray[Any]]]) -> str:
+    """What the compasses' time stamps count: TimeUS (3.4 on), TimeMS (before), or nothing (before 3.1)."""
+    labels = set(streams[0][1].dtype.names or ()) if streams else {"TimeUS"}
+    if "TimeUS" in labels:
+        return "seconds since boot (TimeUS)"
+    if "TimeMS" in labels:
+        return "seconds since boot (TimeMS)"
+    return "none: the compass messages carry no time stamp"
 
 
 def _first_instance(records: NDArray[Any]) -> NDArray[Any]:
@@ -421,8 +439,10 @@ def _gps_position(log: DataFlashLog) -> Position | None:
     with np.errstate(invalid="ignore"):
         lat, lon = log.value(records, "GPS", "Lat"), log.value(records, "GPS", "Lng")
         alt = log.value(records, "GPS", "Alt") if "Alt" in labels else np.full(len(records), np.nan)
-        if {"GWk", "GMS"} <= labels:
-            weeks, ms = records["GWk"].astype(np.float64), records["GMS"].astype(np.float64)
+        # GWk, GMS (ArduPilot 3.4 on); Week, TimeMS before (TimeMS was the GPS time of week then, T the boot time)
+        week_ms = ("GWk", "GMS") if {"GWk", "GMS"} <= labels else ("Week", "TimeMS")
+        if set(week_ms) <= labels:
+            weeks, ms = records[week_ms[0]].astype(np.float64), records[week_ms[1]].astype(np.float64)
             time = np.where(weeks > 0, _GPS_EPOCH_S + weeks * 604_800 + ms / 1000 - _GPS_LEAP_S, np.nan)
         else:
             time = np.full(len(records), np.nan)
@@ -452,13 +472,18 @@ def _describe(
     labels = records.dtype.names or ()
     notes: list[str] = []
     if compass is not None:
-        s = parameter_suffix(compass.index)
-        notes.append(
-            f"MagX/Y/Z are logged after ArduPilot's calibration; undone with COMPASS_OFS{s}, DIA{s}, ODI{s} and "
-            f"SCALE{s} from the log's parameters"
+        notes.extend(
+            ("MagX/Y/Z are logged after ArduPilot's calibration; " + note if i == 0 else note)
+            for i, note in enumerate(describe_parameters(compass, "from the log's parameters"))
         )
+        if any(change.endswith("(no time)") for change in compass.changes) and not _has_offsets(labels):
+            problem = (
+                "the compass offsets changed during the log, its PARM messages carry no time and its MAG records "
+                "not the offsets applied (OfsX/Y/Z), so which records were corrected with which offsets is unknown; "
+                "fit a log recorded after the change"
+            )
         if compass.motor_compensation:
-            if {"MOX", "MOY", "MOZ"} <= set(labels):
+            if _motor_labels(labels) is not None:
                 notes.append("motor compensation was active: undone with the motor offsets logged per sample (MOX/Y/Z)")
             else:
                 problem = (
@@ -466,6 +491,11 @@ def _describe(
                     "the motor offsets it added (no MOX/MOY/MOZ), so the raw field cannot be recovered; record with "
                     "COMPASS_MOTCT 0, or use the onboard calibrator (COMPASS_CAL_FIT)"
                 )
+    if "Health" in labels and len(records) and not np.any(records["Health"]):
+        problem = (
+            f"the compass was unhealthy (Health 0) in every {name} record: the field it logged is stale, not a "
+            "measurement; check its connection and record again"
+        )
     missing = [axis for axis in ("MagX", "MagY", "MagZ") if axis not in labels]
     if missing:
         problem = f"the {name} messages have no {', '.join(missing)} field"
@@ -510,34 +540,45 @@ def _read(
         raise DataFileError(f"{log.path}: {magnetometer.id} cannot be fitted: {problem}")
     with np.errstate(invalid="ignore"):  # damaged values become NaN: dropped below as non-finite samples
         logged = np.column_stack([log.value(records, name, axis) for axis in ("MagX", "MagY", "MagZ")])
-    labels = records.dtype.names or ()
-    motor = None
-    if compass.motor_compensation:
-        motor = np.column_stack([log.value(records, name, axis) for axis in ("MOX", "MOY", "MOZ")])
-    samples = undo_calibration(
-        logged,
-        offsets=compass.offsets,
-        diagonals=compass.diagonals,
-        offdiagonals=compass.offdiagonals,
-        scale=compass.scale,
-        motor_offsets=motor,
+        labels = records.dtype.names or ()
+        motor = None
+        motor_labels = _motor_labels(labels)
+        if compass.motor_compensation and motor_labels is not None:
+            motor = np.column_stack([log.value(records, name, axis) for axis in motor_labels])
+        used = None
+        if _has_offsets(labels):  # the offsets each record was corrected with (whole mG)
+            used = np.column_stack([log.value(records, name, axis) for axis in ("OfsX", "OfsY", "OfsZ")])
+    times = _time_s(log, name, records)
+    undone = undo_records(
+        logged, times, parameters=parameters, compass=compass, motor_offsets=motor, logged_offsets=used
     )
-    notes = list(magnetometer.notes)
-    if {"OfsX", "OfsY", "OfsZ"} <= set(labels):
-        # The offsets in use are logged with each sample (truncated to whole mG): they must be the parameters'.
-        used = np.column_stack([log.value(records, name, axis) for axis in ("OfsX", "OfsY", "OfsZ")])
-        if np.any(np.abs(used - np.trunc(compass.offsets)) > 1.0):
-            raise DataFileError(
-                f"{log.path}: {magnetometer.id}: the offsets logged with the samples (OfsX/Y/Z, e.g. "
-                f"{used[0].tolist()}) are not COMPASS_OFS{parameter_suffix(compass.index)} from the log's parameters "
-                f"({np.round(compass.offsets, 1).tolist()}), so the calibration cannot be undone with confidence; "
-                "please report the log"
+    samples = undone.samples
+    finite = np.all(np.isfinite(samples), axis=1) & ~undone.damaged
+    notes = [*magnetometer.notes, *undone.notes]
+    if "Health" in labels:  # AP_Compass's healthy(): an unhealthy compass logs its last field again, stale
+        unhealthy = records["Health"] == 0
+        if np.any(unhealthy):
+            finite &= ~unhealthy
+            notes.append(
+                f"{int(np.count_nonzero(unhealthy))} of {len(records)} records skipped: the compass was unhealthy "
+                "(Health 0) when they were logged, so the field they carry is stale"
             )
-    finite = np.all(np.isfinite(samples), axis=1)
     return LogSamples(
         magnetometer=magnetometer,
         samples=samples[finite],
-        time_s=_time_s(log, name, records)[finite],
+        time_s=times[finite],
         columns=("MagX", "MagY", "MagZ"),
         notes=tuple(notes),
     )
+
+
+def _has_offsets(labels: tuple[str, ...]) -> bool:
+    return {"OfsX", "OfsY", "OfsZ"} <= set(labels)
+
+
+def _motor_labels(labels: tuple[str, ...]) -> tuple[str, str, str] | None:
+    """MAG's motor compensation fields: MOX/MOY/MOZ, or MOfsX/MOfsY/MOfsZ in logs before ArduPilot 3.5."""
+    for names in (("MOX", "MOY", "MOZ"), ("MOfsX", "MOfsY", "MOfsZ")):
+        if set(names) <= set(labels):
+            return names
+    return None

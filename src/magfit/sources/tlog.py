@@ -56,7 +56,14 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError
 from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
-from .ardupilot import compass_mounting, compass_parameters, first_value, undo_calibration, untrimmed
+from .ardupilot import (
+    compass_mounting,
+    compass_parameters,
+    describe_parameters,
+    first_value,
+    undo_records,
+    untrimmed,
+)
 from .motion import Motion, Stream, align, euler_quaternions
 
 __all__ = ["TelemetryLog", "is_tlog", "open_tlog"]
@@ -417,7 +424,7 @@ class _Vehicle:
     clock: NDArray[np.float64]  # per accepted frame: UTC seconds on the vehicle's clock (else its receive time)
     stretches: int
     parameters: dict[str, list[tuple[float, float]]]
-    no_soft_iron: bool  # a complete parameter list without COMPASS_DIA/ODI: offsets alone were applied
+    complete: bool  # the whole parameter list came: a parameter it lacks is one the firmware did not have
     armed: tuple[NDArray[np.float64], NDArray[np.bool_]]  # HEARTBEAT times and armed flags
 
     def records(self, name: str) -> tuple[NDArray[Any], NDArray[np.float64]]:
@@ -473,9 +480,9 @@ def _vehicle_clock(log: TelemetryLog, source: tuple[int, int]) -> tuple[NDArray[
 
 def _parameters(log: TelemetryLog, source: tuple[int, int]) -> tuple[dict[str, list[tuple[float, float]]], bool]:
     """PARAM_VALUE: name -> [(receive time, value), ...] in log order (as DataFlashLog.parameters gives them),
-    and whether the firmware has no soft-iron parameters (a complete list without COMPASS_DIA/ODI: they are
-    added as zeros, which the firmware reads as no matrix). ArduPilot sends every value as a float cast
-    (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST), integers too."""
+    and whether the list is complete (every index below param_count came), so that a parameter it lacks is one
+    the firmware did not have (COMPASS_DIA/ODI before Copter 3.3: no matrix). ArduPilot sends every value as a
+    float cast (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST), integers too."""
     frames = log.frames("PARAM_VALUE", source)
     records = log.messages("PARAM_VALUE", frames)
     table: dict[str, list[tuple[float, float]]] = {}
@@ -489,14 +496,7 @@ def _parameters(log: TelemetryLog, source: tuple[int, int]) -> tuple[dict[str, l
     counts = records["param_count"][records["param_index"] != 65535]
     listed = np.unique(records["param_index"][records["param_index"] != 65535])
     complete = len(counts) > 0 and len(listed) >= int(np.bincount(counts).argmax())
-    no_soft_iron = complete and "COMPASS_OFS_X" in table and "COMPASS_DIA_X" not in table
-    if no_soft_iron:  # a firmware older than the soft-iron parameters: it applied the offsets alone
-        first = table["COMPASS_OFS_X"][0][0]
-        for suffix in ("", "2", "3"):
-            for axis in "XYZ":
-                table[f"COMPASS_DIA{suffix}_{axis}"] = [(first, 0.0)]
-                table[f"COMPASS_ODI{suffix}_{axis}"] = [(first, 0.0)]
-    return table, no_soft_iron
+    return table, complete
 
 
 def _vehicle(log: TelemetryLog, source: tuple[int, int]) -> _Vehicle:
@@ -506,8 +506,8 @@ def _vehicle(log: TelemetryLog, source: tuple[int, int]) -> _Vehicle:
     autopilot = int(np.bincount(autopilots).argmax()) if len(autopilots) else None
     frames = log.frames("HEARTBEAT", source)
     armed = (log.receipt_s[frames], (beats["base_mode"] & _ARMED) != 0)
-    parameters, no_soft_iron = _parameters(log, source)
-    return _Vehicle(log, source, autopilot, clock, stretches, parameters, no_soft_iron, armed)
+    parameters, complete = _parameters(log, source)
+    return _Vehicle(log, source, autopilot, clock, stretches, parameters, complete, armed)
 
 
 def open_tlog(path: Path, file: Path) -> Source:
@@ -679,17 +679,15 @@ class _Compass:
         else:
             first_time = float(self.time[0]) if len(self.time) else float("nan")
             assert self.slot is not None
-            self.compass, problem = compass_parameters(vehicle.parameters, self.slot, first_time)
+            # A list the station did not download whole may lack a parameter the firmware has: only a complete one
+            # says what the firmware did not have (as a DataFlash log's PARM messages, which hold them all).
+            self.compass, problem = compass_parameters(
+                vehicle.parameters, self.slot, first_time, absent_means_default=vehicle.complete
+            )
             if self.compass is not None:
-                s = "" if self.compass.index == 0 else str(self.compass.index + 1)
-                notes.append(
-                    f"{name}'s xmag/ymag/zmag are ArduPilot's field after its calibration; undone with COMPASS_OFS{s}, "
-                    f"DIA{s}, ODI{s} and SCALE{s} from the parameters the ground station fetched (PARAM_VALUE)"
-                    if not vehicle.no_soft_iron
-                    else f"{name}'s xmag/ymag/zmag are ArduPilot's field after its offsets; undone with COMPASS_OFS{s} "
-                    "from the parameters the ground station fetched (PARAM_VALUE): their complete list has no "
-                    "COMPASS_DIA/ODI, so this firmware applied no soft-iron matrix"
-                )
+                said = describe_parameters(self.compass, "from the parameters the ground station fetched (PARAM_VALUE)")
+                notes.append(f"{name}'s xmag/ymag/zmag are ArduPilot's field after its calibration; {said[0]}")
+                notes.extend(said[1:])
                 problem = self._motor_compensation(notes)
             elif problem is not None:  # dataflash's words are for PARM messages: say it for a tlog
                 problem = problem.replace(
@@ -780,21 +778,20 @@ class _Compass:
     def read(self) -> LogSamples:
 
         samples = self.mag.copy()  # PX4: gauss as sent; ArduPilot: mG, calibrated
+        notes = tuple(self.notes)
+        keep = np.ones(len(samples), dtype=bool)
         if self.compass is not None:
-            samples = undo_calibration(
-                samples,
-                offsets=self.compass.offsets,
-                diagonals=self.compass.diagonals,
-                offdiagonals=self.compass.offdiagonals,
-                scale=self.compass.scale,
-            )
-        finite = np.all(np.isfinite(samples), axis=1)
+            # Each sample undone with the parameters in effect when it was measured: its time is on the ground
+            # station's clock (module docstring), as PARAM_VALUE's receipt times are, within the link's latency.
+            undone = undo_records(samples, self.time, parameters=self.vehicle.parameters, compass=self.compass)
+            samples, keep, notes = undone.samples, ~undone.damaged, (*notes, *undone.notes)
+        finite = np.all(np.isfinite(samples), axis=1) & keep
         return LogSamples(
             magnetometer=self.magnetometer,
             samples=samples[finite],
             time_s=self.time[finite],
             columns=("xmag", "ymag", "zmag"),
-            notes=tuple(self.notes),
+            notes=notes,
         )
 
     def motion(self, position: Position | None) -> Motion:

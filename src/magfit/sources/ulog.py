@@ -23,6 +23,11 @@ Two topics carry the magnetometers:
   into the board rotation and others do not); otherwise the stream is listed with the reason it cannot be
   undone. The samples undone are in the sensor's frame, as ``sensor_mag``'s.
 
+A calibration changed during the log (a recalibration, the estimator saving learned offsets): ULog records each
+parameter change with its time (pyulog's ``changed_parameters``), so every sample is undone with the
+CAL_MAGn_*OFF/*SCALE/*ODIAG in effect at its time stamp (:func:`_calibration_at`). A change of the rotation
+(CAL_MAGn_ROT, SENS_BOARD_ROT) or of the device (CAL_MAGn_ID) is not followed: such a stream is refused.
+
 Frames (``calibration::Magnetometer::Correct``, src/lib/sensor_calibration/Magnetometer.hpp, and
 ``PX4Magnetometer::update``, src/lib/drivers/magnetometer/PX4Magnetometer.cpp): ``sensor_mag`` is published
 after the driver's own fixed chip rotation and before ``CAL_MAGn_ROT``/``SENS_BOARD_ROT``, so
@@ -164,7 +169,7 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
         if data.name == "sensor_mag":
             sid = f"sensor_mag/{data.multi_id}"
             streams[sid] = data
-            magnetometers.append(_raw(sid, data, parameters))
+            magnetometers.append(_raw(sid, data, parameters, changed))
     for data in sorted(ulog.data_list, key=lambda d: (d.name, d.multi_id)):
         if data.name == "vehicle_magnetometer":
             sid = f"vehicle_magnetometer/{data.multi_id}"
@@ -200,7 +205,8 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
             if not magnetometer.raw:  # calibrated by an old PX4's driver (_raw): undone, no rotation involved
                 index = _calibration_index(parameters, magnetometer.device_id)
                 assert index is not None  # _raw made it a problem otherwise; Source.read refused it
-                samples = undo_px4_calibration(samples, **_cal(parameters, index))
+                stamps = np.asarray(data.data["timestamp"], dtype=np.float64)
+                samples = _undo_in_effect(samples, stamps, parameters, changed, index, None)
         else:
             columns = tuple(f"magnetometer_ga[{i}]" for i in range(3))
             with np.errstate(invalid="ignore"):  # as above: damaged values become NaN, dropped below
@@ -209,7 +215,8 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
             assert index is not None  # _calibrated made it a problem otherwise; Source.read refused it
             rotation, _, problem = _rotation(parameters, index)
             assert problem is None  # likewise
-            samples = undo_px4_calibration(corrected, **_cal(parameters, index), rotation=rotation)
+            stamps = np.asarray(data.data["timestamp"], dtype=np.float64)
+            samples = _undo_in_effect(corrected, stamps, parameters, changed, index, rotation)
         times = np.asarray(data.data[_stamp(data, stamp)], dtype=np.float64) / 1e6
         finite = np.all(np.isfinite(samples), axis=1)
         return LogSamples(magnetometer, samples[finite], times[finite], columns, magnetometer.notes)
@@ -441,7 +448,7 @@ def _device(data: Any) -> int | None:
     return int(np.asarray(ids)[-1])
 
 
-def _raw(sid: str, data: Any, parameters: dict[str, Any]) -> Magnetometer:
+def _raw(sid: str, data: Any, parameters: dict[str, Any], changed: list[tuple[int, str, float]]) -> Magnetometer:
     n, start, end = _span(data)
     device = _device(data)
     problem = _lacking(data)
@@ -457,8 +464,8 @@ def _raw(sid: str, data: Any, parameters: dict[str, Any]) -> Magnetometer:
                 f"this PX4 version calibrates sensor_mag in its driver (the topic has x_raw) and no CAL_MAGn_ID holds "
                 f"its device_id {device}, so the calibration cannot be undone"
             )
-        elif not all(f"CAL_MAG{index}_{a}{k}" in parameters for k in ("OFF", "SCALE") for a in "XYZ") or not (
-            _invertible(_cal(parameters, index))
+        elif not all(f"CAL_MAG{index}_{a}{k}" in parameters for k in ("OFF", "SCALE") for a in "XYZ") or not all(
+            _invertible(cal) for cal in _settings(parameters, changed, index)
         ):
             problem = (
                 f"this PX4 version calibrates sensor_mag in its driver and CAL_MAG{index}_*OFF/*SCALE are unusable"
@@ -468,6 +475,7 @@ def _raw(sid: str, data: Any, parameters: dict[str, Any]) -> Magnetometer:
                 f"this PX4 version (before v1.11: the topic has x_raw) calibrates sensor_mag in its driver; undone "
                 f"with CAL_MAG{index}_*OFF and *SCALE from the log's parameters"
             )
+            notes.extend(_changes_note(parameters, changed, index, start))
     magnetometer = Magnetometer(
         id=sid,
         description=("raw sensor_mag" if raw else "sensor_mag, calibrated by the driver")
@@ -526,13 +534,6 @@ def _invertible(cal: dict[str, NDArray[np.float64]]) -> bool:
     return bool(np.linalg.cond(matrix) < 1e6)
 
 
-def _cal(parameters: dict[str, Any], index: int) -> dict[str, NDArray[np.float64]]:
-    def vector(kind: str, default: float) -> NDArray[np.float64]:
-        return np.array([float(parameters.get(f"CAL_MAG{index}_{axis}{kind}", default)) for axis in "XYZ"])
-
-    return {"offsets": vector("OFF", 0.0), "scales": vector("SCALE", 1.0), "offdiagonals": vector("ODIAG", 0.0)}
-
-
 def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[tuple[int, str, float]]) -> Magnetometer:
     n, start, end = _span(data)
     device = _device(data)
@@ -554,7 +555,7 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
             problem = f"the log's parameters lack {', '.join(missing)}, so its calibration cannot be undone"
         elif unknown is not None:
             problem = f"its rotation into the body frame cannot be undone: {unknown}"
-        elif not _invertible(_cal(parameters, index)):
+        elif not all(_invertible(cal) for cal in _settings(parameters, changed, index)):
             problem = (
                 f"its calibration parameters ({name}_*OFF, *SCALE, *ODIAG) are not finite or form a singular matrix, "
                 "so the logged field cannot be undone"
@@ -562,15 +563,20 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
         elif comp != 0:
             problem = f"power compensation is configured (CAL_MAG_COMP_TYP {comp}) and cannot be undone from the log"
         else:
-            moved = sorted({p for t, p, _ in changed if p.startswith(f"{name}_") and t > start * 1e6})
+            turned = (f"{name}_ROT", f"{name}_ID", "SENS_BOARD_ROT")
+            moved = sorted({p for t, p, v in changed if p in turned and t > start * 1e6 and v != parameters.get(p)})
             if moved:
-                problem = f"{', '.join(moved)} changed during the log: the samples were corrected with two calibrations"
+                problem = (
+                    f"{', '.join(moved)} changed during the log: the samples were turned or attributed two ways, which "
+                    "cannot be undone; fit a log recorded after the change"
+                )
     notes = []
     if problem is None and index is not None:
         notes.append(
             f"calibrated by PX4 (body frame); undone to the sensor's frame with CAL_MAG{index}_*OFF, *SCALE, *ODIAG "
             f"and {_rotation(parameters, index)[1]} from the log's parameters"
         )
+        notes.extend(_changes_note(parameters, changed, index, start))
     return Magnetometer(
         id=sid,
         description="calibrated vehicle_magnetometer" + (f", device_id {device}" if device is not None else ""),
@@ -583,3 +589,76 @@ def _calibrated(sid: str, data: Any, parameters: dict[str, Any], changed: list[t
         notes=tuple(notes),
         problem=problem,
     )
+
+
+#: The calibration parameters of CAL_MAGn that a sample is corrected with, in _cal's order (offsets, scales,
+#: offdiagonals; X, Y, Z each) and their defaults (ODIAG came with PX4 1.11: absent before, zero).
+_CAL_KINDS = (("OFF", 0.0), ("SCALE", 1.0), ("ODIAG", 0.0))
+
+
+def _history(parameters: dict[str, Any], changed: list[tuple[int, str, float]], name: str, default: float) -> Any:
+    """(times in µs, values) of parameter ``name``: its initial value from the start, then each change."""
+    stamps = [-np.inf] + [float(t) for t, p, _ in changed if p == name]
+    values = [float(parameters.get(name, default))] + [float(v) for _, p, v in changed if p == name]
+    order = np.argsort(np.array(stamps), kind="stable")
+    return np.array(stamps)[order], np.array(values)[order]
+
+
+def _calibration_at(
+    parameters: dict[str, Any], changed: list[tuple[int, str, float]], index: int, stamps_us: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """CAL_MAG{index}'s offsets, scales and offdiagonals in effect at each time stamp (µs), shape (N, 9)."""
+    columns = []
+    for kind, default in _CAL_KINDS:
+        for axis in "XYZ":
+            times, values = _history(parameters, changed, f"CAL_MAG{index}_{axis}{kind}", default)
+            columns.append(values[np.clip(np.searchsorted(times, stamps_us, side="right") - 1, 0, None)])
+    return np.column_stack(columns)
+
+
+def _settings(
+    parameters: dict[str, Any], changed: list[tuple[int, str, float]], index: int
+) -> list[dict[str, NDArray[np.float64]]]:
+    """Every calibration CAL_MAG{index} had during the log: the initial one, and the one after each change."""
+    moments = np.array([-np.inf, *sorted(float(t) for t, p, _ in changed if p.startswith(f"CAL_MAG{index}_"))])
+    return [_as_cal(row) for row in np.unique(_calibration_at(parameters, changed, index, moments), axis=0)]
+
+
+def _as_cal(row: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:
+    return {"offsets": row[0:3], "scales": row[3:6], "offdiagonals": row[6:9]}
+
+
+def _undo_in_effect(
+    corrected: NDArray[np.float64],
+    stamps_us: NDArray[np.float64],
+    parameters: dict[str, Any],
+    changed: list[tuple[int, str, float]],
+    index: int,
+    rotation: NDArray[np.float64] | None,
+) -> NDArray[np.float64]:
+    """:func:`undo_px4_calibration` of each sample with the CAL_MAG{index} calibration in effect at its time."""
+    settings = _calibration_at(parameters, changed, index, stamps_us)
+    samples = np.full(np.shape(corrected), np.nan)
+    for setting in np.unique(settings, axis=0):
+        rows = np.all(settings == setting, axis=1)
+        samples[rows] = undo_px4_calibration(corrected[rows], **_as_cal(setting), rotation=rotation)
+    return samples
+
+
+def _changes_note(
+    parameters: dict[str, Any], changed: list[tuple[int, str, float]], index: int, start_s: float
+) -> list[str]:
+    """The note that CAL_MAG{index}'s calibration changed during the log, when it did."""
+    kinds = tuple(f"{axis}{kind}" for kind, _ in _CAL_KINDS for axis in "XYZ")
+    moved = sorted({(t, p) for t, p, _ in changed if p.startswith(f"CAL_MAG{index}_") and p.endswith(kinds)})
+    values = _calibration_at(parameters, changed, index, np.array([-np.inf, *(t for t, _ in moved)], dtype=float))
+    if len(np.unique(values, axis=0)) < 2:  # set again to the values it had: no change
+        return []
+    later = [(t, p) for t, p in moved if not np.isfinite(start_s) or t > start_s * 1e6]
+    if not later:
+        return []
+    names = sorted({p for _, p in later})
+    return [
+        f"the calibration changed during the log ({', '.join(names[:3])}{' ...' if len(names) > 3 else ''}, first at "
+        f"{later[0][0] / 1e6:.1f} s): each sample undone with the CAL_MAG{index} parameters in effect at its time"
+    ]
