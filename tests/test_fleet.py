@@ -90,6 +90,7 @@ def test_a_failing_recording_is_one_row_and_the_run_goes_on(tmp_path: Path, vehi
     assert sum(row.verdict == "supported" for row in rows.values()) == 4
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".csv", ".jsonl", ".parquet"])
 def test_the_table_and_the_resumed_run(tmp_path: Path, vehicles: Path, suffix: str) -> None:
     table = tmp_path / f"fleet{suffix}"
@@ -114,6 +115,7 @@ def test_the_table_and_the_resumed_run(tmp_path: Path, vehicles: Path, suffix: s
     assert third.skipped == 7 and len(third.flights()) == 8
 
 
+@pytest.mark.slow
 def test_local_processes_give_the_rows_of_one_process(vehicles: Path) -> None:
     one = fleet([vehicles / "steady"], workers=1)
     two = fleet([vehicles / "steady"], workers=2)
@@ -154,6 +156,7 @@ def test_recordings_from_folders_globs_and_lists(tmp_path: Path, vehicles: Path)
         recordings([tmp_path / "empty"] if (tmp_path / "empty").mkdir() is None else [])
 
 
+@pytest.mark.slow
 def test_the_command(tmp_path: Path, vehicles: Path, capsys: pytest.CaptureFixture[str]) -> None:
     table, report = tmp_path / "fleet.csv", tmp_path / "fleet.html"
     argv = ["fleet", str(vehicles / "magnetised"), "-o", str(table), "--workers", "1", "--unit", "uT"]
