@@ -151,8 +151,11 @@ def test_ardupilot_warns_when_mission_planner_would_ask_about_the_range() -> Non
 @pytest.mark.parametrize("name", ["c", "fusion"])
 def test_c_floats_out_of_float32_range_are_refused(name: str) -> None:
     big = magfit.Calibration("test", np.array([1.0, 2e39, 3.0]), np.eye(3), 3e39, unit="nT")
+    with pytest.raises(ExportError, match="unit_mismatch|not the Earth's field") as refused:
+        export(big, name)  # no place on Earth has a field of 3e39 nT: the declared unit is wrong
+    assert refused.value.codes == ("unit_mismatch",)
     with pytest.raises(ExportError, match=r"offset\[1\] = 2e\+39 is outside float32's range"):
-        export(big, name)
+        export(big, name, allow_unit_mismatch=True)
     # The largest float32 itself is fine; just above it rounds to infinity and is refused.
     edge = float(np.finfo(np.float32).max)
     export(magfit.Calibration("test", np.array([edge, 0.0, 0.0]), np.eye(3), 1.0), name)

@@ -88,6 +88,7 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
 from ..rotations import custom_angles
+from ..units import field_unit_reason
 from ._common import (
     ROTATION_TOLERANCE_DEG,
     SlotParameters,
@@ -206,10 +207,14 @@ def _compass(
     # The field first: a wrong unit shows there, before it inflates the offset.
     field = k * calibration.field_strength
     if not FIELD_RANGE_MG[0] <= field <= FIELD_RANGE_MG[1]:
+        mismatch = field_unit_reason(calibration.field_strength, source.name)
         raise ExportError(
             f"ArduPilot would refuse to arm ('Check mag field'): the corrected field is {field:.4g} mG, outside "
-            f"{FIELD_RANGE_MG[0]:.0f}-{FIELD_RANGE_MG[1]:.0f} mG; check the unit of the samples "
-            f"(unit={source.name!r} was used)"
+            f"{FIELD_RANGE_MG[0]:.0f}-{FIELD_RANGE_MG[1]:.0f} mG; "
+            + f"check the unit of the samples (unit={source.name!r} was used)"
+            + (f": {mismatch}" if mismatch else ""),
+            codes=("unit_mismatch",) if mismatch else (),
+            remedy=mismatch.remedy if mismatch else (),
         )
     length = k * float(np.linalg.norm(calibration.offset))
     if length > OFFSET_MAX_MG:

@@ -72,6 +72,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
+from ..units import field_unit_reason
 from ._common import (
     ROTATION_TOLERANCE_DEG,
     SlotParameters,
@@ -159,9 +160,14 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
     field = k * calibration.field_strength
     low, high = FIELD_RANGE_G
     if not low <= field < high:
+        mismatch = field_unit_reason(calibration.field_strength, source.name)
         raise ExportError(
             f"PX4 rejects a magnetometer calibration whose sphere radius is outside [{low}, {high}) G; the "
-            f"corrected field is {field:.4g} G; check the unit of the samples (unit={source.name!r} was used)"
+            f"corrected field is {field:.4g} G; "
+            + f"check the unit of the samples (unit={source.name!r} was used)"
+            + (f": {mismatch}" if mismatch else ""),
+            codes=("unit_mismatch",) if mismatch else (),
+            remedy=mismatch.remedy if mismatch else (),
         )
     prefix = f"CAL_MAG{where.slot}_"
     comments: list[str] = []
