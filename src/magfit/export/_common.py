@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -43,6 +44,21 @@ def plain(text: object) -> str:
     """``text`` as printable ASCII on one line, safe inside any comment (C, MATLAB, shell, params)."""
     ascii_text = "".join(ch if " " <= ch <= "~" else "?" for ch in str(text))
     return ascii_text.replace("*/", "*_/")
+
+
+def comment_lines(text: str, prefix: str = "# ", width: int = 100) -> list[str]:
+    """``text`` as comment lines of at most ``width`` characters, each starting with ``prefix``.
+
+    For readers with a line buffer (RTIMULib's ``fgets(buf, 200, ...)``): a long line would be split into a
+    second "line" that is no comment. Continuation lines are indented by two more spaces.
+    """
+    return textwrap.wrap(
+        plain(text),
+        width=width,
+        initial_indent=prefix,
+        subsequent_indent=prefix + "  ",
+        break_on_hyphens=False,
+    ) or [prefix.rstrip()]
 
 
 def float32_text(value: float) -> str:
