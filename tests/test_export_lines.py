@@ -26,10 +26,10 @@ import pytest
 
 import magfit
 from magfit.export import FORMATS, export
-#: fgets(buf, 200, f) returns a line of at most 198 characters whole, with its newline.
-READER_LINE_MAX = 198
 from magfit.rotations import euler_matrix
 
+#: fgets(buf, 200, f) returns a line of at most 198 characters whole, with its newline.
+READER_LINE_MAX = 198
 SOFT = np.array([[1.05, 0.02, -0.01], [0.02, 0.97, 0.015], [-0.01, 0.015, 0.99]])
 LONG_METHOD = "ellipsoid-with-a-very-long-name-" * 12  # a user's own label: 384 characters
 
