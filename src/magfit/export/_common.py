@@ -61,6 +61,23 @@ def comment_lines(text: str, prefix: str = "# ", width: int = 100) -> list[str]:
     ) or [prefix.rstrip()]
 
 
+def yaml_float(value: float) -> str:
+    """The shortest text that reads back as the same double in every YAML reader, 1.1 and 1.2.
+
+    ``repr`` gives ``3e-05`` for 0.00003; YAML 1.1's float pattern (PyYAML, ROS 1's ``rosparam``) needs a
+    ``.`` in the mantissa, ``[-+]?([0-9][0-9_]*)?\\.[0-9.]*([eE][-+][0-9]+)?``, and reads ``3e-05`` as the
+    string "3e-05". ``3.0e-05`` matches it and YAML 1.2's core schema,
+    ``[-+]?(\\.[0-9]+|[0-9]+(\\.[0-9]*)?)([eE][-+]?[0-9]+)?``, alike (Python's exponent always has its sign).
+    """
+    text = repr(float(value))
+    if not math.isfinite(value):
+        return {"inf": ".inf", "-inf": "-.inf"}.get(text, ".nan")
+    mantissa, e, exponent = text.partition("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return mantissa + e + exponent
+
+
 def float32_text(value: float) -> str:
     """Shortest text that still round-trips a float32 (9 significant digits, ``%.9g``)."""
     return f"{float(value):.9g}"
