@@ -118,9 +118,36 @@ def test_ardupilot_custom_orientation_reproduces_the_vehicle_field(real_data_dir
     cal = _vehicle(magfit.fit(samples, method="ellipsoid").with_unit("uT"), euler_matrix(12.0, -7.5, 131.0))
     text = export(cal, "ardupilot")
     params = parse_ardupilot(text)
-    assert params["COMPASS_ORIENT"] == 101 and params["CUST_ROT_ENABLE"] == 1
+    # CUST_ROT2: ArduPilot's parameter conversion gives CUST_ROT1 to a custom board orientation (AP_AHRS::init)
+    assert params["COMPASS_ORIENT"] == 102 and params["CUST_ROT_ENABLE"] == 1
+    assert not any(name.startswith("CUST_ROT1") for name in params)
     _close(ardupilot_field(params, 10 * samples), 10 * cal.apply(samples), 10 * samples, RTOL_FLOAT32)
     assert "(COMPASS_EXTERNAL = 1" in text  # ORIENT is ignored for an internal compass: said in the file
+
+
+def _ground_station_load(text: str, known: set[str]) -> dict[str, float]:
+    """Mission Planner / MAVProxy 'param load': a name the vehicle did not list when fetched is not set."""
+    return {name: value for name, value in parse_ardupilot(text).items() if name in known}
+
+
+def test_ardupilot_custom_rotation_needs_two_loads_and_says_so(real_data_dir: Path) -> None:
+    # While CUST_ROT_ENABLE is 0, ArduPilot hides CUST_ROT2_* (AP_PARAM_FLAG_ENABLE): the ground station's list,
+    # fetched before the load, lacks them. One load leaves COMPASS_ORIENT = 102 with the identity.
+    samples = _fxos(real_data_dir)
+    cal = _vehicle(magfit.fit(samples, method="ellipsoid").with_unit("uT"), euler_matrix(12.0, -7.5, 131.0))
+    text = export(cal, "ardupilot")
+    params = parse_ardupilot(text)
+    listed = {name for name in params if not name.startswith("CUST_ROT2_")}  # hidden at the first fetch
+    vehicle = {"CUST_ROT2_ROLL": 0.0, "CUST_ROT2_PITCH": 0.0, "CUST_ROT2_YAW": 0.0}  # the defaults
+    vehicle |= _ground_station_load(text, listed)
+    once = ardupilot_field(vehicle, 10 * samples)
+    assert _heading_error(once, 10 * cal.apply(samples)) > 90.0  # the identity instead of the mounting
+    vehicle |= _ground_station_load(text, listed | set(vehicle))  # reboot, refresh (now listed), load again
+    _close(ardupilot_field(vehicle, 10 * samples), 10 * cal.apply(samples), 10 * samples, RTOL_FLOAT32)
+    head = text.splitlines()[:3]
+    assert head[1].startswith("# LOAD THIS FILE TWICE") and "Reboot" in text and "refresh the parameters" in text
+    fixed = _vehicle(magfit.fit(samples, method="ellipsoid").with_unit("uT"), euler_matrix(180.0, 0.0, 270.0))
+    assert "LOAD THIS FILE TWICE" not in export(fixed, "ardupilot")  # no custom rotation: one load
 
 
 def test_ardupilot_fixed_orientation_within_tolerance(real_data_dir: Path) -> None:
@@ -168,10 +195,17 @@ def test_ardupilot_runs_out_of_custom_rotations() -> None:
     ]  # fmt: skip
     from magfit.export import export_several
 
-    params = parse_ardupilot(export_several(cals[:2], "ardupilot"))
-    assert (params["COMPASS_ORIENT"], params["COMPASS_ORIENT2"]) == (101, 102)
-    with pytest.raises(ExportError, match="2 custom rotations"):
-        export_several(cals, "ardupilot")
+    params = parse_ardupilot(export_several(cals[:1], "ardupilot"))
+    assert params["COMPASS_ORIENT"] == 102
+    # A second compass would need CUST_ROT1, the board's when AHRS_ORIENTATION = 101: refused, with words.
+    with pytest.raises(ExportError, match="CUST_ROT1, is the board's"):
+        export_several(cals[:2], "ardupilot")
+    fixed = magfit.Calibration(
+        "vector", [1.0, 2.0, 3.0], euler_matrix(0.0, 0.0, 90.0), 50.0, unit="uT", frame="vehicle",
+        details={"sensor": {"id": "MAG/1", "slot": 1, "device_id": None}},
+    )  # fmt: skip
+    params = parse_ardupilot(export_several([cals[0], fixed], "ardupilot"))
+    assert (params["COMPASS_ORIENT"], params["COMPASS_ORIENT2"]) == (102, 2)  # ROTATION_YAW_90
 
 
 # ---------------------------------------------------------------------- PX4
@@ -423,7 +457,7 @@ def test_two_real_magnetometers_on_one_rig(real_data_dir: Path) -> None:
     cal = magfit.fit(pni, method="vector", reference=reference, allow_undetermined=True).with_unit("uT")
     assert cal.frame == "vehicle"
     params = parse_ardupilot(export(cal, "ardupilot"))
-    assert params["COMPASS_ORIENT"] == 101
+    assert params["COMPASS_ORIENT"] == 102
     _close(ardupilot_field(params, 10 * pni), 10 * cal.apply(pni), 10 * pni, RTOL_FLOAT32)
     rotation, _ = polar_decomposition(cal.matrix)
     angle = angle_between_deg(np.eye(3), rotation)

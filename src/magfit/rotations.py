@@ -78,7 +78,8 @@ FIRMWARES = ("ardupilot", "px4", "betaflight", "inav")
 #: rotation parameter and the three angle parameters with their unit; PX4 has none.
 CUSTOM: Mapping[str, tuple[str, int, tuple[str, str, str], str] | None] = MappingProxyType(
     {
-        "ardupilot": ("COMPASS_ORIENT", 101, ("CUST_ROT1_ROLL", "CUST_ROT1_PITCH", "CUST_ROT1_YAW"), "deg"),
+        # CUST_ROT2 (102): ArduPilot's own parameter conversion gives CUST_ROT1 to a custom board orientation.
+        "ardupilot": ("COMPASS_ORIENT", 102, ("CUST_ROT2_ROLL", "CUST_ROT2_PITCH", "CUST_ROT2_YAW"), "deg"),
         "px4": None,
         "betaflight": ("align_mag", 9, ("mag_align_roll", "mag_align_pitch", "mag_align_yaw"), "decideg"),
         "inav": ("align_mag", 0, ("align_mag_roll", "align_mag_pitch", "align_mag_yaw"), "decideg"),
