@@ -236,9 +236,9 @@ def test_px4_fixed_rotation_reproduces_the_vehicle_field(real_data_dir: Path) ->
     samples = _fxos(real_data_dir)
     fitted = magfit.fit(samples, method="ellipsoid").with_unit("uT")
     table = standard_rotations("px4")
-    cal = _vehicle(fitted, np.asarray(table[44].matrix))  # PITCH_9_YAW_180
+    cal = _vehicle(fitted, np.asarray(table[38].matrix))  # ROLL_90_PITCH_68_YAW_293 (whole degrees in PX4)
     params = parse_px4(export(cal, "px4", device_id=396809))
-    assert params["CAL_MAG0_ROT"] == 44 and params["CAL_MAG0_ID"] == 396809
+    assert params["CAL_MAG0_ROT"] == 38 and params["CAL_MAG0_ID"] == 396809
     # 43 (PITCH_90_YAW_180) is the same matrix as 29 (ROLL_180_PITCH_90): the smaller id is written
     same = parse_px4(export(_vehicle(fitted, np.asarray(table[43].matrix)), "px4"))
     np.testing.assert_allclose(table[int(same["CAL_MAG0_ROT"])].matrix, table[43].matrix, atol=1e-12)
@@ -247,7 +247,7 @@ def test_px4_fixed_rotation_reproduces_the_vehicle_field(real_data_dir: Path) ->
 
 def test_px4_refuses_a_rotation_off_its_table(real_data_dir: Path) -> None:
     fitted = magfit.fit(_fxos(real_data_dir), method="ellipsoid").with_unit("uT")
-    with pytest.raises(ExportError, match=r"only its 48 fixed rotations.*export to 'ardupilot'"):
+    with pytest.raises(ExportError, match=r"only its fixed rotations \(0-40\).*export to 'ardupilot'"):
         export(_vehicle(fitted, euler_matrix(0.0, 0.0, 97.0)), "px4")
 
 
@@ -492,8 +492,30 @@ def test_random_vehicle_calibrations_through_ardupilot_and_px4(seed: int) -> Non
     free = _random_vehicle(rng, q * np.sign(np.linalg.det(q)))  # any rotation: ArduPilot's custom one
     _close(ardupilot_field(parse_ardupilot(export(free, "ardupilot")), 10 * raw), 10 * free.apply(raw), 10 * raw,
            RTOL_FLOAT32)  # fmt: skip
-    entry = standard_rotations("px4")[int(rng.integers(0, 48))]
+    entry = standard_rotations("px4")[int(rng.integers(0, 41))]  # current PX4's 0-40
     fixed = _random_vehicle(rng, np.asarray(entry.matrix))  # on PX4's table: exact
     _close(px4_correct(parse_px4(export(fixed, "px4")), 0.01 * raw), 0.01 * fixed.apply(raw), 0.01 * raw, RTOL_FLOAT32)
     _close(ardupilot_field(parse_ardupilot(export(fixed, "ardupilot")), 10 * raw), 10 * fixed.apply(raw), 10 * raw,
            RTOL_FLOAT32)  # fmt: skip
+
+
+# ---------------------------------------------------------------------- PX4 rotations 41-47
+
+
+def test_px4_writes_only_the_rotations_current_px4_has() -> None:
+    # Current rotation.h ends at ROTATION_ROLL_90_PITCH_315 = 40 (ROTATION_MAX 41); ParametersUpdate resets a
+    # CAL_MAGn_ROT >= ROTATION_MAX to 0, no rotation. Mid-2020's 41-43 equal 31, 36 and 29 (PX4 PRs #15784,
+    # #16449): written as those; 44-47 have no equal: refused, not written as no rotation.
+    table = standard_rotations("px4")
+    for old, same in ((41, 31), (42, 36), (43, 29)):
+        assert angle_between_deg(table[old].matrix, table[same].matrix) < 1e-6
+        cal = magfit.Calibration("vector", [1.0, 2.0, 3.0], np.asarray(table[old].matrix), 50.0, unit="uT",
+                                 frame="vehicle")  # fmt: skip
+        assert parse_px4(export(cal, "px4"))["CAL_MAG0_ROT"] == same
+    for old in range(44, 48):
+        cal = magfit.Calibration("vector", [1.0, 2.0, 3.0], np.asarray(table[old].matrix), 50.0, unit="uT",
+                                 frame="vehicle")  # fmt: skip
+        with pytest.raises(ExportError, match=r"fixed rotations \(0-40\)"):
+            export(cal, "px4")
+    # Written as 44 (PITCH_9_YAW_180), today's PX4 would apply no rotation: 180 deg of heading.
+    assert angle_between_deg(np.eye(3), table[44].matrix) > 179.0
