@@ -101,7 +101,7 @@ def test_adafruit_header_applied_by_calibrate_gives_apply_in_ut(
     physical: tuple[magfit.Calibration, NDArray[np.float64], float],
 ) -> None:
     cal, samples, k = physical
-    text = export(cal, "adafruit")
+    text = export(cal, "adafruit").split("#if defined(ADAFRUIT_SENSOR_CALIBRATION_USE_EEPROM)")[0]  # as fitted
     values: dict[str, dict[int, float]] = {"mag_hardiron": {}, "mag_softiron": {}}
     for name, index, value in re.findall(rf"cal\.(mag_\w+)\[(\d)\] = ({NUMBER})f;", text):
         values[name][int(index)] = float(value)
