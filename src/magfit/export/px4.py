@@ -386,9 +386,10 @@ def _warnings(calibration: Calibration, entry: SlotParameters, k: float) -> list
     error = heading_error_deg(reference, matrix, offset) if ignored else 0.0
     if error >= 0.005:  # shown with 2 decimals: below, nothing worth a warning is lost
         lines += [
-            f"# WARNING: {', '.join(ignored)} within {CHANGE_THRESHOLD} of PX4's defaults: PX4 never applies them. At",
-            "#   every boot calibration::Magnetometer starts from its defaults (Reset) and ParametersUpdate keeps a",
-            f"#   stored vector closer than {CHANGE_THRESHOLD} to them (set_offset/set_scale/set_offdiagonal). The",
-            f"#   vehicle flies without them: a heading error of up to {error:.2f} deg ({ASSUMPTION}).",
+            f"# WARNING: {', '.join(ignored)} within {CHANGE_THRESHOLD} of PX4's defaults: PX4 never applies them.",
+            "#   At every boot calibration::Magnetometer starts from its defaults (Reset), and ParametersUpdate",
+            f"#   ignores a stored vector closer than {CHANGE_THRESHOLD} to them (set_offset, set_scale,",
+            "#   set_offdiagonal). The vehicle flies without them:",
+            f"#   a heading error of up to {error:.2f} deg ({ASSUMPTION}).",
         ]
     return lines
