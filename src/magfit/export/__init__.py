@@ -216,9 +216,9 @@ def export(
     if not isinstance(calibration, Calibration):
         raise MagfitError(f"export() takes a magfit.Calibration, got {type(calibration).__name__}")
     _refuse_residual(calibration, format)
-    _refuse_unit_mismatch(calibration, format, unit, allow_unit_mismatch)
     options = {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field}
     given = _options(spec, {**options, "applied_rotation": applied_rotation})
+    _refuse_unit_mismatch(calibration, format, unit, allow_unit_mismatch)
     given.pop("applied_rotation", None)
     if "applied_rotation" in spec.options:
         calibration = with_applied_rotation(calibration, applied_rotation)
