@@ -53,10 +53,14 @@ def test_tesla_declared_ut_is_refused_naming_tesla(name: str, tesla_as_ut: magfi
         assert 45 < field < 60
 
 
-def test_forced_writes_the_values_as_declared(counts_as_ut: magfit.Calibration) -> None:
+def test_forced_writes_the_values_as_declared_and_says_so(counts_as_ut: magfit.Calibration) -> None:
     text = export(counts_as_ut, "adafruit", allow_unit_mismatch=True)
     field = float(re.search(r"mag_field = ([\d.e+-]+)f;", text).group(1))  # type: ignore[union-attr]
     assert field == pytest.approx(counts_as_ut.field_strength, rel=1e-8)
+    assert text.splitlines()[1].startswith(" * WARNING (written although): the fitted field strength")
+    for name in UNIT_CHECKED:
+        forced = export(counts_as_ut, name, allow_unit_mismatch=True)
+        assert ("WARNING (written although)" in forced) == (name != "adafruit-json")  # JSON has no comments
 
 
 @pytest.mark.parametrize("name", ["json", "magcal"])

@@ -42,8 +42,9 @@ from numpy.typing import ArrayLike
 
 from ..calibration import Calibration
 from ..errors import ExportError, MagfitError, OptionError
+from ..findings import Reason
 from ..units import field_unit_reason, get_unit
-from ._common import with_applied_rotation
+from ._common import comment_lines, with_applied_rotation
 from .adafruit import write_adafruit, write_adafruit_json
 from .ardupilot import write_ardupilot, write_ardupilot_several
 from .betaflight import write_betaflight
@@ -218,11 +219,12 @@ def export(
     _refuse_residual(calibration, format)
     options = {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field}
     given = _options(spec, {**options, "applied_rotation": applied_rotation})
-    _refuse_unit_mismatch(calibration, format, unit, allow_unit_mismatch)
+    mismatch = _refuse_unit_mismatch(calibration, format, unit, allow_unit_mismatch)
     given.pop("applied_rotation", None)
     if "applied_rotation" in spec.options:
         calibration = with_applied_rotation(calibration, applied_rotation)
-    return spec.writer(calibration, unit, **given)
+    text: str = spec.writer(calibration, unit, **given)
+    return text if mismatch is None else _with_warning(text, format, f"WARNING (written although): {mismatch}")
 
 
 #: The formats :func:`export_several` writes: several compasses of one vehicle in one file.
@@ -308,12 +310,17 @@ def export_several(
 UNIT_CHECKED = ("c", "fusion", "adafruit", "adafruit-json", "rtimulib", "ros-madgwick", "yaml")
 
 
-def _refuse_unit_mismatch(calibration: Calibration, format: str, unit: str | None, allow: bool) -> None:
-    """Refuse a field strength that no place on Earth has in the declared unit (see :data:`UNIT_CHECKED`)."""
-    if format not in UNIT_CHECKED or allow:
-        return
+def _refuse_unit_mismatch(calibration: Calibration, format: str, unit: str | None, allow: bool) -> Reason | None:
+    """Refuse a field strength that no place on Earth has in the declared unit (see :data:`UNIT_CHECKED`).
+
+    Returns the reason when ``allow`` writes the calibration all the same (the file then says so), else None.
+    """
+    if format not in UNIT_CHECKED:
+        return None
     declared = calibration.unit if unit is None else get_unit(unit).name  # OptionError for a misspelt unit
     reason = field_unit_reason(calibration.field_strength, declared)
+    if reason is not None and allow:
+        return reason
     if reason is not None:
         raise ExportError(
             f"the {format} export writes the field in {declared}, and {reason}; or pass allow_unit_mismatch=True "
@@ -321,6 +328,16 @@ def _refuse_unit_mismatch(calibration: Calibration, format: str, unit: str | Non
             codes=(reason.code,),
             remedy=reason.remedy,
         )
+    return None
+
+
+def _with_warning(text: str, format: str, warning: str) -> str:
+    """``text`` with ``warning`` as comment lines after its first line (C block comments or ``#``; JSON has none)."""
+    if format == "adafruit-json":
+        return text
+    first, rest = text.split("\n", 1)
+    prefix = " * " if first.startswith("/*") else "# "
+    return "\n".join([first, *comment_lines(warning, prefix=prefix), rest])
 
 
 def _refuse_residual(calibration: Calibration, format: str) -> None:
