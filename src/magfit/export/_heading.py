@@ -51,9 +51,7 @@ def heading_error_deg(calibration: Calibration, matrix: ArrayLike, offset: Array
     return heading_error_of(calibration, lambda raw: (raw - target_offset) @ target_matrix.T)
 
 
-def heading_error_of(
-    calibration: Calibration, correct: Callable[[NDArray[np.float64]], NDArray[np.float64]]
-) -> float:
+def heading_error_of(calibration: Calibration, correct: Callable[[NDArray[np.float64]], NDArray[np.float64]]) -> float:
     """The worst heading error (degrees) of a target's own correction against ``calibration.apply``.
 
     ``correct`` maps raw samples (N, 3), in the calibration's unit, to the target's corrected vectors (N, 3),
