@@ -539,7 +539,7 @@ def test_docs_examples_run() -> None:
     # The Python examples of docs/exports.md must keep working (they assert their own results).
     doc = Path(__file__).resolve().parents[1] / "docs" / "exports.md"
     blocks = re.findall(r"```python\n(.*?)```", doc.read_text(encoding="utf-8"), re.S)
-    assert len(blocks) == 6
+    assert len(blocks) == 7
     for block in blocks:
         exec(compile(block, str(doc), "exec"), {})
 

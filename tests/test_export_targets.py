@@ -17,6 +17,7 @@ import json
 import re
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -100,7 +101,7 @@ def test_adafruit_header_applied_by_calibrate_gives_apply_in_ut(
     physical: tuple[magfit.Calibration, NDArray[np.float64], float],
 ) -> None:
     cal, samples, k = physical
-    text = export(cal, "adafruit")
+    text = export(cal, "adafruit").split("#if defined(ADAFRUIT_SENSOR_CALIBRATION_USE_EEPROM)")[0]  # as fitted
     values: dict[str, dict[int, float]] = {"mag_hardiron": {}, "mag_softiron": {}}
     for name, index, value in re.findall(rf"cal\.(mag_\w+)\[(\d)\] = ({NUMBER})f;", text):
         values[name][int(index)] = float(value)
@@ -212,6 +213,36 @@ def test_inav_correction_is_the_diagonal_of_apply_and_says_what_it_loses(recordi
     zero = np.array([float(settings[f"magzero_{a}"]) for a in "xyz"])
     gain = np.array([float(settings[f"maggain_{a}"]) for a in "xyz"])
     assert _stated_loss(text) == pytest.approx(_level_heading_error(cal, np.diag(1024 / gain), zero), abs=0.05)
+
+
+def _level_heading_error_of(
+    cal: magfit.Calibration, correct: Callable[[NDArray[np.float64]], NDArray[np.float64]]
+) -> float:
+    """Worst heading error of ``correct(raw)``, sensor level, inclinations up to ±70° (a coarse grid)."""
+    inc, head = np.meshgrid(np.radians(np.arange(-70, 71, 5.0)), np.radians(np.arange(0, 360, 1.0)))
+    field = cal.field_strength * np.stack([np.cos(inc) * np.cos(head), np.cos(inc) * np.sin(head), np.sin(inc)], -1)
+    field = field.reshape(-1, 3)
+    seen = correct(field @ np.linalg.inv(cal.matrix).T + cal.offset)
+    error = np.arctan2(seen[:, 1], seen[:, 0]) - np.arctan2(field[:, 1], field[:, 0])
+    return float(np.degrees(np.max(np.abs((error + np.pi) % (2 * np.pi) - np.pi))))
+
+
+@pytest.mark.parametrize("recording", ["apex5", "unc"])
+def test_inav_states_the_loss_of_float_and_of_integer_builds(recording: str, real_data_dir: Path) -> None:
+    # compass.c divides mag.magADC (compass.h: float since PR #9075, INAV 7.0; int32 before, so C's division
+    # truncates toward zero): the integer builds lose up to about 0.2 deg more on a diag fit.
+    samples = _apex5(real_data_dir) if recording == "apex5" else _unc(real_data_dir)
+    cal = magfit.fit(samples, method="diag").with_unit("counts")
+    text = export(cal, "inav")
+    settings = parse_cli(text)
+    zero = np.array([float(settings[f"magzero_{a}"]) for a in "xyz"])
+    gain = np.array([float(settings[f"maggain_{a}"]) for a in "xyz"])
+    in_float = _level_heading_error_of(cal, lambda raw: (raw - zero) * 1024 / gain)
+    in_int32 = _level_heading_error_of(cal, lambda raw: np.trunc((raw - zero) * 1024 / gain))
+    stated_float, stated_int32 = (float(v) for v in re.findall(r"up to ([\d.]+) deg (?:\(|with)", text))
+    assert stated_float == pytest.approx(in_float, abs=0.03) and stated_int32 == pytest.approx(in_int32, abs=0.03)
+    assert 0.1 < stated_int32 - stated_float < 0.3
+    assert "INAV 7.0 and later, which compute in float" in text and "earlier INAV, which computes in int32" in text
 
 
 def test_inav_loss_is_small_for_a_diag_fit_and_large_for_strong_off_diagonal_terms(real_data_dir: Path) -> None:

@@ -118,9 +118,36 @@ def test_ardupilot_custom_orientation_reproduces_the_vehicle_field(real_data_dir
     cal = _vehicle(magfit.fit(samples, method="ellipsoid").with_unit("uT"), euler_matrix(12.0, -7.5, 131.0))
     text = export(cal, "ardupilot")
     params = parse_ardupilot(text)
-    assert params["COMPASS_ORIENT"] == 101 and params["CUST_ROT_ENABLE"] == 1
+    # CUST_ROT2: ArduPilot's parameter conversion gives CUST_ROT1 to a custom board orientation (AP_AHRS::init)
+    assert params["COMPASS_ORIENT"] == 102 and params["CUST_ROT_ENABLE"] == 1
+    assert not any(name.startswith("CUST_ROT1") for name in params)
     _close(ardupilot_field(params, 10 * samples), 10 * cal.apply(samples), 10 * samples, RTOL_FLOAT32)
     assert "(COMPASS_EXTERNAL = 1" in text  # ORIENT is ignored for an internal compass: said in the file
+
+
+def _ground_station_load(text: str, known: set[str]) -> dict[str, float]:
+    """Mission Planner / MAVProxy 'param load': a name the vehicle did not list when fetched is not set."""
+    return {name: value for name, value in parse_ardupilot(text).items() if name in known}
+
+
+def test_ardupilot_custom_rotation_needs_two_loads_and_says_so(real_data_dir: Path) -> None:
+    # While CUST_ROT_ENABLE is 0, ArduPilot hides CUST_ROT2_* (AP_PARAM_FLAG_ENABLE): the ground station's list,
+    # fetched before the load, lacks them. One load leaves COMPASS_ORIENT = 102 with the identity.
+    samples = _fxos(real_data_dir)
+    cal = _vehicle(magfit.fit(samples, method="ellipsoid").with_unit("uT"), euler_matrix(12.0, -7.5, 131.0))
+    text = export(cal, "ardupilot")
+    params = parse_ardupilot(text)
+    listed = {name for name in params if not name.startswith("CUST_ROT2_")}  # hidden at the first fetch
+    vehicle = {"CUST_ROT2_ROLL": 0.0, "CUST_ROT2_PITCH": 0.0, "CUST_ROT2_YAW": 0.0}  # the defaults
+    vehicle |= _ground_station_load(text, listed)
+    once = ardupilot_field(vehicle, 10 * samples)
+    assert _heading_error(once, 10 * cal.apply(samples)) > 90.0  # the identity instead of the mounting
+    vehicle |= _ground_station_load(text, listed | set(vehicle))  # reboot, refresh (now listed), load again
+    _close(ardupilot_field(vehicle, 10 * samples), 10 * cal.apply(samples), 10 * samples, RTOL_FLOAT32)
+    head = text.splitlines()[:3]
+    assert head[1].startswith("# LOAD THIS FILE TWICE") and "Reboot" in text and "refresh the parameters" in text
+    fixed = _vehicle(magfit.fit(samples, method="ellipsoid").with_unit("uT"), euler_matrix(180.0, 0.0, 270.0))
+    assert "LOAD THIS FILE TWICE" not in export(fixed, "ardupilot")  # no custom rotation: one load
 
 
 def test_ardupilot_fixed_orientation_within_tolerance(real_data_dir: Path) -> None:
@@ -168,10 +195,17 @@ def test_ardupilot_runs_out_of_custom_rotations() -> None:
     ]  # fmt: skip
     from magfit.export import export_several
 
-    params = parse_ardupilot(export_several(cals[:2], "ardupilot"))
-    assert (params["COMPASS_ORIENT"], params["COMPASS_ORIENT2"]) == (101, 102)
-    with pytest.raises(ExportError, match="2 custom rotations"):
-        export_several(cals, "ardupilot")
+    params = parse_ardupilot(export_several(cals[:1], "ardupilot"))
+    assert params["COMPASS_ORIENT"] == 102
+    # A second compass would need CUST_ROT1, the board's when AHRS_ORIENTATION = 101: refused, with words.
+    with pytest.raises(ExportError, match="CUST_ROT1, is the board's"):
+        export_several(cals[:2], "ardupilot")
+    fixed = magfit.Calibration(
+        "vector", [1.0, 2.0, 3.0], euler_matrix(0.0, 0.0, 90.0), 50.0, unit="uT", frame="vehicle",
+        details={"sensor": {"id": "MAG/1", "slot": 1, "device_id": None}},
+    )  # fmt: skip
+    params = parse_ardupilot(export_several([cals[0], fixed], "ardupilot"))
+    assert (params["COMPASS_ORIENT"], params["COMPASS_ORIENT2"]) == (102, 2)  # ROTATION_YAW_90
 
 
 # ---------------------------------------------------------------------- PX4
@@ -202,9 +236,9 @@ def test_px4_fixed_rotation_reproduces_the_vehicle_field(real_data_dir: Path) ->
     samples = _fxos(real_data_dir)
     fitted = magfit.fit(samples, method="ellipsoid").with_unit("uT")
     table = standard_rotations("px4")
-    cal = _vehicle(fitted, np.asarray(table[44].matrix))  # PITCH_9_YAW_180
+    cal = _vehicle(fitted, np.asarray(table[38].matrix))  # ROLL_90_PITCH_68_YAW_293 (whole degrees in PX4)
     params = parse_px4(export(cal, "px4", device_id=396809))
-    assert params["CAL_MAG0_ROT"] == 44 and params["CAL_MAG0_ID"] == 396809
+    assert params["CAL_MAG0_ROT"] == 38 and params["CAL_MAG0_ID"] == 396809
     # 43 (PITCH_90_YAW_180) is the same matrix as 29 (ROLL_180_PITCH_90): the smaller id is written
     same = parse_px4(export(_vehicle(fitted, np.asarray(table[43].matrix)), "px4"))
     np.testing.assert_allclose(table[int(same["CAL_MAG0_ROT"])].matrix, table[43].matrix, atol=1e-12)
@@ -213,7 +247,7 @@ def test_px4_fixed_rotation_reproduces_the_vehicle_field(real_data_dir: Path) ->
 
 def test_px4_refuses_a_rotation_off_its_table(real_data_dir: Path) -> None:
     fitted = magfit.fit(_fxos(real_data_dir), method="ellipsoid").with_unit("uT")
-    with pytest.raises(ExportError, match=r"only its 48 fixed rotations.*export to 'ardupilot'"):
+    with pytest.raises(ExportError, match=r"only its fixed rotations \(0-40\).*export to 'ardupilot'"):
         export(_vehicle(fitted, euler_matrix(0.0, 0.0, 97.0)), "px4")
 
 
@@ -423,7 +457,7 @@ def test_two_real_magnetometers_on_one_rig(real_data_dir: Path) -> None:
     cal = magfit.fit(pni, method="vector", reference=reference, allow_undetermined=True).with_unit("uT")
     assert cal.frame == "vehicle"
     params = parse_ardupilot(export(cal, "ardupilot"))
-    assert params["COMPASS_ORIENT"] == 101
+    assert params["COMPASS_ORIENT"] == 102
     _close(ardupilot_field(params, 10 * pni), 10 * cal.apply(pni), 10 * pni, RTOL_FLOAT32)
     rotation, _ = polar_decomposition(cal.matrix)
     angle = angle_between_deg(np.eye(3), rotation)
@@ -458,8 +492,30 @@ def test_random_vehicle_calibrations_through_ardupilot_and_px4(seed: int) -> Non
     free = _random_vehicle(rng, q * np.sign(np.linalg.det(q)))  # any rotation: ArduPilot's custom one
     _close(ardupilot_field(parse_ardupilot(export(free, "ardupilot")), 10 * raw), 10 * free.apply(raw), 10 * raw,
            RTOL_FLOAT32)  # fmt: skip
-    entry = standard_rotations("px4")[int(rng.integers(0, 48))]
+    entry = standard_rotations("px4")[int(rng.integers(0, 41))]  # current PX4's 0-40
     fixed = _random_vehicle(rng, np.asarray(entry.matrix))  # on PX4's table: exact
     _close(px4_correct(parse_px4(export(fixed, "px4")), 0.01 * raw), 0.01 * fixed.apply(raw), 0.01 * raw, RTOL_FLOAT32)
     _close(ardupilot_field(parse_ardupilot(export(fixed, "ardupilot")), 10 * raw), 10 * fixed.apply(raw), 10 * raw,
            RTOL_FLOAT32)  # fmt: skip
+
+
+# ---------------------------------------------------------------------- PX4 rotations 41-47
+
+
+def test_px4_writes_only_the_rotations_current_px4_has() -> None:
+    # Current rotation.h ends at ROTATION_ROLL_90_PITCH_315 = 40 (ROTATION_MAX 41); ParametersUpdate resets a
+    # CAL_MAGn_ROT >= ROTATION_MAX to 0, no rotation. Mid-2020's 41-43 equal 31, 36 and 29 (PX4 PRs #15784,
+    # #16449): written as those; 44-47 have no equal: refused, not written as no rotation.
+    table = standard_rotations("px4")
+    for old, same in ((41, 31), (42, 36), (43, 29)):
+        assert angle_between_deg(table[old].matrix, table[same].matrix) < 1e-6
+        cal = magfit.Calibration("vector", [1.0, 2.0, 3.0], np.asarray(table[old].matrix), 50.0, unit="uT",
+                                 frame="vehicle")  # fmt: skip
+        assert parse_px4(export(cal, "px4"))["CAL_MAG0_ROT"] == same
+    for old in range(44, 48):
+        cal = magfit.Calibration("vector", [1.0, 2.0, 3.0], np.asarray(table[old].matrix), 50.0, unit="uT",
+                                 frame="vehicle")  # fmt: skip
+        with pytest.raises(ExportError, match=r"fixed rotations \(0-40\)"):
+            export(cal, "px4")
+    # Written as 44 (PITCH_9_YAW_180), today's PX4 would apply no rotation: 180 deg of heading.
+    assert angle_between_deg(np.eye(3), table[44].matrix) > 179.0

@@ -15,6 +15,7 @@ import pytest
 from magfit.errors import OptionError, SampleError
 from magfit.rotations import (
     FIRMWARES,
+    PX4_ROTATION_MAX,
     angle_between_deg,
     custom_angles,
     custom_rotation,
@@ -177,8 +178,8 @@ def test_custom_angles_invert_custom_rotation(firmware: str) -> None:
 
 def test_nearest_rotation_finds_the_entry_and_the_angle() -> None:
     for firmware in FIRMWARES:
-        table = standard_rotations(firmware)
-        for entry in table.values():
+        table = {i: e for i, e in standard_rotations(firmware).items() if firmware != "px4" or i <= PX4_ROTATION_MAX}
+        for entry in table.values():  # PX4: the rotations current PX4 has (41-47 are mid-2020's)
             tilt = euler_matrix(2.0, -1.0, 1.5)  # 2.7 deg away from the entry
             found = nearest_rotation(entry.matrix @ tilt, firmware)
             np.testing.assert_allclose(found.matrix, entry.matrix, atol=1e-12)

@@ -7,7 +7,7 @@ import itertools
 import pytest
 
 from magfit.errors import OptionError
-from magfit.units import UNITS, canonical_name, conversion_factor, get_unit
+from magfit.units import EARTH_FIELD_UT, UNITS, canonical_name, conversion_factor, field_unit_reason, get_unit
 
 PHYSICAL = [name for name, unit in UNITS.items() if unit.is_physical]
 
@@ -89,3 +89,52 @@ def test_unknown_unit_lists_the_valid_ones(bad: object) -> None:
 def test_counts_cannot_be_converted(source: str, target: str) -> None:
     with pytest.raises(OptionError, match="raw counts have no known scale"):
         conversion_factor(source, target)
+
+
+# ---------------------------------------------------------------------- the declared unit against the Earth's field
+
+
+@pytest.mark.parametrize("field_ut", [22.0, 38.0, 48.0, 67.0])
+@pytest.mark.parametrize("true_unit", PHYSICAL)
+def test_a_field_in_its_own_unit_passes_and_in_another_names_its_unit(field_ut: float, true_unit: str) -> None:
+    # Ground truth: the Earth's field (22-67 uT anywhere on the surface) written in the samples' true unit.
+    value = field_ut * conversion_factor("uT", true_unit)
+    assert field_unit_reason(value, true_unit) is None
+    for declared in PHYSICAL:
+        if declared == true_unit:
+            continue
+        reason = field_unit_reason(value, declared)
+        assert reason is not None and reason.code == "unit_mismatch"
+        assert reason.remedy == (("unit", true_unit),), (value, declared)
+
+
+@pytest.mark.parametrize(
+    ("value", "declared", "likely"),
+    [
+        (1078.39, "uT", "counts"),  # a QMC5883L's raw counts declared uT
+        (6.6e-05, "uT", "T"),  # a recording in tesla declared uT
+        (500.0, "G", "mG"),  # milligauss declared gauss
+        (0.5, "mG", "G"),  # gauss declared milligauss
+        (50000.0, "uT", "nT"),  # nanotesla declared microtesla
+        (1400.0, "G", "counts"),
+    ],
+)
+def test_the_likely_unit_is_named(value: float, declared: str, likely: str) -> None:
+    reason = field_unit_reason(value, declared)
+    assert reason is not None and reason.code == "unit_mismatch" and reason.remedy == (("unit", likely),)
+
+
+@pytest.mark.parametrize(
+    ("value", "unit"),
+    [(15.0, "uT"), (100.0, "uT"), (0.2, "G"), (250.0, "mG"), (1400.0, "counts"), (1.0, None), (50.0, "furlongs"),
+     (0.0, "uT"), (float("nan"), "uT"), (-48.0, "uT")],
+)  # fmt: skip
+def test_plausible_or_uncheckable_fields_give_no_reason(value: float, unit: str | None) -> None:
+    # 15-100 uT is accepted (altitude, nearby steel); counts, no unit and unknown names cannot be checked.
+    assert field_unit_reason(value, unit) is None
+
+
+def test_the_surface_range_is_the_world_magnetic_models() -> None:
+    # WMM2025 total intensity extremes: about 22 uT (South Atlantic anomaly) and 67 uT (south magnetic pole area).
+    assert EARTH_FIELD_UT == (22.0, 67.0)
+    assert field_unit_reason(14.9, "uT") is not None and field_unit_reason(100.1, "uT") is not None

@@ -21,9 +21,14 @@ checks each table against vectors worked out by hand from those sources.
 - **PX4** (``CAL_MAGn_ROT``, ``SENS_BOARD_ROT``): ``rot_lookup[]`` in ``src/lib/conversion/rotation.h``
   (roll, pitch, yaw in whole degrees, 0-47), turned into a matrix by ``get_rot_matrix`` in ``rotation.cpp``:
   ``Dcmf{Eulerf{roll, pitch, yaw}}``, the same 3-2-1 sequence (38 is then exactly roll 90, pitch 68, yaw 293,
-  not ArduPilot's 38). PX4 has no custom magnetometer rotation: ``calibration::Magnetometer::ParametersUpdate``
-  (``src/lib/sensor_calibration/Magnetometer.cpp``) resets a ``CAL_MAGn_ROT`` outside 0..47 to 0, and an
-  internal magnetometer always follows the board rotation (``CAL_MAGn_ROT = -1``).
+  not ArduPilot's 38). The table here is mid-2020's (0-47, for reading the logs of those releases); current
+  PX4 stops at 40: PR #15784 (September 2020) made the enum MAVLink's ``MAV_SENSOR_ORIENTATION`` and dropped
+  the rest, PR #16449 removed 41, and rotation.h now ends ``ROTATION_ROLL_90_PITCH_315 = 40, ROTATION_MAX``.
+  PX4 has no custom magnetometer rotation: ``calibration::Magnetometer::ParametersUpdate``
+  (``src/lib/sensor_calibration/Magnetometer.cpp``) resets a ``CAL_MAGn_ROT`` at or above ``ROTATION_MAX`` to
+  0 (``ROTATION_NONE``, "invalid rotation ... resetting to rotation none"), so 41-47 written for today's PX4
+  mean no rotation at all; :func:`nearest_rotation` offers only 0-40 (:data:`PX4_ROTATION_MAX`). An internal
+  magnetometer always follows the board rotation (``CAL_MAGn_ROT = -1``).
 - **Betaflight** (``align_mag``): ``CW0_DEG`` (1) .. ``CW270_DEG_FLIP`` (8) in ``src/main/common/sensor_alignment.h``,
   applied by ``alignSensorViaRotation`` in ``src/main/sensors/boardalignment.c`` (0, ``DEFAULT``, is the
   driver's own choice, unknown here). ``ALIGN_CUSTOM`` (9) uses ``mag_align_roll/pitch/yaw`` in
@@ -60,6 +65,7 @@ from .errors import OptionError, SampleError
 __all__ = [
     "CUSTOM",
     "FIRMWARES",
+    "PX4_ROTATION_MAX",
     "StandardRotation",
     "angle_between_deg",
     "custom_angles",
@@ -78,12 +84,17 @@ FIRMWARES = ("ardupilot", "px4", "betaflight", "inav")
 #: rotation parameter and the three angle parameters with their unit; PX4 has none.
 CUSTOM: Mapping[str, tuple[str, int, tuple[str, str, str], str] | None] = MappingProxyType(
     {
-        "ardupilot": ("COMPASS_ORIENT", 101, ("CUST_ROT1_ROLL", "CUST_ROT1_PITCH", "CUST_ROT1_YAW"), "deg"),
+        # CUST_ROT2 (102): ArduPilot's own parameter conversion gives CUST_ROT1 to a custom board orientation.
+        "ardupilot": ("COMPASS_ORIENT", 102, ("CUST_ROT2_ROLL", "CUST_ROT2_PITCH", "CUST_ROT2_YAW"), "deg"),
         "px4": None,
         "betaflight": ("align_mag", 9, ("mag_align_roll", "mag_align_pitch", "mag_align_yaw"), "decideg"),
         "inav": ("align_mag", 0, ("align_mag_roll", "align_mag_pitch", "align_mag_yaw"), "decideg"),
     }
 )
+
+#: The largest CAL_MAGn_ROT / SENS_BOARD_ROT every PX4 since late 2020 takes (rotation.h: ROTATION_MAX = 41);
+#: above it ParametersUpdate resets the parameter to 0, no rotation. Mid-2020 releases had 41-47 too.
+PX4_ROTATION_MAX = 40
 
 #: Largest |Rᵀ R − I| entry of a matrix accepted as a rotation (float32 tables pass, a soft-iron matrix does not).
 ORTHOGONALITY_TOLERANCE = 1e-5
@@ -286,7 +297,9 @@ def nearest_rotation(matrix: ArrayLike, firmware: str) -> StandardRotation:
     -------
     StandardRotation
         The entry, with ``angle_deg`` the angle between it and ``matrix``. Among entries with the same
-        matrix (ArduPilot's 10/27 and 14/26) the smallest id.
+        matrix (ArduPilot's 10/27 and 14/26) the smallest id. For PX4 only 0-:data:`PX4_ROTATION_MAX`, the
+        rotations current PX4 has (41-43 of mid-2020 duplicated 31, 36 and 29; 44-47 are gone: PX4 now
+        reads them as no rotation).
 
     Raises
     ------
@@ -298,6 +311,8 @@ def nearest_rotation(matrix: ArrayLike, firmware: str) -> StandardRotation:
     rotation = _rotation_matrix(matrix)
     best: StandardRotation | None = None
     for entry in standard_rotations(firmware).values():
+        if firmware == "px4" and entry.id > PX4_ROTATION_MAX:
+            continue
         angle = angle_between_deg(entry.matrix, rotation)
         if best is None or angle < best.angle_deg - 1e-9:
             best = StandardRotation(entry.id, entry.name, entry.matrix, angle)

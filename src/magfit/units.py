@@ -25,8 +25,18 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 from .errors import OptionError
+from .findings import Reason
 
-__all__ = ["UNITS", "Unit", "canonical_name", "conversion_factor", "get_unit"]
+__all__ = [
+    "EARTH_FIELD_UT",
+    "PLAUSIBLE_FIELD_UT",
+    "UNITS",
+    "Unit",
+    "canonical_name",
+    "conversion_factor",
+    "field_unit_reason",
+    "get_unit",
+]
 
 
 @dataclass(frozen=True)
@@ -118,3 +128,88 @@ def conversion_factor(source: str, target: str) -> float:
             "give the physical unit of the samples (e.g. 'uT', 'nT', 'G')"
         )
     return 10.0 ** (src.exponent - dst.exponent)
+
+
+#: The Earth's main field at its surface, µT: about 22 (the South Atlantic anomaly) to 67 (near the magnetic
+#: poles) in the World Magnetic Model.
+EARTH_FIELD_UT = (22.0, 67.0)
+
+#: The field strengths (µT) a calibration may fit and still be the Earth's field in the declared unit: the
+#: surface range widened for altitude (the dipole field falls as 1/r³: about 3 % lower 100 km up) and for
+#: the steel of buildings and vehicles, which can change the local field by tens of percent.
+PLAUSIBLE_FIELD_UT = (15.0, 100.0)
+
+
+#: How far outside the surface range a value may lie in another unit for that unit to be named as the likely
+#: one (a factor: 18-80 uT); a value further out is more likely raw counts than a field in that unit.
+LIKELY_MARGIN = 1.2
+
+
+def field_unit_reason(field_strength: float, unit: str | None) -> Reason | None:
+    """None when ``field_strength`` in ``unit`` can be the Earth's field, else why not and the likely unit.
+
+    A calibration's field strength is the radius of its corrected sphere (the Earth's field B of paper
+    eq. 1, in the samples' unit). Anywhere on Earth B lies in :data:`EARTH_FIELD_UT`; a value outside
+    :data:`PLAUSIBLE_FIELD_UT` once converted to µT means the declared unit is not the samples' unit.
+    Physical units are powers of ten apart by at least 10, wider than the surface range widened by
+    :data:`LIKELY_MARGIN` (18-80 µT, 4.4x), so at most one unit puts the value there: that one is named.
+    When none does, the samples are most likely raw counts of the sensor's ADC, whose scale only its
+    sensitivity gives.
+
+    Parameters
+    ----------
+    field_strength : float
+        The fitted field strength, in ``unit``.
+    unit : str or None
+        The declared unit of the samples (any name :func:`get_unit` takes). None, raw counts and names
+        magfit does not know cannot be checked: None is returned.
+
+    Returns
+    -------
+    Reason or None
+        A :class:`magfit.findings.Reason` with code ``"unit_mismatch"`` and, as its remedy, the likely
+        unit (``("unit", "T")``, or ``("unit", "counts")`` for raw counts); None when the value is plausible
+        or cannot be checked.
+
+    >>> field_unit_reason(48.0, "uT") is None
+    True
+    >>> field_unit_reason(6.6e-05, "uT").remedy
+    (('unit', 'T'),)
+    """
+    if unit is None:
+        return None
+    try:
+        declared = get_unit(unit)
+    except OptionError:
+        return None
+    value = float(field_strength)
+    if declared.exponent is None or not value > 0 or value == float("inf"):
+        return None
+    in_ut = value * 10.0 ** (declared.exponent + 6)
+    low, high = PLAUSIBLE_FIELD_UT
+    if low <= in_ut <= high:
+        return None
+    converted = "" if declared.name == "uT" else f" ({in_ut:.3g} uT)"
+    earth = (
+        f"the fitted field strength, {value:.6g} {declared.name}{converted}, is not the Earth's field, which "
+        f"is {EARTH_FIELD_UT[0]:.0f}-{EARTH_FIELD_UT[1]:.0f} uT on the surface ({low:.0f}-{high:.0f} uT allowed for "
+        "altitude and nearby steel)"
+    )
+    for candidate in UNITS.values():
+        if candidate.exponent is None or candidate is declared:
+            continue
+        as_candidate = value * 10.0 ** (candidate.exponent + 6)
+        if EARTH_FIELD_UT[0] / LIKELY_MARGIN <= as_candidate <= EARTH_FIELD_UT[1] * LIKELY_MARGIN:
+            return Reason(
+                f"{earth}: the samples look like {candidate.description} ({value:.6g} {candidate.name} = "
+                f"{as_candidate:.3g} uT), not {declared.description}; declare unit={candidate.name!r}",
+                "unit_mismatch",
+                (("unit", candidate.name),),
+            )
+    return Reason(
+        f"{earth}, nor in any other unit: the samples are most likely the sensor's raw counts (or the sensor "
+        "sits in steel); declare unit='counts', or convert the counts with the sensor's sensitivity (counts per "
+        "gauss) before fitting",
+        "unit_mismatch",
+        (("unit", "counts"),),
+    )

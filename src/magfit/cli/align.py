@@ -168,7 +168,7 @@ def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | 
         name, value, angle_names, _ = custom
         angles = [round(a, 1) + 0.0 for a in custom_angles(total, firmware)]  # + 0.0: no "-0.0" to paste
         if firmware == "ardupilot":
-            text = "CUST_ROT_ENABLE 1, COMPASS_ORIENT 101, " + ", ".join(
+            text = f"CUST_ROT_ENABLE 1, {name} {value}, " + ", ".join(
                 f"{n} {a:.1f}" for n, a in zip(angle_names, angles, strict=True)
             )
         else:

@@ -42,7 +42,9 @@ from numpy.typing import ArrayLike
 
 from ..calibration import Calibration
 from ..errors import ExportError, MagfitError, OptionError
-from ._common import with_applied_rotation
+from ..findings import Reason
+from ..units import field_unit_reason, get_unit
+from ._common import comment_lines, with_applied_rotation
 from .adafruit import write_adafruit, write_adafruit_json
 from .ardupilot import write_ardupilot, write_ardupilot_several
 from .betaflight import write_betaflight
@@ -56,7 +58,7 @@ from .ros_madgwick import write_ros_madgwick
 from .rtimulib import write_rtimulib
 from .yamlfile import write_yaml
 
-__all__ = ["FORMATS", "SEVERAL", "FormatSpec", "export", "export_several"]
+__all__ = ["FORMATS", "SEVERAL", "UNIT_CHECKED", "FormatSpec", "export", "export_several"]
 
 
 @dataclass(frozen=True)
@@ -156,6 +158,7 @@ def export(
     device_id: int | None = None,
     expected_field: float | None = None,
     applied_rotation: ArrayLike | None = None,
+    allow_unit_mismatch: bool = False,
 ) -> str:
     """The text of a file that carries ``calibration`` in the convention of ``format``.
 
@@ -189,6 +192,10 @@ def export(
         firmware had applied to the samples before they were logged (``board = R0 @ sensor``; ArduPilot
         logs MAG after COMPASS_ORIENT). The rotation written replaces it, so it includes it. Default:
         ``details["sensor"]["applied_rotation"]``, else none (the samples are the sensor's own readings).
+    allow_unit_mismatch : bool
+        The formats of :data:`UNIT_CHECKED` write the field in a physical unit, and refuse a calibration
+        whose field strength is no place's Earth field in the declared unit
+        (:func:`magfit.units.field_unit_reason`: a wrong ``unit``); True writes it all the same.
 
     Returns
     -------
@@ -202,8 +209,9 @@ def export(
         format does not take (``system_id`` for anything but ``px4``).
     ExportError
         The target cannot represent the calibration (out of its accepted range, a non-symmetric matrix,
-        a rotation or a mirror it has no parameter for) or needs a unit conversion that the unit does not
-        allow (counts, none).
+        a rotation or a mirror it has no parameter for), needs a unit conversion that the unit does not
+        allow (counts, none), or the field strength is not the Earth's in the declared unit (code
+        ``"unit_mismatch"``, unless ``allow_unit_mismatch``).
     """
     spec = _spec(format)
     if not isinstance(calibration, Calibration):
@@ -211,10 +219,12 @@ def export(
     _refuse_residual(calibration, format)
     options = {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field}
     given = _options(spec, {**options, "applied_rotation": applied_rotation})
+    mismatch = _refuse_unit_mismatch(calibration, format, unit, allow_unit_mismatch)
     given.pop("applied_rotation", None)
     if "applied_rotation" in spec.options:
         calibration = with_applied_rotation(calibration, applied_rotation)
-    return spec.writer(calibration, unit, **given)
+    text: str = spec.writer(calibration, unit, **given)
+    return text if mismatch is None else _with_warning(text, format, f"WARNING (written although): {mismatch}")
 
 
 #: The formats :func:`export_several` writes: several compasses of one vehicle in one file.
@@ -230,6 +240,7 @@ def export_several(
     slots: Sequence[int | None] | None = None,
     device_ids: Sequence[int | None] | None = None,
     expected_field: float | None = None,
+    allow_unit_mismatch: bool = False,
 ) -> str:
     """One file holding every compass of a vehicle (issue 13): ``ardupilot``, ``px4`` or ``json``.
 
@@ -241,7 +252,7 @@ def export_several(
         ``ardupilot``: COMPASS_*, COMPASS_*2, COMPASS_*3 in one ``.param`` file; ``px4``: CAL_MAG0..3_* in
         one QGroundControl file; ``json``: a JSON array of magfit's own calibrations (each element reads back
         with ``Calibration.from_dict``).
-    unit, system_id, expected_field
+    unit, system_id, expected_field, allow_unit_mismatch
         As for :func:`export`, applied to every calibration.
     slots, device_ids : sequence of (int or None), optional
         Per calibration, in the same order: the firmware slot and the device id; None (or an entry None)
@@ -261,6 +272,7 @@ def export_several(
         raise MagfitError("export_several() takes a non-empty sequence of magfit.Calibration")
     for calibration in calibrations:
         _refuse_residual(calibration, format)
+        _refuse_unit_mismatch(calibration, format, unit, allow_unit_mismatch)
     if format in ("ardupilot", "px4"):  # their mounting rotations, as in export()
         calibrations = [with_applied_rotation(c, None) for c in calibrations]
     if format not in SEVERAL:
@@ -287,6 +299,45 @@ def export_several(
     return write_px4_several(
         calibrations, unit, system_id=1 if system_id is None else system_id, slots=slots, device_ids=device_ids
     )
+
+
+#: The formats that write the field in a physical unit and refuse a calibration whose field strength is not the
+#: Earth's in the declared unit (a wrong unit), unless forced: the values a consumer reads in µT, tesla or the
+#: unit the file names would be wrong by a power of ten. ``ardupilot`` and ``px4`` refuse any field outside
+#: their own narrower arming and calibration ranges, forced or not (their messages name the likely unit too).
+#: ``json`` is magfit's lossless record and keeps every calibration; ``magcal``, ``inav`` and ``betaflight``
+#: name no unit.
+UNIT_CHECKED = ("c", "fusion", "adafruit", "adafruit-json", "rtimulib", "ros-madgwick", "yaml")
+
+
+def _refuse_unit_mismatch(calibration: Calibration, format: str, unit: str | None, allow: bool) -> Reason | None:
+    """Refuse a field strength that no place on Earth has in the declared unit (see :data:`UNIT_CHECKED`).
+
+    Returns the reason when ``allow`` writes the calibration all the same (the file then says so), else None.
+    """
+    if format not in UNIT_CHECKED:
+        return None
+    declared = calibration.unit if unit is None else get_unit(unit).name  # OptionError for a misspelt unit
+    reason = field_unit_reason(calibration.field_strength, declared)
+    if reason is not None and allow:
+        return reason
+    if reason is not None:
+        raise ExportError(
+            f"the {format} export writes the field in {declared}, and {reason}; or pass allow_unit_mismatch=True "
+            "to write it all the same",
+            codes=(reason.code,),
+            remedy=reason.remedy,
+        )
+    return None
+
+
+def _with_warning(text: str, format: str, warning: str) -> str:
+    """``text`` with ``warning`` as comment lines after its first line (C block comments or ``#``; JSON has none)."""
+    if format == "adafruit-json":
+        return text
+    first, rest = text.split("\n", 1)
+    prefix = " * " if first.startswith("/*") else "# "
+    return "\n".join([first, *comment_lines(warning, prefix=prefix), rest])
 
 
 def _refuse_residual(calibration: Calibration, format: str) -> None:

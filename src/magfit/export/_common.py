@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -43,6 +44,38 @@ def plain(text: object) -> str:
     """``text`` as printable ASCII on one line, safe inside any comment (C, MATLAB, shell, params)."""
     ascii_text = "".join(ch if " " <= ch <= "~" else "?" for ch in str(text))
     return ascii_text.replace("*/", "*_/")
+
+
+def comment_lines(text: str, prefix: str = "# ", width: int = 100) -> list[str]:
+    """``text`` as comment lines of at most ``width`` characters, each starting with ``prefix``.
+
+    For readers with a line buffer (RTIMULib's ``fgets(buf, 200, ...)``): a long line would be split into a
+    second "line" that is no comment. Continuation lines are indented by two more spaces.
+    """
+    return textwrap.wrap(
+        plain(text),
+        width=width,
+        initial_indent=prefix,
+        subsequent_indent=prefix + "  ",
+        break_on_hyphens=False,
+    ) or [prefix.rstrip()]
+
+
+def yaml_float(value: float) -> str:
+    """The shortest text that reads back as the same double in every YAML reader, 1.1 and 1.2.
+
+    ``repr`` gives ``3e-05`` for 0.00003; YAML 1.1's float pattern (PyYAML, ROS 1's ``rosparam``) needs a
+    ``.`` in the mantissa, ``[-+]?([0-9][0-9_]*)?\\.[0-9.]*([eE][-+][0-9]+)?``, and reads ``3e-05`` as the
+    string "3e-05". ``3.0e-05`` matches it and YAML 1.2's core schema,
+    ``[-+]?(\\.[0-9]+|[0-9]+(\\.[0-9]*)?)([eE][-+]?[0-9]+)?``, alike (Python's exponent always has its sign).
+    """
+    text = repr(float(value))
+    if not math.isfinite(value):
+        return {"inf": ".inf", "-inf": "-.inf"}.get(text, ".nan")
+    mantissa, e, exponent = text.partition("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return mantissa + e + exponent
 
 
 def float32_text(value: float) -> str:

@@ -16,6 +16,8 @@ the loss, not a flight prediction.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -46,13 +48,22 @@ def heading_error_deg(calibration: Calibration, matrix: ArrayLike, offset: Array
     """
     target_matrix = np.asarray(matrix, dtype=np.float64)
     target_offset = np.asarray(offset, dtype=np.float64)
+    return heading_error_of(calibration, lambda raw: (raw - target_offset) @ target_matrix.T)
+
+
+def heading_error_of(calibration: Calibration, correct: Callable[[NDArray[np.float64]], NDArray[np.float64]]) -> float:
+    """The worst heading error (degrees) of a target's own correction against ``calibration.apply``.
+
+    ``correct`` maps raw samples (N, 3), in the calibration's unit, to the target's corrected vectors (N, 3),
+    in its own arithmetic (integers, truncation); the grid of fields is that of :func:`heading_error_deg`.
+    """
     inclinations = np.radians(np.linspace(-MAX_INCLINATION_DEG, MAX_INCLINATION_DEG, 29))
     headings = np.radians(np.arange(0.0, 360.0, 0.5))
     inc, head = np.meshgrid(inclinations, headings, indexing="ij")
     directions = np.stack([np.cos(inc) * np.cos(head), np.cos(inc) * np.sin(head), np.sin(inc)], axis=-1)
     field: NDArray[np.float64] = calibration.field_strength * directions.reshape(-1, 3)
     raw = np.linalg.solve(calibration.matrix, field.T).T + calibration.offset
-    seen = (raw - target_offset) @ target_matrix.T
+    seen = correct(raw)
     error = np.arctan2(seen[:, 1], seen[:, 0]) - np.arctan2(field[:, 1], field[:, 0])
     error = (error + np.pi) % (2.0 * np.pi) - np.pi
     return float(np.degrees(np.max(np.abs(error))))

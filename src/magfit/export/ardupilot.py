@@ -66,9 +66,14 @@ With the polar split ``M = Q @ S`` (:func:`magfit.rotations.polar_decomposition`
 rotated frame) give ``D @ (R @ raw + OFS) = k M @ (raw - offset)`` exactly. R is written as
 ``COMPASS_ORIENT``: the nearest fixed rotation (:func:`magfit.rotations.nearest_rotation`) when it is
 within :data:`._common.ROTATION_TOLERANCE_DEG` of Q (D then uses it, and the residual rotation, with the
-heading error it costs, is stated), else ArduPilot 4.2's custom rotation ``COMPASS_ORIENT = 101`` with
-``CUST_ROT1_ROLL/PITCH/YAW`` (``CUST_ROT_ENABLE = 1``; 102 and ``CUST_ROT2_*`` for a second compass),
-exact. A mirror (det M < 0) is refused: ArduPilot's rotations are proper. The samples must be the
+heading error it costs, is stated), else ArduPilot 4.2's custom rotation ``COMPASS_ORIENT = 102`` with
+``CUST_ROT2_ROLL/PITCH/YAW`` (``CUST_ROT_ENABLE = 1``), exact. Not CUST_ROT1: ArduPilot's own parameter
+conversion gives CUST_ROT1 to a custom board orientation (``AP_AHRS::init``, ``AHRS_ORIENTATION = 101``) and
+CUST_ROT2 to a compass (``Compass::init``), so a second compass needing a custom rotation is refused. While
+``CUST_ROT_ENABLE`` is 0, ArduPilot hides ``CUST_ROT2_*`` (``AP_PARAM_FLAG_ENABLE`` on ``CUST_ROT_ENABLE`` in
+AP_CustomRotations.cpp), so a ground station that fetched the parameters before cannot set them: one load
+leaves ``COMPASS_ORIENT = 102`` with the identity. The file opens with :data:`LOAD_TWICE`: load, reboot,
+refresh, load again. A mirror (det M < 0) is refused: ArduPilot's rotations are proper. The samples must be the
 sensor's field with ``COMPASS_ORIENT = 0`` and no calibration applied; ArduPilot applies
 ``COMPASS_ORIENT`` to external compasses only (an internal one follows ``AHRS_ORIENTATION``), which the
 file says when the rotation is not the identity.
@@ -88,6 +93,7 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
 from ..rotations import custom_angles
+from ..units import field_unit_reason
 from ._common import (
     ROTATION_TOLERANCE_DEG,
     SlotParameters,
@@ -122,11 +128,26 @@ SCALE_RANGE = (0.85, 1.4)
 SCALE_DOCUMENTED_MAX = 1.3
 #: The COMPASS_SCALE written without an expected field: magfit's corrected field is already in milligauss.
 SCALE = 1.0
-#: Compasses ArduPilot calibrates (COMPASS_OFS, OFS2, OFS3) and custom rotations it has (CUST_ROT1, CUST_ROT2).
+#: Compasses ArduPilot calibrates (COMPASS_OFS, OFS2, OFS3).
 COMPASS_COUNT = 3
-CUSTOM_ROTATION_COUNT = 2
-#: COMPASS_ORIENT's value for CUST_ROT1 (ROTATION_CUSTOM_1 in rotations.h, ArduPilot 4.2+); CUST_ROT2 is 102.
-ROTATION_CUSTOM_1 = 101
+#: The custom rotation a compass gets: CUST_ROT2, COMPASS_ORIENT = 102 (ROTATION_CUSTOM_2 in rotations.h,
+#: ArduPilot 4.2+). ArduPilot has two (NUM_CUST_ROT, AP_CustomRotations.h), and its own parameter conversion
+#: gives CUST_ROT1 to the board (AP_AHRS::init: AHRS_ORIENTATION 100 becomes 101, AHRS_CUSTOM_ROLL/PIT/YAW go
+#: to CUST_ROT1_*) and CUST_ROT2 to a compass (Compass::init: COMPASS_ORIENT 100 becomes 102). Writing CUST_ROT1
+#: would turn the board of a vehicle with AHRS_ORIENTATION = 101, so a compass never gets it.
+COMPASS_CUSTOM_ROTATION = 2
+#: COMPASS_ORIENT's value for CUST_ROTn is 100 + n.
+ROTATION_CUSTOM_BASE = 100
+#: CUST_ROTn_* exist only while CUST_ROT_ENABLE is 1: AP_CustomRotations declares CUST_ROT_ENABLE with
+#: AP_PARAM_FLAG_ENABLE, and AP_Param hides the rest of such a group while it is 0 (_hide_disabled_groups),
+#: so a ground station that fetched the parameters before has no CUST_ROTn_* to set. The file says so.
+LOAD_TWICE = (
+    "# LOAD THIS FILE TWICE. CUST_ROT2_ROLL/PITCH/YAW exist only while CUST_ROT_ENABLE = 1 (AP_CustomRotations;",
+    "#   ArduPilot hides them while it is 0): the first load sets CUST_ROT_ENABLE (Mission Planner reports the",
+    "#   CUST_ROT2_* lines missing, MAVProxy skips them). Reboot, refresh the parameters (Mission Planner:",
+    "#   Refresh Params; MAVProxy: param fetch), load this file again and reboot. After the first load alone,",
+    "#   COMPASS_ORIENT = 102 turns the field by CUST_ROT2 = 0, 0, 0: no rotation at all. Do not fly in between.",
+)
 
 
 def suffix(slot: int) -> str:
@@ -206,10 +227,14 @@ def _compass(
     # The field first: a wrong unit shows there, before it inflates the offset.
     field = k * calibration.field_strength
     if not FIELD_RANGE_MG[0] <= field <= FIELD_RANGE_MG[1]:
+        mismatch = field_unit_reason(calibration.field_strength, source.name)
         raise ExportError(
             f"ArduPilot would refuse to arm ('Check mag field'): the corrected field is {field:.4g} mG, outside "
-            f"{FIELD_RANGE_MG[0]:.0f}-{FIELD_RANGE_MG[1]:.0f} mG; check the unit of the samples "
-            f"(unit={source.name!r} was used)"
+            f"{FIELD_RANGE_MG[0]:.0f}-{FIELD_RANGE_MG[1]:.0f} mG; "
+            + f"check the unit of the samples (unit={source.name!r} was used)"
+            + (f": {mismatch}" if mismatch else ""),
+            codes=("unit_mismatch",) if mismatch else (),
+            remedy=mismatch.remedy if mismatch else (),
         )
     length = k * float(np.linalg.norm(calibration.offset))
     if length > OFFSET_MAX_MG:
@@ -300,24 +325,28 @@ def _orientation(
             f"{ROTATION_TOLERANCE_DEG} deg): a heading error of up to {loss:.2f} deg ({ASSUMPTION})"
         )
     else:
-        if custom > CUSTOM_ROTATION_COUNT:
+        if custom > 1:
             raise ExportError(
-                f"ArduPilot has {CUSTOM_ROTATION_COUNT} custom rotations (CUST_ROT1, CUST_ROT2), and compass "
-                f"slot {slot} would need a third (its alignment is {split.standard.angle_deg:.1f} deg from "
-                "every fixed COMPASS_ORIENT); export that compass on its own, or align it to a fixed rotation"
+                f"compass slot {slot} needs a custom rotation too (its alignment is {split.standard.angle_deg:.1f} "
+                "deg from every fixed COMPASS_ORIENT), and another compass of this file has CUST_ROT2; ArduPilot's "
+                "other one, CUST_ROT1, is the board's (its parameter conversion gives it to AHRS_ORIENTATION 101), "
+                "so magfit does not write it: mount one compass on a fixed orientation (within "
+                f"{ROTATION_TOLERANCE_DEG} deg), or export the compasses in separate files and set the second's "
+                "rotation by hand where AHRS_ORIENTATION is not 101"
             )
         rotation = split.rotation
         roll, pitch, yaw = custom_angles(rotation, "ardupilot")
-        orientation[f"COMPASS_ORIENT{n}"] = float(ROTATION_CUSTOM_1 + custom - 1)
+        k = COMPASS_CUSTOM_ROTATION
         orientation["CUST_ROT_ENABLE"] = 1.0
+        orientation[f"COMPASS_ORIENT{n}"] = float(ROTATION_CUSTOM_BASE + k)
         orientation |= {
-            f"CUST_ROT{custom}_{axis}": value
+            f"CUST_ROT{k}_{axis}": value
             for axis, value in zip(("ROLL", "PITCH", "YAW"), (roll, pitch, yaw), strict=True)
         }
         comments.append(
-            f"# COMPASS_ORIENT{n} = {ROTATION_CUSTOM_1 + custom - 1}: custom rotation CUST_ROT{custom} (ArduPilot "
-            f"4.2+; reboot after loading), the fitted alignment exactly; the nearest fixed one, "
-            f"{split.standard.name}, is {split.standard.angle_deg:.2f} deg away"
+            f"# COMPASS_ORIENT{n} = {ROTATION_CUSTOM_BASE + k}: custom rotation CUST_ROT{k} (ArduPilot 4.2+), the "
+            f"fitted alignment exactly; the nearest fixed one, {split.standard.name}, is "
+            f"{split.standard.angle_deg:.2f} deg away. CUST_ROT1 is left to the board (AHRS_ORIENTATION 101)"
         )
     if not np.allclose(rotation, np.eye(3)):
         comments.append(
@@ -391,8 +420,10 @@ def _file(calibrations: Sequence[Calibration], compasses: list[SlotParameters], 
     source = physical_unit(first, unit, "ardupilot", "milligauss")
     k = factor(source, "mG")
     which = ", ".join(f"{c.slot + 1} (COMPASS_*{suffix(c.slot)})" for c in compasses)
+    custom = any("CUST_ROT_ENABLE" in c.parameters for c in compasses)
     lines = [
         f"# ArduPilot compass calibration: compass {which}",
+        *(LOAD_TWICE if custom else ()),
         *(f"# {line}" for line in describe(first, source.name) if len(compasses) == 1),
         "# ArduPilot corrects each sample (AP_Compass_Backend::correct_field), in milligauss, body frame:",
         "#   mag += (OFS_X, OFS_Y, OFS_Z)",

@@ -3,7 +3,12 @@
 INAV's ``compassUpdate`` (src/main/sensors/compass.c, iNavFlight/inav 005b1ee) corrects each raw
 reading ``magADCRaw`` (int16 counts, sensor frame), before the board and sensor alignment::
 
-    magADC[axis] = (magADCRaw[axis] - magZero[axis]) * 1024 / magGain[axis]     # int32, truncating
+    magADC[axis] = (magADC[axis] - magZero.raw[axis]) * 1024 / magGain[axis]    # magADC = magADCRaw
+
+The arithmetic is that of ``mag.magADC``'s type (``mag_t`` in src/main/sensors/compass.h): ``float`` in
+current INAV, since the sensors went float internally (iNavFlight/inav PR #9075, 2023, INAV 7.0 on), so
+the division is exact to float; ``int32_t`` in the releases before, so C's integer division truncates
+toward zero. The file states the heading loss for both (:func:`heading_losses`) and says which is which.
 
 INAV's own calibration sets magGain to the largest deviation from the zero on each axis, so the
 corrected field has a radius of about 1024. It holds a diagonal correction only. magfit maps its
@@ -32,12 +37,13 @@ alignment INAV skips the board alignment. A mirror is refused. The samples must 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import ExportError
 from ..rotations import custom_angles, custom_rotation
 from ._common import ROTATION_TOLERANCE_DEG, describe, plain, raw_counts, samples_note, unit_phrase, vehicle_split
-from ._heading import ASSUMPTION, heading_error_deg
+from ._heading import ASSUMPTION, heading_error_of
 
 #: INAV's corrected scale: (raw - zero) * 1024 / gain.
 INAV_SCALE = 1024
@@ -104,6 +110,26 @@ def _alignment(calibration: Calibration) -> tuple[np.ndarray, list[str], list[st
     return custom_rotation("inav", *angles), commands, comments
 
 
+def heading_losses(
+    calibration: Calibration, zero: NDArray[np.float64], gain: NDArray[np.float64], rotation: NDArray[np.float64]
+) -> tuple[float, float]:
+    """The heading error (degrees) INAV leaves with these integers: (float arithmetic, int32 arithmetic).
+
+    Float (INAV 7.0 on): ``(raw - zero) * 1024 / gain``. Int32 (before): the same, truncated toward zero
+    as C's integer division truncates; both then turned by the alignment. The raw values are those of the
+    heading grid (:func:`._heading.heading_error_of`), not rounded to counts: the sensor's own quantization
+    is the same for both and for magfit's correction, and is not the export's to state.
+    """
+
+    def in_float(raw: NDArray[np.float64]) -> NDArray[np.float64]:
+        return ((raw - zero) * INAV_SCALE / gain) @ rotation.T
+
+    def in_int32(raw: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.trunc((raw - zero) * INAV_SCALE / gain) @ rotation.T
+
+    return heading_error_of(calibration, in_float), heading_error_of(calibration, in_int32)
+
+
 def write_inav(calibration: Calibration, unit: str | None = None) -> str:
     """INAV CLI commands (``set ... = ...``, then ``save``); see the module docstring."""
     settings = inav_settings(calibration, unit)
@@ -111,7 +137,7 @@ def write_inav(calibration: Calibration, unit: str | None = None) -> str:
     rotation, commands, comments = _alignment(calibration)
     zero = np.array([settings[f"magzero_{a}"] for a in AXES], dtype=np.float64)
     gain = np.array([settings[f"maggain_{a}"] for a in AXES], dtype=np.float64)
-    loss = heading_error_deg(calibration, rotation @ np.diag(INAV_SCALE / gain), zero)
+    loss, loss_int32 = heading_losses(calibration, zero, gain, rotation)
     matrix = (
         vehicle_split(calibration, "inav", None).symmetric if calibration.frame == "vehicle" else calibration.matrix
     )
@@ -134,7 +160,9 @@ def write_inav(calibration: Calibration, unit: str | None = None) -> str:
         ]
     lines += [
         f"# Lost: INAV holds a diagonal only. The matrix's off-diagonal terms (largest {largest:.4f}) and the",
-        f"#   rounding cost a heading error of up to {loss:.2f} deg ({ASSUMPTION}).",
+        f"#   rounding cost a heading error of up to {loss:.2f} deg ({ASSUMPTION}),",
+        "#   with INAV 7.0 and later, which compute in float (float magADC, sensors/compass.h);",
+        f"#   up to {loss_int32:.2f} deg with earlier INAV, which computes in int32 and truncates each axis.",
     ]
     if loss >= 0.5:
         lines.append(

@@ -24,6 +24,9 @@ Refused, rather than written wrong:
 - a field strength outside [0.2, 0.7) G: PX4's own calibration rejects such a sphere radius
   (``check_calibration_result`` in mag_calibration.cpp); usually a wrong unit;
 - a diagonal <= 0: ``Magnetometer::set_scale`` silently keeps the old scales;
+- a vehicle rotation more than :data:`._common.ROTATION_TOLERANCE_DEG` from every rotation 0-40: the
+  rotations of current PX4 (:data:`magfit.rotations.PX4_ROTATION_MAX`; ``ParametersUpdate`` resets
+  ``CAL_MAGn_ROT`` >= ``ROTATION_MAX`` to 0, no rotation, so 41-47 of mid-2020 releases are not written);
 - a non-symmetric matrix other than a Cholesky root.
 
 An offset above 1.3 G on an axis only draws a warning in PX4 (the sensor may saturate), so the file
@@ -32,12 +35,14 @@ is written with a ``# WARNING`` line.
 PX4 ignores small changes: ``calibration::Magnetometer::set_offset``, ``set_scale`` and
 ``set_offdiagonal`` (src/lib/sensor_calibration/Magnetometer.cpp, PX4-Autopilot a412449) take a new
 OFF, SCALE or ODIAG vector only when it differs from the value in use by more than 0.01 (Euclidean
-length of the three-vector); otherwise the old value stays. From PX4's defaults (OFF 0, SCALE 1,
-ODIAG 0: a new vehicle, or after a reset) a mild soft iron is therefore dropped without a word. When a
-vector of this calibration lies within 0.01 of its default, the file says so with the heading error
-that leaves (:func:`._heading.heading_error_deg`) and gives PX4 shell commands that survive the rule:
-each parameter first set 0.05 away from its final value, then to it (every single step then moves
-by more than 0.01, whatever the value in use).
+length of the three-vector); otherwise the old value stays. And at every boot the value in use is the
+default: the ``Magnetometer`` object starts with ``Reset()`` (OFF 0, SCALE 1, ODIAG 0), then
+``set_device_id`` calls ``ParametersUpdate``, which passes the stored parameters through the same three
+setters. So a stored vector within 0.01 of its default is dropped at every boot, whatever was set before
+the reboot: no parameter value can make PX4 keep it (setting a value 0.05 away and back, which passes
+the rule at run time, lasts only until the next reboot). When a vector of this calibration lies within
+0.01 of its default, the file says so with the heading error PX4 flies with
+(:func:`._heading.heading_error_deg`).
 
 The file is QGroundControl's parameter file format: ``#`` comments, then tab-separated
 ``Vehicle-Id Component-Id Name Value Type`` lines (type 9 = MAV_PARAM_TYPE_REAL32, 6 = INT32), for the
@@ -53,14 +58,14 @@ calibration; without one, PX4 applies the slot only if it already holds the sens
 QGroundControl first). :func:`magfit.export.export_several` writes several in one file.
 
 **A vehicle-frame calibration** (``frame == "vehicle"``, ``corrected_vehicle = M @ (raw - offset)``).
-``Magnetometer::Correct`` (Magnetometer.hpp) applies the rotation *after* the scale matrix:
-``R @ (S @ (raw - OFF))``, so the polar split ``M = Q @ S`` (:func:`magfit.rotations.polar_decomposition`)
-maps onto it with ``S`` as SCALE/ODIAG, ``OFF = k offset`` (in the sensor frame) and R = Q. PX4 has no
-custom rotation: ``CAL_MAGn_ROT`` takes only the 48 fixed rotations of rotation.h (``ParametersUpdate``
-resets any other value to 0), so the file writes the nearest fixed one when it is within
-:data:`._common.ROTATION_TOLERANCE_DEG` of Q (the residual's heading error stated) and refuses otherwise.
-An internal magnetometer ignores ``CAL_MAGn_ROT`` (PX4 resets it to -1 and uses ``SENS_BOARD_ROT``), which
-the file says when R is not the identity. A mirror is refused.
+``Magnetometer::Correct`` (Magnetometer.hpp) applies the rotation *after* the scale matrix: ``R @ (S @ (raw -
+OFF))``, so the polar split ``M = Q @ S`` (:func:`magfit.rotations.polar_decomposition`) maps onto it with
+``S`` as SCALE/ODIAG, ``OFF = k offset`` (in the sensor frame) and R = Q. PX4 has no custom rotation:
+``CAL_MAGn_ROT`` takes only the fixed rotations of rotation.h, 0-40 in current PX4 (``ParametersUpdate``
+resets any other value to 0, no rotation), so the file writes the nearest fixed one when it is within
+:data:`._common.ROTATION_TOLERANCE_DEG` of Q (the residual's heading error stated) and refuses otherwise. An
+internal magnetometer ignores ``CAL_MAGn_ROT`` (PX4 resets it to -1 and uses ``SENS_BOARD_ROT``), which the
+file says when R is not the identity. A mirror is refused.
 """
 
 from __future__ import annotations
@@ -72,6 +77,8 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
+from ..rotations import PX4_ROTATION_MAX
+from ..units import field_unit_reason
 from ._common import (
     ROTATION_TOLERANCE_DEG,
     SlotParameters,
@@ -94,8 +101,6 @@ FIELD_RANGE_G = (0.2, 0.7)
 OFFSET_WARNING_G = 1.3
 #: Magnetometer::set_offset/set_scale/set_offdiagonal: a new vector is taken only if it moves by more than this.
 CHANGE_THRESHOLD = 0.01
-#: The step of the two-step fix: each parameter first set this far from its final value (> CHANGE_THRESHOLD).
-DETOUR = 0.05
 #: MAVLink system ids a vehicle can have (0 is the broadcast id).
 SYSTEM_ID_RANGE = (1, 255)
 #: MAV_PARAM_TYPE_REAL32 and MAV_PARAM_TYPE_INT32, the type column of a QGroundControl parameter file.
@@ -159,9 +164,14 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
     field = k * calibration.field_strength
     low, high = FIELD_RANGE_G
     if not low <= field < high:
+        mismatch = field_unit_reason(calibration.field_strength, source.name)
         raise ExportError(
             f"PX4 rejects a magnetometer calibration whose sphere radius is outside [{low}, {high}) G; the "
-            f"corrected field is {field:.4g} G; check the unit of the samples (unit={source.name!r} was used)"
+            f"corrected field is {field:.4g} G; "
+            + f"check the unit of the samples (unit={source.name!r} was used)"
+            + (f": {mismatch}" if mismatch else ""),
+            codes=("unit_mismatch",) if mismatch else (),
+            remedy=mismatch.remedy if mismatch else (),
         )
     prefix = f"CAL_MAG{where.slot}_"
     comments: list[str] = []
@@ -172,10 +182,10 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
         assert standard is not None
         if standard.angle_deg > ROTATION_TOLERANCE_DEG:
             raise ExportError(
-                f"PX4's CAL_MAGn_ROT holds only its 48 fixed rotations, and the fitted alignment is "
-                f"{standard.angle_deg:.2f} deg from the nearest ({standard.id}, {standard.name}; tolerance "
-                f"{ROTATION_TOLERANCE_DEG} deg); export to 'ardupilot' (custom rotation) or a full-matrix format, or "
-                "mount the magnetometer on a fixed rotation"
+                f"PX4's CAL_MAGn_ROT holds only its fixed rotations (0-{PX4_ROTATION_MAX}), and the fitted "
+                f"alignment is {standard.angle_deg:.2f} deg from the nearest ({standard.id}, {standard.name}; "
+                f"tolerance {ROTATION_TOLERANCE_DEG} deg); export to 'ardupilot' (custom rotation) or a full-matrix "
+                "format, or mount the magnetometer on a fixed rotation"
             )
         matrix = split.symmetric
         loss = heading_error_deg(calibration, np.asarray(standard.matrix) @ matrix, calibration.offset)
@@ -183,6 +193,10 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
         comments.append(
             f"# {prefix}ROT = {standard.id} ({standard.name}) is {standard.angle_deg:.2f} deg from the fitted "
             f"alignment (tolerance {ROTATION_TOLERANCE_DEG} deg): a heading error of up to {loss:.2f} deg"
+        )
+        comments.append(
+            f"#   (chosen among 0-{PX4_ROTATION_MAX}, the rotations of every PX4 since late 2020; mid-2020 releases "
+            "also had 41-47, which PX4 now resets to 0, no rotation)"
         )
         comments.append(
             f"# WARNING: PX4 applies {prefix}ROT to an external magnetometer only; for an internal one it resets it "
@@ -214,11 +228,12 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
 
 
 def ignored_vectors(parameters: dict[str, float], slot: int = 0) -> list[str]:
-    """The CAL_MAGn vectors (``"OFF"``, ``"SCALE"``, ``"ODIAG"``) PX4 would keep at its defaults.
+    """The CAL_MAGn vectors (``"OFF"``, ``"SCALE"``, ``"ODIAG"``) PX4 drops at every boot.
 
     PX4 takes a new vector only when it moves by more than :data:`CHANGE_THRESHOLD` from the value
-    in use; from the defaults (OFF 0, SCALE 1, ODIAG 0), a vector closer than that (and not equal
-    to the default: then nothing is lost) is ignored.
+    in use, and at boot the value in use is the default (OFF 0, SCALE 1, ODIAG 0: ``Reset`` before
+    ``ParametersUpdate``), so a stored vector closer than that to its default (and not equal to it:
+    then nothing is lost) is never applied.
     """
     defaults = {"OFF": np.zeros(3), "SCALE": np.ones(3), "ODIAG": np.zeros(3)}
     ignored = []
@@ -370,12 +385,11 @@ def _warnings(calibration: Calibration, entry: SlotParameters, k: float) -> list
     matrix, offset = _as_applied(parameters, ignored, k, entry.slot)
     error = heading_error_deg(reference, matrix, offset) if ignored else 0.0
     if error >= 0.005:  # shown with 2 decimals: below, nothing worth a warning is lost
-        changed = [name for name in names if name.rsplit("_", 1)[1][1:] in ignored]
         lines += [
-            f"# WARNING: {', '.join(ignored)} within {CHANGE_THRESHOLD} of PX4's defaults: a vehicle at its defaults",
-            f"#   keeps them, a heading error of up to {error:.2f} deg ({ASSUMPTION}).",
-            "#   To make PX4 take every value, run in QGroundControl's MAVLink Console (each step moves > 0.01):",
-            *(f"#     param set {name} {float32_text(parameters[name] + DETOUR)}" for name in changed),
-            *(f"#     param set {name} {float32_text(parameters[name])}" for name in changed),
+            f"# WARNING: {', '.join(ignored)} within {CHANGE_THRESHOLD} of PX4's defaults: PX4 never applies them.",
+            "#   At every boot calibration::Magnetometer starts from its defaults (Reset), and ParametersUpdate",
+            f"#   ignores a stored vector closer than {CHANGE_THRESHOLD} to them (set_offset, set_scale,",
+            "#   set_offdiagonal). The vehicle flies without them:",
+            f"#   a heading error of up to {error:.2f} deg ({ASSUMPTION}).",
         ]
     return lines

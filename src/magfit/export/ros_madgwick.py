@@ -11,7 +11,9 @@ the factor from the samples' unit to tesla (1e-6 for µT). The parameters are de
 names and a range of -10 to 10 (ROS 2: ``add_parameter("mag_bias_x", ...)``; ROS 1: the dynamic
 reconfigure file cfg/ImuFilterMadgwick.cfg). The file is a ROS 2 parameter file for any node name
 (``/**``: the node is ``imu_filter_madgwick`` when run alone, ``imu_filter`` from the package's
-launch file); for ROS 1, load the three keys into the node's namespace (``rosparam load``).
+launch file); for ROS 1, load the three keys into the node's namespace (``rosparam load``). The values
+always carry a decimal point (``2.5e-05``, ``3.0e-05``): ``rosparam`` reads YAML 1.1, where ``3e-05`` is a
+string (:func:`._common.yaml_float`).
 
 What dropping magfit's matrix costs is said in the file as a heading error computed for the
 calibration at hand (:func:`._heading.heading_error_deg`); the ``yaml`` export keeps the full matrix.
@@ -27,7 +29,7 @@ import numpy as np
 
 from ..calibration import Calibration
 from ..errors import ExportError
-from ._common import describe, factor, float32_text, physical_unit, plain
+from ._common import describe, factor, float32_text, physical_unit, plain, yaml_float
 from ._heading import ASSUMPTION, heading_error_deg
 
 #: ROS 2 parameter files: "/**" matches every node name.
@@ -67,6 +69,6 @@ def write_ros_madgwick(calibration: Calibration, unit: str | None = None) -> str
         "# ROS 1: rosparam load the three mag_bias_* keys into the node's namespace.",
         f'"{NODE}":',
         "  ros__parameters:",
-        *(f"    mag_bias_{a}: {float(v)!r}" for a, v in zip(AXES, bias, strict=True)),
+        *(f"    mag_bias_{a}: {yaml_float(v)}" for a, v in zip(AXES, bias, strict=True)),
     ]
     return "\n".join(lines) + "\n"

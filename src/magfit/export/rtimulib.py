@@ -22,6 +22,10 @@ same values ``CompassCalEllipsoidOffset`` and ``CompassCalEllipsoidCorr11``). Li
 are skipped. The file holds these keys only: merge them into the RTIMULib.ini that holds the IMU's
 type and bus (a key given twice takes the later value; ``saveSettings`` rewrites the whole file).
 
+Lines: ``RTIMUSettings::loadSettings`` reads the file with ``fgets(buf, 200, m_fd)`` and aborts at the first
+line ``sscanf`` cannot parse, so every comment is wrapped to :data:`LINE_WIDTH` characters: a longer one
+would come back from fgets in two pieces, the second no comment.
+
 Refused: no physical unit, values outside float32. A non-symmetric matrix is written as fitted with
 the warning of :func:`._common.rotated_frame_warning`.
 """
@@ -29,9 +33,16 @@ the warning of :func:`._common.rotated_frame_warning`.
 from __future__ import annotations
 
 from ..calibration import Calibration
-from ._common import check_float32, describe, factor, float32_text, physical_unit, plain, rotated_frame_warning
+from ._common import check_float32, comment_lines, describe, factor, float32_text, physical_unit, rotated_frame_warning
 
 AXES = "XYZ"
+#: RTIMUSettings::loadSettings reads with ``fgets(buf, 200, m_fd)``: at most 199 characters, the newline
+#: included, per call; the rest of a longer line comes back as a line of its own, which, unless it happens
+#: to start with '#', ' ' or a newline, ``sscanf("%[^=]=%s")`` rejects ("Bad line in settings file"), and
+#: loadSettings returns false with the settings read so far. Every line written is at most this long.
+LINE_WIDTH = 100
+#: The longest line (without its newline) fgets(buf, 200) returns whole, with the newline.
+READER_LINE_MAX = 198
 
 
 def rtimulib_settings(calibration: Calibration, unit: str | None = None) -> dict[str, str]:
@@ -70,7 +81,7 @@ def write_rtimulib(calibration: Calibration, unit: str | None = None) -> str:
         "# RTIMULib compass calibration (RTIMULib.ini keys, uT). Generated file: re-export instead of editing.",
         "# Merge these lines into your RTIMULib.ini (it also holds the IMU type and bus): replace the keys of",
         "# the same names.",
-        *(f"# {plain(line)}" for line in describe(calibration, source.name)),
+        *(wrapped for line in describe(calibration, source.name) for wrapped in comment_lines(line, width=LINE_WIDTH)),
         "# RTIMULib corrects the compass (RTIMU::calibrateAverageCompass), in uT:",
         "#   c = (compass - (max + min) / 2) * (largest half-range / half-range)   min/max stage",
         "#   compass = compassCalCorr * (c - compassCalOffset)                     ellipsoid stage",
@@ -79,6 +90,6 @@ def write_rtimulib(calibration: Calibration, unit: str | None = None) -> str:
     ]
     warning = rotated_frame_warning(calibration)
     if warning:
-        lines.append(f"# {plain(warning)}")
+        lines += comment_lines(warning, width=LINE_WIDTH)
     lines += [f"{key}={value}" for key, value in settings.items()]
     return "\n".join(lines) + "\n"

@@ -11,8 +11,10 @@ republisher, a launch file's parameters)::
       field_strength: B
 
 The values keep the samples' unit (no conversion; raw counts are fine) and are written as the
-shortest text that reads back the same double (``repr``), so a YAML reader gets magfit's numbers
-exactly. A non-symmetric matrix (``root="cholesky"``) is written as fitted, with the warning of
+shortest text that reads back the same double (``repr``) with a decimal point always in the mantissa
+(``3.0e-05``, not ``3e-05``, which YAML 1.1 readers such as PyYAML and ROS 1's ``rosparam`` take for a
+string: :func:`._common.yaml_float`), so every YAML reader gets magfit's numbers exactly. A
+non-symmetric matrix (``root="cholesky"``) is written as fitted, with the warning of
 :func:`._common.rotated_frame_warning` in a comment. Every calibration can be written.
 """
 
@@ -21,13 +23,13 @@ from __future__ import annotations
 import json
 
 from ..calibration import CONVENTION, Calibration
-from ._common import describe, label_unit, plain, rotated_frame_warning
+from ._common import describe, label_unit, plain, rotated_frame_warning, yaml_float
 
 KEY = "magnetometer_calibration"
 
 
 def _number(value: float) -> str:
-    return repr(float(value))
+    return yaml_float(value)
 
 
 def write_yaml(calibration: Calibration, unit: str | None = None) -> str:
