@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import atexit
 import bz2
+import errno
 import gzip
 import lzma
 import os
@@ -23,6 +24,8 @@ import stat
 import sys
 import tempfile
 import threading
+import time
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO, cast
@@ -38,6 +41,8 @@ __all__ = [
     "describe_source",
     "display_name",
     "file_error",
+    "open_pipe_for_writing",
+    "read_once",
 ]
 
 #: The file name that means standard input.
@@ -177,6 +182,60 @@ def _open_pipe(file: Path) -> BinaryIO:
     return os.fdopen(descriptor, "rb")
 
 
+def read_once(path: str | os.PathLike[str], *, limit: int = 64 << 20) -> bytes:
+    """The whole content of a small file such as a calibration, read once: a regular file, or a named pipe
+    whose writer starts within :data:`PIPE_WAIT_SECONDS` (waiting for one that never comes would hang).
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError, PermissionError
+        As :func:`open` (the caller words them).
+    DataFileError
+        A pipe nothing writes into, a device or a socket, or more than ``limit`` bytes.
+    """
+    file = Path(path)
+    mode = file.stat().st_mode
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(file))
+    if stat.S_ISFIFO(mode):
+        handle: BinaryIO = _open_pipe(file)
+    elif stat.S_ISREG(mode):
+        handle = open(file, "rb")
+    else:
+        raise file_error(file, "is a device or a socket, not a file; save its content to a file first")
+    with handle:
+        data = handle.read(limit + 1)
+    if len(data) > limit:
+        raise file_error(file, f"holds more than {limit >> 20} MB, far more than the file magfit expects here")
+    return data
+
+
+def open_pipe_for_writing(path: Path) -> int:
+    """A descriptor on the named pipe ``path`` opened for writing once a reader has opened it, within
+    :data:`PIPE_WAIT_SECONDS`.
+
+    Opening a pipe for writing waits until something reads it; a reader that never comes would hang the command
+    after its work is done. The pipe is opened without blocking (which fails while there is no reader) until
+    one is there, and refused when none comes in time; the descriptor is then made blocking again.
+    """
+    deadline = time.monotonic() + PIPE_WAIT_SECONDS
+    while True:
+        try:
+            descriptor = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+            break
+        except OSError as error:
+            if error.errno != errno.ENXIO:  # ENXIO: no reader yet
+                raise
+            if time.monotonic() >= deadline:
+                raise DataFileError(
+                    f"{path}: is a named pipe (FIFO) and nothing read from it within {PIPE_WAIT_SECONDS:g} s; start "
+                    "its reader first (cat, a consumer), or write to a regular file"
+                ) from None
+            time.sleep(0.02)
+    os.set_blocking(descriptor, True)
+    return descriptor
+
+
 def _decompressing(file: Path, compression: str, name: str) -> BinaryIO:
     if compression == "gzip":
         return cast(BinaryIO, gzip.open(file, "rb"))
@@ -217,8 +276,10 @@ def _copy(
         except DataFileError:
             _remove(target)
             raise
-        except (OSError, EOFError, lzma.LZMAError, ValueError) as error:
+        except Exception as error:
             _remove(target)
+            if not isinstance(error, (OSError, EOFError, lzma.LZMAError, zlib.error, ValueError, *_zstd_errors())):
+                raise
             raise DataFileError(
                 f"{name}: the {what} data cannot be read to its end ({_reason(error)}); the file is damaged or "
                 "was cut short: copy or download it again"
@@ -232,6 +293,15 @@ def _copy(
         if kind not in _how.setdefault(name, []):
             _how[name].append(kind)
         return target
+
+
+def _zstd_errors() -> tuple[type[BaseException], ...]:
+    """zstandard's error type (a zstd frame with junk after its magic number), when the package is there."""
+    try:
+        import zstandard
+    except ImportError:
+        return ()
+    return (zstandard.ZstdError,)
 
 
 def _reason(error: BaseException) -> str:

@@ -193,7 +193,7 @@ def bag_kind(path: str | os.PathLike[str]) -> BagKind | None:
     if path.is_dir():
         return "folder" if (path / "metadata.yaml").is_file() else None
     try:
-        with open(path, "rb") as handle:
+        with open(_bytes_of(path), "rb") as handle:
             head = handle.read(16)
     except OSError:
         return None
@@ -236,7 +236,7 @@ def read_bag_contents(path: str | os.PathLike[str]) -> BagContents:
         raise DataFileError(f"{path}: not a ROS bag (the {what})")
     rosbags = _rosbags()
     try:
-        with _readable(path, kind) as readable:
+        with _readable(path if kind == "folder" else _bytes_of(path), kind) as readable:
             return _read(path, kind, readable, rosbags)
     except DataFileError:
         raise
@@ -406,6 +406,15 @@ def _rosbags() -> Any:
             f"reading ROS bags needs rosbags, which is not installed (the ros extra): {INSTALL_HINT}", name="rosbags"
         ) from None
     return rosbags
+
+
+def _bytes_of(path: Path) -> Path:
+    """The regular file holding ``path``'s bytes: the file itself, or the copy that a named pipe or a compressed
+    file is read into once (:func:`magfit.io.sources.data_file`): a pipe opened a second time would wait for
+    a writer that is gone."""
+    from ..io.sources import data_file
+
+    return data_file(path)
 
 
 @contextmanager

@@ -1,0 +1,164 @@
+"""The second fuzz and security campaign's edges: hangs, damaged compressed files, damaged bags, decompression
+bombs, unusable calibrations, the live session's bad lines and cut rows, the web view, an ambiguous .npz and
+a closed pipe. One regression test per finding, rebuilding its reproducer (docs/reliability.md).
+
+Every test that could hang runs its command on a thread joined with a timeout, with the pipe wait lowered.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+
+import magfit
+import magfit.io.sources as sources
+from magfit.cli import cli
+
+needs_fifo = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs named pipes")
+
+
+def _run(*args: object, input: bytes | None = None) -> Result:
+    return CliRunner().invoke(cli, [str(arg) for arg in args], input=input)
+
+
+def _within(seconds: float, call: Callable[[], Any]) -> Any:
+    """``call()``'s result, failing the test (not hanging it) when it takes longer than ``seconds``."""
+    box: list[Any] = []
+    worker = threading.Thread(target=lambda: box.append(call()), daemon=True)
+    worker.start()
+    worker.join(seconds)
+    assert not worker.is_alive(), f"still running after {seconds} s: a hang"
+    return box[0]
+
+
+def _error(result: Result, status: int, *fragments: str) -> str:
+    """The run failed with ``status`` and one line ``magfit: error: ...`` holding every fragment, no traceback."""
+    assert result.exit_code == status, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit), "a traceback escaped"
+    lines = result.stderr.strip().splitlines()
+    assert lines and lines[-1].startswith("magfit: error: "), result.stderr
+    assert "Traceback" not in result.stderr
+    for fragment in fragments:
+        assert fragment in lines[-1], lines[-1]
+    return lines[-1]
+
+
+def _samples(n: int = 500, seed: int = 1) -> np.ndarray:
+    return magfit.scenario("mpu9250", "steel").simulate(n, seed=seed).samples
+
+
+def _csv(path: Path, samples: np.ndarray) -> Path:
+    np.savetxt(path, samples, fmt="%.10g", delimiter=",", header="mx,my,mz", comments="")
+    return path
+
+
+@pytest.fixture
+def short_pipe_wait(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sources, "PIPE_WAIT_SECONDS", 0.3)
+
+
+@pytest.fixture
+def calibrated(tmp_path: Path) -> tuple[Path, Path, magfit.Calibration]:
+    """A samples file, its saved ellipsoid calibration and the calibration."""
+    samples = _samples()
+    data = _csv(tmp_path / "s.csv", samples)
+    calibration = magfit.fit(samples, method="ellipsoid", diagnostics=False)
+    saved = tmp_path / "cal.json"
+    saved.write_text(calibration.to_json())
+    return data, saved, calibration
+
+
+# ---------------------------------------------------------------------- named pipes: read once, never wait for ever
+
+SIX_COMMANDS = {
+    "calibrate": ["calibrate", "{fifo}", "-m", "ellipsoid"],
+    "compare": ["compare", "{fifo}"],
+    "inspect": ["inspect", "{fifo}"],
+    "apply": ["apply", "{cal}", "{fifo}", "-o", "{out}/applied.csv"],
+    "plot": ["plot", "{fifo}", "-o", "{out}/p.png"],
+    "report": ["report", "{fifo}", "-o", "{out}/r.html"],
+}
+
+
+@needs_fifo
+@pytest.mark.parametrize("command", list(SIX_COMMANDS))
+def test_a_fifo_with_a_writer_is_read_once_by_every_command(
+    command: str, tmp_path: Path, calibrated: tuple[Path, Path, magfit.Calibration]
+) -> None:
+    if command in ("plot", "report"):
+        pytest.importorskip("matplotlib")
+    data, saved, _ = calibrated
+    fifo = tmp_path / "in.fifo"
+    os.mkfifo(fifo)
+    writer = threading.Thread(target=lambda: fifo.write_bytes(data.read_bytes()), daemon=True)
+    writer.start()
+    args = [part.format(fifo=fifo, cal=saved, out=tmp_path) for part in SIX_COMMANDS[command]]
+    result = _within(60, lambda: _run(*args))
+    writer.join(5)
+    assert result.exit_code == 0, result.output
+    if command == "apply":  # the rows that went through the pipe, corrected
+        _, _, calibration = calibrated
+        written = np.loadtxt(tmp_path / "applied.csv", delimiter=",", skiprows=1)
+        np.testing.assert_allclose(written, calibration.apply(np.loadtxt(data, delimiter=",", skiprows=1)), rtol=1e-8)
+
+
+@needs_fifo
+def test_a_fifo_output_without_a_reader_is_refused_in_time(
+    tmp_path: Path, calibrated: tuple[Path, Path, magfit.Calibration], short_pipe_wait: None
+) -> None:
+    data, saved, _ = calibrated
+    fifo = tmp_path / "out.fifo"
+    os.mkfifo(fifo)
+    _error(_within(30, lambda: _run("apply", saved, data, "-o", fifo)), 2, "named pipe", "reader")
+    _error(_within(30, lambda: _run("calibrate", data, "-m", "ellipsoid", "-o", fifo)), 2, "named pipe", "reader")
+    # A reader that comes a little late still gets the rows.
+    received: list[bytes] = []
+    reader = threading.Timer(0.1, lambda: received.append(fifo.read_bytes()))
+    reader.start()
+    result = _within(30, lambda: _run("apply", saved, data, "-o", fifo))
+    reader.join(5)
+    assert result.exit_code == 0, result.output
+    assert received[0].count(b"\n") == 501
+
+
+@needs_fifo
+def test_a_fifo_calibration_without_a_writer_is_refused_in_time(
+    tmp_path: Path, calibrated: tuple[Path, Path, magfit.Calibration], short_pipe_wait: None
+) -> None:
+    data, saved, calibration = calibrated
+    fifo = tmp_path / "cal.fifo"
+    os.mkfifo(fifo)
+    out = tmp_path / "o.csv"
+    _error(_within(30, lambda: _run("apply", fifo, data, "-o", out)), 2, "cal.fifo", "named pipe")
+    assert not out.exists()
+    writer = threading.Thread(target=lambda: fifo.write_text(saved.read_text()), daemon=True)
+    writer.start()
+    result = _within(30, lambda: _run("apply", fifo, data, "-o", out))
+    assert result.exit_code == 0, result.output
+    raw = np.loadtxt(data, delimiter=",", skiprows=1)
+    np.testing.assert_allclose(np.loadtxt(out, delimiter=",", skiprows=1), calibration.apply(raw), rtol=1e-8)
+
+
+# ---------------------------------------------------------------------- damaged compressed files
+
+
+@pytest.mark.parametrize(
+    ("suffix", "magic"),
+    [(".zst", b"\x28\xb5\x2f\xfd"), (".gz", b"\x1f\x8b\x08\x00"), (".xz", b"\xfd7zXZ\x00"), (".bz2", b"BZh9")],
+)
+def test_a_compressed_file_with_junk_after_its_magic_is_an_input_error(
+    suffix: str, magic: bytes, tmp_path: Path
+) -> None:
+    if suffix == ".zst":
+        pytest.importorskip("zstandard")
+    path = tmp_path / f"s.csv{suffix}"
+    path.write_bytes(magic + b"junk" * 20)
+    for command in ("calibrate", "inspect", "compare"):
+        _error(_run(command, path), 2, str(path), "damaged")
