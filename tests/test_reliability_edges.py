@@ -7,6 +7,7 @@ Every test that could hang runs its command on a thread joined with a timeout, w
 
 from __future__ import annotations
 
+import json
 import os
 import threading
 from collections.abc import Callable
@@ -162,3 +163,90 @@ def test_a_compressed_file_with_junk_after_its_magic_is_an_input_error(
     path.write_bytes(magic + b"junk" * 20)
     for command in ("calibrate", "inspect", "compare"):
         _error(_run(command, path), 2, str(path), "damaged")
+
+
+# ---------------------------------------------------------------------- calibrations that read back unusable
+
+
+def _mutated(calibration: magfit.Calibration, **fields: Any) -> str:
+    data = calibration.to_dict()
+    data.update(fields)
+    return json.dumps(data)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "fragment"),
+    [
+        ("matrix", [[1.0, 1e308, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], "'matrix' is not a usable correction"),
+        ("matrix", [[1e308, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1e-300]], "'matrix' is not a usable correction"),
+        ("matrix", [[1, 10**20, 0], [0, 1, 0], [0, 0, 1]], "'matrix' is not a usable correction"),  # det 1, cond 1e40
+        ("offset", [1e200, 0.0, 0.0], "'offset'"),
+    ],
+)
+def test_from_json_refuses_a_calibration_whose_products_leave_float64(
+    field: str, value: Any, fragment: str, tmp_path: Path, calibrated: tuple[Path, Path, magfit.Calibration]
+) -> None:
+    data, _, calibration = calibrated
+    text = _mutated(calibration, **{field: value})
+    with pytest.raises(magfit.DataFileError, match=fragment):
+        magfit.Calibration.from_json(text)
+    for frame in ("sensor", "vehicle"):
+        with pytest.raises(magfit.DataFileError, match=fragment):
+            magfit.Calibration.from_json(_mutated(calibration, **{field: value, "frame": frame}))
+    saved = tmp_path / "bad.json"
+    saved.write_text(text)
+    out = tmp_path / "o.csv"
+    _error(_run("apply", saved, data, "-o", out), 2, "bad.json", fragment)
+    assert not out.exists()  # no inf rows written
+
+
+def test_from_json_refuses_a_number_beyond_float64_in_details(
+    calibrated: tuple[Path, Path, magfit.Calibration],
+) -> None:
+    _, _, calibration = calibrated
+    text = _mutated(calibration, details={"options": {"tolerance": 7.654321}, "x": [1, {"y": 0.123456}]})
+    assert magfit.Calibration.from_json(text).details["x"][1]["y"] == 0.123456
+    with pytest.raises(magfit.DataFileError, match=r"'details\.x\[1\]\.y' is inf"):
+        magfit.Calibration.from_json(text.replace("0.123456", "1e999"))
+    with pytest.raises(magfit.DataFileError, match=r"'details\.options\.tolerance' is -inf"):
+        magfit.Calibration.from_json(text.replace("7.654321", "-1e999"))
+
+
+def test_from_json_still_reads_every_calibration_magfit_writes() -> None:
+    samples = magfit.scenario("mpu9250", "none").simulate(2000, seed=3).samples
+    for method in ("ellipsoid", "sphere", "diag", "minmax", "als", "ml"):
+        calibration = magfit.fit(samples, method=method, allow_undetermined=True)
+        assert magfit.Calibration.from_json(calibration.to_json()) == calibration
+    mirror = magfit.Calibration("vector", np.zeros(3), np.diag([1.0, 1.0, -1.0]), 50.0, frame="vehicle")
+    assert magfit.Calibration.from_json(mirror.to_json()) == mirror  # a left-handed sensor's alignment
+
+
+# ---------------------------------------------------------------------- a reader that closes standard output
+
+
+MAIN = "import sys; from magfit.cli import main; sys.exit(main())"
+
+
+def test_apply_to_stdout_whose_reader_stops_ends_quietly(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    samples = _samples(200_000)
+    data = _csv(tmp_path / "big.csv", samples)
+    saved = tmp_path / "cal.json"
+    saved.write_text(magfit.fit(samples[:2000], method="ellipsoid", diagnostics=False).to_json())
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    process = subprocess.Popen(
+        [sys.executable, "-c", MAIN, "apply", str(saved), str(data), "-o", "-"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
+    assert process.stdout is not None and process.stderr is not None
+    first = process.stdout.readline()  # as head -1 does: one line, then the pipe is closed
+    process.stdout.close()
+    status = process.wait(timeout=120)
+    stderr = process.stderr.read().decode()
+    assert first == b"mx,my,mz\n"
+    assert status in (0, 141), stderr
+    assert "error" not in stderr and "Broken pipe" not in stderr and "Traceback" not in stderr, stderr
