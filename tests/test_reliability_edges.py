@@ -250,3 +250,31 @@ def test_apply_to_stdout_whose_reader_stops_ends_quietly(tmp_path: Path) -> None
     assert first == b"mx,my,mz\n"
     assert status in (0, 141), stderr
     assert "error" not in stderr and "Broken pipe" not in stderr and "Traceback" not in stderr, stderr
+
+
+# ---------------------------------------------------------------------- an .npz with several (N, 3) arrays
+
+
+@pytest.mark.parametrize("names", [("samples", "mag_cal"), ("accel", "mag"), ("arr_0", "arr_1")])
+def test_an_npz_with_two_triples_is_refused_like_a_csv_with_two(names: tuple[str, str], tmp_path: Path) -> None:
+    samples = _samples()
+    other = samples * 0.5 + 3.0
+    path = tmp_path / "two.npz"
+    np.savez(path, **{names[0]: samples, names[1]: other})
+    for command in ("calibrate", "compare"):
+        _error(_run(command, path), 2, "several (N, 3) arrays", names[0], names[1], f"--columns {names[0]}")
+    with pytest.raises(magfit.DataFileError, match=rf"columns=\['{names[0]}'\]"):
+        magfit.io.read_samples(path)
+    # The way out the message gives: each array, chosen by name, is read as it is.
+    for name, expected in zip(names, (samples, other), strict=True):
+        np.testing.assert_array_equal(magfit.io.read_samples(path, columns=[name]).samples, expected)
+        result = _run("calibrate", path, "--columns", name, "-m", "ellipsoid", "-o", tmp_path / f"{name}.json")
+        assert result.exit_code == 0, result.output
+        fitted = magfit.Calibration.from_json((tmp_path / f"{name}.json").read_text())
+        truth = magfit.fit(expected, method="ellipsoid", diagnostics=False)
+        np.testing.assert_allclose(fitted.offset, truth.offset, rtol=1e-9, atol=1e-9)
+    # A text file with two magnetometer triples is refused the same way.
+    text = tmp_path / "two.csv"
+    np.savetxt(text, np.column_stack([samples, other]), delimiter=",", comments="",
+               header="mag_x,mag_y,mag_z,mag2_x,mag2_y,mag2_z")  # fmt: skip
+    _error(_run("calibrate", text), 2)
