@@ -278,3 +278,106 @@ def test_an_npz_with_two_triples_is_refused_like_a_csv_with_two(names: tuple[str
     np.savetxt(text, np.column_stack([samples, other]), delimiter=",", comments="",
                header="mag_x,mag_y,mag_z,mag2_x,mag2_y,mag2_z")  # fmt: skip
     _error(_run("calibrate", text), 2)
+
+
+# ---------------------------------------------------------------------- live: a glitched line, a full disk, a cut row
+
+OFFSET = np.array([10.0, -5.0, 20.0])
+
+
+def _uni_lines(n: int = 1500, glitch_at: int | None = 700) -> tuple[str, np.ndarray]:
+    """``Uni:`` lines of a sphere of 48 µT around OFFSET, one with a magnetometer value of 3e200 at ``glitch_at``."""
+    samples = magfit.simulate(n, field_strength=48.0, seed=1).samples + OFFSET
+    lines = [f"Uni:0.1,0.2,9.8,0,0,0,{x:.4f},{y:.4f},{z:.4f}" for x, y, z in samples]
+    if glitch_at is not None:
+        lines.insert(glitch_at, "Uni:0.1,0.2,9.8,0,0,0,3e200,1,1")
+    return "\r\n".join(lines) + "\r\n", samples
+
+
+def test_a_uni_line_beyond_1e150_is_skipped_and_counted_by_the_parser() -> None:
+    from magfit.live import LineParser
+
+    text, samples = _uni_lines()
+    parser = LineParser()
+    rows = parser.feed(text.encode())
+    assert parser.counts.samples == 1500 and parser.counts.junk == 1
+    assert "3e200" in parser.counts.junk_examples[0]
+    np.testing.assert_allclose(rows, np.round(samples, 4), atol=1e-9)
+
+
+def test_live_with_a_glitched_line_calibrates_and_its_recording_too(tmp_path: Path) -> None:
+    text, _ = _uni_lines()
+    stream = tmp_path / "uni.txt"
+    stream.write_text(text)
+    output, record = tmp_path / "cal.json", tmp_path / "rec.csv"
+    result = _within(120, lambda: _run("live", stream, "-o", output, "--record", record))
+    assert result.exit_code == 0, result.output
+    calibration = magfit.Calibration.from_json(output.read_text())
+    np.testing.assert_allclose(calibration.offset, OFFSET, atol=0.05)  # the truth, to the 4 decimals printed
+    assert abs(calibration.field_strength - 48.0) < 0.05
+    assert len(record.read_text().splitlines()) == 1 + 1500  # the glitched line is not recorded
+    # A recording that holds such a row (written before the parser skipped them): skipped with a count.
+    lines = record.read_text().splitlines()
+    lines.insert(701, "0.500,3e+200,1,1")
+    old = tmp_path / "old.csv"
+    old.write_text("\n".join(lines) + "\n")
+    result = _run("calibrate", old, "-m", "sphere", "-o", tmp_path / "old.json")
+    assert result.exit_code == 0, result.output
+    assert "skipped 1 of 1501 rows" in result.stderr and "(lines 702)" in result.stderr
+    fitted = magfit.Calibration.from_json((tmp_path / "old.json").read_text())
+    np.testing.assert_allclose(fitted.offset, OFFSET, atol=0.05)
+    _error(_run("calibrate", old, "--nonfinite", "error"), 2, "line 702", "3e+200")
+
+
+def test_a_full_disk_during_record_leaves_whole_rows(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+
+    from magfit.live import record as record_module
+    from magfit.live.record import Recorder
+
+    path = tmp_path / "rec.csv"
+    recorder = Recorder(path)
+    samples = magfit.simulate(300, field_strength=48.0, seed=2).samples + OFFSET
+    recorder.write(samples[:100], "uT")
+    real_write = os.write
+    calls = {"n": 0}
+
+    def full_disk(descriptor: int, data: bytes) -> int:
+        calls["n"] += 1
+        if calls["n"] == 1:
+            return real_write(descriptor, data[: len(data) // 2 + 7])  # the disk takes part of the batch ...
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # ... then refuses the rest
+
+    monkeypatch.setattr(record_module.os, "write", full_disk)
+    with pytest.raises(magfit.DataFileError, match="keeps the 100 whole rows"):
+        recorder.write(samples[100:], "uT")
+    monkeypatch.setattr(record_module.os, "write", real_write)
+    recorder.close()
+    text = path.read_text()
+    assert text.endswith("\n") and len(text.splitlines()) == 101  # the header and the first batch, whole
+    np.testing.assert_allclose(np.loadtxt(path, delimiter=",", skiprows=1)[:, 1:], samples[:100], rtol=1e-9)
+
+
+def test_a_recording_whose_last_row_is_cut_is_read_without_it(tmp_path: Path) -> None:
+    samples = magfit.simulate(2000, field_strength=48.0, seed=4).samples + OFFSET
+    whole = tmp_path / "whole.csv"
+    np.savetxt(whole, np.column_stack([np.arange(2000) * 0.01, samples]), fmt="%.10g", delimiter=",",
+               header="time_s,mx(uT),my(uT),mz(uT)", comments="")  # fmt: skip
+    cut = tmp_path / "cut.csv"
+    cut.write_bytes(whole.read_bytes() + b"20.000,51.2345,-3.1")  # a row cut by a full disk or a power cut
+    table = magfit.io.read_samples(cut)
+    assert table.n_rows == 2001 and table.n_skipped == 1 and table.skipped_lines == (2002,)
+    np.testing.assert_array_equal(table.samples, magfit.io.read_samples(whole).samples)
+    result = _run("calibrate", cut, "-m", "sphere", "-o", tmp_path / "cal.json")
+    assert result.exit_code == 0, result.output
+    assert "skipped 1 of 2001 rows" in result.stderr and "cut short" in result.stderr
+    fitted = magfit.Calibration.from_json((tmp_path / "cal.json").read_text())
+    np.testing.assert_allclose(fitted.offset, OFFSET, atol=1e-3)
+    _error(_run("calibrate", cut, "--nonfinite", "error"), 2, "line 2002 is cut short")
+    # A last line with too many fields, or a cut line inside the file, is still refused.
+    (tmp_path / "long.csv").write_bytes(whole.read_bytes() + b"20.000,1,2,3,4")
+    _error(_run("calibrate", tmp_path / "long.csv"), 2, "line 2002 has 5 fields")
+    lines = whole.read_text().splitlines()
+    lines[10] = "0.09,51.2"
+    (tmp_path / "inside.csv").write_text("\n".join(lines) + "\n")
+    _error(_run("calibrate", tmp_path / "inside.csv"), 2, "line 11 has 2 fields")

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import MAX_MAGNITUDE
 from ..errors import DataFileError
 from .atomic import atomic_open
 from .chunks import ChunkReader
@@ -118,12 +119,13 @@ def write_calibrated(
 def _calibrate_finite(
     values: NDArray[np.float64], calibration: Calibration, normalized: bool
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Calibrated copy of ``values`` (N, 3): finite rows corrected, the others all NaN.
+    """Calibrated copy of ``values`` (N, 3): rows within ±MAX_MAGNITUDE corrected, the others (NaN, inf, a
+    value whose square overflows, all skipped by the readers) all NaN.
 
     A row with a missing or non-finite value has no corrected value: copying its raw numbers would mix
     raw and calibrated values in the same columns, so all three become NaN.
     """
-    finite: NDArray[np.bool_] = np.asarray(np.isfinite(values).all(axis=1))
+    finite: NDArray[np.bool_] = np.asarray((np.abs(values) <= MAX_MAGNITUDE).all(axis=1))  # NaN compares False
     result = np.full(np.shape(values), np.nan, dtype=np.float64)
     if finite.any():
         result[finite] = calibration.apply(values[finite], normalized=normalized)
