@@ -68,6 +68,8 @@ _MAGIC: tuple[tuple[bytes, BagKind], ...] = (
     (b"SQLite format 3\x00", "sqlite3"),
 )
 #: The suffix rosbags needs to pick its reader for each kind.
+#: Bags up to this size that run out of memory in the parser are damaged, not too big (see read_bag_contents).
+DAMAGED_IF_OUT_OF_MEMORY_BELOW = 1 << 30
 _SUFFIX: dict[BagKind, str] = {"ros1": ".bag", "mcap": ".mcap", "sqlite3": ".db3"}
 
 
@@ -240,8 +242,13 @@ def read_bag_contents(path: str | os.PathLike[str]) -> BagContents:
             return _read(path, kind, readable, rosbags)
     except DataFileError:
         raise
-    except MemoryError:
-        raise
+    except MemoryError as error:
+        # rosbags allocates what a record's length field announces: a damaged length asks for terabytes. A bag
+        # this small cannot need that much (its messages are read one at a time): it is damaged.
+        if _size(path) > DAMAGED_IF_OUT_OF_MEMORY_BELOW:
+            raise
+        error.args = ("a record announces more bytes than the file holds",)
+        raise DataFileError(_damaged(path, kind, error)) from None
     except Exception as error:  # a damaged bag can fail anywhere in the parser: one line, never a traceback
         raise DataFileError(_damaged(path, kind, error)) from None
 
@@ -576,6 +583,16 @@ class _Collector:
             time_base=base,
             angular_velocity=np.asarray(self.more, dtype=np.float64).reshape(-1, 3),
         )
+
+
+def _size(path: Path) -> int:
+    """Bytes of a bag: its file, or the files of its folder."""
+    try:
+        if path.is_dir():
+            return sum(file.stat().st_size for file in path.iterdir() if file.is_file())
+        return path.stat().st_size
+    except OSError:
+        return 0
 
 
 def _rate(times: NDArray[np.float64]) -> float | None:
