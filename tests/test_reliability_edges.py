@@ -381,3 +381,77 @@ def test_a_recording_whose_last_row_is_cut_is_read_without_it(tmp_path: Path) ->
     lines[10] = "0.09,51.2"
     (tmp_path / "inside.csv").write_text("\n".join(lines) + "\n")
     _error(_run("calibrate", tmp_path / "inside.csv"), 2, "line 11 has 2 fields")
+
+
+# ---------------------------------------------------------------------- decompression bombs
+
+
+def _gzip_bomb(path: Path, rows: int) -> Path:
+    import gzip
+
+    with gzip.open(path, "wb", compresslevel=9) as handle:
+        handle.write(b"mx,my,mz\n")
+        block = b"1,2,3\n" * 100_000
+        for _ in range(rows // 100_000):
+            handle.write(block)
+    return path
+
+
+def _peak_bytes(call: Callable[[], Any]) -> tuple[Any, int]:
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        result = call()
+        return result, tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_a_gzip_bomb_is_refused_within_bounded_memory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The campaign's bomb was 350 KB expanding to 40 million rows (85 s, 2.1 GB); this one is 2 million rows
+    # (12 MB from 17 KB), against a floor lowered from 64 MB to 1 MB.
+    bomb = _gzip_bomb(tmp_path / "bomb.csv.gz", 2_000_000)
+    assert bomb.stat().st_size < 40_000
+    monkeypatch.setattr(sources, "EXPANSION_FLOOR", 1 << 20)
+    for command in ("calibrate", "compare", "inspect"):
+        result, peak = _peak_bytes(lambda command=command: _run(command, bomb))
+        _error(result, 2, "bomb.csv.gz", "expands to more than 1.67 MB", "decompression bomb")
+        assert peak < 8 << 20, f"{command}: {peak / 2**20:.0f} MB traced"  # reading it whole took 48 MB and more
+    sources._forget_all()
+    with pytest.raises(magfit.DataFileError, match="decompression bomb"):
+        magfit.io.read_samples(bomb)
+    # A genuine compressed recording (a few times smaller than its text) is read as before.
+    samples = _samples(100_000)
+    plain = _csv(tmp_path / "s.csv", samples)
+    import gzip
+
+    packed = tmp_path / "s.csv.gz"
+    packed.write_bytes(gzip.compress(plain.read_bytes()))
+    assert plain.stat().st_size > (1 << 20) and packed.stat().st_size * MAX_RATIO_OF_REAL_DATA > plain.stat().st_size
+    np.testing.assert_allclose(magfit.io.read_samples(packed).samples, samples, rtol=1e-9)
+
+
+MAX_RATIO_OF_REAL_DATA = 5  # simulated MPU-9250 counts compress about 3 times
+
+
+def test_an_npz_bomb_is_refused_before_a_member_is_inflated(
+    tmp_path: Path, calibrated: tuple[Path, Path, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The campaign's: 467 KB, one (20 000 000, 3) array of zeros; apply peaked at 3.5 GB. This one is 2 million
+    # rows (46 MB from 45 KB; the floor lowered from 64 MB to 1 MB), refused from the zip header, not inflated.
+    monkeypatch.setattr(sources, "EXPANSION_FLOOR", 1 << 20)
+    _, saved, _ = calibrated
+    bomb = tmp_path / "bomb.npz"
+    np.savez_compressed(bomb, mag=np.zeros((2_000_000, 3)))
+    assert bomb.stat().st_size < 100_000
+    out = tmp_path / "out.npz"
+    result, peak = _peak_bytes(lambda: _run("apply", saved, bomb, "-o", out))
+    _error(result, 2, "bomb.npz", "member 'mag' expands to 45.8 MB", "decompression bomb")
+    assert peak < 8 << 20 and not out.exists()
+    for command in ("calibrate", "compare"):
+        _error(_run(command, bomb), 2, "decompression bomb")
+    # An npz of real samples (compressed or not) is read as before.
+    samples = _samples(50_000)
+    np.savez_compressed(tmp_path / "real.npz", mag=samples)
+    np.testing.assert_array_equal(magfit.io.read_samples(tmp_path / "real.npz").samples, samples)

@@ -58,6 +58,13 @@ _SUFFIXES = {".gz": "gzip", ".gzip": "gzip", ".bz2": "bzip2", ".xz": "xz", ".zst
 _COPY_BLOCK = 1 << 20
 #: How long a named pipe may stay silent before it is refused (its writer not started).
 PIPE_WAIT_SECONDS = 2.0
+#: A compressed file (or .npz member) may expand to at most this many times its compressed size, or to
+#: :data:`EXPANSION_FLOOR` bytes when that is more. Samples compress 2 to 10 times (their last digits are
+#: noise); a file that expands 1000 times is a run of identical rows or a decompression bomb (350 KB of gzip
+#: that expands to 40 million rows), which every command but a streamed fit would hold in memory whole.
+MAX_EXPANSION = 100
+#: Bytes any compressed file may expand to, whatever its ratio (about 2 million rows of text).
+EXPANSION_FLOOR = 64 << 20
 
 _lock = threading.Lock()
 #: Source key -> the temporary copy; temporary copy -> the name messages use.
@@ -148,7 +155,35 @@ def _decompressed(file: Path, name: str) -> Path:
         return file
     original = Path(name) if name != STDIN else None
     key = ("decompressed", str(file.resolve()), status.st_size, status.st_mtime_ns)
-    return _copy(key, name, lambda: _decompressing(file, compression, name), original, compression)
+    content = f"its {compression}-compressed content"
+    limit = (expansion_limit(status.st_size), lambda: expansion_error(name, status.st_size, content))
+    return _copy(key, name, lambda: _decompressing(file, compression, name), original, compression, limit)
+
+
+def expansion_limit(compressed_bytes: int) -> int:
+    """The most bytes ``compressed_bytes`` of compressed data may expand to (:data:`MAX_EXPANSION`)."""
+    return max(MAX_EXPANSION * compressed_bytes, EXPANSION_FLOOR)
+
+
+def expansion_error(name: str, compressed_bytes: int, what: str, expanded_bytes: int | None = None) -> DataFileError:
+    """The refusal of a compressed source that expands beyond :func:`expansion_limit`; ``what`` names what
+    expands (``"its gzip data"``), ``expanded_bytes`` how far when it is known (a zip member's header says)."""
+    limit = expansion_limit(compressed_bytes)
+    size = f"more than {_size_text(limit)}" if expanded_bytes is None else _size_text(expanded_bytes)
+    ratio = (limit if expanded_bytes is None else expanded_bytes) // max(compressed_bytes, 1)
+    return DataFileError(
+        f"{name}: {what} expands to {size} from {_size_text(compressed_bytes)} ({'over ' * (expanded_bytes is None)}"
+        f"{ratio} times; magfit reads up to {MAX_EXPANSION} times, or {_size_text(EXPANSION_FLOOR)}): a "
+        "decompression bomb, or rows repeated far beyond any recording; if the file is genuine, decompress it "
+        "yourself first"
+    )
+
+
+def _size_text(count: int) -> str:
+    for unit, size in (("GB", 1 << 30), ("MB", 1 << 20), ("KB", 1 << 10)):
+        if count >= size:
+            return f"{count / size:.3g} {unit}"
+    return f"{count} bytes"
 
 
 def _open_stdin() -> BinaryIO:
@@ -203,8 +238,12 @@ def read_once(path: str | os.PathLike[str], *, limit: int = 64 << 20) -> bytes:
         handle = open(file, "rb")
     else:
         raise file_error(file, "is a device or a socket, not a file; save its content to a file first")
-    with handle:
-        data = handle.read(limit + 1)
+    parts, size = [], 0
+    with handle:  # a block at a time: read(limit) would allocate the whole limit at once
+        while size <= limit and (block := handle.read(1 << 16)):
+            parts.append(block)
+            size += len(block)
+    data = b"".join(parts)
     if len(data) > limit:
         raise file_error(file, f"holds more than {limit >> 20} MB, far more than the file magfit expects here")
     return data
@@ -254,9 +293,15 @@ def _decompressing(file: Path, compression: str, name: str) -> BinaryIO:
 
 
 def _copy(
-    key: tuple[object, ...], name: str, opener: Callable[[], BinaryIO], original: Path | None, what: str = "input"
+    key: tuple[object, ...],
+    name: str,
+    opener: Callable[[], BinaryIO],
+    original: Path | None,
+    what: str = "input",
+    limit: tuple[int, Callable[[], DataFileError]] | None = None,
 ) -> Path:
-    """The temporary copy of a source (made on first use, under a lock: pieces read on threads share it)."""
+    """The temporary copy of a source (made on first use, under a lock: pieces read on threads share it); a
+    ``limit`` (bytes, and the error) refuses a source that expands beyond it."""
     with _lock:
         existing = _copies.get(key)
         if existing is not None and existing.exists():
@@ -269,7 +314,10 @@ def _copy(
             with os.fdopen(handle, "wb") as out:
                 source = opener()
                 try:
-                    shutil.copyfileobj(source, out, _COPY_BLOCK)
+                    if limit is None:
+                        shutil.copyfileobj(source, out, _COPY_BLOCK)
+                    else:
+                        _copy_at_most(source, out, *limit)
                 finally:
                     if source is not getattr(sys.stdin, "buffer", None):
                         source.close()
@@ -293,6 +341,16 @@ def _copy(
         if kind not in _how.setdefault(name, []):
             _how[name].append(kind)
         return target
+
+
+def _copy_at_most(source: BinaryIO, out: BinaryIO, limit: int, refused: Callable[[], DataFileError]) -> None:
+    """Copy ``source`` into ``out`` block by block, refusing it once more than ``limit`` bytes came."""
+    copied = 0
+    while block := source.read(_COPY_BLOCK):
+        copied += len(block)
+        if copied > limit:
+            raise refused()
+        out.write(block)
 
 
 def _zstd_errors() -> tuple[type[BaseException], ...]:
