@@ -136,6 +136,14 @@ class NpyStream:
             with self.archive.open(f"{self.key}.npy") as handle:
                 self._whole = np.lib.format.read_array(handle, allow_pickle=False)
 
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self._info.shape
+
+    @property
+    def dtype(self) -> np.dtype[Any]:
+        return self._info.dtype
+
     def next_rows(self) -> NDArray[Any]:
         total = self._info.shape[0]
         count = min(self.chunk_rows, total - self._position)
