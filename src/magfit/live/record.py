@@ -49,6 +49,7 @@ class Recorder:
         self._start = time.monotonic()
         self._synced = self._start
         self._size = 0
+        self._unit: str | None = None
         self.rows = 0
 
     def write(self, samples: NDArray[np.float64], unit: str | None) -> None:
@@ -60,9 +61,10 @@ class Recorder:
         """
         if samples.shape[0] == 0 and not self._closing:
             return
+        self._unit = unit if unit is not None else self._unit
         text = ""
         if not self._header_written:
-            suffix = f"({unit})" if unit else ""
+            suffix = f"({self._unit})" if self._unit else ""
             text = f"time_s,mx{suffix},my{suffix},mz{suffix}\n"
         now = time.monotonic()
         stamp = f"{now - self._start:.3f}"
@@ -89,9 +91,13 @@ class Recorder:
                 os.lseek(descriptor, self._size, os.SEEK_SET)
             except OSError:
                 pass
+            kept = (
+                f"it keeps the {self.rows} whole rows written before, which 'magfit calibrate' reads"
+                if self.rows
+                else "it holds no sample yet"
+            )
             raise DataFileError(
-                f"{self.path}: the recording cannot be written ({error.strerror}); it keeps the {self.rows} whole "
-                "rows written before, which 'magfit calibrate' reads"
+                f"{self.path}: the recording cannot be written ({error.strerror}); {kept}; free some space"
             ) from None
         self._size += len(data)
 
