@@ -7,6 +7,11 @@ substitution (``<(zcat log.gz)``), and files compressed with gzip, bzip2, xz or 
 recognised by the file's first bytes (its magic number), not by its name. The copy is made once per
 process and source, and removed when the process exits; messages name the source as the user gave it.
 
+A named pipe is opened once, and refused when nothing writes into it within :data:`PIPE_WAIT_SECONDS`
+(an output pipe, when nothing reads it: :func:`open_pipe_for_writing`). A compressed file is refused once it
+expands beyond :func:`expansion_limit` (a decompression bomb), before any reader holds it in memory; damaged
+compressed data are a :class:`~magfit.DataFileError`, whichever library reports them.
+
 zstd needs the ``zstandard`` package (the ``zstd`` extra); gzip, bzip2 and xz come with Python.
 """
 
