@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import socket
+import struct
+import threading
 import time
 import urllib.request
 from collections.abc import Iterator
@@ -12,7 +15,7 @@ from typing import Any
 import pytest
 
 from magfit.live import LineParser, LiveRun, Session, SimulatedBoard, SimulatedSource, StopRule
-from magfit.live.web import WebView
+from magfit.live.web import WebView, host_allowed
 from test_report_browser import CHROMEDRIVER, CHROMIUM, CHROMIUM_FLAGS, _missing
 
 
@@ -46,6 +49,70 @@ def test_state_follows_the_session_and_the_server_listens_on_loopback_only(page:
     assert abs(sorted(radii)[len(radii) // 2] - 1.0) < 0.05  # corrected samples lie on the unit sphere
     with pytest.raises(urllib.error.HTTPError):
         urllib.request.urlopen(page.url + "other", timeout=5)
+
+
+def _get(web: WebView, path: str, host: str | None) -> tuple[int, bytes]:
+    """A GET with the Host header ``host`` (none when None), on a raw socket: its status and body."""
+    with socket.create_connection(("127.0.0.1", web.port), timeout=10) as connection:
+        header = f"Host: {host}\r\n" if host is not None else ""
+        connection.sendall(f"GET {path} HTTP/1.0\r\n{header}\r\n".encode())
+        reply = b""
+        while chunk := connection.recv(65536):
+            reply += chunk
+    status = int(reply.split(b" ", 2)[1])
+    return status, reply.partition(b"\r\n\r\n")[2]
+
+
+def test_only_requests_addressed_to_loopback_are_answered(page: WebView) -> None:
+    port = page.port
+    for host in (f"127.0.0.1:{port}", f"localhost:{port}", f"[::1]:{port}", "localhost"):
+        status, body = _get(page, "/state.json", host)
+        assert status == 200 and "samples" in json.loads(body), host
+    # A page that rebinds its own name to 127.0.0.1 sends that name: refused, and nothing of the state leaks.
+    for host in (f"evil.example:{port}", f"127.0.0.1.evil.example:{port}", f"127.0.0.1:{port + 1}", "", None):
+        status, body = _get(page, "/state.json", host)
+        assert status == 403 and b"samples" not in body, host
+    assert not host_allowed(f"localhost:{port}:{port}", port) and not host_allowed("[::1]x", port)
+
+
+def _reset(port: int, data: bytes) -> None:
+    """Connect, send ``data`` and close with a reset (SO_LINGER 0), as a client whose connection dies."""
+    connection = socket.create_connection(("127.0.0.1", port), timeout=5)
+    connection.sendall(data)
+    connection.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    connection.close()
+
+
+def test_clients_that_reset_their_connection_print_nothing(page: WebView, capfd: pytest.CaptureFixture[str]) -> None:
+    for _ in range(30):
+        _reset(page.port, b"GET /state")  # reset while the server reads the request line
+        _reset(page.port, f"GET /state.json HTTP/1.1\r\nHost: 127.0.0.1:{page.port}\r\n\r\n".encode())
+    time.sleep(1.0)
+    assert _get(page, "/", f"127.0.0.1:{page.port}")[0] == 200  # still serving
+    captured = capfd.readouterr()
+    assert "Traceback" not in captured.err and "Exception" not in captured.err, captured.err[:2000]
+
+
+def test_idle_connections_hold_a_bounded_number_of_threads_for_a_bounded_time() -> None:
+    source = SimulatedSource(SimulatedBoard(rate_hz=200, speed_dps=300, seed=3))
+    run = LiveRun(source, LineParser(), Session(), stop=StopRule(duration=60)).start()
+    web = WebView(run, max_connections=8, idle_seconds=0.5).start()
+    idle: list[socket.socket] = []
+    try:
+        before = threading.active_count()
+        idle = [socket.create_connection(("127.0.0.1", web.port), timeout=5) for _ in range(60)]
+        time.sleep(0.3)
+        assert threading.active_count() <= before + 8, threading.active_count() - before  # 60 made 60 threads
+        deadline = time.monotonic() + 10
+        while threading.active_count() > before and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert threading.active_count() <= before, "idle connections were not closed"
+        assert _get(web, "/state.json", f"localhost:{web.port}")[0] == 200  # the slots are free again
+    finally:
+        for connection in idle:
+            connection.close()
+        web.close()
+        run.close()
 
 
 @pytest.fixture

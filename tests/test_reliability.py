@@ -319,9 +319,13 @@ def test_5_csv_with_one_huge_row_after_a_full_chunk(tmp_path: Path) -> None:
         handle.write("mx,my,mz\n")
         np.savetxt(handle, _samples(65_536), fmt="%.6f", delimiter=",")
         handle.write("1e200,0,0\n")
+    # Skipped and counted as a NaN row is (a glitch no magnetometer reads); named with --nonfinite error.
     result = _run("calibrate", path, "-m", "ellipsoid")
-    _assert_error(result, 2, "line 65538, column 'mx'", "1e+200")
+    assert result.exit_code == 0, result.output
+    assert "skipped 1 of 65537 rows" in result.stderr and "(lines 65538)" in result.stderr
     assert "Warning" not in result.stderr
+    result = _run("calibrate", path, "-m", "ellipsoid", "--nonfinite", "error")
+    _assert_error(result, 2, "line 65538, column 'mx'", "1e+200")
 
 
 # ---------------------------------------------------------------------- 7. warnings and wrong reasons

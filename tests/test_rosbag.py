@@ -395,3 +395,35 @@ def test_a_truncated_bag_on_the_command_line_is_exit_2_and_one_line(bags: dict[s
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith(f"magfit: error: {damaged}: this "), lines
         assert output.read_text() == "kept"
+
+
+def test_an_mcap_record_announcing_more_than_the_file_is_damage_not_memory(
+    bags: dict[str, Path], tmp_path: Path
+) -> None:
+    import struct
+
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    data = next(bags["mcap"].glob("*.mcap")).read_bytes()
+    records, position = [], 8  # after the magic: opcode (1 byte), length (uint64), body
+    while position < len(data) - 8 and len(records) < 12:
+        length = struct.unpack_from("<Q", data, position + 1)[0]
+        records.append(position)
+        position += 9 + length
+    refused = 0
+    for index, start in enumerate(records):
+        damaged = bytearray(data)
+        struct.pack_into("<Q", damaged, start + 1, 1 << 62)  # a length no machine can allocate
+        path = tmp_path / f"length{index}.mcap"
+        path.write_bytes(bytes(damaged))
+        result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "/imu/mag", "-m", "ellipsoid"])
+        if result.exit_code == 0:  # a record the reader skips (a chunk whose messages the index also holds)
+            continue
+        refused += 1
+        assert result.exit_code == 2, result.output
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and f"{path}: this MCAP file cannot be read" in lines[0], lines
+        assert "memory" not in lines[0].replace("MemoryError", "") and "--max-samples" not in lines[0], lines[0]
+    assert refused >= 3

@@ -48,6 +48,14 @@ __all__ = ["CONVENTION", "FRAMES", "SCHEMA_VERSION", "Calibration"]
 CONVENTION = "corrected = matrix @ (raw - offset)"
 #: Field strengths a calibration can hold: 1/field_strength² (in A of eq. 2) stays a normal float64.
 FIELD_STRENGTH_RANGE = (1e-150, 1e150)
+#: The singular values a saved calibration's matrix may have. magfit scales the matrix to |det| = 1, so they
+#: bracket 1; a matrix outside stretches one direction a million times more than another (a triangular
+#: matrix with a 1e20 entry has det 1): no soft iron does, and its products with the samples (apply, the
+#: exports' inverses) leave float64 or are singular in it.
+MATRIX_SINGULAR_RANGE = (1e-3, 1e3)
+#: Largest offset component a saved calibration may have: the samples' own bound
+#: (:data:`magfit._validation.MAX_MAGNITUDE`), so that raw - offset stays finite.
+MAX_OFFSET = 1e150
 #: What the corrected field's axes are: the magnetometer's own, or the vehicle's (see the module docstring).
 FRAMES = ("sensor", "vehicle")
 #: Version of the JSON layout written by :meth:`Calibration.to_dict`.
@@ -282,8 +290,10 @@ class Calibration:
         DataFileError
             Anything that is not a usable calibration: another schema or version, a missing field, a
             value of the wrong type (strings for numbers, a ragged matrix, ``details`` that is not an
-            object), a mirror (negative determinant) or singular matrix, a field strength outside
-            ``FIELD_STRENGTH_RANGE`` (1e-150 to 1e150), malformed ``details.diagnostics``.
+            object), a mirror (negative determinant) or singular matrix, a matrix whose singular values
+            leave ``MATRIX_SINGULAR_RANGE`` (1e-3 to 1e3), an offset beyond ``MAX_OFFSET``, a field strength
+            outside ``FIELD_STRENGTH_RANGE`` (1e-150 to 1e150), a number in ``details`` beyond float64,
+            malformed ``details.diagnostics``.
         """
         if not isinstance(data, Mapping):
             raise DataFileError(f"a calibration must be a JSON object, got {type(data).__name__}")
@@ -336,6 +346,8 @@ class Calibration:
         if not determinant > 0:
             what = "a mirror (negative determinant)" if determinant < 0 else "singular"
             raise DataFileError(f"calibration 'matrix' is {what}: no soft-iron correction is; re-run the calibration")
+        _check_usable(offset, matrix)
+        _check_finite_details(details)
         try:
             calibration = cls(
                 method=method,
@@ -385,6 +397,47 @@ class Calibration:
         if not isinstance(data, dict):
             raise DataFileError("calibration JSON must be an object")
         return cls.from_dict(data)
+
+
+def _check_usable(offset: NDArray[np.float64], matrix: NDArray[np.float64]) -> None:
+    """Refuse a matrix no soft iron has (singular values outside :data:`MATRIX_SINGULAR_RANGE`) and an offset
+    beyond :data:`MAX_OFFSET`: read back, they would correct samples to inf or make an export's inverse fail."""
+    low, high = MATRIX_SINGULAR_RANGE
+    with np.errstate(all="ignore"):
+        try:
+            singular = np.linalg.svd(matrix, compute_uv=False)
+        except np.linalg.LinAlgError:
+            singular = np.array([np.inf])
+    if not (np.all(np.isfinite(singular)) and singular.max() <= high and singular.min() >= low):
+        stretch = f"{singular.max():.3g} to {singular.min():.3g}" if np.all(np.isfinite(singular)) else "beyond float64"
+        raise DataFileError(
+            f"calibration 'matrix' is not a usable correction: it scales directions by {stretch}, outside {low:g} to "
+            f"{high:g} (magfit writes matrices of determinant 1, whose singular values bracket 1); re-run the "
+            "calibration"
+        )
+    largest = float(np.max(np.abs(offset)))
+    if largest > MAX_OFFSET:
+        raise DataFileError(
+            f"calibration 'offset' holds {largest:.3g}, beyond the {MAX_OFFSET:g} that samples can hold; re-run the "
+            "calibration"
+        )
+
+
+def _check_finite_details(details: Mapping[str, Any]) -> None:
+    """Refuse a number in ``details`` beyond float64 (``1e999`` reads as inf, which :meth:`Calibration.to_json`
+    cannot write back), naming where it is."""
+    pending: list[tuple[str, Any]] = [("details", details)]
+    while pending:
+        where, value = pending.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            raise DataFileError(
+                f"calibration '{where}' is {value}, beyond the range of float64 (JSON has no such number); delete that "
+                "entry or re-run the calibration"
+            )
+        if isinstance(value, Mapping):
+            pending.extend((f"{where}.{key}", item) for key, item in value.items())
+        elif isinstance(value, (list, tuple)):
+            pending.extend((f"{where}[{index}]", item) for index, item in enumerate(value))
 
 
 def _refuse_constant(name: str) -> float:

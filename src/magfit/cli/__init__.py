@@ -9,6 +9,7 @@ stderr and an exit status:
   every method failed;
 - 2: a usage or input error (bad option, unreadable file, malformed samples, refused output path);
 - 3: an unexpected error (a bug: rerun with ``--debug`` for the traceback and report it);
+- 141 (128 + SIGPIPE), quietly, when the reader of standard output closes it (``magfit apply ... -o - | head``);
 - 130 on Ctrl-C (SIGINT), 128 + the signal number on SIGTERM (143) or SIGHUP (129): the command stops,
   its temporary files are removed and no output is left half-written (docs/reliability.md).
 
@@ -20,7 +21,9 @@ Importing :mod:`magfit` never imports this package (click and rich are the ``cli
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
+import sys
 from collections.abc import Iterator, Sequence
 from types import FrameType
 from typing import Any
@@ -51,6 +54,19 @@ def _interrupted(error: BaseException) -> click.exceptions.Exit:
     return click.exceptions.Exit(status)
 
 
+def _closed_pipe() -> click.exceptions.Exit:
+    """The quiet end of a command whose standard output was closed by its reader, as a Unix tool's: no message,
+    status 141 (128 + SIGPIPE, what a shell reports for ``cat big | head``). Standard output is pointed at
+    the null device so that the interpreter's last flush cannot fail again on the way out."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError, AttributeError):  # no real descriptor (a test's captured stdout)
+        pass
+    return click.exceptions.Exit(128 + getattr(signal, "SIGPIPE", 13))
+
+
 class MagfitGroup(click.Group):
     """A click group that reports errors as ``magfit: error: <message>`` with magfit's exit statuses."""
 
@@ -71,6 +87,8 @@ class MagfitGroup(click.Group):
             raise
         except (KeyboardInterrupt, Terminated) as error:  # click would turn Ctrl-C into "Aborted!", status 1
             raise _interrupted(error) from None
+        except BrokenPipeError:  # the reader of standard output is gone (magfit apply ... -o - | head)
+            raise _closed_pipe() from None
         except Exception as error:
             if ctx.params.get("debug"):
                 raise

@@ -276,13 +276,19 @@ nonfinite_option = click.option(
 
 
 def parse_columns(ctx: click.Context, param: click.Parameter, value: str | None) -> list[str | int] | None:
-    """``--columns mx,my,mz`` or ``--columns 0,1,2`` (0-based) into three names or indices."""
+    """``--columns mx,my,mz`` or ``--columns 0,1,2`` (0-based) into three names or indices; ``--columns mag``,
+    one name, is the (N, 3) array of an .npz archive."""
     if value is None:
         return None
     items = [item.strip() for item in value.split(",")]
+    if len(items) == 1 and items[0] and not items[0].isdigit():
+        return [items[0]]
     if len(items) != 3 or not all(items):
         raise click.BadParameter(
-            f"expected three comma-separated column names or 0-based numbers (x,y,z), got {value!r}", ctx, param
+            f"expected three comma-separated column names or 0-based numbers (x,y,z), or the name of an .npz "
+            f"file's (N, 3) array, got {value!r}",
+            ctx,
+            param,
         )
     return [int(item) if item.isdigit() else item for item in items]
 

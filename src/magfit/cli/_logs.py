@@ -91,7 +91,10 @@ def read_recordings(
         # on a file that does not, and refuses an interleaved file without it.
         table = read_samples(path, columns=columns, nonfinite=nonfinite, sensor=sensor)
         if table.n_skipped:
-            warn(f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values")
+            warn(
+                f"{path}: skipped {table.n_skipped} of {table.n_rows} rows with NaN or inf values, values beyond "
+                "±1e150 or a last line cut short"
+            )
         return [
             Recording(
                 path.name,

@@ -19,8 +19,10 @@ if TYPE_CHECKING:
 
 def read_calibration(path: Path) -> Calibration:
     """The calibration saved in ``path`` by ``magfit calibrate -o`` (:meth:`Calibration.to_json`)."""
+    from ..io.sources import read_once
+
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_once(path).decode("utf-8")  # a named pipe read once, refused when nothing writes into it
     except FileNotFoundError:
         raise DataFileError(f"calibration file {path} does not exist") from None
     except (OSError, UnicodeDecodeError) as error:

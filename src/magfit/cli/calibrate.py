@@ -428,7 +428,8 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             lines = ", ".join(map(str, compass.skipped_lines[:5]))
             more = ", ..." if compass.n_skipped > 5 else ""
             warn(
-                f"{compass.path}: skipped {compass.n_skipped} of {compass.n_rows} rows with NaN or inf values (lines "
+                f"{compass.path}: skipped {compass.n_skipped} of {compass.n_rows} rows with NaN or inf values, values "
+                "beyond ±1e150 or a last line cut short (lines "
                 f"{lines}{more}); pass --nonfinite error to refuse such files"
             )
         for message in _fit_warnings(compass.calibration):

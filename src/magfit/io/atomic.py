@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from ..errors import DataFileError, OptionError
+from .sources import open_pipe_for_writing
 
 __all__ = ["STDOUT", "atomic_open", "atomic_write_text", "check_output", "write_all"]
 
@@ -180,9 +181,13 @@ def _stdout(mode: str) -> IO[Any]:
 
 @contextlib.contextmanager
 def _open_stream(target: Path, mode: str, **kwargs: Any) -> Iterator[IO[Any]]:
-    """Write into a FIFO or a device (opening a FIFO waits for its reader, as a shell redirection does)."""
+    """Write into a FIFO or a device. A FIFO waits for its reader, as a shell redirection does, but only
+    :data:`~magfit.io.sources.PIPE_WAIT_SECONDS`: then it is refused, where the shell would wait for ever."""
     try:
-        handle = open(target, mode, **kwargs)
+        if stat.S_ISFIFO(os.stat(target).st_mode):
+            handle = os.fdopen(open_pipe_for_writing(target), mode, **kwargs)
+        else:
+            handle = open(target, mode, **kwargs)
     except OSError as error:
         raise DataFileError(f"{target}: cannot be opened for writing ({error.strerror}); choose another path") from None
     with handle:

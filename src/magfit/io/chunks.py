@@ -231,35 +231,31 @@ class ChunkReader:
         self.n_rows += len(values)
         if values.size and -MAX_MAGNITUDE <= values.min() and values.max() <= MAX_MAGNITUDE:
             return values  # the usual chunk, in two reductions (NaN fails both comparisons)
-        too_large = np.isfinite(values) & (np.abs(values) > MAX_MAGNITUDE)
-        if too_large.any():  # refused here, where the file's line is known, rather than by Statistics
-            row, axis = (int(i) for i in np.argwhere(too_large)[0])
-            place = "line" if self.format.kind == "text" else "row"
-            line = int(to_line(np.array([first_row + row]))[0])
-            raise file_error(
-                self.path,
-                f"{place} {line}, column {self.columns[axis]!r}: {values[row, axis]:.3g} is beyond ±{MAX_MAGNITUDE:g}, "
-                "more than float64 can square; fix or delete that row, or rescale the file",
-            )
-        finite = np.isfinite(values).all(axis=1)
-        if finite.all():
+        # A value beyond ±MAX_MAGNITUDE (its square overflows float64) measures nothing a magnetometer can: such
+        # a row is skipped and counted as a NaN's is (a glitch on a serial line, a damaged row), or named.
+        usable = (np.abs(values) <= MAX_MAGNITUDE).all(axis=1)
+        if usable.all():
             return values
-        bad = np.flatnonzero(~finite)
+        bad = np.flatnonzero(~usable)
         if self.nonfinite == "error":
             row = bad[0]
-            axis = int(np.flatnonzero(~np.isfinite(values[row]))[0])
+            axis = int(np.flatnonzero(~(np.abs(values[row]) <= MAX_MAGNITUDE))[0])
             place = "line" if self.format.kind == "text" else "row"
             line = int(to_line(np.array([first_row + row]))[0])
-            raise file_error(
-                self.path,
-                f"{place} {line}, column {self.columns[axis]!r}: the value is "
-                f"{_nonfinite_word(values[row, axis])}; fix or delete that row, or skip such rows (nonfinite='skip')",
+            value = values[row, axis]
+            problem = (
+                f"{value:.3g} is beyond ±{MAX_MAGNITUDE:g}, more than float64 can square; fix or delete that row, or "
+                "skip such rows (nonfinite='skip')"
+                if np.isfinite(value)
+                else f"the value is {_nonfinite_word(value)}; fix or delete that row, or skip such rows "
+                "(nonfinite='skip')"
             )
+            raise file_error(self.path, f"{place} {line}, column {self.columns[axis]!r}: {problem}")
         self.n_skipped += bad.size
         room = MAX_REPORTED_LINES - len(self._skipped)
         if room > 0:
             self._skipped.extend(int(line) for line in to_line(first_row + bad[:room]))
-        return np.ascontiguousarray(values[finite])
+        return np.ascontiguousarray(values[usable])
 
     def __iter__(self) -> Iterator[NDArray[np.float64]]:
         self.n_rows = 0
@@ -441,6 +437,17 @@ class ChunkReader:
                     if order != list(range(len(order))):  # columns asked in another order than the file's
                         values = values[:, order]
                     yield self._filter(values, to_line)
+        if source.cut_line is not None:  # counted as a skipped row (and refused by nonfinite="error")
+            if self.nonfinite == "error":
+                raise file_error(
+                    self.path,
+                    f"line {source.cut_line} is cut short (fields missing, no line end): the recording was "
+                    "interrupted; delete that line, or skip it (nonfinite='skip')",
+                )
+            self.n_rows += 1
+            self.n_skipped += 1
+            if len(self._skipped) < MAX_REPORTED_LINES:
+                self._skipped.append(source.cut_line)
 
     def _sensor_rows(
         self,
@@ -551,6 +558,10 @@ class _CheckedSource(io.RawIOBase):
         self._line = 0  # lines before the unchecked tail, counted from the first line read
         self._tail = b""  # bytes after the last newline seen: the start of a line not yet complete
         self._blank_rows: list[int] = []  # for each blank line, how many rows come before it
+        self._ready = b""  # checked whole lines not yet passed on
+        self._done = False
+        #: File line number of a last line cut short (left out), else None.
+        self.cut_line: int | None = None
 
     @functools.cached_property
     def _first_line(self) -> int:
@@ -567,20 +578,40 @@ class _CheckedSource(io.RawIOBase):
             size = -1
         if self._max_read is not None and (size < 0 or size > self._max_read):
             size = self._max_read
+        # Only whole, checked lines are passed on; the bytes after the last line end wait for the next read.
+        while not self._ready and not self._done:
+            self._fill(size)
+        if size < 0:
+            data, self._ready = self._ready, b""
+        else:
+            data, self._ready = self._ready[:size], self._ready[size:]
+        return data
+
+    def _fill(self, size: int) -> None:
         data = self._handle.read(size)
         if not data:
-            if self._tail.strip():
-                self._check(self._tail, 1)  # a last line without a line end
-            self._tail = b""
-            return data
+            self._done = True
+            tail, self._tail = self._tail, b""
+            if not tail.strip():
+                self._ready += tail
+                return
+            line = tail.decode(self._reader._text_encoding, errors="replace").rstrip("\r")
+            if len(split_fields(line, self._reader.format.delimiter)) < self._n:
+                # A last line without a line end and with fields missing: a recording cut mid-row (a full
+                # disk, a pulled cable). It is left out and counted; any other bad line is refused.
+                self.cut_line = self._first_line + self._line
+                return
+            self._check(tail, 1)
+            self._ready += tail
+            return
         last = data.rfind(b"\n")
         if last < 0:
             self._tail += data
-            return data
+            return
         segment = self._tail + data[: last + 1]
         self._tail = data[last + 1 :]
         self._check(segment)
-        return data
+        self._ready += segment
 
     def readinto(self, buffer: Any) -> int:
         data = self.read(len(buffer))

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .sources import file_error
+from ..errors import DataFileError
+from .sources import display_name, expansion_error, expansion_limit, file_error
 
 __all__ = ["BROKEN_NPY", "NpyInfo", "NpyStream", "check_npy_array", "npy_info", "npz_members", "one_line"]
 
@@ -51,15 +52,24 @@ def read_npy_header(handle: Any) -> NpyInfo:
 
 
 def npz_members(path: Path) -> dict[str, NpyInfo]:
-    """Shapes and dtypes of the arrays of an npz file, read from their headers only."""
+    """Shapes and dtypes of the arrays of an npz file, read from their headers only; a member that expands
+    beyond :func:`~magfit.io.sources.expansion_limit` is refused (every command but a streamed fit would
+    inflate it whole)."""
     members: dict[str, NpyInfo] = {}
     try:
         with zipfile.ZipFile(path) as archive:
             for info in archive.infolist():
                 if not info.filename.endswith(".npy"):
                     continue
+                key = info.filename[: -len(".npy")]
+                if info.compress_type != zipfile.ZIP_STORED and info.file_size > expansion_limit(info.compress_size):
+                    raise expansion_error(
+                        display_name(path), info.compress_size, f"its member {key!r}", info.file_size
+                    )
                 with archive.open(info) as handle:
-                    members[info.filename[: -len(".npy")]] = read_npy_header(handle)
+                    members[key] = read_npy_header(handle)
+    except DataFileError:
+        raise
     except (zipfile.BadZipFile, zlib.error, *BROKEN_NPY) as error:
         raise file_error(
             path, f"is not a readable .npz archive ({one_line(error)}); re-save it with numpy.savez"
@@ -125,6 +135,14 @@ class NpyStream:
             self._handle.close()
             with self.archive.open(f"{self.key}.npy") as handle:
                 self._whole = np.lib.format.read_array(handle, allow_pickle=False)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self._info.shape
+
+    @property
+    def dtype(self) -> np.dtype[Any]:
+        return self._info.dtype
 
     def next_rows(self) -> NDArray[Any]:
         total = self._info.shape[0]

@@ -140,8 +140,9 @@ def read_samples(
         (:mod:`magfit.io.columns`); without a header, three columns are x, y, z and with more, the first
         three numeric ones are used (``SampleTable.columns`` says which).
     nonfinite : {"skip", "error"}
-        Rows with a NaN, infinite or empty magnetometer value are dropped and counted (``"skip"``), or
-        the first one raises (``"error"``).
+        Rows with a NaN, infinite or empty magnetometer value, or one beyond ±1e150 (whose square overflows
+        float64: no magnetometer reads it), are dropped and counted (``"skip"``), or the first one raises
+        (``"error"``).
     progress : callable, optional
         Called with the number of rows of each chunk read (finite ones; from several threads for a large
         text file), e.g. to advance a progress bar.

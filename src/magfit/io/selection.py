@@ -17,16 +17,12 @@ import numpy as np
 
 from ..errors import DataFileError, OptionError
 from .columns import (
-    _MAG_LETTERS,
-    _MAG_WORDS,
     CONTENT_ROWS,
     ContentChoice,
     Converter,
     choose_columns_by_content,
     find_magnetometer_columns,
     name_unit,
-    name_words,
-    normalise_name,
     recognise_converter,
 )
 from .layout import HEAD_BYTES, FileFormat, cell_kind, decode_lines, read_head, split_fields, text_encoding
@@ -177,11 +173,6 @@ class NpzSelection:
         return (first, second, third)
 
 
-def _looks_magnetic(key: str) -> bool:
-    words = name_words(normalise_name(key))
-    return any(word in _MAG_WORDS or word in _MAG_LETTERS or word.startswith("mag") for word in words)
-
-
 def resolve_npz_columns(path: Path, members: dict[str, NpyInfo], columns: Sequence[str | int] | None) -> NpzSelection:
     listing = ", ".join(f"{key} {members[key].shape}" for key in members)
     vectors = {key: info for key, info in members.items() if len(info.shape) == 1 and is_numeric_dtype(info.dtype)}
@@ -208,15 +199,17 @@ def resolve_npz_columns(path: Path, members: dict[str, NpyInfo], columns: Sequen
             if len(best) > 1:
                 raise _ambiguity(path, best)
             return from_vectors(best[0].names)
+        # Several (N, 3) arrays are refused whatever their names, as a text file with several column triples
+        # is: a key's name ("mag_raw", "mag_cal", "magnitude") does not say which of them holds the raw samples.
         triples = [key for key, info in matrices.items() if info.shape[1] == 3]
-        if len(triples) > 1:
-            triples = [key for key in triples if _looks_magnetic(key)] or triples
         if len(triples) == 1:
             return from_matrix(triples[0], (0, 1, 2))
         if len(triples) > 1:
+            shapes = ", ".join(f"{key} {members[key].shape}" for key in triples)
             raise file_error(
                 path,
-                f"several (N, 3) arrays could be the samples: {', '.join(triples)}; choose one with columns=['key']",
+                f"several (N, 3) arrays could be the samples: {', '.join(triples)} ({shapes}); choose the raw "
+                f"magnetometer's with columns=['{triples[0]}']",
             )
         raise file_error(
             path,

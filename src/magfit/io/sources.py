@@ -7,6 +7,11 @@ substitution (``<(zcat log.gz)``), and files compressed with gzip, bzip2, xz or 
 recognised by the file's first bytes (its magic number), not by its name. The copy is made once per
 process and source, and removed when the process exits; messages name the source as the user gave it.
 
+A named pipe is opened once, and refused when nothing writes into it within :data:`PIPE_WAIT_SECONDS`
+(an output pipe, when nothing reads it: :func:`open_pipe_for_writing`). A compressed file is refused once it
+expands beyond :func:`expansion_limit` (a decompression bomb), before any reader holds it in memory; damaged
+compressed data are a :class:`~magfit.DataFileError`, whichever library reports them.
+
 zstd needs the ``zstandard`` package (the ``zstd`` extra); gzip, bzip2 and xz come with Python.
 """
 
@@ -14,6 +19,7 @@ from __future__ import annotations
 
 import atexit
 import bz2
+import errno
 import gzip
 import lzma
 import os
@@ -23,6 +29,8 @@ import stat
 import sys
 import tempfile
 import threading
+import time
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO, cast
@@ -38,6 +46,8 @@ __all__ = [
     "describe_source",
     "display_name",
     "file_error",
+    "open_pipe_for_writing",
+    "read_once",
 ]
 
 #: The file name that means standard input.
@@ -53,6 +63,13 @@ _SUFFIXES = {".gz": "gzip", ".gzip": "gzip", ".bz2": "bzip2", ".xz": "xz", ".zst
 _COPY_BLOCK = 1 << 20
 #: How long a named pipe may stay silent before it is refused (its writer not started).
 PIPE_WAIT_SECONDS = 2.0
+#: A compressed file (or .npz member) may expand to at most this many times its compressed size, or to
+#: :data:`EXPANSION_FLOOR` bytes when that is more. Samples compress 2 to 10 times (their last digits are
+#: noise); a file that expands 1000 times is a run of identical rows or a decompression bomb (350 KB of gzip
+#: that expands to 40 million rows), which every command but a streamed fit would hold in memory whole.
+MAX_EXPANSION = 100
+#: Bytes any compressed file may expand to, whatever its ratio (about 2 million rows of text).
+EXPANSION_FLOOR = 64 << 20
 
 _lock = threading.Lock()
 #: Source key -> the temporary copy; temporary copy -> the name messages use.
@@ -143,7 +160,35 @@ def _decompressed(file: Path, name: str) -> Path:
         return file
     original = Path(name) if name != STDIN else None
     key = ("decompressed", str(file.resolve()), status.st_size, status.st_mtime_ns)
-    return _copy(key, name, lambda: _decompressing(file, compression, name), original, compression)
+    content = f"its {compression}-compressed content"
+    limit = (expansion_limit(status.st_size), lambda: expansion_error(name, status.st_size, content))
+    return _copy(key, name, lambda: _decompressing(file, compression, name), original, compression, limit)
+
+
+def expansion_limit(compressed_bytes: int) -> int:
+    """The most bytes ``compressed_bytes`` of compressed data may expand to (:data:`MAX_EXPANSION`)."""
+    return max(MAX_EXPANSION * compressed_bytes, EXPANSION_FLOOR)
+
+
+def expansion_error(name: str, compressed_bytes: int, what: str, expanded_bytes: int | None = None) -> DataFileError:
+    """The refusal of a compressed source that expands beyond :func:`expansion_limit`; ``what`` names what
+    expands (``"its gzip data"``), ``expanded_bytes`` how far when it is known (a zip member's header says)."""
+    limit = expansion_limit(compressed_bytes)
+    size = f"more than {_size_text(limit)}" if expanded_bytes is None else _size_text(expanded_bytes)
+    ratio = (limit if expanded_bytes is None else expanded_bytes) // max(compressed_bytes, 1)
+    return DataFileError(
+        f"{name}: {what} expands to {size} from {_size_text(compressed_bytes)} ({'over ' * (expanded_bytes is None)}"
+        f"{ratio} times; magfit reads up to {MAX_EXPANSION} times, or {_size_text(EXPANSION_FLOOR)}): a "
+        "decompression bomb, or rows repeated far beyond any recording; if the file is genuine, decompress it "
+        "yourself first"
+    )
+
+
+def _size_text(count: int) -> str:
+    for unit, size in (("GB", 1 << 30), ("MB", 1 << 20), ("KB", 1 << 10)):
+        if count >= size:
+            return f"{count / size:.3g} {unit}"
+    return f"{count} bytes"
 
 
 def _open_stdin() -> BinaryIO:
@@ -177,6 +222,64 @@ def _open_pipe(file: Path) -> BinaryIO:
     return os.fdopen(descriptor, "rb")
 
 
+def read_once(path: str | os.PathLike[str], *, limit: int = 64 << 20) -> bytes:
+    """The whole content of a small file such as a calibration, read once: a regular file, or a named pipe
+    whose writer starts within :data:`PIPE_WAIT_SECONDS` (waiting for one that never comes would hang).
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError, PermissionError
+        As :func:`open` (the caller words them).
+    DataFileError
+        A pipe nothing writes into, a device or a socket, or more than ``limit`` bytes.
+    """
+    file = Path(path)
+    mode = file.stat().st_mode
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(file))
+    if stat.S_ISFIFO(mode):
+        handle: BinaryIO = _open_pipe(file)
+    elif stat.S_ISREG(mode):
+        handle = open(file, "rb")
+    else:
+        raise file_error(file, "is a device or a socket, not a file; save its content to a file first")
+    parts, size = [], 0
+    with handle:  # a block at a time: read(limit) would allocate the whole limit at once
+        while size <= limit and (block := handle.read(1 << 16)):
+            parts.append(block)
+            size += len(block)
+    data = b"".join(parts)
+    if len(data) > limit:
+        raise file_error(file, f"holds more than {limit >> 20} MB, far more than the file magfit expects here")
+    return data
+
+
+def open_pipe_for_writing(path: Path) -> int:
+    """A descriptor on the named pipe ``path`` opened for writing once a reader has opened it, within
+    :data:`PIPE_WAIT_SECONDS`.
+
+    Opening a pipe for writing waits until something reads it; a reader that never comes would hang the command
+    after its work is done. The pipe is opened without blocking (which fails while there is no reader) until
+    one is there, and refused when none comes in time; the descriptor is then made blocking again.
+    """
+    deadline = time.monotonic() + PIPE_WAIT_SECONDS
+    while True:
+        try:
+            descriptor = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+            break
+        except OSError as error:
+            if error.errno != errno.ENXIO:  # ENXIO: no reader yet
+                raise
+            if time.monotonic() >= deadline:
+                raise DataFileError(
+                    f"{path}: is a named pipe (FIFO) and nothing read from it within {PIPE_WAIT_SECONDS:g} s; start "
+                    "its reader first (cat, a consumer), or write to a regular file"
+                ) from None
+            time.sleep(0.02)
+    os.set_blocking(descriptor, True)
+    return descriptor
+
+
 def _decompressing(file: Path, compression: str, name: str) -> BinaryIO:
     if compression == "gzip":
         return cast(BinaryIO, gzip.open(file, "rb"))
@@ -195,9 +298,15 @@ def _decompressing(file: Path, compression: str, name: str) -> BinaryIO:
 
 
 def _copy(
-    key: tuple[object, ...], name: str, opener: Callable[[], BinaryIO], original: Path | None, what: str = "input"
+    key: tuple[object, ...],
+    name: str,
+    opener: Callable[[], BinaryIO],
+    original: Path | None,
+    what: str = "input",
+    limit: tuple[int, Callable[[], DataFileError]] | None = None,
 ) -> Path:
-    """The temporary copy of a source (made on first use, under a lock: pieces read on threads share it)."""
+    """The temporary copy of a source (made on first use, under a lock: pieces read on threads share it); a
+    ``limit`` (bytes, and the error) refuses a source that expands beyond it."""
     with _lock:
         existing = _copies.get(key)
         if existing is not None and existing.exists():
@@ -210,15 +319,20 @@ def _copy(
             with os.fdopen(handle, "wb") as out:
                 source = opener()
                 try:
-                    shutil.copyfileobj(source, out, _COPY_BLOCK)
+                    if limit is None:
+                        shutil.copyfileobj(source, out, _COPY_BLOCK)
+                    else:
+                        _copy_at_most(source, out, *limit)
                 finally:
                     if source is not getattr(sys.stdin, "buffer", None):
                         source.close()
         except DataFileError:
             _remove(target)
             raise
-        except (OSError, EOFError, lzma.LZMAError, ValueError) as error:
+        except Exception as error:
             _remove(target)
+            if not isinstance(error, (OSError, EOFError, lzma.LZMAError, zlib.error, ValueError, *_zstd_errors())):
+                raise
             raise DataFileError(
                 f"{name}: the {what} data cannot be read to its end ({_reason(error)}); the file is damaged or "
                 "was cut short: copy or download it again"
@@ -232,6 +346,25 @@ def _copy(
         if kind not in _how.setdefault(name, []):
             _how[name].append(kind)
         return target
+
+
+def _copy_at_most(source: BinaryIO, out: BinaryIO, limit: int, refused: Callable[[], DataFileError]) -> None:
+    """Copy ``source`` into ``out`` block by block, refusing it once more than ``limit`` bytes came."""
+    copied = 0
+    while block := source.read(_COPY_BLOCK):
+        copied += len(block)
+        if copied > limit:
+            raise refused()
+        out.write(block)
+
+
+def _zstd_errors() -> tuple[type[BaseException], ...]:
+    """zstandard's error type (a zstd frame with junk after its magic number), when the package is there."""
+    try:
+        import zstandard
+    except ImportError:
+        return ()
+    return (zstandard.ZstdError,)
 
 
 def _reason(error: BaseException) -> str:

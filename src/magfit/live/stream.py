@@ -24,7 +24,6 @@ their stored calibration are kept, to confirm a calibration sent to the board.
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -32,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import MAX_MAGNITUDE
 from ..errors import DataFileError, OptionError
 from ..io.columns import find_magnetometer_columns
 
@@ -291,7 +291,8 @@ class LineParser:
 
 
 def _numbers(fields: Sequence[str], *, integers: bool) -> list[float] | None:
-    """The fields as finite numbers, or None when any is not one (integers only for ``Raw:``)."""
+    """The fields as numbers within ±MAX_MAGNITUDE, or None when any is not one (integers only for ``Raw:``):
+    the line is then junk, counted and skipped."""
     values = []
     for text in fields:
         text = text.strip()
@@ -304,7 +305,7 @@ def _numbers(fields: Sequence[str], *, integers: bool) -> list[float] | None:
             value = float(text)
         except ValueError:
             return None
-        if not math.isfinite(value):
+        if not abs(value) <= MAX_MAGNITUDE:  # NaN, inf, or beyond what float64 can square: no sample, a glitch
             return None
         values.append(value)
     return values

@@ -6,11 +6,16 @@ nothing fetched from elsewhere), and ``/state.json``, the session's snapshot, wh
 times a second. The page draws on a 2-D canvas, in software, so it needs no WebGL: the corrected samples
 of the even subset (on the unit sphere when the fit is right) and the 100 equal-area cells of the coverage,
 green when reached, red when not; drag to turn it.
+
+The server answers only requests addressed to a loopback name (a page elsewhere that rebinds its own name
+to 127.0.0.1 gets 403), serves a bounded number of connections at once and closes idle ones, and does not
+report clients that go away.
 """
 
 from __future__ import annotations
 
 import json
+import sys
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
@@ -67,18 +72,93 @@ def state(run: LiveRun) -> dict[str, Any]:
     }
 
 
-class WebView:
-    """Serve the page of ``run`` on 127.0.0.1 (``port`` 0: any free port) from a background thread."""
+#: Host names the page answers to. A page elsewhere can make a browser resolve its own name to 127.0.0.1
+#: (DNS rebinding) and read /state.json as if it were its own: such a request carries that name in its Host
+#: header, and is refused.
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "[::1]")
+#: Connections served at once; more are closed at once (each has a thread while it is open).
+MAX_CONNECTIONS = 16
+#: Seconds a connection may stay silent before it is closed (an idle one would hold its thread for ever).
+IDLE_SECONDS = 10.0
 
-    def __init__(self, run: LiveRun, port: int = 0) -> None:
+
+def host_allowed(host: str | None, port: int) -> bool:
+    """Whether a request's Host header names this server: a loopback name, with no port or with ``port``."""
+    if not host:
+        return False
+    host = host.strip().lower()
+    if host.startswith("["):  # an IPv6 address: "[::1]" or "[::1]:8000"
+        inside, _, rest = host.partition("]")
+        name, given = inside + "]", rest[1:] if rest.startswith(":") else rest
+        if rest and not rest.startswith(":"):
+            return False
+    else:
+        name, _, given = host.partition(":")
+    return name in LOOPBACK_HOSTS and given in ("", str(port))
+
+
+class _Server(ThreadingHTTPServer):
+    """One thread per connection, at most :data:`MAX_CONNECTIONS` of them; a client that goes away is no error."""
+
+    daemon_threads = True
+    request_queue_size = 64  # the listen backlog: a burst of connections waits to be accepted (or closed)
+
+    def __init__(self, address: tuple[str, int], handler: type[BaseHTTPRequestHandler], limit: int) -> None:
+        super().__init__(address, handler)
+        self._slots = threading.BoundedSemaphore(limit)
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        if not self._slots.acquire(blocking=False):  # every slot taken: this connection is closed unserved
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._slots.release()
+            raise
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._slots.release()
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A client that resets or drops its connection (a closed tab, a timeout) is not reported; the socket
+        server would print a traceback over the live view for each."""
+        error = sys.exc_info()[1]
+        if isinstance(error, OSError):
+            return
+        super().handle_error(request, client_address)
+
+
+class WebView:
+    """Serve the page of ``run`` on 127.0.0.1 (``port`` 0: any free port) from a background thread.
+
+    Only requests whose Host header is a loopback name are answered (403 otherwise); at most
+    ``max_connections`` are open at once, each closed after ``idle_seconds`` of silence.
+    """
+
+    def __init__(
+        self,
+        run: LiveRun,
+        port: int = 0,
+        *,
+        max_connections: int = MAX_CONNECTIONS,
+        idle_seconds: float = IDLE_SECONDS,
+    ) -> None:
         self.run = run
         page = _PAGE.replace("__CELLS__", json.dumps(np.round(partition(COVERAGE_CELLS).centres(), 4).tolist()))
         body = page.encode("utf-8")
         view = self
 
         class Handler(BaseHTTPRequestHandler):
+            timeout = idle_seconds  # StreamRequestHandler sets it on the connection's socket
+
             def do_GET(self) -> None:
-                if self.path == "/":
+                if not host_allowed(self.headers.get("Host"), view.port):
+                    self.send_error(403, "this page answers to 127.0.0.1 and localhost only")
+                elif self.path == "/":
                     self._send(body, "text/html; charset=utf-8")
                 elif self.path == "/state.json":
                     self._send(json.dumps(state(view.run)).encode("utf-8"), "application/json")
@@ -96,14 +176,16 @@ class WebView:
             def log_message(self, format: str, *args: Any) -> None:  # no access log on the terminal
                 pass
 
-        self._server = ThreadingHTTPServer(("127.0.0.1", port), Handler)
-        self._server.daemon_threads = True
+        self._server = _Server(("127.0.0.1", port), Handler, max_connections)
         self._thread = threading.Thread(target=self._server.serve_forever, name="magfit-live-web", daemon=True)
 
     @property
+    def port(self) -> int:
+        return int(self._server.server_address[1])
+
+    @property
     def url(self) -> str:
-        port = self._server.server_address[1]
-        return f"http://127.0.0.1:{port}/"
+        return f"http://127.0.0.1:{self.port}/"
 
     def start(self) -> WebView:
         self._thread.start()

@@ -68,6 +68,8 @@ _MAGIC: tuple[tuple[bytes, BagKind], ...] = (
     (b"SQLite format 3\x00", "sqlite3"),
 )
 #: The suffix rosbags needs to pick its reader for each kind.
+#: Bags up to this size that run out of memory in the parser are damaged, not too big (see read_bag_contents).
+DAMAGED_IF_OUT_OF_MEMORY_BELOW = 1 << 30
 _SUFFIX: dict[BagKind, str] = {"ros1": ".bag", "mcap": ".mcap", "sqlite3": ".db3"}
 
 
@@ -193,7 +195,7 @@ def bag_kind(path: str | os.PathLike[str]) -> BagKind | None:
     if path.is_dir():
         return "folder" if (path / "metadata.yaml").is_file() else None
     try:
-        with open(path, "rb") as handle:
+        with open(_bytes_of(path), "rb") as handle:
             head = handle.read(16)
     except OSError:
         return None
@@ -236,12 +238,17 @@ def read_bag_contents(path: str | os.PathLike[str]) -> BagContents:
         raise DataFileError(f"{path}: not a ROS bag (the {what})")
     rosbags = _rosbags()
     try:
-        with _readable(path, kind) as readable:
+        with _readable(path if kind == "folder" else _bytes_of(path), kind) as readable:
             return _read(path, kind, readable, rosbags)
     except DataFileError:
         raise
-    except MemoryError:
-        raise
+    except MemoryError as error:
+        # rosbags allocates what a record's length field announces: a damaged length asks for terabytes. A bag
+        # this small cannot need that much (its messages are read one at a time): it is damaged.
+        if _size(path) > DAMAGED_IF_OUT_OF_MEMORY_BELOW:
+            raise
+        error.args = ("a record announces more bytes than the file holds",)
+        raise DataFileError(_damaged(path, kind, error)) from None
     except Exception as error:  # a damaged bag can fail anywhere in the parser: one line, never a traceback
         raise DataFileError(_damaged(path, kind, error)) from None
 
@@ -408,6 +415,15 @@ def _rosbags() -> Any:
     return rosbags
 
 
+def _bytes_of(path: Path) -> Path:
+    """The regular file holding ``path``'s bytes: the file itself, or the copy that a named pipe or a compressed
+    file is read into once (:func:`magfit.io.sources.data_file`): a pipe opened a second time would wait for
+    a writer that is gone."""
+    from ..io.sources import data_file
+
+    return data_file(path)
+
+
 @contextmanager
 def _readable(path: Path, kind: BagKind) -> Iterator[Path]:
     """``path``, or a link to it under the suffix rosbags needs to pick its reader (a bag is known by content)."""
@@ -567,6 +583,16 @@ class _Collector:
             time_base=base,
             angular_velocity=np.asarray(self.more, dtype=np.float64).reshape(-1, 3),
         )
+
+
+def _size(path: Path) -> int:
+    """Bytes of a bag: its file, or the files of its folder."""
+    try:
+        if path.is_dir():
+            return sum(file.stat().st_size for file in path.iterdir() if file.is_file())
+        return path.stat().st_size
+    except OSError:
+        return 0
 
 
 def _rate(times: NDArray[np.float64]) -> float | None:
