@@ -89,11 +89,13 @@ CHOICE_TOLERANCE = 1e-5
 #: A richer model must predict held-out blocks better by at least this share of the simpler one's distance.
 MIN_GAIN = 0.01
 #: A richer model that predicts held-out blocks better by this share (and twice the block-to-block standard
-#: error) shows that the chosen model clearly misses a distortion: a full model the verdict returns (weak: it
-#: pins the heading near the attitudes recorded) is then taken instead of it.
+#: error) shows that the chosen model clearly misses a distortion: when the chosen model's heading bound (its
+#: one-sigma with the heading error of that distortion) passes PREFERRED_BOUND_DEG, a full model the verdict
+#: returns (weak: it pins the heading near the attitudes recorded) is taken instead of it.
 WITNESS_GAIN = 0.15
-#: Otherwise the chosen model is returned, weak, its heading bound (its one-sigma with the heading error of
-#: the distortion it may leave out) stated; beyond this many degrees auto refuses: no compass.
+PREFERRED_BOUND_DEG = 5.0
+#: Otherwise the chosen model is returned, weak, its heading bound stated; beyond this many degrees auto
+#: refuses: no compass.
 USELESS_BOUND_DEG = 10.0
 
 
@@ -228,7 +230,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
         sigma = _heading_sigma(reports.get(chosen))
         bound = math.hypot(sigma or 0.0, effect)
         standing = [w for w in witnesses if verdicts[w].verdict != "refused"]  # returned by the verdict, weak
-        if clear and standing and _holds(optima[standing[-1]], kept, standing[-1]):
+        if clear and bound > PREFERRED_BOUND_DEG and standing and _holds(optima[standing[-1]], kept, standing[-1]):
             steps.append(
                 f"the {chosen} model {words}, a distortion worth ±{effect:.2g}° of heading; the "
                 f"{standing[-1]} model is returned: it pins the heading near the attitudes recorded"
