@@ -181,6 +181,11 @@ def test_an_aircraft_gets_the_model_the_samples_determine_with_a_heading_bound_t
     error = _heading_error_deg(auto, sim, LEVEL)
     stated = report.uncertainty.heading_sigma_deg
     assert stated is not None and omitted["heading_deg"] <= stated and error <= stated, (error, stated)
+    # magfit.diagnose of the calibration states the same one-sigma and names the same weakness.
+    again_diagnosed = magfit.diagnose(auto, sim.samples)
+    assert again_diagnosed.uncertainty is not None and again_diagnosed.support is not None
+    assert again_diagnosed.uncertainty.heading_sigma_deg == pytest.approx(stated, rel=1e-9)
+    assert "model_inadequate" in again_diagnosed.support.codes
     none = _heading_error_deg(magfit.Calibration("none", np.zeros(3), np.eye(3), 1.0), sim, LEVEL)
     assert error < none / 10  # 0.55° against 52° uncalibrated
     forced = {

@@ -288,7 +288,7 @@ def diagnose(
             refit = refit_of(calibration, calibration.method, options)
         except MagfitError:
             refit = None
-    return diagnose_samples(
+    report = diagnose_samples(
         calibration,
         samples,
         inclination_deg=inclination_deg,
@@ -296,4 +296,10 @@ def diagnose(
         held_out=held_out,
         represents=represents,
         refit=refit,
+        model_error_heading_deg=_omitted_heading_deg(calibration),
     )
+    omitted = _omitted_weakness(calibration, report)
+    if omitted is None or report.support is None:
+        return report
+    support = Support.judged(report.support.refusals, (*report.support.weaknesses, omitted), report.support.advice)
+    return replace(report, support=support, warnings=support.warnings)

@@ -17,8 +17,14 @@ clearly better on stretches of the recording it did not see (docs/diagnostics.md
    Statist. 6, 1978), is reported but does not choose: it counts every sample as independent evidence, so
    on long logs it prefers the richer model whenever it follows effects no calibration holds (a drifting
    field, a vehicle's slowly changing fields) with its weakly determined parameters.
-4. An undetermined richer model that predicts the held-out blocks more than :data:`WITNESS_GAIN` better
-   than the chosen one vetoes it: the chosen model leaves out a distortion the samples show.
+4. Where a richer model is not determined (restricted attitudes: a vehicle), every richer model that predicts
+   the held-out blocks as well or better shows a distortion the chosen model may leave out. Its heading error
+   (the level-heading difference of the two models plus the richer one's heading one-sigma) joins the
+   chosen model's heading one-sigma (``details["omitted_distortion"]``, read by :func:`magfit.fit`), named
+   as a weakness. When the richer model clearly wins (:data:`WITNESS_GAIN`) and that bound passes
+   :data:`PREFERRED_BOUND_DEG`, a full model the verdict returns weak is taken instead; beyond
+   :data:`USELESS_BOUND_DEG` without one, auto refuses (:class:`UndeterminedChoice`, which carries the
+   model the choice ranks best for a forced fit).
 
 The calibration returned is the chosen model's maximum-likelihood fit on a stride of at most 200 000
 samples: for the full ellipsoid the ``ml`` method's fit (exact orthogonal distances, corrected for the
