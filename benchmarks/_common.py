@@ -57,7 +57,9 @@ def verdict_of(calibration: magfit.Calibration | None, error: str) -> tuple[str 
 def failure_message(error: BaseException) -> str:
     """``Type: first line of the message``: how a failed fit is recorded (a result, with its reason)."""
     message = str(error).strip().splitlines()[0] if str(error).strip() else ""
-    return f"{type(error).__name__}: {message}" if message else type(error).__name__
+    # A refusal is a CalibrationError whatever its subclass (auto's UndeterminedChoice): a verdict.
+    name = "CalibrationError" if isinstance(error, magfit.CalibrationError) else type(error).__name__
+    return f"{name}: {message}" if message else name
 
 
 # ====================================================================== ratios and targets

@@ -145,3 +145,84 @@ def test_real_recordings_fall_back_or_refuse_with_a_reason(real_data_dir) -> Non
 def test_bad_option_is_refused() -> None:
     with pytest.raises(magfit.OptionError, match="detect, reject, keep"):
         magfit.fit(magfit.simulate(100, noise=0.01, seed=6).samples, "auto", outliers="sometimes")
+
+
+def _aircraft(seed: int, n: int = 6000) -> magfit.Simulation:
+    """Level flight with banked turns (±20°) in an aircraft: its induced field (soft iron ±3 %, cross terms ±1.5 %),
+    a permanent one (hard iron), eddy currents that follow the manoeuvres and a drifting field (eq. 1e)."""
+    rng = np.random.default_rng(seed)
+    soft_iron = np.diag(1 + rng.uniform(-0.03, 0.03, 3))
+    cross = rng.uniform(-0.015, 0.015, 3)
+    soft_iron[[0, 0, 1], [1, 2, 2]] = cross
+    soft_iron[[1, 2, 2], [0, 0, 1]] = cross
+    return magfit.simulate(
+        n, soft_iron=soft_iron, hard_iron=rng.uniform(-0.4, 0.4, 3), noise=0.005, orientations="flight",
+        max_tilt_deg=20, field_drift=0.005, eddy_current=rng.normal(0, 0.01, (3, 3)), seed=rng,
+    )  # fmt: skip
+
+
+LEVEL = np.column_stack([np.zeros(360), np.zeros(360), np.arange(360.0) - 180.0])
+
+
+def test_an_aircraft_gets_the_model_the_samples_determine_with_a_heading_bound_that_covers_it() -> None:
+    # The full and diag models follow the aircraft's induced field (the full one predicts held-out stretches as
+    # well or better) but the samples do not determine them: auto returns the sphere, weak, the distortion it
+    # leaves out named with the heading error it can cause, inside the stated heading one-sigma.
+    sim = _aircraft(2)
+    auto = magfit.fit(sim.samples, "auto")
+    report = auto.diagnostics
+    assert report is not None and report.support is not None and report.uncertainty is not None
+    assert auto.details["chosen_model"] == "sphere" and report.support.verdict == "weak"
+    assert "model_inadequate" in report.support.codes
+    omitted = auto.details["omitted_distortion"]
+    assert omitted["heading_deg"] == pytest.approx(
+        omitted["heading_difference_deg"] + omitted["witness_heading_sigma_deg"]
+    )
+    error = _heading_error_deg(auto, sim, LEVEL)
+    stated = report.uncertainty.heading_sigma_deg
+    assert stated is not None and omitted["heading_deg"] <= stated and error <= stated, (error, stated)
+    # magfit.diagnose of the calibration states the same one-sigma and names the same weakness.
+    again_diagnosed = magfit.diagnose(auto, sim.samples)
+    assert again_diagnosed.uncertainty is not None and again_diagnosed.support is not None
+    assert again_diagnosed.uncertainty.heading_sigma_deg == pytest.approx(stated, rel=1e-9)
+    assert "model_inadequate" in again_diagnosed.support.codes
+    none = _heading_error_deg(magfit.Calibration("none", np.zeros(3), np.eye(3), 1.0), sim, LEVEL)
+    assert error < none / 10  # 0.55° against 52° uncalibrated
+    forced = {
+        m: _heading_error_deg(magfit.fit(sim.samples, m, allow_undetermined=True, diagnostics=False), sim, LEVEL)
+        for m in ("sphere", "diag", "ml")
+    }
+    assert error <= 1.2 * min(forced.values()), forced
+    # Forcing changes nothing where auto answers: the same calibration, never the full model it passed over.
+    again = magfit.fit(sim.samples, "auto", allow_undetermined=True)
+    np.testing.assert_array_equal(again.offset, auto.offset)
+    assert again.details["support"]["forced"] is False
+
+
+def test_forced_auto_returns_what_the_unforced_choice_ranks_best_with_the_refusal_first() -> None:
+    sim = magfit.scenario("mpu9250", "none").simulate(2000, seed=1, orientations="yaw")
+    with pytest.raises(magfit.CalibrationError) as refused:
+        magfit.fit(sim.samples, "auto")
+    assert refused.value.codes
+    forced = magfit.fit(sim.samples, "auto", allow_undetermined=True)
+    support = forced.details["support"]
+    assert support["verdict"] == "refused" and support["forced"] is True
+    assert support["refusal_codes"][0] == refused.value.codes[0]
+    assert forced.details["chosen_model"] == "sphere"  # the simplest: fewest numbers the samples fail to fix
+    assert forced.diagnostics is not None and forced.diagnostics.warnings[0].startswith("NOT SUPPORTED (forced): ")
+    assert forced.details["options"]["outliers"] == "detect"  # recorded as every fit's options
+
+
+def test_one_heading_uncertainty_is_quoted_everywhere() -> None:
+    # The chosen model's weaknesses are the verdict's on the calibration returned: auto's reason quotes none of
+    # its candidates' one-sigmas, and every heading one-sigma the warnings quote is the one saved.
+    sim = magfit.scenario("mpu9250", "none").simulate(2000, seed=0, orientations="restricted")
+    auto = magfit.fit(sim.samples, "auto")
+    report = auto.diagnostics
+    assert report is not None and report.uncertainty is not None and report.uncertainty.heading_sigma_deg
+    saved = magfit.Calibration.from_json(auto.to_json()).details
+    assert saved["weak"] == saved["support"]["weaknesses"] == list(report.warnings)
+    stated = f"±{report.uncertainty.heading_sigma_deg:.2g}°"
+    quoted = [w for w in report.warnings if "heading uncertainty" in w]
+    assert quoted and all(stated in w for w in quoted), (stated, quoted)
+    assert "weak in the" not in auto.details["reason"]  # it quoted the candidate's one-sigma (±0.68° for ±1.2°)

@@ -49,3 +49,20 @@ def test_a_supported_fit_says_so(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     (line,) = [line for line in result.stdout.splitlines() if line.startswith("verdict")]
     assert line.split()[1] in ("supported", "weak:")
+
+
+def test_auto_is_refused_without_force_and_returned_with_it(tmp_path: Path) -> None:
+    # auto refuses when no model is determined; forced, it returns the model its unforced choice ranks best
+    # (exit 0, as README and docs/cli.md say), the refusal the first warning; it exited 1 before.
+    path = _yaw_only(tmp_path)
+    runner = CliRunner()
+    refused = runner.invoke(cli, ["calibrate", str(path), "-o", str(tmp_path / "cal.json")])
+    assert refused.exit_code == 1 and not (tmp_path / "cal.json").exists()
+    forced = runner.invoke(cli, ["calibrate", str(path), "--force", "-o", str(tmp_path / "cal.json")])
+    assert forced.exit_code == 0, forced.output
+    assert forced.stderr.startswith("magfit: warning: NOT SUPPORTED (forced): the samples determine no calibration")
+    assert "verdict          NOT SUPPORTED by the samples, returned because of --force" in forced.stdout
+    saved = magfit.Calibration.from_json((tmp_path / "cal.json").read_text())
+    assert saved.method == "auto" and saved.details["support"]["forced"] is True
+    # The ring is a circle of radius 30 about (0, 0, 20): the sphere through it has that centre in x and y.
+    np.testing.assert_allclose(saved.offset[:2], [0.0, 0.0], atol=0.5)

@@ -19,9 +19,10 @@ from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refi
 from .diagnostics import diagnose as diagnose_samples
 from .diagnostics.reference import judged as judged_against_reference
 from .errors import CalibrationError, MagfitError, OptionError
+from .findings import Reason, Support
 from .methods import METHODS, FitInput, get_method
-from .methods.auto import refit_first_order
-from .methods.core import estimate, is_recorded_array, method_spec, prepare, refitter
+from .methods.auto import UndeterminedChoice, refit_first_order
+from .methods.core import estimate, is_recorded_array, method_spec, prepare, recorded_options, refitter
 from .statistics import Statistics
 
 __all__ = ["diagnose", "fit", "refit"]
@@ -80,7 +81,16 @@ def fit(
     """
     spec = method_spec(method, options)
     data = prepare(samples, spec)
-    calibration = estimate(data, spec.name, options)
+    try:
+        calibration = estimate(data, spec.name, options)
+    except UndeterminedChoice as refused:
+        if not allow_undetermined:
+            raise
+        # auto refused: forced, it returns the model its unforced choice ranks best, its refusal the first warning.
+        chosen = refused.calibration
+        recorded = {**chosen.details, "options": recorded_options({**spec.defaults, **options})}
+        refusal = Reason(str(refused), refused.codes[0] if refused.codes else "model_inadequate")
+        return _judged(replace(chosen, details=recorded), data, spec.name, options, diagnostics, True, refusal)
     return _judged(calibration, data, spec.name, options, diagnostics, allow_undetermined)
 
 
@@ -135,8 +145,15 @@ def _judged(
     options: dict[str, Any],
     diagnostics: bool | Literal["quick"],
     allow_undetermined: bool,
+    refusal: Reason | None = None,
 ) -> Calibration:
-    """``calibration`` with its verdict (and diagnostics) attached, or the refusal raised."""
+    """``calibration`` with its verdict (and diagnostics) attached, or the refusal raised.
+
+    ``refusal``: the method's own, when it was forced to return a calibration (``auto``: no model the samples
+    determine describes them within a useful heading bound). ``auto``'s chosen model may leave out a
+    distortion that a richer model, which the samples do not determine, shows (``details["omitted_distortion"]``):
+    the heading error it can cause joins the heading one-sigma before the verdict, and is named a weakness.
+    """
     if calibration.frame == "vehicle":  # fitted against a reference field: judged there, not by its magnitude
         return judged_against_reference(calibration, method, diagnostics, allow_undetermined)
     if data.samples is None:
@@ -157,18 +174,64 @@ def _judged(
             thorough=thorough,
             compare_ml=method != "auto",
             variation_refit=variation,
+            model_error_heading_deg=_omitted_heading_deg(calibration),
         )
     support = report.support
     assert support is not None  # both diagnoses reach a verdict
+    omitted = _omitted_weakness(calibration, report)
+    if omitted is not None or refusal is not None:
+        support = Support.judged(
+            (*(() if refusal is None else (refusal,)), *support.refusals),
+            (*support.weaknesses, *(() if omitted is None else (omitted,))),
+            support.advice,
+        )
+        report = replace(report, support=support, warnings=support.warnings)
     if support.verdict == "refused":
         if not allow_undetermined:
             raise CalibrationError(support.message(method), codes=support.codes)
         support = replace(support, forced=True)
         report = replace(report, support=support, warnings=support.warnings)
     details: dict[str, Any] = {**calibration.details, "support": support.to_dict()}
+    if method == "auto" and "weak" in details:  # the chosen model's weaknesses: the verdict's, one uncertainty
+        details["weak"] = [str(w) for w in support.weaknesses]
     if diagnostics:
         details["diagnostics"] = report.to_dict()
     return replace(calibration, details=details)
+
+
+def _omitted_heading_deg(calibration: Calibration) -> float:
+    """The heading error (degrees) of the distortion ``auto``'s chosen model leaves out, 0 when none."""
+    omitted = calibration.details.get("omitted_distortion")
+    if not isinstance(omitted, dict):
+        return 0.0
+    value = omitted.get("heading_deg")
+    return float(value) if isinstance(value, (int, float)) and value > 0 else 0.0
+
+
+def _omitted_weakness(calibration: Calibration, report: Diagnostics) -> Reason | None:
+    """The weakness naming the distortion ``auto``'s chosen model leaves out, with the heading error it causes."""
+    heading = _omitted_heading_deg(calibration)
+    omitted = calibration.details.get("omitted_distortion")
+    if not heading or not isinstance(omitted, dict):
+        return None
+    model = calibration.details.get("chosen_model", "chosen")
+    stated = report.uncertainty.heading_sigma_deg if report.uncertainty is not None else None
+    total = "" if stated is None else f"; the heading one-sigma stated includes it: ±{stated:.2g}°"
+    difference = omitted.get("heading_difference_deg")
+    witness_sigma = omitted.get("witness_heading_sigma_deg")
+    parts = (
+        f"their level headings differ by {difference:.2g}° (RMS) and the {omitted.get('model')} model's own heading "
+        f"one-sigma is ±{witness_sigma:.2g}°: "
+        if isinstance(difference, (int, float)) and isinstance(witness_sigma, (int, float))
+        else ""
+    )
+    return Reason(
+        f"the {model} model may leave out a distortion the samples show but do not determine (the "
+        f"{omitted.get('model')} model, fitted to the same samples, predicts held-out stretches of the recording as "
+        f"well or better); {parts}the heading error it can cause is ±{heading:.2g}°{total}; a reference field "
+        "(method 'vector' with the attitude) or more tilt while recording would determine it",
+        "model_inadequate",
+    )
 
 
 def refit_of(calibration: Calibration, method: str, options: dict[str, Any]) -> Refit:
@@ -225,7 +288,7 @@ def diagnose(
             refit = refit_of(calibration, calibration.method, options)
         except MagfitError:
             refit = None
-    return diagnose_samples(
+    report = diagnose_samples(
         calibration,
         samples,
         inclination_deg=inclination_deg,
@@ -233,4 +296,10 @@ def diagnose(
         held_out=held_out,
         represents=represents,
         refit=refit,
+        model_error_heading_deg=_omitted_heading_deg(calibration),
     )
+    omitted = _omitted_weakness(calibration, report)
+    if omitted is None or report.support is None:
+        return report
+    support = Support.judged(report.support.refusals, (*report.support.weaknesses, omitted), report.support.advice)
+    return replace(report, support=support, warnings=support.warnings)

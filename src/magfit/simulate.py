@@ -3,9 +3,16 @@
     B_p = W R_x(φ) R_y(θ) R_z(ψ) B (cos δ, 0, sin δ)ᵀ + V                        (1)
 
 W is the soft-iron matrix, V the hard-iron offset, B the field strength, δ the inclination and
-(φ, θ, ψ) the roll, pitch and yaw of the sensor. Gaussian noise of standard deviation ``noise`` is added
-to each axis of B_p, then the result is optionally quantised (raw counts). The true calibration is
-``offset = V``, ``matrix = W⁻¹``, ``field_strength = B``.
+(φ, θ, ψ) the roll, pitch and yaw of the sensor. A vehicle's own field adds, in Tolles–Lawson's
+aeromagnetic compensation (Tolles & Lawson, "Magnetic compensation of MAD equipped aircraft", 1950), a
+permanent term (V), an induced term proportional to the direction cosines of the field (W − I), and an
+eddy-current term proportional to their rate of change:
+
+    B_p(t) = W b(t) + V + E ḃ(t),    b = R_x(φ) R_y(θ) R_z(ψ) B (cos δ, 0, sin δ)ᵀ           (1e)
+
+E (seconds) follows the manoeuvres: no calibration of eq. (1) holds it. Gaussian noise of standard
+deviation ``noise`` is added to each axis of B_p, then the result is optionally quantised (raw counts).
+The true calibration is ``offset = V``, ``matrix = W⁻¹``, ``field_strength = B``.
 """
 
 from __future__ import annotations
@@ -149,6 +156,8 @@ def simulate(
     max_tilt_deg: float = 20.0,
     resolution: float | None = None,
     field_drift: float = 0.0,
+    eddy_current: ArrayLike | None = None,
+    sample_rate_hz: float = 10.0,
     seed: int | np.random.Generator | None = None,
 ) -> Simulation:
     """Simulate ``n`` magnetometer samples from eq. (1).
@@ -181,6 +190,12 @@ def simulate(
         Relative amplitude of a slow change of the field strength along the recording (0.005: ±0.5 %,
         as a crustal anomaly or a vehicle's own slowly changing field): a real effect no calibration
         model holds. The truth keeps the nominal ``field_strength``.
+    eddy_current : array_like, shape (3, 3), optional
+        E of eq. (1e), seconds: the vehicle's eddy-current field, ``E ḃ``, where ``ḃ`` is the rate of change
+        of the field in the sensor frame along the recording (samples ``1 / sample_rate_hz`` apart, in
+        the order of ``orientations``). Model error that follows the manoeuvres; the truth leaves it out.
+    sample_rate_hz : float
+        The samples' rate, for ``eddy_current``.
     seed : int or numpy Generator, optional
         Seed of the random draws, for repeatable samples.
     """
@@ -197,8 +212,16 @@ def simulate(
         raise OptionError("soft_iron must be an invertible 3x3 matrix")
     if v.shape != (3,):
         raise OptionError(f"hard_iron must have shape (3,), got {v.shape}")
+    if not sample_rate_hz > 0:
+        raise OptionError(f"sample_rate_hz must be positive, got {sample_rate_hz}")
+    eddy = None if eddy_current is None else np.asarray(eddy_current, dtype=np.float64)
+    if eddy is not None and eddy.shape != (3, 3):
+        raise OptionError(f"eddy_current must be a 3x3 matrix (seconds), got shape {eddy.shape}")
     attitudes = _attitudes(n, orientations, max_tilt_deg, rng)
     clean = _model(attitudes, w, v, field_strength, inclination_deg)
+    if eddy is not None and n > 1:  # E ḃ of eq. (1e): ḃ by central differences of b = W⁻¹ (B_p − V)
+        field = (clean - v) @ np.linalg.inv(w).T
+        clean = clean + np.gradient(field, 1.0 / sample_rate_hz, axis=0) @ eddy.T
     if field_drift:
         along = 1.0 + field_drift * np.cos(1.5 * np.pi * np.arange(n) / max(n - 1, 1))  # +drift to −drift
         clean = (clean - v) * along[:, None] + v  # W is linear: scaling the field scales W R B f

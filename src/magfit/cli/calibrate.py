@@ -541,6 +541,27 @@ def _verdict(calibration: Calibration) -> list[tuple[str, str]]:
     return [("verdict", verdict)]
 
 
+def _uncertainty(run: CompassCalibration) -> list[tuple[str, str]]:
+    """The share of directions covered and the heading one-sigma, as the saved diagnostics hold them (the one
+    uncertainty the warnings quote); a log's coverage is already on its ``directions`` line."""
+    diagnostics = run.calibration.details.get("diagnostics")
+    if not isinstance(diagnostics, Mapping):
+        return []
+    lines = []
+    cover = diagnostics.get("coverage")
+    if run.magnetometer is None and isinstance(cover, Mapping) and isinstance(cover.get("share"), (int, float)):
+        lines.append(("coverage", f"{100 * cover['share']:.0f} % of the sphere of field directions reached"))
+    spread = diagnostics.get("uncertainty")
+    heading = spread.get("heading_sigma_deg") if isinstance(spread, Mapping) else None
+    if isinstance(heading, (int, float)) and isinstance(spread, Mapping):
+        worst, inclination = spread.get("heading_sigma_max_deg"), spread.get("inclination_deg")
+        text = f"± {heading:.2g}° one-sigma at level (RMS over headings"
+        text += f", worst ± {worst:.2g}°" if isinstance(worst, (int, float)) else ""
+        text += f"; inclination {inclination:.0f}°)" if isinstance(inclination, (int, float)) else ")"
+        lines.append(("heading", text))
+    return lines
+
+
 def _fitted_on(run: CompassCalibration) -> list[tuple[str, str]]:
     """When the fit used an even subsample: how many samples, and why."""
     if run.subsample is None:
@@ -587,6 +608,7 @@ def print_summary(out: Console, run: CompassCalibration) -> None:
             f"mean {fixed(run.evaluation.mean)}  std {fixed(run.evaluation.std)}  "
             f"(paper, section V: fraction of the field strength, n = {run.evaluation.n})",
         ),
+        *_uncertainty(run),
         *_verdict(calibration),
         ("convention", CONVENTION),
     ]

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -126,6 +127,7 @@ def diagnose(
     thorough: bool = True,
     compare_ml: bool = True,
     variation_refit: Refit | None = None,
+    model_error_heading_deg: float = 0.0,
 ) -> Diagnostics:
     """Diagnose a calibration on the samples it was fitted to (or on a subsample of them), with its verdict.
 
@@ -160,6 +162,10 @@ def diagnose(
         The refit for the two halves and the block jackknife (10 refits), when ``refit`` is too slow for
         that many: the same model's first-order maximum-likelihood fit (``magfit.fit`` passes it for the
         iterative methods). Default: ``refit``.
+    model_error_heading_deg : float
+        A heading error the calibration's model is known to leave out (``auto``: the distortion of a richer
+        model the samples do not determine), degrees: added in quadrature to the heading one-sigma before
+        the verdict, so that every figure stated is the one uncertainty.
 
     Returns
     -------
@@ -208,6 +214,12 @@ def diagnose(
         if vary is not None and uncertainty.offset_sigma is not None:
             # After the halves: a change between them is named as such, not hidden in a wider one-sigma.
             uncertainty = _with_block_jackknife(uncertainty, rows, vary, total)
+    if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:
+        uncertainty = replace(
+            uncertainty,
+            heading_sigma_deg=math.hypot(uncertainty.heading_sigma_deg, model_error_heading_deg),
+            heading_sigma_max_deg=math.hypot(uncertainty.heading_sigma_max_deg or 0.0, model_error_heading_deg),
+        )
     evidence = Evidence(
         kind=kind,
         residual_rms=fitted.rms,

@@ -22,7 +22,7 @@ import datetime
 import importlib.util
 import math
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -208,6 +208,10 @@ class FileCalibration:
                 "with sensor='ID'"
             )
         return self.compasses[0].calibration
+
+    def __iter__(self) -> Iterator[CompassCalibration]:
+        """The compasses fitted, in the log's order: ``for compass in calibrate_file(...)``."""
+        return iter(self.compasses)
 
 
 def calibrate_file(
