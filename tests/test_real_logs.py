@@ -159,18 +159,18 @@ def test_a_real_copter33_flight_undoes_every_compass_to_what_the_firmware_logged
 
 def test_the_real_flight_calibrates_end_to_end(original: dict[str, np.ndarray]) -> None:
     result = CliRunner().invoke(cli, ["calibrate", str(COPTER33)])
-    # Compasses 1 and 2 are fitted (weak: a flight covers few directions); compass 3, uncalibrated and
-    # unhealthy in this vehicle, is refused with its reason: exit 1.
+    # From the field's magnitude alone, a flight's few directions leave a distortion that a richer model sees on
+    # held-out stretches (±11° and ±54° of heading on compasses 1 and 2): each compass is refused with its reason
+    # and code (compass 3, uncalibrated and unhealthy in this vehicle, lies on no ellipsoid): exit 1, every compass
+    # read and judged.
     assert result.exit_code == 1, result.output
-    assert result.stdout.count("offset  ") == 2 and "MAG/2: not fitted" in result.stdout
+    assert all(f"MAG/{i}: not fitted" in result.stdout for i in range(3))
     assert "log the parameters" not in result.output and "Traceback" not in result.output
+    fitted = magfit.calibrate_file(COPTER33)
+    assert {failure.sensor for failure in fitted.failures} == {"MAG/0", "MAG/1", "MAG/2"}
+    assert all(failure.codes for failure in fitted.failures)
 
 
-@pytest.mark.xfail(
-    reason="auto's refusal 'the samples determine no calibration model' carries no reason code (methods/auto.py); "
-    "measured on this log's compass 3: CalibrationError.codes == ()",
-    strict=True,
-)
 def test_the_refused_compass_of_the_real_flight_says_why_with_a_code(original: dict[str, np.ndarray]) -> None:
     with pytest.raises(CalibrationError) as refused:
         magfit.fit(original["MAG/2"], method="auto")
@@ -195,11 +195,12 @@ def test_as_copter32_logged_it_the_missing_soft_iron_parameters_are_the_identity
         assert magnetometer.problem is None
         assert any("applied no soft-iron matrix" in note for note in magnetometer.notes)
         np.testing.assert_allclose(source.read(sensor).samples, original[sensor], atol=1.0)
-    result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "MAG/1"])
+    # The flight alone determines no calibration from the field's magnitude (test above): forced, the same one.
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "MAG/1", "--force"])
     assert result.exit_code == 0, result.output
     assert "has no COMPASS_DIA2, COMPASS_ODI2 parameters" in result.stderr
-    refit = magfit.calibrate_file(path, sensor="MAG/1").calibration
-    first = magfit.calibrate_file(COPTER33, sensor="MAG/1").calibration
+    refit = magfit.calibrate_file(path, sensor="MAG/1", force=True).calibration
+    first = magfit.calibrate_file(COPTER33, sensor="MAG/1", force=True).calibration
     np.testing.assert_allclose(refit.offset, first.offset, atol=3.0)
 
 
@@ -239,8 +240,8 @@ def test_offsets_changed_half_way_are_undone_record_by_record(tmp_path: Path, or
     # The records' own offsets are whole mG: the raw field within the original's by that truncation and the
     # rounding of the rewritten field.
     np.testing.assert_allclose(read.samples, original["MAG/0"], atol=2.0)
-    refit = magfit.calibrate_file(path, sensor="MAG/0").calibration
-    first = magfit.calibrate_file(COPTER33, sensor="MAG/0").calibration
+    refit = magfit.calibrate_file(path, sensor="MAG/0", force=True).calibration
+    first = magfit.calibrate_file(COPTER33, sensor="MAG/0", force=True).calibration
     np.testing.assert_allclose(refit.offset, first.offset, atol=3.0)
     # Undone with the first offsets throughout, the second half would be SHIFT off: the test can fail.
     assert np.linalg.norm(SHIFT) > 30

@@ -67,10 +67,14 @@ __all__ = [
 DISAGREEMENT_RATIO = 2.0
 #: ... and exceeds it by this share of the field (RMS): noise-level differences are not a change.
 DISAGREEMENT_FLOOR = 0.01
-#: Refusal codes that only say a flight covers too little of the sphere: its samples still join the union.
+#: Refusal codes that only say a flight covers too little of the sphere (``model_inadequate``: a richer model
+#: would describe it but is not determined) — its samples still join the union, whose verdict judges them.
 PARTIAL_CODES = frozenset(
-    {"undetermined", "weakly_determined", "single_axis", "low_coverage", "restricted_attitude", "too_few_samples"}
-)
+    {
+        "undetermined", "weakly_determined", "single_axis", "low_coverage", "restricted_attitude", "too_few_samples",
+        "model_inadequate",
+    }
+)  # fmt: skip
 #: File name endings the folder walk takes as recordings (after a compression suffix).
 RECORDING_SUFFIXES = (".bin", ".ulg", ".tlog", ".csv", ".tsv", ".txt", ".npy", ".npz", ".bag", ".mcap")
 _COMPRESSED = (".gz", ".bz2", ".xz", ".zst")
@@ -341,7 +345,7 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
         if read is not None:
             compasses.append(replace_mergeable(read, True, device_id))
     for failure in result.failures:
-        codes = tuple(getattr(failure, "codes", ()))
+        codes = failure.codes
         read = statistics.get(failure.sensor)
         rows.append(FleetRow("flight", vehicle, str(path), sensor=failure.sensor,
                              device_id=read.device_id if read is not None else None, date=_file_date(path),

@@ -165,6 +165,7 @@ class CompassFailure:
     sensor: str
     reason: str
     notes: tuple[str, ...] = ()
+    codes: tuple[str, ...] = ()  # the refusal's reason codes (magfit.REASON_CODES); empty for a read error
 
 
 @dataclass(frozen=True, eq=False)
@@ -344,7 +345,7 @@ def calibrate_file(
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
-            failures.append(CompassFailure(magnetometer.id, str(error), _notes(source, magnetometer)))
+            failures.append(CompassFailure(magnetometer.id, str(error), _notes(source, magnetometer), error.codes))
             continue
         compasses.append(replace(compass, model_field=model))
     tried = tuple(compass.sensor or "" for compass in compasses) + tuple(f.sensor for f in failures)
@@ -415,7 +416,7 @@ def _calibrate_compass(
         calibration = fit(fitted, method=method, **options)
     except CalibrationError as error:
         advice = "".join(f"; {note}" for note in magnetometer.notes if "logged at only" in note or "only " in note)
-        raise CalibrationError(f"{where}: {error}{advice}") from None
+        raise CalibrationError(f"{where}: {error}{advice}", codes=error.codes, remedy=error.remedy) from None
     label = unit or magnetometer.unit
     calibration = calibration.with_unit(label) if label else calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
@@ -476,7 +477,7 @@ def _calibrate_samples(
     except CalibrationError as error:
         used = "columns " + ", ".join(str(c) for c in chosen.columns)
         used += f"; {chosen.column_note}" if chosen.column_note else ""
-        raise CalibrationError(f"{path} ({used}): {error}") from None
+        raise CalibrationError(f"{path} ({used}): {error}", codes=error.codes, remedy=error.remedy) from None
     calibration = fitted.calibration
     unit = unit if unit is not None else chosen.unit  # the file's own when its column names say it (mag_x_uT)
     if unit is not None:
