@@ -107,6 +107,23 @@ def as_command_error(error: BaseException) -> CommandError:
     )
 
 
+#: Remedy arguments whose command-line form is a flag (its value "True").
+_REMEDY_FLAGS = {"force": "--force", "allow_undetermined": "--force", "even": "--even"}
+
+
+def command_line(command: str, path: Path | str, remedy: Sequence[tuple[str, str]]) -> str:
+    """A remedy (``(argument, value)`` pairs, :class:`magfit.findings.Reason`'s) as the command to type:
+    ``magfit calibrate flight.csv --method vector --attitude roll,pitch,yaw``."""
+    parts = ["magfit", command, str(path)]
+    for name, value in remedy:
+        if name in _REMEDY_FLAGS:
+            if value == "True":
+                parts.append(_REMEDY_FLAGS[name])
+            continue
+        parts += [f"--{name.replace('_', '-')}", value]
+    return " ".join(parts)
+
+
 def fail(message: str) -> NoReturn:
     """Stop the command with ``magfit: error: <message>`` (exit status 2)."""
     raise CommandError(message)
@@ -284,6 +301,16 @@ def parse_columns(ctx: click.Context, param: click.Parameter, value: str | None)
         raise click.BadParameter(
             f"expected three comma-separated column names or 0-based numbers (x,y,z), got {value!r}", ctx, param
         )
+    return [int(item) if item.isdigit() else item for item in items]
+
+
+def parse_stream(ctx: click.Context, param: click.Parameter, value: str | None) -> list[str | int] | None:
+    """``--attitude roll,pitch,yaw`` or ``--gyro 7,8,9`` (0-based, as --columns) into names or indices."""
+    if value is None:
+        return None
+    items = [item.strip() for item in value.split(",")]
+    if not all(items):
+        raise click.BadParameter(f"expected comma-separated column names or 0-based numbers, got {value!r}", ctx, param)
     return [int(item) if item.isdigit() else item for item in items]
 
 

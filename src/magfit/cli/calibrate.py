@@ -21,14 +21,17 @@ from ..calibration import CONVENTION, Calibration
 from ..errors import CalibrationError
 from ..geomag import Field, compare_fitted, parse_date, parse_location
 from ..methods import get_method
-from ..pipeline import CompassCalibration, FileCalibration, calibrate_file
+from ..pipeline import CompassCalibration, FileCalibration, RefusedWithAdvice, StreamsMissing, calibrate_file
 from ..pipeline.streaming import Advance
 from ..units import conversion_factor, get_unit
 from ._common import (
+    CommandError,
     FieldStrength,
+    FitFailedError,
     Nonfinite,
     RegistryChoice,
     columns_text,
+    command_line,
     console,
     default_method,
     export_format_names,
@@ -37,8 +40,10 @@ from ._common import (
     geomag_option,
     method_names,
     nonfinite_option,
+    one_line,
     option_wording,
     parse_columns,
+    parse_stream,
     refuse_overwriting_input,
     same_file,
     significant,
@@ -278,6 +283,38 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     help="Return the calibration even when the samples do not support it (exit 0): it is marked NOT SUPPORTED "
     "and the refusal is printed as a warning. To inspect a poor recording, not to use its numbers.",
 )
+@click.option(
+    "--attitude",
+    callback=parse_stream,
+    metavar="ROLL,PITCH,YAW|W,X,Y,Z",
+    help="A samples file's attitude columns for --method vector: roll, pitch, yaw (degrees or radians, detected) "
+    "or a quaternion w, x, y, z; names or 0-based numbers as --columns. Default: found by name.",
+)
+@click.option(
+    "--reference",
+    callback=parse_stream,
+    metavar="N,E,D",
+    help="A samples file's reference field columns (north, east, down, in the samples' unit) for --method vector. "
+    "Default: found by name (ref_n ...), else the World Magnetic Model at --location or the file's lat/lon columns.",
+)
+@click.option("--gyro", callback=parse_stream, metavar="GX,GY,GZ", help="A samples file's gyroscope columns (rad/s).")
+@click.option("--accel", callback=parse_stream, metavar="AX,AY,AZ", help="A samples file's accelerometer columns.")
+@click.option("--time", "time_column", callback=parse_stream, metavar="T", help="A samples file's time column (s).")
+@click.option(
+    "--attitude-convention",
+    type=click.Choice(["ned", "enu"]),
+    default="ned",
+    show_default=True,
+    help="ned: aerospace 3-2-1 (yaw, pitch, roll), body forward-right-down to North-East-Down; enu: ROS's, "
+    "forward-left-up to East-North-Up (the reference columns then E, N, U).",
+)
+@click.option(
+    "--angle-unit",
+    type=click.Choice(["auto", "deg", "rad"]),
+    default="auto",
+    show_default=True,
+    help="The attitude angles' unit; auto decides from the values and refuses a file they leave ambiguous.",
+)
 def calibrate_command(
     file: Path,
     method: str | None,
@@ -295,6 +332,13 @@ def calibrate_command(
     force: bool,
     system_id: int | None,
     sensor: str | None,
+    attitude: list[str | int] | None = None,
+    reference: list[str | int] | None = None,
+    gyro: list[str | int] | None = None,
+    accel: list[str | int] | None = None,
+    time_column: list[str | int] | None = None,
+    attitude_convention: str = "ned",
+    angle_unit: str = "auto",
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -317,6 +361,7 @@ def calibrate_command(
       magfit calibrate boat.csv --unit uT --field-strength wmm --location 47.4,8.5,0.5 --date 2026-06-01
       magfit calibrate 00000042.BIN --field-strength wmm --export ardupilot -o compasses.param
       magfit calibrate flight.ulg --sensor sensor_mag/0 -o mag0.json
+      magfit calibrate flight.csv --unit nT --method vector --attitude roll,pitch,yaw --reference ref_n,ref_e,ref_d
     """
     from ..io import STDOUT, write_all
     from ..sources import log_kind
@@ -336,22 +381,20 @@ def calibrate_command(
     method = method or default_method()
     if output is not None and export_format is not None and str(output) != STDOUT:
         _check_extension(output, export_format)
-    result = calibrate_file(
-        file,
-        method,
-        sensor=sensor,
-        columns=columns,
-        unit=unit,
-        field_strength=field_strength,  # type: ignore[arg-type]  # FieldStrength gives a number or "wmm"
-        location=location,  # type: ignore[arg-type]  # parse_place gives a place or "log"
-        date=model_date,
-        force=force,
-        nonfinite=nonfinite,
-        even=even,
-        max_samples=max_samples,
-        progress=progress_bar,
-        notify=warn,
-    )
+    try:
+        result = _calibrate(
+            file, method, sensor=sensor, columns=columns, unit=unit, field_strength=field_strength, location=location,
+            model_date=model_date, force=force, nonfinite=nonfinite, even=even, max_samples=max_samples,
+            attitude=attitude, reference=reference, gyro=gyro, accel=accel, time=time_column,
+            attitude_convention=attitude_convention, angle_unit=angle_unit,
+        )  # fmt: skip
+    except StreamsMissing as error:
+        raise CommandError(
+            f"{one_line(error.text)}; on the command line: {command_line('calibrate', file, error.remedy)}"
+        ) from None
+    except RefusedWithAdvice as error:
+        said = "; ".join(f"{reason} ({command_line('calibrate', file, reason.remedy)})" for reason in error.advice)
+        raise FitFailedError(f"{option_wording(one_line(error.text))}; what works for a vehicle: {said}") from None
     several = len(result.compasses) + len(result.failures) > 1
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
     files: list[tuple[Path, bytes]] = []
@@ -390,6 +433,11 @@ def calibrate_command(
         click.echo(stdout_text, nl=not stdout_text.endswith("\n"))
     if result.failures:
         raise CalibrationError(f"{file}: {_failed(result)}; the warnings above say why")
+
+
+def _calibrate(file: Path, method: str, *, model_date: datetime.date | None, **options: Any) -> FileCalibration:
+    """:func:`calibrate_file` with the progress bar and the notes as warnings."""
+    return calibrate_file(file, method, date=model_date, progress=progress_bar, notify=warn, **options)
 
 
 def _wrote_line(path: Path, result: FileCalibration, export_format: str | None) -> str:
@@ -433,6 +481,16 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             )
         for message in _fit_warnings(compass.calibration):
             warn(without_own_advice(message, compass.calibration.method))  # "prefer method='auto'" after auto
+        for reason in compass.warnings:  # the unit check (unit_mismatch) and the like
+            warn(str(reason))
+        if compass.advice:
+            said = "; ".join(
+                f"{reason} ({command_line('calibrate', compass.path, reason.remedy)})" for reason in compass.advice
+            )
+            warn(
+                f"{compass.path}: the samples look like a vehicle's (level with turns); what works for a vehicle: "
+                + said
+            )
         print_summary(out, compass)
         if compass.model_field is not None:
             model, unit = compass.model_field, compass.calibration.unit

@@ -22,6 +22,7 @@ import datetime
 import importlib.util
 import math
 import os
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -32,11 +33,14 @@ import numpy as np
 from ..calibration import Calibration
 from ..errors import CalibrationError, DataFileError, MagfitError, OptionError
 from ..evaluate import Evaluation, evaluate
+from ..findings import Reason
 from ..fit import fit
 from ..methods import get_method
 from ..sources import Magnetometer, Source, log_kind, open_source
 from ..units import get_unit
+from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, vehicle_advice
 from .streaming import Nonfinite, Progress, fit_samples_file, no_progress, samples_for_fit
+from .table import StreamSpec
 
 if TYPE_CHECKING:
     from ..geomag import Field  # (imported when used: the wmm extra)
@@ -47,6 +51,9 @@ __all__ = [
     "FileCalibration",
     "ModelField",
     "Progress",
+    "RefusedWithAdvice",
+    "StreamSpec",
+    "StreamsMissing",
     "calibrate_file",
     "no_progress",
 ]
@@ -113,6 +120,12 @@ class CompassCalibration:
         calibration undone with the log's parameters, damaged data skipped).
     model_field : ModelField or None
         The World Magnetic Model's field at the recording, when asked for.
+    warnings : tuple of Reason
+        What a user must be warned of about the result (a field strength no place on Earth has in the unit
+        declared: ``unit_mismatch``), each with its code.
+    advice : tuple of Reason
+        For a vehicle's recording fitted weakly: the methods that work for it, each with its remedy
+        (:func:`magfit.pipeline.advice.vehicle_advice`).
     """
 
     path: Path
@@ -132,6 +145,8 @@ class CompassCalibration:
     time_base: str = ""
     notes: tuple[str, ...] = ()
     model_field: ModelField | None = None
+    warnings: tuple[Reason, ...] = ()
+    advice: tuple[Reason, ...] = ()
 
     @property
     def sensor(self) -> str | None:
@@ -227,6 +242,13 @@ def calibrate_file(
     options: Mapping[str, Any] | None = None,
     progress: Progress = no_progress,
     notify: Callable[[str], None] | None = None,
+    attitude: Sequence[str | int] | None = None,
+    reference: Sequence[str | int] | None = None,
+    gyro: Sequence[str | int] | None = None,
+    accel: Sequence[str | int] | None = None,
+    time: Sequence[str | int] | None = None,
+    attitude_convention: Literal["ned", "enu"] = "ned",
+    angle_unit: Literal["auto", "deg", "rad"] = "auto",
 ) -> FileCalibration:
     """Fit a recording: a samples file (text, npy, npz), a PX4 ULog, an ArduPilot DataFlash log or a ROS bag.
 
@@ -267,6 +289,18 @@ def calibrate_file(
     notify : callable or None
         Called with each note about the recording as soon as it is known (``"x.bin (MAG/0): ..."``), before
         a fit that may fail; the notes are in the result too.
+    attitude, reference, gyro, accel, time : sequence or None
+        A samples file's other streams for ``vector`` and ``gyro`` (docs/file-formats.md): the attitude's
+        columns (roll, pitch, yaw, or a quaternion w, x, y, z), the reference field's N, E, D columns (in the
+        samples' unit; without them, the World Magnetic Model at ``location`` or at the file's latitude and
+        longitude columns), the gyroscope's (rad/s), the accelerometer's and the time column (seconds). Names
+        or 0-based numbers, as ``columns``; None finds each by its name.
+    attitude_convention : {"ned", "enu"}
+        ``"ned"``: aerospace 3-2-1 Euler angles (yaw, pitch, roll) or a quaternion from the body's
+        forward-right-down axes into North-East-Down; ``"enu"``: ROS's, forward-left-up into East-North-Up
+        (the reference columns then E, N, U).
+    angle_unit : {"auto", "deg", "rad"}
+        The Euler angles' unit; ``"auto"`` decides from the values and refuses a file they leave ambiguous.
 
     Returns
     -------
@@ -303,18 +337,23 @@ def calibrate_file(
         if sensor is not None:
             raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
         needs = get_method(method).needs
-        if needs and not all(need in options for need in needs):
-            raise OptionError(
-                f"{path}: the {method} method needs {', '.join(needs)} beside the samples, which a samples file does "
-                "not hold: give a flight log or bag that logs the attitude and GPS (vector) or the gyroscope (gyro), "
-                f"or call magfit.fit(samples, method={method!r}, {'=..., '.join(needs)}=...) from Python"
-            )
+        spec = StreamSpec(attitude, reference, gyro, accel, time, attitude_convention, angle_unit)
         model = _model(path, None, location, date)  # (no log: "wmm" without a place is refused below)
+        if needs and not all(need in options for need in needs):
+            if field_strength is not None:
+                raise OptionError(f"{path}: field_strength=... goes with a magnitude-only method, not {method}")
+            where = location if location is not None and location != FROM_LOG else None
+            compass = _calibrate_samples_streams(path, method, columns, spec, unit, where, date, options, say)
+            return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
         if field_strength == "wmm":
             options["field_strength"] = _model_strength(model, unit)
         elif field_strength is not None:
             options["field_strength"] = field_strength
-        compass = _calibrate_samples(path, method, columns, nonfinite, unit, even, max_samples, options, progress)
+        try:
+            compass = _calibrate_samples(path, method, columns, nonfinite, unit, even, max_samples, options, progress)
+        except CalibrationError as error:
+            raise _with_vehicle_advice(path, error, columns, unit, method) from None
+        compass = _vehicle_weak(compass, unit, method)
         return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
     if columns is not None:
         raise OptionError(f"{path}: columns=[...] chooses the columns of a samples file; a log's compass by sensor=")
@@ -438,7 +477,164 @@ def _calibrate_compass(
         end_s=float(times.max()) if times.size else float("nan"),
         time_base=source.time_base,
         notes=notes,
+        warnings=_unit_warnings(calibration.field_strength, label or None),
     )
+
+
+def _unit_warnings(field_strength: float, unit: str | None) -> tuple[Reason, ...]:
+    """The unit check's warning (``unit_mismatch``): a field strength no place on Earth has in the unit declared.
+
+    Asked of :func:`magfit.units.earth_field_check` where that function exists, else nothing."""
+    units = sys.modules[get_unit.__module__]  # magfit.units (a name another change adds to it)
+    check = getattr(units, "earth_field_check", None)
+    if check is None or not math.isfinite(field_strength):
+        return ()
+    reason = check(float(field_strength), unit)
+    return () if reason is None else (reason,)
+
+
+def _with_vehicle_advice(
+    path: Path, error: CalibrationError, columns: Sequence[str | int] | None, unit: str | None, method: str
+) -> CalibrationError:
+    """A samples file's refusal, with the methods that work for a vehicle when the samples look like one's."""
+    try:
+        from ..io import read_samples
+        from ..io.layout import sniff
+        from ..io.streams import find_stream_columns
+
+        samples = read_samples(path, columns=columns).samples
+        header = sniff(path).header
+    except MagfitError:
+        return error
+    if not looks_like_vehicle(samples):
+        return error
+    streams = tuple(find_stream_columns(header)) if header is not None else ()
+    advice = vehicle_advice(path, is_log=False, streams=streams, unit=unit, method=method)
+    return RefusedWithAdvice(path, str(error), advice, codes=getattr(error, "codes", ()))
+
+
+def _vehicle_weak(compass: CompassCalibration, unit: str | None, method: str) -> CompassCalibration:
+    """A weak fit of a vehicle's samples gets the methods that work for a vehicle (``advice``)."""
+    support = compass.calibration.details.get("support")
+    if not isinstance(support, Mapping) or support.get("verdict") not in ("weak", "refused"):
+        return compass
+    try:
+        from ..io import read_samples
+        from ..io.layout import sniff
+        from ..io.streams import find_stream_columns
+
+        indices = compass.calibration.details.get("source", {}).get("column_indices")
+        samples = read_samples(compass.path, columns=indices).samples
+        header = sniff(compass.path).header
+    except MagfitError:
+        return compass
+    if not looks_like_vehicle(samples):
+        return compass
+    streams = tuple(find_stream_columns(header)) if header is not None else ()
+    return replace(
+        compass, advice=vehicle_advice(compass.path, is_log=False, streams=streams, unit=unit, method=method)
+    )
+
+
+def _calibrate_samples_streams(
+    path: Path,
+    method: str,
+    columns: Sequence[str | int] | None,
+    spec: StreamSpec,
+    unit: str | None,
+    location: tuple[float, float, float] | None,
+    date: datetime.date | str | None,
+    options: Mapping[str, Any],
+    say: Callable[[str], None],
+) -> CompassCalibration:
+    """Fit a samples file with ``vector`` or ``gyro``: its attitude, reference, gyroscope, accelerometer and
+    time columns through the logs' path (:func:`magfit.pipeline.streams.method_streams`)."""
+    from .streams import method_streams, stream_names
+    from .table import samples_source
+
+    names = stream_names([method])
+    wanted = ["attitude", "reference", "place"] if "reference" in names.needed else []
+    wanted += [s for s in ("gyro", "accel") if s in (*names.needed, *names.optional)]
+    wanted += ["time"] if "time_s" in (*names.needed, *names.optional) else []
+    source, reference_ned, notes = samples_source(path, columns, spec, wanted, location)
+    motion = source.read_motion("columns")
+    label = unit or motion.unit or None
+    base = [("method", method)] + ([("unit", label)] if label else [])
+    found = {"attitude": motion.attitude is not None, "reference": reference_ned is not None}
+    listing = f"the columns are: {_columns_of(path)}"
+    if "reference" in names.needed:
+        if motion.attitude is None:
+            raise StreamsMissing(
+                path,
+                f"{path}: the vector method needs the vehicle's attitude beside the samples, and no attitude columns "
+                f"were found (roll, pitch, yaw or qw, qx, qy, qz; {listing}): name them",
+                (*base, ("attitude", "ROLL,PITCH,YAW"), *(() if found["reference"] else (("reference", "N,E,D"),))),
+            )
+        if reference_ned is None and motion.position is None:
+            raise StreamsMissing(
+                path,
+                f"{path}: the vector method needs the reference field at each sample: no N/E/D columns were found "
+                f"(ref_n, ref_e, ref_d; {listing}) and no place for the World Magnetic Model (no latitude and "
+                "longitude columns, no location): name the reference columns, or give the place",
+                (*base, ("reference", "N,E,D")),
+            )
+    if "gyro" in names.needed and (motion.gyro is None or "time" not in source.time_base):
+        missing = [
+            what
+            for what, ok in (("gyroscope", motion.gyro is not None), ("time", "time" in source.time_base))
+            if not ok
+        ]
+        raise StreamsMissing(
+            path,
+            f"{path}: the gyro method needs the gyroscope's rates (rad/s) and the time of each sample; no "
+            f"{' or '.join(missing)} columns were found (gx, gy, gz; time; {listing}): name them",
+            (*base, *((("gyro", "GX,GY,GZ"),) if motion.gyro is None else ()),
+             *((("time", "TIME"),) if "time" not in source.time_base else ())),
+        )  # fmt: skip
+    for note in notes:
+        say(note)
+    streams = method_streams(
+        source, "columns", names.needed,
+        optional=[o for o in names.optional if o != "inclination_deg" or motion.position],
+        unit=label, date=date, reference_ned=reference_ned,
+    )  # fmt: skip
+    for note in streams.notes:
+        say(note)
+    fitted_options = {**options, **streams.options}
+    if "time" not in source.time_base:
+        fitted_options.pop("time_s", None)  # row numbers are no time: no lag searched
+    try:
+        calibration = fit(streams.samples, method=method, **fitted_options)
+    except CalibrationError as error:
+        used = f"columns {source.magnetometers[0].description}"
+        raise _with_vehicle_advice(
+            path, CalibrationError(f"{path} ({used}): {error}", codes=error.codes), columns, label, method
+        ) from None
+    calibration = calibration.with_unit(label) if label else calibration
+    chosen = source.magnetometers[0]
+    details = {"file": path.name, "columns": chosen.description.split(", "), "unit": calibration.unit,
+               "streams": [note.split(": ", 1)[1] for note in notes[1:]]}  # fmt: skip
+    calibration = replace(calibration, details={**calibration.details, "source": details})
+    return CompassCalibration(
+        path=path,
+        calibration=calibration,
+        evaluation=evaluate(calibration, streams.samples),
+        columns=tuple(chosen.description.split(", ")),
+        n_rows=len(streams.samples),
+        n_skipped=0,
+        skipped_lines=(),
+        file_format=source.format,
+        streamed=False,
+        notes=notes + streams.notes,
+        warnings=_unit_warnings(calibration.field_strength, label),
+    )
+
+
+def _columns_of(path: Path) -> str:
+    from ..io.layout import sniff
+
+    fmt = sniff(path)
+    return ", ".join(fmt.column_label(i) for i in range(fmt.n_columns))
 
 
 def _calibrate_samples(
@@ -500,6 +696,7 @@ def _calibrate_samples(
         streamed=fitted.streamed,
         subsample=fitted.subsample,
         column_note=chosen.column_note,
+        warnings=_unit_warnings(calibration.field_strength, unit),
     )
 
 

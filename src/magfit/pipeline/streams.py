@@ -101,6 +101,7 @@ def method_streams(
     date: datetime.date | str | None = None,
     available: bool = False,
     gyro_own_rate: bool = False,
+    reference_ned: NDArray[np.float64] | None = None,
 ) -> MethodStreams:
     """Read ``sensor``'s samples with the streams ``needs`` names (``reference``, ``gyro``, ``time_s``) and
     those of ``optional`` the log holds (``time_s``, ``gyro``, ``accel``; :func:`stream_names` gives both for
@@ -144,7 +145,7 @@ def method_streams(
         notes.append(str(error))
     try:
         if "reference" in needs:
-            options["reference"] = _reference(source, motion, where, unit, date, notes)
+            options["reference"] = _reference(source, motion, where, unit, date, notes, reference_ned)
     except (DataFileError, OptionError) as error:
         if not available:
             raise
@@ -201,8 +202,10 @@ def _reference(
     unit: str | None,
     date: datetime.date | str | None,
     notes: list[str],
+    reference_ned: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
-    """The model's field turned into the body frame at each sample: ``attitudeᵀ · (N, E, D)``."""
+    """The model's field (or ``reference_ned``, row by row) turned into the body frame at each sample:
+    ``attitudeᵀ · (N, E, D)``."""
     from ..geomag import field_at
 
     if motion.attitude is None:
@@ -210,6 +213,12 @@ def _reference(
             f"{where}: the log holds no attitude beside this compass; the vector method needs one (ArduPilot ATT or "
             "XKQ, PX4 vehicle_attitude, a ROS sensor_msgs/Imu with its orientation)"
         )
+    if reference_ned is not None:
+        said = f" ({unit})" if unit else " (the samples' unit)"
+        notes.append(
+            f"{where}: reference field from the file's N/E/D columns{said}, turned into the body frame by the attitude"
+        )
+        return np.einsum("kji,kj->ki", motion.attitude, reference_ned)
     label = unit or motion.unit
     if not label or not get_unit(label).is_physical:
         raise OptionError(

@@ -1,0 +1,182 @@
+"""A samples file with the vehicle's attitude, the reference field, the gyroscope and the accelerometer in
+columns beside the magnetometer, as a :class:`magfit.sources.Source`: :func:`samples_source`.
+
+The streams are found by their names (:func:`magfit.io.streams.find_stream_columns`) or named by the caller,
+read row for row with the magnetometer (rows with a missing value in any column used are dropped and
+counted), and handed to :func:`magfit.pipeline.streams.method_streams` as a flight log's are: one path for
+logs and files, the reference field turned into the body frame by the attitude there.
+
+The attitude's convention: ``"ned"`` (default) is the aerospace one, 3-2-1 Euler angles ``Rz(yaw) Ry(pitch)
+Rx(roll)`` (or a quaternion, scalar first) from the body's forward-right-down axes into North-East-Down:
+``v_ned = R v_body``; ``"enu"`` is ROS's (REP-103), from forward-left-up into East-North-Up, turned here into
+the former (``R_ned = T R_enu F`` with ``T`` swapping east and north and flipping up, ``F = diag(1, -1, -1)``).
+Angles in degrees or radians: :func:`angle_unit`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DataFileError, OptionError
+from ..sources import LogSamples, Magnetometer, Position, Source, median_position
+from ..sources.motion import Motion
+
+__all__ = ["ANGLE_UNITS", "CONVENTIONS", "StreamSpec", "angle_unit", "samples_source"]
+
+CONVENTIONS = ("ned", "enu")
+ANGLE_UNITS = ("auto", "deg", "rad")
+#: ENU <-> NED (east and north swapped, up flipped) and FLU <-> FRD.
+_T = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+_F = np.diag([1.0, -1.0, -1.0])
+#: Angles all within this many radians in magnitude could be degrees of a vehicle that hardly moved, or
+#: radians: the file is refused as ambiguous unless the unit is given.
+AMBIGUOUS_RAD = 1.0
+
+
+@dataclass(frozen=True)
+class StreamSpec:
+    """The columns the caller named for each stream (None: found by name), and how to read the attitude."""
+
+    attitude: Sequence[str | int] | None = None
+    reference: Sequence[str | int] | None = None
+    gyro: Sequence[str | int] | None = None
+    accel: Sequence[str | int] | None = None
+    time: Sequence[str | int] | None = None
+    convention: Literal["ned", "enu"] = "ned"
+    angle_unit: Literal["auto", "deg", "rad"] = "auto"
+
+
+def angle_unit(path: Path, angles: NDArray[np.float64], given: str) -> str:
+    """``"deg"`` or ``"rad"`` for Euler angles (N, 3): given, or from the values. Any beyond 2π: degrees; any
+    beyond :data:`AMBIGUOUS_RAD` (and none beyond 2π): radians (in degrees the vehicle's heading, roll and
+    pitch would all have stayed within ±6.3°); all within it: refused as ambiguous."""
+    if given != "auto":
+        return given
+    largest = float(np.nanmax(np.abs(angles))) if angles.size else 0.0
+    if largest > 2 * math.pi + 1e-6:
+        return "deg"
+    if largest > AMBIGUOUS_RAD:
+        return "rad"
+    raise DataFileError(
+        f"{path}: the attitude's angles all lie within ±{largest:.3g}: radians, or degrees of a vehicle that "
+        "hardly turned; say which with angle_unit='deg' or angle_unit='rad'"
+    )
+
+
+def _matrices(values: NDArray[np.float64], unit: str, convention: str) -> NDArray[np.float64]:
+    """Body -> NED rotation matrices from (roll, pitch, yaw) or (w, x, y, z), in the convention given."""
+    from scipy.spatial.transform import Rotation
+
+    if values.shape[1] == 4:
+        norms = np.linalg.norm(values, axis=1, keepdims=True)
+        matrices = Rotation.from_quat(values[:, [1, 2, 3, 0]] / norms).as_matrix()
+    else:
+        roll, pitch, yaw = values.T
+        matrices = Rotation.from_euler("ZYX", np.column_stack([yaw, pitch, roll]), degrees=unit == "deg").as_matrix()
+    if convention == "enu":
+        matrices = np.einsum("ij,njk,kl->nil", _T, matrices, _F)
+    return np.asarray(matrices)
+
+
+def samples_source(
+    path: Path,
+    columns: Sequence[str | int] | None,
+    spec: StreamSpec,
+    wanted: Sequence[str],
+    location: tuple[float, float, float] | None = None,
+) -> tuple[Source, NDArray[np.float64] | None, tuple[str, ...]]:
+    """The samples file as a :class:`Source` whose ``read_motion`` gives the magnetometer with the streams
+    ``wanted`` holds (``attitude``, ``reference``, ``gyro``, ``accel``, ``time``, ``place``) that the file
+    has; the reference field's N/E/D rows (None when the file has none) and notes (where each came from).
+    """
+    from ..io import ChunkReader
+    from ..io.streams import find_stream_columns, read_stream_columns, resolve_stream
+
+    chosen = ChunkReader(path, columns=columns, nonfinite="skip")  # the magnetometer's columns and layout only
+    fmt = chosen.format
+    named = find_stream_columns(fmt.header) if fmt.header is not None else {}
+    found = {}
+    for stream in wanted:
+        given = getattr(spec, stream, None)
+        if given is not None:
+            scale = named["time"].scale if stream == "time" and "time" in named else 1.0
+            found[stream] = resolve_stream(path, fmt, stream, given, scale=scale)
+        elif stream in named:
+            found[stream] = named[stream]
+    magnetometer_columns = tuple(chosen.column_indices)
+    for columns_of in found.values():
+        if set(columns_of.indices) & set(magnetometer_columns):
+            raise OptionError(
+                f"{path}: the {columns_of.name} columns {columns_of.describe()} include the magnetometer's "
+                f"({', '.join(map(str, chosen.columns))}); name each stream's own columns"
+            )
+    read = read_stream_columns(path, fmt, {"mag": magnetometer_columns, **{k: v.indices for k, v in found.items()}})
+    good = np.all(np.isfinite(np.column_stack(list(read.values()))), axis=1)
+    if "place" in read:  # a missing fix does not drop the sample: the place is the median of the fixes
+        good = np.all(np.isfinite(np.column_stack([v for k, v in read.items() if k != "place"])), axis=1)
+    n_dropped = int(np.count_nonzero(~good))
+    rows = {name: values[good] for name, values in read.items()}
+    samples = rows["mag"]
+    unit = chosen.unit or ""
+    notes = [f"{path}: magnetometer {', '.join(map(str, chosen.columns))}"]
+    if chosen.column_note:
+        notes[0] += f" ({chosen.column_note})"
+    if n_dropped:
+        notes.append(f"{path}: {n_dropped} of {len(good)} rows dropped: a missing value in a column used")
+    how = {True: "found by name", False: "as given"}
+    for name, where in found.items():
+        notes.append(f"{path}: {name} {where.describe()} ({how[where.by_name]})")
+    time_s = rows["time"][:, 0] * found["time"].scale if "time" in rows else np.arange(len(samples), dtype=float)
+    if "time" in rows and len(time_s) > 1 and not np.all(np.diff(time_s) > 0):
+        raise DataFileError(f"{path}: the time column {found['time'].describe()} does not increase row after row")
+    attitude = None
+    if "attitude" in rows:
+        values = rows["attitude"]
+        if values.shape[1] == 3:
+            unit_used = angle_unit(path, values, spec.angle_unit)
+            notes.append(
+                f"{path}: attitude as roll, pitch, yaw in {'degrees' if unit_used == 'deg' else 'radians'}, "
+                "3-2-1 (yaw, pitch, roll), body to "
+                + ("NED" if spec.convention == "ned" else "ENU (ROS), turned into NED")
+            )
+        else:
+            unit_used = "rad"
+            notes.append(f"{path}: attitude as a quaternion (w, x, y, z), body to {spec.convention.upper()}")
+        attitude = _matrices(values, unit_used, spec.convention)
+    position = None
+    if "place" in rows:
+        place = rows["place"]
+        alt = place[:, 2] if place.shape[1] > 2 else np.zeros(len(place))
+        position = median_position(place[:, 0], place[:, 1], alt, np.full(len(place), np.nan))
+    if location is not None:  # the place given wins over the file's own columns
+        position = Position(location[0], location[1], location[2], float("nan"), 1)
+    reference_ned = rows.get("reference")
+    if reference_ned is not None and spec.convention == "enu":
+        reference_ned = reference_ned @ _T.T  # an ENU reference (east, north, up) into N, E, D
+    magnetometer = Magnetometer(id="columns", description=", ".join(map(str, chosen.columns)), unit=unit,
+                                n_samples=len(samples))  # fmt: skip
+    motion = Motion(
+        sensor="columns", unit=unit, time_s=time_s, samples=samples, magnetometer_frame="body",
+        attitude=attitude, gyro=rows.get("gyro"), accel=rows.get("accel"),
+        imu_frame="body" if "gyro" in rows or "accel" in rows else "",
+        sources={k: f"columns {found[k].describe()}" for k in ("attitude", "gyro", "accel") if k in found},
+        frames={k: "body" for k in ("attitude", "gyro", "accel") if k in found},
+        position=position, notes=(),
+    )  # fmt: skip
+
+    def read_samples_only(chosen_magnetometer: Magnetometer) -> LogSamples:
+        return LogSamples(chosen_magnetometer, samples, time_s, tuple(map(str, chosen.columns)))
+
+    source = Source(
+        path=path, kind="samples", format=fmt.describe(),
+        time_base="seconds (the time column)" if "time" in rows else "none (rows)",
+        magnetometers=(magnetometer,), position=position, _reader=read_samples_only, _motion=lambda m: motion,
+    )  # fmt: skip
+    return source, reference_ned, tuple(notes)

@@ -1,0 +1,156 @@
+"""A vehicle's samples file on the command line: the attitude, reference field and time columns found by name
+or named, through the logs' path to ``vector``; the same numbers as ``magfit.fit`` from Python; a missing
+stream named with the exact command line and Python call; the methods that work for a vehicle advised; the
+unit check's warning printed."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from scipy.spatial.transform import Rotation
+
+import magfit
+from magfit.cli import cli
+from magfit.errors import DataFileError
+from magfit.findings import Reason
+from magfit.pipeline import StreamsMissing
+from magfit.vehicle import simulate_vehicle
+
+HEADER = "time,flux_x,flux_y,flux_z,pitch,roll,yaw,ref_n,ref_e,ref_d"
+
+
+@pytest.fixture(scope="module")
+def flight() -> object:
+    return simulate_vehicle(
+        3000, "flight", rate_hz=10.0, field_strength=50000.0, inclination_deg=64.0, declination_deg=3.0, noise=5.0,
+        hard_iron=[800.0, -500.0, 300.0], soft_iron=np.array([[1.05, 0.02, 0.0], [0.02, 0.97, 0.01], [0.0, 0.01, 1.0]]),
+        attitude_noise_deg=0.1, seed=3,
+    )  # fmt: skip
+
+
+def table(sim: object, *, radians: bool = False) -> np.ndarray:
+    yaw, pitch, roll = Rotation.from_matrix(sim.attitude_measured).as_euler("ZYX", degrees=not radians).T  # type: ignore[attr-defined]
+    yaw = np.mod(yaw, 2 * np.pi if radians else 360.0)
+    ned = np.tile(sim.field_world, (len(yaw), 1))  # type: ignore[attr-defined]
+    return np.column_stack([sim.time_s, sim.samples, pitch, roll, yaw, ned])  # type: ignore[attr-defined]
+
+
+def python_fit(values: np.ndarray, *, radians: bool = False) -> magfit.Calibration:
+    """What a Python user writes: the reference turned into the body frame by the attitude, then fit."""
+    attitude = Rotation.from_euler("ZYX", values[:, [6, 4, 5]], degrees=not radians).as_matrix()
+    reference = np.einsum("kji,kj->ki", attitude, values[:, 7:10])
+    return magfit.fit(values[:, 1:4], method="vector", reference=reference, time_s=values[:, 0])
+
+
+def write(path: Path, values: np.ndarray, header: bool = True) -> Path:
+    np.savetxt(path, values, delimiter=",", header=HEADER if header else "", comments="", fmt="%.10g")
+    return path
+
+
+def test_vector_from_a_named_flight_csv_matches_python_and_the_truth(tmp_path: Path, flight: object) -> None:
+    values = table(flight)
+    path = write(tmp_path / "flight.csv", values)
+    out = tmp_path / "cal.json"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "nT", "--method", "vector", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    fitted = magfit.Calibration.from_json(out.read_text())
+    expected = python_fit(np.loadtxt(path, delimiter=",", skiprows=1))
+    np.testing.assert_allclose(fitted.offset, expected.offset, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(fitted.matrix, expected.matrix, rtol=1e-9, atol=1e-12)
+    # Against the truth: the corrected field in the body frame, within a fraction of a degree.
+    corrected, truth = fitted.apply(flight.clean), flight.truth.apply(flight.clean)  # type: ignore[attr-defined]
+    cosine = np.sum(corrected * truth, axis=1) / np.linalg.norm(corrected, axis=1) / np.linalg.norm(truth, axis=1)
+    assert np.degrees(np.arccos(np.clip(cosine, -1, 1))).mean() < 0.3
+
+
+def test_a_headerless_file_with_the_columns_named_and_radians(tmp_path: Path, flight: object) -> None:
+    values = table(flight, radians=True)
+    path = write(tmp_path / "flight.txt", values, header=False)
+    result = magfit.calibrate_file(path, method="vector", unit="nT", attitude=[5, 4, 6], reference=[7, 8, 9], time=[0])
+    expected = python_fit(np.loadtxt(path, delimiter=","), radians=True)
+    np.testing.assert_allclose(result.calibration.offset, expected.offset, rtol=1e-9, atol=1e-6)
+    assert any("in radians" in note for note in result.compasses[0].notes)
+    cli_run = CliRunner().invoke(
+        cli, ["calibrate", str(path), "--unit", "nT", "-m", "vector", "--attitude", "5,4,6", "--reference", "7,8,9",
+              "--time", "column 1"],
+    )  # fmt: skip
+    assert cli_run.exit_code == 0, cli_run.output
+    assert f"offset           ({expected.offset[0]:.6g}" in cli_run.stdout
+
+
+def test_angles_that_could_be_either_unit_are_refused(tmp_path: Path, flight: object) -> None:
+    values = table(flight, radians=True)
+    values[:, 4:7] = np.clip(values[:, 4:7], -0.9, 0.9)
+    path = write(tmp_path / "small.csv", values)
+    with pytest.raises(DataFileError, match="angle_unit='deg' or angle_unit='rad'"):
+        magfit.calibrate_file(path, method="vector", unit="nT")
+
+
+def test_a_missing_attitude_names_the_command_line_and_a_python_call_that_parses(
+    tmp_path: Path, flight: object
+) -> None:
+    values = table(flight)[:, :4]
+    path = tmp_path / "mag.csv"
+    np.savetxt(path, values, delimiter=",", header="time,flux_x,flux_y,flux_z", comments="", fmt="%.10g")
+    with pytest.raises(StreamsMissing) as caught:
+        magfit.calibrate_file(path, method="vector", unit="nT")
+    call = str(caught.value).split("from Python: ", 1)[1]
+    ast.parse(call)  # valid Python, not "magfit.fit(samples, --method vector, ...)"
+    assert call.startswith(f"magfit.calibrate_file({str(path)!r}, method='vector', unit='nT', attitude=[")
+    assert ("method", "vector") in caught.value.remedy
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "nT", "--method", "vector"])
+    assert result.exit_code == 2
+    assert f"on the command line: magfit calibrate {path} --method vector --unit nT --attitude ROLL,PITCH,YAW" in (
+        result.stderr
+    )
+    assert "--method vector," not in result.stderr and "Traceback" not in result.output
+
+
+def test_a_vehicle_s_weak_or_refused_fit_names_what_works(tmp_path: Path, flight: object) -> None:
+    path = write(tmp_path / "flight.csv", table(flight))
+    try:
+        result = magfit.calibrate_file(path, method="auto", unit="nT")
+    except magfit.CalibrationError as error:  # refused: the advice rides on the error
+        advice = error.advice  # type: ignore[attr-defined]
+    else:
+        advice = result.compasses[0].advice
+    methods = {dict(reason.remedy)["method"] for reason in advice}
+    assert {"vector", "gyro", "sphere"} <= methods
+    assert all(isinstance(reason, Reason) and reason.code == "vehicle_methods" for reason in advice)
+    run = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "nT"])
+    assert f"magfit calibrate {path} --method vector" in run.stderr
+    assert "--field-strength wmm --location" in run.stderr
+
+
+def test_the_unit_check_is_printed_as_a_warning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The wiring, with a stand-in of magfit.units.earth_field_check(field_strength, unit) -> Reason | None."""
+    sim = magfit.simulate(1500, field_strength=1078.0, hard_iron=[10.0, -20.0, 30.0], noise=0.5, seed=4)
+    path = tmp_path / "counts.csv"
+    np.savetxt(path, sim.samples, delimiter=",", header="mx,my,mz", comments="")
+    seen = []
+
+    def check(field_strength: float, unit: str | None) -> Reason | None:
+        seen.append((round(field_strength), unit))
+        return Reason(f"{field_strength:.0f} {unit} is no Earth field: raw counts?", "unit_mismatch")
+
+    monkeypatch.setattr(magfit.units, "earth_field_check", check, raising=False)
+    result = magfit.calibrate_file(path, method="sphere", unit="uT")
+    assert [reason.code for reason in result.compasses[0].warnings] == ["unit_mismatch"]
+    assert seen == [(1078, "uT")]
+    run = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "-m", "sphere"])
+    assert run.exit_code == 0
+    assert "magfit: warning: 1078 uT is no Earth field: raw counts?" in run.stderr
+
+
+def test_the_real_unit_check_warns_of_counts_declared_as_microtesla(tmp_path: Path) -> None:
+    if not hasattr(magfit.units, "earth_field_check"):
+        pytest.skip("magfit.units.earth_field_check is not there yet")
+    sim = magfit.simulate(1500, field_strength=1078.0, hard_iron=[10.0, -20.0, 30.0], noise=0.5, seed=4)
+    path = tmp_path / "counts.csv"
+    np.savetxt(path, sim.samples, delimiter=",", header="mx,my,mz", comments="")
+    result = magfit.calibrate_file(path, method="sphere", unit="uT")
+    assert [reason.code for reason in result.compasses[0].warnings] == ["unit_mismatch"]
