@@ -154,3 +154,23 @@ def test_the_real_unit_check_warns_of_counts_declared_as_microtesla(tmp_path: Pa
     np.savetxt(path, sim.samples, delimiter=",", header="mx,my,mz", comments="")
     result = magfit.calibrate_file(path, method="sphere", unit="uT")
     assert [reason.code for reason in result.compasses[0].warnings] == ["unit_mismatch"]
+
+
+def test_align_from_the_attitude_and_reference_columns(tmp_path: Path) -> None:
+    """No accelerometer: the rotation is the vector fit's polar factor, the same as from Python, and near the
+    true mounting (upside down, turned 25°)."""
+    mounting = Rotation.from_euler("ZYX", [25.0, 0.0, 180.0], degrees=True).as_matrix()
+    sim = simulate_vehicle(
+        3000, "flight", rate_hz=10.0, field_strength=50000.0, inclination_deg=64.0, declination_deg=3.0, noise=5.0,
+        hard_iron=[800.0, -500.0, 300.0], mounting=mounting, attitude_noise_deg=0.1, seed=5,
+    )  # fmt: skip
+    path = write(tmp_path / "flight.csv", table(sim))
+    result = CliRunner().invoke(cli, ["align", str(path), "--unit", "nT"])
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.stdout.splitlines() if line.startswith(("rotation", " " * 17 + "("))][:3]
+    printed = np.array([[float(v) for v in line.split("(")[1].split(")")[0].split(",")] for line in lines])
+    expected = magfit.rotations.polar_decomposition(python_fit(np.loadtxt(path, delimiter=",", skiprows=1)).matrix)[0]
+    np.testing.assert_allclose(printed, expected, atol=6e-6)  # printed to 5 decimals
+    angle = np.degrees(np.arccos(np.clip((np.trace(expected.T @ mounting) - 1) / 2, -1, 1)))
+    assert angle < 0.5
+    assert "COMPASS_ORIENT 8 " in result.stdout or "ROTATION_ROLL_180" in result.stdout
