@@ -376,8 +376,8 @@ def align_command(
     with the vehicle's attitude and the reference field (or a place for the World Magnetic Model) is
     aligned by the vector fit instead: the rotation is the polar factor of its matrix. The accelerometer
     gives gravity while the vehicle is still or slow; the angle between gravity and the field is the same
-    everywhere, so the rotation follows without any attitude. Prints the rotation, its one-sigma, the nearest rotation of
-    ArduPilot, PX4, Betaflight and INAV and the parameters to set. Exit status 1 when the samples do
+    everywhere, so the rotation follows without any attitude. Prints the rotation, its one-sigma, the
+    nearest rotation of ArduPilot, PX4, Betaflight and INAV and the parameters to set. Exit status 1 when the samples do
     not determine it (a vehicle that stayed level cannot show its mount's yaw).
 
     \b
