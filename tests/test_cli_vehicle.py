@@ -174,3 +174,32 @@ def test_align_from_the_attitude_and_reference_columns(tmp_path: Path) -> None:
     angle = np.degrees(np.arccos(np.clip((np.trace(expected.T @ mounting) - 1) / 2, -1, 1)))
     assert angle < 0.5
     assert "COMPASS_ORIENT 8 " in result.stdout or "ROTATION_ROLL_180" in result.stdout
+
+
+def test_a_flight_log_s_refusal_or_weak_fit_names_the_log_s_methods(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A DataFlash log of level turns (roll and pitch within ±6°): every remedy is a command that runs on the log,
+    with no column to name; never only "tumble it"."""
+    import test_sources_motion as motion_log
+
+    def level_turns(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        a = np.column_stack([0.1 * np.sin(0.31 * t), 0.05 * np.sin(0.23 * t + 1.0), 0.7 * t])
+        da = np.column_stack(
+            [0.1 * 0.31 * np.cos(0.31 * t), 0.05 * 0.23 * np.cos(0.23 * t + 1.0), np.full_like(t, 0.7)]
+        )
+        return a, da
+
+    monkeypatch.setattr(motion_log, "euler", level_turns)
+    formats, rows = motion_log.dataflash_messages(n_mag=1600)
+    path = motion_log.write_bin(tmp_path / "level.bin", formats, rows)
+    try:
+        advice = magfit.calibrate_file(path, method="ellipsoid").compasses[0].advice
+    except magfit.CalibrationError as error:
+        advice = error.advice  # type: ignore[attr-defined]
+    remedies = [dict(reason.remedy) for reason in advice]
+    assert [remedy["method"] for remedy in remedies] == ["vector", "gyro", "sphere"]
+    assert all(set(remedy) <= {"method", "field_strength", "unit", "sensor"} for remedy in remedies)
+    run = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "ellipsoid"])
+    assert f"(magfit calibrate {path} --method vector)" in run.stderr
+    assert f"(magfit calibrate {path} --method sphere --field-strength wmm" in run.stderr

@@ -469,6 +469,7 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             out.print("")
         if sensor in failed:
             warn(failed[sensor].reason)
+            _warn_advice(failed[sensor].advice, result.path, "")
             out.print(f"{'sensor':<16} {sensor}: not fitted (the warning above says why)")
             continue
         compass = fitted[sensor]
@@ -483,14 +484,7 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             warn(without_own_advice(message, compass.calibration.method))  # "prefer method='auto'" after auto
         for reason in compass.warnings:  # the unit check (unit_mismatch) and the like
             warn(str(reason))
-        if compass.advice:
-            said = "; ".join(
-                f"{reason} ({command_line('calibrate', compass.path, reason.remedy)})" for reason in compass.advice
-            )
-            warn(
-                f"{compass.path}: the samples look like a vehicle's (level with turns); what works for a vehicle: "
-                + said
-            )
+        _warn_advice(compass.advice, compass.path, " (level with turns)" if compass.magnetometer is None else "")
         print_summary(out, compass)
         if compass.model_field is not None:
             model, unit = compass.model_field, compass.calibration.unit
@@ -504,6 +498,13 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             f"{field.inclination_deg:.1f}°) at {result.model_field.origin}",
             soft_wrap=True,
         )
+
+
+def _warn_advice(advice: Sequence[Any], path: Path, why: str) -> None:
+    """The methods that work for a vehicle (:class:`magfit.findings.Reason` with remedies), as commands to type."""
+    if advice:
+        said = "; ".join(f"{reason} ({command_line('calibrate', path, reason.remedy)})" for reason in advice)
+        warn(f"{path}: a vehicle's recording{why}; what works for a vehicle: {said}")
 
 
 def _samples_drawn(

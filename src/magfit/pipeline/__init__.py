@@ -38,7 +38,7 @@ from ..fit import fit
 from ..methods import get_method
 from ..sources import Magnetometer, Source, log_kind, open_source
 from ..units import get_unit
-from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, vehicle_advice
+from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, turned, vehicle_advice
 from .streaming import Nonfinite, Progress, fit_samples_file, no_progress, samples_for_fit
 from .table import StreamSpec
 
@@ -175,11 +175,13 @@ class CompassCalibration:
 
 @dataclass(frozen=True)
 class CompassFailure:
-    """A compass of a log that could not be fitted: which, and why (the fit's refusal or the read's error)."""
+    """A compass of a log that could not be fitted: which, and why (the fit's refusal or the read's error);
+    ``advice``: the methods that work for a vehicle, each a :class:`~magfit.findings.Reason` with its remedy."""
 
     sensor: str
     reason: str
     notes: tuple[str, ...] = ()
+    advice: tuple[Reason, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -379,7 +381,10 @@ def calibrate_file(
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
-            failures.append(CompassFailure(magnetometer.id, str(error), _notes(source, magnetometer)))
+            if isinstance(error, RefusedWithAdvice):  # the refusal's words; the remedies as data
+                failures.append(CompassFailure(magnetometer.id, error.text, _notes(source, magnetometer), error.advice))
+            else:
+                failures.append(CompassFailure(magnetometer.id, str(error), _notes(source, magnetometer)))
             continue
         compasses.append(replace(compass, model_field=model))
     tried = tuple(compass.sensor or "" for compass in compasses) + tuple(f.sensor for f in failures)
@@ -446,14 +451,25 @@ def _calibrate_compass(
         options = {**options, **streams.options}
     elif even:
         fitted = samples_for_fit(read.samples, even)
+    several = len([m for m in source.magnetometers if m.problem is None and m.n_samples > 0]) > 1
+    streams_held = ("attitude", "place", "gyro", "time")  # a log's: vector and gyro read them (or say why not)
     try:
         calibration = fit(fitted, method=method, **options)
     except CalibrationError as error:
         advice = "".join(f"; {note}" for note in magnetometer.notes if "logged at only" in note or "only " in note)
-        raise CalibrationError(f"{where}: {error}{advice}") from None
+        chosen = magnetometer.id if several else None
+        works = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
+        raise RefusedWithAdvice(
+            path, f"{where}: {error}{advice}", works if turned(fitted) else (), codes=error.codes
+        ) from None
     label = unit or magnetometer.unit
     calibration = calibration.with_unit(label) if label else calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
+    verdict = calibration.details.get("support", {}).get("verdict")
+    vehicle: tuple[Reason, ...] = ()
+    if verdict in ("weak", "refused") and turned(fitted):  # a flight log is a vehicle's: what works for it
+        chosen = magnetometer.id if several else None
+        vehicle = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
     if magnetometer.calibration_in_use is not None:  # the exports refuse to write a residual in its place
         sensor["calibration_in_use"] = magnetometer.calibration_in_use
     source_details = {"file": path.name, "sensor": magnetometer.id, "device_id": magnetometer.device_id}
@@ -478,6 +494,7 @@ def _calibrate_compass(
         time_base=source.time_base,
         notes=notes,
         warnings=_unit_warnings(calibration.field_strength, label or None),
+        advice=vehicle,
     )
 
 

@@ -32,6 +32,8 @@ STREAM_ARGUMENTS = ("columns", "attitude", "reference", "gyro", "accel", "time")
 #: Samples whose smallest principal spread is below this share of their largest turned about one axis
 #: mostly (level with turns, a car, a boat): a vehicle's.
 LEVEL_SHARE = 0.35
+#: Samples whose largest spread is below this share of the field's strength did not turn.
+TURNED_SHARE = 0.05
 
 
 def _python_value(name: str, value: str) -> str:
@@ -94,7 +96,17 @@ def looks_like_vehicle(samples: NDArray[np.float64]) -> bool:
     if len(finite) < 10:
         return False
     spreads = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov(finite.T)), 0.0))
-    return bool(spreads[-1] > 0 and spreads[0] < LEVEL_SHARE * spreads[-1])
+    return bool(turned(finite) and spreads[0] < LEVEL_SHARE * spreads[-1])
+
+
+def turned(samples: NDArray[np.float64]) -> bool:
+    """Whether the field turned in the sensor at all (a spread beyond :data:`TURNED_SHARE` of its strength): a
+    sensor never turned (or never read) is helped by no method, only by recording again."""
+    finite = samples[np.all(np.isfinite(samples), axis=1)]
+    if len(finite) < 10:
+        return False
+    spread = float(np.sqrt(np.max(np.linalg.eigvalsh(np.cov(finite.T)))))
+    return spread > TURNED_SHARE * float(np.median(np.linalg.norm(finite, axis=1)))
 
 
 def vehicle_advice(
@@ -104,10 +116,20 @@ def vehicle_advice(
     streams: Sequence[str],
     unit: str | None,
     method: str,
+    sensor: str | None = None,
 ) -> tuple[Reason, ...]:
     """The methods that work for a vehicle's recording, each a :class:`Reason` with its remedy (the arguments
     of :func:`magfit.calibrate_file` / the command line's options). ``streams``: those the file or log holds
-    (``attitude``, ``reference``, ``place``, ``gyro``, ``time``)."""
+    (``attitude``, ``reference``, ``place``, ``gyro``, ``time``); ``sensor``: the log's compass, named in
+    each remedy (a log holding several)."""
+    advice = [
+        Reason(reason.text, reason.code, reason.remedy + ((("sensor", sensor),) if sensor is not None else ()))
+        for reason in _advice(is_log=is_log, streams=streams, unit=unit, method=method)
+    ]
+    return tuple(advice)
+
+
+def _advice(*, is_log: bool, streams: Sequence[str], unit: str | None, method: str) -> list[Reason]:
     advice = []
     physical = unit not in (None, "", "counts")
     unit_pair = (("unit", unit),) if unit else (("unit", "uT"),)
@@ -147,4 +169,4 @@ def vehicle_advice(
         "the sphere pinned to the World Magnetic Model's field strength: offsets only, which level turns determine",
         "vehicle_methods", tuple(remedy),
     ))  # fmt: skip
-    return tuple(advice)
+    return advice
