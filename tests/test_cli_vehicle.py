@@ -203,3 +203,68 @@ def test_a_flight_log_s_refusal_or_weak_fit_names_the_log_s_methods(
     run = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "ellipsoid"])
     assert f"(magfit calibrate {path} --method vector)" in run.stderr
     assert f"(magfit calibrate {path} --method sphere --field-strength wmm" in run.stderr
+
+
+def test_gyro_from_a_samples_file_matches_python_and_the_truth(tmp_path: Path) -> None:
+    sim = simulate_vehicle(
+        6000, "car", rate_hz=20.0, field_strength=50.0, noise=0.05, hard_iron=[8.0, -5.0, 3.0],
+        soft_iron=np.array([[1.05, 0.02, 0.0], [0.02, 0.97, 0.01], [0.0, 0.01, 1.0]]), gyro_noise=0.001, seed=2,
+    )  # fmt: skip
+    path = tmp_path / "car.csv"
+    values = np.column_stack([sim.time_s, sim.samples, sim.gyro, sim.accel])
+    np.savetxt(path, values, delimiter=",", header="time,mx,my,mz,gx,gy,gz,ax,ay,az", comments="", fmt="%.12g")
+    read = np.loadtxt(path, delimiter=",", skiprows=1)
+    expected = magfit.fit(read[:, 1:4], method="gyro", gyro=read[:, 4:7], time_s=read[:, 0], accel=read[:, 7:10])
+    run = CliRunner().invoke(
+        cli, ["calibrate", str(path), "-m", "gyro", "--unit", "uT", "-o", str(tmp_path / "c.json")]
+    )
+    assert run.exit_code == 0, run.output
+    fitted = magfit.Calibration.from_json((tmp_path / "c.json").read_text())
+    np.testing.assert_allclose(fitted.offset, expected.offset, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(fitted.offset, sim.hard_iron, atol=0.2)  # the truth
+
+
+def test_a_quaternion_and_the_ros_convention_give_the_same_fit(tmp_path: Path, flight: object) -> None:
+    values = table(flight)
+    expected = python_fit(values)
+    rotation = Rotation.from_matrix(flight.attitude_measured)  # type: ignore[attr-defined]
+    wxyz = rotation.as_quat()[:, [3, 0, 1, 2]]
+    quaternion = tmp_path / "quaternion.csv"
+    body = np.column_stack([values[:, :4], wxyz, values[:, 7:10]])
+    np.savetxt(quaternion, body, delimiter=",", header="time,mx,my,mz,qw,qx,qy,qz,ref_n,ref_e,ref_d", comments="")
+    fitted = magfit.calibrate_file(quaternion, method="vector", unit="nT").calibration
+    np.testing.assert_allclose(fitted.offset, expected.offset, rtol=1e-6, atol=1e-3)
+    # ROS: FLU body -> ENU, yaw counter-clockwise from east; the reference as E, N, U.
+    swap, flip = np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]]), np.diag([1.0, -1, -1])
+    enu = Rotation.from_matrix(np.einsum("ij,njk,kl->nil", swap, rotation.as_matrix(), flip))
+    yaw, pitch, roll = enu.as_euler("ZYX", degrees=True).T
+    ros = tmp_path / "ros.csv"
+    columns = [values[:, :4], roll, pitch, yaw, values[:, 7:10] @ swap.T]
+    np.savetxt(
+        ros, np.column_stack(columns), delimiter=",", header="t,mx,my,mz,roll,pitch,yaw,ref_e,ref_n,ref_u", comments=""
+    )
+    run = magfit.calibrate_file(
+        ros, method="vector", unit="nT", reference=["ref_e", "ref_n", "ref_u"], attitude_convention="enu"
+    )
+    np.testing.assert_allclose(run.calibration.offset, expected.offset, rtol=1e-6, atol=1e-3)
+
+
+def test_the_world_magnetic_model_at_the_file_s_own_place(tmp_path: Path, flight: object) -> None:
+    pytest.importorskip("pygeomag")
+    from magfit.geomag import field_at
+
+    values = table(flight)[:, :7]
+    place = np.tile([47.4, 8.5, 500.0], (len(values), 1))
+    path = tmp_path / "survey.csv"
+    header = "time,mx,my,mz,pitch,roll,yaw,lat,lon,alt"
+    np.savetxt(path, np.column_stack([values, place]), delimiter=",", header=header, comments="", fmt="%.10g")
+    result = magfit.calibrate_file(path, method="vector", unit="nT", date="2026-04-14")
+    read = np.loadtxt(path, delimiter=",", skiprows=1)
+    attitude = Rotation.from_euler("ZYX", read[:, [6, 4, 5]], degrees=True).as_matrix()
+    ned = field_at(47.4, 8.5, 0.5, date="2026-04-14").vector_in("nT")
+    expected = magfit.fit(
+        read[:, 1:4], method="vector", reference=np.einsum("kji,j->ki", attitude, ned), time_s=read[:, 0]
+    )
+    np.testing.assert_allclose(result.calibration.offset, expected.offset, rtol=1e-9, atol=1e-6)
+    without_unit = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "vector"])
+    assert without_unit.exit_code == 2 and "physical unit" in without_unit.stderr

@@ -374,7 +374,8 @@ def calibrate_command(
     if system_id is not None and export_format != "px4":
         raise click.UsageError("--system-id goes with --export px4: it is the vehicle id a PX4 parameter file names")
     is_log = log_kind(file) is not None
-    if location is None and model_date is not None and field_strength != "wmm":
+    needs_streams = bool(get_method(method or default_method()).needs)  # vector: a file's own lat/lon columns
+    if location is None and model_date is not None and field_strength != "wmm" and not needs_streams:
         raise click.UsageError("--date goes with --location: the World Magnetic Model needs the place too")
     if location is None and field_strength == "wmm" and not is_log:
         raise click.UsageError("--field-strength wmm needs --location LAT,LON[,ALT] (where the recording was made)")

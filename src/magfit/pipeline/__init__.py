@@ -324,7 +324,7 @@ def calibrate_file(
     options = dict(options or {})
     if force:  # fit's own keyword, passed with the method's options
         options["allow_undetermined"] = True
-    if date is not None and location is None and field_strength != "wmm":
+    if date is not None and location is None and field_strength != "wmm" and not get_method(method).needs:
         raise OptionError(
             "date='YYYY-MM-DD' goes with location='LAT,LON[,ALT]' or field_strength='wmm': the World Magnetic "
             "Model needs the place too"
