@@ -268,3 +268,28 @@ def test_the_world_magnetic_model_at_the_file_s_own_place(tmp_path: Path, flight
     np.testing.assert_allclose(result.calibration.offset, expected.offset, rtol=1e-9, atol=1e-6)
     without_unit = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "vector"])
     assert without_unit.exit_code == 2 and "physical unit" in without_unit.stderr
+
+
+def test_inspect_names_the_streams_and_missing_rows_are_counted_or_refused(tmp_path: Path, flight: object) -> None:
+    values = table(flight)
+    values[10, 5] = np.nan  # one roll missing
+    path = write(tmp_path / "flight.csv", values)
+    shown = CliRunner().invoke(cli, ["inspect", str(path)])
+    assert "streams          attitude: roll, pitch, yaw" in shown.stdout
+    assert "reference: ref_n, ref_e, ref_d" in shown.stdout
+    compass = magfit.calibrate_file(path, method="vector", unit="nT").compasses[0]
+    assert (compass.n_rows, compass.n_skipped) == (len(values), 1)
+    assert compass.calibration.details["source"]["column_indices"] == [1, 2, 3]
+    with pytest.raises(DataFileError, match="data row 11 holds a missing value"):
+        magfit.calibrate_file(path, method="vector", unit="nT", nonfinite="error")
+
+
+def test_a_headerless_file_s_missing_attitude_points_at_the_columns_that_look_like_it(tmp_path: Path) -> None:
+    from test_columns_wide import flight_table
+
+    path = tmp_path / "wide.csv"
+    np.savetxt(path, flight_table(2500, seed=1), delimiter=",", fmt="%.3f")
+    run = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "nT", "-m", "vector"])
+    assert run.exit_code == 2
+    assert "columns 4,5,6 (0-based) look like angles" in run.stderr
+    assert "columns 7,8,9 (0-based) like a reference field" in run.stderr

@@ -71,6 +71,8 @@ def column_lines(path: Path) -> list[tuple[str, str]]:
 
     try:
         fmt = sniff(path)
+        if fmt.header is not None and fmt.kind == "text":
+            return _stream_lines(fmt.header)
         if fmt.header is not None or fmt.kind == "npz" or fmt.n_columns <= 3:
             return []
         choice = text_content_choice(path, fmt) if fmt.kind == "text" else npy_content_choice(path, fmt)
@@ -79,6 +81,28 @@ def column_lines(path: Path) -> list[tuple[str, str]]:
     labels = [fmt.column_label(i) for i in range(fmt.n_columns)]
     return [
         ("columns" if index == 0 else "", f"{names}: {what}") for index, (names, what) in enumerate(choice.what(labels))
+    ]
+
+
+#: What each stream of a samples file is for.
+_USES = {
+    "attitude": "--method vector, magfit align",
+    "reference": "--method vector, magfit align",
+    "gyro": "--method gyro; vector's still-sample gate",
+    "accel": "vector, gyro, magfit align: gravity",
+    "time": "vector's lag, gyro's integration",
+    "place": "the World Magnetic Model's reference field",
+}
+
+
+def _stream_lines(header: tuple[str, ...]) -> list[tuple[str, str]]:
+    """The streams a header names beside the magnetometer (docs/file-formats.md, "The other streams")."""
+    from ..io.streams import find_stream_columns
+
+    found = find_stream_columns(header)
+    return [
+        ("streams" if index == 0 else "", f"{name}: {columns.describe()} ({_USES[name]})")
+        for index, (name, columns) in enumerate(found.items())
     ]
 
 

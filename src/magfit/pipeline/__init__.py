@@ -345,7 +345,9 @@ def calibrate_file(
             if field_strength is not None:
                 raise OptionError(f"{path}: field_strength=... goes with a magnitude-only method, not {method}")
             where = location if location is not None and location != FROM_LOG else None
-            compass = _calibrate_samples_streams(path, method, columns, spec, unit, where, date, options, say)
+            compass = _calibrate_samples_streams(
+                path, method, columns, spec, unit, where, date, options, say, nonfinite
+            )
             return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
         if field_strength == "wmm":
             options["field_strength"] = _model_strength(model, unit)
@@ -563,6 +565,7 @@ def _calibrate_samples_streams(
     date: datetime.date | str | None,
     options: Mapping[str, Any],
     say: Callable[[str], None],
+    nonfinite: Nonfinite = "skip",
 ) -> CompassCalibration:
     """Fit a samples file with ``vector`` or ``gyro``: its attitude, reference, gyroscope, accelerometer and
     time columns through the logs' path (:func:`magfit.pipeline.streams.method_streams`)."""
@@ -573,12 +576,13 @@ def _calibrate_samples_streams(
     wanted = ["attitude", "reference", "place"] if "reference" in names.needed else []
     wanted += [s for s in ("gyro", "accel") if s in (*names.needed, *names.optional)]
     wanted += ["time"] if "time_s" in (*names.needed, *names.optional) else []
-    source, reference_ned, notes = samples_source(path, columns, spec, wanted, location)
+    read = samples_source(path, columns, spec, wanted, location, nonfinite)
+    source, reference_ned, notes = read.source, read.reference_ned, read.notes
     motion = source.read_motion("columns")
     label = unit or motion.unit or None
     base = [("method", method)] + ([("unit", label)] if label else [])
     found = {"attitude": motion.attitude is not None, "reference": reference_ned is not None}
-    listing = f"the columns are: {_columns_of(path)}"
+    listing = f"the columns are: {_columns_of(path)}" + "".join(f"; {hint}" for hint in read.hints)
     if "reference" in names.needed:
         if motion.attitude is None:
             raise StreamsMissing(
@@ -629,16 +633,23 @@ def _calibrate_samples_streams(
         ) from None
     calibration = calibration.with_unit(label) if label else calibration
     chosen = source.magnetometers[0]
-    details = {"file": path.name, "columns": chosen.description.split(", "), "unit": calibration.unit,
-               "streams": [note.split(": ", 1)[1] for note in notes[1:]]}  # fmt: skip
+    details = {
+        "file": path.name,
+        "columns": list(read.columns),
+        "column_indices": list(read.column_indices),
+        "header": read.header,
+        "n_columns": read.n_columns,
+        "unit": calibration.unit,
+        "streams": [note.split(": ", 1)[1] for note in notes[1:]],
+    }
     calibration = replace(calibration, details={**calibration.details, "source": details})
     return CompassCalibration(
         path=path,
         calibration=calibration,
         evaluation=evaluate(calibration, streams.samples),
         columns=tuple(chosen.description.split(", ")),
-        n_rows=len(streams.samples),
-        n_skipped=0,
+        n_rows=read.n_rows,
+        n_skipped=read.n_dropped,
         skipped_lines=(),
         file_format=source.format,
         streamed=False,

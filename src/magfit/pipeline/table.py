@@ -25,10 +25,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError, OptionError
+from ..io.layout import FileFormat
 from ..sources import LogSamples, Magnetometer, Position, Source, median_position
 from ..sources.motion import Motion
 
-__all__ = ["ANGLE_UNITS", "CONVENTIONS", "StreamSpec", "angle_unit", "samples_source"]
+__all__ = ["ANGLE_UNITS", "CONVENTIONS", "SamplesStreams", "StreamSpec", "angle_unit", "samples_source"]
 
 CONVENTIONS = ("ned", "enu")
 ANGLE_UNITS = ("auto", "deg", "rad")
@@ -51,6 +52,23 @@ class StreamSpec:
     time: Sequence[str | int] | None = None
     convention: Literal["ned", "enu"] = "ned"
     angle_unit: Literal["auto", "deg", "rad"] = "auto"
+
+
+@dataclass(frozen=True)
+class SamplesStreams:
+    """What :func:`samples_source` read: the file as a :class:`Source`, the reference field's N/E/D rows (None
+    when the file has none), where each stream came from (notes), and the rows read and dropped."""
+
+    source: Source
+    reference_ned: NDArray[np.float64] | None
+    notes: tuple[str, ...]
+    n_rows: int
+    n_dropped: int
+    columns: tuple[str, ...]
+    column_indices: tuple[int, ...]
+    header: bool
+    n_columns: int
+    hints: tuple[str, ...] = ()
 
 
 def angle_unit(path: Path, angles: NDArray[np.float64], given: str) -> str:
@@ -91,10 +109,15 @@ def samples_source(
     spec: StreamSpec,
     wanted: Sequence[str],
     location: tuple[float, float, float] | None = None,
-) -> tuple[Source, NDArray[np.float64] | None, tuple[str, ...]]:
+    nonfinite: Literal["skip", "error"] = "skip",
+) -> SamplesStreams:
     """The samples file as a :class:`Source` whose ``read_motion`` gives the magnetometer with the streams
     ``wanted`` holds (``attitude``, ``reference``, ``gyro``, ``accel``, ``time``, ``place``) that the file
-    has; the reference field's N/E/D rows (None when the file has none) and notes (where each came from).
+    has, with the reference field's N/E/D rows and notes (where each came from). ``nonfinite="error"``
+    refuses a row with a missing value in a column used, ``"skip"`` drops it (counted).
+
+    For a file without a header, ``hints`` says which columns look like angles or a reference field (the
+    content rule of :func:`magfit.io.columns.choose_columns_by_content`), for the message that asks for them.
     """
     from ..io import ChunkReader
     from ..io.streams import find_stream_columns, read_stream_columns, resolve_stream
@@ -122,6 +145,12 @@ def samples_source(
     if "place" in read:  # a missing fix does not drop the sample: the place is the median of the fixes
         good = np.all(np.isfinite(np.column_stack([v for k, v in read.items() if k != "place"])), axis=1)
     n_dropped = int(np.count_nonzero(~good))
+    if n_dropped and nonfinite == "error":
+        first = int(np.flatnonzero(~good)[0]) + 1
+        raise DataFileError(
+            f"{path}: data row {first} holds a missing value (NaN, inf or empty) in a column used; pass "
+            "nonfinite='skip' to drop such rows"
+        )
     rows = {name: values[good] for name, values in read.items()}
     samples = rows["mag"]
     unit = chosen.unit or ""
@@ -179,4 +208,30 @@ def samples_source(
         time_base="seconds (the time column)" if "time" in rows else "none (rows)",
         magnetometers=(magnetometer,), position=position, _reader=read_samples_only, _motion=lambda m: motion,
     )  # fmt: skip
-    return source, reference_ned, tuple(notes)
+    hints: tuple[str, ...] = ()
+    if fmt.header is None and fmt.kind == "text":
+        hints = _content_hints(path, fmt)
+    return SamplesStreams(
+        source, reference_ned, tuple(notes), len(good), n_dropped, tuple(map(str, chosen.columns)),
+        tuple(chosen.column_indices), fmt.header is not None, fmt.n_columns, hints,
+    )  # fmt: skip
+
+
+def _content_hints(path: Path, fmt: FileFormat) -> tuple[str, ...]:
+    """Which columns of a file without a header look like angles or a reference field, in words (0-based
+    numbers, as the options take them)."""
+    from ..io.selection import text_content_choice
+
+    try:
+        choice = text_content_choice(path, fmt)
+    except (DataFileError, ValueError):
+        return ()
+    hints = []
+    if choice.angles:
+        hints.append(f"columns {','.join(map(str, choice.angles))} (0-based) look like angles")
+    for triple, why in choice.passed:
+        if "world" in why or "noise" in why:
+            hints.append(f"columns {','.join(map(str, triple))} (0-based) like a reference field")
+    if len(choice.constant) >= 3:
+        hints.append(f"columns {','.join(map(str, choice.constant))} (0-based) are constant: a reference field?")
+    return tuple(hints)
