@@ -293,3 +293,18 @@ def test_a_headerless_file_s_missing_attitude_points_at_the_columns_that_look_li
     assert run.exit_code == 2
     assert "columns 4,5,6 (0-based) look like angles" in run.stderr
     assert "columns 7,8,9 (0-based) like a reference field" in run.stderr
+
+
+def test_compare_runs_vector_on_a_samples_file_s_own_columns(tmp_path: Path, flight: object) -> None:
+    path = write(tmp_path / "flight.csv", table(flight))
+    run = CliRunner().invoke(
+        cli, ["compare", str(path), "--methods", "sphere,vector,gyro", "--unit", "nT", "--format", "csv"]
+    )
+    assert run.exit_code == 0, run.output
+    rows = {line.split(",")[1]: line.split(",") for line in run.stdout.splitlines()[1:]}
+    expected = python_fit(np.loadtxt(path, delimiter=",", skiprows=1))
+    header = run.stdout.splitlines()[0].split(",")
+    offset = [float(rows["vector"][header.index(f"offset_{axis}")]) for axis in "xyz"]
+    np.testing.assert_allclose(offset, expected.offset, rtol=1e-5)
+    assert rows["gyro"][2] == "failed"
+    assert "the file holds no gyroscope columns" in run.stderr and "--gyro X,Y,Z" in run.stderr

@@ -133,6 +133,11 @@ def method_streams(
         options["time_s"] = motion.time_s
     try:
         if "gyro" in needs:
+            if motion.gyro is None and source.kind == "samples":
+                raise DataFileError(
+                    f"{where}: the file holds no gyroscope columns beside the magnetometer (gx, gy, gz, gyro_x ...); "
+                    "the gyro method needs them, in rad/s (name them with gyro=[...])"
+                )
             if motion.gyro is None:
                 raise DataFileError(
                     f"{where}: the log holds no gyroscope beside this compass; the gyro method needs one (log the "
@@ -152,6 +157,8 @@ def method_streams(
         notes.append(str(error))
     if "accel" in wanted:
         accel, said = _accel(motion, wanted)
+        if source.kind == "samples" and accel is None:
+            said = "no accelerometer columns beside the magnetometer: the methods run without it (gravity not used)"
         notes.append(f"{where}: {said}")
         if accel is not None:
             options["accel"] = accel
@@ -208,6 +215,11 @@ def _reference(
     ``attitudeᵀ · (N, E, D)``."""
     from ..geomag import field_at
 
+    if motion.attitude is None and source.kind == "samples":
+        raise DataFileError(
+            f"{where}: the file holds no attitude columns beside the magnetometer (roll, pitch, yaw or qw, qx, qy, "
+            "qz); the vector method needs them (name them with attitude=[...])"
+        )
     if motion.attitude is None:
         raise DataFileError(
             f"{where}: the log holds no attitude beside this compass; the vector method needs one (ArduPilot ATT or "
@@ -226,6 +238,12 @@ def _reference(
             "their physical unit (unit='uT', 'G', 'mG' ...): raw counts have no known scale"
         )
     position = motion.position or source.position
+    if position is None and source.kind == "samples":
+        raise DataFileError(
+            f"{where}: the file holds neither the reference field's N/E/D columns nor latitude and longitude "
+            "columns, and no location was given: the vector method needs the field at each sample (name the "
+            "reference columns with reference=[...], or give location='LAT,LON[,ALT]')"
+        )
     if position is None:
         raise DataFileError(
             f"{where}: the log holds no 3-D GNSS fix, so the World Magnetic Model's field there is not known; the "
