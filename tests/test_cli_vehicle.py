@@ -308,3 +308,24 @@ def test_compare_runs_vector_on_a_samples_file_s_own_columns(tmp_path: Path, fli
     np.testing.assert_allclose(offset, expected.offset, rtol=1e-5)
     assert rows["gyro"][2] == "failed"
     assert "the file holds no gyroscope columns" in run.stderr and "--gyro X,Y,Z" in run.stderr
+
+
+def test_what_looks_like_a_vehicle() -> None:
+    """Level turns (a ring tilted by ±10°) look like a vehicle's; a tumble, a hemisphere and a still sensor do
+    not (a still sensor is helped by no method: only by recording again)."""
+    from magfit.pipeline.advice import looks_like_vehicle
+
+    rng = np.random.default_rng(0)
+    heading = rng.uniform(0, 2 * np.pi, 3000)
+    tilt = np.radians(rng.uniform(-10, 10, 3000))
+    ring = 50 * np.column_stack([np.cos(heading) * 0.45, np.sin(heading) * 0.45, 0.9 + 0.45 * np.sin(tilt)])
+    tumble = rng.normal(size=(3000, 3))
+    tumble = 50 * tumble / np.linalg.norm(tumble, axis=1, keepdims=True)
+    hemisphere = tumble * np.where(tumble[:, 2:] < 0, -1, 1)
+    still = np.tile([20.0, -5.0, 44.0], (3000, 1)) + rng.normal(scale=0.1, size=(3000, 3))
+
+    def shape(samples: np.ndarray) -> bool:
+        return looks_like_vehicle(np.cov(samples.T), float(np.mean(np.sum(samples**2, axis=1))))
+
+    assert shape(ring)
+    assert not shape(tumble) and not shape(hemisphere) and not shape(still)

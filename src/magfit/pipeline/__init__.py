@@ -356,8 +356,8 @@ def calibrate_file(
         try:
             compass = _calibrate_samples(path, method, columns, nonfinite, unit, even, max_samples, options, progress)
         except CalibrationError as error:
-            raise _with_vehicle_advice(path, error, columns, unit, method) from None
-        compass = _vehicle_weak(compass, unit, method)
+            raise _with_vehicle_advice(path, error, columns, unit, method, nonfinite) from None
+        compass = _vehicle_weak(compass, columns, nonfinite, unit, method)
         return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
     if columns is not None:
         raise OptionError(f"{path}: columns=[...] chooses the columns of a samples file; a log's compass by sensor=")
@@ -512,47 +512,60 @@ def _unit_warnings(field_strength: float, unit: str | None) -> tuple[Reason, ...
     return () if reason is None else (reason,)
 
 
-def _with_vehicle_advice(
-    path: Path, error: CalibrationError, columns: Sequence[str | int] | None, unit: str | None, method: str
-) -> CalibrationError:
-    """A samples file's refusal, with the methods that work for a vehicle when the samples look like one's."""
-    try:
-        from ..io import read_samples
-        from ..io.layout import sniff
-        from ..io.streams import find_stream_columns
+def _samples_file_advice(
+    path: Path, columns: Sequence[str | int] | None, nonfinite: Nonfinite, unit: str | None, method: str
+) -> tuple[Reason, ...]:
+    """The methods that work for a vehicle, when a samples file's samples look like a vehicle's (one pass over
+    the file for their covariance, in chunks: read only when a fit is refused or weak); none otherwise."""
+    from ..io import iter_sample_chunks
+    from ..io.layout import sniff
+    from ..io.streams import find_stream_columns
 
-        samples = read_samples(path, columns=columns).samples
+    try:
+        count, total, outer = 0, np.zeros(3), np.zeros((3, 3))
+        for chunk in iter_sample_chunks(path, columns=columns, nonfinite=nonfinite):
+            count += len(chunk)
+            total += chunk.sum(axis=0)
+            outer += chunk.T @ chunk
         header = sniff(path).header
     except MagfitError:
-        return error
-    if not looks_like_vehicle(samples):
-        return error
+        return ()
+    if count < 10:
+        return ()
+    mean = total / count
+    covariance = outer / count - np.outer(mean, mean)
+    if not looks_like_vehicle(covariance, float(np.trace(outer)) / count):
+        return ()
     streams = tuple(find_stream_columns(header)) if header is not None else ()
-    advice = vehicle_advice(path, is_log=False, streams=streams, unit=unit, method=method)
-    return RefusedWithAdvice(path, str(error), advice, codes=getattr(error, "codes", ()))
+    return vehicle_advice(path, is_log=False, streams=streams, unit=unit, method=method)
 
 
-def _vehicle_weak(compass: CompassCalibration, unit: str | None, method: str) -> CompassCalibration:
+def _with_vehicle_advice(
+    path: Path,
+    error: CalibrationError,
+    columns: Sequence[str | int] | None,
+    unit: str | None,
+    method: str,
+    nonfinite: Nonfinite = "skip",
+) -> CalibrationError:
+    """A samples file's refusal, with the methods that work for a vehicle when the samples look like one's."""
+    advice = _samples_file_advice(path, columns, nonfinite, unit, method)
+    return RefusedWithAdvice(path, str(error), advice, codes=error.codes) if advice else error
+
+
+def _vehicle_weak(
+    compass: CompassCalibration,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    unit: str | None,
+    method: str,
+) -> CompassCalibration:
     """A weak fit of a vehicle's samples gets the methods that work for a vehicle (``advice``)."""
     support = compass.calibration.details.get("support")
     if not isinstance(support, Mapping) or support.get("verdict") not in ("weak", "refused"):
         return compass
-    try:
-        from ..io import read_samples
-        from ..io.layout import sniff
-        from ..io.streams import find_stream_columns
-
-        indices = compass.calibration.details.get("source", {}).get("column_indices")
-        samples = read_samples(compass.path, columns=indices).samples
-        header = sniff(compass.path).header
-    except MagfitError:
-        return compass
-    if not looks_like_vehicle(samples):
-        return compass
-    streams = tuple(find_stream_columns(header)) if header is not None else ()
-    return replace(
-        compass, advice=vehicle_advice(compass.path, is_log=False, streams=streams, unit=unit, method=method)
-    )
+    chosen = columns if columns is not None else compass.calibration.details.get("source", {}).get("column_indices")
+    return replace(compass, advice=_samples_file_advice(compass.path, chosen, nonfinite, unit, method))
 
 
 def _calibrate_samples_streams(
@@ -628,9 +641,8 @@ def _calibrate_samples_streams(
         calibration = fit(streams.samples, method=method, **fitted_options)
     except CalibrationError as error:
         used = f"columns {source.magnetometers[0].description}"
-        raise _with_vehicle_advice(
-            path, CalibrationError(f"{path} ({used}): {error}", codes=error.codes), columns, label, method
-        ) from None
+        refusal = CalibrationError(f"{path} ({used}): {error}", codes=error.codes)
+        raise _with_vehicle_advice(path, refusal, columns, label, method, nonfinite) from None
     calibration = calibration.with_unit(label) if label else calibration
     chosen = source.magnetometers[0]
     details = {

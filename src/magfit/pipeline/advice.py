@@ -89,14 +89,12 @@ class StreamsMissing(OptionError):
         super().__init__(f"{text}; from Python: {python_call(path, remedy)}", remedy=remedy)
 
 
-def looks_like_vehicle(samples: NDArray[np.float64]) -> bool:
-    """Whether the samples turned mostly about one axis (a small share of spread across the plane the field
-    turns in): level with turns, as a vehicle moves; a tumble spreads in every direction."""
-    finite = samples[np.all(np.isfinite(samples), axis=1)]
-    if len(finite) < 10:
-        return False
-    spreads = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov(finite.T)), 0.0))
-    return bool(turned(finite) and spreads[0] < LEVEL_SHARE * spreads[-1])
+def looks_like_vehicle(covariance: NDArray[np.float64], mean_square: float) -> bool:
+    """Whether samples of this covariance (3, 3) and mean square norm turned, and mostly about one axis (a
+    small share of spread across the plane the field turns in): level with turns, as a vehicle moves; a tumble
+    spreads in every direction."""
+    spreads = np.sqrt(np.maximum(np.linalg.eigvalsh(covariance), 0.0))
+    return bool(_turned(spreads[-1], mean_square) and spreads[0] < LEVEL_SHARE * spreads[-1])
 
 
 def turned(samples: NDArray[np.float64]) -> bool:
@@ -105,8 +103,12 @@ def turned(samples: NDArray[np.float64]) -> bool:
     finite = samples[np.all(np.isfinite(samples), axis=1)]
     if len(finite) < 10:
         return False
-    spread = float(np.sqrt(np.max(np.linalg.eigvalsh(np.cov(finite.T)))))
-    return spread > TURNED_SHARE * float(np.median(np.linalg.norm(finite, axis=1)))
+    largest = float(np.sqrt(max(float(np.max(np.linalg.eigvalsh(np.cov(finite.T)))), 0.0)))
+    return _turned(largest, float(np.mean(np.sum(finite**2, axis=1))))
+
+
+def _turned(largest_spread: float, mean_square: float) -> bool:
+    return bool(largest_spread > TURNED_SHARE * np.sqrt(max(mean_square, 0.0)))
 
 
 def vehicle_advice(
