@@ -625,7 +625,7 @@ def _calibrate_samples_streams(
             (*base, *((("gyro", "GX,GY,GZ"),) if motion.gyro is None else ()),
              *((("time", "TIME"),) if "time" not in source.time_base else ())),
         )  # fmt: skip
-    for note in notes:
+    for note in notes[1:]:  # (the first names the magnetometer's columns: the summary shows them)
         say(note)
     streams = method_streams(
         source, "columns", names.needed,
