@@ -222,6 +222,13 @@ def test_gyro_from_a_samples_file_matches_python_and_the_truth(tmp_path: Path) -
     fitted = magfit.Calibration.from_json((tmp_path / "c.json").read_text())
     np.testing.assert_allclose(fitted.offset, expected.offset, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(fitted.offset, sim.hard_iron, atol=0.2)  # the truth
+    # PX4's ulog2csv `timestamp` counts microseconds since boot: read as such, said in a note.
+    values[:, 0] = 1.7e9 + np.round(values[:, 0] * 1e6)
+    stamped = tmp_path / "car_us.csv"
+    np.savetxt(stamped, values, delimiter=",", header="timestamp,mx,my,mz,gx,gy,gz,ax,ay,az", comments="", fmt="%.12g")
+    compass = magfit.calibrate_file(stamped, method="gyro", unit="uT").compasses[0]
+    np.testing.assert_allclose(compass.calibration.offset, expected.offset, atol=1e-4)
+    assert any("microseconds" in note for note in compass.notes)
 
 
 def test_a_quaternion_and_the_ros_convention_give_the_same_fit(tmp_path: Path, flight: object) -> None:

@@ -39,6 +39,9 @@ _F = np.diag([1.0, -1.0, -1.0])
 #: Angles all within this many radians in magnitude could be degrees of a vehicle that hardly moved, or
 #: radians: the file is refused as ambiguous unless the unit is given.
 AMBIGUOUS_RAD = 1.0
+#: A time column in seconds by its name that steps by this much or more per row counts microseconds (PX4's
+#: ``timestamp``: a magnetometer logged once in 17 minutes is no recording).
+MICROSECONDS_STEP = 1000.0
 
 
 @dataclass(frozen=True)
@@ -165,6 +168,15 @@ def samples_source(
     time_s = rows["time"][:, 0] * found["time"].scale if "time" in rows else np.arange(len(samples), dtype=float)
     if "time" in rows and len(time_s) > 1 and not np.all(np.diff(time_s) > 0):
         raise DataFileError(f"{path}: the time column {found['time'].describe()} does not increase row after row")
+    if "time" in rows and len(time_s) > 1 and found["time"].scale == 1.0:
+        step = float(np.median(np.diff(time_s)))
+        if step >= MICROSECONDS_STEP:  # PX4's ulog2csv writes `timestamp` in microseconds
+            time_s = time_s * 1e-6
+            notes.append(f"{path}: the time column steps by {step:g} per row: microseconds (as PX4's timestamp)")
+        elif step >= 1.0:
+            notes.append(
+                f"{path}: the time column steps by {step:g} s per row; if it counts milliseconds, name it time_ms"
+            )
     attitude = None
     if "attitude" in rows:
         values = rows["attitude"]
