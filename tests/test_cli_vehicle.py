@@ -336,3 +336,11 @@ def test_what_looks_like_a_vehicle() -> None:
 
     assert shape(ring)
     assert not shape(tumble) and not shape(hemisphere) and not shape(still)
+
+
+def test_stream_columns_for_a_method_that_does_not_read_them_are_refused(tmp_path: Path, flight: object) -> None:
+    path = write(tmp_path / "flight.csv", table(flight))
+    with pytest.raises(magfit.OptionError, match="sphere takes the samples alone"):
+        magfit.calibrate_file(path, method="sphere", attitude=["roll", "pitch", "yaw"])
+    run = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "sphere", "--gyro", "1,2,3"])
+    assert run.exit_code == 2 and "--gyro" in run.stderr

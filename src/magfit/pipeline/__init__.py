@@ -330,6 +330,16 @@ def calibrate_file(
             "Model needs the place too"
         )
     say = notify or (lambda note: None)
+    given = [name for name, value in (("attitude", attitude), ("reference", reference), ("gyro", gyro),
+                                      ("accel", accel), ("time", time)) if value is not None]  # fmt: skip
+    if given and (not get_method(method).needs or log_kind(path) is not None):
+        what = (
+            "a flight log's streams are its own" if log_kind(path) is not None else f"{method} takes the samples alone"
+        )
+        raise OptionError(
+            f"{path}: {', '.join(f'{name}=[...]' for name in given)} names a samples file's columns for the methods "
+            f"that read them (vector, gyro); {what}"
+        )
     from ..io.instances import head_sensors
 
     kind = log_kind(path)
