@@ -88,3 +88,35 @@ def test_several_plausible_triples_are_refused_with_their_names(tmp_path: Path) 
     result = CliRunner().invoke(cli, ["inspect", str(path)])
     assert result.exit_code == 0
     assert result.stdout.count("a candidate magnetometer, as likely as another") == 2
+
+
+@pytest.mark.parametrize(
+    ("header", "expected"),
+    [
+        (
+            ["TimeUS", "MagX", "MagY", "MagZ", "Roll", "Pitch", "Yaw"],
+            {"time": ((0,), 1e-6), "attitude": ((4, 5, 6), 1.0)},
+        ),
+        (
+            ["t", "mx", "my", "mz", "q0", "q1", "q2", "q3", "wmm_n", "wmm_e", "wmm_d", "lat", "lon", "alt"],
+            {
+                "time": ((0,), 1.0),
+                "attitude": ((4, 5, 6, 7), 1.0),
+                "reference": ((8, 9, 10), 1.0),
+                "place": ((11, 12, 13), 1.0),
+            },
+        ),  # fmt: skip
+        (
+            ["time_ms", "gyro_x(rad/s)", "gyro_y(rad/s)", "gyro_z(rad/s)", "accX", "accY", "accZ", "Bx", "By", "Bz"],
+            {"time": ((0,), 1e-3), "gyro": ((1, 2, 3), 1.0), "accel": ((4, 5, 6), 1.0)},
+        ),
+        (["qw", "qx", "qy", "phi", "theta"], {}),  # incomplete groups are not streams
+    ],
+)
+def test_the_other_streams_are_found_by_name(
+    header: list[str], expected: dict[str, tuple[tuple[int, ...], float]]
+) -> None:
+    from magfit.io.streams import find_stream_columns
+
+    found = find_stream_columns(header)
+    assert {name: (columns.indices, columns.scale) for name, columns in found.items()} == expected

@@ -120,10 +120,9 @@ def find_stream_columns(header: Sequence[str]) -> dict[str, StreamColumns]:
     return found
 
 
-def resolve_stream(
-    path: Path, fmt: FileFormat, stream: str, given: Sequence[str | int], *, scale: float = 1.0
-) -> StreamColumns:
-    """The columns ``given`` for ``stream`` (names, ``column N`` labels or 0-based numbers) as positions."""
+def resolve_stream(path: Path, fmt: FileFormat, stream: str, given: Sequence[str | int]) -> StreamColumns:
+    """The columns ``given`` for ``stream`` (names, ``column N`` labels or 0-based numbers) as positions; a
+    time column's unit from its name as :func:`find_stream_columns` reads it (seconds when it says none)."""
     from .selection import _match_name
 
     sizes = STREAM_SIZES[stream]
@@ -143,7 +142,11 @@ def resolve_stream(
             positions.append(int(item))
         else:
             positions.append(_match_name(path, str(item), labels, fmt.header is not None))
-    return StreamColumns(stream, tuple(positions), tuple(labels[i] for i in positions), False, scale)
+    chosen = tuple(labels[i] for i in positions)
+    scale = 1.0
+    if stream == "time" and fmt.header is not None and "time" in (named := find_stream_columns(chosen)):
+        scale = named["time"].scale
+    return StreamColumns(stream, tuple(positions), chosen, False, scale)
 
 
 def read_stream_columns(

@@ -132,8 +132,7 @@ def samples_source(
     for stream in wanted:
         given = getattr(spec, stream, None)
         if given is not None:
-            scale = named["time"].scale if stream == "time" and "time" in named else 1.0
-            found[stream] = resolve_stream(path, fmt, stream, given, scale=scale)
+            found[stream] = resolve_stream(path, fmt, stream, given)
         elif stream in named:
             found[stream] = named[stream]
     magnetometer_columns = tuple(chosen.column_indices)
@@ -144,9 +143,12 @@ def samples_source(
                 f"({', '.join(map(str, chosen.columns))}); name each stream's own columns"
             )
     read = read_stream_columns(path, fmt, {"mag": magnetometer_columns, **{k: v.indices for k, v in found.items()}})
-    good = np.all(np.isfinite(np.column_stack(list(read.values()))), axis=1)
-    if "place" in read:  # a missing fix does not drop the sample: the place is the median of the fixes
-        good = np.all(np.isfinite(np.column_stack([v for k, v in read.items() if k != "place"])), axis=1)
+    # A missing fix does not drop the sample (the place is the median of the fixes); a quaternion far from
+    # unit length (zeros where the estimator had none) is no attitude.
+    good = np.all(np.isfinite(np.column_stack([v for k, v in read.items() if k != "place"])), axis=1)
+    if "attitude" in read and read["attitude"].shape[1] == 4:
+        norms = np.linalg.norm(read["attitude"], axis=1)
+        good &= (norms > 0.5) & (norms < 1.5)
     n_dropped = int(np.count_nonzero(~good))
     if n_dropped and nonfinite == "error":
         first = int(np.flatnonzero(~good)[0]) + 1
@@ -161,7 +163,10 @@ def samples_source(
     if chosen.column_note:
         notes[0] += f" ({chosen.column_note})"
     if n_dropped:
-        notes.append(f"{path}: {n_dropped} of {len(good)} rows dropped: a missing value in a column used")
+        notes.append(
+            f"{path}: {n_dropped} of {len(good)} rows dropped: a missing value in a column used (or a quaternion "
+            "far from unit length)"
+        )
     how = {True: "found by name", False: "as given"}
     for name, where in found.items():
         notes.append(f"{path}: {name} {where.describe()} ({how[where.by_name]})")
