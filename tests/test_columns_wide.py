@@ -105,7 +105,7 @@ def test_several_plausible_triples_are_refused_with_their_names(tmp_path: Path) 
                 "reference": ((8, 9, 10), 1.0),
                 "place": ((11, 12, 13), 1.0),
             },
-        ),  # fmt: skip
+        ),
         (
             ["time_ms", "gyro_x(rad/s)", "gyro_y(rad/s)", "gyro_z(rad/s)", "accX", "accY", "accZ", "Bx", "By", "Bz"],
             {"time": ((0,), 1e-3), "gyro": ((1, 2, 3), 1.0), "accel": ((4, 5, 6), 1.0)},
