@@ -603,8 +603,22 @@ def _calibrate_samples_streams(
     source, reference_ned, notes = read.source, read.reference_ned, read.notes
     motion = source.read_motion("columns")
     label = unit or motion.unit or None
+    # The call as the user made it (the remedy adds what is missing): method, unit, columns, place, date.
     base = [("method", method)] + ([("unit", label)] if label else [])
-    found = {"attitude": motion.attitude is not None, "reference": reference_ned is not None}
+    if columns is not None:
+        base.append(("columns", ",".join(map(str, columns))))
+    for name, value in (("attitude", spec.attitude), ("reference", spec.reference), ("gyro", spec.gyro),
+                        ("accel", spec.accel), ("time", spec.time)):  # fmt: skip
+        if value is not None:
+            base.append((name, ",".join(map(str, value))))
+    if location is not None:
+        base.append(("location", ",".join(f"{v:g}" for v in location)))
+    if date is not None:
+        base.append(("date", str(date)))
+    found = {
+        "attitude": motion.attitude is not None,
+        "reference": reference_ned is not None or motion.position is not None,
+    }
     listing = f"the columns are: {_columns_of(path)}" + "".join(f"; {hint}" for hint in read.hints)
     if "reference" in names.needed:
         if motion.attitude is None:
