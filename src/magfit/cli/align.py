@@ -27,7 +27,7 @@ from ..geomag import field_at, parse_date, parse_location
 from ..io.layout import sniff
 from ..io.readers import read_samples
 from ..io.streams import find_stream_columns
-from ..pipeline import StreamsMissing, calibrate_file
+from ..pipeline import RefusedWithAdvice, StreamsMissing, calibrate_file
 from ..pipeline.table import StreamSpec
 from ..rotations import CUSTOM, custom_angles, euler_angles, polar_decomposition
 from ..sources import log_kind, open_source
@@ -173,6 +173,9 @@ def _align_by_reference(
         )  # fmt: skip
     except StreamsMissing as error:
         fail(f"{one_line(error.text)}; on the command line: {command_line('align', path, error.remedy)}")
+    except RefusedWithAdvice as error:  # the methods that work, as commands (not the library's Python calls)
+        said = "; ".join(f"{reason} ({command_line('calibrate', path, reason.remedy)})" for reason in error.advice)
+        raise CalibrationError(f"{one_line(error.text)}; what works for a vehicle: {said}") from None
     compass = result.compasses[0]
     calibration = compass.calibration
     rotation, _ = polar_decomposition(calibration.matrix)
