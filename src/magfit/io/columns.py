@@ -389,8 +389,8 @@ class ContentChoice:
             reasons.append(f"{', '.join(labels[i] for i in self.constant)} constant")
         if self.angles:
             reasons.append(f"{', '.join(labels[i] for i in self.angles)} angles")
-        for triple, why in self.passed:
-            if not set(triple) & {*self.monotonic, *self.constant, *self.angles}:
+        for triple, why in self.passed:  # the model or reference fields (mixed triples: magfit inspect says them)
+            if not set(triple) & {*self.monotonic, *self.constant, *self.angles} and not why.startswith("sizes"):
                 reasons.append(f"{', '.join(labels[i] for i in triple)} {why}")
         if self.spread is not None:
             reasons.append(f"the most constant norm under an ellipsoid fit ({100 * self.spread:.2g} % spread)")
