@@ -344,3 +344,15 @@ def test_stream_columns_for_a_method_that_does_not_read_them_are_refused(tmp_pat
         magfit.calibrate_file(path, method="sphere", attitude=["roll", "pitch", "yaw"])
     run = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "sphere", "--gyro", "1,2,3"])
     assert run.exit_code == 2 and "--gyro" in run.stderr
+
+
+def test_a_real_imu_npz_through_gyro_with_its_rates_in_degrees(real_data_dir: Path) -> None:
+    """ensta_tlefloch_imu/raw_data.npz (time, accel, gyro in °/s, mag keys; ../shared/data/real): the gyro
+    method reads its keys by name; rates in °/s are refused as rad/s with the option that says so, and with it
+    the offsets agree with auto's supported fit within 2 % of the field."""
+    path = real_data_dir / "ensta_tlefloch_imu" / "raw_data.npz"
+    refused = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "gyro"])
+    assert refused.exit_code == 2 and "say so with --gyro-unit deg/s" in refused.stderr
+    gyro = magfit.calibrate_file(path, method="gyro", gyro_unit="deg/s").calibration
+    auto = magfit.calibrate_file(path, method="auto").calibration
+    assert np.linalg.norm(gyro.offset - auto.offset) < 0.02 * auto.field_strength

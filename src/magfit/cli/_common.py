@@ -61,7 +61,7 @@ def one_line(message: str) -> str:
 
 #: Library hints that name a keyword argument (``nonfinite='skip'``, ``columns=[...]``): the options that set them.
 _KEYWORD_HINT = re.compile(
-    r"\b(nonfinite|unit|method|columns|field_strength|max_samples|location|date|sensor|attitude|reference|gyro|accel)"
+    r"\b(nonfinite|unit|method|columns|field_strength|max_samples|location|date|sensor|attitude|reference|gyro|accel|angle_unit|gyro_unit)"
     r"=(?:'([^']*)'|\[([^\]]*)\]|(-?\d[\w.+-]*))"
 )
 

@@ -169,7 +169,7 @@ def _align_by_reference(
         result = calibrate_file(
             path, "vector", columns=columns, unit=unit, location=location, date=date, force=force,  # type: ignore[arg-type]
             attitude=spec.attitude, reference=spec.reference, gyro=spec.gyro, time=spec.time,
-            attitude_convention=spec.convention, angle_unit=spec.angle_unit, notify=None,
+            attitude_convention=spec.convention, angle_unit=spec.angle_unit, gyro_unit=spec.gyro_unit, notify=None,
         )  # fmt: skip
     except StreamsMissing as error:
         fail(f"{one_line(error.text)}; on the command line: {command_line('align', path, error.remedy)}")
@@ -402,7 +402,7 @@ def align_command(
         recording = _read_log(file, sensor)
     elif accel_columns is None and _by_reference(file, attitude):
         spec = StreamSpec(attitude, reference, gyro_columns, None, [time_column] if time_column else None,
-                          attitude_convention, angle_unit)  # type: ignore[arg-type]  # fmt: skip
+                          attitude_convention, angle_unit, gyro_unit)  # type: ignore[arg-type]  # fmt: skip
         _align_by_reference(file, columns, spec, unit, location, date, force)
         return
     else:

@@ -315,6 +315,13 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     show_default=True,
     help="The attitude angles' unit; auto decides from the values and refuses a file they leave ambiguous.",
 )
+@click.option(
+    "--gyro-unit",
+    type=click.Choice(["rad/s", "deg/s"]),
+    default="rad/s",
+    show_default=True,
+    help="The gyroscope columns' unit.",
+)
 def calibrate_command(
     file: Path,
     method: str | None,
@@ -339,6 +346,7 @@ def calibrate_command(
     time_column: list[str | int] | None = None,
     attitude_convention: str = "ned",
     angle_unit: str = "auto",
+    gyro_unit: str = "rad/s",
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -387,7 +395,7 @@ def calibrate_command(
             file, method, sensor=sensor, columns=columns, unit=unit, field_strength=field_strength, location=location,
             model_date=model_date, force=force, nonfinite=nonfinite, even=even, max_samples=max_samples,
             attitude=attitude, reference=reference, gyro=gyro, accel=accel, time=time_column,
-            attitude_convention=attitude_convention, angle_unit=angle_unit,
+            attitude_convention=attitude_convention, angle_unit=angle_unit, gyro_unit=gyro_unit,
         )  # fmt: skip
     except StreamsMissing as error:
         raise CommandError(

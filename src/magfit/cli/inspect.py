@@ -71,7 +71,7 @@ def column_lines(path: Path) -> list[tuple[str, str]]:
 
     try:
         fmt = sniff(path)
-        if fmt.header is not None and fmt.kind == "text":
+        if fmt.header is not None and fmt.kind in ("text", "npz"):
             return _stream_lines(fmt.header)
         if fmt.header is not None or fmt.kind == "npz" or fmt.n_columns <= 3:
             return []

@@ -171,6 +171,13 @@ def read_stream_columns(
             except ValueError as error:
                 raise file_error(path, f"cannot read the columns {used} as numbers ({error})") from None
         values = frame.to_numpy(dtype=np.float64)
+    elif fmt.kind == "npz" and fmt.header is not None:  # one 1-D key per column, the keys in the header's order
+        with np.load(path, allow_pickle=False) as members:
+            arrays = [np.asarray(members[fmt.header[i]], dtype=np.float64) for i in used]
+        if any(array.ndim != 1 or len(array) != len(arrays[0]) for array in arrays):
+            shapes = ", ".join(f"{fmt.header[i]} {array.shape}" for i, array in zip(used, arrays, strict=True))
+            raise file_error(path, f"the streams need 1-D keys of one length, one value per sample: {shapes}")
+        values = np.column_stack(arrays)
     else:
-        raise file_error(path, "the attitude, reference and motion columns are read from text or .npy files")
+        raise file_error(path, "the attitude, reference and motion columns are read from text, .npy or .npz files")
     return {name: values[:, [used.index(i) for i in indices]] for name, indices in columns.items()}

@@ -251,6 +251,7 @@ def calibrate_file(
     time: Sequence[str | int] | None = None,
     attitude_convention: Literal["ned", "enu"] = "ned",
     angle_unit: Literal["auto", "deg", "rad"] = "auto",
+    gyro_unit: Literal["rad/s", "deg/s"] = "rad/s",
 ) -> FileCalibration:
     """Fit a recording: a samples file (text, npy, npz), a PX4 ULog, an ArduPilot DataFlash log or a ROS bag.
 
@@ -303,6 +304,8 @@ def calibrate_file(
         (the reference columns then E, N, U).
     angle_unit : {"auto", "deg", "rad"}
         The Euler angles' unit; ``"auto"`` decides from the values and refuses a file they leave ambiguous.
+    gyro_unit : {"rad/s", "deg/s"}
+        The gyroscope columns' unit (the methods refuse rates that look like degrees per second as rad/s).
 
     Returns
     -------
@@ -349,7 +352,7 @@ def calibrate_file(
         if sensor is not None:
             raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
         needs = get_method(method).needs
-        spec = StreamSpec(attitude, reference, gyro, accel, time, attitude_convention, angle_unit)
+        spec = StreamSpec(attitude, reference, gyro, accel, time, attitude_convention, angle_unit, gyro_unit)
         model = _model(path, None, location, date)  # (no log: "wmm" without a place is refused below)
         if needs and not all(need in options for need in needs):
             if field_strength is not None:
@@ -663,6 +666,14 @@ def _calibrate_samples_streams(
         fitted_options.pop("time_s", None)  # row numbers are no time: no lag searched
     try:
         calibration = fit(streams.samples, method=method, **fitted_options)
+    except OptionError as error:  # (the gyroscope's unit: said where its columns are)
+        if "gyro" not in fitted_options or spec.gyro_unit != "rad/s":
+            raise
+        gyro_columns = next((note.split(": gyro ", 1)[1] for note in notes if ": gyro " in note), "gyro")
+        raise OptionError(
+            f"{path}: {error} (the file's gyroscope columns {gyro_columns}; if they hold degrees per second, say so "
+            "with gyro_unit='deg/s')"
+        ) from None
     except CalibrationError as error:
         used = f"columns {source.magnetometers[0].description}"
         refusal = CalibrationError(f"{path} ({used}): {error}", codes=error.codes)

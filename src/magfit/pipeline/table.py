@@ -55,6 +55,7 @@ class StreamSpec:
     time: Sequence[str | int] | None = None
     convention: Literal["ned", "enu"] = "ned"
     angle_unit: Literal["auto", "deg", "rad"] = "auto"
+    gyro_unit: Literal["rad/s", "deg/s"] = "rad/s"
 
 
 @dataclass(frozen=True)
@@ -136,6 +137,13 @@ def samples_source(
         elif stream in named:
             found[stream] = named[stream]
     magnetometer_columns = tuple(chosen.column_indices)
+    if fmt.kind == "npz":  # the keys are the columns: the magnetometer's by their names
+        if fmt.header is None or not all(str(name) in fmt.header for name in chosen.columns):
+            raise DataFileError(
+                f"{path}: the magnetometer is columns of one 2-D key ({', '.join(map(str, chosen.columns))}); the "
+                "other streams are read from 1-D keys beside three 1-D magnetometer keys"
+            )
+        magnetometer_columns = tuple(fmt.header.index(str(name)) for name in chosen.columns)
     for columns_of in found.values():
         if set(columns_of.indices) & set(magnetometer_columns):
             raise OptionError(
@@ -157,6 +165,8 @@ def samples_source(
             "nonfinite='skip' to drop such rows"
         )
     rows = {name: values[good] for name, values in read.items()}
+    if "gyro" in rows and spec.gyro_unit == "deg/s":
+        rows["gyro"] = np.radians(rows["gyro"])
     samples = rows["mag"]
     unit = chosen.unit or ""
     notes = [f"{path}: magnetometer {', '.join(map(str, chosen.columns))}"]
@@ -169,7 +179,8 @@ def samples_source(
         )
     how = {True: "found by name", False: "as given"}
     for name, where in found.items():
-        notes.append(f"{path}: {name} {where.describe()} ({how[where.by_name]})")
+        said = f", in {spec.gyro_unit}" if name == "gyro" else ""
+        notes.append(f"{path}: {name} {where.describe()} ({how[where.by_name]}{said})")
     time_s = rows["time"][:, 0] * found["time"].scale if "time" in rows else np.arange(len(samples), dtype=float)
     if "time" in rows and len(time_s) > 1 and not np.all(np.diff(time_s) > 0):
         raise DataFileError(f"{path}: the time column {found['time'].describe()} does not increase row after row")
