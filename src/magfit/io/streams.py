@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from ..errors import OptionError
 from .columns import normalise_name
 from .layout import FileFormat, pandas_module, pandas_options
+from .selection import _match_name
 from .sources import file_error
 
 __all__ = ["STREAM_SIZES", "StreamColumns", "find_stream_columns", "read_stream_columns", "resolve_stream"]
@@ -123,8 +124,6 @@ def find_stream_columns(header: Sequence[str]) -> dict[str, StreamColumns]:
 def resolve_stream(path: Path, fmt: FileFormat, stream: str, given: Sequence[str | int]) -> StreamColumns:
     """The columns ``given`` for ``stream`` (names, ``column N`` labels or 0-based numbers) as positions; a
     time column's unit from its name as :func:`find_stream_columns` reads it (seconds when it says none)."""
-    from .selection import _match_name
-
     sizes = STREAM_SIZES[stream]
     items = list(given)
     if len(items) not in sizes:
