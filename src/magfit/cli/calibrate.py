@@ -403,7 +403,8 @@ def calibrate_command(
         ) from None
     except RefusedWithAdvice as error:
         said = "; ".join(f"{reason} ({command_line('calibrate', file, reason.remedy)})" for reason in error.advice)
-        raise FitFailedError(f"{option_wording(one_line(error.text))}; what works for a vehicle: {said}") from None
+        works = f"; what works for a vehicle: {said}" if said else ""
+        raise FitFailedError(f"{option_wording(one_line(error.text))}{works}") from None
     several = len(result.compasses) + len(result.failures) > 1
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
     files: list[tuple[Path, bytes]] = []

@@ -474,9 +474,9 @@ def _calibrate_compass(
         advice = "".join(f"; {note}" for note in magnetometer.notes if "logged at only" in note or "only " in note)
         chosen = magnetometer.id if several else None
         works = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
-        raise RefusedWithAdvice(
-            path, f"{where}: {error}{advice}", works if turned(fitted) else (), codes=error.codes
-        ) from None
+        if not turned(fitted):  # a compass never turned: only recording again helps
+            raise CalibrationError(f"{where}: {error}{advice}", codes=error.codes) from None
+        raise RefusedWithAdvice(path, f"{where}: {error}{advice}", works, codes=error.codes) from None
     label = unit or magnetometer.unit
     calibration = calibration.with_unit(label) if label else calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
