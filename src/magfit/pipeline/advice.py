@@ -134,7 +134,7 @@ def vehicle_advice(
 def _advice(*, is_log: bool, streams: Sequence[str], unit: str | None, method: str) -> list[Reason]:
     advice = []
     physical = unit not in (None, "", "counts")
-    unit_pair = (("unit", unit),) if unit else (("unit", "uT"),)
+    unit_pair = (("unit", unit or "UNIT"),)  # the samples' unit: the user's, or a place to give it
     if method != "vector":
         if is_log:
             advice.append(Reason(
@@ -162,13 +162,12 @@ def _advice(*, is_log: bool, streams: Sequence[str], unit: str | None, method: s
             "the gyroscope's rates pin the distortion the turns cannot (the gyro method, rates in rad/s)",
             "vehicle_methods", tuple(remedy),
         ))  # fmt: skip
-    remedy = [("method", "sphere"), ("field_strength", "wmm")]
-    if not is_log:
-        remedy.append(("location", "LAT,LON,ALT_KM"))
-    if not is_log or unit:
-        remedy += unit_pair if physical or not unit else [("unit", "uT")]
-    advice.append(Reason(
-        "the sphere pinned to the World Magnetic Model's field strength: offsets only, which level turns determine",
-        "vehicle_methods", tuple(remedy),
-    ))  # fmt: skip
+    if unit is None or unit == "" or physical:  # the model's field has a physical unit: raw counts have none
+        remedy = [("method", "sphere"), ("field_strength", "wmm")]
+        if not is_log:
+            remedy += [("location", "LAT,LON,ALT_KM"), *unit_pair]
+        advice.append(Reason(
+            "the sphere pinned to the World Magnetic Model's field strength: offsets only, which level turns "
+            "determine", "vehicle_methods", tuple(remedy),
+        ))  # fmt: skip
     return advice
