@@ -128,7 +128,9 @@ def resolve_stream(path: Path, fmt: FileFormat, stream: str, given: Sequence[str
     items = list(given)
     if len(items) not in sizes:
         wanted = " or ".join(str(size) for size in sizes)
-        raise OptionError(f"{stream}= takes {wanted} columns (names or 0-based numbers), got {len(items)}: {items}")
+        raise OptionError(
+            f"{stream}=[...] takes {wanted} columns (names or 0-based numbers), got {len(items)}: {items}"
+        )
     labels = [fmt.column_label(i) for i in range(fmt.n_columns)]
     positions = []
     for item in items:
