@@ -357,6 +357,10 @@ def calibrate_file(
         if needs and not all(need in options for need in needs):
             if field_strength is not None:
                 raise OptionError(f"{path}: field_strength=... goes with a magnitude-only method, not {method}")
+            if even:
+                raise OptionError(
+                    f"{path}: even=True subsamples by direction; the {method} method needs every sample in time order"
+                )
             where = location if location is not None and location != FROM_LOG else None
             compass = _calibrate_samples_streams(
                 path, method, columns, spec, unit, where, date, options, say, nonfinite
