@@ -356,7 +356,7 @@ def calibrate_file(
         model = _model(path, None, location, date)  # (no log: "wmm" without a place is refused below)
         if needs and not all(need in options for need in needs):
             if field_strength is not None:
-                raise OptionError(f"{path}: field_strength=... goes with a magnitude-only method, not {method}")
+                raise OptionError(f"{path}: field_strength='...' goes with a magnitude-only method, not {method}")
             if even:
                 raise OptionError(
                     f"{path}: even=True subsamples by direction; the {method} method needs every sample in time order"
