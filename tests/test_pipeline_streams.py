@@ -100,7 +100,8 @@ def test_the_command_fits_the_vector_method_on_a_log_and_refuses_it_on_a_samples
     csv = tmp_path / "samples.csv"
     np.savetxt(csv, np.random.default_rng(0).normal(size=(100, 3)), delimiter=",")
     result = CliRunner().invoke(cli, ["calibrate", str(csv), "--method", "vector"])
-    assert result.exit_code == 2 and "a samples file does not hold" in result.output
+    assert result.exit_code == 2 and "no attitude columns were found" in result.output
+    assert f"on the command line: magfit calibrate {csv} --method vector --attitude ROLL,PITCH,YAW" in result.output
 
 
 def test_compare_on_a_log_runs_vector_with_the_logs_streams_and_says_why_gyro_or_vector_cannot(

@@ -570,6 +570,7 @@ REASON_CODES: dict[str, str] = {
     "inclination": "the inclination given disagrees with the samples",
     "logging_rate": "the compass was logged too slowly for the motion",
     "calibration_in_use": "the fit corrects an unknown calibration already applied",
+    "vehicle_methods": "a vehicle's recording: the methods that use its attitude, gyroscope or the known field",
     "unclassified": "a reason without a code of its own yet",
 }
 

@@ -61,7 +61,8 @@ def one_line(message: str) -> str:
 
 #: Library hints that name a keyword argument (``nonfinite='skip'``, ``columns=[...]``): the options that set them.
 _KEYWORD_HINT = re.compile(
-    r"\b(nonfinite|unit|method|columns|field_strength|max_samples|location|date|sensor)=(?:'([^']*)'|\[([^\]]*)\]|(-?\d[\w.+-]*))"
+    r"\b(nonfinite|unit|method|columns|field_strength|max_samples|location|date|sensor|attitude|reference|gyro|accel|angle_unit|gyro_unit)"
+    r"=(?:'([^']*)'|\[([^\]]*)\]|(-?\d[\w.+-]*))"
 )
 
 
@@ -105,6 +106,23 @@ def as_command_error(error: BaseException) -> CommandError:
         f"unexpected {type(error).__name__}: {one_line(str(error))} (a bug in magfit: rerun with --debug "
         "and report the traceback)"
     )
+
+
+#: Remedy arguments whose command-line form is a flag (its value "True").
+_REMEDY_FLAGS = {"force": "--force", "allow_undetermined": "--force", "even": "--even"}
+
+
+def command_line(command: str, path: Path | str, remedy: Sequence[tuple[str, str]]) -> str:
+    """A remedy (``(argument, value)`` pairs, :class:`magfit.findings.Reason`'s) as the command to type:
+    ``magfit calibrate flight.csv --method vector --attitude roll,pitch,yaw``."""
+    parts = ["magfit", command, str(path)]
+    for name, value in remedy:
+        if name in _REMEDY_FLAGS:
+            if value == "True":
+                parts.append(_REMEDY_FLAGS[name])
+            continue
+        parts += [f"--{name.replace('_', '-')}", value]
+    return " ".join(parts)
 
 
 def fail(message: str) -> NoReturn:
@@ -290,6 +308,16 @@ def parse_columns(ctx: click.Context, param: click.Parameter, value: str | None)
             ctx,
             param,
         )
+    return [int(item) if item.isdigit() else item for item in items]
+
+
+def parse_stream(ctx: click.Context, param: click.Parameter, value: str | None) -> list[str | int] | None:
+    """``--attitude roll,pitch,yaw`` or ``--gyro 7,8,9`` (0-based, as --columns) into names or indices."""
+    if value is None:
+        return None
+    items = [item.strip() for item in value.split(",")]
+    if not all(items):
+        raise click.BadParameter(f"expected comma-separated column names or 0-based numbers, got {value!r}", ctx, param)
     return [int(item) if item.isdigit() else item for item in items]
 
 

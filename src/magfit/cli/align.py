@@ -19,16 +19,19 @@ import click
 import numpy as np
 from numpy.typing import NDArray
 
-from ..alignment import Alignment, align, nearest_rotations
+from ..alignment import Alignment, _mirror_axis, align, nearest_rotations
 from ..calibration import Calibration
 from ..errors import CalibrationError, DataFileError
 from ..fit import fit
 from ..geomag import field_at, parse_date, parse_location
 from ..io.layout import sniff
 from ..io.readers import read_samples
-from ..rotations import CUSTOM, custom_angles
+from ..io.streams import find_stream_columns
+from ..pipeline import RefusedWithAdvice, StreamsMissing, calibrate_file
+from ..pipeline.table import StreamSpec
+from ..rotations import CUSTOM, custom_angles, euler_angles, polar_decomposition
 from ..sources import log_kind, open_source
-from ._common import fail, geomag_option, parse_columns, vector, warn
+from ._common import command_line, fail, geomag_option, one_line, parse_columns, parse_stream, vector, warn
 
 #: Header names of accelerometer columns: ``ax``, ``imu_ax``, ``accel_x``, ``Ax``, ``acc_x`` ... (gyroscope columns are
 #: not guessed: raw counts taken for rad/s would drop every sample as turning).
@@ -90,7 +93,8 @@ def _read_samples_file(
     if accel_columns is None:
         fail(
             f"{path}: no accelerometer columns found (ax/ay/az, accel_x ..., imu_ax ...); name them with "
-            "--accel-columns AX,AY,AZ"
+            "--accel-columns AX,AY,AZ, or give the vehicle's attitude and the reference field instead (--attitude "
+            "ROLL,PITCH,YAW --reference N,E,D: the rotation from the vector fit)"
         )
     mag = read_samples(path, columns=columns, nonfinite="error")
     accel = read_samples(path, columns=accel_columns, nonfinite="error").samples
@@ -139,6 +143,79 @@ def _read_log(path: Path, sensor: str | None) -> _Recording:
         f"{path} ({source.format}, {motion.sensor})", motion.samples, motion.accel, motion.gyro, motion.time_s,
         mounting, motion.mounting_note, slot, position, tuple(notes), recorded,
     )  # fmt: skip
+
+
+def _by_reference(path: Path, attitude: list[str | int] | None) -> bool:
+    """Whether a samples file is aligned by the vector fit: attitude columns (given or found by name) and no
+    accelerometer columns found by name."""
+    header = sniff(path).header
+    if header is not None and _columns_by_name(header, _ACCEL) is not None:
+        return False
+    return attitude is not None or (header is not None and "attitude" in find_stream_columns(header))
+
+
+def _align_by_reference(
+    path: Path,
+    columns: list[str | int] | None,
+    spec: StreamSpec,
+    unit: str | None,
+    location: tuple[float, float, float] | None,
+    date: object,
+    force: bool,
+) -> None:
+    """The rotation into the vehicle frame from the vector fit (the polar factor of its matrix), printed as the
+    gravity path prints its own: the same numbers as ``magfit.fit(samples, method="vector", reference=...)``."""
+    try:
+        result = calibrate_file(
+            path, "vector", columns=columns, unit=unit, location=location, date=date, force=force,  # type: ignore[arg-type]
+            attitude=spec.attitude, reference=spec.reference, gyro=spec.gyro, time=spec.time,
+            attitude_convention=spec.convention, angle_unit=spec.angle_unit, gyro_unit=spec.gyro_unit, notify=None,
+        )  # fmt: skip
+    except StreamsMissing as error:
+        fail(f"{one_line(error.text)}; on the command line: {command_line('align', path, error.remedy)}")
+    except RefusedWithAdvice as error:  # the methods that work, as commands (not the library's Python calls)
+        said = "; ".join(f"{reason} ({command_line('calibrate', path, reason.remedy)})" for reason in error.advice)
+        raise CalibrationError(f"{one_line(error.text)}; what works for a vehicle: {said}") from None
+    compass = result.compasses[0]
+    calibration = compass.calibration
+    rotation, _ = polar_decomposition(calibration.matrix)
+    sigma = float(calibration.details.get("alignment_sigma_deg", math.nan))
+    mirror = bool(np.linalg.det(rotation) < 0)
+    inverted, nearest = _mirror_axis(rotation) if mirror else (None, nearest_rotations(rotation))
+    proper = rotation @ np.diag([-1.0 if axis == inverted else 1.0 for axis in "xyz"]) if mirror else rotation
+    roll, pitch, yaw = euler_angles(proper)
+    support = calibration.details.get("support", {})
+    verdict = str(support.get("verdict", "supported")) if isinstance(support, Mapping) else "supported"
+    warnings = tuple(str(w) for w in (*support.get("refusals", ()), *support.get("weaknesses", ())))
+    aligned = Alignment(
+        matrix=rotation, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw, sigma_deg=np.full(3, sigma),
+        axis_sigma_deg=np.full(3, sigma), inclination_deg=math.nan, inclination_sigma_deg=math.nan,
+        inclination_fitted=False, mirror=mirror, inverted_axis=inverted, nearest=nearest, residual_deg=math.nan,
+        n_samples=compass.n_rows, n_used=int(calibration.n_samples or 0), verdict=verdict, warnings=warnings,
+    )  # fmt: skip
+    out = click.echo
+    out(f"{'file':16s} {path} (magnetometer {', '.join(map(str, compass.columns))})")
+    out(f"{'calibration':16s} vector: against the file's attitude and reference field ({verdict})")
+    out(f"{'samples used':16s} {calibration.n_samples} of {compass.n_rows}")
+    matrix_lines = [vector(row, lambda v: f"{v:+.5f}") for row in rotation]
+    out(f"{'rotation':16s} {matrix_lines[0]}    body = rotation @ sensor (the polar factor of the vector fit)")
+    for line in matrix_lines[1:]:
+        out(f"{'':16s} {line}")
+    out(f"{'roll pitch yaw':16s} {roll:+.2f}°, {pitch:+.2f}°, {yaw:+.2f}° ± {sigma:.2f}° (RMS angle, one-sigma; "
+        "Rz(yaw) Ry(pitch) Rx(roll))")  # fmt: skip
+    if mirror:
+        out(f"{'mirror':16s} yes: invert the sensor's {inverted} axis; the angles above are after that")
+    out(f"{'verdict':16s} {verdict}")
+    for warning in warnings:
+        out(f"{'':16s} {warning}")
+    for note in compass.notes:
+        out(f"{'note':16s} {note}")
+    if mirror:
+        out(f"{'set':16s} no firmware rotation represents a mirror: fix the axis first; then, for the rotation left:")
+    for index, line in enumerate(_parameter_lines(aligned, proper, None)):
+        out(f"{'set' if index == 0 and not mirror else '':16s} {line}")
+    if verdict == "refused":
+        warn(f"printed because of --force: {warnings[0] if warnings else 'refused'}")
 
 
 def _recorded_date(recording: _Recording) -> datetime.date | None:
@@ -242,10 +319,12 @@ def _capped_by_calibration(result: Alignment, calibration: Calibration) -> Align
 @click.argument("file", type=click.Path(dir_okay=True, path_type=Path))
 @click.option("--sensor", help="The magnetometer of a log (its id or device id, see 'magfit inspect').")
 @click.option("--columns", callback=parse_columns, help="Magnetometer columns X,Y,Z of a samples file.")
-@click.option("--accel-columns", callback=parse_columns, help="Accelerometer columns (found by name by default).")
-@click.option("--gyro-columns", callback=parse_columns, help="Gyroscope columns, in --gyro-unit (not guessed).")
+@click.option("--accel-columns", "--accel", "accel_columns", callback=parse_columns,
+              help="Accelerometer columns (found by name by default).")  # fmt: skip
+@click.option("--gyro-columns", "--gyro", "gyro_columns", callback=parse_columns,
+              help="Gyroscope columns, in --gyro-unit (not guessed).")  # fmt: skip
 @click.option("--gyro-unit", type=click.Choice(["rad/s", "deg/s"]), default="rad/s", show_default=True)
-@click.option("--time-column", help="Time column (found by name: t, time, timestamp).")
+@click.option("--time-column", "--time", "time_column", help="Time column (found by name: t, time, timestamp).")
 @click.option("--time-unit", type=click.Choice(list(_SECONDS)), default="s", show_default=True)
 @click.option("--calibration", "calibration_path", type=click.Path(dir_okay=False, path_type=Path),
               help="A magnitude-only calibration (JSON) to correct the field with; fitted by default.")  # fmt: skip
@@ -260,6 +339,16 @@ def _capped_by_calibration(result: Alignment, calibration: Calibration) -> Align
 @click.option("--no-mirror", is_flag=True,
               help="Right-handed sensor axes (by default a mirror is named where the samples tell).")  # fmt: skip
 @click.option("--force", is_flag=True, help="Print an alignment the samples do not determine, its refusal first.")
+@click.option("--attitude", callback=parse_stream, metavar="ROLL,PITCH,YAW|W,X,Y,Z",
+              help="A samples file without an accelerometer: its attitude columns; the rotation then comes from the "
+              "vector fit against the reference field (found by name by default).")  # fmt: skip
+@click.option("--reference", callback=parse_stream, metavar="N,E,D",
+              help="The reference field's columns (N, E, D in the samples' unit), with --attitude; else the World "
+              "Magnetic Model at --location or the file's lat/lon columns.")  # fmt: skip
+@click.option("--unit", help="The samples' unit (for the World Magnetic Model's reference field).")
+@click.option("--attitude-convention", type=click.Choice(["ned", "enu"]), default="ned", show_default=True,
+              help="ned: aerospace 3-2-1, body FRD to NED; enu: ROS's, FLU to ENU.")  # fmt: skip
+@click.option("--angle-unit", type=click.Choice(["auto", "deg", "rad"]), default="auto", show_default=True)
 def align_command(
     file: Path,
     sensor: str | None,
@@ -277,20 +366,28 @@ def align_command(
     max_tilt_rate: float,
     no_mirror: bool,
     force: bool,
+    attitude: list[str | int] | None = None,
+    reference: list[str | int] | None = None,
+    unit: str | None = None,
+    attitude_convention: str = "ned",
+    angle_unit: str = "auto",
 ) -> None:
     """Find the magnetometer's rotation into the vehicle frame from gravity and the field's inclination.
 
     FILE is a samples file with magnetometer and accelerometer columns (and optionally gyroscope and time),
-    or a flight log (PX4 ULog, ArduPilot DataFlash, ROS bag). The accelerometer gives gravity while the
-    vehicle is still or slow; the angle between gravity and the field is the same everywhere, so the
-    rotation follows without any attitude. Prints the rotation, its one-sigma, the nearest rotation of
-    ArduPilot, PX4, Betaflight and INAV and the parameters to set. Exit status 1 when the samples do
+    or a flight log (PX4 ULog, ArduPilot DataFlash, ROS bag). A samples file without an accelerometer but
+    with the vehicle's attitude and the reference field (or a place for the World Magnetic Model) is
+    aligned by the vector fit instead: the rotation is the polar factor of its matrix. The accelerometer
+    gives gravity while the vehicle is still or slow; the angle between gravity and the field is the same
+    everywhere, so the rotation follows without any attitude. Prints the rotation, its one-sigma, the
+    nearest rotation of ArduPilot, PX4, Betaflight and INAV and the parameters to set. Exit status 1 when the samples do
     not determine it (a vehicle that stayed level cannot show its mount's yaw).
 
     \b
     Examples:
       magfit align imu.csv --inclination 64 --max-rate none
       magfit align flight.ulg --location 47.4,8.5 --no-mirror
+      magfit align survey.csv --attitude roll,pitch,yaw --reference ref_n,ref_e,ref_d
     """
     if max_rate.strip().lower() == "none":
         max_rate_dps: float | None = None
@@ -303,6 +400,11 @@ def align_command(
         fail("give --inclination or --location, not both")
     if log_kind(file) is not None:
         recording = _read_log(file, sensor)
+    elif accel_columns is None and _by_reference(file, attitude):
+        spec = StreamSpec(attitude, reference, gyro_columns, None, [time_column] if time_column else None,
+                          attitude_convention, angle_unit, gyro_unit)  # type: ignore[arg-type]  # fmt: skip
+        _align_by_reference(file, columns, spec, unit, location, date, force)
+        return
     else:
         recording = _read_samples_file(file, columns, accel_columns, gyro_columns, gyro_unit, time_column, time_unit)
     place = location or recording.position

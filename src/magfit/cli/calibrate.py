@@ -21,14 +21,17 @@ from ..calibration import CONVENTION, Calibration
 from ..errors import CalibrationError
 from ..geomag import Field, compare_fitted, parse_date, parse_location
 from ..methods import get_method
-from ..pipeline import CompassCalibration, FileCalibration, calibrate_file
+from ..pipeline import CompassCalibration, FileCalibration, RefusedWithAdvice, StreamsMissing, calibrate_file
 from ..pipeline.streaming import Advance
 from ..units import conversion_factor, get_unit
 from ._common import (
+    CommandError,
     FieldStrength,
+    FitFailedError,
     Nonfinite,
     RegistryChoice,
     columns_text,
+    command_line,
     console,
     default_method,
     export_format_names,
@@ -37,8 +40,10 @@ from ._common import (
     geomag_option,
     method_names,
     nonfinite_option,
+    one_line,
     option_wording,
     parse_columns,
+    parse_stream,
     refuse_overwriting_input,
     same_file,
     significant,
@@ -101,21 +106,29 @@ def render_output(
     export_format: str | None,
     unit: str | None,
     system_id: int | None = None,
+    force: bool = False,
 ) -> str:
-    """The text of one calibration: its JSON, or the firmware export (``system_id``: PX4's, for ``px4``)."""
+    """The text of one calibration: its JSON, or the firmware export (``system_id``: PX4's, for ``px4``;
+    ``force``: written although its field strength is no Earth field in its unit)."""
     if export_format is None:
         return compass.calibration.to_json() + "\n"
     from ..export import export
 
-    return export(compass.calibration, export_format, unit=unit, **_export_options(compass, export_format, system_id))
+    options = _export_options(compass, export_format, system_id, force)
+    return export(compass.calibration, export_format, unit=unit, **options)
 
 
-def _export_options(compass: CompassCalibration, export_format: str, system_id: int | None) -> dict[str, Any]:
+def _export_options(
+    compass: CompassCalibration, export_format: str, system_id: int | None, force: bool = False
+) -> dict[str, Any]:
     """The export's options: PX4's ``system_id``; the model's field for a format that takes it (ArduPilot's
-    COMPASS_SCALE, as its own calibrator sets it), in the calibration's unit."""
+    COMPASS_SCALE, as its own calibrator sets it), in the calibration's unit; ``--force`` writes a field strength
+    that is no Earth field in its unit (``allow_unit_mismatch``)."""
     from ..export import FORMATS
 
     options: dict[str, Any] = {} if system_id is None else {"system_id": system_id}
+    if force:
+        options["allow_unit_mismatch"] = True
     unit = compass.calibration.unit
     model = compass.model_field
     if model is not None and "expected_field" in FORMATS[export_format].options and unit and get_unit(unit).is_physical:
@@ -135,6 +148,7 @@ def several_outputs(
     export_format: str | None,
     unit: str | None,
     system_id: int | None,
+    force: bool = False,
 ) -> list[tuple[Path, bytes]]:
     """The files that carry a log's several calibrations: one parameter file holding every compass (ArduPilot,
     PX4), else one file per compass named ``<stem>-<sensor><ext>`` beside ``-o``, none of which may exist."""
@@ -146,7 +160,7 @@ def several_outputs(
 
         # One expected field for the file: the compasses of a log share its unit.
         units = {compass.calibration.unit for compass in result.compasses}
-        options = _export_options(result.compasses[0], export_format, system_id)
+        options = _export_options(result.compasses[0], export_format, system_id, force)
         if len(units) != 1:
             options.pop("expected_field", None)
         calibrations = [compass.calibration for compass in result.compasses]
@@ -167,7 +181,7 @@ def several_outputs(
                 f"{path} exists: the calibration of {compass.sensor} would replace it; remove it or give another -o "
                 "NAME (a file per compass is never written over)"
             )
-        files.append((path, render_output(compass, export_format, unit, system_id).encode("utf-8")))
+        files.append((path, render_output(compass, export_format, unit, system_id, force).encode("utf-8")))
     return files
 
 
@@ -278,6 +292,45 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     help="Return the calibration even when the samples do not support it (exit 0): it is marked NOT SUPPORTED "
     "and the refusal is printed as a warning. To inspect a poor recording, not to use its numbers.",
 )
+@click.option(
+    "--attitude",
+    callback=parse_stream,
+    metavar="ROLL,PITCH,YAW|W,X,Y,Z",
+    help="A samples file's attitude columns for --method vector: roll, pitch, yaw (degrees or radians, detected) "
+    "or a quaternion w, x, y, z; names or 0-based numbers as --columns. Default: found by name.",
+)
+@click.option(
+    "--reference",
+    callback=parse_stream,
+    metavar="N,E,D",
+    help="A samples file's reference field columns (north, east, down, in the samples' unit) for --method vector. "
+    "Default: found by name (ref_n ...), else the World Magnetic Model at --location or the file's lat/lon columns.",
+)
+@click.option("--gyro", callback=parse_stream, metavar="GX,GY,GZ", help="A samples file's gyroscope columns (rad/s).")
+@click.option("--accel", callback=parse_stream, metavar="AX,AY,AZ", help="A samples file's accelerometer columns.")
+@click.option("--time", "time_column", callback=parse_stream, metavar="T", help="A samples file's time column (s).")
+@click.option(
+    "--attitude-convention",
+    type=click.Choice(["ned", "enu"]),
+    default="ned",
+    show_default=True,
+    help="ned: aerospace 3-2-1 (yaw, pitch, roll), body forward-right-down to North-East-Down; enu: ROS's, "
+    "forward-left-up to East-North-Up (the reference columns then E, N, U).",
+)
+@click.option(
+    "--angle-unit",
+    type=click.Choice(["auto", "deg", "rad"]),
+    default="auto",
+    show_default=True,
+    help="The attitude angles' unit; auto decides from the values and refuses a file they leave ambiguous.",
+)
+@click.option(
+    "--gyro-unit",
+    type=click.Choice(["rad/s", "deg/s"]),
+    default="rad/s",
+    show_default=True,
+    help="The gyroscope columns' unit.",
+)
 def calibrate_command(
     file: Path,
     method: str | None,
@@ -295,6 +348,14 @@ def calibrate_command(
     force: bool,
     system_id: int | None,
     sensor: str | None,
+    attitude: list[str | int] | None = None,
+    reference: list[str | int] | None = None,
+    gyro: list[str | int] | None = None,
+    accel: list[str | int] | None = None,
+    time_column: list[str | int] | None = None,
+    attitude_convention: str = "ned",
+    angle_unit: str = "auto",
+    gyro_unit: str = "rad/s",
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -317,6 +378,7 @@ def calibrate_command(
       magfit calibrate boat.csv --unit uT --field-strength wmm --location 47.4,8.5,0.5 --date 2026-06-01
       magfit calibrate 00000042.BIN --field-strength wmm --export ardupilot -o compasses.param
       magfit calibrate flight.ulg --sensor sensor_mag/0 -o mag0.json
+      magfit calibrate flight.csv --unit nT --method vector --attitude roll,pitch,yaw --reference ref_n,ref_e,ref_d
     """
     from ..io import STDOUT, write_all
     from ..sources import log_kind
@@ -329,29 +391,29 @@ def calibrate_command(
     if system_id is not None and export_format != "px4":
         raise click.UsageError("--system-id goes with --export px4: it is the vehicle id a PX4 parameter file names")
     is_log = log_kind(file) is not None
-    if location is None and model_date is not None and field_strength != "wmm":
+    needs_streams = bool(get_method(method or default_method()).needs)  # vector: a file's own lat/lon columns
+    if location is None and model_date is not None and field_strength != "wmm" and not needs_streams:
         raise click.UsageError("--date goes with --location: the World Magnetic Model needs the place too")
     if location is None and field_strength == "wmm" and not is_log:
         raise click.UsageError("--field-strength wmm needs --location LAT,LON[,ALT] (where the recording was made)")
     method = method or default_method()
     if output is not None and export_format is not None and str(output) != STDOUT:
         _check_extension(output, export_format)
-    result = calibrate_file(
-        file,
-        method,
-        sensor=sensor,
-        columns=columns,
-        unit=unit,
-        field_strength=field_strength,  # type: ignore[arg-type]  # FieldStrength gives a number or "wmm"
-        location=location,  # type: ignore[arg-type]  # parse_place gives a place or "log"
-        date=model_date,
-        force=force,
-        nonfinite=nonfinite,
-        even=even,
-        max_samples=max_samples,
-        progress=progress_bar,
-        notify=warn,
-    )
+    try:
+        result = _calibrate(
+            file, method, sensor=sensor, columns=columns, unit=unit, field_strength=field_strength, location=location,
+            model_date=model_date, force=force, nonfinite=nonfinite, even=even, max_samples=max_samples,
+            attitude=attitude, reference=reference, gyro=gyro, accel=accel, time=time_column,
+            attitude_convention=attitude_convention, angle_unit=angle_unit, gyro_unit=gyro_unit,
+        )  # fmt: skip
+    except StreamsMissing as error:
+        raise CommandError(
+            f"{one_line(error.text)}; on the command line: {command_line('calibrate', file, error.remedy)}"
+        ) from None
+    except RefusedWithAdvice as error:
+        said = "; ".join(f"{reason} ({command_line('calibrate', file, reason.remedy)})" for reason in error.advice)
+        works = f"; what works for a vehicle: {said}" if said else ""
+        raise FitFailedError(f"{option_wording(one_line(error.text))}{works}") from None
     several = len(result.compasses) + len(result.failures) > 1
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
     files: list[tuple[Path, bytes]] = []
@@ -366,9 +428,9 @@ def calibrate_command(
         ids = ", ".join(compass.sensor or "?" for compass in result.compasses)
         fail(f"{file}: --plot draws one compass: choose it with --sensor ID ({ids})")
     if several and wanted:
-        files = several_outputs(file, result, output, export_format, unit, system_id)
+        files = several_outputs(file, result, output, export_format, unit, system_id, force)
     elif wanted:
-        text = render_output(result.compasses[0], export_format, unit, system_id)
+        text = render_output(result.compasses[0], export_format, unit, system_id, force)
         files.append((output if output is not None else Path(STDOUT), text.encode("utf-8")))
     to_stdout = any(str(path) == STDOUT for path, _ in files)
     stdout_text = b"".join(data for path, data in files if str(path) == STDOUT).decode("utf-8")
@@ -390,6 +452,11 @@ def calibrate_command(
         click.echo(stdout_text, nl=not stdout_text.endswith("\n"))
     if result.failures:
         raise CalibrationError(f"{file}: {_failed(result)}; the warnings above say why")
+
+
+def _calibrate(file: Path, method: str, *, model_date: datetime.date | None, **options: Any) -> FileCalibration:
+    """:func:`calibrate_file` with the progress bar and the notes as warnings."""
+    return calibrate_file(file, method, date=model_date, progress=progress_bar, notify=warn, **options)
 
 
 def _wrote_line(path: Path, result: FileCalibration, export_format: str | None) -> str:
@@ -421,6 +488,7 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             out.print("")
         if sensor in failed:
             warn(failed[sensor].reason)
+            _warn_advice(failed[sensor].advice, result.path, "")
             out.print(f"{'sensor':<16} {sensor}: not fitted (the warning above says why)")
             continue
         compass = fitted[sensor]
@@ -434,6 +502,9 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             )
         for message in _fit_warnings(compass.calibration):
             warn(without_own_advice(message, compass.calibration.method))  # "prefer method='auto'" after auto
+        for reason in compass.warnings:  # the unit check (unit_mismatch) and the like
+            warn(str(reason))
+        _warn_advice(compass.advice, compass.path, " (level with turns)" if compass.magnetometer is None else "")
         print_summary(out, compass)
         if compass.model_field is not None:
             model, unit = compass.model_field, compass.calibration.unit
@@ -447,6 +518,13 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
             f"{field.inclination_deg:.1f}°) at {result.model_field.origin}",
             soft_wrap=True,
         )
+
+
+def _warn_advice(advice: Sequence[Any], path: Path, why: str) -> None:
+    """The methods that work for a vehicle (:class:`magfit.findings.Reason` with remedies), as commands to type."""
+    if advice:
+        said = "; ".join(f"{reason} ({command_line('calibrate', path, reason.remedy)})" for reason in advice)
+        warn(f"{path}: a vehicle's recording{why}; what works for a vehicle: {said}")
 
 
 def _samples_drawn(

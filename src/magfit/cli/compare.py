@@ -159,7 +159,7 @@ def compare_command(
     results = []
     for path in files:
         for recording in read_recordings(path, columns=columns, nonfinite=nonfinite, sensor=sensor):
-            samples, streams = with_streams(recording, methods, unit)
+            samples, streams = with_streams(recording, methods, unit, path=path, columns=columns, nonfinite=nonfinite)
             comparison = compare(samples, methods, allow_undetermined=force, streams=streams)
             name = str(path) if recording.sensor is None else f"{path} ({recording.sensor})"
             results.append(
@@ -180,25 +180,41 @@ def compare_command(
 
 
 def with_streams(
-    recording: Recording, methods: tuple[str, ...], unit: str | None
+    recording: Recording,
+    methods: tuple[str, ...],
+    unit: str | None,
+    *,
+    path: Path | None = None,
+    columns: list[str | int] | None = None,
+    nonfinite: Nonfinite = "skip",
 ) -> tuple[NDArray[np.float64], dict[str, Any]]:
-    """The samples and the log's streams for the methods that need them (vector, gyro), where the log has them.
+    """The samples and the log's streams for the methods that need them (vector, gyro), where the log has them;
+    for a samples file (``path``), the streams its columns hold, found by name (docs/file-formats.md).
 
-    All the methods are then compared on the samples those streams cover; a samples file has none.
+    All the methods are then compared on the samples those streams cover.
     """
     from ..pipeline.streams import method_streams, stream_names
 
     names = stream_names(methods)  # what they need, and the optional streams they take (the accelerometer)
-    if not names.needed or recording.source is None or recording.sensor is None:
+    if not names.needed:
         return recording.samples, {}
+    source, sensor, reference_ned = recording.source, recording.sensor, None
+    if (source is None or sensor is None) and path is not None and recording.sensor is None:
+        from ..pipeline.table import StreamSpec, samples_source
 
+        wanted = ["attitude", "reference", "place", "gyro", "accel", "time"]
+        read = samples_source(path, columns, StreamSpec(), wanted, None, nonfinite)
+        source, sensor, reference_ned = read.source, "columns", read.reference_ned
+    if source is None or sensor is None:
+        return recording.samples, {}
     found = method_streams(
-        recording.source,
-        recording.sensor,
+        source,
+        sensor,
         names.needed,
-        optional=names.optional,
+        optional=[name for name in names.optional if name != "inclination_deg" or source.position is not None],
         unit=unit or recording.unit,
         available=True,
+        reference_ned=reference_ned,
     )
     for note in found.notes:
         warn(note)

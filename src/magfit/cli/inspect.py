@@ -62,6 +62,50 @@ def source_lines(source: Source) -> list[tuple[str, str]]:
     return lines
 
 
+def column_lines(path: Path) -> list[tuple[str, str]]:
+    """For a samples file without a header: each group of columns the content rule looked at and what it
+    took it for (time, angles, a reference field, the magnetometer, a rival); nothing for other files."""
+    from ..errors import MagfitError
+    from ..io import sniff
+    from ..io.selection import npy_content_choice, text_content_choice
+
+    try:
+        fmt = sniff(path)
+        if fmt.header is not None and fmt.kind in ("text", "npz"):
+            return _stream_lines(fmt.header)
+        if fmt.header is not None or fmt.kind == "npz" or fmt.n_columns <= 3:
+            return []
+        choice = text_content_choice(path, fmt) if fmt.kind == "text" else npy_content_choice(path, fmt)
+    except (MagfitError, OSError, ValueError):
+        return []  # the source's own lines say what is wrong with the file
+    labels = [fmt.column_label(i) for i in range(fmt.n_columns)]
+    return [
+        ("columns" if index == 0 else "", f"{names}: {what}") for index, (names, what) in enumerate(choice.what(labels))
+    ]
+
+
+#: What each stream of a samples file is for.
+_USES = {
+    "attitude": "--method vector, magfit align",
+    "reference": "--method vector, magfit align",
+    "gyro": "--method gyro; vector's still-sample gate",
+    "accel": "vector, gyro, magfit align: gravity",
+    "time": "vector's lag, gyro's integration",
+    "place": "the World Magnetic Model's reference field",
+}
+
+
+def _stream_lines(header: tuple[str, ...]) -> list[tuple[str, str]]:
+    """The streams a header names beside the magnetometer (docs/file-formats.md, "The other streams")."""
+    from ..io.streams import find_stream_columns
+
+    found = find_stream_columns(header)
+    return [
+        ("streams" if index == 0 else "", f"{name}: {columns.describe()} ({_USES[name]})")
+        for index, (name, columns) in enumerate(found.items())
+    ]
+
+
 @click.command("inspect")
 @click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
 def inspect_command(file: Path) -> None:
@@ -80,5 +124,9 @@ def inspect_command(file: Path) -> None:
       magfit inspect mag.csv
     """
     out = console()
-    for label, value in source_lines(open_source(file)):
+    source = open_source(file)
+    lines = source_lines(source)
+    if source.kind == "samples":
+        lines += column_lines(file)
+    for label, value in lines:
         out.print(f"{label:<16} {value}", soft_wrap=True)

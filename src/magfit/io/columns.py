@@ -53,7 +53,9 @@ __all__ = [
 
 _AXES = ("x", "y", "z")
 #: Words that mark a magnetometer anywhere in the stem (plus any word starting with "mag").
-_MAG_WORDS = frozenset({"compass", "field", "mfield", "bfield", "magnetic", "magnetometer", "mag", "magn"})
+_MAG_WORDS = frozenset(
+    {"compass", "field", "mfield", "bfield", "magnetic", "magnetometer", "mag", "magn", "flux", "fluxgate"}
+)
 #: Single letters that mean a magnetometer only when glued before the axis letter (mx, imu_mx, Bx, m_x; hx for
 #: the H field, as WitMotion and u-blox exports name it).
 _MAG_LETTERS = frozenset({"m", "b", "h"})
@@ -65,6 +67,7 @@ _OTHER_WORDS = frozenset(
         "rotation", "euler", "q", "quat", "quaternion", "att", "attitude", "orientation", "orient",
         "vel", "velocity", "v", "pos", "position", "p", "d", "dist", "displacement", "e", "r", "o",
         "gps", "speed", "force", "torque", "offset", "bias", "std", "var", "sigma", "err", "error",
+        "ref", "reference", "model", "wmm", "igrf", "expected", "predicted",
     }
 )  # fmt: skip
 #: Words that say nothing about the sensor: they neither help nor hurt.
@@ -328,8 +331,14 @@ MONOTONIC_MIN_ROWS = 10
 #: Two disjoint triples both within this factor of the best spread are an ambiguity (an accelerometer
 #: held still has a nearly constant norm too): the caller asks for the columns instead of guessing.
 AMBIGUITY_FACTOR = 2.0
-#: With more candidate columns than this, only neighbouring triples are tried (x, y, z sit side by side).
-MAX_COMBINATION_COLUMNS = 12
+
+
+#: A triple whose field direction stays within this angle (degrees) of its mean over the head does not turn
+#: with a sensor on a moving body: a field in the world frame (a model or reference field, N/E/D).
+STILL_DIRECTION_DEG = 2.0
+#: A triple whose raw norm varies by less than this fraction of its mean is a model or reference field in
+#: the body frame: no magnetometer's noise, quantisation and uncorrected hard iron together are that small.
+MODEL_NORM_SPREAD = 1e-5
 
 
 @dataclass(frozen=True)
@@ -350,6 +359,14 @@ class ContentChoice:
     rivals : tuple of tuple of 3 int
         Other triples whose spread is within :data:`AMBIGUITY_FACTOR` of the best: a non-empty tuple means
         the content cannot decide (the caller reports it).
+    angles : tuple of int
+        Columns passed over as angles: one that behaves like a heading (it wraps, or covers more than half a
+        turn, in degrees or radians) and the two written beside it within a tilt's range (roll, pitch, yaw).
+    passed : tuple of (tuple of 3 int, str)
+        Triples of neighbouring columns passed over, each with why in words (a model or reference field;
+        angles; time).
+    candidates : tuple of (tuple of 3 int, float)
+        The triples compared by content (neighbouring columns, none passed over), each with its spread.
     """
 
     indices: tuple[int, int, int]
@@ -357,6 +374,9 @@ class ContentChoice:
     constant: tuple[int, ...] = ()
     spread: float | None = None
     rivals: tuple[tuple[int, int, int], ...] = ()
+    angles: tuple[int, ...] = ()
+    passed: tuple[tuple[tuple[int, int, int], str], ...] = ()
+    candidates: tuple[tuple[tuple[int, int, int], float], ...] = ()
 
     def describe(self, labels: Sequence[str]) -> str | None:
         """Why these columns, in words (``column 1 is monotonic: time or a counter``); None when obvious."""
@@ -367,9 +387,36 @@ class ContentChoice:
             reasons.append(f"{names} {verb} monotonic: time or a counter")
         if self.constant:
             reasons.append(f"{', '.join(labels[i] for i in self.constant)} constant")
+        if self.angles:
+            reasons.append(f"{', '.join(labels[i] for i in self.angles)} angles")
+        for triple, why in self.passed:  # the model or reference fields (mixed triples: magfit inspect says them)
+            if not set(triple) & {*self.monotonic, *self.constant, *self.angles} and not why.startswith("sizes"):
+                reasons.append(f"{', '.join(labels[i] for i in triple)} {why}")
         if self.spread is not None:
             reasons.append(f"the most constant norm under an ellipsoid fit ({100 * self.spread:.2g} % spread)")
         return "; ".join(reasons) or None
+
+    def what(self, labels: Sequence[str]) -> list[tuple[str, str]]:
+        """Each group of columns the rule looked at and what it took it for, in file order (``magfit inspect``)."""
+        said: list[tuple[int, str, str]] = []
+        for column in self.monotonic:
+            said.append((column, labels[column], "monotonic: time or a counter"))
+        for column in self.constant:
+            said.append((column, labels[column], "constant"))
+        if self.angles:
+            said.append((self.angles[0], ", ".join(labels[i] for i in self.angles), "angles (attitude), not a field"))
+        for triple, why in self.passed:
+            if not set(triple) & {*self.monotonic, *self.constant, *self.angles}:
+                said.append((triple[0], ", ".join(labels[i] for i in triple), why))
+        for triple, spread in self.candidates:
+            if self.rivals and (triple == self.indices or triple in self.rivals):
+                role = "a candidate magnetometer, as likely as another: not chosen (give the columns)"
+            else:
+                role = "the magnetometer" if triple == self.indices else "less constant a norm than the magnetometer"
+            said.append((triple[0], ", ".join(labels[i] for i in triple), f"{role} ({100 * spread:.2g} % spread)"))
+        if not self.candidates:
+            said.append((self.indices[0], ", ".join(labels[i] for i in self.indices), "the magnetometer"))
+        return [(names, text) for _, names, text in sorted(said, key=lambda item: item[0])]
 
 
 def _is_monotonic(column: NDArray[np.float64]) -> bool:
@@ -418,6 +465,98 @@ def ellipsoid_spread(points: NDArray[np.float64]) -> float | None:
     return float(radius.std() / mean) if mean > 0 else None
 
 
+def _turn(column: NDArray[np.float64]) -> float | None:
+    """The turn (360 or 2π) a column's values lie within as angles (±half a turn or 0 to a turn), or None."""
+    values = column[np.isfinite(column)]
+    if values.size < MONOTONIC_MIN_ROWS:
+        return None
+    low, high = float(values.min()), float(values.max())
+    for turn in (2 * np.pi, 360.0):
+        if (low >= -turn / 2 - 1e-9 and high <= turn / 2 + 1e-9) or (low >= -1e-9 and high <= turn + 1e-9):
+            return turn
+    return None
+
+
+def _angle_seed(column: NDArray[np.float64]) -> tuple[float, bool] | None:
+    """The turn of a column that behaves like a heading and whether it wraps, or None: within one turn,
+    smooth (small steps between neighbouring rows), and either a jump of nearly a turn (it wraps) or more
+    than an eighth of a turn covered (then only with tilts beside it: :func:`_angle_group`)."""
+    turn = _turn(column)
+    if turn is None:
+        return None
+    values = column[np.isfinite(column)]
+    steps = np.abs(np.diff(values))
+    wraps = bool(np.any(steps > 0.75 * turn))
+    if float(np.quantile(steps[steps <= 0.75 * turn], 0.9)) >= 0.02 * turn:
+        return None
+    return (turn, wraps) if wraps or float(values.max() - values.min()) > turn / 8 else None
+
+
+def _angle_group(
+    values: NDArray[np.float64], numeric: Sequence[int], candidates: Sequence[int], seed: int, turn: float, wraps: bool
+) -> tuple[int, ...]:
+    """The heading-like column with the two neighbours written beside it that are a vehicle's tilts (roll
+    and pitch: within a quarter turn, averaging within a tenth of it, smooth; and, unless the heading wraps,
+    no near-constant norm as a field's axes keep: :data:`FIELD_MAX_SPREAD`): of the windows of three neighbouring
+    columns holding it, the one whose tilts stay closest to zero. None such: the seed alone when it wraps
+    (an angle all the same), else nothing (a field's axis that happens to stay within a turn)."""
+    order = list(numeric)
+    position = order.index(seed)
+    best: tuple[float, tuple[int, ...]] | None = None
+    for first in range(max(position - 2, 0), position + 1):
+        window = order[first : first + 3]
+        if len(window) != 3 or not set(window) <= set(candidates):
+            continue
+        tilts = [values[:, j][np.isfinite(values[:, j])] for j in window if j != seed]
+        largest = max(float(np.abs(tilt).max()) if tilt.size else np.inf for tilt in tilts)
+        centred = all(
+            tilt.size > 1
+            and abs(float(tilt.mean())) <= turn / 10
+            and float(np.quantile(np.abs(np.diff(tilt)), 0.9)) < 0.02 * turn  # smooth, as an estimator's
+            for tilt in tilts
+        )
+        if not (largest <= turn / 4 + 1e-9 and centred and (best is None or largest < best[0])):
+            continue
+        # Without a wrap, a field's three axes in µT can look the same: they keep a near-constant norm.
+        spread = ellipsoid_spread(values[:, window])
+        if wraps or spread is None or spread > FIELD_MAX_SPREAD:
+            best = (largest, tuple(window))
+    if best is not None:
+        return best[1]
+    return (seed,) if wraps else ()
+
+
+#: An attitude's three angles outline no ellipsoid with a norm this constant (std / mean after the fit); a
+#: field's axes (µT values within ±180 too) do.
+FIELD_MAX_SPREAD = 0.1
+
+#: Three columns whose sizes (root mean square) differ by more than this factor hold different quantities
+#: (an angle in degrees beside a field in nT): a field's three axes are of one size over a recording.
+SIZE_RATIO = 100.0
+
+
+def _world_field(points: NDArray[np.float64]) -> str | None:
+    """Why a triple is a model or reference field and no magnetometer, or None (module constants)."""
+    finite = points[np.isfinite(points).all(axis=1)]
+    norms = np.linalg.norm(finite, axis=1)
+    if finite.shape[0] < MONOTONIC_MIN_ROWS or not np.all(norms > 0):
+        return None
+    sizes = np.sqrt(np.mean(finite**2, axis=0))
+    if float(sizes.max()) > SIZE_RATIO * float(sizes.min()):
+        return f"sizes {float(sizes.max()) / float(sizes.min()):.2g}x apart: different quantities, not one field's axes"
+    mean = float(norms.mean())
+    if float(norms.std()) < MODEL_NORM_SPREAD * mean:
+        constant = float(norms.std()) / mean
+        return f"a norm constant to {constant:.1g} of itself, below any sensor's noise: a model or reference field"
+    unit = finite / norms[:, None]
+    centre = unit.mean(axis=0)
+    centre /= np.linalg.norm(centre)
+    turned = float(np.degrees(np.arccos(np.clip(unit @ centre, -1.0, 1.0))).max())
+    if turned < STILL_DIRECTION_DEG:
+        return f"turns by {turned:.2g}° at most: a field fixed in the world (a model or reference field, N/E/D)"
+    return None
+
+
 def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int]) -> ContentChoice:
     """Choose the magnetometer's three columns of a file without a header from the values of its first rows.
 
@@ -427,9 +566,18 @@ def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int])
        :data:`MONOTONIC_MIN_ROWS` rows, changing in half of its steps) is a time or a counter; a column
        with one value holds no axis. Both are passed over.
     2. Three columns left are x, y, z in file order.
-    3. More than three: every triple (in file order) is fitted with an ellipsoid (:func:`ellipsoid_spread`)
-       and the one whose norm is most constant wins. Another triple, disjoint from it, within
-       :data:`AMBIGUITY_FACTOR` of its spread is a rival (``rivals``): the caller refuses to guess.
+    3. More than three: a column that behaves like a heading (:func:`_angle_seed`: smooth, within one turn
+       of degrees or radians, and it wraps or covers an eighth of a turn) and the two written beside it that
+       behave like a vehicle's tilts (:func:`_angle_group`) are an attitude, passed over. The candidates
+       are three *neighbouring* numeric columns (a writer puts x, y, z side by side) with none passed over
+       and none reaching into another group (three columns drawn from different groups are never a
+       magnetometer). A triple that does not turn (its direction within
+       :data:`STILL_DIRECTION_DEG`) or whose norm is constant far below any sensor's noise
+       (:data:`MODEL_NORM_SPREAD`) is a model or reference field, and one whose columns' sizes differ by
+       more than :data:`SIZE_RATIO` holds different quantities: both passed over. Each candidate left is fitted
+       with an ellipsoid (:func:`ellipsoid_spread`) and the one whose norm is most constant wins. Another
+       triple, disjoint from it, within :data:`AMBIGUITY_FACTOR` of its spread is a rival (``rivals``): the
+       caller refuses to guess.
     4. Fewer than three left, or no triple outlining an ellipsoid: the first three of the varying columns,
        then the constant ones, then time and counters, as a last resort (in file order).
 
@@ -450,11 +598,31 @@ def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int])
     # The last resort prefers columns that vary, then constant ones (a flat recording), time and counters last.
     fallback = [*left, *constant, *monotonic]
     if len(left) > 3:
-        if len(left) <= MAX_COMBINATION_COLUMNS:
-            triples = list(itertools.combinations(left, 3))
-        else:
-            triples = [(left[k], left[k + 1], left[k + 2]) for k in range(len(left) - 2)]
-        scored = [(spread, triple) for triple in triples if (spread := ellipsoid_spread(values[:, triple])) is not None]
+        angles: list[int] = []
+        for j in left:
+            if j not in angles and (seed := _angle_seed(values[:, j])) is not None:
+                angles += [k for k in _angle_group(values, numeric, left, j, *seed) if k not in angles and k in left]
+        angles.sort()
+        windows = [tuple(numeric[k : k + 3]) for k in range(len(numeric) - 2)]
+        passed: list[tuple[tuple[int, int, int], str]] = []
+        fields: set[int] = set()  # the columns of a model or reference field: a group of their own
+        for window in windows:
+            triple = (window[0], window[1], window[2])
+            if set(triple) & {*monotonic, *constant, *angles}:
+                continue
+            why = _world_field(values[:, triple])
+            if why is not None:
+                passed.append((triple, why))
+                if not why.startswith("sizes"):
+                    fields.update(triple)
+        scored: list[tuple[float, tuple[int, int, int]]] = []
+        for window in windows:
+            triple = (window[0], window[1], window[2])
+            if set(triple) & {*monotonic, *constant, *angles, *fields} or any(t == triple for t, _ in passed):
+                continue  # a triple reaching into another group is drawn from two sensors' columns
+            spread = ellipsoid_spread(values[:, triple])
+            if spread is not None:
+                scored.append((spread, triple))
         if scored:
             best_spread, best = min(scored)
             rivals = tuple(
@@ -462,6 +630,16 @@ def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int])
                 for spread, triple in sorted(scored)
                 if not set(triple) & set(best) and spread <= AMBIGUITY_FACTOR * best_spread
             )
-            return ContentChoice(best, tuple(monotonic), tuple(constant), best_spread, rivals)
+            return ContentChoice(
+                best, tuple(monotonic), tuple(constant), best_spread, rivals, tuple(angles), tuple(passed),
+                tuple((triple, spread) for spread, triple in scored),
+            )  # fmt: skip
+        dropped = {*angles, *(j for triple, _ in passed for j in triple)}
+        fallback = [j for j in fallback if j not in dropped] + [j for j in fallback if j in dropped]
+        first = sorted((fallback + [j for j in range(values.shape[1]) if j not in fallback])[:3])
+        return ContentChoice(
+            (first[0], first[1], first[2]), tuple(j for j in monotonic if j not in first), (), None, (),
+            tuple(j for j in angles if j not in first), tuple(passed),
+        )  # fmt: skip
     first = sorted((fallback + [j for j in range(values.shape[1]) if j not in fallback])[:3])
     return ContentChoice((first[0], first[1], first[2]), tuple(j for j in monotonic if j not in first))

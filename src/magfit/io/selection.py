@@ -113,13 +113,19 @@ def resolve_table_columns(
             # No header: chosen by what the columns hold (time and counters passed over), and reported.
             choice = content or ContentChoice((0, 1, 2))
             if choice.rivals:
+                spreads = dict(choice.candidates)
                 found = "; ".join(
-                    "(" + ", ".join(labels[i] for i in triple) + ")" for triple in (choice.indices, *choice.rivals)
+                    "("
+                    + ", ".join(labels[i] for i in triple)
+                    + ")"
+                    + (f" {100 * spreads[triple]:.2g} % spread" if triple in spreads else "")
+                    for triple in (choice.indices, *choice.rivals)
                 )
                 raise file_error(
                     path,
-                    f"has no header and several column triples look like a magnetometer: {found}; choose one with "
-                    f"columns=[{', '.join(str(i) for i in choice.indices)}] (0-based)",
+                    f"has no header and several column triples look like a magnetometer: {found}"
+                    + (f" ({note})" if (note := choice.describe(labels)) else "")
+                    + f"; choose one with columns=[{', '.join(str(i) for i in choice.indices)}] (0-based)",
                 )
             indices = choice.indices
     else:

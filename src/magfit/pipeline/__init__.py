@@ -32,11 +32,14 @@ import numpy as np
 from ..calibration import Calibration
 from ..errors import CalibrationError, DataFileError, MagfitError, OptionError
 from ..evaluate import Evaluation, evaluate
+from ..findings import Reason
 from ..fit import fit
 from ..methods import get_method
 from ..sources import Magnetometer, Source, log_kind, open_source
-from ..units import get_unit
+from ..units import field_unit_reason, get_unit
+from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, turned, vehicle_advice
 from .streaming import Nonfinite, Progress, fit_samples_file, no_progress, samples_for_fit
+from .table import StreamSpec
 
 if TYPE_CHECKING:
     from ..geomag import Field  # (imported when used: the wmm extra)
@@ -47,6 +50,9 @@ __all__ = [
     "FileCalibration",
     "ModelField",
     "Progress",
+    "RefusedWithAdvice",
+    "StreamSpec",
+    "StreamsMissing",
     "calibrate_file",
     "no_progress",
 ]
@@ -113,6 +119,12 @@ class CompassCalibration:
         calibration undone with the log's parameters, damaged data skipped).
     model_field : ModelField or None
         The World Magnetic Model's field at the recording, when asked for.
+    warnings : tuple of Reason
+        What a user must be warned of about the result (a field strength no place on Earth has in the unit
+        declared: ``unit_mismatch``), each with its code.
+    advice : tuple of Reason
+        For a vehicle's recording fitted weakly: the methods that work for it, each with its remedy
+        (:func:`magfit.pipeline.advice.vehicle_advice`).
     """
 
     path: Path
@@ -132,6 +144,8 @@ class CompassCalibration:
     time_base: str = ""
     notes: tuple[str, ...] = ()
     model_field: ModelField | None = None
+    warnings: tuple[Reason, ...] = ()
+    advice: tuple[Reason, ...] = ()
 
     @property
     def sensor(self) -> str | None:
@@ -160,11 +174,13 @@ class CompassCalibration:
 
 @dataclass(frozen=True)
 class CompassFailure:
-    """A compass of a log that could not be fitted: which, and why (the fit's refusal or the read's error)."""
+    """A compass of a log that could not be fitted: which, and why (the fit's refusal or the read's error);
+    ``advice``: the methods that work for a vehicle, each a :class:`~magfit.findings.Reason` with its remedy."""
 
     sensor: str
     reason: str
     notes: tuple[str, ...] = ()
+    advice: tuple[Reason, ...] = ()
     codes: tuple[str, ...] = ()  # the refusal's reason codes (magfit.REASON_CODES); empty for a read error
 
 
@@ -232,6 +248,14 @@ def calibrate_file(
     options: Mapping[str, Any] | None = None,
     progress: Progress = no_progress,
     notify: Callable[[str], None] | None = None,
+    attitude: Sequence[str | int] | None = None,
+    reference: Sequence[str | int] | None = None,
+    gyro: Sequence[str | int] | None = None,
+    accel: Sequence[str | int] | None = None,
+    time: Sequence[str | int] | None = None,
+    attitude_convention: Literal["ned", "enu"] = "ned",
+    angle_unit: Literal["auto", "deg", "rad"] = "auto",
+    gyro_unit: Literal["rad/s", "deg/s"] = "rad/s",
 ) -> FileCalibration:
     """Fit a recording: a samples file (text, npy, npz), a PX4 ULog, an ArduPilot DataFlash log or a ROS bag.
 
@@ -272,6 +296,20 @@ def calibrate_file(
     notify : callable or None
         Called with each note about the recording as soon as it is known (``"x.bin (MAG/0): ..."``), before
         a fit that may fail; the notes are in the result too.
+    attitude, reference, gyro, accel, time : sequence or None
+        A samples file's other streams for ``vector`` and ``gyro`` (docs/file-formats.md): the attitude's
+        columns (roll, pitch, yaw, or a quaternion w, x, y, z), the reference field's N, E, D columns (in the
+        samples' unit; without them, the World Magnetic Model at ``location`` or at the file's latitude and
+        longitude columns), the gyroscope's (rad/s), the accelerometer's and the time column (seconds). Names
+        or 0-based numbers, as ``columns``; None finds each by its name.
+    attitude_convention : {"ned", "enu"}
+        ``"ned"``: aerospace 3-2-1 Euler angles (yaw, pitch, roll) or a quaternion from the body's
+        forward-right-down axes into North-East-Down; ``"enu"``: ROS's, forward-left-up into East-North-Up
+        (the reference columns then E, N, U).
+    angle_unit : {"auto", "deg", "rad"}
+        The Euler angles' unit; ``"auto"`` decides from the values and refuses a file they leave ambiguous.
+    gyro_unit : {"rad/s", "deg/s"}
+        The gyroscope columns' unit (the methods refuse rates that look like degrees per second as rad/s).
 
     Returns
     -------
@@ -293,12 +331,22 @@ def calibrate_file(
     options = dict(options or {})
     if force:  # fit's own keyword, passed with the method's options
         options["allow_undetermined"] = True
-    if date is not None and location is None and field_strength != "wmm":
+    if date is not None and location is None and field_strength != "wmm" and not get_method(method).needs:
         raise OptionError(
             "date='YYYY-MM-DD' goes with location='LAT,LON[,ALT]' or field_strength='wmm': the World Magnetic "
             "Model needs the place too"
         )
     say = notify or (lambda note: None)
+    given = [name for name, value in (("attitude", attitude), ("reference", reference), ("gyro", gyro),
+                                      ("accel", accel), ("time", time)) if value is not None]  # fmt: skip
+    if given and (not get_method(method).needs or log_kind(path) is not None):
+        what = (
+            "a flight log's streams are its own" if log_kind(path) is not None else f"{method} takes the samples alone"
+        )
+        raise OptionError(
+            f"{path}: {', '.join(f'{name}=[...]' for name in given)} names a samples file's columns for the methods "
+            f"that read them (vector, gyro); {what}"
+        )
     from ..io.instances import head_sensors
 
     kind = log_kind(path)
@@ -308,18 +356,29 @@ def calibrate_file(
         if sensor is not None:
             raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
         needs = get_method(method).needs
-        if needs and not all(need in options for need in needs):
-            raise OptionError(
-                f"{path}: the {method} method needs {', '.join(needs)} beside the samples, which a samples file does "
-                "not hold: give a flight log or bag that logs the attitude and GPS (vector) or the gyroscope (gyro), "
-                f"or call magfit.fit(samples, method={method!r}, {'=..., '.join(needs)}=...) from Python"
-            )
+        spec = StreamSpec(attitude, reference, gyro, accel, time, attitude_convention, angle_unit, gyro_unit)
         model = _model(path, None, location, date)  # (no log: "wmm" without a place is refused below)
+        if needs and not all(need in options for need in needs):
+            if field_strength is not None:
+                raise OptionError(f"{path}: field_strength='...' goes with a magnitude-only method, not {method}")
+            if even:
+                raise OptionError(
+                    f"{path}: even=True subsamples by direction; the {method} method needs every sample in time order"
+                )
+            where = location if location is not None and location != FROM_LOG else None
+            compass = _calibrate_samples_streams(
+                path, method, columns, spec, unit, where, date, options, say, nonfinite
+            )
+            return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
         if field_strength == "wmm":
             options["field_strength"] = _model_strength(model, unit)
         elif field_strength is not None:
             options["field_strength"] = field_strength
-        compass = _calibrate_samples(path, method, columns, nonfinite, unit, even, max_samples, options, progress)
+        try:
+            compass = _calibrate_samples(path, method, columns, nonfinite, unit, even, max_samples, options, progress)
+        except CalibrationError as error:
+            raise _with_vehicle_advice(path, error, columns, unit, method, nonfinite) from None
+        compass = _vehicle_weak(compass, columns, nonfinite, unit, method)
         return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
     if columns is not None:
         raise OptionError(f"{path}: columns=[...] chooses the columns of a samples file; a log's compass by sensor=")
@@ -345,7 +404,11 @@ def calibrate_file(
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
-            failures.append(CompassFailure(magnetometer.id, str(error), _notes(source, magnetometer), error.codes))
+            notes = _notes(source, magnetometer)
+            if isinstance(error, RefusedWithAdvice):  # the refusal's words; the remedies as data
+                failures.append(CompassFailure(magnetometer.id, error.text, notes, error.advice, error.codes))
+            else:
+                failures.append(CompassFailure(magnetometer.id, str(error), notes, codes=error.codes))
             continue
         compasses.append(replace(compass, model_field=model))
     tried = tuple(compass.sensor or "" for compass in compasses) + tuple(f.sensor for f in failures)
@@ -412,14 +475,25 @@ def _calibrate_compass(
         options = {**options, **streams.options}
     elif even:
         fitted = samples_for_fit(read.samples, even)
+    several = len([m for m in source.magnetometers if m.problem is None and m.n_samples > 0]) > 1
+    streams_held = ("attitude", "place", "gyro", "time")  # a log's: vector and gyro read them (or say why not)
     try:
         calibration = fit(fitted, method=method, **options)
     except CalibrationError as error:
         advice = "".join(f"; {note}" for note in magnetometer.notes if "logged at only" in note or "only " in note)
-        raise CalibrationError(f"{where}: {error}{advice}", codes=error.codes, remedy=error.remedy) from None
+        chosen = magnetometer.id if several else None
+        works = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
+        if not turned(fitted):  # a compass never turned: only recording again helps
+            raise CalibrationError(f"{where}: {error}{advice}", codes=error.codes, remedy=error.remedy) from None
+        raise RefusedWithAdvice(path, f"{where}: {error}{advice}", works, codes=error.codes) from None
     label = unit or magnetometer.unit
     calibration = calibration.with_unit(label) if label else calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
+    verdict = calibration.details.get("support", {}).get("verdict")
+    vehicle: tuple[Reason, ...] = ()
+    if verdict in ("weak", "refused") and turned(fitted):  # a flight log is a vehicle's: what works for it
+        chosen = magnetometer.id if several else None
+        vehicle = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
     if magnetometer.calibration_in_use is not None:  # the exports refuse to write a residual in its place
         sensor["calibration_in_use"] = magnetometer.calibration_in_use
     source_details = {"file": path.name, "sensor": magnetometer.id, "device_id": magnetometer.device_id}
@@ -443,7 +517,205 @@ def _calibrate_compass(
         end_s=float(times.max()) if times.size else float("nan"),
         time_base=source.time_base,
         notes=notes,
+        warnings=_unit_warnings(calibration.field_strength, label or None),
+        advice=vehicle,
     )
+
+
+def _unit_warnings(field_strength: float, unit: str | None) -> tuple[Reason, ...]:
+    """The unit check's warning (``unit_mismatch``): a field strength no place on Earth has in the unit declared
+    (:func:`magfit.units.field_unit_reason`)."""
+    if not math.isfinite(field_strength):
+        return ()
+    reason = field_unit_reason(float(field_strength), unit)
+    return () if reason is None else (reason,)
+
+
+def _samples_file_advice(
+    path: Path, columns: Sequence[str | int] | None, nonfinite: Nonfinite, unit: str | None, method: str
+) -> tuple[Reason, ...]:
+    """The methods that work for a vehicle, when a samples file's samples look like a vehicle's (one pass over
+    the file for their covariance, in chunks: read only when a fit is refused or weak); none otherwise."""
+    from ..io import iter_sample_chunks
+    from ..io.layout import sniff
+    from ..io.streams import find_stream_columns
+
+    try:
+        count, total, outer = 0, np.zeros(3), np.zeros((3, 3))
+        for chunk in iter_sample_chunks(path, columns=columns, nonfinite=nonfinite):
+            count += len(chunk)
+            total += chunk.sum(axis=0)
+            outer += chunk.T @ chunk
+        header = sniff(path).header
+    except MagfitError:
+        return ()
+    if count < 10:
+        return ()
+    mean = total / count
+    covariance = outer / count - np.outer(mean, mean)
+    if not looks_like_vehicle(covariance, float(np.trace(outer)) / count):
+        return ()
+    streams = tuple(find_stream_columns(header)) if header is not None else ()
+    return vehicle_advice(path, is_log=False, streams=streams, unit=unit, method=method)
+
+
+def _with_vehicle_advice(
+    path: Path,
+    error: CalibrationError,
+    columns: Sequence[str | int] | None,
+    unit: str | None,
+    method: str,
+    nonfinite: Nonfinite = "skip",
+) -> CalibrationError:
+    """A samples file's refusal, with the methods that work for a vehicle when the samples look like one's."""
+    advice = _samples_file_advice(path, columns, nonfinite, unit, method)
+    return RefusedWithAdvice(path, str(error), advice, codes=error.codes) if advice else error
+
+
+def _vehicle_weak(
+    compass: CompassCalibration,
+    columns: Sequence[str | int] | None,
+    nonfinite: Nonfinite,
+    unit: str | None,
+    method: str,
+) -> CompassCalibration:
+    """A weak fit of a vehicle's samples gets the methods that work for a vehicle (``advice``)."""
+    support = compass.calibration.details.get("support")
+    if not isinstance(support, Mapping) or support.get("verdict") not in ("weak", "refused"):
+        return compass
+    chosen = columns if columns is not None else compass.calibration.details.get("source", {}).get("column_indices")
+    return replace(compass, advice=_samples_file_advice(compass.path, chosen, nonfinite, unit, method))
+
+
+def _calibrate_samples_streams(
+    path: Path,
+    method: str,
+    columns: Sequence[str | int] | None,
+    spec: StreamSpec,
+    unit: str | None,
+    location: tuple[float, float, float] | None,
+    date: datetime.date | str | None,
+    options: Mapping[str, Any],
+    say: Callable[[str], None],
+    nonfinite: Nonfinite = "skip",
+) -> CompassCalibration:
+    """Fit a samples file with ``vector`` or ``gyro``: its attitude, reference, gyroscope, accelerometer and
+    time columns through the logs' path (:func:`magfit.pipeline.streams.method_streams`)."""
+    from .streams import method_streams, stream_names
+    from .table import samples_source
+
+    names = stream_names([method])
+    wanted = ["attitude", "reference", "place"] if "reference" in names.needed else []
+    wanted += [s for s in ("gyro", "accel") if s in (*names.needed, *names.optional)]
+    wanted += ["time"] if "time_s" in (*names.needed, *names.optional) else []
+    read = samples_source(path, columns, spec, wanted, location, nonfinite)
+    source, reference_ned, notes = read.source, read.reference_ned, read.notes
+    motion = source.read_motion("columns")
+    label = unit or motion.unit or None
+    # The call as the user made it (the remedy adds what is missing): method, unit, columns, place, date.
+    base = [("method", method)] + ([("unit", label)] if label else [])
+    if columns is not None:
+        base.append(("columns", ",".join(map(str, columns))))
+    for name, value in (("attitude", spec.attitude), ("reference", spec.reference), ("gyro", spec.gyro),
+                        ("accel", spec.accel), ("time", spec.time)):  # fmt: skip
+        if value is not None:
+            base.append((name, ",".join(map(str, value))))
+    if location is not None:
+        base.append(("location", ",".join(f"{v:g}" for v in location)))
+    if date is not None:
+        base.append(("date", str(date)))
+    found = {
+        "attitude": motion.attitude is not None,
+        "reference": reference_ned is not None or motion.position is not None,
+    }
+    listing = f"the columns are: {_columns_of(path)}" + "".join(f"; {hint}" for hint in read.hints)
+    if "reference" in names.needed:
+        if motion.attitude is None:
+            raise StreamsMissing(
+                path,
+                f"{path}: the vector method needs the vehicle's attitude beside the samples, and no attitude columns "
+                f"were found (roll, pitch, yaw or qw, qx, qy, qz; {listing}): name them",
+                (*base, ("attitude", "ROLL,PITCH,YAW"), *(() if found["reference"] else (("reference", "N,E,D"),))),
+            )
+        if reference_ned is None and motion.position is None:
+            raise StreamsMissing(
+                path,
+                f"{path}: the vector method needs the reference field at each sample: no N/E/D columns were found "
+                f"(ref_n, ref_e, ref_d; {listing}) and no place for the World Magnetic Model (no latitude and "
+                "longitude columns, no location): name the reference columns, or give the place",
+                (*base, ("reference", "N,E,D")),
+            )
+    if "gyro" in names.needed and (motion.gyro is None or "time" not in source.time_base):
+        missing = [
+            what
+            for what, ok in (("gyroscope", motion.gyro is not None), ("time", "time" in source.time_base))
+            if not ok
+        ]
+        raise StreamsMissing(
+            path,
+            f"{path}: the gyro method needs the gyroscope's rates (rad/s) and the time of each sample; no "
+            f"{' or '.join(missing)} columns were found (gx, gy, gz; time; {listing}): name them",
+            (*base, *((("gyro", "GX,GY,GZ"),) if motion.gyro is None else ()),
+             *((("time", "TIME"),) if "time" not in source.time_base else ())),
+        )  # fmt: skip
+    for note in notes[1:]:  # (the first names the magnetometer's columns: the summary shows them)
+        say(note)
+    streams = method_streams(
+        source, "columns", names.needed,
+        optional=[o for o in names.optional if o != "inclination_deg" or motion.position],
+        unit=label, date=date, reference_ned=reference_ned,
+    )  # fmt: skip
+    for note in streams.notes:
+        say(note)
+    fitted_options = {**options, **streams.options}
+    if "time" not in source.time_base:
+        fitted_options.pop("time_s", None)  # row numbers are no time: no lag searched
+    try:
+        calibration = fit(streams.samples, method=method, **fitted_options)
+    except OptionError as error:  # (the gyroscope's unit: said where its columns are)
+        if "gyro" not in fitted_options or spec.gyro_unit != "rad/s":
+            raise
+        gyro_columns = next((note.split(": gyro ", 1)[1] for note in notes if ": gyro " in note), "gyro")
+        raise OptionError(
+            f"{path}: {error} (the file's gyroscope columns {gyro_columns}; if they hold degrees per second, say so "
+            "with gyro_unit='deg/s')"
+        ) from None
+    except CalibrationError as error:
+        used = f"columns {source.magnetometers[0].description}"
+        refusal = CalibrationError(f"{path} ({used}): {error}", codes=error.codes)
+        raise _with_vehicle_advice(path, refusal, columns, label, method, nonfinite) from None
+    calibration = calibration.with_unit(label) if label else calibration
+    chosen = source.magnetometers[0]
+    details = {
+        "file": path.name,
+        "columns": list(read.columns),
+        "column_indices": list(read.column_indices),
+        "header": read.header,
+        "n_columns": read.n_columns,
+        "unit": calibration.unit,
+        "streams": [note.split(": ", 1)[1] for note in notes[1:]],
+    }
+    calibration = replace(calibration, details={**calibration.details, "source": details})
+    return CompassCalibration(
+        path=path,
+        calibration=calibration,
+        evaluation=evaluate(calibration, streams.samples),
+        columns=tuple(chosen.description.split(", ")),
+        n_rows=read.n_rows,
+        n_skipped=read.n_dropped,
+        skipped_lines=(),
+        file_format=source.format,
+        streamed=False,
+        notes=notes + streams.notes,
+        warnings=_unit_warnings(calibration.field_strength, label),
+    )
+
+
+def _columns_of(path: Path) -> str:
+    from ..io.layout import sniff
+
+    fmt = sniff(path)
+    return ", ".join(fmt.column_label(i) for i in range(fmt.n_columns))
 
 
 def _calibrate_samples(
@@ -505,6 +777,7 @@ def _calibrate_samples(
         streamed=fitted.streamed,
         subsample=fitted.subsample,
         column_note=chosen.column_note,
+        warnings=_unit_warnings(calibration.field_strength, unit),
     )
 
 

@@ -101,6 +101,7 @@ def method_streams(
     date: datetime.date | str | None = None,
     available: bool = False,
     gyro_own_rate: bool = False,
+    reference_ned: NDArray[np.float64] | None = None,
 ) -> MethodStreams:
     """Read ``sensor``'s samples with the streams ``needs`` names (``reference``, ``gyro``, ``time_s``) and
     those of ``optional`` the log holds (``time_s``, ``gyro``, ``accel``; :func:`stream_names` gives both for
@@ -132,6 +133,11 @@ def method_streams(
         options["time_s"] = motion.time_s
     try:
         if "gyro" in needs:
+            if motion.gyro is None and source.kind == "samples":
+                raise DataFileError(
+                    f"{where}: the file holds no gyroscope columns beside the magnetometer (gx, gy, gz, gyro_x ...); "
+                    "the gyro method needs them, in rad/s (name them with gyro=[...])"
+                )
             if motion.gyro is None:
                 raise DataFileError(
                     f"{where}: the log holds no gyroscope beside this compass; the gyro method needs one (log the "
@@ -144,13 +150,15 @@ def method_streams(
         notes.append(str(error))
     try:
         if "reference" in needs:
-            options["reference"] = _reference(source, motion, where, unit, date, notes)
+            options["reference"] = _reference(source, motion, where, unit, date, notes, reference_ned)
     except (DataFileError, OptionError) as error:
         if not available:
             raise
         notes.append(str(error))
     if "accel" in wanted:
         accel, said = _accel(motion, wanted)
+        if source.kind == "samples" and accel is None:
+            said = "no accelerometer columns beside the magnetometer: the methods run without it (gravity not used)"
         notes.append(f"{where}: {said}")
         if accel is not None:
             options["accel"] = accel
@@ -201,15 +209,28 @@ def _reference(
     unit: str | None,
     date: datetime.date | str | None,
     notes: list[str],
+    reference_ned: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
-    """The model's field turned into the body frame at each sample: ``attitudeᵀ · (N, E, D)``."""
+    """The model's field (or ``reference_ned``, row by row) turned into the body frame at each sample:
+    ``attitudeᵀ · (N, E, D)``."""
     from ..geomag import field_at
 
+    if motion.attitude is None and source.kind == "samples":
+        raise DataFileError(
+            f"{where}: the file holds no attitude columns beside the magnetometer (roll, pitch, yaw or qw, qx, qy, "
+            "qz); the vector method needs them (name them with attitude=[...])"
+        )
     if motion.attitude is None:
         raise DataFileError(
             f"{where}: the log holds no attitude beside this compass; the vector method needs one (ArduPilot ATT or "
             "XKQ, PX4 vehicle_attitude, a ROS sensor_msgs/Imu with its orientation)"
         )
+    if reference_ned is not None:
+        said = f" ({unit})" if unit else " (the samples' unit)"
+        notes.append(
+            f"{where}: reference field from the file's N/E/D columns{said}, turned into the body frame by the attitude"
+        )
+        return np.einsum("kji,kj->ki", motion.attitude, reference_ned)
     label = unit or motion.unit
     if not label or not get_unit(label).is_physical:
         raise OptionError(
@@ -217,6 +238,12 @@ def _reference(
             "their physical unit (unit='uT', 'G', 'mG' ...): raw counts have no known scale"
         )
     position = motion.position or source.position
+    if position is None and source.kind == "samples":
+        raise DataFileError(
+            f"{where}: the file holds neither the reference field's N/E/D columns nor latitude and longitude "
+            "columns, and no location was given: the vector method needs the field at each sample (name the "
+            "reference columns with reference=[...], or give location='LAT,LON[,ALT]')"
+        )
     if position is None:
         raise DataFileError(
             f"{where}: the log holds no 3-D GNSS fix, so the World Magnetic Model's field there is not known; the "
