@@ -257,14 +257,14 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
             )
         else:
             # Refused; a forced fit still gets the model the unforced choice ranks best, with this refusal.
+            why = "; ".join(verdicts[w].refusals[0] for w in witnesses if verdicts[w].refusals)
             refusal = (
                 f"the samples determine no model that describes them within a useful heading bound: the {chosen} "
                 f"model, the richest they determine, {words}, and the heading error that distortion can cause "
                 f"(±{bound:.2g}°, beyond {USELESS_BOUND_DEG:g}°) leaves no usable calibration; that model is not "
-                "determined ("
-                + "; ".join(verdicts[w].refusals[0] for w in witnesses if verdicts[w].refusals)
-                + "); record again turning the sensor through more attitudes (tilt it further: a full tumble is "
-                "best), or fit against a reference field (method='vector' with the attitude)"
+                "determined" + (f" ({why})" if why else "") + "; record again turning the sensor through more "
+                "attitudes (tilt it further: a full tumble is best), or fit against a reference field "
+                "(method='vector' with the attitude)"
             )
     weak = list(verdicts[chosen].weaknesses)
     calibration = optima[chosen]
