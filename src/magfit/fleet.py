@@ -555,7 +555,8 @@ def _combine(outcomes: Sequence[_Outcome]) -> tuple[list[FleetRow], list[str]]:
         for flight in flights:
             flight.own = _own_rms(flight.compass.statistics)
         parts, splits = _split(flights)
-        label = f"{vehicle} compass {flights[0].row.sensor or key}".rstrip()
+        sensor_name = flights[0].row.sensor or (key if flights[0].compass.device_id is not None else "")
+        label = f"{vehicle} compass {sensor_name}" if sensor_name else vehicle
         for flight, distance, own in splits:
             before = parts[next(i for i, p in enumerate(parts) if flight in p.flights) - 1]
             moved = _offset_move(before, flight)
