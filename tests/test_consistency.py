@@ -1,0 +1,240 @@
+"""A vehicle's compasses against each other: the relative rotation (Wahba), the compass mounted at another angle
+than it declares named with its angle, the one that follows the current, the firmwares' pre-arm figures —
+each against a simulated truth, through the library and through a DataFlash log and ``magfit calibrate``."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import magfit
+from magfit.cli import cli
+from magfit.consistency import (
+    CompassField,
+    compare_compasses,
+    compare_fields,
+    wahba_rotation,
+)
+from magfit.errors import SampleError
+from magfit.rotations import angle_between_deg, euler_angles, euler_matrix, polar_decomposition
+from magfit.vehicle import simulate_vehicle
+from test_sources_dataflash import DataFlashWriter
+
+FIELD = 480.0
+SOFT = [
+    np.array([[1.10, 0.05, 0.0], [0.05, 0.95, 0.02], [0.0, 0.02, 1.0]]),
+    np.array([[0.97, 0.0, 0.04], [0.0, 1.08, 0.0], [0.04, 0.0, 1.0]]),
+    np.array([[1.02, 0.01, 0.0], [0.01, 1.0, 0.0], [0.0, 0.0, 0.98]]),
+]
+HARD = [np.array([120.0, -60.0, 200.0]), np.array([-40.0, 85.0, -150.0]), np.array([10.0, 30.0, -20.0])]
+
+
+def _vehicle(motion: str = "tumble", n: int = 2400, seed: int = 1):
+    sim = simulate_vehicle(
+        n, motion, rate_hz=20.0, field_strength=FIELD, inclination_deg=60.0, max_tilt_deg=30.0, seed=seed
+    )
+    return sim.time_s, np.einsum("nji,j->ni", sim.attitude, sim.field_world), sim.attitude
+
+
+def _fields(mountings, *, motion="tumble", attitude=True, current=None, seed=1):
+    """Calibrated fields of compasses whose true mountings are ``mountings`` (all declaring identity)."""
+    rng = np.random.default_rng(seed)
+    time_s, body, att = _vehicle(motion, seed=seed)
+    _, dance, _ = _vehicle("tumble", seed=seed + 100)
+    out = []
+    for k, mounting in enumerate(mountings):
+        calibration = magfit.fit((dance @ mounting) @ SOFT[k].T + HARD[k], method="ellipsoid")
+        raw = (body @ mounting) @ SOFT[k].T + HARD[k] + rng.normal(0, 1.5, body.shape)
+        if current is not None and k == current[0]:
+            raw = raw + np.outer(current[1], current[2])  # the sensor sees k·I on top of the field
+        _, symmetric = polar_decomposition(calibration.matrix)
+        field = (raw - calibration.offset) @ symmetric.T
+        out.append(
+            CompassField(
+                f"MAG/{k}", time_s, field, "mG", np.eye(3), att[:, 2, :] if attitude else None, k, 1000 + k, "ardupilot"
+            )
+        )
+    return out
+
+
+def test_wahba_recovers_a_known_rotation_and_refuses_bad_shapes() -> None:
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(200, 3))
+    truth = euler_matrix(10.0, -35.0, 120.0)
+    b = a @ truth.T + rng.normal(0, 1e-3, a.shape)
+    assert angle_between_deg(wahba_rotation(a, b), truth) < 0.05
+    assert np.allclose(wahba_rotation(a, a), np.eye(3), atol=1e-12)
+    with pytest.raises(SampleError, match=r"\(N, 3\)"):
+        wahba_rotation(a, b.T)
+
+
+@pytest.mark.parametrize(
+    ("angles", "nearest_id"), [((0.0, 0.0, 45.0), 1), ((0.0, 0.0, 90.0), 2), ((180.0, 0.0, 0.0), 8)]
+)
+def test_a_rotated_second_compass_is_named_with_its_angle_and_the_firmware_rotation(angles, nearest_id) -> None:
+    truth = euler_matrix(*angles)
+    comparison = compare_fields(_fields([np.eye(3), truth]))
+    m = comparison.misoriented
+    assert m is not None and m.sensor == "MAG/1"
+    assert abs(m.angle_deg - angle_between_deg(np.eye(3), truth)) < 1.0
+    assert angle_between_deg(m.orientation, truth) < 1.0  # the orientation it should declare is the truth
+    assert m.nearest is not None and m.nearest.id == nearest_id and m.nearest.angle_deg < 1.0
+    (finding,) = [r for r in comparison.findings if r.code == "compass_misoriented"]
+    assert finding.remedy == (("COMPASS_ORIENT2", str(nearest_id)),)
+    assert comparison.priority[0] == "MAG/0"
+
+
+def test_a_rotated_first_compass_is_named_too_and_the_angle_carries_a_small_stated_uncertainty() -> None:
+    comparison = compare_fields(_fields([euler_matrix(0.0, 0.0, 45.0), np.eye(3)], motion="flight"))
+    m = comparison.misoriented
+    assert m is not None and m.sensor == "MAG/0" and abs(m.angle_deg - 45.0) < 1.0
+    assert 0 < m.sigma_deg < 1.0
+    assert comparison.priority == ("MAG/1", "MAG/0")
+
+
+def test_a_tilt_no_table_entry_matches_is_named_without_an_orient_remedy() -> None:
+    comparison = compare_fields(_fields([np.eye(3), euler_matrix(20.0, 0.0, 0.0)]))
+    m = comparison.misoriented
+    assert m is not None and m.sensor == "MAG/1" and abs(m.angle_deg - 20.0) < 1.0
+    assert m.nearest is not None and m.nearest.angle_deg > 15.0
+    (finding,) = [r for r in comparison.findings if r.code == "compass_misoriented"]
+    assert finding.remedy == ()
+
+
+def test_correctly_mounted_compasses_raise_nothing() -> None:
+    comparison = compare_fields(_fields([np.eye(3), np.eye(3)], motion="flight"))
+    assert comparison.misoriented is None and comparison.codes == ()
+    assert comparison.pairs[0].angle_deg < 1.0 and comparison.pairs[0].determined
+    assert comparison.ardupilot[0].fail_share == 0.0 and comparison.px4[0].fail_share == 0.0
+
+
+def test_two_compasses_without_attitude_say_that_which_is_wrong_is_unknown() -> None:
+    comparison = compare_fields(_fields([np.eye(3), euler_matrix(0.0, 0.0, 45.0)], attitude=False))
+    assert comparison.misoriented is None
+    assert "compass_misoriented" in comparison.codes
+    assert abs(comparison.pairs[0].angle_deg - 45.0) < 1.0
+
+
+def test_three_compasses_name_the_odd_one_by_majority() -> None:
+    comparison = compare_fields(_fields([np.eye(3), np.eye(3), euler_matrix(0.0, 0.0, -90.0)], attitude=False))
+    m = comparison.misoriented
+    assert m is not None and m.sensor == "MAG/2" and abs(m.angle_deg - 90.0) < 1.0
+    assert m.nearest is not None and m.nearest.id == 6  # ROTATION_YAW_270
+    assert len(comparison.px4) == 2  # PX4 compares the first two others with the primary
+
+
+@pytest.mark.parametrize("follower", [0, 1])
+def test_the_compass_that_follows_the_current_is_named_with_its_share_of_the_field(follower: int) -> None:
+    time_s, _, _ = _vehicle()
+    rng = np.random.default_rng(5)
+    amps = 5.0 + 35.0 * np.abs(np.sin(time_s / 7.0)) + rng.normal(0, 0.5, len(time_s))
+    per_amp = np.array([1.5, -1.0, 3.0])  # mG per ampere
+    fields = _fields([np.eye(3), np.eye(3)], current=(follower, amps, per_amp))
+    comparison = compare_fields(fields, regressor=(time_s, amps, "current", "BAT.Curr"))
+    effect = comparison.pairs[0].current
+    assert effect is not None and effect.follower == (f"MAG/{follower}",)
+    expected = 100 * np.linalg.norm(per_amp) * amps.max() / FIELD
+    assert abs(effect.at_full_pct - expected) < 0.25 * expected
+    assert "compass_follows_current" in comparison.codes
+    assert comparison.priority[0] == f"MAG/{1 - follower}"
+    quiet = compare_fields(_fields([np.eye(3), np.eye(3)]), regressor=(time_s, amps, "current", "BAT.Curr"))
+    assert "compass_follows_current" not in quiet.codes
+
+
+def test_the_firmware_figures_are_their_one_line_formulas() -> None:
+    time_s = np.arange(100) * 0.1
+    primary = np.tile([200.0, 0.0, 400.0], (100, 1))
+    turned = np.tile([200.0 * math.cos(math.radians(70)), 200.0 * math.sin(math.radians(70)), 400.0], (100, 1))
+    fields = [CompassField("A", time_s, primary, "mG"), CompassField("B", time_s, turned, "mG")]
+    comparison = compare_fields(fields)
+    ap = comparison.ardupilot[0]
+    cosine = np.dot(primary[0], turned[0]) / np.linalg.norm(primary[0]) / np.linalg.norm(turned[0])
+    assert ap.xyz_angle_deg == pytest.approx(math.degrees(math.acos(cosine)), abs=1e-6)
+    assert ap.xy_angle_deg == pytest.approx(70.0, abs=1e-6)
+    assert ap.xy_length == pytest.approx(2 * 200.0 * math.sin(math.radians(35)), abs=1e-6)
+    assert ap.fail_share == 1.0 and any("horizontal angle" in f for f in ap.failing)
+    px = comparison.px4[0]
+    assert px.angle_deg == pytest.approx(ap.xyz_angle_deg)
+    assert px.filtered_max_deg == pytest.approx(ap.xyz_angle_deg * (1 - 0.95**100), rel=1e-9)
+    assert "compasses_inconsistent" in comparison.codes
+    gauss = [CompassField("A", time_s, primary / 1000, "G"), CompassField("B", time_s, turned / 1000, "G")]
+    assert compare_fields(gauss).ardupilot[0].xy_length == pytest.approx(ap.xy_length)
+
+
+def test_bad_inputs_are_one_line_errors() -> None:
+    time_s = np.arange(100) * 0.1
+    one = CompassField("A", time_s, np.ones((100, 3)), "mG")
+    with pytest.raises(SampleError, match="at least two"):
+        compare_fields([one])
+    with pytest.raises(SampleError, match="different units"):
+        compare_fields([one, CompassField("B", time_s, np.ones((100, 3)), "G")])
+    with pytest.raises(SampleError, match="share only 0 time stamps"):
+        compare_fields([one, CompassField("B", time_s + 100.0, np.ones((100, 3)), "mG")])
+
+
+# ---------------------------------------------------------------------------------------------- a DataFlash log
+
+
+def write_two_compass_log(path: Path, mounting2: np.ndarray, *, amps_per_mg: float = 0.0) -> None:
+    """A tumble logged by ArduPilot with two compasses (both declared ROTATION_NONE, identity calibration), the
+    second mounted at ``mounting2``; ATT, and BAT with a current the first compass sees ``amps_per_mg`` of."""
+    time_s, body, attitude = _vehicle("tumble", n=2400, seed=3)
+    rng = np.random.default_rng(3)
+    amps = 5.0 + 35.0 * np.abs(np.sin(time_s / 7.0))
+    raws = [
+        body @ SOFT[0].T + HARD[0] + np.outer(amps, [amps_per_mg, 0.0, 2 * amps_per_mg]),
+        (body @ mounting2) @ SOFT[1].T + HARD[1],
+    ]
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "QBfff", "TimeUS,I,MagX,MagY,MagZ")
+    writer.define(131, "ATT", "Qfff", "TimeUS,Roll,Pitch,Yaw")
+    writer.define(132, "BAT", "QBf", "TimeUS,Inst,Curr")
+    for k, s in enumerate(("", "2")):
+        for axis in "XYZ":
+            for name, value in (("OFS", 0.0), ("DIA", 1.0), ("ODI", 0.0)):
+                writer.write("PARM", 500_000, f"COMPASS_{name}{s}_{axis}", value)
+        writer.write("PARM", 500_000, f"COMPASS_SCALE{s}", 0.0)
+        writer.write("PARM", 500_000, f"COMPASS_DEV_ID{s}", float(97539 + k))
+        writer.write("PARM", 500_000, f"COMPASS_ORIENT{s}", 0.0)
+        writer.write("PARM", 500_000, f"COMPASS_EXTERN{'AL' if k == 0 else s}", 1.0)
+    writer.write("PARM", 500_000, "COMPASS_MOTCT", 0.0)
+    writer.write("PARM", 500_000, "AHRS_ORIENTATION", 0.0)
+    for j, t in enumerate(time_s):
+        stamp = 1_000_000 + round(t * 1e6)
+        roll, pitch, yaw = euler_angles(attitude[j])
+        writer.write("ATT", stamp, roll, pitch, yaw % 360.0)
+        writer.write("BAT", stamp, 0, float(amps[j]))
+        for k in range(2):
+            writer.write("MAG", stamp, k, *(float(v) for v in raws[k][j] + rng.normal(0, 1.0, 3)))
+    path.write_bytes(writer.bytes())
+
+
+def test_a_log_whose_second_compass_is_rotated_45_degrees_names_it(tmp_path: Path) -> None:
+    log = tmp_path / "rotated.bin"
+    write_two_compass_log(log, euler_matrix(0.0, 0.0, 45.0))
+    result = magfit.calibrate_file(log)
+    comparison = compare_compasses(result)
+    m = comparison.misoriented
+    assert m is not None and m.sensor == "MAG/1" and abs(m.angle_deg - 45.0) < 2.0
+    assert m.nearest is not None and m.nearest.name == "ROTATION_YAW_45"
+    assert comparison.firmware == "ardupilot" and comparison.device_ids == (97539, 97540)
+    assert any("BAT.Curr" in note for note in comparison.notes)
+    assert comparison.pairs[0].current is not None and comparison.pairs[0].current.follower == ()
+
+
+@pytest.mark.slow
+def test_calibrate_prints_the_compasses_block_and_inspect_a_quick_check(tmp_path: Path) -> None:
+    log = tmp_path / "rotated.bin"
+    write_two_compass_log(log, euler_matrix(0.0, 0.0, 45.0))
+    run = CliRunner().invoke(cli, ["calibrate", str(log)])
+    assert run.exit_code == 0, run.output
+    assert "compasses" in run.output and "COMPASS_ORIENT2 1" in run.output
+    assert "ArduPilot check" in run.output
+    run = CliRunner().invoke(cli, ["inspect", str(log)])
+    assert run.exit_code == 0, run.output
+    assert "MAG/1" in run.output and "45" in run.output.split("compasses", 1)[-1]
