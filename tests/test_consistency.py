@@ -237,4 +237,17 @@ def test_calibrate_prints_the_compasses_block_and_inspect_a_quick_check(tmp_path
     assert "ArduPilot check" in run.output
     run = CliRunner().invoke(cli, ["inspect", str(log)])
     assert run.exit_code == 0, run.output
-    assert "MAG/1" in run.output and "45" in run.output.split("compasses", 1)[-1]
+    quick = run.output.split("compasses", 1)[-1]
+    angle = float(quick.split("is turned ", 1)[1].split("°", 1)[0])
+    assert "MAG/1" in quick and abs(angle - 45.0) < 1.0
+
+
+def test_compasses_that_no_rotation_brings_together_are_said_to_disagree_not_misoriented() -> None:
+    first = _fields([np.eye(3)], seed=1)[0]
+    second = _fields([np.eye(3)], seed=2)[0]  # another flight: not the same field at the same instants
+    comparison = compare_fields(
+        [first, CompassField("MAG/1", first.time_s, second.field, "mG", np.eye(3), second.down)]
+    )
+    assert comparison.misoriented is None
+    assert "compasses_inconsistent" in comparison.codes
+    assert any("under any rotation" in reason for reason in comparison.findings)

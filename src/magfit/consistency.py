@@ -102,6 +102,8 @@ ARDUPILOT_OLD_LIMITS = (50.0, 30.0, 100.0)
 PX4_ANGLE_LIMIT_DEG = 60.0
 #: A relative rotation below this is mounting tolerance, not a wrong orientation (degrees).
 MISORIENTED_DEG = 10.0
+#: Two compasses whose residual after the best rotation exceeds this share of the field do not measure one field.
+DISAGREE = 0.25
 #: The nearest table entry is offered as the fix only when it is this close to the orientation found (degrees).
 NEAREST_DEG = 5.0
 #: A current effect is named when the regression explains this share of the pairwise difference's variance.
@@ -261,9 +263,11 @@ class ArduPilotFigures:
     xy_length : float
         Median of ``|b_primary,xy − b_xy|`` in mG (NaN when the unit is not physical).
     fail_share : float
-        Share of the common time stamps at which one of the three tests fails (0-1).
+        Share of the stamps (or level headings, see ``basis``) at which one of the three tests fails (0-1).
     failing : tuple of str
         The tests that fail at the median, in words with the limit (``"3-D angle 95° > 90°"``).
+    basis : str
+        ``"level"`` or ``"log"``, as for :class:`PX4Figures`.
     """
 
     sensor: str
@@ -273,6 +277,7 @@ class ArduPilotFigures:
     xy_length: float
     fail_share: float
     failing: tuple[str, ...] = ()
+    basis: str = "log"
 
 
 @dataclass(frozen=True)
@@ -288,6 +293,10 @@ class PX4Figures:
         Maximum of the filtered angle (``0.95 a + 0.05 angle`` per update), what the check compares.
     fail_share : float
         Share of the time stamps at which the filtered angle exceeds ``COM_ARM_MAG_ANG``.
+    basis : str
+        ``"level"``: over every heading of the vehicle standing level with its motors off (the pre-arm
+        situation), from the rotation found and the field's inclination (the filter's steady state);
+        ``"log"``: over the log's own time stamps (no attitude to find the inclination with).
     """
 
     sensor: str
@@ -295,6 +304,7 @@ class PX4Figures:
     angle_deg: float
     filtered_max_deg: float
     fail_share: float
+    basis: str = "log"
 
 
 @dataclass(frozen=True, eq=False)
@@ -326,6 +336,9 @@ class CompassComparison:
         ``"ardupilot"`` or ``"px4"`` when the log says, else None.
     slots, device_ids : tuple
         Each compass's calibration slot and device id (None when unknown), in ``compasses`` order.
+    priority_fixed : tuple of str
+        The order to prefer them in once the misoriented compass's orientation is set as found (empty when
+        there is nothing to fix).
     """
 
     compasses: tuple[str, ...]
@@ -340,6 +353,7 @@ class CompassComparison:
     firmware: str | None = None
     slots: tuple[int | None, ...] = ()
     device_ids: tuple[int | None, ...] = ()
+    priority_fixed: tuple[str, ...] = ()
 
     @property
     def codes(self) -> tuple[str, ...]:
@@ -466,6 +480,7 @@ def _ardupilot(
     c: NDArray[np.float64],
     to_mg: float | None,
     limits: tuple[float, float, float],
+    basis: str,
 ) -> ArduPilotFigures:
     xyz = _angles_deg(p, c)
     pxy, cxy = p[:, :2], c[:, :2]
@@ -483,19 +498,51 @@ def _ardupilot(
         failing.append(f"horizontal angle {medians[1]:.0f}° > {limits[1]:.0f}°")
     if math.isfinite(medians[2]) and medians[2] > limits[2]:
         failing.append(f"horizontal difference {medians[2]:.0f} mG > {limits[2]:.0f} mG")
-    return ArduPilotFigures(sensor, primary, *medians, float(np.mean(fails)), tuple(failing))
+    return ArduPilotFigures(sensor, primary, *medians, float(np.mean(fails)), tuple(failing), basis)
 
 
-def _px4(primary: str, sensor: str, p: NDArray[np.float64], c: NDArray[np.float64], limit_deg: float) -> PX4Figures:
+def _px4(
+    primary: str, sensor: str, p: NDArray[np.float64], c: NDArray[np.float64], limit_deg: float, basis: str
+) -> PX4Figures:
     angle = _angles_deg(p, c)
-    filtered = np.empty_like(angle)
-    value = 0.0  # VehicleMagnetometer's filter starts at 0
-    for k, a in enumerate(angle):
-        value = 0.95 * value + 0.05 * float(a)
-        filtered[k] = value
+    if basis == "level":  # a vehicle standing still: the filter's steady state is the angle itself
+        filtered = angle
+    else:
+        filtered = np.empty_like(angle)
+        value = 0.0  # VehicleMagnetometer's filter starts at 0
+        for k, a in enumerate(angle):
+            value = 0.95 * value + 0.05 * float(a)
+            filtered[k] = value
     return PX4Figures(
-        sensor, primary, float(np.median(angle)), float(np.max(filtered)), float(np.mean(filtered > limit_deg))
+        sensor, primary, float(np.median(angle)), float(np.max(filtered)), float(np.mean(filtered > limit_deg)), basis
     )
+
+
+def _level_fields(fields: Sequence[CompassField], pairs: Sequence[PairRotation]) -> list[NDArray[np.float64]] | None:
+    """Each compass's field on the ground: the vehicle level, its motors off, at every heading (1° apart). The
+    primary sees ``Rz(ψ)ᵀ f`` with ``f`` the field in the local level frame (its horizontal and vertical parts
+    from the angle between the primary's field and the attitude's down direction); compass k sees
+    ``R_0k`` of that (the rotation found, eq. C2). None without an attitude."""
+    primary = fields[0]
+    if primary.down is None:
+        return None
+    good = np.all(np.isfinite(primary.down), axis=1) & np.all(np.isfinite(primary.field), axis=1)
+    if np.count_nonzero(good) < 20:
+        return None
+    length = np.linalg.norm(primary.field[good], axis=1)
+    down = np.sum(primary.field[good] * primary.down[good], axis=1) / np.maximum(
+        np.linalg.norm(primary.down[good], axis=1), 1e-300
+    )
+    vertical = float(np.median(down))
+    horizontal = math.sqrt(max(float(np.median(length)) ** 2 - vertical**2, 0.0))
+    heading = np.radians(np.arange(360.0))
+    # Rz(ψ)ᵀ (h, 0, v): the body sees north at -ψ
+    level = np.column_stack([horizontal * np.cos(heading), -horizontal * np.sin(heading), np.full(360, vertical)])
+    out = [level]
+    for k in range(1, len(fields)):
+        pair = next(p for p in pairs if p.first == primary.sensor and p.second == fields[k].sensor)
+        out.append(level @ pair.rotation.T)
+    return out
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -637,7 +684,17 @@ def compare_fields(
                     current_followers.update(p.current.follower)
             notes.append(f"the {kind} from {source}, interpolated onto the common stamps")
 
-    misoriented, said = _misoriented(fields, pairs)
+    # A pair that no rotation brings together (a residual of a quarter of the field) says nothing about mounting:
+    # one compass is disturbed or broken, or the two were not sampled at the same instants.
+    apart = [p for p in pairs if p.residual_rms > DISAGREE * field_size]
+    for p in apart:
+        findings.add(
+            "compasses_inconsistent",
+            f"{p.first} and {p.second} do not see the same field under any rotation (residual "
+            f"{100 * p.residual_rms / field_size:.0f} % of the field): one of them is disturbed or faulty, or they "
+            "were not sampled together; compare each with the World Magnetic Model (method='vector')",
+        )
+    misoriented, said = _misoriented(fields, [p for p in pairs if p not in apart])
     notes += said
     for p in pairs:
         if not p.determined:
@@ -666,17 +723,25 @@ def compare_fields(
         findings.add("compass_misoriented", said[0])
 
     to_mg = _to_mg(unit)
+    level = _level_fields(fields, pairs)
+    basis = "log" if level is None else "level"
+    checked = values if level is None else level
+    if level is None:
+        notes.append("the pre-arm figures are over the log's stamps (no attitude to put the vehicle level with)")
     ardupilot = tuple(
-        _ardupilot(names[0], names[k], values[0], values[k], to_mg, ardupilot_limits) for k in range(1, len(fields))
+        _ardupilot(names[0], names[k], checked[0], checked[k], to_mg, ardupilot_limits, basis)
+        for k in range(1, len(fields))
     )
-    px4 = tuple(_px4(names[0], names[k], values[0], values[k], px4_angle_deg) for k in range(1, len(fields[:3])))
+    px4 = tuple(
+        _px4(names[0], names[k], checked[0], checked[k], px4_angle_deg, basis) for k in range(1, len(fields[:3]))
+    )
     for figures in ardupilot:
         if figures.failing or figures.fail_share > 0.5:
             findings.add(
                 "compasses_inconsistent",
                 f"ArduPilot's pre-arm check would fail ('Compasses inconsistent') for {figures.sensor} against "
-                f"{figures.primary}: {', '.join(figures.failing) or 'at most attitudes'} (fails at "
-                f"{100 * figures.fail_share:.0f} % of the stamps)",
+                f"{figures.primary}: {', '.join(figures.failing) or 'at most headings'} (fails at "
+                f"{100 * figures.fail_share:.0f} % of the {_where(basis)})",
             )
     for px in px4:
         if px.fail_share > 0.5:
@@ -697,6 +762,8 @@ def compare_fields(
             "compensation",
         )
     priority = _priority(fields, misoriented, current_followers)
+    fixable = misoriented is not None and any(r.code == "compass_misoriented" and r.remedy for r in findings)
+    priority_fixed = _priority(fields, None, current_followers) if fixable else ()
     return CompassComparison(
         names,
         unit,
@@ -710,7 +777,12 @@ def compare_fields(
         fields[0].firmware,
         tuple(f.slot for f in fields),
         tuple(f.device_id for f in fields),
+        priority_fixed,
     )
+
+
+def _where(basis: str) -> str:
+    return "headings, level with the motors off" if basis == "level" else "log's time stamps"
 
 
 def _to_mg(unit: str) -> float | None:

@@ -10,6 +10,7 @@ import click
 
 from ..sources import Magnetometer, Source, open_source
 from ._common import console, option_wording, time_span
+from ._consistency import inspect_lines
 
 
 def _number(value: float, digits: int = 1) -> str:
@@ -80,5 +81,6 @@ def inspect_command(file: Path) -> None:
       magfit inspect mag.csv
     """
     out = console()
-    for label, value in source_lines(open_source(file)):
+    source = open_source(file)
+    for label, value in source_lines(source) + inspect_lines(source):
         out.print(f"{label:<16} {value}", soft_wrap=True)
