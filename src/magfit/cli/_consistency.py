@@ -1,4 +1,5 @@
-"""The compasses-against-each-other block of ``magfit calibrate`` and the quick check of ``magfit inspect``.
+"""``magfit calibrate``'s checks of a log (the firmware's acceptance tests replayed, the compasses against each
+other) and ``magfit inspect``'s quick look (the firmware's own reports, the compasses' rotation).
 
 The work is :mod:`magfit.consistency`; this module only words it: one labelled line per fact, the findings with
 their codes, the remedy as the parameter to set.
@@ -16,8 +17,10 @@ from ..rotations import polar_decomposition
 from ._common import console, one_line
 
 if TYPE_CHECKING:
+    from ..firmware_checks import LogExplanation
     from ..pipeline import FileCalibration
     from ..sources import Source
+    from ..sources.calibration_messages import CalibrationMessages
 
 #: ``magfit inspect`` fits each compass's sphere on at most this many samples (an even stride of the log).
 INSPECT_SAMPLES = 20_000
@@ -98,28 +101,78 @@ def _order_text(comparison: CompassComparison, priority: tuple[str, ...]) -> str
         return f"{order} ({params})"
     if comparison.firmware == "px4" and all(slots.get(name) is not None for name in priority):
         params = ", ".join(
-            f"CAL_MAG{slots[name]}_PRIO {value}"
-            for name, value in zip(priority, (100, 75, 50), strict=False)
+            f"CAL_MAG{slots[name]}_PRIO {value}" for name, value in zip(priority, (100, 75, 50), strict=False)
         )
         return f"{order} ({params})"
     return order
 
 
-def print_consistency(result: FileCalibration, *, stderr: bool = False) -> None:
-    """``magfit calibrate``'s block on a log with two or more fitted compasses; a line saying why when they cannot
-    be compared. Never raises a magfit error (the calibrations above stand without it)."""
-    if len(result.compasses) < 2:
+def replay_lines(explanation: LogExplanation) -> list[tuple[str, str]]:
+    """One line per compass and firmware: what its acceptance tests would report, and the first failure's reason;
+    then what the log's firmware itself said about its calibration."""
+    lines: list[tuple[str, str]] = []
+    for replay in explanation.replays:
+        label = "ArduPilot tests" if replay.firmware == "ardupilot" else "PX4 tests"
+        shown = [t for t in replay.tests if t.passed is not None]
+        figures = "; ".join(
+            f"{t.name} {t.value}" + (f": {t.margin}" if t.name == "orientation" and t.margin else "")
+            for t in shown
+            if t.name in ("fitness", "radius", "orientation")
+        )
+        if replay.status == "unknown":
+            lines.append((label, f"{replay.sensor}: not replayed ({replay.tests[-1].value})"))
+        elif replay.passed:
+            lines.append((label, f"{replay.sensor}: {replay.status} ({figures})"))
+        else:
+            lines.append((label, f"{replay.sensor}: would report {replay.status} ({figures})"))
+            for reason in replay.reasons:
+                fix = "; set " + ", ".join(f"{n} {v}" for n, v in reason.remedy) if reason.remedy else ""
+                lines.append(("", f"[{reason.code}] {reason}{fix}"))
+    lines += said_lines(explanation.said)
+    return lines
+
+
+def said_lines(said: CalibrationMessages | None) -> list[tuple[str, str]]:
+    """The firmware's own calibration reports and messages found in a log."""
+    if said is None:
+        return []
+    lines: list[tuple[str, str]] = []
+    for report in said.reports:
+        lines.append(
+            (
+                "firmware said",
+                f"MAG_CAL_REPORT compass {report.compass_id}: {report.status}, fitness {report.fitness:.1f} mG, "
+                f"offsets ({', '.join(f'{v:.0f}' for v in report.offsets)}) mG",
+            )
+        )
+    for message in said.messages[:10]:
+        lines.append(("firmware said" if not lines else "", message.text))
+    if len(said.messages) > 10:
+        lines.append(("", f"... and {len(said.messages) - 10} more lines about the compass"))
+    return lines
+
+
+def print_log_checks(result: FileCalibration, *, stderr: bool = False) -> None:
+    """``magfit calibrate``'s blocks on a log: the firmware's acceptance tests replayed on each compass, and, with
+    two or more compasses fitted, the compasses against each other. A line saying why when a check cannot run;
+    never raises a magfit error (the calibrations above stand without these checks)."""
+    if not any(compass.magnetometer is not None for compass in result.compasses):
         return
     from ..consistency import compare_compasses
+    from ..firmware_checks import explain_log
 
     out = console(stderr=stderr)
     out.print("")
     try:
-        comparison = compare_compasses(result)
+        lines = replay_lines(explain_log(result))
     except MagfitError as error:
-        out.print(f"{'compasses':<16} not compared: {one_line(str(error))}", soft_wrap=True)
-        return
-    for label, text in comparison_lines(comparison):
+        lines = [("firmware tests", f"not replayed: {one_line(str(error))}")]
+    if len(result.compasses) >= 2:
+        try:
+            lines += comparison_lines(compare_compasses(result))
+        except MagfitError as error:
+            lines.append(("compasses", f"not compared: {one_line(str(error))}"))
+    for label, text in lines:
         out.print(f"{label:<16} {text}", soft_wrap=True)
 
 
@@ -129,9 +182,17 @@ def inspect_lines(source: Source) -> list[tuple[str, str]]:
     usable compasses; one line saying why when they cannot be compared."""
     import magfit
 
-    usable = [m for m in source.magnetometers if m.problem is None and m.n_samples > 0]
-    if source.kind == "samples" or len(usable) < 2:
+    from ..sources.calibration_messages import read_calibration_messages
+
+    if source.kind == "samples":
         return []
+    try:
+        said = said_lines(read_calibration_messages(source.path))
+    except MagfitError:
+        said = []
+    usable = [m for m in source.magnetometers if m.problem is None and m.n_samples > 0]
+    if len(usable) < 2:
+        return said
     firmware = {"dataflash": "ardupilot", "tlog": "ardupilot", "mavlogdump": "ardupilot", "ulog": "px4"}.get(
         source.kind
     )
@@ -156,7 +217,7 @@ def inspect_lines(source: Source) -> list[tuple[str, str]]:
             )  # fmt: skip
         comparison = compare_fields(fields)
     except MagfitError as error:
-        return [("compasses", f"not compared: {one_line(str(error))}")]
+        return [*said, ("compasses", f"not compared: {one_line(str(error))}")]
     lines = [
         (label, text)
         for label, text in comparison_lines(comparison)
@@ -166,4 +227,4 @@ def inspect_lines(source: Source) -> list[tuple[str, str]]:
     if crude:
         how = f"hard iron only for {', '.join(crude)} (its soft iron can turn it by a few degrees more than stated)"
     lines.append(("", f"({how}, frames as logged: 'magfit calibrate' gives the full check)"))
-    return lines
+    return said + lines

@@ -46,7 +46,7 @@ from ._common import (
     vector,
     warn,
 )
-from ._consistency import print_consistency
+from ._consistency import print_log_checks
 from ._extras import require
 from ._wording import without_own_advice
 
@@ -383,7 +383,7 @@ def calibrate_command(
         files.append((plot_path, figure))
     write_all(files)
     _print_all(result, stderr=to_stdout)
-    print_consistency(result, stderr=to_stdout)
+    print_log_checks(result, stderr=to_stdout)
     summary = console(stderr=to_stdout)
     for line in [*written, plot_line]:
         if line is not None:
