@@ -251,3 +251,31 @@ def test_compasses_that_no_rotation_brings_together_are_said_to_disagree_not_mis
     assert comparison.misoriented is None
     assert "compasses_inconsistent" in comparison.codes
     assert any("under any rotation" in reason for reason in comparison.findings)
+
+
+def test_the_report_fragment_shows_the_rotation_the_findings_and_the_firmware_tests(tmp_path: Path) -> None:
+    from magfit.firmware_checks import explain_log
+    from magfit.report import compasses_html
+
+    log = tmp_path / "rotated.bin"
+    write_two_compass_log(log, euler_matrix(0.0, 0.0, 45.0))
+    result = magfit.calibrate_file(log)
+    fragment = compasses_html(compare_compasses(result), explain_log(result))
+    assert fragment.startswith("<div class='compasses'>") and fragment.endswith("</div>")
+    assert "compass_misoriented" in fragment and "MAG/1" in fragment
+    assert "Compass::consistent" in fragment and "orientation" in fragment
+    angle = float(fragment.split("<td>MAG/1</td><td>", 1)[1].split(" ", 1)[0])
+    assert abs(angle - 45.0) < 2.0
+    assert "<script" not in fragment  # every text escaped
+
+
+@pytest.mark.slow
+def test_a_report_section_carries_the_fragment(tmp_path: Path) -> None:
+    pytest.importorskip("plotly")
+    from magfit.report import ReportSection, compasses_html, report_html
+
+    fields = _fields([np.eye(3), euler_matrix(0.0, 0.0, 45.0)])
+    fragment = compasses_html(compare_fields(fields))
+    sim = magfit.simulate(500, seed=1)
+    section = ReportSection("log", sim.samples, (magfit.fit(sim.samples),), extra_html=(fragment,))
+    assert fragment in report_html([section])

@@ -461,6 +461,13 @@ def explain_log(result: FileCalibration) -> LogExplanation:
     notes = []
     if settings:
         notes.append("settings from the log: " + ", ".join(f"{k} {v:g}" for k, v in sorted(settings.items())))
+    if firmware == "ardupilot":
+        missing = [name for name in ("COMPASS_CAL_FIT", "COMPASS_OFFS_MAX", "COMPASS_AUTO_ROT") if name not in settings]
+        if missing:
+            notes.append(
+                f"{', '.join(missing)} not in the log's parameters: today's defaults assumed (a firmware without "
+                "COMPASS_AUTO_ROT, before 4.0, has no orientation test)"
+            )
     replays = []
     for compass in result.compasses:
         if compass.magnetometer is None:

@@ -128,6 +128,7 @@ def replay_lines(explanation: LogExplanation) -> list[tuple[str, str]]:
             for reason in replay.reasons:
                 fix = "; set " + ", ".join(f"{n} {v}" for n, v in reason.remedy) if reason.remedy else ""
                 lines.append(("", f"[{reason.code}] {reason}{fix}"))
+    lines += [("", f"({note})") for note in explanation.notes if explanation.replays]
     lines += said_lines(explanation.said)
     return lines
 
