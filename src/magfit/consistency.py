@@ -25,7 +25,9 @@ hide the misalignment sought here.
 textbook covariance ``σ² (Σ [b]ₓᵀ[b]ₓ)⁻¹`` is too small. A block jackknife over contiguous stretches of
 the log is used instead: with ``K`` blocks, ``δ_b = log(R̂ᵀ R_(−b))`` (the rotation vector of the
 leave-one-block-out estimate against the whole), ``Σ_δ = (K−1)/K Σ_b (δ_b − δ̄)(δ_b − δ̄)ᵀ``; the
-stated one-sigma of the angle is the square root of Σ_δ's largest eigenvalue. The rotation about an axis
+stated one-sigma of the angle is the square root of Σ_δ's largest eigenvalue, with 0.5° added in quadrature
+for what no resampling sees: the calibrations' own errors (a cross term of the symmetric soft-iron matrix 1 %
+off turns a vector by up to 0.6°). The rotation about an axis
 the field never left is undetermined: the information ``J = (1/N) Σ (I − b̂ b̂ᵀ)`` then has an
 eigenvalue near 0 (a vehicle standing still, or level with the field along one body axis).
 
@@ -100,6 +102,9 @@ ARDUPILOT_LIMITS = (90.0, 60.0, 200.0)
 ARDUPILOT_OLD_LIMITS = (50.0, 30.0, 100.0)
 #: PX4's ``COM_ARM_MAG_ANG`` default (degrees; 45 before PX4 1.12).
 PX4_ANGLE_LIMIT_DEG = 60.0
+#: Added in quadrature to the jackknife's one-sigma: the calibrations' own errors turn the fields too (a symmetric
+#: soft-iron matrix 1 % off in a cross term turns a vector by up to 0.6°), which no resampling of the log sees.
+SIGMA_FLOOR_DEG = 0.5
 #: A relative rotation below this is mounting tolerance, not a wrong orientation (degrees).
 MISORIENTED_DEG = 10.0
 #: Two compasses whose residual after the best rotation exceeds this share of the field do not measure one field.
@@ -423,6 +428,7 @@ def _pair(first: str, second: str, a: NDArray[np.float64], b: NDArray[np.float64
         spread -= spread.mean(axis=0)
         covariance = (blocks - 1) / blocks * spread.T @ spread
         sigma = float(np.degrees(math.sqrt(max(float(np.linalg.eigvalsh(covariance)[-1]), 0.0))))
+        sigma = math.hypot(sigma, SIGMA_FLOOR_DEG)  # the calibrations' own errors, module docstring
     unit = a / np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-300)
     information = float(np.linalg.eigvalsh(np.eye(3) - unit.T @ unit / n)[0])
     residual = b - a @ rotation.T
