@@ -153,6 +153,26 @@ def said_lines(said: CalibrationMessages | None) -> list[tuple[str, str]]:
     return lines
 
 
+def temperature_lines(result: FileCalibration) -> list[tuple[str, str]]:
+    """The offset's drift per °C of each compass whose temperature the log has (PX4 ``sensor_mag``)."""
+    from ..temperature import log_drifts
+
+    try:
+        drifts = log_drifts(result)
+    except MagfitError as error:
+        return [("temperature", f"not read: {one_line(str(error))}")]
+    lines: list[tuple[str, str]] = []
+    for sensor, drift in drifts.items():
+        span = f"{drift.range_c[0]:.1f} to {drift.range_c[1]:.1f} °C"
+        if drift.determined:
+            values = ", ".join(f"{d:+.3g} ± {s:.2g}" for d, s in zip(drift.drift, drift.sigma, strict=True))
+            text = f"{sensor}: {span}; offset drift ({values}) {drift.unit}/°C (x, y, z, sensor axes)"
+        else:
+            text = f"{sensor}: {span}; no drift determined: {drift.reasons[0]}"
+        lines.append(("temperature" if not lines else "", text))
+    return lines
+
+
 def print_log_checks(result: FileCalibration, *, stderr: bool = False) -> None:
     """``magfit calibrate``'s blocks on a log: the firmware's acceptance tests replayed on each compass, and, with
     two or more compasses fitted, the compasses against each other. A line saying why when a check cannot run;
@@ -168,6 +188,7 @@ def print_log_checks(result: FileCalibration, *, stderr: bool = False) -> None:
         lines = replay_lines(explain_log(result))
     except MagfitError as error:
         lines = [("firmware tests", f"not replayed: {one_line(str(error))}")]
+    lines += temperature_lines(result)
     if len(result.compasses) >= 2:
         try:
             lines += comparison_lines(compare_compasses(result))
