@@ -178,3 +178,25 @@ def test_calibrate_prints_the_firmware_replay(tmp_path: Path) -> None:
     run = CliRunner().invoke(cli, ["calibrate", str(log)])
     assert run.exit_code == 0, run.output
     assert "ArduPilot tests  MAG/0: SUCCESS" in run.output and "ArduPilot tests  MAG/1: SUCCESS" in run.output
+
+
+def test_inspect_repeats_what_the_firmware_said(tmp_path: Path) -> None:
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "QBfff", "TimeUS,I,MagX,MagY,MagZ")
+    writer.define(133, "MSG", "QZ", "TimeUS,Message")
+    for axis in "XYZ":
+        for name, value in (("OFS", 0.0), ("DIA", 1.0), ("ODI", 0.0)):
+            writer.write("PARM", 1000, f"COMPASS_{name}_{axis}", value)
+    writer.write("PARM", 1000, "COMPASS_SCALE", 0.0)
+    writer.write("PARM", 1000, "COMPASS_DEV_ID", 97539.0)
+    writer.write("PARM", 1000, "COMPASS_MOTCT", 0.0)
+    for j in range(50):
+        writer.write("MAG", 1_000_000 + 100_000 * j, 0, 200.0, 10.0, 400.0)
+    writer.write("MSG", 2_000_000, "Mag(0) bad orientation: 6/0 0.9")
+    log = tmp_path / "said.bin"
+    log.write_bytes(writer.bytes())
+    run = CliRunner().invoke(cli, ["inspect", str(log)])
+    assert run.exit_code == 0, run.output
+    said = [line for line in run.output.splitlines() if line.startswith("firmware said")]
+    assert said == ["firmware said    Mag(0) bad orientation: 6/0 0.9"]

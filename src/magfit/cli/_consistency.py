@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..consistency import ARDUPILOT_LIMITS, PX4_ANGLE_LIMIT_DEG, CompassComparison, CompassField, compare_fields
-from ..errors import MagfitError
 from ..rotations import polar_decomposition
 from ._common import console, one_line
 
@@ -22,6 +21,8 @@ if TYPE_CHECKING:
     from ..sources import Source
     from ..sources.calibration_messages import CalibrationMessages
 
+#: What a check may raise on a damaged or unusual log: said in one line, the calibrations above stand.
+_CHECK_ERRORS = (ValueError, ArithmeticError, IndexError, KeyError, OSError, np.linalg.LinAlgError)
 #: ``magfit inspect`` fits each compass's sphere on at most this many samples (an even stride of the log).
 INSPECT_SAMPLES = 20_000
 
@@ -159,7 +160,7 @@ def temperature_lines(result: FileCalibration) -> list[tuple[str, str]]:
 
     try:
         drifts = log_drifts(result)
-    except MagfitError as error:
+    except _CHECK_ERRORS as error:
         return [("temperature", f"not read: {one_line(str(error))}")]
     lines: list[tuple[str, str]] = []
     for sensor, drift in drifts.items():
@@ -186,13 +187,13 @@ def print_log_checks(result: FileCalibration, *, stderr: bool = False) -> None:
     out.print("")
     try:
         lines = replay_lines(explain_log(result))
-    except MagfitError as error:
+    except _CHECK_ERRORS as error:
         lines = [("firmware tests", f"not replayed: {one_line(str(error))}")]
     lines += temperature_lines(result)
     if len(result.compasses) >= 2:
         try:
             lines += comparison_lines(compare_compasses(result))
-        except MagfitError as error:
+        except _CHECK_ERRORS as error:
             lines.append(("compasses", f"not compared: {one_line(str(error))}"))
     for label, text in lines:
         out.print(f"{label:<16} {text}", soft_wrap=True)
@@ -210,7 +211,7 @@ def inspect_lines(source: Source) -> list[tuple[str, str]]:
         return []
     try:
         said = said_lines(read_calibration_messages(source.path))
-    except MagfitError:
+    except _CHECK_ERRORS:
         said = []
     usable = [m for m in source.magnetometers if m.problem is None and m.n_samples > 0]
     if len(usable) < 2:
@@ -227,7 +228,7 @@ def inspect_lines(source: Source) -> list[tuple[str, str]]:
             samples, time_s = read.samples[::stride], read.time_s[::stride]
             try:  # the soft iron turns the field by a few degrees: the ellipsoid when the samples determine it
                 fit = magfit.fit(samples, method="ellipsoid", allow_undetermined=True)
-            except MagfitError:
+            except _CHECK_ERRORS:
                 fit = magfit.fit(samples, method="sphere", allow_undetermined=True)
                 crude.append(magnetometer.id)
             _, symmetric = polar_decomposition(fit.matrix)
@@ -238,7 +239,7 @@ def inspect_lines(source: Source) -> list[tuple[str, str]]:
                 )
             )  # fmt: skip
         comparison = compare_fields(fields)
-    except MagfitError as error:
+    except _CHECK_ERRORS as error:
         return [*said, ("compasses", f"not compared: {one_line(str(error))}")]
     lines = [
         (label, text)
