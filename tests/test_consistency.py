@@ -279,3 +279,21 @@ def test_a_report_section_carries_the_fragment(tmp_path: Path) -> None:
     sim = magfit.simulate(500, seed=1)
     section = ReportSection("log", sim.samples, (magfit.fit(sim.samples),), extra_html=(fragment,))
     assert fragment in report_html([section])
+
+
+def test_the_regressor_is_read_in_amperes_from_new_and_old_logs(tmp_path: Path) -> None:
+    from magfit.consistency import _power_regressor
+
+    for name, letters, scale in (("BAT", "QBf", 1.0), ("CURR", "QBh", 100.0)):
+        writer = DataFlashWriter()
+        writer.define(129, name, letters, "TimeUS,Inst,Curr")
+        for j in range(30):
+            amps = 5.0 + j
+            writer.write(name, 1_000_000 + 100_000 * j, 0, amps * scale if letters[-1] == "f" else int(amps * scale))
+            writer.write(name, 1_000_000 + 100_000 * j, 1, 99.0 if letters[-1] == "f" else 9900)  # another battery
+        log = tmp_path / f"{name}.bin"
+        log.write_bytes(writer.bytes())
+        regressor = _power_regressor(log)
+        assert regressor is not None and regressor[2:] == ("current", f"{name}.Curr")
+        np.testing.assert_allclose(regressor[1], 5.0 + np.arange(30))
+        np.testing.assert_allclose(regressor[0], 1.0 + 0.1 * np.arange(30))

@@ -963,7 +963,13 @@ def _power_regressor(path: Any) -> tuple[NDArray[np.float64], NDArray[np.float64
         log = DataFlashLog(Path(path), Path(path).read_bytes())
     except (OSError, DataFileError):
         return None
-    for name, label, kind in (("BAT", "Curr", "current"), ("CURR", "Curr", "current"), ("CTUN", "ThO", "throttle")):
+    sources = (
+        ("BAT", "Curr", "current", 1.0),
+        ("CURR", "Curr", "current", 0.01),  # an integer field in old logs: centiamperes
+        ("CTUN", "ThO", "throttle", 1.0),
+        ("CTUN", "ThrOut", "throttle", 0.001),  # old logs: 0 to 1000
+    )
+    for name, label, kind, integer_unit in sources:
         if not log.has(name):
             continue
         records = log.messages(name)
@@ -976,9 +982,18 @@ def _power_regressor(path: Any) -> tuple[NDArray[np.float64], NDArray[np.float64
                 break
         time = records["TimeUS"] / 1e6 if "TimeUS" in labels else records["TimeMS"] / 1e3
         values = log.value(records, name, label)
+        if _plain_integer(log, name, label):
+            values = values * integer_unit
         if np.count_nonzero(np.isfinite(values)) >= 2 and float(np.nanmax(values) - np.nanmin(values)) > 0:
             return np.asarray(time, dtype=np.float64), values, kind, f"{name}.{label}"
     return None
+
+
+def _plain_integer(log: Any, name: str, label: str) -> bool:
+    """The field is stored as a plain integer (no centi- letter): its unit is the old logs' integer unit."""
+    type_id = next(k for k, fmt in log.formats.items() if fmt.name == name)
+    fmt = log.formats[type_id]
+    return fmt.letters[fmt.labels.index(label)] in "bBhHiIqQ"
 
 
 def compare_compasses(
