@@ -297,3 +297,48 @@ def test_the_regressor_is_read_in_amperes_from_new_and_old_logs(tmp_path: Path) 
         assert regressor is not None and regressor[2:] == ("current", f"{name}.Curr")
         np.testing.assert_allclose(regressor[1], 5.0 + np.arange(30))
         np.testing.assert_allclose(regressor[0], 1.0 + 0.1 * np.arange(30))
+
+
+@pytest.mark.slow
+def test_a_px4_log_names_the_compass_whose_cal_mag_rot_is_wrong(tmp_path: Path) -> None:
+    from scipy.spatial.transform import Rotation
+
+    from magfit.rotations import standard_rotations
+    from test_sources_ulog import ULogWriter
+
+    time_s, body, attitude = _vehicle("tumble", n=2400, seed=4)
+    table = standard_rotations("px4")
+    declared = {0: 6, 1: 0}  # CAL_MAG0_ROT 6 (yaw 270, right), CAL_MAG1_ROT 0 (but mounted yaw 45: PX4's 1)
+    truly = {0: table[6].matrix, 1: table[1].matrix}
+    devices = {0: 592905, 1: 600001}
+    writer = ULogWriter()
+    writer.format("sensor_mag", [("uint64_t", "timestamp"), ("uint32_t", "device_id"), *(("float", a) for a in "xyz")])
+    writer.format("vehicle_attitude", [("uint64_t", "timestamp"), ("float[4]", "q")])
+    for k in (0, 1):
+        writer.parameter(f"CAL_MAG{k}_ID", devices[k])
+        writer.parameter(f"CAL_MAG{k}_ROT", declared[k])
+    for k in (0, 1):
+        writer.subscribe("sensor_mag", k)
+    writer.subscribe("vehicle_attitude", 0)
+    raw = {k: ((body @ truly[k]) @ SOFT[k].T + HARD[k]) / 1000.0 for k in (0, 1)}  # gauss; sensor = Mᵀ body
+    q = Rotation.from_matrix(attitude).as_quat()
+    for j, t in enumerate(time_s):
+        stamp = 1_000_000 + round(t * 1e6)
+        writer.data("vehicle_attitude", 0, stamp - 1000, q[j, 3], q[j, 0], q[j, 1], q[j, 2])
+        for k in (0, 1):
+            writer.data("sensor_mag", k, stamp, devices[k], *raw[k][j])
+    log = tmp_path / "px4.ulg"
+    log.write_bytes(writer.bytes())
+    comparison = compare_compasses(magfit.calibrate_file(log, "ellipsoid"))
+    m = comparison.misoriented
+    assert comparison.firmware == "px4"
+    assert m is not None and m.sensor == "sensor_mag/1" and abs(m.angle_deg - 45.0) < 2.0
+    assert m.nearest is not None and m.nearest.id == 1
+    (finding,) = [r for r in comparison.findings if r.code == "compass_misoriented"]
+    assert finding.remedy == (("CAL_MAG1_ROT", "1"),)
+
+
+def test_three_compasses_all_apart_name_none_but_say_so() -> None:
+    mountings = [np.eye(3), euler_matrix(0.0, 0.0, 45.0), euler_matrix(0.0, 0.0, -60.0)]
+    comparison = compare_fields(_fields(mountings, attitude=False))
+    assert comparison.misoriented is None and "compass_misoriented" in comparison.codes

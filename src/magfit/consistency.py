@@ -606,6 +606,9 @@ def _misoriented(
                 "attitude, which one is wrong cannot be told: log the attitude (ATT) or check both mountings"
             )
     if wrong is None:
+        if not notes:
+            apart = ", ".join(f"{a} and {b} by {p.angle_deg:.0f}°" for (a, b), p in big.items())
+            notes.append(f"the compasses disagree ({apart}) and no single one is the odd one out: check each mounting")
         return None, notes
     index = names.index(wrong)
     reference = next(f for f in names if f != wrong and ((f, wrong) in big or (wrong, f) in big))
