@@ -179,7 +179,9 @@ def test_bad_inputs_are_one_line_errors() -> None:
 # ---------------------------------------------------------------------------------------------- a DataFlash log
 
 
-def write_two_compass_log(path: Path, mounting2: np.ndarray, *, amps_per_mg: float = 0.0) -> None:
+def write_two_compass_log(
+    path: Path, mounting2: np.ndarray, *, amps_per_mg: float = 0.0, parameters: dict[str, float] | None = None
+) -> None:
     """A tumble logged by ArduPilot with two compasses (both declared ROTATION_NONE, identity calibration), the
     second mounted at ``mounting2``; ATT, and BAT with a current the first compass sees ``amps_per_mg`` of."""
     time_s, body, attitude = _vehicle("tumble", n=2400, seed=3)
@@ -204,6 +206,8 @@ def write_two_compass_log(path: Path, mounting2: np.ndarray, *, amps_per_mg: flo
         writer.write("PARM", 500_000, f"COMPASS_EXTERN{'AL' if k == 0 else s}", 1.0)
     writer.write("PARM", 500_000, "COMPASS_MOTCT", 0.0)
     writer.write("PARM", 500_000, "AHRS_ORIENTATION", 0.0)
+    for name, value in (parameters or {}).items():
+        writer.write("PARM", 500_000, name, value)
     for j, t in enumerate(time_s):
         stamp = 1_000_000 + round(t * 1e6)
         roll, pitch, yaw = euler_angles(attitude[j])
@@ -342,3 +346,16 @@ def test_three_compasses_all_apart_name_none_but_say_so() -> None:
     mountings = [np.eye(3), euler_matrix(0.0, 0.0, 45.0), euler_matrix(0.0, 0.0, -60.0)]
     comparison = compare_fields(_fields(mountings, attitude=False))
     assert comparison.misoriented is None and "compass_misoriented" in comparison.codes
+
+
+def test_a_compass_not_used_for_yaw_is_not_checked_by_ardupilots_prearm(tmp_path: Path) -> None:
+    log = tmp_path / "unused.bin"
+    write_two_compass_log(log, euler_matrix(0.0, 0.0, 90.0), parameters={"COMPASS_USE2": 0.0})
+    comparison = compare_compasses(magfit.calibrate_file(log))
+    (figures,) = comparison.ardupilot
+    assert not figures.checked and figures.xy_angle_deg == pytest.approx(90.0, abs=2.0)
+    assert "compasses_inconsistent" not in comparison.codes  # PX4's figures are not findings on an ArduPilot log
+    assert comparison.misoriented is not None and comparison.misoriented.sensor == "MAG/1"
+    used = tmp_path / "used.bin"
+    write_two_compass_log(used, euler_matrix(0.0, 0.0, 90.0))
+    assert "compasses_inconsistent" in compare_compasses(magfit.calibrate_file(used)).codes

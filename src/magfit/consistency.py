@@ -141,6 +141,8 @@ class CompassField:
         ``"ardupilot"`` or ``"px4"`` when known from the log.
     supported : bool
         The calibration's verdict was "supported" (not weak).
+    used_for_yaw : bool
+        ArduPilot's ``COMPASS_USEn`` (``Compass::consistent()`` skips a compass not used for yaw).
     """
 
     sensor: str
@@ -153,6 +155,7 @@ class CompassField:
     device_id: int | None = None
     firmware: str | None = None
     supported: bool = True
+    used_for_yaw: bool = True
 
 
 @dataclass(frozen=True)
@@ -273,6 +276,8 @@ class ArduPilotFigures:
         The tests that fail at the median, in words with the limit (``"3-D angle 95° > 90°"``).
     basis : str
         ``"level"`` or ``"log"``, as for :class:`PX4Figures`.
+    checked : bool
+        False when the compass is not used for yaw (``COMPASS_USEn`` 0): the firmware skips it.
     """
 
     sensor: str
@@ -283,6 +288,7 @@ class ArduPilotFigures:
     fail_share: float
     failing: tuple[str, ...] = ()
     basis: str = "log"
+    checked: bool = True
 
 
 @dataclass(frozen=True)
@@ -738,21 +744,25 @@ def compare_fields(
     if level is None:
         notes.append("the pre-arm figures are over the log's stamps (no attitude to put the vehicle level with)")
     ardupilot = tuple(
-        _ardupilot(names[0], names[k], checked[0], checked[k], to_mg, ardupilot_limits, basis)
+        dataclasses.replace(
+            _ardupilot(names[0], names[k], checked[0], checked[k], to_mg, ardupilot_limits, basis),
+            checked=fields[k].used_for_yaw,
+        )
         for k in range(1, len(fields))
     )
     px4 = tuple(
         _px4(names[0], names[k], checked[0], checked[k], px4_angle_deg, basis) for k in range(1, len(fields[:3]))
     )
-    for figures in ardupilot:
-        if figures.failing or figures.fail_share > 0.5:
+    firmware = fields[0].firmware
+    for figures in ardupilot if firmware in (None, "ardupilot") else ():
+        if figures.checked and (figures.failing or figures.fail_share > 0.5):
             findings.add(
                 "compasses_inconsistent",
                 f"ArduPilot's pre-arm check would fail ('Compasses inconsistent') for {figures.sensor} against "
                 f"{figures.primary}: {', '.join(figures.failing) or 'at most headings'} (fails at "
                 f"{100 * figures.fail_share:.0f} % of the {_where(basis)})",
             )
-    for px in px4:
+    for px in px4 if firmware in (None, "px4") else ():
         if px.fail_share > 0.5:
             findings.add(
                 "compasses_inconsistent",
@@ -894,11 +904,13 @@ def compass_fields(result: FileCalibration) -> tuple[list[CompassField], list[st
         The file cannot be read again.
     """
     from .sources import open_source
+    from .sources.calibration_messages import read_calibration_messages
 
     source = open_source(result.path)
     firmware = {"dataflash": "ardupilot", "tlog": "ardupilot", "mavlogdump": "ardupilot", "ulog": "px4"}.get(
         source.kind
     )
+    settings = read_calibration_messages(result.path).settings if firmware == "ardupilot" else {}
     fields: list[CompassField] = []
     notes: list[str] = []
     for compass in result.compasses:
@@ -947,9 +959,17 @@ def compass_fields(result: FileCalibration) -> tuple[list[CompassField], list[st
                 compass.magnetometer.device_id,
                 firmware,
                 supported,
+                _used_for_yaw(settings, compass.magnetometer.slot),
             )
         )
     return fields, notes
+
+
+def _used_for_yaw(settings: Mapping[str, float], slot: int | None) -> bool:
+    """ArduPilot's ``COMPASS_USE`` / ``USE2`` / ``USE3`` of the compass in ``slot`` (used when not logged)."""
+    if slot is None:
+        return True
+    return bool(settings.get("COMPASS_USE" if slot == 0 else f"COMPASS_USE{slot + 1}", 1))
 
 
 def _power_regressor(path: Any) -> tuple[NDArray[np.float64], NDArray[np.float64], str, str] | None:

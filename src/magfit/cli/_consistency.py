@@ -59,6 +59,8 @@ def comparison_lines(comparison: CompassComparison) -> list[tuple[str, str]]:
         for ap in comparison.ardupilot:
             length = f", horizontal difference {ap.xy_length:.0f} mG" if np.isfinite(ap.xy_length) else ""
             verdict = f"FAILS ({'; '.join(ap.failing)})" if ap.failing else "passes at the median"
+            if not ap.checked:
+                verdict = "not checked by the firmware (not used for yaw: COMPASS_USEn 0)"
             lines.append(
                 (
                     "ArduPilot check",

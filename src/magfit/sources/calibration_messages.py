@@ -54,6 +54,9 @@ SETTINGS = (
     "COMPASS_EXTERN2",
     "COMPASS_EXTERN3",
     "COM_ARM_MAG_ANG",
+    "COMPASS_USE",
+    "COMPASS_USE2",
+    "COMPASS_USE3",
 )
 #: A text line about the compass or its calibration (ArduPilot's and PX4's wordings).
 _ABOUT_COMPASS = re.compile(r"Mag\(\d\)|[Cc]ompass|\bmag\b|\[cal\]|MagCal|[Cc]alibration", re.ASCII)
