@@ -571,6 +571,10 @@ REASON_CODES: dict[str, str] = {
     "logging_rate": "the compass was logged too slowly for the motion",
     "calibration_in_use": "the fit corrects an unknown calibration already applied",
     "vehicle_methods": "a vehicle's recording: the methods that use its attitude, gyroscope or the known field",
+    "compass_misoriented": "a compass's declared orientation disagrees with the other compasses' and the attitude",
+    "compasses_inconsistent": "a firmware's pre-arm check would find the compasses inconsistent",
+    "compass_follows_current": "a compass's field follows the battery current or the throttle",
+    "firmware_check": "a firmware's own calibration acceptance test fails on these samples",
     "unclassified": "a reason without a code of its own yet",
 }
 

@@ -51,6 +51,7 @@ from ._common import (
     vector,
     warn,
 )
+from ._consistency import print_log_checks
 from ._extras import require
 from ._wording import without_own_advice
 
@@ -444,6 +445,7 @@ def calibrate_command(
         files.append((plot_path, figure))
     write_all(files)
     _print_all(result, stderr=to_stdout)
+    print_log_checks(result, stderr=to_stdout)
     summary = console(stderr=to_stdout)
     for line in [*written, plot_line]:
         if line is not None:

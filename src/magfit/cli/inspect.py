@@ -10,6 +10,7 @@ import click
 
 from ..sources import Magnetometer, Source, open_source
 from ._common import console, option_wording, time_span
+from ._consistency import inspect_lines
 
 
 def _number(value: float, digits: int = 1) -> str:
@@ -128,5 +129,5 @@ def inspect_command(file: Path) -> None:
     lines = source_lines(source)
     if source.kind == "samples":
         lines += column_lines(file)
-    for label, value in lines:
+    for label, value in lines + inspect_lines(source):
         out.print(f"{label:<16} {value}", soft_wrap=True)

@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 from ..calibration import Calibration
 from ..compare import PAPER_METHODS, Comparison, compare
 from ._html import CONTENT_SECURITY_POLICY, DEFAULT_MAX_POINTS_3D, ReportSection, report_html, write_report
+from .compasses import compasses_html
 
 if TYPE_CHECKING:
     from ..experiment import Experiment
@@ -33,6 +34,7 @@ __all__ = [
     "DEFAULT_MAX_POINTS_3D",
     "ReportSection",
     "compare_section",
+    "compasses_html",
     "experiment_sections",
     "report_html",
     "section_from_comparison",

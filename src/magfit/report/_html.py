@@ -69,6 +69,8 @@ class ReportSection:
     diagnostics : mapping or None
         Diagnostics of the data (coverage, uncertainty, what could not be determined) for the whole
         section; each calibration's own ``details["diagnostics"]`` is shown as well.
+    extra_html : tuple of str
+        Ready HTML fragments shown after the notes (:func:`magfit.report.compasses.compasses_html`).
     """
 
     title: str
@@ -80,6 +82,7 @@ class ReportSection:
     published: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     diagnostics: Mapping[str, Any] | None = None
+    extra_html: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "samples", as_samples(self.samples))
@@ -203,6 +206,7 @@ def _section_html(index: int, section: ReportSection, *, max_points: int, max_po
         summary += f" Field strength B = {main.field_strength:.5g} {unit} ({labels[0]} fit)."
     parts.append(f"<p>{_e(summary)}</p>")
     parts += [f"<p>{_e(note)}</p>" for note in section.notes]
+    parts += list(section.extra_html)
     parts.append(_comparison_table(section, labels))
     if section.calibrations:
         parts.append(_parameter_table(section, labels, unit))

@@ -155,6 +155,23 @@ _LAYOUTS: dict[int, tuple[str, np.dtype[Any]]] = {
     ),
     116: ("SCALED_IMU2", _layout(f"time_boot_ms:<u4 {_IMU} temperature:<i2")),
     129: ("SCALED_IMU3", _layout(f"time_boot_ms:<u4 {_IMU} temperature:<i2")),
+    # The onboard compass calibration (ArduPilot's CompassCalibrator), read by magfit.sources.calibration_messages.
+    191: (
+        "MAG_CAL_PROGRESS",
+        _layout(
+            "direction_x:<f4 direction_y:<f4 direction_z:<f4 compass_id:u1 cal_mask:u1 cal_status:u1 attempt:u1 "
+            "completion_pct:u1 completion_mask:10u1"
+        ),
+    ),
+    192: (
+        "MAG_CAL_REPORT",
+        _layout(
+            "fitness:<f4 ofs_x:<f4 ofs_y:<f4 ofs_z:<f4 diag_x:<f4 diag_y:<f4 diag_z:<f4 offdiag_x:<f4 offdiag_y:<f4 "
+            "offdiag_z:<f4 compass_id:u1 cal_mask:u1 cal_status:u1 autosaved:u1 orientation_confidence:<f4 "
+            "old_orientation:u1 new_orientation:u1 scale_factor:<f4"
+        ),
+    ),
+    253: ("STATUSTEXT", _layout("severity:u1 text:S50 id:<u2 chunk_seq:u1")),
 }
 #: What a parameter's name is made of (ArduPilot's and PX4's names: letters, digits and underscores).
 _NAME = re.compile(r"[A-Za-z0-9_]*")
