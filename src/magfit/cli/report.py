@@ -25,7 +25,9 @@ from .compare import parse_methods, with_streams
 from .plot import methods_in_order
 
 if TYPE_CHECKING:
+    from ..calibration import Calibration
     from ..experiment import Experiment
+    from ..report import ReportSection
 
 
 def check_html_path(output: Path, option: str = "'-o' / '--output'") -> None:
@@ -119,7 +121,7 @@ def report_command(
     """
     from ..compare import compare
     from ..io import atomic_write_text
-    from ..report import ReportSection, report_html, section_from_comparison
+    from ..report import report_html, section_from_comparison
 
     require("plot", "magfit report")  # matplotlib and plotly, before anything is read or written
     check_html_path(output)
@@ -151,6 +153,8 @@ def report_command(
                 f"{label}: {len(samples):,} samples, {fitted} of {len(comparison)} methods fitted",
                 soft_wrap=True,
             )
+        if sensor is None:
+            sections = _with_compasses_section(path, sections)
     if unfitted and not allow_unfitted:  # a failed run leaves an existing report as it was
         raise FitFailedError(
             f"no method could fit {', '.join(map(str, unfitted))}; the report is not written "
@@ -191,3 +195,46 @@ def write_demo_report(output: Path, experiment: Experiment) -> str:
     )
     atomic_write_text(output, text)
     return f"Wrote the report to {output} ({len(text.encode('utf-8')) / 1e6:.1f} MB)"
+
+
+def _with_compasses_section(path: Path, sections: list[ReportSection]) -> list[ReportSection]:
+    """A log of several compasses: its last section gets the compasses against each other and the firmware's own
+    acceptance tests (:func:`magfit.consistency.compare_compasses`, :func:`magfit.firmware_checks.explain_log`)."""
+    import dataclasses
+
+    from ..consistency import compare_compasses
+    from ..errors import MagfitError
+    from ..firmware_checks import explain_log
+    from ..pipeline import calibrate_file
+    from ..report import compasses_html
+    from ..sources import log_kind
+
+    if not sections or log_kind(path) is None:
+        return sections
+    try:  # forced: the firmware's tests are replayed on every compass, refused ones included
+        result = calibrate_file(path, force=True)
+    except MagfitError:
+        return sections
+    comparison = explanation = None
+    # Only calibrations the samples support are turned against each other (a forced one would name a rotation
+    # that is the calibration's error).
+    supported = tuple(c for c in result.compasses if not _forced(c.calibration))
+    try:
+        kept = dataclasses.replace(result, compasses=supported)
+        comparison = compare_compasses(kept) if len(supported) > 1 else None
+    except MagfitError:
+        comparison = None
+    try:
+        explanation = explain_log(result)
+    except MagfitError:
+        explanation = None
+    if comparison is None and explanation is None:
+        return sections
+    last = dataclasses.replace(sections[-1], extra_html=(compasses_html(comparison, explanation),))
+    return [*sections[:-1], last]
+
+
+def _forced(calibration: Calibration) -> bool:
+    diagnostics = calibration.diagnostics
+    return diagnostics is not None and diagnostics.support is not None and diagnostics.support.forced
+
