@@ -154,13 +154,18 @@ class FleetRow:
 
 @dataclass(frozen=True)
 class _Compass:
-    """A compass's samples as statistics, with what grouping and merging need (journal only)."""
+    """A compass's samples as statistics, with what grouping and merging need (journal only).
+
+    ``key`` names the compass across recordings: a log's device id (else its id in the log), a samples file's
+    three column names.
+    """
 
     sensor: str
     device_id: int | None
     unit: str
     statistics: Statistics
     mergeable: bool
+    key: str = ""
 
 
 @dataclass(frozen=True)
@@ -170,11 +175,13 @@ class _Outcome:
     path: str
     rows: tuple[FleetRow, ...]
     compasses: tuple[_Compass, ...] = ()
+    fingerprint: str = ""  # the file (size, modification time) and the settings it was fitted with
 
     def to_json(self) -> str:
         return json.dumps(
             {
                 "path": self.path,
+                "fingerprint": self.fingerprint,
                 "rows": [asdict(row) for row in self.rows],
                 "compasses": [
                     {
@@ -182,6 +189,7 @@ class _Outcome:
                         "device_id": c.device_id,
                         "unit": c.unit,
                         "mergeable": c.mergeable,
+                        "key": c.key,
                         "statistics": c.statistics.to_dict(),
                     }
                     for c in self.compasses
@@ -195,10 +203,18 @@ class _Outcome:
         data = json.loads(text)
         rows = tuple(FleetRow(**row) for row in data["rows"])
         compasses = tuple(
-            _Compass(c["sensor"], c["device_id"], c["unit"], Statistics.from_dict(c["statistics"]), c["mergeable"])
+            _Compass(
+                c["sensor"], c["device_id"], c["unit"], Statistics.from_dict(c["statistics"]), c["mergeable"],
+                c.get("key", ""),
+            )
             for c in data["compasses"]
         )
-        return cls(data["path"], rows, compasses)
+        return cls(data["path"], rows, compasses, str(data.get("fingerprint", "")))
+
+    @property
+    def failed(self) -> bool:
+        """Nothing was read: the recording runs again on a resumed run."""
+        return all(row.kind == "error" for row in self.rows) and not self.compasses
 
 
 @dataclass(frozen=True)
@@ -288,9 +304,19 @@ def _is_recording(path: Path) -> bool:
     return name.endswith(RECORDING_SUFFIXES)
 
 
-def vehicle_of(path: Path) -> str:
-    """The vehicle a recording belongs to: the name of the folder that holds it."""
-    return path.resolve().parent.name or str(path.resolve().parent)
+def vehicle_of(path: Path, root: Path | None = None) -> str:
+    """The vehicle a recording belongs to: the folder that holds it, as a path below ``root`` (the folder that
+    holds every recording of the run: ``droneA/logs`` and ``droneB/logs`` are two vehicles); the folder's own
+    name when it is ``root``."""
+    folder = path.resolve().parent
+    if root is not None:
+        try:
+            below = folder.relative_to(root.resolve())
+        except ValueError:
+            below = None
+        if below is not None and str(below) not in ("", "."):
+            return below.as_posix()
+    return folder.name or str(folder)
 
 
 # ---------------------------------------------------------------------------------------------- one recording
@@ -307,15 +333,27 @@ class _Settings:
 
 def _fit_recording(path: Path, vehicle: str, settings: _Settings) -> _Outcome:
     """Every compass of one recording: its row and its statistics; a failure is one row, never an exception."""
+    fingerprint = _fingerprint(path, settings)
     try:
-        return _fit_recording_or_raise(path, vehicle, settings)
+        outcome = _fit_recording_or_raise(path, vehicle, settings)
     except MagfitError as error:
         row = FleetRow("error", vehicle, str(path), date=_file_date(path), method=settings.method,
                        verdict="refused" if error.codes else "error", codes=";".join(error.codes),
                        reason=_one_line(str(error)))  # fmt: skip
-        return _Outcome(str(path), (row,), _compasses_anyway(path, settings, error))
+        outcome = _Outcome(str(path), (row,), _compasses_anyway(path, settings, error))
     except (OSError, MemoryError) as error:
-        return _Outcome(str(path), (FleetRow("error", vehicle, str(path), reason=_one_line(str(error))),))
+        outcome = _Outcome(str(path), (FleetRow("error", vehicle, str(path), reason=_one_line(str(error))),))
+    return _Outcome(outcome.path, outcome.rows, outcome.compasses, fingerprint)
+
+
+def _fingerprint(path: Path, settings: _Settings) -> str:
+    """What a journal entry was made from: the file's size and modification time, and the settings."""
+    try:
+        stat = path.stat()
+        file = f"{stat.st_size}:{stat.st_mtime_ns}"
+    except OSError:
+        file = "missing"
+    return f"{file}|{settings.method}|{settings.unit}|{settings.field_strength}|{settings.location}|{settings.date}"
 
 
 def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _Outcome:
@@ -325,14 +363,14 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
         path, settings.method, unit=settings.unit, field_strength=settings.field_strength,
         location=settings.location, date=settings.date,
     )  # fmt: skip
-    statistics = {c.sensor: c for c in _read_compasses(path, settings.unit)}
+    fitted = {_sensor_of(compass.calibration): compass.calibration for compass in result.compasses}
+    reads = {c.sensor: c for c in _read_compasses(path, settings.unit, fitted)}
     rows: list[FleetRow] = []
     compasses: list[_Compass] = []
     for compass in result.compasses:
         cal = compass.calibration
-        sensor_info = cal.details.get("sensor") or {}
-        sensor = str(sensor_info.get("id") or "")
-        device_id = sensor_info.get("device_id")
+        sensor = _sensor_of(cal)
+        device_id = (cal.details.get("sensor") or {}).get("device_id")
         model = compass.model_field or result.model_field
         ratio = math.nan
         if model is not None and cal.unit:
@@ -341,24 +379,27 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
             except MagfitError:
                 ratio = math.nan
         rows.append(_row("flight", vehicle, str(path), cal, sensor, device_id, _log_date(compass, path), ratio))
-        read = statistics.get(sensor)
+        read = reads.get(sensor)
         if read is not None:
-            compasses.append(replace_mergeable(read, True, device_id))
+            compasses.append(read)
     for failure in result.failures:
         codes = failure.codes
-        read = statistics.get(failure.sensor)
+        read = reads.get(failure.sensor)
         rows.append(FleetRow("flight", vehicle, str(path), sensor=failure.sensor,
                              device_id=read.device_id if read is not None else None, date=_file_date(path),
                              method=settings.method, verdict="refused", codes=";".join(codes),
                              reason=_one_line(failure.reason)))  # fmt: skip
         if read is not None:
-            compasses.append(replace_mergeable(read, bool(codes) and set(codes) <= PARTIAL_CODES, read.device_id))
+            compasses.append(_mergeable(read, bool(codes) and set(codes) <= PARTIAL_CODES))
     return _Outcome(str(path), tuple(rows), tuple(compasses))
 
 
-def replace_mergeable(compass: _Compass, mergeable: bool, device_id: int | None) -> _Compass:
-    return _Compass(compass.sensor, device_id if device_id is not None else compass.device_id, compass.unit,
-                    compass.statistics, mergeable)  # fmt: skip
+def _sensor_of(calibration: Calibration) -> str:
+    return str((calibration.details.get("sensor") or {}).get("id") or "")
+
+
+def _mergeable(compass: _Compass, mergeable: bool) -> _Compass:
+    return _Compass(compass.sensor, compass.device_id, compass.unit, compass.statistics, mergeable, compass.key)
 
 
 def _compasses_anyway(path: Path, settings: _Settings, error: MagfitError) -> tuple[_Compass, ...]:
@@ -366,20 +407,31 @@ def _compasses_anyway(path: Path, settings: _Settings, error: MagfitError) -> tu
     if not error.codes or not set(error.codes) <= PARTIAL_CODES:
         return ()
     try:
-        return tuple(replace_mergeable(c, True, c.device_id) for c in _read_compasses(path, settings.unit))
+        return tuple(_read_compasses(path, settings.unit, {}))
     except (MagfitError, OSError, MemoryError):
         return ()
 
 
-def _read_compasses(path: Path, unit: str | None) -> list[_Compass]:
-    """The statistics of each compass of a recording (a log's every usable compass, or a samples file's)."""
+def _read_compasses(path: Path, unit: str | None, fitted: dict[str, Calibration]) -> list[_Compass]:
+    """The statistics of each compass of a recording (a log's every usable compass, or a samples file's), of the
+    samples its fit kept: a robust fit's rejected samples (spikes, a passing magnet) stay out of the union."""
+    from .diagnostics import _inlier_mask  # the same rule the diagnostics leave those samples out by
     from .sources import log_kind, open_source
 
-    if log_kind(path) is None:
-        from .io import iter_sample_chunks
+    def kept(samples: np.ndarray, sensor: str) -> Statistics:
+        calibration = fitted.get(sensor)
+        if calibration is not None:
+            mask, _ = _inlier_mask(calibration, samples)
+            if mask is not None:
+                samples = samples[mask]
+        return Statistics.from_samples(samples)
 
-        statistics = Statistics.from_chunks(iter_sample_chunks(path))
-        return [_Compass("", None, unit or "", statistics, True)]
+    if log_kind(path) is None:
+        from .io import read_samples
+
+        table = read_samples(path)
+        key = "columns " + ",".join(str(column) for column in table.columns)
+        return [_Compass("", None, unit or "", kept(table.samples, ""), True, key)]
     source = open_source(path, everything=False)
     compasses = []
     for magnetometer in source.magnetometers:
@@ -391,8 +443,9 @@ def _read_compasses(path: Path, unit: str | None) -> list[_Compass]:
             continue
         if len(samples) == 0:
             continue
-        statistics = Statistics.from_samples(samples)
-        compasses.append(_Compass(magnetometer.id, magnetometer.device_id, unit or magnetometer.unit, statistics, True))
+        key = f"device {magnetometer.device_id}" if magnetometer.device_id is not None else magnetometer.id
+        compasses.append(_Compass(magnetometer.id, magnetometer.device_id, unit or magnetometer.unit,
+                                  kept(samples, magnetometer.id), True, key))  # fmt: skip
     return compasses
 
 
@@ -452,52 +505,56 @@ def _one_line(text: str) -> str:
 # ---------------------------------------------------------------------------------------------- combining
 
 
-def residual_rms(statistics: Statistics, calibration: Calibration) -> float:
-    """RMS distance of the samples behind ``statistics`` to ``calibration``'s ellipsoid, in units of its field.
-
-    Half the root of ``θᵀ S θ / n`` (module docstring): the first-order distance of the algebraic residual
-    ``|M (x − V)|² / B² − 1``, computed from the statistics alone.
-    """
+def _theta(statistics: Statistics, calibration: Calibration) -> np.ndarray:
+    """The quadric of ``calibration`` in ``statistics``' canonical frame (module docstring)."""
     centre, scale = statistics.centre, statistics.scale
     matrix = np.asarray(calibration.matrix)
     a = matrix.T @ matrix / calibration.field_strength**2
     shift = centre - np.asarray(calibration.offset)
     root2 = math.sqrt(2.0)
-    theta = np.array([
+    return np.array([
         a[0, 0] * scale**2, a[1, 1] * scale**2, a[2, 2] * scale**2,
         root2 * a[0, 1] * scale**2, root2 * a[0, 2] * scale**2, root2 * a[1, 2] * scale**2,
         *(2.0 * scale * (a @ shift)),
         float(shift @ a @ shift) - 1.0,
     ])  # fmt: skip
-    mean_square = float(theta @ statistics.scatter @ theta) / statistics.n
+
+
+def residual_rms(statistics: Statistics, calibration: Calibration, own_radius: bool = False) -> float:
+    """RMS distance of the samples behind ``statistics`` to ``calibration``'s ellipsoid, in units of its field.
+
+    Half the root of ``θᵀ S θ / n`` (module docstring): the first-order distance of the algebraic residual
+    ``|M (x − V)|² / B² − 1``, computed from the statistics alone. ``own_radius``: about the samples' own mean
+    of ``|M (x − V)|² / B²`` instead of 1 (``θᵀ S θ / n − (θᵀ s̄)²``, s̄ the mean design vector): a recording
+    made where the Earth's field is stronger or weaker is not off the ellipsoid's shape and centre.
+    """
+    theta = _theta(statistics, calibration)
+    scatter = statistics.scatter
+    mean_square = float(theta @ scatter @ theta) / statistics.n
+    if own_radius:
+        mean_square -= float(theta @ scatter[:, 9] / statistics.n) ** 2
     return 0.5 * math.sqrt(max(mean_square, 0.0))
 
 
-def _own_rms(statistics: Statistics) -> float:
-    """A flight's distance to its own best ellipsoid (any, determined or not): its noise and model error."""
+def _own_fit(statistics: Statistics) -> Calibration | None:
+    """A flight's own best ellipsoid (determined or not): what its noise and model error leave."""
     from .fit import fit
 
     try:
-        own = fit(statistics, method="ellipsoid", diagnostics=False, allow_undetermined=True)
+        return fit(statistics, method="ellipsoid", diagnostics=False, allow_undetermined=True)
     except MagfitError:
-        return math.nan
-    return residual_rms(statistics, own)
+        return None
 
 
 def _union_fit(parts: Sequence[Statistics]) -> Calibration | None:
-    from .fit import fit
-
-    try:
-        return fit(sum(parts, Statistics()), method="ellipsoid", diagnostics=False, allow_undetermined=True)
-    except MagfitError:
-        return None
+    return _own_fit(sum(parts, Statistics()))
 
 
 @dataclass
 class _Flight:
     row: FleetRow
     compass: _Compass
-    own: float = math.nan
+    own: float = math.nan  # RMS distance to its own ellipsoid, about its own radius (units of the field)
 
 
 @dataclass
@@ -505,38 +562,107 @@ class _Part:
     flights: list[_Flight] = field(default_factory=list)
 
 
-def _split(flights: list[_Flight]) -> tuple[list[_Part], list[tuple[_Flight, float, float]]]:
+#: A flight disagrees with the union when n·(d_union² − d_own²) / d_own², whose distribution is about χ² with
+#: the 9 degrees of freedom of its own fit when it agrees, exceeds this (a false alarm about once in 10⁸) ...
+DISAGREEMENT_CHI2 = 60.0
+
+
+def _disagreement(flight: _Flight, union: Calibration) -> float:
+    """The flight's excess RMS distance to the union's ellipsoid over its own (units of the field), when
+    significant (:data:`DISAGREEMENT_CHI2`) and larger than :data:`DISAGREEMENT_FLOOR`; else 0. A flight whose
+    own ellipsoid could not be fitted never splits."""
+    if not np.isfinite(flight.own) or flight.own <= 0:
+        return 0.0
+    union_rms = residual_rms(flight.compass.statistics, union, own_radius=True)
+    excess_square = union_rms**2 - flight.own**2
+    if excess_square <= 0:
+        return 0.0
+    statistic = flight.compass.statistics.n * excess_square / flight.own**2
+    excess = math.sqrt(excess_square)
+    return excess if statistic > DISAGREEMENT_CHI2 and excess > DISAGREEMENT_FLOOR else 0.0
+
+
+def _split(flights: list[_Flight]) -> tuple[list[_Part], list[tuple[_Flight, float]]]:
     """The flights in time order, split before each flight that does not agree with those before it.
 
-    Returns the parts and, for each split, the flight that starts it with its distance to the earlier part's
-    union and to its own ellipsoid.
+    Returns the parts and, for each split, the flight that starts it with the excess distance found.
     """
     parts = [_Part([flights[0]])]
-    splits: list[tuple[_Flight, float, float]] = []
+    splits: list[tuple[_Flight, float]] = []
     for flight in flights[1:]:
         current = parts[-1]
         union = _union_fit([f.compass.statistics for f in (*current.flights, flight)])
-        if union is None:
-            current.flights.append(flight)
-            continue
-        worst = 0.0
-        for member in (*current.flights, flight):
-            excess = residual_rms(member.compass.statistics, union)
-            own = member.own if np.isfinite(member.own) else 0.0
-            if excess > DISAGREEMENT_RATIO * own and excess - own > DISAGREEMENT_FLOOR:
-                worst = max(worst, excess)
+        worst = 0.0 if union is None else max(_disagreement(member, union) for member in (*current.flights, flight))
         if worst > 0.0:
             parts.append(_Part([flight]))
-            splits.append((flight, worst, flight.own))
+            splits.append((flight, worst))
         else:
             current.flights.append(flight)
     return parts, splits
 
 
-def _combine(outcomes: Sequence[_Outcome]) -> tuple[list[FleetRow], list[str]]:
-    """The combined rows of each vehicle and compass, and the changes found between flights."""
-    from .fit import fit
+@dataclass(frozen=True)
+class _PartTask:
+    """One combined fit: a vehicle's compass over the flights of one part, read again and fitted together."""
 
+    vehicle: str
+    sensor: str
+    device_id: int | None
+    unit: str
+    recordings: tuple[tuple[str, str], ...]  # (path, sensor id) in time order
+    dates: str
+    model_total: float  # the World Magnetic Model's field in ``unit`` where the flights knew it, else NaN
+
+
+#: At most this many samples of a part are fitted together (a regular stride of each flight beyond it).
+COMBINED_SAMPLES = 2_000_000
+
+
+def _fit_part(task: _PartTask, settings: _Settings) -> FleetRow:
+    """The combined row: the part's flights' samples (the compass's, read again), in time order, fitted with the
+    run's method and judged like any recording (its verdict, the halves of the union, its heading one-sigma)."""
+    from .fit import fit
+    from .io import read_samples
+    from .sources import log_kind, open_source
+
+    paths = ";".join(path for path, _ in task.recordings)
+    try:
+        pieces = []
+        for path, sensor in task.recordings:
+            if log_kind(path) is None:
+                pieces.append(read_samples(path).samples)
+            else:
+                pieces.append(open_source(path, everything=False).read(sensor or None).samples)
+        total = sum(len(piece) for piece in pieces)
+        step = max(1, math.ceil(total / COMBINED_SAMPLES))
+        samples = np.concatenate([piece[::step] for piece in pieces])
+        options: dict[str, Any] = {}
+        if isinstance(settings.field_strength, float) or isinstance(settings.field_strength, int):
+            options["field_strength"] = float(settings.field_strength)
+        elif settings.field_strength == "wmm" and math.isfinite(task.model_total):
+            options["field_strength"] = task.model_total
+        method = settings.method if settings.method in _SAMPLES_METHODS else COMBINE_METHOD
+        cal = fit(samples, method=method, **options)
+    except MagfitError as error:
+        return FleetRow("combined", task.vehicle, paths, sensor=task.sensor, device_id=task.device_id,
+                        date=task.dates, method=settings.method, verdict="refused", codes=";".join(error.codes),
+                        reason=_one_line(str(error)), unit=task.unit, flights=len(task.recordings))  # fmt: skip
+    except (OSError, MemoryError) as error:
+        return FleetRow("combined", task.vehicle, paths, sensor=task.sensor, device_id=task.device_id,
+                        date=task.dates, verdict="error", reason=_one_line(str(error)), unit=task.unit,
+                        flights=len(task.recordings))  # fmt: skip
+    cal = cal.with_unit(task.unit) if task.unit else cal
+    ratio = cal.field_strength / task.model_total if math.isfinite(task.model_total) else math.nan
+    return _row("combined", task.vehicle, paths, cal, task.sensor, task.device_id, task.dates, ratio,
+                flights=len(task.recordings))  # fmt: skip
+
+
+#: The methods a combined fit can run (the magnitude-only ones); another (vector, gyro) is combined with als.
+_SAMPLES_METHODS = frozenset({"auto", "ellipsoid", "sphere", "minmax", "als", "ml", "diag", "robust"})
+
+
+def _combine(outcomes: Sequence[_Outcome]) -> tuple[list[_PartTask], list[str]]:
+    """The combined fits to run, one per vehicle, compass and part, and the changes found between flights."""
     groups: dict[tuple[str, str, str], list[_Flight]] = {}
     for outcome in outcomes:
         by_sensor = {c.sensor: c for c in outcome.compasses if c.mergeable}
@@ -544,47 +670,40 @@ def _combine(outcomes: Sequence[_Outcome]) -> tuple[list[FleetRow], list[str]]:
             compass = by_sensor.get(row.sensor)
             if compass is None:
                 continue
-            key = str(compass.device_id) if compass.device_id is not None else row.sensor
+            key = compass.key or (str(compass.device_id) if compass.device_id is not None else row.sensor)
             groups.setdefault((row.vehicle, key, compass.unit), []).append(_Flight(row, compass))
-    rows: list[FleetRow] = []
+    tasks: list[_PartTask] = []
     events: list[str] = []
-    for (vehicle, key, unit), flights in sorted(groups.items()):
+    for (vehicle, _, unit), flights in sorted(groups.items()):
         if len(flights) < 2:
             continue
         flights.sort(key=lambda f: (f.row.date, f.row.path))
         for flight in flights:
-            flight.own = _own_rms(flight.compass.statistics)
+            own = _own_fit(flight.compass.statistics)
+            flight.own = math.nan if own is None else residual_rms(flight.compass.statistics, own, own_radius=True)
         parts, splits = _split(flights)
-        sensor_name = flights[0].row.sensor or (key if flights[0].compass.device_id is not None else "")
+        sensor_name = flights[0].row.sensor
         label = f"{vehicle} compass {sensor_name}" if sensor_name else vehicle
-        for flight, distance, own in splits:
+        for flight, distance in splits:
             before = parts[next(i for i, p in enumerate(parts) if flight in p.flights) - 1]
             moved = _offset_move(before, flight)
             events.append(
                 f"{label}: the flights from {flight.row.date} ({Path(flight.row.path).name}) on do not agree with "
-                f"the earlier ones: their samples lie {100 * distance:.1f} % of the field (RMS) off the calibration "
-                f"of both together, against {100 * own:.1f} % off their own{moved}; the vehicle was magnetised, or "
-                "its hardware or payload changed: the flights before and after are combined apart"
+                f"the earlier ones: their samples lie {100 * distance:.2g} % of the field (RMS) further from the "
+                f"calibration of both together than from their own{moved}; the vehicle was magnetised, or its "
+                "hardware or payload changed: the flights before and after are combined apart"
             )
         for part in parts:
             if len(part.flights) < 2:
                 continue
-            merged = sum((f.compass.statistics for f in part.flights), Statistics())
-            paths = ";".join(f.row.path for f in part.flights)
-            dates = f"{part.flights[0].row.date}/{part.flights[-1].row.date}"
-            sensor = part.flights[0].row.sensor
-            device_id = part.flights[0].compass.device_id
-            try:
-                cal = fit(merged, method=COMBINE_METHOD)
-            except MagfitError as error:
-                rows.append(FleetRow("combined", vehicle, paths, sensor=sensor, device_id=device_id, date=dates,
-                                     method=COMBINE_METHOD, verdict="refused", codes=";".join(error.codes),
-                                     reason=_one_line(str(error)), unit=unit, n_samples=merged.n,
-                                     flights=len(part.flights)))  # fmt: skip
-                continue
-            cal = cal.with_unit(unit) if unit else cal
-            rows.append(_row("combined", vehicle, paths, cal, sensor, device_id, dates, flights=len(part.flights)))
-    return rows, events
+            ratios = [f.row.field_strength / f.row.field_vs_model for f in part.flights
+                      if math.isfinite(f.row.field_vs_model) and f.row.field_vs_model > 0]  # fmt: skip
+            first = part.flights[0]
+            recorded = tuple((f.row.path, f.row.sensor) for f in part.flights)
+            dates = f"{first.row.date}/{part.flights[-1].row.date}"
+            model = float(np.median(ratios)) if ratios else math.nan
+            tasks.append(_PartTask(vehicle, first.row.sensor, first.compass.device_id, unit, recorded, dates, model))
+    return tasks, events
 
 
 def _offset_move(before: _Part, flight: _Flight) -> str:
@@ -601,40 +720,50 @@ def _offset_move(before: _Part, flight: _Flight) -> str:
 # ---------------------------------------------------------------------------------------------- engines
 
 
-def _run_local(
-    tasks: list[tuple[Path, str]], settings: _Settings, workers: int
-) -> Iterator[_Outcome]:
+def _run_local(function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], workers: int) -> Iterator[Any]:
+    """``function(*task)`` for each task, on ``workers`` local processes (in this one for 1), as they finish."""
     if workers <= 1 or len(tasks) <= 1:
-        for path, vehicle in tasks:
-            yield _fit_recording(path, vehicle, settings)
+        for task in tasks:
+            yield function(*task)
         return
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    context = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods()
-                                          else "spawn")  # fmt: skip
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = [pool.submit(_fit_recording, path, vehicle, settings) for path, vehicle in tasks]
+    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method)) as pool:
+        futures = [pool.submit(function, *task) for task in tasks]
         for future in as_completed(futures):
             yield future.result()
 
 
-def _run_dask(tasks: list[tuple[Path, str]], settings: _Settings, scheduler: Any) -> Iterator[_Outcome]:
+def _dask_client(scheduler: Any) -> Any:
+    """A client of the Dask cluster at ``scheduler`` (an address or a Client), or an OptionError saying why not."""
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError:
         raise OptionError(
             "scheduler= runs the fleet on a Dask cluster, which needs Dask distributed: pip install 'magfit[fleet]'"
         ) from None
-    client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+    if isinstance(scheduler, Client):
+        return scheduler
     try:
-        futures = client.map(_fit_recording, [p for p, _ in tasks], [v for _, v in tasks], [settings] * len(tasks),
-                             pure=False)  # fmt: skip
-        for future in as_completed(futures):
-            yield future.result()
-    finally:
-        if client is not scheduler:
-            client.close()
+        return Client(scheduler, timeout="30s")
+    except (OSError, ValueError, TypeError) as error:
+        raise OptionError(
+            f"--scheduler {scheduler}: no Dask scheduler can be reached there ({_one_line(str(error))}); give its "
+            "address as tcp://HOST:PORT"
+        ) from None
+
+
+def _run_dask(function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], client: Any) -> Iterator[Any]:
+    from distributed import as_completed
+
+    if not tasks:
+        return
+    columns = list(zip(*tasks, strict=True))
+    futures = client.map(function, *columns, pure=False)
+    for future in as_completed(futures):
+        yield future.result()
 
 
 # ---------------------------------------------------------------------------------------------- the run
@@ -665,8 +794,8 @@ def fleet(
         The table to write: ``.csv``, ``.parquet`` or ``.jsonl`` (JSON lines), chosen by the extension; its
         journal ``OUTPUT.journal.jsonl`` beside it makes the run resumable. None: nothing is written.
     method : str
-        The method for each recording (:func:`magfit.calibrate_file`); the combined fits use ``als`` on the
-        merged statistics.
+        The method for each recording (:func:`magfit.calibrate_file`), and for each vehicle's flights combined
+        (their samples fitted together; a vehicle-frame method's combined fit is ``als``).
     field_strength, unit, location, date
         As :func:`magfit.calibrate_file`.
     workers : int, optional
@@ -674,7 +803,8 @@ def fleet(
     scheduler : str or distributed.Client, optional
         A Dask scheduler's address (``"tcp://host:8786"``) or client: the recordings run on that cluster.
     resume : bool
-        Skip the recordings the journal of ``output`` already holds (default). False starts afresh (the old
+        Skip the recordings the journal of ``output`` already holds, fitted the same way from the same file (its
+        size and modification time; default). A recording that failed runs again. False starts afresh (the old
         journal is replaced, the table rewritten).
     combine : bool
         Also combine each vehicle's flights per compass (default).
@@ -688,41 +818,69 @@ def fleet(
     from .methods import get_method
 
     get_method(method)
-    table = Path(output) if output is not None else None
+    table = Path(output).resolve() if output is not None else None
     if table is not None:
         _check_table_format(table)
     journal = _journal_path(table) if table is not None else None
     settings = _Settings(method, field_strength, unit, location, date)
-    files = recordings(paths)
-    done: dict[str, _Outcome] = {}
+    files = [path.resolve() for path in recordings(paths)]  # a cluster's workers do not share our directory
+    if table is not None:
+        files = [path for path in files if path != table and path != journal]
+        for path in files:  # never written over an input (a folder walked finds the table too)
+            if table.exists() and os.path.samefile(path, table):
+                raise OptionError(f"-o {table} is one of the recordings: give the table another name")
+        if not files:
+            raise OptionError("no recording left to fit once the table itself is set aside")
+    root = _common_root(files)
+    outcomes: dict[str, _Outcome] = {}
     if journal is not None and journal.exists() and resume:
-        done = _read_journal(journal)
+        outcomes = _read_journal(journal)
     elif journal is not None and journal.exists():
         journal.unlink()
-    tasks = [(path, vehicle_of(path)) for path in files if str(path) not in done]
+    # A journal entry stands only for the same file fitted the same way, and a recording that failed runs again.
+    fresh = {str(p): _fingerprint(p, settings) for p in files}
+    outcomes = {k: v for k, v in outcomes.items() if fresh.get(k) == v.fingerprint and not v.failed}
+    tasks = [(path, vehicle_of(path, root), settings) for path in files if str(path) not in outcomes]
     skipped = len(files) - len(tasks)
-    engine = _run_dask(tasks, settings, scheduler) if scheduler is not None else _run_local(
-        tasks, settings, workers if workers is not None else (os.cpu_count() or 1))  # fmt: skip
-    outcomes = dict(done)
+    client = _dask_client(scheduler) if scheduler is not None else None
+    count = workers if workers is not None else (os.cpu_count() or 1)
+
+    def run(function: Callable[..., Any], arguments: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        return _run_dask(function, arguments, client) if client is not None else _run_local(function, arguments, count)
+
     handle = journal.open("a", encoding="utf-8") if journal is not None else None
     try:
-        for count, outcome in enumerate(engine, start=1):
+        for done, outcome in enumerate(run(_fit_recording, tasks), start=1):
             outcomes[outcome.path] = outcome
             if handle is not None:
                 handle.write(outcome.to_json() + "\n")
                 handle.flush()
             if progress is not None:
-                progress(count, len(tasks), outcome.path)
+                progress(done, len(tasks), outcome.path)
+        ordered = [outcomes[str(p)] for p in files if str(p) in outcomes]
+        flight_rows = [row for outcome in ordered for row in outcome.rows]
+        combined: list[FleetRow] = []
+        events: list[str] = []
+        if combine:
+            parts, events = _combine(ordered)
+            found = {row.path: row for row in run(_fit_part, [(part, settings) for part in parts])}
+            combined = [found[";".join(p for p, _ in part.recordings)] for part in parts]
     finally:
         if handle is not None:
             handle.close()
-    ordered = [outcomes[str(p)] for p in files if str(p) in outcomes]
-    flight_rows = [row for outcome in ordered for row in outcome.rows]
-    combined, events = _combine(ordered) if combine else ([], [])
+        if client is not None and client is not scheduler:
+            client.close()
     result = FleetResult(tuple(flight_rows + combined), tuple(events), skipped, table)
     if table is not None:
         write_table(result.rows, table)
     return result
+
+
+def _common_root(files: Sequence[Path]) -> Path:
+    """The deepest folder that holds every recording."""
+    if not files:
+        return Path.cwd()
+    return Path(os.path.commonpath([str(path.parent) for path in files]))
 
 
 def _missing(value: object) -> bool:
