@@ -20,8 +20,9 @@ does: the verdict is computed on the union (:func:`magfit.diagnostics.diagnose_s
 
 so the mean squared algebraic residual of a recording against any calibration is ``θᵀ S θ / n`` without its
 samples; half its root is the RMS distance to the ellipsoid in units of the field (first order). A flight whose
-distance to the calibration of the flights merged with it grows :data:`DISAGREEMENT_RATIO` times beyond its
-distance to its own best ellipsoid (and by more than :data:`DISAGREEMENT_FLOOR` of the field) sits on another
+distance to the calibration of the flights merged with it exceeds its distance to its own best ellipsoid
+(each about its own field strength: a flight at another site is no change) significantly
+(:data:`DISAGREEMENT_CHI2`) and by more than :data:`DISAGREEMENT_FLOOR` of the field sits on another
 ellipsoid: the vehicle was magnetised, or its hardware or payload changed. The flights from it on start a new
 part, named with its date and size.
 
@@ -53,8 +54,8 @@ from .errors import MagfitError, OptionError
 from .statistics import Statistics
 
 __all__ = [
+    "DISAGREEMENT_CHI2",
     "DISAGREEMENT_FLOOR",
-    "DISAGREEMENT_RATIO",
     "FleetResult",
     "FleetRow",
     "fleet",
@@ -62,11 +63,11 @@ __all__ = [
     "residual_rms",
 ]
 
-#: A flight disagrees with those merged with it when its distance to their calibration is this many times
-#: its distance to its own best ellipsoid ...
-DISAGREEMENT_RATIO = 2.0
-#: ... and exceeds it by this share of the field (RMS): noise-level differences are not a change.
-DISAGREEMENT_FLOOR = 0.01
+#: A flight disagrees with those merged with it when its excess distance to their ellipsoid over its own is
+#: significant (:data:`DISAGREEMENT_CHI2`) and at least this share of the field (RMS): an offset that moved by
+#: about 1.5 % of the field (some 1.5° of heading at 60° of dip) between flights; smaller excesses are left to
+#: the combined fit's own verdict (its halves).
+DISAGREEMENT_FLOOR = 0.004
 #: Refusal codes that only say a flight covers too little of the sphere (``model_inadequate``: a richer model
 #: would describe it but is not determined) — its samples still join the union, whose verdict judges them.
 PARTIAL_CODES = frozenset(
