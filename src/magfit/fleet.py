@@ -691,8 +691,9 @@ def _combine(outcomes: Sequence[_Outcome]) -> tuple[list[_PartTask], list[str]]:
             events.append(
                 f"{label}: the flights from {flight.row.date} ({Path(flight.row.path).name}) on do not agree with "
                 f"the earlier ones: their samples lie {100 * distance:.2g} % of the field (RMS) further from the "
-                f"calibration of both together than from their own{moved}; the vehicle was magnetised, or its "
-                "hardware or payload changed: the flights before and after are combined apart"
+                f"calibration of both together than from their own{moved}; the vehicle was magnetised, its hardware "
+                "or payload changed, or it flew where the Earth's field is not the same: the flights before and "
+                "after are combined apart"
             )
         for part in parts:
             if len(part.flights) < 2:
