@@ -31,6 +31,7 @@ from ..findings import Diagnostics, Goodness, Reason, ReasonList, Support
 from ..geometry.frame import Frame
 from ..geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
 from ..sampling import MAX_ANALYSED, thin, weighted_even_subsample
+from ..saturation import find_clipped
 from ..statistics import Statistics
 from .coverage import Coverage, coverage
 from .uncertainty import (
@@ -170,8 +171,12 @@ def diagnose(
     check_finite(array)
     if represents is not None and represents < array.shape[0]:
         raise SampleError(f"represents={represents} is fewer than the {array.shape[0]} samples given")
-    mask, how = _inlier_mask(calibration, array)
     notes: list[str] = []
+    clipping = find_clipped(array)  # the rows every fit left out (methods.core.estimate): so do the diagnostics
+    if clipping.n_clipped:
+        notes.append(f"{clipping.n_clipped} samples clipped at the sensor's full scale are left out of these figures.")
+        array = array[~clipping.clipped]
+    mask, how = _inlier_mask(calibration, array)
     if mask is not None and not mask.all():
         notes.append(f"{int((~mask).sum())} samples {how} are left out of the diagnostics.")
         array = array[mask]
@@ -225,6 +230,7 @@ def diagnose(
         flat=flat_axis(raw, weights),
         axis_ratio=float(np.max(calibration.semi_axes) / np.min(calibration.semi_axes)),
         solver_problem=calibration.details.get("solver_problem"),
+        clipping=clipping if clipping.n_clipped else None,
     )
     support = judge(evidence)
     return Diagnostics(

@@ -53,6 +53,7 @@ import math
 from dataclasses import dataclass
 
 from ..findings import Consistency, Coverage, Goodness, Observability, ReasonList, Support, Uncertainty
+from ..saturation import Clipping
 
 __all__ = [
     "FIELD_TOLERANCE",
@@ -122,6 +123,9 @@ class Evidence:
         The method that fitted the calibration, for messages.
     solver_problem : str or None
         The method's solver did not converge (``details["solver_problem"]``): refused, in its words.
+    clipping : Clipping or None
+        Rows clipped at the sensor's full scale, left out of the fit and of this evidence
+        (:mod:`magfit.saturation`); None when there were none.
     field_strength : float or None
         The calibration's field strength (input units), to judge offsets by.
     """
@@ -142,6 +146,7 @@ class Evidence:
     method: str | None = None
     field_strength: float | None = None
     solver_problem: str | None = None
+    clipping: Clipping | None = None
 
 
 def judge(evidence: Evidence) -> Support:
@@ -290,6 +295,15 @@ def judge(evidence: Evidence) -> Support:
                 "their one-sigma: the distortion or the field changed while recording (a magnet moved, motors, "
                 "temperature); calibrate on a recording where nothing near the sensor changes"
             )
+    if evidence.clipping is not None:
+        clipped = evidence.clipping
+        (refusals if refusals else weak).add("saturated",
+            f"{clipped.n_clipped} of {clipped.n_samples} samples were clipped at the sensor's full scale "
+            f"({clipped.describe(evidence.unit)}) and are left out: the calibration rests on the other "
+            f"{clipped.n_kept}, which miss the directions where the field plus the offset left the range; set a "
+            "larger full-scale range on the magnetometer (its range or gain setting), or mount it further from the "
+            "iron that pushes it out of range"
+        )
     return Support.judged(refusals, weak, _RECORD_ADVICE)
 
 
