@@ -41,7 +41,9 @@ from .uncertainty import (
     Uncertainty,
     WeakDirection,
     analyse,
+    compare_with_full,
     consistency,
+    covering,
 )
 from .verdict import NO_ELLIPSOID_RMS, Evidence, judge
 
@@ -213,6 +215,10 @@ def diagnose(
         if vary is not None and uncertainty.offset_sigma is not None:
             # After the halves: a change between them is named as such, not hidden in a wider one-sigma.
             uncertainty = _with_block_jackknife(uncertainty, rows, vary)
+    comparison = None
+    if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
+        comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
+    uncertainty = covering(uncertainty, comparison, check)  # the heading one-sigma covers known biases too
     evidence = Evidence(
         kind=kind,
         residual_rms=fitted.rms,
@@ -231,6 +237,7 @@ def diagnose(
         axis_ratio=float(np.max(calibration.semi_axes) / np.min(calibration.semi_axes)),
         solver_problem=calibration.details.get("solver_problem"),
         clipping=clipping if clipping.n_clipped else None,
+        comparison=comparison,
     )
     support = judge(evidence)
     return Diagnostics(

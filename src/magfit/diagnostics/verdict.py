@@ -54,6 +54,7 @@ from dataclasses import dataclass
 
 from ..findings import Consistency, Coverage, Goodness, Observability, ReasonList, Support, Uncertainty
 from ..saturation import Clipping
+from .uncertainty import ModelComparison
 
 __all__ = [
     "FIELD_TOLERANCE",
@@ -82,6 +83,10 @@ BIASED_OFFSET = 0.05
 #: An undetermined combination of parameters is returned (weak) when the level heading uncertainty stays
 #: within this, degrees; above, refused.
 UNDETERMINED_HEADING_DEG = 3.0
+#: A restricted model that misses distortion the samples show (the F test against the full model) is refused
+#: when what that costs the level heading exceeds this, degrees; below, it is weak, the cost counted in its
+#: heading uncertainty.
+MODEL_HEADING_DEG = 3.0
 #: Halves of a recording whose offsets differ by more than this many combined one-sigmas disagree.
 HALVES_SIGMAS = 3.0
 
@@ -126,6 +131,9 @@ class Evidence:
     clipping : Clipping or None
         Rows clipped at the sensor's full scale, left out of the fit and of this evidence
         (:mod:`magfit.saturation`); None when there were none.
+    comparison : ModelComparison or None
+        A restricted model against the full ellipsoid on the same samples (the F test); None for a full
+        model. ``uncertainty`` already covers its heading cost when it is significant.
     field_strength : float or None
         The calibration's field strength (input units), to judge offsets by.
     """
@@ -147,6 +155,7 @@ class Evidence:
     field_strength: float | None = None
     solver_problem: str | None = None
     clipping: Clipping | None = None
+    comparison: ModelComparison | None = None
 
 
 def judge(evidence: Evidence) -> Support:
@@ -244,8 +253,32 @@ def judge(evidence: Evidence) -> Support:
                 else ": check the value and the samples' unit (iron that scales the whole field, such as a steel "
                 "plate against the sensor, does this too: then leave the field strength out)"
             ))
-    if (
-        evidence.kind != "full"
+    comparison = evidence.comparison
+    if comparison is not None and comparison.significant and all(r.code != "model_inadequate" for r in refusals):
+        turn = comparison.heading_difference_deg
+        times = f"{comparison.rss_ratio:.3g}" if comparison.rss_ratio < 1e4 else "over 10 000"
+        words = (
+            f"the {_fit_name(evidence)} leaves {times} times the squared residual of a full ellipsoid on the same "
+            f"samples (F test, p = {comparison.p_value:.1g}): there is soft iron this model cannot remove"
+        )
+        if not math.isfinite(comparison.full_heading_sigma_deg):
+            refusals.add("model_inadequate",
+                f"{words}, and the samples do not determine the full model well enough to tell how far it turns the "
+                "heading; record a fuller set of attitudes, or use the auto method"
+            )
+        elif comparison.measured and turn > MODEL_HEADING_DEG:
+            refusals.add("model_inadequate",
+                f"{words}: it turns the level heading by {turn:.2g}° (the full fit's one-sigma: "
+                f"±{comparison.full_heading_sigma_deg:.2g}°); the ellipsoid or auto method would not leave that"
+            )
+        else:
+            weak.add("model_inadequate",
+                f"{words}: it turns the level heading by up to {comparison.heading_cost_deg:.2g}°, counted in the "
+                f"heading uncertainty of ±{heading:.2g}°; the ellipsoid or auto method would remove it"
+            )
+    elif (
+        comparison is None
+        and evidence.kind != "full"
         and evidence.ellipsoid_rms is not None
         and evidence.residual_rms > RESTRICTED_RESIDUAL_RATIO * evidence.ellipsoid_rms
         and LARGE_RESIDUAL_RMS / 2 < evidence.residual_rms <= NO_ELLIPSOID_RMS
