@@ -19,7 +19,11 @@ What is checked, in this order (each a refusal unless said otherwise):
    recordings in ``shared/data/real``: 0.4-4 %; simulated noise of 10 %, 10 %); a Gaussian cloud 39 %, a
    filled cube 28 %, a still sensor's noise 40 %. Between :data:`LARGE_RESIDUAL_RMS` and that: weak. A
    restricted model (sphere, axis-aligned, min/max) that leaves more than that where the full ellipsoid
-   fits cannot describe the samples: refused too.
+   fits cannot describe the samples: refused too. Below it, a restricted model is compared with the full
+   ellipsoid on the same samples (:class:`~magfit.diagnostics.uncertainty.ModelComparison`, an F test):
+   when the full one holds distortion the restricted one cannot (p < 0.001) and pins the level heading
+   more than :data:`MODEL_HEADING_DEG` away, or is itself not determined, refused; otherwise named, what it
+   may cost already in the heading one-sigma.
 2. The sensor did not turn about one axis only: the field directions do not form a band or a cone
    around an axis (then the offset and scale along that axis are fixed by nothing, whatever the
    information matrix says at a fitted point).
@@ -41,10 +45,12 @@ What is checked, in this order (each a refusal unless said otherwise):
 5. A fit more than :data:`BIASED_HEADING_DEG` of level heading, or :data:`BIASED_OFFSET` of the field in
    offset, away from the maximum-likelihood fit of its own model (beyond the uncertainty): the method is
    biased on these samples (min/max, or an algebraic fit of a cap of directions).
-6. Weak only: a restricted model (sphere, axis-aligned) that leaves much larger residuals than the
-   full ellipsoid; coverage below half the directions; a fit that does much worse on held-out samples
-   than on its own (over-fitted); a fit far from the maximum-likelihood fit of its model (biased); two
-   halves of the recording that give different offsets (the distortion changed while recording).
+6. Weak only: a restricted model (sphere, axis-aligned) that misses distortion the full ellipsoid
+   shows (the F test above, within the refusal); rows clipped at the sensor's full scale, left out of the
+   fit (:mod:`magfit.saturation`; with a refusal, named as its cause); coverage below half the
+   directions; a fit that does much worse on held-out samples than on its own (over-fitted); a fit far
+   from the maximum-likelihood fit of its model (biased); two halves of the recording that give different
+   offsets (the distortion changed while recording).
 """
 
 from __future__ import annotations
