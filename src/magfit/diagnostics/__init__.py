@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,7 @@ from .uncertainty import (
     compare_with_full,
     consistency,
     covering,
+    level_heading_difference_deg,
 )
 from .verdict import NO_ELLIPSOID_RMS, Evidence, judge
 
@@ -214,7 +216,7 @@ def diagnose(
             halves = _halves(rows, vary, uncertainty)
         if vary is not None and uncertainty.offset_sigma is not None:
             # After the halves: a change between them is named as such, not hidden in a wider one-sigma.
-            uncertainty = _with_block_jackknife(uncertainty, rows, vary)
+            uncertainty = _with_block_jackknife(uncertainty, rows, vary, calibration)
     comparison = None
     if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
         comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
@@ -302,7 +304,9 @@ JACKKNIFE_BLOCKS = 8
 JACKKNIFE_SAMPLES = 2_000
 
 
-def _with_block_jackknife(uncertainty: Uncertainty, rows: NDArray[np.float64], refit: Refit) -> Uncertainty:
+def _with_block_jackknife(
+    uncertainty: Uncertainty, rows: NDArray[np.float64], refit: Refit, calibration: Calibration
+) -> Uncertainty:
     """``uncertainty`` widened to what leaving out one stretch of the recording at a time shows.
 
     The batch-means covariance sees correlation within a stretch of a twentieth of the recording. What
@@ -312,8 +316,9 @@ def _with_block_jackknife(uncertainty: Uncertainty, rows: NDArray[np.float64], r
     (Künsch, Ann. Statist. 17, 1989), ``Var = (K − 1) / K Σ (V₍ₖ₎ − V̄)²`` for the offset V. When it
     exceeds the stated offset variance, every one-sigma is scaled by the mean ratio of the two (the
     heading and scale figures come from the same fit). The refits see a regular stride of at most
-    :data:`JACKKNIFE_SAMPLES` rows, their variance divided by the stride. Refits that fail leave the
-    uncertainty as it is.
+    :data:`JACKKNIFE_SAMPLES` rows, their variance divided by the stride. The level heading is jackknifed
+    the same way (each replicate's RMS level-heading difference from ``calibration``), and the heading
+    one-sigma raised to it where it is larger. Refits that fail leave the uncertainty as it is.
     """
     assert uncertainty.offset_sigma is not None
     m = rows.shape[0]
@@ -323,21 +328,29 @@ def _with_block_jackknife(uncertainty: Uncertainty, rows: NDArray[np.float64], r
     series = rows[::step]
     edges = np.linspace(0, series.shape[0], JACKKNIFE_BLOCKS + 1).astype(np.int64)
     offsets = []
+    headings = []
     for block in range(JACKKNIFE_BLOCKS):
         kept = np.concatenate([series[: edges[block]], series[edges[block + 1] :]])
         try:
-            offsets.append(refit(kept).offset)
+            replicate = refit(kept)
         except (MagfitError, np.linalg.LinAlgError):
             return uncertainty
+        offsets.append(replicate.offset)
+        headings.append(level_heading_difference_deg(replicate, calibration, uncertainty.inclination_deg))
     leave_one_out = np.array(offsets)
     spread = np.sum((leave_one_out - leave_one_out.mean(axis=0)) ** 2, axis=0)
     # Refits on one row in ``step`` vary ``step`` times more than fits on every row would.
     variance = (JACKKNIFE_BLOCKS - 1) / JACKKNIFE_BLOCKS * spread / step
     stated = np.maximum(np.asarray(uncertainty.offset_sigma) ** 2, 1e-300)
     factor = float(np.mean(variance / stated))
-    if not factor > 1.0:
-        return uncertainty
-    return uncertainty.scaled(math.sqrt(factor))
+    widened = uncertainty.scaled(math.sqrt(factor)) if factor > 1.0 else uncertainty
+    # The same for the level heading itself, each replicate against the whole fit (for the mean of the
+    # replicates: a little wider): a drift along a flight moves the heading more than the offsets' mean ratio says.
+    heading = math.sqrt((JACKKNIFE_BLOCKS - 1) / JACKKNIFE_BLOCKS * float(np.sum(np.square(headings))) / step)
+    if widened.heading_sigma_deg is not None and heading > widened.heading_sigma_deg:
+        largest = max(widened.heading_sigma_max_deg or heading, heading)
+        widened = replace(widened, heading_sigma_deg=heading, heading_sigma_max_deg=largest)
+    return widened
 
 
 def _halves(
