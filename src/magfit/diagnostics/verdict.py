@@ -274,13 +274,14 @@ def judge(evidence: Evidence) -> Support:
             )
         elif comparison.measured and turn > MODEL_HEADING_DEG:
             refusals.add("model_inadequate",
-                f"{words}: it turns the level heading by {turn:.2g}° (the full fit's one-sigma: "
-                f"±{comparison.full_heading_sigma_deg:.2g}°); the ellipsoid or auto method would not leave that"
+                f"{words}, and this fit's level heading is {turn:.2g}° from the full ellipsoid's (whose one-sigma "
+                f"is ±{comparison.full_heading_sigma_deg:.2g}°); the ellipsoid or auto method would not leave that"
             )
         else:
             weak.add("model_inadequate",
-                f"{words}: it turns the level heading by up to {comparison.heading_cost_deg:.2g}°, counted in the "
-                f"heading uncertainty of ±{heading:.2g}°; the ellipsoid or auto method would remove it"
+                f"{words}, and this fit's level heading may be up to {comparison.heading_cost_deg:.2g}° from the "
+                f"full ellipsoid's, counted in the heading uncertainty of ±{heading:.2g}°; the ellipsoid or auto "
+                "method would remove it"
             )
     elif (
         comparison is None
