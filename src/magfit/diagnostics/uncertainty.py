@@ -426,6 +426,8 @@ MODEL_TEST_LEVEL = 1e-3
 #: whether or not the verdict names it: widening costs an adequate model little, and a borderline test
 #: on a log whose field drifts (level flight) is where a sphere's soft iron hides.
 WIDEN_LEVEL = 0.05
+#: The restricted and full fits of the comparison run on at most this many of the analysed rows.
+COMPARISON_ROWS = 5_000
 #: The heading difference from the full fit is taken as measured beyond this many of the full fit's one-sigmas.
 MEASURED_SIGMAS = 5.0
 
@@ -511,6 +513,11 @@ def compare_with_full(
 
     if kind == "full" or uncertainty.heading_sigma_deg is None:
         return None
+    # Two maximum-likelihood fits: on at most COMPARISON_ROWS of the analysed rows, weighted to stand for all.
+    step = max(1, raw.shape[0] // COMPARISON_ROWS)
+    total = float(weights.sum())
+    raw, weights = raw[::step], weights[::step]
+    weights = weights * (total / float(weights.sum()))
     frame = Frame(np.array(calibration.offset), np.eye(3) / calibration.field_strength)
     z = frame.normalise(raw)
     try:
