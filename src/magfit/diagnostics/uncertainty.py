@@ -457,8 +457,8 @@ class ModelComparison:
         RMS over level headings between the restricted calibration and the full one
         (:func:`level_heading_difference_deg`): what the missing distortion costs, when significant.
     full_heading_sigma_deg : float
-        The full fit's own heading one-sigma (inf: the samples do not determine it), which the difference
-        is only known to.
+        The full fit's own heading one-sigma, which the difference is only known to (inf: the samples do
+        not determine the full model, and the comparison tells nothing).
     """
 
     kind: str
@@ -566,7 +566,7 @@ def covering(
     if uncertainty.heading_sigma_deg is None:
         return uncertainty
     extra = 0.0
-    if comparison is not None and comparison.p_value < WIDEN_LEVEL:
+    if comparison is not None and comparison.p_value < WIDEN_LEVEL and math.isfinite(comparison.heading_cost_deg):
         extra += comparison.heading_cost_deg**2
     if check is not None and not check.consistent:
         extra += check.heading_difference_deg**2

@@ -22,8 +22,9 @@ What is checked, in this order (each a refusal unless said otherwise):
    fits cannot describe the samples: refused too. Below it, a restricted model is compared with the full
    ellipsoid on the same samples (:class:`~magfit.diagnostics.uncertainty.ModelComparison`, an F test):
    when the full one holds distortion the restricted one cannot (p < 0.001) and pins the level heading
-   more than :data:`MODEL_HEADING_DEG` away, or is itself not determined, refused; otherwise named, what it
-   may cost already in the heading one-sigma.
+   more than :data:`MODEL_HEADING_DEG` away, refused; otherwise named, what it may cost already in the
+   heading one-sigma. A full model the samples do not determine tells nothing here (its fit follows the
+   noise along the directions it lacks): the restricted model's own observability and coverage judge it.
 2. The sensor did not turn about one axis only: the field directions do not form a band or a cone
    around an axis (then the offset and scale along that axis are fixed by nothing, whatever the
    information matrix says at a fitted point).
@@ -260,19 +261,19 @@ def judge(evidence: Evidence) -> Support:
                 "plate against the sensor, does this too: then leave the field strength out)"
             ))
     comparison = evidence.comparison
-    if comparison is not None and comparison.significant and all(r.code != "model_inadequate" for r in refusals):
+    if (
+        comparison is not None
+        and comparison.significant
+        and math.isfinite(comparison.full_heading_sigma_deg)  # an undetermined full model tells nothing here
+        and all(r.code != "model_inadequate" for r in refusals)
+    ):
         turn = comparison.heading_difference_deg
         times = f"{comparison.rss_ratio:.3g}" if comparison.rss_ratio < 1e4 else "over 10 000"
         words = (
             f"the {_fit_name(evidence)} leaves {times} times the squared residual of a full ellipsoid on the same "
             f"samples (F test, p = {comparison.p_value:.1g}): there is soft iron this model cannot remove"
         )
-        if not math.isfinite(comparison.full_heading_sigma_deg):
-            refusals.add("model_inadequate",
-                f"{words}, and the samples do not determine the full model well enough to tell how far it turns the "
-                "heading; record a fuller set of attitudes, or use the auto method"
-            )
-        elif comparison.measured and turn > MODEL_HEADING_DEG:
+        if comparison.measured and turn > MODEL_HEADING_DEG:
             refusals.add("model_inadequate",
                 f"{words}, and this fit's level heading is {turn:.2g}° from the full ellipsoid's (whose one-sigma "
                 f"is ±{comparison.full_heading_sigma_deg:.2g}°); the ellipsoid or auto method would not leave that"
