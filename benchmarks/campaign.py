@@ -2,8 +2,8 @@
 
 Run (from the checkout, in magfit's development environment)::
 
-    python benchmarks/campaign.py                 # the default run, about 3 minutes on one core
-    python benchmarks/campaign.py --trials 2      # fewer trials per kind (the smoke test's run)
+    python benchmarks/campaign.py                 # the default run, 6 seeds per kind: about a minute
+    python benchmarks/campaign.py --trials 1      # one seed per kind
 
 It simulates the kinds of data the second fuzz campaign found wrong calibrations on, each with a known
 truth (the paper's eq. 1): a sensor clipped at its full scale, half a sphere of directions with mild soft
