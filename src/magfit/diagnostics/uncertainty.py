@@ -427,7 +427,7 @@ MODEL_TEST_LEVEL = 1e-3
 #: on a log whose field drifts (level flight) is where a sphere's soft iron hides.
 WIDEN_LEVEL = 0.05
 #: The restricted and full fits of the comparison run on at most this many of the analysed rows.
-COMPARISON_ROWS = 5_000
+COMPARISON_ROWS = 2_000
 #: The heading difference from the full fit is taken as measured beyond this many of the full fit's one-sigmas.
 MEASURED_SIGMAS = 5.0
 
