@@ -511,8 +511,8 @@ def compare_with_full(
     from ..errors import MagfitError
     from ..geometry.frame import calibration_from_parameters, maximum_likelihood
 
-    if kind == "full" or uncertainty.heading_sigma_deg is None:
-        return None
+    if kind == "full" or uncertainty.heading_sigma_deg is None or raw.shape[0] < 3 * N_PARAMETERS["full"]:
+        return None  # (too few rows to fit the full model at all: nothing to compare with)
     # Two maximum-likelihood fits: on at most COMPARISON_ROWS of the analysed rows, weighted to stand for all.
     step = max(1, raw.shape[0] // COMPARISON_ROWS)
     total = float(weights.sum())
@@ -530,7 +530,8 @@ def compare_with_full(
         return None
     full = min(cost, restricted)  # Σ d² at the optimum
     try:
-        own = _uncertainty(raw, weights, "full", reference, inclination_deg, uncertainty.n_samples, series)
+        with np.errstate(invalid="ignore"):  # a full model the rows barely hold: a non-finite one-sigma, below
+            own = _uncertainty(raw, weights, "full", reference, inclination_deg, uncertainty.n_samples, series)
     except np.linalg.LinAlgError:
         own = None
     sigma = math.inf if own is None or own.heading_sigma_deg is None else own.heading_sigma_deg
