@@ -223,3 +223,62 @@ def test_statistics_fit_names_the_weak_direction_without_numbers() -> None:
     )
     assert full.diagnostics is not None and full.diagnostics.observability is not None
     assert full.diagnostics.observability.weak == () and full.diagnostics.ok
+
+
+# ---------------------------------------------------------------------- a restricted model against the full one
+
+
+def test_the_f_test_p_value_is_the_f_distributions_survival_function() -> None:
+    # Oracle: scipy.stats (which the library does not import: it pulls in scipy.optimize) on the same numbers.
+    from scipy.special import betainc
+    from scipy.stats import f
+
+    for statistic, extra, dof in [(3.76, 5, 300), (0.5, 3, 50), (20.0, 5, 1000), (1.0, 6, 9)]:
+        ours = betainc(dof / 2.0, extra / 2.0, dof / (dof + extra * statistic))
+        assert ours == pytest.approx(f.sf(statistic, extra, dof), rel=1e-9)
+
+
+def test_a_sphere_on_soft_iron_is_compared_with_the_full_ellipsoid_and_a_sphere_on_a_sphere_is_not_flagged() -> None:
+    from magfit.diagnostics.uncertainty import compare_with_full
+
+    def comparison(soft_iron: np.ndarray) -> object:
+        sim = magfit.simulate(3000, soft_iron=soft_iron, hard_iron=[0.2, -0.1, 0.3], noise=0.01, seed=8)
+        calibration = magfit.fit(sim.samples, "sphere", allow_undetermined=True)
+        weights = np.ones(3000)
+        report = diagnose(calibration, sim.samples, held_out=False)
+        assert report.uncertainty is not None
+        return compare_with_full(sim.samples, weights, "sphere", calibration, report.uncertainty, 60.0, sim.samples)
+
+    clean = comparison(np.eye(3))
+    assert clean is not None and not clean.significant and clean.rss_ratio < 1.01  # no soft iron: nothing to miss
+    soft = comparison(np.diag([1.1, 1.0, 0.9]))
+    assert soft is not None and soft.significant and soft.rss_ratio > 2.0
+    assert soft.full_heading_sigma_deg < 0.5 and soft.heading_difference_deg > 1.0  # the full fit pins the heading
+
+
+def test_covering_adds_the_known_biases_to_the_heading_one_sigma_in_quadrature() -> None:
+    from magfit.diagnostics.uncertainty import ModelComparison, covering
+    from magfit.findings import Consistency, Uncertainty
+
+    stated = Uncertainty((0.01,) * 3, (0.01,) * 3, 0.01, 0.3, 0.4, 60.0, 0.01, 1000, 900.0)
+    missing = ModelComparison("sphere", 2.0, 50.0, 1e-9, 3.0, 4.0)  # heading cost √(3² + 4²) = 5
+    biased = Consistency((0.0, 0.0, 0.0), 5.0, 12.0, False)
+    widened = covering(stated, missing, biased)
+    assert widened.heading_sigma_deg == pytest.approx(np.sqrt(0.3**2 + 5.0**2 + 12.0**2))
+    assert widened.heading_sigma_max_deg == pytest.approx(np.sqrt(0.4**2 + 25.0 + 144.0))
+    assert widened.offset_sigma == stated.offset_sigma  # only the heading
+    not_significant = ModelComparison("sphere", 1.0, 0.1, 0.9, 3.0, 4.0)
+    assert covering(stated, not_significant, None) == stated
+
+
+def test_clipped_rows_are_named_beside_a_refusal() -> None:
+    # A vehicle tilted ±5° whose x axis also clipped: refused for what the tilts leave undetermined, and the
+    # clipping named beside it (the rows it cut are the directions missing).
+    sim = magfit.simulate(
+        2000, orientations="restricted", max_tilt_deg=5, hard_iron=[1.2, 0.0, 0.0], noise=0.01, seed=2
+    )
+    samples = np.clip(sim.samples, -1.5, 1.5)
+    assert np.any(sim.samples[:, 0] > 1.5)
+    with pytest.raises(magfit.CalibrationError) as caught:
+        magfit.fit(samples, "als")
+    assert "saturated" in caught.value.codes and "undetermined" in caught.value.codes, caught.value.codes

@@ -18,6 +18,7 @@ import math
 import os
 import re
 import struct
+import sys
 import tempfile
 import warnings
 from collections.abc import Callable
@@ -33,6 +34,8 @@ from hypothesis import strategies as st
 import magfit
 from magfit.calibration import FIELD_STRENGTH_RANGE
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # accuracy's truth metric
+
 #: Examples per test are scaled by this / 100 (the default budget: the numbers written in each test).
 SCALE = int(os.environ.get("MAGFIT_FUZZ_EXAMPLES", "100")) / 100
 
@@ -42,12 +45,18 @@ def budget(examples: int) -> Any:
     return settings(
         max_examples=max(1, int(examples * SCALE)),
         deadline=None,
+        print_blob=True,  # a failure prints @reproduce_failure(...): the example's seed, to rerun it alone
         suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much],
     )
 
 
-BASE = magfit.scenario("mpu9250", "steel").simulate(400, seed=11).samples
-SPHERE = magfit.scenario("mpu9250", "none").simulate(400, seed=12).samples
+BASE_SIMULATION = magfit.scenario("mpu9250", "steel").simulate(400, seed=11)
+SPHERE_SIMULATION = magfit.scenario("mpu9250", "none").simulate(400, seed=12)
+BASE = BASE_SIMULATION.samples
+SPHERE = SPHERE_SIMULATION.samples
+#: A returned calibration's level heading is within this many stated one-sigmas of the truth (or within FLOOR_DEG).
+COVER = 3.0
+FLOOR_DEG = 0.1
 
 
 def check_calibration(calibration: magfit.Calibration) -> None:
@@ -78,26 +87,63 @@ def outcome(call: Callable[[], Any]) -> Any:
 # ---------------------------------------------------------------------- samples
 
 
+class Bent(np.ndarray):
+    """A recording bent out of shape, with the truth it still has: ``truth`` is None once it has none."""
+
+    truth: tuple[magfit.Simulation, float, float] | None  # (simulation, scale, shift): samples = scale x + shift
+
+
 def _recordings() -> st.SearchStrategy[np.ndarray]:
-    """Good recordings bent out of shape: scaled, shifted, flattened, cut short, spiked, duplicated."""
+    """Good recordings bent out of shape: scaled, shifted, flattened, cut short, spiked, duplicated.
+
+    Scaling and shifting keep a truth (the simulation's, scaled and shifted the same way); flattening an
+    axis, spiking rows or keeping a few distinct samples do not.
+    """
 
     @st.composite
     def build(draw: st.DrawFn) -> np.ndarray:
-        samples = (BASE if draw(st.booleans()) else SPHERE).copy()
+        simulation = BASE_SIMULATION if draw(st.booleans()) else SPHERE_SIMULATION
+        samples = simulation.samples.copy()
         samples = samples[: draw(st.integers(0, len(samples)))]
-        samples = samples * 10.0 ** draw(st.integers(-40, 40))
-        samples = samples + 10.0 ** draw(st.integers(-5, 60)) * draw(st.sampled_from([0.0, 1.0, -1.0]))
+        scale = 10.0 ** draw(st.integers(-40, 40))
+        shift = 10.0 ** draw(st.integers(-5, 60)) * draw(st.sampled_from([0.0, 1.0, -1.0]))
+        samples = samples * scale + shift
+        kept = True
         if len(samples) and draw(st.booleans()):
             samples[:, draw(st.integers(0, 2))] = draw(st.sampled_from([0.0, 1e15, -3.5]))  # a flat axis
+            kept = False
         if len(samples) and draw(st.booleans()):
             rows = draw(st.lists(st.integers(0, len(samples) - 1), max_size=5))
             value = draw(st.sampled_from([np.nan, np.inf, -np.inf, 1e200, -1e300, 1e151, 0.0, 5e-324]))
             samples[rows, draw(st.integers(0, 2))] = value
+            kept = kept and not rows
         if draw(st.booleans()):
             samples = np.repeat(samples[:3], draw(st.integers(1, 50)), axis=0)  # few distinct samples
-        return samples
+            kept = False
+        bent = samples.view(Bent)
+        # The truth survives where the shift does not swallow the field (float64 keeps 15 digits of it).
+        bent.truth = (simulation, scale, shift) if kept and abs(shift) <= 1e6 * scale else None
+        return bent
 
     return build()
+
+
+def check_against_truth(calibration: magfit.Calibration, truth: tuple[magfit.Simulation, float, float]) -> None:
+    """The calibration's level heading is within its stated uncertainty of the truth (accuracy benchmark metric)."""
+    from accuracy import heading_error_deg
+
+    simulation, scale, shift = truth
+    unbent = magfit.Calibration(
+        calibration.method,
+        (np.asarray(calibration.offset) - shift) / scale,
+        calibration.matrix,
+        calibration.field_strength / scale,
+    )
+    error = heading_error_deg(unbent, simulation)
+    report = calibration.diagnostics
+    stated = report.uncertainty.heading_sigma_deg if report is not None and report.uncertainty is not None else None
+    assert stated is not None, "a returned calibration states its heading uncertainty"
+    assert error <= max(COVER * stated, FLOOR_DEG), (calibration.method, error, stated)
 
 
 def _arbitrary_arrays() -> st.SearchStrategy[Any]:
@@ -113,7 +159,10 @@ def _arbitrary_arrays() -> st.SearchStrategy[Any]:
     )
 
 
-@pytest.mark.parametrize("method", sorted(magfit.METHODS))
+MAGNITUDE_METHODS = sorted(name for name, spec in magfit.METHODS.items() if not spec.needs)
+
+
+@pytest.mark.parametrize("method", MAGNITUDE_METHODS)
 @budget(12)
 @given(samples=st.one_of(_recordings(), _arbitrary_arrays()))
 def test_fit_gives_a_checked_calibration_or_a_magfit_error(method: str, samples: Any) -> None:
@@ -123,6 +172,75 @@ def test_fit_gives_a_checked_calibration_or_a_magfit_error(method: str, samples:
     if calibration is not None:
         check_calibration(calibration)
         outcome(lambda: calibration.diagnostics)
+        truth = getattr(samples, "truth", None)
+        if truth is not None:
+            check_against_truth(calibration, truth)
+
+
+@pytest.mark.parametrize("method", MAGNITUDE_METHODS)
+@budget(6)
+@given(
+    steel=st.booleans(),
+    cut=st.integers(8, 400),
+    scale_exponent=st.integers(-40, 40),
+    shift=st.floats(-1e5, 1e5),
+)
+def test_a_fit_of_a_scaled_recording_is_within_its_stated_uncertainty_or_refused(
+    method: str, steel: bool, cut: int, scale_exponent: int, shift: float
+) -> None:
+    # The truth survives scaling and shifting (the simulation's, scaled and shifted alike): a returned
+    # calibration's level heading must lie within COVER of its stated one-sigmas of it.
+    simulation = BASE_SIMULATION if steel else SPHERE_SIMULATION
+    scale = 10.0**scale_exponent
+    samples = simulation.samples[:cut] * scale + shift * scale
+    calibration = outcome(lambda: magfit.fit(samples, method=method))
+    if calibration is not None:
+        check_calibration(calibration)
+        check_against_truth(calibration, (simulation, scale, shift * scale))
+
+
+def _vehicle_recording() -> Any:
+    from magfit.vehicle import simulate_vehicle
+
+    # A tumble both methods accept whole ("supported"): the fuzz then bends it.
+    return simulate_vehicle(
+        600, "tumble", rate_hz=10.0, hard_iron=[0.3, -0.2, 0.1], noise=0.005, attitude_noise_deg=0.3,
+        gyro_noise=0.002, seed=5,
+    )  # fmt: skip
+
+
+VEHICLE = _vehicle_recording()
+
+
+@pytest.mark.parametrize("method", sorted(name for name, spec in magfit.METHODS.items() if spec.needs))
+@budget(4)
+@given(
+    cut=st.one_of(st.just(600), st.integers(0, 600)),
+    scale=st.sampled_from([1e-6, 1.0, 1e6]),
+    spikes=st.lists(st.integers(0, 599), max_size=4),
+    value=st.sampled_from([np.nan, np.inf, 1e200, 0.0]),
+)
+def test_fit_with_a_reference_or_gyro_gives_a_checked_calibration_or_a_magfit_error(
+    method: str, cut: int, scale: float, spikes: list[int], value: float
+) -> None:
+    # vector and gyro run on what they need beside the samples (a reference field, body rates): without it
+    # they would stop at the OptionError before the method. Their accuracy against the truth is
+    # tests/test_vehicle.py's and tests/test_vector.py's.
+    samples = VEHICLE.samples[:cut] * scale
+    samples[[i for i in spikes if i < cut], 0] = value
+    streams: dict[str, Any] = {"time_s": VEHICLE.time_s[:cut]}
+    if method == "vector":
+        streams["reference"] = VEHICLE.reference[:cut] * scale
+    else:
+        streams["gyro"] = VEHICLE.gyro[:cut]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        calibration = outcome(lambda: magfit.fit(samples, method=method, **streams))
+    if cut == 600 and not spikes and scale == 1.0:
+        assert calibration is not None, "the whole tumble is accepted: the method itself ran"
+    if calibration is not None:
+        check_calibration(calibration)
+        assert calibration.frame == "vehicle"
 
 
 # ---------------------------------------------------------------------- Statistics
@@ -148,11 +266,15 @@ def test_statistics_update_and_merge(samples: np.ndarray, cuts: list[int], chunk
     assert merged.n == whole.n
     scale = max(whole.scale, float(np.max(np.abs(whole.mean))) * 1e-15, np.finfo(float).tiny)
     np.testing.assert_allclose(merged.mean, whole.mean, rtol=1e-9, atol=1e-9 * scale)
+    # The scatter the linear fits solve from, not only the mean: normalised, it is O(1) per entry.
+    big = float(np.max(np.abs(whole.scatter)))
+    np.testing.assert_allclose(merged.scatter, whole.scatter, rtol=1e-7, atol=1e-9 * big)
 
 
 # ---------------------------------------------------------------------- Calibration.from_json
 
-_GOOD = json.loads(magfit.fit(BASE, method="ellipsoid").to_json())
+_GOOD_TEXT = magfit.fit(BASE, method="ellipsoid").to_json()
+_GOOD = json.loads(_GOOD_TEXT)
 _JSON_VALUES = st.recursive(
     st.one_of(
         st.none(),
@@ -207,7 +329,8 @@ def test_from_json_on_mutated_calibrations(place: tuple[Any, ...], value: Any, d
     text=st.one_of(
         st.text(max_size=200),
         st.binary(max_size=200),
-        st.builds(lambda cut: json.dumps(_GOOD)[:cut], st.integers(0, 2000)),
+        st.builds(lambda cut: _GOOD_TEXT[:cut], st.integers(0, len(_GOOD_TEXT))),
+        st.just(_GOOD_TEXT),
         st.integers(1, 3000).map(lambda depth: '{"details": ' + "[" * depth + "]" * depth + "}"),
     )
 )
@@ -215,6 +338,8 @@ def test_from_json_on_arbitrary_text(text: str | bytes) -> None:
     calibration = outcome(lambda: magfit.Calibration.from_json(text))
     if calibration is not None:
         check_calibration(calibration)
+    if text == _GOOD_TEXT:  # the whole document is read back as it was written
+        assert calibration is not None and calibration.to_json() == magfit.Calibration.from_json(_GOOD_TEXT).to_json()
 
 
 # ---------------------------------------------------------------------- export
@@ -222,9 +347,14 @@ def test_from_json_on_arbitrary_text(text: str | bytes) -> None:
 
 @st.composite
 def _calibrations(draw: st.DrawFn) -> magfit.Calibration:
-    exponent = draw(st.integers(-6, 7))
+    # Up to the ends of the field-strength range and offsets near float64's limit: a unit conversion (x 1e9 from
+    # tesla to nT, x 1e5 from gauss) or a product in a firmware's arithmetic can overflow to inf, which the
+    # export must refuse rather than write.
+    exponent = draw(st.one_of(st.integers(-6, 7), st.integers(-149, 149)))
     strength = 10.0**exponent * draw(st.floats(0.5, 2.0))
-    offset = np.array(draw(st.lists(st.floats(-50, 50), min_size=3, max_size=3))) * 10.0 ** draw(st.integers(-6, 9))
+    offset = np.array(draw(st.lists(st.floats(-50, 50), min_size=3, max_size=3))) * 10.0 ** draw(
+        st.one_of(st.integers(-6, 9), st.integers(-300, 306))
+    )
     skew = np.array(draw(st.lists(st.floats(-0.4, 0.4), min_size=9, max_size=9))).reshape(3, 3)
     matrix = np.eye(3) + skew
     determinant = np.linalg.det(matrix)

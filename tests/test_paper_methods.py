@@ -99,7 +99,8 @@ def test_minmax_is_biased_when_soft_iron_is_not_axis_aligned() -> None:
     # The documented limit of the pseudo-calibration: the steel case's soft iron is turned 20° (see
     # magfit.simulate.Scenario), and min/max then misses the shape by far more than the noise explains.
     sim = magfit.scenario("ellipse2a", "steel").simulate(N, seed=14)
-    minmax = magfit.fit(sim.samples, method="minmax", centre="midrange")
+    minmax = magfit.fit(sim.samples, method="minmax", centre="midrange", allow_undetermined=True)
+    assert "model_inadequate" in minmax.details["support"]["refusal_codes"]  # and the verdict says so
     ellipsoid = magfit.fit(sim.samples, method="ellipsoid")
     assert shape_error(minmax, sim.truth) > 0.1
     assert shape_error(ellipsoid, sim.truth) < 0.02
@@ -107,7 +108,8 @@ def test_minmax_is_biased_when_soft_iron_is_not_axis_aligned() -> None:
 
 def test_minmax_as_published_centres_on_the_mean() -> None:
     samples = magfit.scenario("mpu9250", "smartphone").simulate(500, seed=3).samples
-    cal = magfit.fit(samples, method="minmax")  # centre="mean" is the paper's section IV
+    # centre="mean" is the paper's section IV (refused here: the full ellipsoid shows soft iron it misses)
+    cal = magfit.fit(samples, method="minmax", allow_undetermined=True)
     mean = samples.mean(axis=0)
     half_range = (samples.max(axis=0) - samples.min(axis=0)) / 2
     # the paper's formula, with its z-row typo fixed: 2 (B − mean) / (max − min)

@@ -115,7 +115,7 @@ def test_several_compasses_go_to_one_file_each_never_over_an_existing_one(two_co
         assert f"wrote the calibration of MAG/{k} to {file}" in result.stdout
     assert not output.exists()
     before = {k: file.read_bytes() for k, file in written.items()}
-    again = runner.invoke(cli, ["calibrate", str(path), "-m", "sphere", "-o", str(output)])
+    again = runner.invoke(cli, ["calibrate", str(path), "-m", "ml", "-o", str(output)])
     assert again.exit_code == 2 and "cal-MAG_0.json exists" in again.stderr and "never written over" in again.stderr
     assert {k: file.read_bytes() for k, file in written.items()} == before
     # A one-compass format without -o has nowhere to put the second compass.

@@ -63,6 +63,10 @@ FAILURES = ["android", "hmc5883l"]
 #: from its z offset, but the level heading is, to ±2°: returned, weak, saying so — see below.)
 REFUSED = {
     ("sphere", "unc"): "cannot describe these samples",
+    # The full ellipsoid on the same samples leaves significantly less (F test) and pins a level heading
+    # more than 3° away from the restricted fit's: soft iron the restricted model cannot hold.
+    **{("sphere", name): "soft iron this model cannot remove" for name in ("mxl_pni", "animal_calib", "animal_track")},
+    **{("minmax", name): "soft iron this model cannot remove" for name in ("fxos", "betaflight03", "betaflight00")},
     **{
         ("minmax", name): "cannot describe these samples|biased"
         for name in (

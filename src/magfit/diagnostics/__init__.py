@@ -32,6 +32,7 @@ from ..findings import Diagnostics, Goodness, Reason, ReasonList, Support
 from ..geometry.frame import Frame
 from ..geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
 from ..sampling import MAX_ANALYSED, thin, weighted_even_subsample
+from ..saturation import find_clipped
 from ..statistics import Statistics
 from .coverage import Coverage, coverage
 from .uncertainty import (
@@ -41,7 +42,10 @@ from .uncertainty import (
     Uncertainty,
     WeakDirection,
     analyse,
+    compare_with_full,
     consistency,
+    covering,
+    level_heading_difference_deg,
 )
 from .verdict import NO_ELLIPSOID_RMS, Evidence, judge
 
@@ -176,8 +180,12 @@ def diagnose(
     check_finite(array)
     if represents is not None and represents < array.shape[0]:
         raise SampleError(f"represents={represents} is fewer than the {array.shape[0]} samples given")
-    mask, how = _inlier_mask(calibration, array)
     notes: list[str] = []
+    clipping = find_clipped(array)  # the rows every fit left out (methods.core.estimate): so do the diagnostics
+    if clipping.n_clipped:
+        notes.append(f"{clipping.n_clipped} samples clipped at the sensor's full scale are left out of these figures.")
+        array = array[~clipping.clipped]
+    mask, how = _inlier_mask(calibration, array)
     if mask is not None and not mask.all():
         notes.append(f"{int((~mask).sum())} samples {how} are left out of the diagnostics.")
         array = array[mask]
@@ -213,8 +221,12 @@ def diagnose(
             halves = _halves(rows, vary, uncertainty, total)
         if vary is not None and uncertainty.offset_sigma is not None:
             # After the halves: a change between them is named as such, not hidden in a wider one-sigma.
-            uncertainty = _with_block_jackknife(uncertainty, rows, vary, total)
-    if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:
+            uncertainty = _with_block_jackknife(uncertainty, rows, vary, calibration, total)
+    comparison = None
+    if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
+        comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
+    uncertainty = covering(uncertainty, comparison, check)  # the heading one-sigma covers known biases too
+    if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion
         uncertainty = replace(
             uncertainty,
             heading_sigma_deg=math.hypot(uncertainty.heading_sigma_deg, model_error_heading_deg),
@@ -237,6 +249,8 @@ def diagnose(
         flat=flat_axis(raw, weights),
         axis_ratio=float(np.max(calibration.semi_axes) / np.min(calibration.semi_axes)),
         solver_problem=calibration.details.get("solver_problem"),
+        clipping=clipping if clipping.n_clipped else None,
+        comparison=comparison,
     )
     support = judge(evidence)
     return Diagnostics(
@@ -302,7 +316,11 @@ JACKKNIFE_SAMPLES = 2_000
 
 
 def _with_block_jackknife(
-    uncertainty: Uncertainty, rows: NDArray[np.float64], refit: Refit, total: int | None = None
+    uncertainty: Uncertainty,
+    rows: NDArray[np.float64],
+    refit: Refit,
+    calibration: Calibration,
+    total: int | None = None,
 ) -> Uncertainty:
     """``uncertainty`` widened to what leaving out one stretch of the recording at a time shows.
 
@@ -314,8 +332,9 @@ def _with_block_jackknife(
     exceeds the stated offset variance, every one-sigma is scaled by the mean ratio of the two (the
     heading and scale figures come from the same fit). The refits see a regular stride of at most
     :data:`JACKKNIFE_SAMPLES` rows, their variance scaled by their count over the ``total`` samples the
-    stated uncertainty is for (``rows`` may itself be a stride of the recording). Refits that fail leave the
-    uncertainty as it is.
+    stated uncertainty is for (``rows`` may itself be a stride of the recording). The level heading is
+    jackknifed the same way (each replicate's RMS level-heading difference from ``calibration``), and the
+    heading one-sigma raised to it where it is larger. Refits that fail leave the uncertainty as it is.
     """
     assert uncertainty.offset_sigma is not None
     m = rows.shape[0]
@@ -325,21 +344,30 @@ def _with_block_jackknife(
     series = rows[::step]
     edges = np.linspace(0, series.shape[0], JACKKNIFE_BLOCKS + 1).astype(np.int64)
     offsets = []
+    headings = []
     for block in range(JACKKNIFE_BLOCKS):
         kept = np.concatenate([series[: edges[block]], series[edges[block + 1] :]])
         try:
-            offsets.append(refit(kept).offset)
+            replicate = refit(kept)
         except (MagfitError, np.linalg.LinAlgError):
             return uncertainty
+        offsets.append(replicate.offset)
+        headings.append(level_heading_difference_deg(replicate, calibration, uncertainty.inclination_deg))
     leave_one_out = np.array(offsets)
     spread = np.sum((leave_one_out - leave_one_out.mean(axis=0)) ** 2, axis=0)
     # Refits on s of the ``total`` samples vary total / s times more than the fit on all of them.
     variance = (JACKKNIFE_BLOCKS - 1) / JACKKNIFE_BLOCKS * spread * series.shape[0] / (total or m)
     stated = np.maximum(np.asarray(uncertainty.offset_sigma) ** 2, 1e-300)
     factor = float(np.mean(variance / stated))
-    if not factor > 1.0:
-        return uncertainty
-    return uncertainty.scaled(math.sqrt(factor))
+    widened = uncertainty.scaled(math.sqrt(factor)) if factor > 1.0 else uncertainty
+    # The same for the level heading itself, each replicate against the whole fit (for the mean of the
+    # replicates: a little wider): a drift along a flight moves the heading more than the offsets' mean ratio says.
+    scale = series.shape[0] / (total or m)
+    heading = math.sqrt((JACKKNIFE_BLOCKS - 1) / JACKKNIFE_BLOCKS * float(np.sum(np.square(headings))) * scale)
+    if widened.heading_sigma_deg is not None and heading > widened.heading_sigma_deg:
+        largest = max(widened.heading_sigma_max_deg or heading, heading)
+        widened = replace(widened, heading_sigma_deg=heading, heading_sigma_max_deg=largest)
+    return widened
 
 
 def _halves(

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,7 +45,18 @@ from ..geometry.frame import (
     unit_map,
 )
 
-__all__ = ["Consistency", "Observability", "Uncertainty", "WeakDirection", "analyse", "consistency"]
+__all__ = [
+    "Consistency",
+    "ModelComparison",
+    "Observability",
+    "Uncertainty",
+    "WeakDirection",
+    "analyse",
+    "compare_with_full",
+    "consistency",
+    "covering",
+    "level_heading_difference_deg",
+]
 
 #: A direction carrying less than this share of a full tumble's information is weakly determined.
 WEAK_INFORMATION = 0.05
@@ -378,7 +390,23 @@ def consistency(
         subset = math.sqrt(max(float(uncertainty.n_samples) / max(raw.shape[0], 1), 1.0))
         scale = np.maximum(np.asarray(uncertainty.offset_sigma) * subset, 1e-300)
         sigmas = float(np.sqrt(np.sum((difference / scale) ** 2)))
-    # Level headings seen by both: the reference's corrected field f(ψ), mapped back to raw readings.
+    heading = level_heading_difference_deg(calibration, reference, inclination_deg)
+    consistent = (sigmas is None or sigmas <= 3.0) or heading <= 0.1
+    return Consistency(
+        offset_difference=(float(difference[0]), float(difference[1]), float(difference[2])),
+        sigmas=sigmas,
+        heading_difference_deg=heading,
+        consistent=consistent,
+    )
+
+
+def level_heading_difference_deg(calibration: Calibration, reference: Calibration, inclination_deg: float) -> float:
+    """RMS over level headings of the heading ``calibration`` reads where ``reference`` reads f(ψ), degrees.
+
+    The reference's corrected field at level ``f(ψ) = (cos δ cos ψ, cos δ sin ψ, sin δ)`` is mapped back to
+    raw readings and corrected by ``calibration``; both through the symmetric root ``L = A^½`` of their
+    ellipsoid matrix, so the rotation no magnitude-only fit observes does not count.
+    """
     delta = math.radians(inclination_deg)
     psi = np.radians(np.arange(0.0, 360.0, 2.0))
     field = np.column_stack(
@@ -388,11 +416,163 @@ def consistency(
     seen = (readings - calibration.offset) @ symmetric_unit_map(calibration).T
     angle = np.arctan2(seen[:, 1], seen[:, 0]) - np.arctan2(field[:, 1], field[:, 0])
     angle = (angle + math.pi) % (2.0 * math.pi) - math.pi
-    heading = float(np.degrees(np.sqrt(np.mean(angle**2))))
-    consistent = (sigmas is None or sigmas <= 3.0) or heading <= 0.1
-    return Consistency(
-        offset_difference=(float(difference[0]), float(difference[1]), float(difference[2])),
-        sigmas=sigmas,
-        heading_difference_deg=heading,
-        consistent=consistent,
-    )
+    return float(np.degrees(np.sqrt(np.mean(angle**2))))
+
+
+#: A restricted model misses distortion the samples show when the full model's F statistic has a p-value
+#: below this.
+MODEL_TEST_LEVEL = 1e-3
+#: Below this p-value the heading one-sigma of a restricted model includes what it may miss (:func:`covering`),
+#: whether or not the verdict names it: widening costs an adequate model little, and a borderline test
+#: on a log whose field drifts (level flight) is where a sphere's soft iron hides.
+WIDEN_LEVEL = 0.05
+#: The restricted and full fits of the comparison run on at most this many of the analysed rows.
+COMPARISON_ROWS = 2_000
+#: The heading difference from the full fit is taken as measured beyond this many of the full fit's one-sigmas.
+MEASURED_SIGMAS = 5.0
+
+
+@dataclass(frozen=True)
+class ModelComparison:
+    """A restricted model (sphere, axis-aligned) against the full ellipsoid on the same samples.
+
+    The F test of nested least-squares models (e.g. Seber & Wild, *Nonlinear Regression*, 1989, eq. 5.23):
+
+        F = ((RSS_r − RSS_f) / (k_f − k_r)) / (RSS_f / (n − k_f))                             (F)
+
+    RSS the sums of squared distances to each model's maximum-likelihood ellipsoid in the isotropic frame
+    ``(x − V) / B`` (both from the same rows), k the parameters (sphere 4, diag 6, full 9) and n the
+    *effective* samples of the recording (:attr:`Uncertainty.effective_samples`: correlated samples count
+    for fewer). Under the restricted model F follows F(k_f − k_r, n − k_f); a p-value below
+    :data:`MODEL_TEST_LEVEL` says the full model holds distortion the restricted one cannot.
+
+    Attributes
+    ----------
+    kind : {"sphere", "diag"}
+    rss_ratio : float
+        RSS_r / RSS_f.
+    f_statistic, p_value : float
+        Of (F).
+    heading_difference_deg : float
+        RMS over level headings between the restricted calibration and the full one
+        (:func:`level_heading_difference_deg`): what the missing distortion costs, when significant.
+    full_heading_sigma_deg : float
+        The full fit's own heading one-sigma, which the difference is only known to (inf: the samples do
+        not determine the full model, and the comparison tells nothing).
+    """
+
+    kind: str
+    rss_ratio: float
+    f_statistic: float
+    p_value: float
+    heading_difference_deg: float
+    full_heading_sigma_deg: float
+
+    @property
+    def significant(self) -> bool:
+        return self.p_value < MODEL_TEST_LEVEL
+
+    @property
+    def heading_cost_deg(self) -> float:
+        """The heading error the missing distortion adds: the difference and its own one-sigma, in quadrature."""
+        return math.hypot(self.heading_difference_deg, self.full_heading_sigma_deg)
+
+    @property
+    def measured(self) -> bool:
+        """Whether the full fit pins the heading difference: more than :data:`MEASURED_SIGMAS` of its one-sigmas.
+
+        Below, the difference may be the full fit's own error (a field that drifts along a flight reads as
+        soft iron to it, and its stated one-sigma misses that by up to 3 times): the restricted model is
+        then off by at most about :attr:`heading_cost_deg`, which its stated one-sigma includes.
+        """
+        return self.heading_difference_deg > MEASURED_SIGMAS * self.full_heading_sigma_deg
+
+
+def compare_with_full(
+    raw: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    kind: str,
+    calibration: Calibration,
+    uncertainty: Uncertainty,
+    inclination_deg: float,
+    series: NDArray[np.float64] | None = None,
+) -> ModelComparison | None:
+    """The F test (see :class:`ModelComparison`) of ``calibration`` (a restricted model) against the full one.
+
+    ``series``: the samples in recording order, as for :func:`analyse`. The effective samples of the test
+    and the full fit's heading one-sigma come from the full fit's own residuals (with the correlation in
+    time): the restricted model's would count its own misfit, which is systematic from one stretch of the
+    recording to the next, as correlated noise, and so hide it.
+
+    None for a full model, an undetermined one, or when the full model's maximum-likelihood fit fails.
+    """
+    from scipy.special import betainc  # not scipy.stats: it imports scipy.optimize (0.5 s)
+
+    from ..errors import MagfitError
+    from ..geometry.frame import calibration_from_parameters, maximum_likelihood
+
+    if kind == "full" or uncertainty.heading_sigma_deg is None or raw.shape[0] < 3 * N_PARAMETERS["full"]:
+        return None  # (too few rows to fit the full model at all: nothing to compare with)
+    # Two maximum-likelihood fits: on at most COMPARISON_ROWS of the analysed rows, weighted to stand for all.
+    step = max(1, raw.shape[0] // COMPARISON_ROWS)
+    total = float(weights.sum())
+    raw, weights = raw[::step], weights[::step]
+    weights = weights * (total / float(weights.sum()))
+    frame = Frame(np.array(calibration.offset), np.eye(3) / calibration.field_strength)
+    z = frame.normalise(raw)
+    try:
+        # The restricted model at its own optimum: a method biased on these samples (an algebraic fit of a
+        # cap) is the consistency check's to name, not evidence of distortion the model cannot hold.
+        restricted, _ = maximum_likelihood(z, kind, [parameters(calibration, kind, frame)])
+        cost, optimum = maximum_likelihood(z, "full", [parameters(calibration, "full", frame)])
+        reference = calibration_from_parameters(optimum, "full", frame, "full")
+    except (MagfitError, np.linalg.LinAlgError):
+        return None
+    full = min(cost, restricted)  # Σ d² at the optimum
+    try:
+        with np.errstate(invalid="ignore"):  # a full model the rows barely hold: a non-finite one-sigma, below
+            own = _uncertainty(raw, weights, "full", reference, inclination_deg, uncertainty.n_samples, series)
+    except np.linalg.LinAlgError:
+        own = None
+    sigma = math.inf if own is None or own.heading_sigma_deg is None else own.heading_sigma_deg
+    if not sigma <= 90.0:  # not determined: the full fit's heading could be anywhere
+        sigma = math.inf
+    extra = N_PARAMETERS["full"] - N_PARAMETERS[kind]
+    n = float(uncertainty.n_samples if own is None else own.effective_samples or own.n_samples)
+    dof = max(n - N_PARAMETERS["full"], 1.0)
+    ratio = restricted / max(full, 1e-300)
+    statistic = (ratio - 1.0) * dof / extra
+    # The F distribution's survival function: P(F > f) = I_x(d₂/2, d₁/2), x = d₂ / (d₂ + d₁ f) (regularised
+    # incomplete beta function, Abramowitz & Stegun 26.6.2).
+    p_value = float(betainc(dof / 2.0, extra / 2.0, dof / (dof + extra * max(statistic, 0.0))))
+    heading = level_heading_difference_deg(calibration, reference, inclination_deg)
+    return ModelComparison(kind, ratio, float(statistic), p_value, heading, sigma)
+
+
+def covering(
+    uncertainty: Uncertainty,
+    comparison: ModelComparison | None,
+    check: Consistency | None,
+) -> Uncertainty:
+    """``uncertainty`` with the heading one-sigma widened by the errors the fit is known to carry beyond noise.
+
+    Each is added in quadrature to the heading one-sigma (and to its maximum over headings): none is noise
+    that more samples average away, and what the calibration states must cover what it gets wrong.
+
+    - A restricted model that misses distortion the samples show (``comparison.p_value`` below
+      :data:`WIDEN_LEVEL`) is off the full model's heading by up to ``comparison.heading_cost_deg``.
+    - A biased method (``check`` not consistent) is off its own model's maximum-likelihood fit by
+      ``check.heading_difference_deg``.
+    """
+    if uncertainty.heading_sigma_deg is None:
+        return uncertainty
+    extra = 0.0
+    if comparison is not None and comparison.p_value < WIDEN_LEVEL and math.isfinite(comparison.heading_cost_deg):
+        extra += comparison.heading_cost_deg**2
+    if check is not None and not check.consistent:
+        extra += check.heading_difference_deg**2
+    if extra == 0.0:
+        return uncertainty
+    heading = math.sqrt(uncertainty.heading_sigma_deg**2 + extra)
+    largest = math.sqrt((uncertainty.heading_sigma_max_deg or uncertainty.heading_sigma_deg) ** 2 + extra)
+    return replace(uncertainty, heading_sigma_deg=heading, heading_sigma_max_deg=largest)

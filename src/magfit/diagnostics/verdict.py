@@ -19,7 +19,12 @@ What is checked, in this order (each a refusal unless said otherwise):
    recordings in ``shared/data/real``: 0.4-4 %; simulated noise of 10 %, 10 %); a Gaussian cloud 39 %, a
    filled cube 28 %, a still sensor's noise 40 %. Between :data:`LARGE_RESIDUAL_RMS` and that: weak. A
    restricted model (sphere, axis-aligned, min/max) that leaves more than that where the full ellipsoid
-   fits cannot describe the samples: refused too.
+   fits cannot describe the samples: refused too. Below it, a restricted model is compared with the full
+   ellipsoid on the same samples (:class:`~magfit.diagnostics.uncertainty.ModelComparison`, an F test):
+   when the full one holds distortion the restricted one cannot (p < 0.001) and pins the level heading
+   more than :data:`MODEL_HEADING_DEG` away, refused; otherwise named, what it may cost already in the
+   heading one-sigma. A full model the samples do not determine tells nothing here (its fit follows the
+   noise along the directions it lacks): the restricted model's own observability and coverage judge it.
 2. The sensor did not turn about one axis only: the field directions do not form a band or a cone
    around an axis (then the offset and scale along that axis are fixed by nothing, whatever the
    information matrix says at a fitted point).
@@ -41,10 +46,12 @@ What is checked, in this order (each a refusal unless said otherwise):
 5. A fit more than :data:`BIASED_HEADING_DEG` of level heading, or :data:`BIASED_OFFSET` of the field in
    offset, away from the maximum-likelihood fit of its own model (beyond the uncertainty): the method is
    biased on these samples (min/max, or an algebraic fit of a cap of directions).
-6. Weak only: a restricted model (sphere, axis-aligned) that leaves much larger residuals than the
-   full ellipsoid; coverage below half the directions; a fit that does much worse on held-out samples
-   than on its own (over-fitted); a fit far from the maximum-likelihood fit of its model (biased); two
-   halves of the recording that give different offsets (the distortion changed while recording).
+6. Weak only: a restricted model (sphere, axis-aligned) that misses distortion the full ellipsoid
+   shows (the F test above, within the refusal); rows clipped at the sensor's full scale, left out of the
+   fit (:mod:`magfit.saturation`; with a refusal, named as its cause); coverage below half the
+   directions; a fit that does much worse on held-out samples than on its own (over-fitted); a fit far
+   from the maximum-likelihood fit of its model (biased); two halves of the recording that give different
+   offsets (the distortion changed while recording).
 """
 
 from __future__ import annotations
@@ -53,6 +60,8 @@ import math
 from dataclasses import dataclass
 
 from ..findings import Consistency, Coverage, Goodness, Observability, ReasonList, Support, Uncertainty
+from ..saturation import Clipping
+from .uncertainty import ModelComparison
 
 __all__ = [
     "FIELD_TOLERANCE",
@@ -81,6 +90,10 @@ BIASED_OFFSET = 0.05
 #: An undetermined combination of parameters is returned (weak) when the level heading uncertainty stays
 #: within this, degrees; above, refused.
 UNDETERMINED_HEADING_DEG = 3.0
+#: A restricted model that misses distortion the samples show (the F test against the full model) is refused
+#: when what that costs the level heading exceeds this, degrees; below, it is weak, the cost counted in its
+#: heading uncertainty.
+MODEL_HEADING_DEG = 3.0
 #: Halves of a recording whose offsets differ by more than this many combined one-sigmas disagree.
 HALVES_SIGMAS = 3.0
 
@@ -122,6 +135,12 @@ class Evidence:
         The method that fitted the calibration, for messages.
     solver_problem : str or None
         The method's solver did not converge (``details["solver_problem"]``): refused, in its words.
+    clipping : Clipping or None
+        Rows clipped at the sensor's full scale, left out of the fit and of this evidence
+        (:mod:`magfit.saturation`); None when there were none.
+    comparison : ModelComparison or None
+        A restricted model against the full ellipsoid on the same samples (the F test); None for a full
+        model. ``uncertainty`` already covers its heading cost when it is significant.
     field_strength : float or None
         The calibration's field strength (input units), to judge offsets by.
     """
@@ -142,6 +161,8 @@ class Evidence:
     method: str | None = None
     field_strength: float | None = None
     solver_problem: str | None = None
+    clipping: Clipping | None = None
+    comparison: ModelComparison | None = None
 
 
 def judge(evidence: Evidence) -> Support:
@@ -239,8 +260,33 @@ def judge(evidence: Evidence) -> Support:
                 else ": check the value and the samples' unit (iron that scales the whole field, such as a steel "
                 "plate against the sensor, does this too: then leave the field strength out)"
             ))
+    comparison = evidence.comparison
     if (
-        evidence.kind != "full"
+        comparison is not None
+        and comparison.significant
+        and math.isfinite(comparison.full_heading_sigma_deg)  # an undetermined full model tells nothing here
+        and all(r.code != "model_inadequate" for r in refusals)
+    ):
+        turn = comparison.heading_difference_deg
+        times = f"{comparison.rss_ratio:.3g}" if comparison.rss_ratio < 1e4 else "over 10 000"
+        words = (
+            f"the {_fit_name(evidence)} leaves {times} times the squared residual of a full ellipsoid on the same "
+            f"samples (F test, p = {comparison.p_value:.1g}): there is soft iron this model cannot remove"
+        )
+        if comparison.measured and turn > MODEL_HEADING_DEG:
+            refusals.add("model_inadequate",
+                f"{words}, and this fit's level heading is {turn:.2g}° from the full ellipsoid's (whose one-sigma "
+                f"is ±{comparison.full_heading_sigma_deg:.2g}°); the ellipsoid or auto method would not leave that"
+            )
+        else:
+            weak.add("model_inadequate",
+                f"{words}, and this fit's level heading may be up to {comparison.heading_cost_deg:.2g}° from the "
+                f"full ellipsoid's, counted in the heading uncertainty of ±{heading:.2g}°; the ellipsoid or auto "
+                "method would remove it"
+            )
+    elif (
+        comparison is None
+        and evidence.kind != "full"
         and evidence.ellipsoid_rms is not None
         and evidence.residual_rms > RESTRICTED_RESIDUAL_RATIO * evidence.ellipsoid_rms
         and LARGE_RESIDUAL_RMS / 2 < evidence.residual_rms <= NO_ELLIPSOID_RMS
@@ -290,6 +336,15 @@ def judge(evidence: Evidence) -> Support:
                 "their one-sigma: the distortion or the field changed while recording (a magnet moved, motors, "
                 "temperature); calibrate on a recording where nothing near the sensor changes"
             )
+    if evidence.clipping is not None:
+        clipped = evidence.clipping
+        (refusals if refusals else weak).add("saturated",
+            f"{clipped.n_clipped} of {clipped.n_samples} samples were clipped at the sensor's full scale "
+            f"({clipped.describe(evidence.unit)}) and are left out: the calibration rests on the other "
+            f"{clipped.n_kept}, which miss the directions where the field plus the offset left the range; set a "
+            "larger full-scale range on the magnetometer (its range or gain setting), or mount it further from the "
+            "iron that pushes it out of range"
+        )
     return Support.judged(refusals, weak, _RECORD_ADVICE)
 
 

@@ -1,5 +1,9 @@
 """The one path by which every method runs: validate, reduce to statistics, check support, dispatch.
 
+Rows clipped at the sensor's full scale (:mod:`magfit.saturation`) are left out here, before any method
+sees them, and counted in ``details["saturation"]``; when too few rows remain the fit is refused (code
+``"saturated"``), naming the full-scale range to change.
+
 :func:`magfit.fit` (with the verdict and the diagnostics on top), the robust fit's inner models, ``auto``'s
 candidates and the held-out refits of the diagnostics all go through :func:`estimate`, so a method refuses
 the same data whoever calls it. The user's options are recorded explicitly in
@@ -19,7 +23,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._validation import check_finite, check_shape, check_support
 from ..calibration import Calibration
-from ..errors import OptionError
+from ..errors import CalibrationError, OptionError
+from ..saturation import Clipping, find_clipped
 from ..statistics import Statistics
 from .registry import METHODS, FitInput, MethodSpec, get_method
 
@@ -67,12 +72,51 @@ def estimate(data: FitInput, method: str, options: Mapping[str, Any] | None = No
     """
     options = dict(options or {})
     spec = method_spec(method, options)
+    clipping = None
+    if data.samples is not None and not spec.needs:  # vector's and gyro's arrays run row by row beside them
+        data, clipping = without_clipped(data, spec)
     check_support(data.statistics, spec.name, spec.min_samples)
     for check in spec.checks:
         check(data.statistics, spec.name)
     calibration = spec.function(data, **options)
     effective = {**spec.defaults, **options}  # every option, as the method ran: a refit needs no guessing
-    return replace(calibration, details={**calibration.details, "options": recorded_options(effective)})
+    details = {**calibration.details, "options": recorded_options(effective)}
+    if clipping is not None:
+        details["saturation"] = clipping.to_dict()
+    return replace(calibration, details=details)
+
+
+#: A fit is refused when more than this share of the rows is clipped at the full scale: what is left is
+#: the directions where the field plus offset stayed within the range, a band the clipping cut.
+MAX_CLIPPED_SHARE = 0.5
+
+FULL_SCALE_ADVICE = (
+    "set a larger full-scale range on the magnetometer (its range or gain setting, e.g. ±8 gauss instead of "
+    "±2 gauss; the firmware's compass range parameter where it has one), or mount it further from the magnet, "
+    "motor or steel whose field pushes it out of range, and record again"
+)
+
+
+def without_clipped(data: FitInput, spec: MethodSpec) -> tuple[FitInput, Clipping | None]:
+    """``data`` without the rows clipped at the sensor's full scale, and what was clipped (None: nothing).
+
+    Raises :class:`CalibrationError` (code ``"saturated"``) when more than :data:`MAX_CLIPPED_SHARE` of the
+    rows, or all but fewer than the method needs, are clipped.
+    """
+    assert data.samples is not None
+    clipping = find_clipped(data.samples)
+    if not clipping.n_clipped:
+        return data, None
+    kept = data.samples[~clipping.clipped]
+    if clipping.n_clipped > MAX_CLIPPED_SHARE * clipping.n_samples or kept.shape[0] < spec.min_samples:
+        raise CalibrationError(
+            f"the samples do not support the {spec.name} calibration: {clipping.n_clipped} of "
+            f"{clipping.n_samples} samples are clipped at the sensor's full scale ({clipping.describe()}): the "
+            "field plus the offset exceeded the range the sensor was set to, so those readings are its range's end, "
+            f"not the field, and the {kept.shape[0]} left are too few to fit; {FULL_SCALE_ADVICE}",
+            codes=("saturated",),
+        )
+    return FitInput(Statistics.from_samples(kept), kept), clipping
 
 
 #: How :func:`recorded_options` records an array option (its length only: a refit takes the new one).

@@ -57,7 +57,8 @@ def fit_diag(data: FitInput, *, field_strength: float | None = None) -> Calibrat
         raise CalibrationError(
             f"the diag fit failed: {ellipsoid}; either the soft iron is turned off the sensor axes, which the "
             "axis-aligned model cannot represent (use method='als'), or the samples cover too few directions "
-            "(rotate the sensor through more attitudes)"
+            "(rotate the sensor through more attitudes)",
+            codes=("no_ellipsoid",),
         )
     offset, shape = ellipsoid
     shape = np.diag(np.diag(shape))  # exactly diagonal (the off-diagonal entries are zeros already)

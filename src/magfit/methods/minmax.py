@@ -43,7 +43,9 @@ def fit_minmax(data: FitInput, *, centre: str = "mean") -> Calibration:
     half_range = 0.5 * (high - low)
     if not np.all(half_range > 0):
         axis = "xyz"[int(np.argmin(half_range))]
-        raise CalibrationError(f"the {axis} axis never changes: min/max scaling needs every axis to vary")
+        raise CalibrationError(
+            f"the {axis} axis never changes: min/max scaling needs every axis to vary", codes=("single_axis",)
+        )
     narrow = int(np.argmin(half_range))
     if half_range[narrow] < MIN_RANGE_RATIO * half_range.max():
         # A sensor that never pointed an axis along the field: its range there is the tilt or the noise, and
@@ -52,7 +54,8 @@ def fit_minmax(data: FitInput, *, centre: str = "mean") -> Calibration:
         raise CalibrationError(
             f"the samples hardly vary along {axis} ({100 * half_range[narrow] / half_range.max():.0f} % of the widest "
             f"axis's range): min/max cannot scale an axis the sensor was never turned along; tilt the sensor so both "
-            f"ends of {axis} face the field in turn"
+            f"ends of {axis} face the field in turn",
+            codes=("single_axis",),
         )
     offset = statistics.mean if centre == "mean" else 0.5 * (high + low)
     # B_cal = 2 (x − centre) / (max − min) on the unit sphere; scaled so that det(matrix) = 1.

@@ -73,7 +73,8 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
             raise CalibrationError(
                 f"the given field strength {known_field:.4g} moves the centre {shift:.4g} away from the free "
                 f"fit's (radius {fitted:.4g}): the samples contradict it; check that it is in the samples' unit, "
-                "or leave it out"
+                "or leave it out",
+                codes=("field_mismatch",),
             )
         return Calibration(
             method="sphere",
@@ -91,7 +92,8 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
     if not radius_squared_z > 0:
         raise CalibrationError(
             "the sphere fit found no real sphere (B² <= 0): the samples do not outline a sphere; "
-            "check that they are magnetometer readings taken while turning the sensor"
+            "check that they are magnetometer readings taken while turning the sensor",
+            codes=("no_ellipsoid",),
         )
     return Calibration(
         method="sphere",
@@ -121,7 +123,8 @@ def _check_radius(statistics: Statistics, centre_z: NDArray[np.float64], known_f
     if abs(radius - known_field) > RADIUS_TOLERANCE * known_field:
         raise CalibrationError(
             f"the samples lie {radius:.4g} from the best centre, not at the given field strength "
-            f"{known_field:.4g}: check that the field strength is in the samples' unit, or leave it out"
+            f"{known_field:.4g}: check that the field strength is in the samples' unit, or leave it out",
+            codes=("field_mismatch",),
         )
 
 
@@ -195,6 +198,7 @@ def _pinned_centre(
     if not np.all(np.linalg.eigvalsh(hessian) > 0):
         raise CalibrationError(
             "the sphere fit with a known field_strength found no minimum: the samples do not outline a sphere "
-            "of that radius; check the field_strength and its unit, or record while turning the sensor"
+            "of that radius; check the field_strength and its unit, or record while turning the sensor",
+            codes=("field_mismatch",),
         )
     return centre, iteration

@@ -34,5 +34,6 @@ def check_outlines_ellipsoid(statistics: Statistics, method: str) -> None:
             f"the samples do not outline an ellipsoid ({reason}), as "
             "every hard- and soft-iron distortion should: they cover too few directions, or the distortion "
             f"changed while recording; the {method} fit to them would mean nothing. Record again turning the "
-            "sensor through all attitudes, away from moving magnets"
+            "sensor through all attitudes, away from moving magnets",
+            codes=("no_ellipsoid",),
         )
