@@ -478,3 +478,24 @@ def test_apply_to_an_npz_streams_it(layout: str, tmp_path: Path) -> None:
         )
     np.testing.assert_allclose(corrected[:500], calibration.apply(samples[:500]), rtol=1e-12, atol=1e-9)
     np.testing.assert_array_equal(corrected[-500:], corrected[:500])
+
+
+@pytest.mark.external
+@pytest.mark.parametrize("command", ["calibrate", "inspect"])
+def test_a_command_printing_to_a_closed_pipe_exits_141(tmp_path: Path, command: str) -> None:
+    """rich's console exits 1 on a closed standard output by itself ("the data cannot support the fit"); magfit's
+    ends as every other closed pipe does: quietly, 141."""
+    import subprocess
+    import sys
+
+    data = _csv(tmp_path / "small.csv", _samples(2000))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    process = subprocess.Popen(
+        [sys.executable, "-c", MAIN, command, str(data)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env
+    )
+    assert process.stdout is not None and process.stderr is not None
+    process.stdout.close()  # as `| true` does: nobody reads
+    status = process.wait(timeout=120)
+    stderr = process.stderr.read().decode()
+    assert status == 141, stderr
+    assert "Traceback" not in stderr, stderr

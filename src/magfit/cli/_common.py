@@ -138,6 +138,16 @@ def warn(message: str) -> None:
 # ---------------------------------------------------------------------- output
 
 
+class _Console(Console):
+    """rich's Console, except that a closed standard output ends the command as every other write does: the
+    CLI's boundary turns the BrokenPipeError into a quiet exit 141 (rich's own handler exits 1, which means
+    "the data cannot support the fit")."""
+
+    def on_broken_pipe(self) -> None:
+        self.quiet = True
+        raise BrokenPipeError
+
+
 def console(*, stderr: bool = False) -> Console:
     """A rich console on stdout (or stderr), created per call so that redirected streams are honoured.
 
@@ -146,7 +156,7 @@ def console(*, stderr: bool = False) -> Console:
     """
     stream = sys.stderr if stderr else sys.stdout
     terminal = stream.isatty()
-    return Console(
+    return _Console(
         file=stream,
         markup=False,
         highlight=False,
