@@ -36,7 +36,7 @@ from ..fit import fit
 from ..methods import get_method
 from ..sources import Magnetometer, Source, log_kind, open_source
 from ..units import get_unit
-from .streaming import Nonfinite, Progress, fit_samples_file, no_progress, samples_for_fit
+from .streaming import Nonfinite, Progress, fit_samples_file, log_subsample, no_progress, samples_for_fit
 
 if TYPE_CHECKING:
     from ..geomag import Field  # (imported when used: the wmm extra)
@@ -145,7 +145,9 @@ class CompassCalibration:
 
     @property
     def rate_hz(self) -> float:
-        """Mean sample rate over the span (NaN without time stamps)."""
+        """Mean sample rate over the span (NaN without time stamps); a log read on a stride: the log's."""
+        if self.magnetometer is not None and self.subsample is not None and "stride:" in self.subsample:
+            return self.magnetometer.rate_hz
         span = self.span_s
         return (self.n_rows - 1) / span if self.n_rows > 1 and math.isfinite(span) and span > 0 else float("nan")
 
@@ -259,7 +261,8 @@ def calibrate_file(
         Fit an even subsample over directions (a long stay in one attitude does not pull the fit).
     max_samples : int or None
         Most samples an iterative method holds in memory (a larger samples file is fitted on an even
-        subsample); None: :func:`magfit.pipeline.streaming.memory_sample_limit`.
+        subsample; a log's compass with more records, by any method, on a regular stride of them);
+        None: :func:`magfit.pipeline.streaming.memory_sample_limit`.
     options : mapping or None
         The method's other keyword options, passed to :func:`magfit.fit`.
     progress : Progress
@@ -336,7 +339,9 @@ def calibrate_file(
         elif field_strength is not None:
             compass_options["field_strength"] = field_strength
         try:
-            compass = _calibrate_compass(source, magnetometer, method, compass_options, unit, even, say, date)
+            compass = _calibrate_compass(
+                source, magnetometer, method, compass_options, unit, even, say, date, max_samples=max_samples
+            )
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
@@ -370,6 +375,8 @@ def _calibrate_compass(
     even: bool,
     say: Callable[[str], None],
     date: datetime.date | str | None = None,
+    *,
+    max_samples: int | None = None,
 ) -> CompassCalibration:
     """Fit one magnetometer of a flight log or bag (docs/file-formats.md): its raw field, read by magfit.sources.
 
@@ -378,8 +385,9 @@ def _calibrate_compass(
     """
     path = source.path
     where = f"{path} ({magnetometer.id}, {magnetometer.description})"
+    limit, subsample = log_subsample(magnetometer.n_samples, max_samples, even)
     try:
-        read = source.read(magnetometer.id)
+        read = source.read(magnetometer.id, max_samples=limit)
     except DataFileError:
         for note in source.notes:
             say(f"{path} ({magnetometer.id}): {note}")
@@ -432,7 +440,7 @@ def _calibrate_compass(
         skipped_lines=(),
         file_format=f"{source.format}; {magnetometer.id}: {magnetometer.description}, {span}",
         streamed=False,
-        subsample="even=True" if even else None,
+        subsample=subsample,
         magnetometer=magnetometer,
         start_s=float(times.min()) if times.size else float("nan"),
         end_s=float(times.max()) if times.size else float("nan"),

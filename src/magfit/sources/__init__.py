@@ -311,7 +311,7 @@ def strided(read: LogSamples, max_samples: int | None) -> LogSamples:
         return read
     every = -(-n // max_samples)
     note = (
-        f"every {every}th sample kept ({len(range(0, n, every))} of {n}): the stream holds more than "
+        f"one sample in every {every} kept ({len(range(0, n, every))} of {n}): the stream holds more than "
         f"max_samples={max_samples}, so a regular stride over the whole recording is fitted"
     )
     return LogSamples(read.magnetometer, read.samples[::every], read.time_s[::every], read.columns, (*read.notes, note))

@@ -160,7 +160,7 @@ class DataFlashLog:
         self.skipped_bytes = 0
         self.truncated = False
         self._counts: dict[int, int] = {}
-        self._offsets: dict[int, NDArray[np.int64]] = {}
+        self._offsets: dict[int, NDArray[np.int64] | NDArray[np.uint32]] = {}
         # Bytes already in memory: every type's offsets kept (tests rewrite logs by them); a file: the wanted ones.
         self._everything = not isinstance(data, Path)
         self._indexed: set[str] = set(_INDEXED)
@@ -176,6 +176,14 @@ class DataFlashLog:
             message = f"{self.path}: cannot be read ({error.strerror}); check the file's permissions"
             raise DataFileError(message) from None
 
+    def _size(self) -> int:
+        if isinstance(self._source, Path):
+            try:
+                return self._source.stat().st_size
+            except OSError:
+                return 0
+        return len(self._source)
+
     def _walk(self, names: set[str] | None, *, first: bool) -> None:
         """One pass over the message headers, in blocks: the offsets of the messages named ``names`` (None:
         of every message, FMT too); on the ``first`` pass the formats, the counts, and the damage (bytes
@@ -184,6 +192,8 @@ class DataFlashLog:
         lengths[_FMT_TYPE] = _FMT_LENGTH
         counts = [0] * 256
         keep: dict[int, array[int]] = {}
+        wide = self._size() >= 1 << 32  # offsets in 4 bytes each, 8 beyond 4 GB
+        code, kind = ("q", np.int64) if wide else ("I", np.uint32)
         wanted = [names is None] * 256
         formats: dict[int, _Format] = {}
         skipped = 0
@@ -235,7 +245,7 @@ class DataFlashLog:
                             if wanted[type_id]:
                                 offsets = keep.get(type_id)
                                 if offsets is None:
-                                    offsets = keep[type_id] = array("q")
+                                    offsets = keep[type_id] = array(code)
                                 offsets.append(base + pos)
                             pos = end
                             continue
@@ -261,9 +271,9 @@ class DataFlashLog:
             self._counts = {type_id: count for type_id, count in enumerate(counts) if count}
         for type_id in set(formats) | set(keep):
             if names is None or (type_id in formats and formats[type_id].name in names):
-                self._offsets[type_id] = np.frombuffer(keep.get(type_id, array("q")), dtype=np.int64)
+                self._offsets[type_id] = np.frombuffer(keep.get(type_id, array(code)), dtype=kind)
 
-    def _offsets_of(self, name: str) -> NDArray[np.int64]:
+    def _offsets_of(self, name: str) -> NDArray[np.int64] | NDArray[np.uint32]:
         """The byte offsets of every message ``name``: walked again for a type the first walk did not keep."""
         if not self._everything and name not in self._indexed:
             group = next((g for g in _WALKED_TOGETHER if name in g), frozenset((name,)))
@@ -328,7 +338,7 @@ class DataFlashLog:
         assert fmt.dtype is not None
         return fmt.dtype
 
-    def _gather(self, offsets: NDArray[np.int64], skip: int, width: int) -> NDArray[np.uint8]:
+    def _gather(self, offsets: NDArray[np.int64] | NDArray[np.uint32], skip: int, width: int) -> NDArray[np.uint8]:
         """``width`` bytes at ``offsets + skip``, an (n, width) array: read window by window (at most
         :data:`_BLOCK` bytes and :data:`_GATHER` messages at a time), so the index never grows with the log."""
         out = np.empty((len(offsets), width), dtype=np.uint8)
@@ -344,7 +354,7 @@ class DataFlashLog:
                 end = int(offsets[j - 1]) + skip + width
                 handle.seek(start)
                 window = np.frombuffer(handle.read(end - start), dtype=np.uint8)
-                out[i:j] = window[(offsets[i:j] - start)[:, None] + columns]
+                out[i:j] = window[(offsets[i:j].astype(np.int64) - start)[:, None] + columns]
                 i = j
         return out
 
@@ -724,7 +734,7 @@ def _read(
     notes = [*magnetometer.notes]
     if every > 1:
         notes.append(
-            f"every {every}th record read ({len(records)} of {stream.count}): the compass logged more than "
+            f"one record in every {every} read ({len(records)} of {stream.count}): the compass logged more than "
             f"max_samples={max_samples}, so a regular stride over the whole log is fitted"
         )
     notes += undone.notes
