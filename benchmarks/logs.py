@@ -93,7 +93,7 @@ def header_walk(path: Path) -> int:
     """The floor: magfit's one pass over the DataFlash message headers, no payload decoded."""
     from magfit.sources.dataflash import DataFlashLog
 
-    return sum(DataFlashLog(path, path.read_bytes()).names().values())
+    return sum(DataFlashLog(path, path).names().values())
 
 
 def best_of(functions: dict[str, Callable[[Path], int]], path: Path, repeat: int) -> dict[str, float]:
@@ -256,18 +256,23 @@ def _repeat(
     return copies
 
 
-def big_rows(folder: Path, size_mb: float, before: Path | None) -> list[dict[str, Any]]:
+def big_rows(folder: Path, size_mb: float, before: Path | None, dense_mb: float) -> list[dict[str, Any]]:
     """The 1 GB case: a DataFlash log and a ULog built by repeating real logs' data messages, each read in a
     fresh interpreter as ``calibrate`` reads it (at most 500 000 samples a compass: the default), against a
     plain read of its bytes and the interpreter with the readers imported, in the same run; ``before``: a
-    ``src`` folder of another checkout measured the same way on a log a tenth the size (the old readers held
-    the whole log)."""
+    ``src`` folder of another checkout measured the same way, on the 1 GB logs and on logs a tenth the size.
+    A third ULog, ``dense_mb`` of the test suite's synthetic log repeated (two sensor_mag at 50 Hz), shows the
+    thinning of a topic beyond 2^19 messages (the real sample log logs its compass at about 1 Hz)."""
     rows: list[dict[str, Any]] = []
-    for source, build, suffix in (
-        (BIG_DATAFLASH, build_big_dataflash, ".bin"),
-        (BIG_ULOG, build_big_ulog, ".ulg"),
+    dense = synthetic_logs(folder, 30_000)[0]  # sensor_mag at 50 Hz: the real ULog logs its compass at 1 Hz
+    for source, build, suffix, largest in (
+        (BIG_DATAFLASH, build_big_dataflash, ".bin", size_mb),
+        (BIG_ULOG, build_big_ulog, ".ulg", size_mb),
+        (dense, build_big_ulog, ".ulg", dense_mb),
     ):
-        sizes = [size_mb] + ([size_mb / 10] if before is not None else [])
+        if not largest:
+            continue
+        sizes = [largest] + ([largest / 10] if before is not None and source != dense else [])
         for mb in sizes:
             path = folder / f"big_{source.stem}_{mb:.0f}MB{suffix}"
             started = time.perf_counter()
@@ -278,9 +283,13 @@ def big_rows(folder: Path, size_mb: float, before: Path | None) -> list[dict[str
             imported = measure(path, "import")
             readers = [("magfit (this tree)", None)] + ([("magfit (before)", before)] if before is not None else [])
             for label, src in readers:
-                for what in (
-                    ("all",) if src is not None else ("500000", "all") if mb != size_mb else ("500000", "calibrate")
-                ):
+                if src is not None:
+                    whats: tuple[str, ...] = ("all",)
+                elif mb != largest or source == dense:
+                    whats = ("500000", "all")
+                else:
+                    whats = ("500000", "calibrate")
+                for what in whats:
                     got = measure(path, what, src)
                     row = {
                         "file": path.name,
@@ -334,7 +343,10 @@ def write_big(rows: list[dict[str, Any]], output: Path) -> str:
         "Files: the real logs' data messages repeated, each copy's time stamps moved on by the log's span "
         "(`build_big_dataflash`, `build_big_ulog`): copter33_log171_trimmed.bin (a real ArduCopter 3.3 flight, "
         "CC BY-SA 3.0, tests/data/ardupilot_real/README.md) and PX4's sample_log_small.ulg (pyulog's repository, "
-        "BSD-3-Clause, tests/data/px4_pyulog/LICENSE). Built in a temporary folder, deleted after.",
+        "BSD-3-Clause, tests/data/px4_pyulog/LICENSE), whose compass is logged at about 1 Hz (14 000 samples "
+        "in 1 GB); and, for a topic beyond the 2^19 messages a ULog reader keeps, the test suite's synthetic "
+        "ULog (`synthetic_30000`: two sensor_mag at 50 Hz, vehicle_magnetometer, vehicle_attitude) repeated. "
+        "Built in a temporary folder, deleted after.",
         "",
         "Reading: `open_source(path, everything=False)` and `Source.read(id, max_samples=...)` of every usable "
         "compass (`all`: `Source.read(id)`, as the readers before took it), in a fresh interpreter; peak: its "
@@ -358,11 +370,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--output", type=Path, default=RESULTS / "logs.md")
     parser.add_argument("--big", action="store_true", help="only the 1 GB case (results: logs-big.md)")
     parser.add_argument("--big-mb", type=float, default=1000.0, help="size of the big logs, MB")
-    parser.add_argument("--before", type=Path, help="a src folder of another checkout, measured on a log 1/10 the size")
+    parser.add_argument("--before", type=Path, help="a src folder of another checkout, measured the same way")
+    parser.add_argument("--dense-mb", type=float, default=150.0, help="size of the dense synthetic ULog, MB (0: none)")
     args = parser.parse_args(argv)
     if args.big:
         with tempfile.TemporaryDirectory() as folder:
-            rows = big_rows(Path(folder), args.big_mb, args.before)
+            rows = big_rows(Path(folder), args.big_mb, args.before, args.dense_mb)
         return 0 if write_big(rows, RESULTS / "logs-big.md") == "PASS" else 1
     try:
         import pymavlink  # noqa: F401

@@ -209,3 +209,27 @@ def test_a_big_compressed_dataflash_log_is_read_in_bounded_memory(tmp_path: Path
     assert copies > 400 and len(got["samples"]) == 3
     assert all(400_000 < n <= 500_000 for n in got["samples"]), got  # one record in every 2 of ~ 990 000
     assert got["peak_mb"] < 250, got
+
+
+def test_a_tlog_too_big_for_the_memory_is_refused_with_the_reason(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A tlog is scanned whole (about 8 bytes of memory per byte of it): beyond half the memory available it is
+    # refused before anything is read, with how to cut it, exit 2.
+    from magfit.sources import tlog
+
+    path = DATA / "ardupilot_real" / "fs_batt_2016.tlog"
+    assert open_source(path).magnetometers  # read when the memory allows
+    monkeypatch.setattr(tlog, "_available_memory", lambda: 300_000)
+    with pytest.raises(magfit.DataFileError, match="scans a tlog whole") as refused:
+        open_source(path)
+    assert "mavlogdump.py --types RAW_IMU" in str(refused.value)
+    run = CliRunner().invoke(cli, ["calibrate", str(path)])
+    assert run.exit_code == 2 and "scans a tlog whole" in run.output
+
+
+def test_a_zstd_compressed_ulog_is_read_as_the_plain_one(tmp_path: Path) -> None:
+    zstandard = pytest.importorskip("zstandard")
+    path = tmp_path / "log.ulg"
+    write_log(path)
+    packed = tmp_path / "log.ulg.zst"
+    packed.write_bytes(zstandard.ZstdCompressor().compress(path.read_bytes()))
+    _same(_everything(open_source(path)), _everything(open_source(packed)))
