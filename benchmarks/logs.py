@@ -93,7 +93,10 @@ def header_walk(path: Path) -> int:
     """The floor: magfit's one pass over the DataFlash message headers, no payload decoded."""
     from magfit.sources.dataflash import DataFlashLog
 
-    return sum(DataFlashLog(path, path).names().values())
+    try:
+        return sum(DataFlashLog(path, path).names().values())  # walked from the file, in blocks
+    except TypeError:  # a checkout before the streamed reader (--before): it took the file's bytes
+        return sum(DataFlashLog(path, path.read_bytes()).names().values())
 
 
 def best_of(functions: dict[str, Callable[[Path], int]], path: Path, repeat: int) -> dict[str, float]:
