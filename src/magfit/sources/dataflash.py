@@ -2,8 +2,10 @@
 
 The format describes itself. Every message is ``0xA3 0x95 <type>`` and a packed little-endian payload; the
 FMT messages (type 128, 89 bytes) give each type's name, length, field types (one letter each) and field
-names. This reader walks the messages once to learn their formats and where each one starts, then reads
-every message of a wanted type as one NumPy structured array. It is a small reader of the format, not
+names. This reader walks the messages once, in blocks, to learn their formats and where the messages a fit
+reads start, then reads those of a wanted type (all, or a regular stride of a long compass) as one NumPy
+structured array, window by window: the memory grows with the records read, not with the log
+(:class:`DataFlashLog`). It is a small reader of the format, not
 pymavlink's DFReader: that one is a 7 MB wheel (93 MB installed, with lxml) to read six messages, and
 magfit reads the same MAG and PARM messages about 10x faster (docs/file-formats.md has the measurement).
 

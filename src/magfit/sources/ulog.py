@@ -153,20 +153,27 @@ class _Thinned(bytearray):
 
     def __init__(self, cap: int) -> None:
         super().__init__()
-        self.cap, self.every, self.seen, self.size, self.last = cap, 1, 0, 0, b""
+        self.cap, self.every, self.seen, self.last = cap, 1, 0, b""
+        self.full = 0  # bytes of ``cap`` messages, once the first one's size is known
         self.timestamp_offset = 0  # where the uint64 timestamp starts in a payload
 
     def __iadd__(self, payload: Any) -> _Thinned:  # type: ignore[misc]
-        if self.seen % self.every == 0:
-            self.size = self.size or len(payload)
-            if len(self) >= self.cap * self.size:  # full: every other one kept, the stride doubled
-                rows = np.frombuffer(bytes(self), dtype=np.uint8).reshape(-1, self.size)
+        # Called once per message while pyulog reads: kept short (a stride that is a power of two: a mask).
+        seen = self.seen
+        self.seen = seen + 1
+        self.last = payload
+        if seen & (self.every - 1):
+            return self
+        if len(self) >= self.full:
+            if not self.full:
+                self.full = self.cap * len(payload)
+            else:  # full: every other one kept, the stride doubled
+                rows = np.frombuffer(bytes(self), dtype=np.uint8).reshape(-1, len(payload))
                 self[:] = rows[::2].tobytes()
                 self.every *= 2
-            if self.seen % self.every == 0:
-                self.extend(payload)
-        self.seen += 1
-        self.last = payload
+                if seen & (self.every - 1):
+                    return self
+        self.extend(payload)
         return self
 
 
@@ -180,12 +187,18 @@ def _parse(path: Path, file: Path, topics: list[str] | None, caps: dict[str, int
     pyulog = _pyulog()
     buffers: dict[int, _Thinned] = {}
     limits = dict(caps or {})
+    try:
+        size = file.stat().st_size
+    except OSError:
+        size = 1 << 62  # (reported by the parse below)
 
     class _AddLogged(pyulog.ULog._MessageAddLogged):  # type: ignore[name-defined]
         def __init__(self, *args: Any) -> None:
             super().__init__(*args)
             cap = limits.get(self.message_name, _LISTED if topics is None else None)
-            if cap is not None:
+            # A file too small to hold more than ``cap`` of its messages (5 bytes of header each) needs no
+            # thinning: pyulog's own buffer then, without a Python call per message.
+            if cap is not None and size // (self.dtype.itemsize + 5) > cap:
                 self.buffer = buffers[self.msg_id] = _Thinned(cap)
                 self.buffer.timestamp_offset = self.timestamp_offset
 
