@@ -233,13 +233,17 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
 
     ``everything=False`` reads only the magnetometer topics (nothing listed in ``other``); :meth:`read_motion`
     then reads the file again for the attitude and IMU topics. Of each magnetometer and GNSS topic instance
-    at most :data:`_KEPT` messages are kept, a regular stride beyond (said in the samples' notes); of the
-    topics only listed, :data:`_LISTED` (their counts stay exact): the memory does not grow with the log.
+    at most :data:`_KEPT` messages are kept, a regular stride beyond (said in the samples' notes), and of
+    the motion topics when ``everything``; of the topics only listed, :data:`_LISTED` (their counts stay
+    exact): the memory does not grow with the log.
     The sensor_combined topic is read beside the magnetometers, in case an older PX4 logged its compass
     only there (one pass, not a second parse).
     """
     caps = dict.fromkeys((*_FIELDS, *_GPS_TOPICS), _KEPT)
-    caps["sensor_combined"] = _LISTED
+    if everything:  # the motion topics kept as the magnetometers' (read_motion reads them again if thinned)
+        caps.update(dict.fromkeys(_MOTION_TOPICS, _KEPT))
+    else:
+        caps["sensor_combined"] = _LISTED
     ulog = _parse(path, file, None if everything else [*_FIELDS, *_GPS_TOPICS, "sensor_combined"], caps)
     # A parameter of an unexpected type (bytes in a damaged log) is dropped: the stream it concerns is then
     # refused for want of it, rather than undone with a wrong value.
