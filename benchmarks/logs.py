@@ -132,7 +132,7 @@ BIG_DATAFLASH = DATA / "ardupilot_real" / "copter33_log171_trimmed.bin"
 BIG_ULOG = DATA / "px4_pyulog" / "sample_log_small.ulg"
 
 _MEASURE = """
-import json, resource, sys, time
+import json, sys, time
 path, what = sys.argv[1], sys.argv[2]
 start = time.perf_counter()
 n = 0
@@ -160,7 +160,9 @@ else:  # magfit: open_source, then every usable compass read as calibrate reads 
             else:
                 n += len(source.read(magnetometer.id, max_samples=int(what)).samples)
 seconds = time.perf_counter() - start
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
+# The peak of this program alone: VmHWM (ru_maxrss keeps the parent's resident size from before the exec).
+with open("/proc/self/status") as status:
+    peak = next(int(line.split()[1]) for line in status if line.startswith("VmHWM:")) / 1024  # kB
 print(json.dumps({"seconds": seconds, "peak_mb": peak, "samples": n}))
 """
 
@@ -353,7 +355,8 @@ def write_big(rows: list[dict[str, Any]], output: Path) -> str:
         "",
         "Reading: `open_source(path, everything=False)` and `Source.read(id, max_samples=...)` of every usable "
         "compass (`all`: `Source.read(id)`, as the readers before took it), in a fresh interpreter; peak: its "
-        "`ru_maxrss`. `calibrate`: the whole default `magfit.calibrate_file(path)` (auto, every compass; its "
+        "`VmHWM` (`ru_maxrss` would carry the benchmark's own resident size from before the exec). `calibrate`: "
+        "the whole default `magfit.calibrate_file(path)` (auto, every compass; its "
         "samples: those fitted, 0 when every compass was refused). References in the same run: a plain read of the "
         "file's bytes in 8 MB blocks (the time ratio), and the interpreter with magfit's readers and pyulog "
         "imported, reading nothing (import MB: the floor under every peak).",

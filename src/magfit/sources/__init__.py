@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import DataFileError
+from ..errors import DataFileError, OptionError
 
 if TYPE_CHECKING:
     from .motion import Motion
@@ -271,12 +271,14 @@ class Source:
         ------
         DataFileError
             As :meth:`magnetometer`, or the stream's ``problem`` (a calibration that cannot be undone).
+        OptionError
+            ``max_samples`` below 1.
         """
         chosen = self.magnetometer(sensor)
         if chosen.problem is not None:
             raise DataFileError(f"{self.path}: {chosen.id} cannot be fitted: {chosen.problem}")
         if max_samples is not None and max_samples < 1:
-            raise ValueError(f"max_samples must be a positive number of samples, not {max_samples}")
+            raise OptionError(f"max_samples must be a positive number of samples, not {max_samples}")
         if self._bounded_reader is not None:
             return self._bounded_reader(chosen, max_samples)
         if self._reader is None:
