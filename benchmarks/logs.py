@@ -2,6 +2,8 @@
 
     .venv/bin/python benchmarks/logs.py             # about half a minute on 2 cores
     .venv/bin/python benchmarks/logs.py --small     # the committed fixtures only, a few seconds
+    .venv/bin/python benchmarks/logs.py --big       # 1 GB logs: peak memory and time, about 3 minutes
+    .venv/bin/python benchmarks/logs.py --big --before /path/to/other/checkout/src   # and a before, ~6 minutes
 
 pymavlink is no magfit dependency; install it *outside* the project's virtual environment, since it ships a
 script ``magfit.py`` that, once in ``.venv/bin``, shadows the magfit package for ``.venv/bin/magfit``:
@@ -25,6 +27,11 @@ with three compasses; ``synthetic/ulog_pyulog_loops.ulg`` is a damaged log for t
 and, without ``--small``, larger synthetic logs written here by the test suite's writers
 (``tests/test_sources_ulog.py``, ``tests/test_sources_dataflash.py``). Results:
 ``benchmarks/results/logs.md`` and ``logs.json``.
+
+``--big`` (issue 24's target: a 1 GB log read in about 300 MB at most): a DataFlash log and a ULog of 1 GB
+built in a temporary folder by repeating a real log's data messages (time stamps moved on each copy), read in
+a fresh interpreter each as ``calibrate`` reads them, their peak resident memory and time beside a plain read
+of the file's bytes in the same run. Results: ``benchmarks/results/logs-big.md`` and ``.json``.
 """
 
 from __future__ import annotations
