@@ -99,6 +99,7 @@ def test_max_samples_reads_a_regular_stride_of_each_compass(tmp_path: Path) -> N
         np.testing.assert_array_equal(stride.samples, whole.samples[::4])
         np.testing.assert_array_equal(stride.time_s, whole.time_s[::4])
         assert any("one record in every 4 read (375 of 1500)" in note for note in stride.notes)
+        assert (stride.every, whole.every) == (4, 1)
         truth = simulations[slot].truth
         fitted = magfit.fit(stride.samples, method="ellipsoid")
         np.testing.assert_allclose(fitted.offset, truth.offset, atol=3.0)
@@ -148,6 +149,13 @@ def test_a_ulog_topic_beyond_the_cap_is_kept_at_a_regular_stride(
     np.testing.assert_array_equal(kept.samples, full.samples[::32])
     assert any("one message in every 32 kept while the log was read (47 of 1500)" in n for n in kept.notes)
     np.testing.assert_allclose(full.samples, simulation.samples, atol=1e-5)
+    assert kept.every == 32 and thinned.read("sensor_mag/0", max_samples=20).every == 96
+    # calibrate says the stride the reader kept, not one computed from max_samples
+    compass = magfit.calibrate_file(path, "ellipsoid", sensor="sensor_mag/0", force=True).compasses[0]
+    assert (
+        compass.subsample
+        == "stride: one in every 32 of 1500 records read, more than the log's reader keeps of one topic"
+    )
 
 
 def test_an_older_px4_log_is_parsed_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -36,7 +36,15 @@ from ..fit import fit
 from ..methods import get_method
 from ..sources import Magnetometer, Source, log_kind, open_source
 from ..units import get_unit
-from .streaming import Nonfinite, Progress, fit_samples_file, log_subsample, no_progress, samples_for_fit
+from .streaming import (
+    Nonfinite,
+    Progress,
+    fit_samples_file,
+    log_read_limit,
+    log_subsample,
+    no_progress,
+    samples_for_fit,
+)
 
 if TYPE_CHECKING:
     from ..geomag import Field  # (imported when used: the wmm extra)
@@ -385,13 +393,13 @@ def _calibrate_compass(
     """
     path = source.path
     where = f"{path} ({magnetometer.id}, {magnetometer.description})"
-    limit, subsample = log_subsample(magnetometer.n_samples, max_samples, even)
     try:
-        read = source.read(magnetometer.id, max_samples=limit)
+        read = source.read(magnetometer.id, max_samples=log_read_limit(max_samples))
     except DataFileError:
         for note in source.notes:
             say(f"{path} ({magnetometer.id}): {note}")
         raise
+    subsample = log_subsample(magnetometer.n_samples, read.every, max_samples, even)
     # Told before a refusal too: they often say why (a compass logged at 1 Hz, a calibration undone).
     notes = tuple(f"{path} ({magnetometer.id}): {note}" for note in (*source.notes, *read.notes))
     for note in notes:

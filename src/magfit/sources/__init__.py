@@ -136,6 +136,9 @@ class LogSamples:
         The fields the samples came from (``x, y, z`` or ``MagX, MagY, MagZ``).
     notes : tuple of str
         What was done to them (the calibration undone, and with which parameters).
+    every : int
+        One record in every ``every`` of the stream was read (``max_samples``, or a reader's own bound on
+        a long log; the notes say which); 1 when every record was.
     """
 
     magnetometer: Magnetometer
@@ -143,6 +146,7 @@ class LogSamples:
     time_s: NDArray[np.float64]
     columns: tuple[str, ...]
     notes: tuple[str, ...] = ()
+    every: int = 1
 
 
 @dataclass(frozen=True)
@@ -316,7 +320,14 @@ def strided(read: LogSamples, max_samples: int | None) -> LogSamples:
         f"one sample in every {every} kept ({len(range(0, n, every))} of {n}): the stream holds more than "
         f"max_samples={max_samples}, so a regular stride over the whole recording is fitted"
     )
-    return LogSamples(read.magnetometer, read.samples[::every], read.time_s[::every], read.columns, (*read.notes, note))
+    return LogSamples(
+        read.magnetometer,
+        read.samples[::every],
+        read.time_s[::every],
+        read.columns,
+        (*read.notes, note),
+        every=read.every * every,
+    )
 
 
 def log_kind(path: str | os.PathLike[str]) -> str | None:

@@ -754,6 +754,7 @@ def _read(
         time_s=times[finite],
         columns=("MagX", "MagY", "MagZ"),
         notes=tuple(notes),
+        every=every,
     )
 
 

@@ -312,7 +312,7 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
                 f"one message in every {data.magfit_every} kept while the log was read ({len(samples)} of "
                 f"{data.magfit_seen}): the topic holds more than {_KEPT}, so a regular stride over the whole log",
             )
-        return LogSamples(magnetometer, samples[finite], times[finite], columns, notes)
+        return LogSamples(magnetometer, samples[finite], times[finite], columns, notes, every=data.magfit_every)
 
     def motion(magnetometer: Magnetometer) -> Motion:
         if not motion_log:  # opened for the magnetometers only: the motion topics are read now, once
