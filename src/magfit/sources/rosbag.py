@@ -512,7 +512,7 @@ def _fix(message: Any, bag_time: int) -> tuple[float, float, float, float] | Non
 
 class _Collector:
     """The messages of one topic, gathered into arrays: packed as they come (8 bytes a number, not a Python
-    object each), so a long bag's compass and IMU take 40 and 120 bytes a message."""
+    object each), so a long bag's compass and IMU take 40 and 96 bytes a message."""
 
     def __init__(self) -> None:
         self.frames: list[str] = []
