@@ -266,7 +266,8 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     type=click.IntRange(min=10),
     default=None,
     help="Most samples an iterative method (ml, robust, auto) holds in memory; a larger file is fitted on an "
-    "even subsample of this many. Default: 500 000, fewer when memory is short.",
+    "even subsample of this many; a flight log's compass with more records is read on a regular stride of "
+    "them (any method). Default: 500 000, fewer when memory is short.",
 )
 @click.option(
     "--system-id",
@@ -648,7 +649,8 @@ def _fitted_on(run: CompassCalibration) -> list[tuple[str, str]]:
         return []
     used = run.calibration.n_samples
     why = option_wording(run.subsample)  # even=True -> --even, max_samples=N -> --max-samples N
-    return [("fitted on", f"an even subsample: {used} of {run.n_rows - run.n_skipped} samples ({why})")]
+    kind = "a regular stride" if run.subsample.startswith("stride") else "an even subsample"  # a long log's
+    return [("fitted on", f"{kind}: {used} of {run.n_rows - run.n_skipped} samples ({why})")]
 
 
 def _log_lines(run: CompassCalibration) -> list[tuple[str, str]]:

@@ -38,7 +38,15 @@ from ..methods import get_method
 from ..sources import Magnetometer, Source, log_kind, open_source
 from ..units import field_unit_reason, get_unit
 from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, turned, vehicle_advice
-from .streaming import Nonfinite, Progress, fit_samples_file, no_progress, samples_for_fit
+from .streaming import (
+    Nonfinite,
+    Progress,
+    fit_samples_file,
+    log_read_limit,
+    log_subsample,
+    no_progress,
+    samples_for_fit,
+)
 from .table import StreamSpec
 
 if TYPE_CHECKING:
@@ -159,7 +167,9 @@ class CompassCalibration:
 
     @property
     def rate_hz(self) -> float:
-        """Mean sample rate over the span (NaN without time stamps)."""
+        """Mean sample rate over the span (NaN without time stamps); a log read on a stride: the log's."""
+        if self.magnetometer is not None and self.subsample is not None and "stride:" in self.subsample:
+            return self.magnetometer.rate_hz
         span = self.span_s
         return (self.n_rows - 1) / span if self.n_rows > 1 and math.isfinite(span) and span > 0 else float("nan")
 
@@ -288,7 +298,8 @@ def calibrate_file(
         Fit an even subsample over directions (a long stay in one attitude does not pull the fit).
     max_samples : int or None
         Most samples an iterative method holds in memory (a larger samples file is fitted on an even
-        subsample); None: :func:`magfit.pipeline.streaming.memory_sample_limit`.
+        subsample; a log's compass with more records, by any method, on a regular stride of them);
+        None: :func:`magfit.pipeline.streaming.memory_sample_limit`.
     options : mapping or None
         The method's other keyword options, passed to :func:`magfit.fit`.
     progress : Progress
@@ -400,7 +411,9 @@ def calibrate_file(
         elif field_strength is not None:
             compass_options["field_strength"] = field_strength
         try:
-            compass = _calibrate_compass(source, magnetometer, method, compass_options, unit, even, say, date)
+            compass = _calibrate_compass(
+                source, magnetometer, method, compass_options, unit, even, say, date, max_samples=max_samples
+            )
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
@@ -438,6 +451,8 @@ def _calibrate_compass(
     even: bool,
     say: Callable[[str], None],
     date: datetime.date | str | None = None,
+    *,
+    max_samples: int | None = None,
 ) -> CompassCalibration:
     """Fit one magnetometer of a flight log or bag (docs/file-formats.md): its raw field, read by magfit.sources.
 
@@ -447,11 +462,12 @@ def _calibrate_compass(
     path = source.path
     where = f"{path} ({magnetometer.id}, {magnetometer.description})"
     try:
-        read = source.read(magnetometer.id)
+        read = source.read(magnetometer.id, max_samples=log_read_limit(max_samples))
     except DataFileError:
         for note in source.notes:
             say(f"{path} ({magnetometer.id}): {note}")
         raise
+    subsample = log_subsample(magnetometer.n_samples, read.every, max_samples, even)
     # Told before a refusal too: they often say why (a compass logged at 1 Hz, a calibration undone).
     notes = tuple(f"{path} ({magnetometer.id}): {note}" for note in (*source.notes, *read.notes))
     for note in notes:
@@ -511,7 +527,7 @@ def _calibrate_compass(
         skipped_lines=(),
         file_format=f"{source.format}; {magnetometer.id}: {magnetometer.description}, {span}",
         streamed=False,
-        subsample="even=True" if even else None,
+        subsample=subsample,
         magnetometer=magnetometer,
         start_s=float(times.min()) if times.size else float("nan"),
         end_s=float(times.max()) if times.size else float("nan"),

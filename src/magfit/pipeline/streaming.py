@@ -165,6 +165,32 @@ def memory_sample_limit() -> int:
     return min(DEFAULT_FIT_SAMPLES, max(100_000, available // 2 // BYTES_PER_FIT_SAMPLE))
 
 
+def log_read_limit(max_samples: int | None) -> int:
+    """The most records a log's compass is read with: ``max_samples``, default :func:`memory_sample_limit`.
+
+    A log is read into memory (the fit of a log's compass holds its samples, with their stamps for the
+    methods that align the log's other streams), so every method is bounded as the iterative fit of a
+    samples file is, by a regular stride over the whole log (:meth:`magfit.sources.Source.read`).
+    """
+    return memory_sample_limit() if max_samples is None else max_samples
+
+
+def log_subsample(n_records: int, every: int, max_samples: int | None, even: bool) -> str | None:
+    """What ``CompassCalibration.subsample`` says of a log's compass read one record in every ``every``
+    (``LogSamples.every``) of its ``n_records``; None when every record was read and ``even`` is off."""
+    if every <= 1:
+        return "even=True" if even else None
+    limit = log_read_limit(max_samples)
+    bound = f"stride: one in every {every} of {n_records} records read, "
+    if n_records > limit:
+        bound += f"more than max_samples={limit}"
+        if max_samples is None:
+            bound += f", the default: {DEFAULT_FIT_SAMPLES:,} or half the available memory".replace(",", " ")
+    else:
+        bound += "more than the log's reader keeps of one topic"
+    return f"even=True; {bound}" if even else bound
+
+
 def _estimated_rows(path: Path) -> int:
     """Data rows in ``path``, estimated without reading it all: exact for npy, from the line lengths for text."""
     from ..io import sniff

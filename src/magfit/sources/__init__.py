@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import DataFileError
+from ..errors import DataFileError, OptionError
 
 if TYPE_CHECKING:
     from .motion import Motion
@@ -45,6 +45,7 @@ __all__ = [
     "log_kind",
     "median_position",
     "open_source",
+    "strided",
 ]
 
 #: First bytes of a PX4 ULog file (the version byte and the timestamp follow).
@@ -135,6 +136,9 @@ class LogSamples:
         The fields the samples came from (``x, y, z`` or ``MagX, MagY, MagZ``).
     notes : tuple of str
         What was done to them (the calibration undone, and with which parameters).
+    every : int
+        One record in every ``every`` of the stream was read (``max_samples``, or a reader's own bound on
+        a long log; the notes say which); 1 when every record was.
     """
 
     magnetometer: Magnetometer
@@ -142,6 +146,7 @@ class LogSamples:
     time_s: NDArray[np.float64]
     columns: tuple[str, ...]
     notes: tuple[str, ...] = ()
+    every: int = 1
 
 
 @dataclass(frozen=True)
@@ -224,6 +229,11 @@ class Source:
     position: Position | None = None
     _reader: Callable[[Magnetometer], LogSamples] | None = field(default=None, repr=False, compare=False)
     _motion: Callable[[Magnetometer], Motion] | None = field(default=None, repr=False, compare=False)
+    #: A reader that reads only a regular stride of a long stream's records (``max_samples``), when the
+    #: format can (DataFlash, ULog); other sources are read whole and thinned after.
+    _bounded_reader: Callable[[Magnetometer, int | None], LogSamples] | None = field(
+        default=None, repr=False, compare=False
+    )
 
     def magnetometer(self, sensor: str | None) -> Magnetometer:
         """The magnetometer ``sensor`` names (its id, or its device id), or the only usable one when None.
@@ -254,20 +264,30 @@ class Source:
             f"--sensor ID (one of {ids})"
         )
 
-    def read(self, sensor: str | None = None) -> LogSamples:
+    def read(self, sensor: str | None = None, *, max_samples: int | None = None) -> LogSamples:
         """The samples of the magnetometer ``sensor`` names (see :meth:`magnetometer`).
+
+        ``max_samples``: at most this many, a regular stride over the whole recording (every k-th record, k
+        the least that keeps within it; the notes say so); None reads every one. A DataFlash log or a ULog
+        reads only those records, so the memory grows with ``max_samples``, not with the log.
 
         Raises
         ------
         DataFileError
             As :meth:`magnetometer`, or the stream's ``problem`` (a calibration that cannot be undone).
+        OptionError
+            ``max_samples`` below 1.
         """
         chosen = self.magnetometer(sensor)
         if chosen.problem is not None:
             raise DataFileError(f"{self.path}: {chosen.id} cannot be fitted: {chosen.problem}")
+        if max_samples is not None and max_samples < 1:
+            raise OptionError(f"max_samples must be a positive number of samples, not {max_samples}")
+        if self._bounded_reader is not None:
+            return self._bounded_reader(chosen, max_samples)
         if self._reader is None:
             raise DataFileError(f"{self.path}: is a samples file; read it with magfit.io.read_samples")
-        return self._reader(chosen)
+        return strided(self._reader(chosen), max_samples)
 
     def read_motion(self, sensor: str | None = None) -> Motion:
         """The samples of magnetometer ``sensor`` with the vehicle's attitude, gyroscope and accelerometer at
@@ -287,6 +307,27 @@ class Source:
                 "the magnetometer; give a flight log or a bag"
             )
         return self._motion(chosen)
+
+
+def strided(read: LogSamples, max_samples: int | None) -> LogSamples:
+    """``read`` thinned to a regular stride of at most ``max_samples`` samples (every k-th), said in its notes;
+    ``read`` itself when it holds no more."""
+    n = len(read.samples)
+    if max_samples is None or n <= max_samples:
+        return read
+    every = -(-n // max_samples)
+    note = (
+        f"one sample in every {every} kept ({len(range(0, n, every))} of {n}): the stream holds more than "
+        f"max_samples={max_samples}, so a regular stride over the whole recording is fitted"
+    )
+    return LogSamples(
+        read.magnetometer,
+        read.samples[::every],
+        read.time_s[::every],
+        read.columns,
+        (*read.notes, note),
+        every=read.every * every,
+    )
 
 
 def log_kind(path: str | os.PathLike[str]) -> str | None:

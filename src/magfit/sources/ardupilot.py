@@ -365,7 +365,9 @@ def undo_records(
         field = field - np.where(np.isfinite(motor), motor, np.nan)
     samples = np.full((n, 3), np.nan)
     settings = np.column_stack([diagonals, offdiagonals, scale])
-    for setting in np.unique(settings, axis=0):
+    changed = np.ones(n, dtype=bool)  # the settings change rarely: the unique ones are among the runs' first rows
+    changed[1:] = np.any(settings[1:] != settings[:-1], axis=1)
+    for setting in np.unique(settings[changed], axis=0):
         rows = np.all(settings == setting, axis=1)
         samples[rows] = undo_calibration(
             field[rows], offsets=offsets[rows], diagonals=setting[:3], offdiagonals=setting[3:6], scale=setting[6]

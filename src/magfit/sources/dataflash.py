@@ -2,8 +2,10 @@
 
 The format describes itself. Every message is ``0xA3 0x95 <type>`` and a packed little-endian payload; the
 FMT messages (type 128, 89 bytes) give each type's name, length, field types (one letter each) and field
-names. This reader walks the messages once to learn their formats and where each one starts, then reads
-every message of a wanted type as one NumPy structured array. It is a small reader of the format, not
+names. This reader walks the messages once, in blocks, to learn their formats and where the messages a fit
+reads start, then reads those of a wanted type (all, or a regular stride of a long compass) as one NumPy
+structured array, window by window: the memory grows with the records read, not with the log
+(:class:`DataFlashLog`). It is a small reader of the format, not
 pymavlink's DFReader: that one is a 7 MB wheel (93 MB installed, with lxml) to read six messages, and
 magfit reads the same MAG and PARM messages about 10x faster (docs/file-formats.md has the measurement).
 
@@ -32,10 +34,12 @@ this reader maps it the same way when the log has those parameters.
 
 from __future__ import annotations
 
+import io
 import struct
+from array import array
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -83,6 +87,16 @@ _LETTERS: dict[str, tuple[str, float | None]] = {
     "q": ("<i8", None),
     "Q": ("<u8", None),
 }
+#: Bytes read at a time: by the walk over the headers, and per window of :meth:`DataFlashLog.messages`.
+_BLOCK = 1 << 23
+#: Most messages gathered at a time (the gather index is ``_GATHER x width`` int64).
+_GATHER = 1 << 14
+#: The types whose offsets the first walk keeps: what a fit reads (the compasses, their parameters, the GNSS).
+_INDEXED = frozenset(("MAG", "MAG2", "MAG3", "PARM", "GPS"))
+#: Types walked for together when one of them is first asked for (``read_motion`` reads them in turn).
+_WALKED_TOGETHER = (frozenset(("ATT", "XKQ", "AHR2", "IMU")),)
+#: Most GNSS records the position's medians are taken over (a regular stride beyond).
+_MAX_FIXES = 100_000
 #: Messages listed by `magfit inspect` beside the compasses, when present.
 _ALSO = ("ATT", "AHR2", "XKQ", "IMU", "GPS", "BARO", "PARM", "MODE", "BAT", "CURR", "RCOU")
 
@@ -120,14 +134,20 @@ def _format_from(payload: bytes) -> tuple[int, _Format] | None:
 
 
 class DataFlashLog:
-    """A DataFlash log walked once: the formats, and where each message of each type starts.
+    """A DataFlash log walked once: the formats, how many messages of each type, where the wanted ones start.
+
+    The file is read in blocks of :data:`_BLOCK` bytes, never whole: the walk keeps the formats, a count per
+    type, and the byte offsets (8 bytes a message) of the types a fit reads (:data:`_INDEXED`: the compasses,
+    PARM, GPS). Another type is found by a second walk when it is first asked for (the attitude and IMU of
+    ``read_motion``, in one walk together). :meth:`messages` reads the records it is asked for, window by
+    window, so a 1 GB log is read in memory that grows with the records returned, not with the file.
 
     Parameters
     ----------
     path : Path
         The name messages give.
-    data : bytes
-        The file's bytes.
+    data : bytes or Path
+        The file's bytes, or the file to read them from (in blocks).
 
     Raises
     ------
@@ -135,76 +155,154 @@ class DataFlashLog:
         No DataFlash message at all, or no FMT message before the data.
     """
 
-    def __init__(self, path: Path, data: bytes) -> None:
+    def __init__(self, path: Path, data: bytes | Path) -> None:
         self.path = path
-        self._data = data
+        self._source = data
         self.formats: dict[int, _Format] = {}
         self.skipped_bytes = 0
         self.truncated = False
-        self._offsets: dict[int, NDArray[np.int64]] = {}
-        self._walk()
+        self._counts: dict[int, int] = {}
+        self._offsets: dict[int, NDArray[np.int64] | NDArray[np.uint32]] = {}
+        # Bytes already in memory: every type's offsets kept (tests rewrite logs by them); a file: the wanted ones.
+        self._everything = not isinstance(data, Path)
+        self._indexed: set[str] = set(_INDEXED)
+        self._walk(None if self._everything else self._indexed, first=True)
         self._by_name = {fmt.name: type_id for type_id, fmt in self.formats.items()}
 
-    def _walk(self) -> None:
-        data, n = self._data, len(self._data)
-        lengths = {_FMT_TYPE: _FMT_LENGTH}
-        starts: dict[int, list[int]] = {}
-        pos = 0
-        # One pass in Python over the message headers (the payloads are read later by NumPy, per type). A
-        # byte that does not start a known message is damage: skip to the next 0xA3 0x95, and count it.
-        while pos + 3 <= n:
-            if data[pos] == 0xA3 and data[pos + 1] == 0x95:
-                type_id = data[pos + 2]
-                length = lengths.get(type_id)
-                if length is not None:
-                    end = pos + length
-                    if end > n:
-                        self.truncated = True
-                        break
-                    if type_id == _FMT_TYPE:
-                        defined = _format_from(data[pos + 3 : end])
-                        if defined is None:  # a damaged FMT: not a message after all
-                            pos = self._resync(pos)
-                            continue
-                        new_type, fmt = defined
-                        old = self.formats.get(new_type)
-                        if old is not None and old.length != fmt.length:
-                            fmt = _Format(fmt.name, fmt.length, fmt.letters, fmt.labels, None)  # two layouts: unusable
-                        self.formats[new_type] = fmt
-                        if new_type != _FMT_TYPE:
-                            lengths[new_type] = fmt.length
-                    starts.setdefault(type_id, []).append(pos)
-                    pos = end
-                    continue
-            pos = self._resync(pos)
-        if not self.formats:
-            raise DataFileError(
-                f"{self.path}: starts like an ArduPilot DataFlash log but holds no readable FMT message; the file "
-                "is damaged: download the log from the vehicle again"
-            )
-        self._offsets = {type_id: np.asarray(offsets, dtype=np.int64) for type_id, offsets in starts.items()}
+    def _open(self) -> BinaryIO:
+        if isinstance(self._source, (bytes, bytearray, memoryview)):
+            return io.BytesIO(self._source)
+        try:
+            return open(self._source, "rb")
+        except OSError as error:
+            message = f"{self.path}: cannot be read ({error.strerror}); check the file's permissions"
+            raise DataFileError(message) from None
 
-    def _resync(self, pos: int) -> int:
-        found = self._data.find(_HEAD, pos + 1)
-        end = len(self._data) if found < 0 else found
-        self.skipped_bytes += end - pos
-        return end
+    def _size(self) -> int:
+        if isinstance(self._source, Path):
+            try:
+                return self._source.stat().st_size
+            except OSError:
+                return 0
+        return len(self._source)
+
+    def _walk(self, names: set[str] | None, *, first: bool) -> None:
+        """One pass over the message headers, in blocks: the offsets of the messages named ``names`` (None:
+        of every message, FMT too); on the ``first`` pass the formats, the counts, and the damage (bytes
+        skipped, a last message cut short)."""
+        lengths = [0] * 256
+        lengths[_FMT_TYPE] = _FMT_LENGTH
+        counts = [0] * 256
+        keep: dict[int, array[int]] = {}
+        wide = self._size() >= 1 << 32  # offsets in 4 bytes each, 8 beyond 4 GB
+        code, kind = ("q", np.int64) if wide else ("I", np.uint32)
+        wanted = [names is None] * 256
+        formats: dict[int, _Format] = {}
+        skipped = 0
+        truncated = False
+        data = b""
+        base = 0  # the file offset of data[0]
+        eof = False
+        with self._open() as handle:
+            while not eof:
+                block = handle.read(_BLOCK)
+                eof = not block
+                data += block
+                n = len(data)
+                pos = 0
+                # One pass in Python over the message headers (the payloads are read later by NumPy, per type).
+                # A byte that does not start a known message is damage: skip to the next 0xA3 0x95, and count it.
+                while pos + 3 <= n:
+                    if data[pos] == 0xA3 and data[pos + 1] == 0x95:
+                        type_id = data[pos + 2]
+                        length = lengths[type_id]
+                        if length:
+                            end = pos + length
+                            if end > n:
+                                if eof:
+                                    truncated = True
+                                    pos = n
+                                break  # the rest of it is in the next block
+                            if type_id == _FMT_TYPE:
+                                defined = _format_from(data[pos + 3 : end])
+                                if defined is None:  # a damaged FMT: not a message after all
+                                    found = data.find(_HEAD, pos + 1)
+                                    if found < 0 and not eof:
+                                        skipped += n - 1 - pos
+                                        pos = n - 1
+                                        break
+                                    found = n if found < 0 else found
+                                    skipped += found - pos
+                                    pos = found
+                                    continue
+                                new_type, fmt = defined
+                                old = formats.get(new_type)
+                                if old is not None and old.length != fmt.length:  # two layouts: unusable
+                                    fmt = _Format(fmt.name, fmt.length, fmt.letters, fmt.labels, None)
+                                formats[new_type] = fmt
+                                if new_type != _FMT_TYPE:
+                                    lengths[new_type] = fmt.length
+                                    wanted[new_type] = names is None or fmt.name in names
+                            counts[type_id] += 1
+                            if wanted[type_id]:
+                                offsets = keep.get(type_id)
+                                if offsets is None:
+                                    offsets = keep[type_id] = array(code)
+                                offsets.append(base + pos)
+                            pos = end
+                            continue
+                    found = data.find(_HEAD, pos + 1)
+                    if found < 0 and not eof:  # keep the last byte: it may be the first of a header
+                        skipped += n - 1 - pos
+                        pos = n - 1
+                        break
+                    found = n if found < 0 else found
+                    skipped += found - pos
+                    pos = found
+                if eof:
+                    break
+                base += pos
+                data = data[pos:]
+        if first:
+            if not formats:
+                raise DataFileError(
+                    f"{self.path}: starts like an ArduPilot DataFlash log but holds no readable FMT message; the "
+                    "file is damaged: download the log from the vehicle again"
+                )
+            self.formats, self.skipped_bytes, self.truncated = formats, skipped, truncated
+            self._counts = {type_id: count for type_id, count in enumerate(counts) if count}
+        for type_id in set(formats) | set(keep):
+            if names is None or (type_id in formats and formats[type_id].name in names):
+                self._offsets[type_id] = np.frombuffer(keep.get(type_id, array(code)), dtype=kind)
+
+    def _offsets_of(self, name: str) -> NDArray[np.int64] | NDArray[np.uint32]:
+        """The byte offsets of every message ``name``: walked again for a type the first walk did not keep."""
+        if not self._everything and name not in self._indexed:
+            group = next((g for g in _WALKED_TOGETHER if name in g), frozenset((name,)))
+            self._indexed |= group
+            self._walk(set(group), first=False)
+        return self._offsets.get(self._by_name[name], np.empty(0, dtype=np.int64))
 
     def names(self) -> dict[str, int]:
         """Every message type in the log and how many messages of it (FMT excluded)."""
         counts = {}
         for type_id, fmt in self.formats.items():
             if type_id != _FMT_TYPE:
-                count = len(self._offsets.get(type_id, ()))
+                count = self._counts.get(type_id, 0)
                 if count:
                     counts[fmt.name] = count
         return counts
 
     def has(self, name: str) -> bool:
-        return name in self._by_name and len(self._offsets.get(self._by_name[name], ())) > 0
+        return name in self._by_name and self._counts.get(self._by_name[name], 0) > 0
 
-    def messages(self, name: str) -> NDArray[Any]:
-        """Every message ``name`` as a structured array (fields by their labels, stored values unscaled).
+    def count(self, name: str) -> int:
+        """How many messages ``name`` the log holds (0 for a type it does not define)."""
+        return self._counts.get(self._by_name[name], 0) if name in self._by_name else 0
+
+    def messages(self, name: str, rows: NDArray[np.int64] | None = None) -> NDArray[Any]:
+        """Every message ``name`` as a structured array (fields by their labels, stored values unscaled), or
+        the ones at the increasing indices ``rows`` among them.
 
         Raises
         ------
@@ -220,11 +318,47 @@ class DataFlashLog:
                 f"{self.path}: the {name} messages' format ({fmt.letters!r}, {fmt.length} bytes) cannot be read: a "
                 "field type magfit does not know, or two different definitions; please report the log"
             )
-        offsets = self._offsets.get(type_id, np.empty(0, dtype=np.int64))
-        width = fmt.length - 3
-        raw = np.frombuffer(self._data, dtype=np.uint8)
-        rows = raw[(offsets + 3)[:, None] + np.arange(width)]  # (n, width) bytes of the payloads
-        return np.ascontiguousarray(rows).view(fmt.dtype).reshape(-1)
+        offsets = self._offsets_of(name)
+        if rows is not None:
+            offsets = offsets[rows]
+        return self._gather(offsets, 3, fmt.length - 3).view(fmt.dtype).reshape(-1)
+
+    def column(self, name: str, label: str, rows: NDArray[np.int64] | None = None) -> NDArray[Any]:
+        """Field ``label`` of every message ``name`` (or of those at ``rows``), stored values unscaled: one
+        field's bytes read, not the whole records'."""
+        records = np.empty(0, dtype=self._dtype(name))
+        field, start = records.dtype.fields[label][:2]
+        offsets = self._offsets_of(name)
+        if rows is not None:
+            offsets = offsets[rows]
+        return self._gather(offsets, 3 + start, field.itemsize).view(field).reshape(-1)
+
+    def _dtype(self, name: str) -> np.dtype[Any]:
+        fmt = self.formats[self._by_name[name]]
+        if fmt.dtype is None:
+            self.messages(name, np.empty(0, dtype=np.int64))  # raises the error that says why
+        assert fmt.dtype is not None
+        return fmt.dtype
+
+    def _gather(self, offsets: NDArray[np.int64] | NDArray[np.uint32], skip: int, width: int) -> NDArray[np.uint8]:
+        """``width`` bytes at ``offsets + skip``, an (n, width) array: read window by window (at most
+        :data:`_BLOCK` bytes and :data:`_GATHER` messages at a time), so the index never grows with the log."""
+        out = np.empty((len(offsets), width), dtype=np.uint8)
+        if not len(offsets) or not width:
+            return out
+        columns = np.arange(width, dtype=np.int64) + skip
+        with self._open() as handle:
+            i = 0
+            while i < len(offsets):
+                start = int(offsets[i])
+                j = int(np.searchsorted(offsets, start + _BLOCK - skip - width, side="right"))
+                j = min(max(j, i + 1), i + _GATHER)
+                end = int(offsets[j - 1]) + skip + width
+                handle.seek(start)
+                window = np.frombuffer(handle.read(end - start), dtype=np.uint8)
+                out[i:j] = window[(offsets[i:j].astype(np.int64) - start)[:, None] + columns]
+                i = j
+        return out
 
     def value(self, records: NDArray[Any], name: str, label: str) -> NDArray[np.float64]:
         """Field ``label`` of ``name``'s records as float64, with its letter's factor (centi-units, 1e-7 deg)."""
@@ -252,7 +386,7 @@ class DataFlashLog:
         return table
 
 
-def _time_s(log: DataFlashLog, name: str, records: NDArray[Any]) -> NDArray[np.float64]:
+def _time_s(log: Any, name: str, records: NDArray[Any]) -> NDArray[np.float64]:
     """The messages' time stamps in seconds: TimeUS (microseconds since boot), or TimeMS in older logs."""
     labels = records.dtype.names or ()
     if "TimeUS" in labels:
@@ -263,23 +397,41 @@ def _time_s(log: DataFlashLog, name: str, records: NDArray[Any]) -> NDArray[np.f
 
 
 def open_dataflash(path: Path, file: Path) -> Source:
-    """Read an ArduPilot DataFlash log into a :class:`~magfit.sources.Source` (``file``: its bytes on disk)."""
+    """Read an ArduPilot DataFlash log into a :class:`~magfit.sources.Source` (``file``: its bytes on disk, read
+    in blocks)."""
     try:
-        data = file.read_bytes()
+        with open(file, "rb"):
+            pass
     except OSError as error:
         raise DataFileError(f"{path}: cannot be read ({error.strerror}); check the file's permissions") from None
-    return source_from_log(path, DataFlashLog(path, data), "ArduPilot DataFlash log")
+    return source_from_log(path, DataFlashLog(path, file), "ArduPilot DataFlash log")
+
+
+@dataclass(frozen=True)
+class _Stream:
+    """One compass's messages: ``name`` (MAG, MAG2, MAG3), the value of MAG's instance field ``I`` (None: every
+    message of ``name``), how many, and the field labels."""
+
+    name: str
+    instance: int | None
+    count: int
+    labels: tuple[str, ...]
 
 
 def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, ...] = ()) -> Source:
     """The :class:`~magfit.sources.Source` of a DataFlash log already read: a :class:`DataFlashLog`, or anything
-    with its ``has``, ``messages``, ``value``, ``parameters``, ``names``, ``skipped_bytes`` and ``truncated``
-    (the text of ``mavlogdump.py``, :mod:`magfit.sources.mavlogdump`); ``notes``: what to say of the file."""
+    with its ``has``, ``count``, ``messages``, ``column``, ``value``, ``parameters``, ``names``,
+    ``skipped_bytes`` and ``truncated`` (the text of ``mavlogdump.py``, :mod:`magfit.sources.mavlogdump`);
+    ``notes``: what to say of the file.
+
+    Only what describes each compass is read here (its count, first and last stamps, its Health field); its
+    records are read when :meth:`Source.read` asks, a regular stride of them when ``max_samples`` says.
+    """
     parameters, damaged = without_damaged_changes(log.parameters())
-    streams = _compass_streams(log)
+    streams, instances = _compass_streams(log)
     magnetometers = []
-    for slot, (name, records) in enumerate(streams):
-        magnetometers.append(_describe(log, parameters, slot, name, records))
+    for slot, stream in enumerate(streams):
+        magnetometers.append(_describe(log, parameters, slot, stream, instances))
     said = list(notes)
     if damaged:
         said.append(f"{damaged} PARM messages skipped as damaged (a value that is not a number)")
@@ -294,10 +446,9 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
         other += (f"{len(rest)} other message types: {', '.join(rest)}",)
     position = _position(log)
 
-    def read(magnetometer: Magnetometer) -> LogSamples:
+    def read(magnetometer: Magnetometer, max_samples: int | None = None) -> LogSamples:
         slot = int(magnetometer.id.split("/")[1])
-        name, records = streams[slot]
-        return _read(log, parameters, magnetometer, name, records)
+        return _read(log, parameters, magnetometer, streams[slot], instances, max_samples)
 
     def motion(magnetometer: Magnetometer) -> Motion:
         return _motion(log, parameters, read(magnetometer), position)
@@ -313,12 +464,13 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
         notes=tuple(said),
         _reader=read,
         _motion=motion,
+        _bounded_reader=read,
     )
 
 
-def _time_base(streams: list[tuple[str, NDArray[Any]]]) -> str:
+def _time_base(streams: list[_Stream]) -> str:
     """What the compasses' time stamps count: TimeUS (3.4 on), TimeMS (before), or nothing (before 3.1)."""
-    labels = set(streams[0][1].dtype.names or ()) if streams else {"TimeUS"}
+    labels = set(streams[0].labels) if streams else {"TimeUS"}
     if "TimeUS" in labels:
         return "seconds since boot (TimeUS)"
     if "TimeMS" in labels:
@@ -418,7 +570,7 @@ _GPS_EPOCH_S = 315_964_800.0
 _GPS_LEAP_S = 18.0
 
 
-def _position(log: DataFlashLog) -> Position | None:
+def _position(log: Any) -> Position | None:
     """The median of the first GPS's 3-D fixes (Status >= 3) and the UTC time of the first (GWk, GMS)."""
     try:
         return _gps_position(log)
@@ -426,10 +578,12 @@ def _position(log: DataFlashLog) -> Position | None:
         return None
 
 
-def _gps_position(log: DataFlashLog) -> Position | None:
+def _gps_position(log: Any) -> Position | None:
     if not log.has("GPS"):
         return None
-    records = log.messages("GPS")
+    count = log.count("GPS")
+    every = -(-count // _MAX_FIXES)  # a regular stride over a long log's fixes: their medians barely move
+    records = log.messages("GPS", np.arange(0, count, every) if every > 1 else None)
     labels = set(records.dtype.names or ())
     if not {"Status", "Lat", "Lng"} <= labels:
         return None
@@ -449,27 +603,47 @@ def _gps_position(log: DataFlashLog) -> Position | None:
     return median_position(lat, lon, alt, time)
 
 
-def _compass_streams(log: DataFlashLog) -> list[tuple[str, NDArray[Any]]]:
-    """(message name, records) per compass slot: MAG split by its instance field I, else MAG, MAG2, MAG3."""
+def _compass_streams(log: Any) -> tuple[list[_Stream], NDArray[Any] | None]:
+    """The compass slots: MAG split by its instance field I (and that field, one byte a record), else MAG,
+    MAG2, MAG3."""
     if not log.has("MAG"):
-        return []
-    records = log.messages("MAG")
-    if "I" in (records.dtype.names or ()):
-        return [("MAG", records[records["I"] == slot]) for slot in np.unique(records["I"]).tolist()]
-    streams = [("MAG", records)]
+        return [], None
+    labels = _labels(log, "MAG")
+    if "I" in labels:
+        instances = log.column("MAG", "I")
+        values, counts = np.unique(instances, return_counts=True)
+        return [_Stream("MAG", int(v), int(c), labels) for v, c in zip(values, counts, strict=True)], instances
+    streams = [_Stream("MAG", None, log.count("MAG"), labels)]
     for name in ("MAG2", "MAG3"):
         if log.has(name):
-            streams.append((name, log.messages(name)))
-    return streams
+            streams.append(_Stream(name, None, log.count(name), _labels(log, name)))
+    return streams, None
+
+
+def _labels(log: Any, name: str) -> tuple[str, ...]:
+    return tuple(log.messages(name, np.empty(0, dtype=np.int64)).dtype.names or ())
+
+
+def _rows(stream: _Stream, instances: NDArray[Any] | None, every: int = 1) -> NDArray[np.int64] | None:
+    """The indices of the stream's records among its type's (every ``every``-th), None for all of them."""
+    if stream.instance is not None and instances is not None:
+        return np.flatnonzero(instances == stream.instance)[::every]
+    return np.arange(0, stream.count, every, dtype=np.int64) if every > 1 else None
 
 
 def _describe(
-    log: DataFlashLog, parameters: dict[str, list[tuple[float, float]]], slot: int, name: str, records: NDArray[Any]
+    log: Any,
+    parameters: dict[str, list[tuple[float, float]]],
+    slot: int,
+    stream: _Stream,
+    instances: NDArray[Any] | None,
 ) -> Magnetometer:
-    times = _time_s(log, name, records)
+    name, labels = stream.name, stream.labels
+    rows = _rows(stream, instances)
+    ends = rows[[0, -1]] if rows is not None and len(rows) else np.array([0, stream.count - 1], dtype=np.int64)
+    times = _time_s(log, name, log.messages(name, ends)) if stream.count else np.empty(0)
     first = float(times[0]) if len(times) else float("nan")
     compass, problem = compass_parameters(parameters, slot, first)
-    labels = records.dtype.names or ()
     notes: list[str] = []
     if compass is not None:
         notes.extend(
@@ -491,7 +665,7 @@ def _describe(
                     "the motor offsets it added (no MOX/MOY/MOZ), so the raw field cannot be recovered; record with "
                     "COMPASS_MOTCT 0, or use the onboard calibrator (COMPASS_CAL_FIT)"
                 )
-    if "Health" in labels and len(records) and not np.any(records["Health"]):
+    if "Health" in labels and stream.count and not np.any(log.column(name, "Health", rows)):
         problem = (
             f"the compass was unhealthy (Health 0) in every {name} record: the field it logged is stale, not a "
             "measurement; check its connection and record again"
@@ -508,7 +682,7 @@ def _describe(
         + (f", I={slot})" if name == "MAG" and "I" in labels else ")")
         + device,
         unit="mG",
-        n_samples=len(records),
+        n_samples=stream.count,
         start_s=first,
         end_s=float(times[-1]) if len(times) else float("nan"),
         device_id=compass.device_id if compass else None,
@@ -528,16 +702,21 @@ def _describe(
 
 
 def _read(
-    log: DataFlashLog,
+    log: Any,
     parameters: dict[str, list[tuple[float, float]]],
     magnetometer: Magnetometer,
-    name: str,
-    records: NDArray[Any],
+    stream: _Stream,
+    instances: NDArray[Any] | None,
+    max_samples: int | None = None,
 ) -> LogSamples:
+    """The compass's raw field: its records (every k-th, k the least that keeps at most ``max_samples``), the
+    calibration each was logged with undone, the damaged and stale ones skipped."""
     slot = int(magnetometer.id.split("/")[1])
     compass, problem = compass_parameters(parameters, slot, magnetometer.start_s)
     if compass is None:  # _describe set the problem; Source.read refuses it before calling here
         raise DataFileError(f"{log.path}: {magnetometer.id} cannot be fitted: {problem}")
+    every = -(-stream.count // max_samples) if max_samples is not None and 0 < max_samples < stream.count else 1
+    name, records = stream.name, log.messages(stream.name, _rows(stream, instances, every))
     with np.errstate(invalid="ignore"):  # damaged values become NaN: dropped below as non-finite samples
         logged = np.column_stack([log.value(records, name, axis) for axis in ("MagX", "MagY", "MagZ")])
         labels = records.dtype.names or ()
@@ -554,7 +733,13 @@ def _read(
     )
     samples = undone.samples
     finite = np.all(np.isfinite(samples), axis=1) & ~undone.damaged
-    notes = [*magnetometer.notes, *undone.notes]
+    notes = [*magnetometer.notes]
+    if every > 1:
+        notes.append(
+            f"one record in every {every} read ({len(records)} of {stream.count}): the compass logged more than "
+            f"max_samples={max_samples}, so a regular stride over the whole log is fitted"
+        )
+    notes += undone.notes
     if "Health" in labels:  # AP_Compass's healthy(): an unhealthy compass logs its last field again, stale
         unhealthy = records["Health"] == 0
         if np.any(unhealthy):
@@ -569,6 +754,7 @@ def _read(
         time_s=times[finite],
         columns=("MagX", "MagY", "MagZ"),
         notes=tuple(notes),
+        every=every,
     )
 
 

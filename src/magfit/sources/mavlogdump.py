@@ -58,8 +58,8 @@ def _number(text: str) -> float:
 class MavlogdumpLog:
     """A mavlogdump text file read once: the messages magfit needs as structured arrays, the others counted.
 
-    It has the interface :func:`magfit.sources.dataflash.source_from_log` reads a log by (``has``,
-    ``messages``, ``value``, ``parameters``, ``names``, ``skipped_bytes``, ``truncated``).
+    It has the interface :func:`magfit.sources.dataflash.source_from_log` reads a log by (``has``, ``count``,
+    ``messages``, ``column``, ``value``, ``parameters``, ``names``, ``skipped_bytes``, ``truncated``).
     """
 
     def __init__(self, path: Path, lines: Any) -> None:
@@ -128,9 +128,19 @@ class MavlogdumpLog:
     def has(self, name: str) -> bool:
         return self._counts.get(name, 0) > 0 and (name == "PARM" or name in self._records)
 
-    def messages(self, name: str) -> NDArray[Any]:
-        """The messages ``name`` as a structured array of float64 fields (values as printed)."""
-        return self._records.get(name, np.empty(0))
+    def count(self, name: str) -> int:
+        """How many messages ``name`` were read (the lines of another format skipped)."""
+        return len(self._records.get(name, ()))
+
+    def messages(self, name: str, rows: NDArray[np.int64] | None = None) -> NDArray[Any]:
+        """The messages ``name`` (those at the indices ``rows``) as a structured array of float64 fields
+        (values as printed)."""
+        records = self._records.get(name, np.empty(0))
+        return records if rows is None else records[rows]
+
+    def column(self, name: str, label: str, rows: NDArray[np.int64] | None = None) -> NDArray[Any]:
+        """Field ``label`` of the messages ``name`` (those at ``rows``)."""
+        return self.messages(name, rows)[label]
 
     def value(self, records: NDArray[Any], name: str, label: str) -> NDArray[np.float64]:
         """Field ``label`` as float64: mavlogdump printed it already scaled."""

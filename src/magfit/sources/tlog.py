@@ -527,8 +527,43 @@ def _vehicle(log: TelemetryLog, source: tuple[int, int]) -> _Vehicle:
     return _Vehicle(log, source, autopilot, clock, stretches, parameters, complete, armed)
 
 
+#: Memory the scan of a tlog takes per byte of it, at its peak (the bytes, the candidate frames' and the
+#: accepted frames' arrays; docs/file-formats.md has the measurement).
+MEMORY_PER_BYTE = 8
+
+
+def _available_memory() -> int:
+    """Bytes of memory available to this process (MemAvailable; 4 GiB when the system does not say)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError):
+        pass
+    return 4 << 30
+
+
 def open_tlog(path: Path, file: Path) -> Source:
-    """Read a MAVLink telemetry log into a :class:`~magfit.sources.Source` (``file``: its bytes on disk)."""
+    """Read a MAVLink telemetry log into a :class:`~magfit.sources.Source` (``file``: its bytes on disk).
+
+    The whole file is scanned at once (:class:`TelemetryLog`), in about :data:`MEMORY_PER_BYTE` times its size
+    of memory: a tlog that would take more than half the memory available is refused with that reason and how
+    to cut it, before anything is read.
+    """
+    try:
+        size = file.stat().st_size
+    except OSError as error:
+        raise DataFileError(f"{path}: cannot be read ({error.strerror}); check the file's permissions") from None
+    available = _available_memory()
+    if size * MEMORY_PER_BYTE > available // 2:
+        raise DataFileError(
+            f"{path}: this telemetry log is {size / 1e6:.0f} MB, and magfit scans a tlog whole, in about "
+            f"{MEMORY_PER_BYTE} times its size of memory: more than half the {available / 1e6:.0f} MB available; keep "
+            "the messages magfit reads (mavlogdump.py --types RAW_IMU,SCALED_IMU2,SCALED_IMU3,HIGHRES_IMU,"
+            "PARAM_VALUE,HEARTBEAT,ATTITUDE,GPS_RAW_INT,GLOBAL_POSITION_INT -o smaller.tlog LOG), or give the "
+            "vehicle's DataFlash log or ULog"
+        )
     try:
         data = file.read_bytes()
     except OSError as error:

@@ -135,13 +135,80 @@ def undo_px4_calibration(
     return np.linalg.solve(matrix, field.T).T + np.asarray(offsets, dtype=np.float64)
 
 
-def _parse(path: Path, file: Path, topics: list[str] | None) -> Any:
-    """pyulog's reading of ``topics`` (None: all), its damage a one-line DataFileError."""
+#: Most messages of a magnetometer or GNSS topic instance kept while a log is read (a power of two): beyond,
+#: a regular stride of them (every 2nd, 4th ...), so a long log is read in bounded memory.
+_KEPT = 1 << 19
+#: Most messages kept of a topic read only to be listed (``everything=True``) or to name an older PX4's
+#: compass (sensor_combined): their count and span are exact, their samples are not used.
+_LISTED = 1 << 10
+
+
+class _Thinned(bytearray):
+    """pyulog's buffer of one topic instance's messages that keeps a regular stride of at most ``cap`` of them.
+
+    pyulog appends each message's payload (``buffer += payload``, fixed size); while fewer than ``cap`` are
+    kept every one is, then every other kept one is dropped and the stride doubles. The messages kept are
+    those at multiples of ``every`` (the first among them); ``seen`` counts them all, ``last`` is the last.
+    """
+
+    def __init__(self, cap: int) -> None:
+        super().__init__()
+        self.cap, self.every, self.seen, self.last = cap, 1, 0, b""
+        self.full = 0  # bytes of ``cap`` messages, once the first one's size is known
+        self.timestamp_offset = 0  # where the uint64 timestamp starts in a payload
+
+    def __iadd__(self, payload: Any) -> _Thinned:  # type: ignore[misc]
+        # Called once per message while pyulog reads: kept short (a stride that is a power of two: a mask).
+        seen = self.seen
+        self.seen = seen + 1
+        self.last = payload
+        if seen & (self.every - 1):
+            return self
+        if len(self) >= self.full:
+            if not self.full:
+                self.full = self.cap * len(payload)
+            else:  # full: every other one kept, the stride doubled
+                rows = np.frombuffer(bytes(self), dtype=np.uint8).reshape(-1, len(payload))
+                self[:] = rows[::2].tobytes()
+                self.every *= 2
+                if seen & (self.every - 1):
+                    return self
+        self.extend(payload)
+        return self
+
+
+def _parse(path: Path, file: Path, topics: list[str] | None, caps: dict[str, int] | None = None) -> Any:
+    """pyulog's reading of ``topics`` (None: all), its damage a one-line DataFileError.
+
+    ``caps``: the most messages kept per instance of a topic (the rest: :data:`_LISTED` when ``topics`` is
+    None, else every one), a regular stride beyond (:class:`_Thinned`); each data item read then has
+    ``magfit_seen`` (its messages), ``magfit_every`` (the stride kept) and ``magfit_last_s`` (its last stamp).
+    """
     pyulog = _pyulog()
+    buffers: dict[int, _Thinned] = {}
+    limits = dict(caps or {})
+    try:
+        size = file.stat().st_size
+    except OSError:
+        size = 1 << 62  # (reported by the parse below)
+
+    class _AddLogged(pyulog.ULog._MessageAddLogged):  # type: ignore[name-defined]
+        def __init__(self, *args: Any) -> None:
+            super().__init__(*args)
+            cap = limits.get(self.message_name, _LISTED if topics is None else None)
+            # A file too small to hold more than ``cap`` of its messages (5 bytes of header each) needs no
+            # thinning: pyulog's own buffer then, without a Python call per message.
+            if cap is not None and size // (self.dtype.itemsize + 5) > cap:
+                self.buffer = buffers[self.msg_id] = _Thinned(cap)
+                self.buffer.timestamp_offset = self.timestamp_offset
+
+    class _ULog(pyulog.ULog):  # type: ignore[name-defined]
+        _MessageAddLogged = _AddLogged
+
     try:
         # pyulog prints its warnings about damaged data on stdout, which is magfit's output: captured.
         with contextlib.redirect_stdout(io.StringIO()) as said, _BudgetedFile(file) as handle:
-            ulog = pyulog.ULog(handle, topics)
+            ulog = _ULog(handle, topics)
     except Exception as error:  # pyulog raises what its parser meets (struct.error, IndexError, ...)
         reason = " ".join(str(error).split()) or type(error).__name__
         raise DataFileError(
@@ -149,6 +216,15 @@ def _parse(path: Path, file: Path, topics: list[str] | None) -> Any:
             "log again"
         ) from None
     ulog.magfit_said = said.getvalue()
+    for data in ulog.data_list:
+        kept = buffers.get(data.msg_id)
+        data.magfit_seen = len(next(iter(data.data.values()), ()))
+        data.magfit_every, data.magfit_last_s = 1, None
+        if kept is not None and kept.every > 1:
+            data.magfit_seen, data.magfit_every = kept.seen, kept.every
+            at = kept.timestamp_offset
+            if "timestamp" in data.data and len(kept.last) >= at + 8:
+                data.magfit_last_s = int.from_bytes(kept.last[at : at + 8], "little") / 1e6
     return ulog
 
 
@@ -156,9 +232,19 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
     """Read a PX4 ULog into a :class:`~magfit.sources.Source` (``file``: its bytes on disk).
 
     ``everything=False`` reads only the magnetometer topics (nothing listed in ``other``); :meth:`read_motion`
-    then reads the file again for the attitude and IMU topics.
+    then reads the file again for the attitude and IMU topics. Of each magnetometer and GNSS topic instance
+    at most :data:`_KEPT` messages are kept, a regular stride beyond (said in the samples' notes), and of
+    the motion topics when ``everything``; of the topics only listed, :data:`_LISTED` (their counts stay
+    exact): the memory does not grow with the log.
+    The sensor_combined topic is read beside the magnetometers, in case an older PX4 logged its compass
+    only there (one pass, not a second parse).
     """
-    ulog = _parse(path, file, None if everything else [*_FIELDS, *_GPS_TOPICS])
+    caps = dict.fromkeys((*_FIELDS, *_GPS_TOPICS), _KEPT)
+    if everything:  # the motion topics kept as the magnetometers' (read_motion reads them again if thinned)
+        caps.update(dict.fromkeys(_MOTION_TOPICS, _KEPT))
+    else:
+        caps["sensor_combined"] = _LISTED
+    ulog = _parse(path, file, None if everything else [*_FIELDS, *_GPS_TOPICS, "sensor_combined"], caps)
     # A parameter of an unexpected type (bytes in a damaged log) is dropped: the stream it concerns is then
     # refused for want of it, rather than undone with a wrong value.
     parameters = {k: v for k, v in ulog.initial_parameters.items() if isinstance(v, (int, float))}
@@ -177,14 +263,14 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
             magnetometers.append(_calibrated(sid, data, parameters, changed))
     for data in ulog.data_list:
         if data.name == "sensor_combined" and data.multi_id == 0 and "magnetometer_ga[0]" in data.data:
-            magnetometers.append(_combined(data))
-    if not magnetometers and not everything:  # an older PX4 logs its compass only in sensor_combined: say so
-        return open_ulog(path, file, everything=True)
+            if everything or not magnetometers:  # an older PX4 logs its compass only in sensor_combined: say so
+                magnetometers.append(_combined(data))
     slots = _slots(parameters, [m.device_id for m in magnetometers])
     magnetometers = [replace(m, slot=slots.get(m.device_id)) if m.device_id else m for m in magnetometers]
     counts: dict[str, int] = {}
     for data in ulog.data_list:
-        counts[data.name] = counts.get(data.name, 0) + len(next(iter(data.data.values()), ()))
+        if everything or data.name != "sensor_combined":  # (read for an older PX4's compass only)
+            counts[data.name] = counts.get(data.name, 0) + data.magfit_seen
     other = tuple(f"{name} ({counts[name]})" for name in _ALSO if name in counts)
     rest = sorted(set(counts) - set(_ALSO) - {"sensor_mag", "vehicle_magnetometer"})
     if rest:
@@ -194,7 +280,8 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
         notes.append("pyulog found damaged data in the file and skipped it")
     described = "PX4 ULog" + (f", firmware {ulog.msg_info_dict['ver_sw']}" if "ver_sw" in ulog.msg_info_dict else "")
     position = _position(ulog)
-    motion_log: list[Any] = [ulog] if everything else []
+    thinned = any(data.magfit_every > 1 for data in ulog.data_list if data.name in _MOTION_TOPICS)
+    motion_log: list[Any] = [ulog] if everything and not thinned else []
 
     def read(magnetometer: Magnetometer, stamp: str = "timestamp") -> LogSamples:
         data = streams[magnetometer.id]
@@ -219,7 +306,13 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
             samples = _undo_in_effect(corrected, stamps, parameters, changed, index, rotation)
         times = np.asarray(data.data[_stamp(data, stamp)], dtype=np.float64) / 1e6
         finite = np.all(np.isfinite(samples), axis=1)
-        return LogSamples(magnetometer, samples[finite], times[finite], columns, magnetometer.notes)
+        notes = magnetometer.notes
+        if data.magfit_every > 1:
+            notes += (
+                f"one message in every {data.magfit_every} kept while the log was read ({len(samples)} of "
+                f"{data.magfit_seen}): the topic holds more than {_KEPT}, so a regular stride over the whole log",
+            )
+        return LogSamples(magnetometer, samples[finite], times[finite], columns, notes, every=data.magfit_every)
 
     def motion(magnetometer: Magnetometer) -> Motion:
         if not motion_log:  # opened for the magnetometers only: the motion topics are read now, once
@@ -433,12 +526,15 @@ def _lacking(data: Any) -> str | None:
 
 
 def _span(data: Any) -> tuple[int, float, float]:
+    """How many messages (all of them, a thinned topic's too), the first and the last stamp (seconds)."""
+    count = getattr(data, "magfit_seen", None)
     if "timestamp" not in data.data:
-        return len(next(iter(data.data.values()), ())), float("nan"), float("nan")
+        return count or len(next(iter(data.data.values()), ())), float("nan"), float("nan")
     times = np.asarray(data.data["timestamp"], dtype=np.float64) / 1e6
     if not len(times):
         return 0, float("nan"), float("nan")
-    return len(times), float(times[0]), float(times[-1])
+    last = getattr(data, "magfit_last_s", None)
+    return count or len(times), float(times[0]), float(times[-1]) if last is None else last
 
 
 def _device(data: Any) -> int | None:
