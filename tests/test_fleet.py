@@ -168,3 +168,41 @@ def test_the_command(tmp_path: Path, vehicles: Path, capsys: pytest.CaptureFixtu
     assert "offset moved by" in page and page.count("<tr>") >= 4 + 2
     assert main(["fleet", str(vehicles / "magnetised"), "-o", str(tmp_path / "t.xls")]) == 2
     assert ".csv, .parquet or .jsonl" in capsys.readouterr().err
+    # Nothing calibrated at all: exit 1, the table still written with each row's reason.
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "still.csv").write_text("mx,my,mz\n" + "1,2,3\n" * 50, encoding="utf-8")
+    assert main(["fleet", str(tmp_path / "bad"), "-o", str(tmp_path / "bad.csv"), "--workers", "1"]) == 1
+    assert (tmp_path / "bad.csv").exists() and "none of the 1 compass fits" in capsys.readouterr().err
+    # The table is never written over a recording.
+    flight = tmp_path / "bad" / "still.csv"
+    assert main(["fleet", str(flight), "-o", str(flight)]) == 2
+    assert flight.read_text(encoding="utf-8").startswith("mx,my,mz")
+
+
+def test_vehicles_are_folders_below_the_common_root(tmp_path: Path) -> None:
+    """droneA/logs and droneB/logs are two vehicles (a folder's own name would merge them)."""
+    for vehicle, move in (("droneA", 0.0), ("droneB", 30.0)):
+        bench.magnetised_vehicle(tmp_path / vehicle / "logs", seed=7, move=np.zeros(3))
+        for flight in (tmp_path / vehicle / "logs").glob("*.csv"):
+            if move:
+                shifted = np.loadtxt(flight, delimiter=",", skiprows=1) + np.array([move, 0.0, 0.0])
+                bench.write_flight(flight, shifted, int(flight.stem[-1]))
+    result = fleet([tmp_path], workers=1, unit="uT")
+    assert {row.vehicle for row in result.rows} == {"droneA/logs", "droneB/logs"}
+    assert not result.events and len(result.combined()) == 2
+
+
+def test_a_changed_recording_is_fitted_again_on_resume(tmp_path: Path, vehicles: Path) -> None:
+    shutil.copytree(vehicles / "steady", tmp_path / "v")
+    table = tmp_path / "fleet.csv"
+    first = fleet([tmp_path / "v"], table, workers=1)
+    flight = tmp_path / "v" / "flight0.csv"
+    moved = np.loadtxt(flight, delimiter=",", skiprows=1) + np.array([20.0, 0.0, 0.0])
+    bench.write_flight(flight, moved, 9)  # rewritten: another size and modification time
+    second = fleet([tmp_path / "v"], table, workers=1)
+    assert second.skipped == 3
+    before = {Path(r.path).name: r for r in first.flights()}["flight0.csv"]
+    after = {Path(r.path).name: r for r in second.flights()}["flight0.csv"]
+    assert after.offset_x == pytest.approx(before.offset_x + 20.0, abs=0.5)
+    # Fitted another way (the method), every recording runs again.
+    assert fleet([tmp_path / "v"], table, workers=1, method="ellipsoid").skipped == 0

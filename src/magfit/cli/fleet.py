@@ -8,7 +8,7 @@ import click
 from rich.console import Console
 
 from ..fleet import FleetResult, fleet
-from ._common import console
+from ._common import FitFailedError, console
 
 
 @click.command("fleet")
@@ -89,6 +89,10 @@ def fleet_command(
         from ..report.fleet import write_fleet_report
 
         out.print(f"wrote {write_fleet_report(report, result)}", soft_wrap=True)
+    if not any(row.verdict in ("supported", "weak") for row in result.rows):
+        raise FitFailedError(
+            f"none of the {len(result.flights())} compass fits gave a calibration (the table says why, row by row)"
+        )
 
 
 def _summary(out: Console, result: FleetResult) -> None:
