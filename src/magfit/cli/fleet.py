@@ -84,7 +84,7 @@ def fleet_command(
             paths, output, method=method, unit=unit, field_strength=strength,  # type: ignore[arg-type]
             workers=workers, scheduler=scheduler, resume=not no_resume, combine=not no_combine, progress=advance,
         )  # fmt: skip
-    _summary(out, result)
+    _summary(out, result, output)
     if report is not None:
         from ..report.fleet import write_fleet_report
 
@@ -95,7 +95,7 @@ def fleet_command(
         )
 
 
-def _summary(out: Console, result: FleetResult) -> None:
+def _summary(out: Console, result: FleetResult, table: Path) -> None:
     """What a fleet operator reads first: counts by verdict, each vehicle's combined calibrations, the changes."""
     flights = result.flights()
     counts: dict[str, int] = {}
@@ -120,5 +120,4 @@ def _summary(out: Console, result: FleetResult) -> None:
         )
     for event in result.events:
         print_(f"change: {event}", soft_wrap=True)
-    if result.output is not None:
-        print_(f"wrote {result.output} ({len(result.rows)} rows)", soft_wrap=True)
+    print_(f"wrote {table} ({len(result.rows)} rows)", soft_wrap=True)
