@@ -570,6 +570,10 @@ REASON_CODES: dict[str, str] = {
     "inclination": "the inclination given disagrees with the samples",
     "logging_rate": "the compass was logged too slowly for the motion",
     "calibration_in_use": "the fit corrects an unknown calibration already applied",
+    "motor_undetermined": "the motors' regressor does not vary independently of the attitude and the offset",
+    "motor_no_regressor": "the log holds no current or throttle on the compass's stamps to fit the motors' field",
+    "motor_negligible": "the motors' field is too small to matter or to tell from the noise; no term fitted",
+    "motor_not_exportable": "the export format cannot hold the motors' field",
     "unclassified": "a reason without a code of its own yet",
 }
 
