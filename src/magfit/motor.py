@@ -338,7 +338,7 @@ def fit_motor(
         lag = float(lags[int(np.argmin(costs))])
     x, cn = subset(lag, stride)
     p, rms_with = _solve(x, cn, start, free)
-    p_without, rms_without = _solve(x, cn, start, _free(model, False))
+    _, rms_without = _solve(x, cn, start, _free(model, False))
     # (M4) against the full soft iron whatever the model: k must not stand in for an attitude-dependent error.
     rho, _ = _independence(_jacobian(p, x, cn)[:, _free("full", True)])
     _, schur = _independence(_jacobian(p, x, cn)[:, free])

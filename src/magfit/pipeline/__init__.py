@@ -227,6 +227,7 @@ def calibrate_file(
     options: Mapping[str, Any] | None = None,
     progress: Progress = no_progress,
     notify: Callable[[str], None] | None = None,
+    motor: str = "auto",
 ) -> FileCalibration:
     """Fit a recording: a samples file (text, npy, npz), a PX4 ULog, an ArduPilot DataFlash log or a ROS bag.
 
@@ -267,6 +268,10 @@ def calibrate_file(
     notify : callable or None
         Called with each note about the recording as soon as it is known (``"x.bin (MAG/0): ..."``), before
         a fit that may fail; the notes are in the result too.
+    motor : {"auto", "current", "throttle", "none"}
+        The motors' field in a flight log (:mod:`magfit.pipeline.motor`): ``"auto"`` fits it with the
+        calibration when the log's current or throttle determines it and it matters, a name fits that one
+        whenever it is determined, ``"none"`` never. Said in the notes either way; ignored for samples files.
 
     Returns
     -------
@@ -285,6 +290,9 @@ def calibrate_file(
     """
     path = Path(path)
     get_method(method)  # an unknown method, before the file is read
+    from .motor import check_motor
+
+    check_motor(motor)
     options = dict(options or {})
     if force:  # fit's own keyword, passed with the method's options
         options["allow_undetermined"] = True
@@ -336,7 +344,7 @@ def calibrate_file(
         elif field_strength is not None:
             compass_options["field_strength"] = field_strength
         try:
-            compass = _calibrate_compass(source, magnetometer, method, compass_options, unit, even, say, date)
+            compass = _calibrate_compass(source, magnetometer, method, compass_options, unit, even, say, date, motor)
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
@@ -370,6 +378,7 @@ def _calibrate_compass(
     even: bool,
     say: Callable[[str], None],
     date: datetime.date | str | None = None,
+    motor: str = "none",
 ) -> CompassCalibration:
     """Fit one magnetometer of a flight log or bag (docs/file-formats.md): its raw field, read by magfit.sources.
 
@@ -414,6 +423,18 @@ def _calibrate_compass(
         raise CalibrationError(f"{where}: {error}{advice}") from None
     label = unit or magnetometer.unit
     calibration = calibration.with_unit(label) if label else calibration
+    from .motor import motor_stage  # the motors' field: the method again on raw − k c when a term is kept
+
+    outcome = motor_stage(
+        source, read, calibration, motor=motor, where=where, refit_samples=fitted if needs else read.samples,
+        refit_time_s=options.get("time_s") if needs else read.time_s,
+        refit=lambda s: _labelled(fit(s if needs or not even else samples_for_fit(s, even), method=method, **options),
+                                  label),
+    )  # fmt: skip
+    for note in outcome.notes:
+        say(note)
+    notes += outcome.notes
+    calibration = outcome.calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
     if magnetometer.calibration_in_use is not None:  # the exports refuse to write a residual in its place
         sensor["calibration_in_use"] = magnetometer.calibration_in_use
@@ -425,7 +446,7 @@ def _calibrate_compass(
     return CompassCalibration(
         path=path,
         calibration=calibration,
-        evaluation=evaluate(calibration, read.samples),
+        evaluation=evaluate(replace(calibration, motor=None), outcome.evaluation_samples),
         columns=read.columns,
         n_rows=len(read.samples),
         n_skipped=0,
@@ -439,6 +460,10 @@ def _calibrate_compass(
         time_base=source.time_base,
         notes=notes,
     )
+
+
+def _labelled(calibration: Calibration, label: str | None) -> Calibration:
+    return calibration.with_unit(label) if label else calibration
 
 
 def _calibrate_samples(

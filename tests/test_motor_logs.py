@@ -1,0 +1,103 @@
+"""The motors' field from flight logs: the current and throttle read (sources.power), fitted by calibrate_file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import magfit
+from magfit.errors import OptionError
+from magfit.motorsim import MotorFlight, heading_error_deg, simulate_motor_flight
+from magfit.sources.power import read_power
+from test_sources_dataflash import DataFlashWriter
+
+
+def write_flight(path: Path, flight: MotorFlight, *, bat: bool = True, ctun: bool = True) -> Path:
+    """An ArduPilot DataFlash log of the flight: MAG (the raw field: no calibration, COMPASS_MOTCT 0), BAT, CTUN."""
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "QBhhhhhhhhhBI", "TimeUS,I,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOX,MOY,MOZ,Health,S")
+    writer.define(131, "BAT", "QBff", "TimeUS,Inst,Volt,Curr")
+    writer.define(132, "CTUN", "Qff", "TimeUS,ThI,ThO")
+    for axis in "XYZ":
+        writer.write("PARM", 1000, f"COMPASS_OFS_{axis}", 0.0)
+        writer.write("PARM", 1000, f"COMPASS_DIA_{axis}", 1.0)
+        writer.write("PARM", 1000, f"COMPASS_ODI_{axis}", 0.0)
+    writer.write("PARM", 1000, "COMPASS_SCALE", 1.0)
+    writer.write("PARM", 1000, "COMPASS_MOTCT", 0.0)
+    logged = np.trunc(flight.samples)
+    for j, t in enumerate(flight.time_s):
+        time = int(1_000_000 + t * 1e6)
+        writer.write("MAG", time, 0, *logged[j].astype(int), 0, 0, 0, 0, 0, 0, 1, time)
+        if j % 5 == 0:  # 10 Hz, as ArduPilot logs BAT and CTUN
+            if bat:
+                writer.write("BAT", time + 3000, 0, 15.8, float(flight.current[j]))
+            if ctun:
+                writer.write("CTUN", time + 1000, float(flight.throttle[j]), float(flight.throttle[j]))
+    path.write_bytes(writer.bytes())
+    return path
+
+
+@pytest.fixture(scope="module")
+def current_flight() -> MotorFlight:
+    return simulate_motor_flight(240, driver="current", per_unit=3.5, seed=11)
+
+
+def test_power_is_read_from_dataflash(tmp_path: Path, current_flight: MotorFlight) -> None:
+    path = write_flight(tmp_path / "quad.bin", current_flight)
+    power = read_power(path)
+    assert power.current is not None and power.throttle is not None
+    assert power.current.name == "BAT.Curr" and power.throttle.name == "CTUN.ThO"
+    np.testing.assert_allclose(power.current.values, current_flight.current[::5], rtol=1e-6)
+    np.testing.assert_allclose(power.current.time_s, 1.0 + current_flight.time_s[::5] + 0.003, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_calibrate_file_fits_the_current_and_beats_the_plain_fit(tmp_path: Path, current_flight: MotorFlight) -> None:
+    path = write_flight(tmp_path / "quad.bin", current_flight)
+    result = magfit.calibrate_file(path)
+    calibration = result.calibration
+    assert calibration.motor is not None and calibration.motor.regressor == "current"
+    truth = current_flight.truth.motor
+    assert truth is not None
+    assert np.linalg.norm(calibration.motor.coefficients - truth.coefficients) < 0.1 * np.linalg.norm(
+        truth.coefficients
+    )
+    flight = current_flight
+    lagged = np.interp(flight.time_s - calibration.motor.lag_s, flight.time_s, flight.current)
+    fitted = heading_error_deg(
+        calibration.apply(np.trunc(flight.samples), regressor=lagged), flight.attitude, flight.field_ned
+    )
+    true_lagged = np.interp(flight.time_s - flight.lag_s, flight.time_s, flight.current)
+    best = heading_error_deg(
+        flight.truth.apply(flight.samples, regressor=true_lagged), flight.attitude, flight.field_ned
+    )
+    plain = magfit.calibrate_file(path, motor="none").calibration
+    assert plain.motor is None
+    before = heading_error_deg(plain.apply(np.trunc(flight.samples)), flight.attitude, flight.field_ned)
+    assert fitted <= 1.5 * best < before
+    assert any("the motors' field (current)" in note and "fitted" in note for note in result.compasses[0].notes)
+    again = magfit.Calibration.from_json(calibration.to_json())
+    assert again == calibration
+
+
+@pytest.mark.slow
+def test_a_clean_vehicle_log_gets_no_term(tmp_path: Path) -> None:
+    flight = simulate_motor_flight(180, driver="none", seed=12)
+    result = magfit.calibrate_file(write_flight(tmp_path / "clean.bin", flight))
+    assert result.calibration.motor is None
+    facts = result.calibration.details["motor"]
+    assert facts["chosen"] is None and "motor_negligible" in facts["codes"]
+    assert all(tried["percent"] < 2.0 for tried in facts["tried"])
+
+
+def test_asking_for_a_regressor_the_log_lacks_is_an_option_error(tmp_path: Path) -> None:
+    flight = simulate_motor_flight(30, driver="none", seed=13)
+    path = write_flight(tmp_path / "nobat.bin", flight, bat=False)
+    with pytest.raises(OptionError) as error:
+        magfit.calibrate_file(path, method="sphere", motor="current")
+    assert error.value.codes == ("motor_no_regressor",)
+    with pytest.raises(OptionError):
+        magfit.calibrate_file(path, motor="rpm")
