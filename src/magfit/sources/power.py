@@ -4,7 +4,8 @@ Each comes on its own clock, the log's time base (the magnetometer's: :meth:`Sou
 it), and is put on the compass's stamps, at a lag, by :func:`magfit.motor.regressor_at`. What is read:
 
 - **ArduPilot DataFlash**: ``BAT.Curr`` (amperes) of the primary battery (instance 0: the one
-  ``COMPASS_MOTCT`` 2 uses, ``AP_BattMonitor::current_amps()``), ``CURR.Curr`` in logs before Copter 3.3;
+  ``COMPASS_MOTCT`` 2 uses, ``AP_BattMonitor::current_amps()``), ``CURR.Curr`` in older logs (an integer
+  field there: centiamperes);
   the throttle ``CTUN.ThO`` (0 to 1, what ``COMPASS_MOTCT`` 1 uses: ``motors->get_throttle()``), ``CTUN.ThrOut``
   (0 to 1000) in old logs.
 - **PX4 ULog**: ``battery_status.current_a`` of instance 0 (amperes; negative is "unknown"), the thrust
@@ -113,7 +114,12 @@ def _dataflash(path: Path, file: Path) -> Power:
                 continue
             if "Instance" in labels or "Inst" in labels:  # the primary battery: what COMPASS_MOTCT 2 reads
                 records = records[records["Instance" if "Instance" in labels else "Inst"] == 0]
-            current = _signal("current", f"{name}.Curr", _time_s(log, name, records), log.value(records, name, "Curr"))
+            values = log.value(records, name, "Curr")
+            letter = log.formats[log._by_name[name]].letters[labels.index("Curr")]
+            described = f"{name}.Curr"
+            if letter in "hHiI":  # an integer field: centiamperes (Copter 3.3's CURR: current_amps() * 100)
+                values, described = values / 100.0, f"{name}.Curr / 100"
+            current = _signal("current", described, _time_s(log, name, records), values)
     if log.has("CTUN"):
         records = log.messages("CTUN")
         labels = records.dtype.names or ()
