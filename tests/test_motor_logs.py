@@ -101,3 +101,22 @@ def test_asking_for_a_regressor_the_log_lacks_is_an_option_error(tmp_path: Path)
     assert error.value.codes == ("motor_no_regressor",)
     with pytest.raises(OptionError):
         magfit.calibrate_file(path, motor="rpm")
+
+
+@pytest.mark.slow
+def test_cli_says_the_motors_field_and_exports_it(tmp_path: Path, current_flight: MotorFlight) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    path = write_flight(tmp_path / "quad.bin", current_flight)
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--export", "ardupilot", "-o", str(tmp_path / "m.param")])
+    assert result.exit_code == 0, result.output
+    assert "motors           the motors' field (current)" in result.output and ", fitted" in result.output
+    written = (tmp_path / "m.param").read_text()
+    assert "COMPASS_MOTCT,2" in written and "COMPASS_MOT_Y," in written
+    refused = CliRunner().invoke(cli, ["calibrate", str(path), "--export", "fusion"])
+    assert refused.exit_code != 0 and "no place for the motors' field" in refused.output
+    plain = CliRunner().invoke(cli, ["calibrate", str(path), "--motor", "none", "--export", "fusion"])
+    assert plain.exit_code == 0, plain.output
+    assert "motors " not in plain.output

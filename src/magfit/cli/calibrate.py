@@ -278,6 +278,15 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     help="Return the calibration even when the samples do not support it (exit 0): it is marked NOT SUPPORTED "
     "and the refusal is printed as a warning. To inspect a poor recording, not to use its numbers.",
 )
+@click.option(
+    "--motor",
+    type=click.Choice(["auto", "current", "throttle", "none"]),
+    default="auto",
+    show_default=True,
+    help="The motors' field in a flight log: fit it with the calibration from the battery current or the throttle "
+    "when the log determines it and it matters (auto), from the one named whenever it is determined, or never "
+    "(none). Exported as COMPASS_MOT*/COMPASS_MOTCT (ardupilot) or CAL_MAGn_xCOMP/CAL_MAG_COMP_TYP (px4).",
+)
 def calibrate_command(
     file: Path,
     method: str | None,
@@ -295,6 +304,7 @@ def calibrate_command(
     force: bool,
     system_id: int | None,
     sensor: str | None,
+    motor: str = "auto",
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -351,6 +361,7 @@ def calibrate_command(
         max_samples=max_samples,
         progress=progress_bar,
         notify=warn,
+        motor=motor,
     )
     several = len(result.compasses) + len(result.failures) > 1
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
@@ -561,6 +572,22 @@ def _log_lines(run: CompassCalibration) -> list[tuple[str, str]]:
     return lines
 
 
+def _motor_lines(calibration: Calibration) -> list[tuple[str, str]]:
+    """The motors' field, in words, when a log's current or throttle was tried (``details["motor"]``)."""
+    facts = calibration.details.get("motor")
+    if not isinstance(facts, Mapping) or not facts.get("tried"):
+        return []
+    tried = [t for t in facts["tried"] if isinstance(t, Mapping)]
+    chosen = [t for t in tried if t.get("source") == facts.get("chosen")]
+    shown = chosen or tried
+    lines = [("motors", str(shown[0].get("summary", "")))]
+    if calibration.motor is not None:
+        k = vector(calibration.motor.coefficients, lambda v: significant(v, 4))
+        per = "A" if calibration.motor.regressor == "current" else "full throttle"
+        lines.append(("motor term", f"k = {k} {calibration.unit or 'units'} per {per}, raw axes, before the matrix"))
+    return lines
+
+
 def print_summary(out: Console, run: CompassCalibration) -> None:
     """The calibration and its score, one labelled line each (plain text: easy to read and to grep)."""
     calibration = run.calibration
@@ -586,8 +613,9 @@ def print_summary(out: Console, run: CompassCalibration) -> None:
             f"mean {fixed(run.evaluation.mean)}  std {fixed(run.evaluation.std)}  "
             f"(paper, section V: fraction of the field strength, n = {run.evaluation.n})",
         ),
+        *_motor_lines(calibration),
         *_verdict(calibration),
-        ("convention", CONVENTION),
+        ("convention", CONVENTION if calibration.motor is None else CONVENTION[:-1] + " - k c)"),
     ]
     for label, value in lines:
         out.print(f"{label:<16} {value}", soft_wrap=True)
