@@ -14,13 +14,17 @@ from magfit.sources.power import read_power
 from test_sources_dataflash import DataFlashWriter
 
 
-def write_flight(path: Path, flight: MotorFlight, *, bat: bool = True, ctun: bool = True) -> Path:
-    """An ArduPilot DataFlash log of the flight: MAG (the raw field: no calibration, COMPASS_MOTCT 0), BAT, CTUN."""
+def write_flight(path: Path, flight: MotorFlight, *, bat: bool = True, ctun: bool = True, att: bool = False) -> Path:
+    """An ArduPilot DataFlash log of the flight: MAG (the raw field: no calibration, COMPASS_MOTCT 0), BAT, CTUN,
+    and with ``att`` the true attitude as ATT (degrees) and AHRS_EKF_TYPE 0 (what pymavlink's magfit_WMM reads)."""
     writer = DataFlashWriter()
     writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
     writer.define(130, "MAG", "QBhhhhhhhhhBI", "TimeUS,I,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOX,MOY,MOZ,Health,S")
     writer.define(131, "BAT", "QBff", "TimeUS,Inst,Volt,Curr")
     writer.define(132, "CTUN", "Qff", "TimeUS,ThI,ThO")
+    writer.define(133, "ATT", "Qfff", "TimeUS,Roll,Pitch,Yaw")
+    for name in ("AHRS_EKF_TYPE", "AHRS_TRIM_X", "AHRS_TRIM_Y", "AHRS_TRIM_Z"):
+        writer.write("PARM", 1000, name, 0.0)
     for axis in "XYZ":
         writer.write("PARM", 1000, f"COMPASS_OFS_{axis}", 0.0)
         writer.write("PARM", 1000, f"COMPASS_DIA_{axis}", 1.0)
@@ -31,6 +35,9 @@ def write_flight(path: Path, flight: MotorFlight, *, bat: bool = True, ctun: boo
     for j, t in enumerate(flight.time_s):
         time = int(1_000_000 + t * 1e6)
         writer.write("MAG", time, 0, *logged[j].astype(int), 0, 0, 0, 0, 0, 0, 1, time)
+        if att:
+            roll, pitch, yaw = np.degrees(flight.euler[j])
+            writer.write("ATT", time, float(roll), float(pitch), float(yaw % 360.0))
         if j % 5 == 0:  # 10 Hz, as ArduPilot logs BAT and CTUN
             if bat:
                 writer.write("BAT", time + 3000, 0, 15.8, float(flight.current[j]))

@@ -318,8 +318,6 @@ def fit_motor(
     c_scale = spread
 
     start = _start(calibration, scale)
-    model = "full" if full_model else _model(calibration)
-    free = _free(model, True)
 
     def subset(lag: float, every: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         c = at(lag)
@@ -327,17 +325,51 @@ def fit_motor(
         keep[np.arange(len(keep)) % every != 0] = False
         return x_all[keep] / scale, c[keep] / c_scale
 
-    lag = float(lags[0])
-    if len(lags) > 1:  # the lag on an even subset (warm-started along the grid), then the fit on all at that lag
-        search_stride = max(stride, int(np.ceil(len(x_all) / MAX_SEARCH_SAMPLES)))
-        costs, warm = [], start
-        for candidate in lags:
-            x, cn = subset(float(candidate), search_stride)
-            warm, rms = _solve(x, cn, warm, free)
-            costs.append(rms)
-        lag = float(lags[int(np.argmin(costs))])
+    def joint(model: str) -> tuple[float, float, NDArray[np.float64]]:
+        """The lag on an even subset (warm-started along the grid), then the fit on all at that lag."""
+        free = _free(model, True)
+        lag = float(lags[0])
+        if len(lags) > 1:
+            search_stride = max(stride, int(np.ceil(len(x_all) / MAX_SEARCH_SAMPLES)))
+            costs, warm = [], start
+            for candidate in lags:
+                xs, cs = subset(float(candidate), search_stride)
+                try:
+                    warm, cost = _solve(xs, cs, warm, free)
+                except SampleError:
+                    warm, cost = start, np.inf
+                costs.append(cost)
+            lag = float(lags[int(np.argmin(costs))])
+        xs, cs = subset(lag, stride)
+        p, rms = _solve(xs, cs, start, free)
+        return rms, lag, p
+
+    def plausible(p: NDArray[np.float64]) -> bool:
+        """The joint fit stays near the calibration given: its radius within 1/1.5-1.5x, its centre within one
+        radius. A sphere grown a hundredfold to fit a band of directions is a degenerate solution, not a fit."""
+        _, radius, offset, _ = _unpack(p)
+        return 1 / 1.5 < radius / start[5] < 1.5 and float(np.linalg.norm(offset - start[6:9])) < start[5]
+
+    # The calibration's own model, then the general ellipsoid (a sphere or axis-aligned model chosen on samples the
+    # motors distorted would push its own misfit into k); the general one is kept when it stays plausible.
+    models = [_model(calibration)] + (["full"] if full_model and _model(calibration) != "full" else [])
+    fits = []
+    for model in models:
+        try:
+            fits.append((model, *joint(model)))
+        except SampleError:
+            continue
+    fits = [f for f in fits if plausible(f[3])]
+    if not fits:
+        reasons.add(
+            "motor_undetermined",
+            f"the joint fit with the {kind} does not stay near the calibration (its sphere grows or its centre runs "
+            "away): the samples do not determine the motors' field; record a flight that turns and tilts more",
+        )
+        return MotorFit(calibration, False, None, reasons=tuple(reasons))
+    model, rms_with, lag, p = fits[-1]
+    free = _free(model, True)
     x, cn = subset(lag, stride)
-    p, rms_with = _solve(x, cn, start, free)
     _, rms_without = _solve(x, cn, start, _free(model, False))
     # (M4) against the full soft iron whatever the model: k must not stand in for an attitude-dependent error.
     rho, _ = _independence(_jacobian(p, x, cn)[:, _free("full", True)])

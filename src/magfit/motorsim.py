@@ -36,6 +36,7 @@ class MotorFlight:
     field_ned: NDArray[np.float64]  # (3,) mG
     truth: Calibration  # with the true motor term (None on a clean vehicle)
     lag_s: float
+    euler: NDArray[np.float64]  # (N, 3) roll, pitch, yaw in radians (Rz(yaw) Ry(pitch) Rx(roll), body -> NED)
 
 
 def _rotation(roll: NDArray[np.float64], pitch: NDArray[np.float64], yaw: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -54,8 +55,10 @@ def simulate_motor_flight(
     max_tilt_deg: float = 30.0,
     noise: float = 2.0,
     seed: int = 0,
+    field_ned: NDArray[np.float64] | None = None,
 ) -> MotorFlight:
-    """A hover of ``duration_s`` with turns and tilts; ``per_unit``: |k| in mG per A (or per full throttle)."""
+    """A hover of ``duration_s`` with turns and tilts; ``per_unit``: |k| in mG per A (or per full throttle);
+    ``field_ned``: the Earth's field (mG, NED), else a random one."""
     rng = np.random.default_rng(seed)
     n = int(duration_s * rate_hz)
     t = np.arange(n) / rate_hz
@@ -76,9 +79,13 @@ def simulate_motor_flight(
     inclination = np.radians(rng.uniform(40, 65))
     strength = rng.uniform(400, 550)
     declination = rng.uniform(-0.3, 0.3)
-    field_ned = strength * np.array(
-        [np.cos(inclination) * np.cos(declination), np.cos(inclination) * np.sin(declination), np.sin(inclination)]
-    )
+    if field_ned is None:
+        field_ned = strength * np.array(
+            [np.cos(inclination) * np.cos(declination), np.cos(inclination) * np.sin(declination), np.sin(inclination)]
+        )
+    else:
+        field_ned = np.asarray(field_ned, dtype=np.float64)
+        strength = float(np.linalg.norm(field_ned))
     body = np.einsum("nji,j->ni", attitude, field_ned)
     a = rng.normal(0, 0.06, (3, 3))
     soft = np.eye(3) + (a + a.T) / 2
@@ -100,7 +107,9 @@ def simulate_motor_flight(
     correction = np.linalg.inv(soft)
     scale = abs(np.linalg.det(correction)) ** (1 / 3)
     truth = Calibration("truth", offset, correction / scale, strength / scale, unit="mG", n_samples=n, motor=motor)
-    return MotorFlight(t, samples, current, throttle, attitude, field_ned, truth, lag_s)
+    return MotorFlight(
+        t, samples, current, throttle, attitude, field_ned, truth, lag_s, np.column_stack([roll, pitch, yaw])
+    )
 
 
 def heading_error_deg(
