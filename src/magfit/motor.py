@@ -57,6 +57,8 @@ __all__ = ["MIN_INDEPENDENCE", "MIN_PERCENT", "MOTOR_CHOICES", "MotorFit", "fit_
 MOTOR_CHOICES = ("auto", "current", "throttle", "none")
 #: ρ of (M4) below which k is not told from the attitude and the offset.
 MIN_INDEPENDENCE = 0.02
+#: ρ below which a kept term is said to be weakly told from the attitude (its bias from any misfit grows as ρ^-½).
+WEAK_INDEPENDENCE = 0.1
 #: The interference at full current (% of the field) below which "auto" fits no term.
 MIN_PERCENT = 2.0
 #: χ²₃ at 99.9 %: a term whose k is not this far from zero (in its covariance) is noise.
@@ -100,6 +102,7 @@ class MotorFit:
     independence: float = float("nan")
     residual_rms: tuple[float, float] = (float("nan"), float("nan"))
     reasons: tuple[Reason, ...] = ()
+    at_lag_edge: bool = False
 
     def summary(self) -> str:
         """In words: ``the motors' field: 4.2 mG per A, 31 % of the field at full current (45 A), fitted``."""
@@ -113,6 +116,10 @@ class MotorFit:
             f"the motors' field ({self.term.regressor}): {size:.3g} {unit} per {per}, {self.percent:.1f} % "
             f"± {self.percent_sigma:.1f} % of the field at {at}, lag {1000 * self.term.lag_s:.0f} ms"
         )
+        if np.isfinite(self.independence) and self.independence < WEAK_INDEPENDENCE:
+            text += f", weakly told from the attitude (ρ = {self.independence:.2f})"
+        if self.at_lag_edge:
+            text += " (the lag at the edge of its search)"
         if self.fitted:
             return text + ", fitted"
         return text + ", not fitted: " + "; ".join(self.reasons)
@@ -422,8 +429,17 @@ def fit_motor(
             calibration.method, offset_n * scale, matrix, field, unit=calibration.unit,
             n_samples=calibration.n_samples, details=details, frame="sensor", motor=term,
         )  # fmt: skip
+    edge = len(lags) > 1 and abs(lag) >= float(np.max(np.abs(lags))) - 1e-12
     return MotorFit(
-        result, fitted, term, percent, percent_sigma, rho, (rms_without * scale, rms_with * scale), tuple(reasons)
+        result,
+        fitted,
+        term,
+        percent,
+        percent_sigma,
+        rho,
+        (rms_without * scale, rms_with * scale),
+        tuple(reasons),
+        edge,
     )
 
 
