@@ -127,3 +127,74 @@ def test_cli_says_the_motors_field_and_exports_it(tmp_path: Path, current_flight
     plain = CliRunner().invoke(cli, ["calibrate", str(path), "--motor", "none", "--export", "fusion"])
     assert plain.exit_code == 0, plain.output
     assert "motors " not in plain.output
+
+
+def write_px4_flight(path: Path, flight: MotorFlight) -> Path:
+    """A PX4 ULog of the flight: raw sensor_mag (gauss, 50 Hz), battery_status and vehicle_thrust_setpoint (10 Hz)."""
+    from test_sources_ulog import ULogWriter
+
+    writer = ULogWriter()
+    writer.format(
+        "sensor_mag",
+        [("uint64_t", "timestamp"), ("uint32_t", "device_id"), ("float", "x"), ("float", "y"), ("float", "z")],
+    )
+    writer.format("battery_status", [("uint64_t", "timestamp"), ("float", "current_a"), ("uint8_t", "connected")])
+    writer.format("vehicle_thrust_setpoint", [("uint64_t", "timestamp"), ("float[3]", "xyz")])
+    writer.info("ver_sw", "v1.14.0-test")
+    writer.parameter("CAL_MAG0_ID", 396809)
+    writer.parameter("CAL_MAG0_ROT", -1)
+    writer.parameter("CAL_MAG_COMP_TYP", 0)
+    for axis in "XYZ":
+        writer.parameter(f"CAL_MAG0_{axis}OFF", 0.0)
+        writer.parameter(f"CAL_MAG0_{axis}SCALE", 1.0)
+        writer.parameter(f"CAL_MAG0_{axis}ODIAG", 0.0)
+    for name in ("sensor_mag", "battery_status", "vehicle_thrust_setpoint"):
+        writer.subscribe(name, 0)
+    for j, t in enumerate(flight.time_s):
+        time = int(1_000_000 + t * 1e6)
+        writer.data("sensor_mag", 0, time, 396809, *(flight.samples[j] * 1e-3))
+        if j % 5 == 0:
+            writer.data("battery_status", 0, time + 2000, float(flight.current[j]), 1)
+            writer.data("vehicle_thrust_setpoint", 0, time + 1000, 0.0, 0.0, -float(flight.throttle[j]))
+    path.write_bytes(writer.bytes())
+    return path
+
+
+@pytest.mark.slow
+def test_a_px4_log_fits_the_current_and_exports_comp(tmp_path: Path, current_flight: MotorFlight) -> None:
+    pytest.importorskip("pyulog")
+    path = write_px4_flight(tmp_path / "quad.ulg", current_flight)
+    power = read_power(path)
+    assert power.current is not None and power.current.name == "battery_status.current_a"
+    assert power.throttle is not None and power.throttle.name == "|vehicle_thrust_setpoint.xyz|"
+    np.testing.assert_allclose(power.throttle.values, current_flight.throttle[::5], rtol=1e-6)
+    calibration = magfit.calibrate_file(path).calibration
+    assert calibration.motor is not None and calibration.motor.regressor == "current"
+    truth = current_flight.truth.motor
+    assert truth is not None
+    expected = truth.coefficients * 1e-3  # mG -> G per A
+    assert np.linalg.norm(calibration.motor.coefficients - expected) < 0.1 * np.linalg.norm(expected)
+
+
+def test_a_tlog_current_and_throttle_are_read(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import struct
+
+    import test_sources_tlog as tlogs
+
+    monkeypatch.setitem(tlogs.CRC_EXTRA, 1, 124)  # SYS_STATUS (pymavlink's definitions)
+    monkeypatch.setitem(tlogs.CRC_EXTRA, 74, 20)  # VFR_HUD
+    monkeypatch.setitem(tlogs.PACK, 1, "<IIIHHhHHHHHHb")
+    monkeypatch.setitem(tlogs.PACK, 74, "<ffffhH")
+    path = tmp_path / "vehicle.tlog"
+    tlogs.write_vehicle(path, 300)
+    writer = tlogs.TlogWriter()
+    start = struct.unpack(">Q", path.read_bytes()[:8])[0]
+    for j in range(30):
+        time = start + j * 1_000_000
+        writer.add(time, 1, 0, 0, 0, 0, 15800, 1000 + 100 * j, 0, 0, 0, 0, 0, 0, 80)  # current_battery in cA
+        writer.add(time + 500, 74, 0.0, 0.0, 10.0, 0.0, 90, 30 + j)  # throttle in %
+    path.write_bytes(path.read_bytes() + writer.bytes())
+    power = read_power(path)
+    assert power.current is not None and power.throttle is not None
+    np.testing.assert_allclose(np.sort(power.current.values), 10.0 + np.arange(30), rtol=1e-9)
+    np.testing.assert_allclose(np.sort(power.throttle.values), (30 + np.arange(30)) / 100.0, rtol=1e-9)

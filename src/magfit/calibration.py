@@ -281,6 +281,8 @@ class Calibration:
     def __repr__(self) -> str:
         unit = f" {self.unit}" if self.unit else ""
         frame = ", frame='vehicle'" if self.frame == "vehicle" else ""
+        if self.motor is not None:  # the motors' field: its regressor and coefficients
+            frame += f", motor={self.motor.regressor}:{np.array2string(self.motor.coefficients, precision=5)}"
         return (
             f"Calibration(method={self.method!r}{frame}, offset={np.array2string(self.offset, precision=5)}{unit}, "
             f"field_strength={self.field_strength:.6g}{unit}, "
