@@ -8,6 +8,8 @@ calibration returned, and the calibration holds the term. Either way the user is
 
 from __future__ import annotations
 
+import functools
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
@@ -48,6 +50,20 @@ _WANTED = {
 }
 
 
+def _stamp(path: Any) -> tuple[int, int]:
+    try:
+        status = os.stat(path)
+    except OSError:
+        return (0, 0)
+    return (status.st_mtime_ns, status.st_size)
+
+
+@functools.lru_cache(maxsize=4)
+def _power_of(path: str, mtime_ns: int, size: int) -> Power:
+    """The log's current and throttle, read once for all its compasses (keyed by the file's time and size)."""
+    return read_power(path)
+
+
 def check_motor(motor: str) -> None:
     if motor not in MOTOR_CHOICES:
         raise OptionError(f"motor must be one of {', '.join(MOTOR_CHOICES)}; got {motor!r}")
@@ -75,7 +91,7 @@ def motor_stage(
     if motor == "none" or len(read.samples) == 0:
         return unchanged
     try:
-        power = power if power is not None else read_power(source.path)
+        power = power if power is not None else _power_of(str(source.path), *_stamp(source.path))
     except DataFileError as error:
         return replace(unchanged, notes=(f"{where}: the motors' field not tried: {error}",))
     kinds = ("current", "throttle") if motor == "auto" else (motor,)
