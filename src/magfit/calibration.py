@@ -193,8 +193,10 @@ class Calibration:
             raise SampleError("apply(regressor=...) given to a calibration without a motor term")
         if regressor is None:
             raise SampleError(
-                f"this calibration holds a motor term (the {self.motor.regressor}): give apply(..., regressor=...), "
-                f"the {self.motor.regressor} at each sample"
+                f"this calibration holds the motors' field (the {self.motor.regressor}): correcting a sample needs the "
+                f"{self.motor.regressor} at that sample (Calibration.apply(raw, regressor=...) in Python); for a "
+                "calibration without the term, calibrate again with motor='none' (--motor none)",
+                remedy=(("motor", "none"),),
             )
         values = np.asarray(regressor, dtype=np.float64)
         expected = array.shape[:-1]

@@ -58,7 +58,7 @@ MOTOR_CHOICES = ("auto", "current", "throttle", "none")
 #: ρ of (M4) below which k is not told from the attitude and the offset.
 MIN_INDEPENDENCE = 0.02
 #: ρ below which a kept term is said to be weakly told from the attitude (its bias from any misfit grows as ρ^-½).
-WEAK_INDEPENDENCE = 0.1
+WEAK_INDEPENDENCE = 0.05
 #: The interference at full current (% of the field) below which "auto" fits no term.
 MIN_PERCENT = 2.0
 #: χ²₃ at 99.9 %: a term whose k is not this far from zero (in its covariance) is noise.
