@@ -196,5 +196,18 @@ def test_a_tlog_current_and_throttle_are_read(tmp_path: Path, monkeypatch: pytes
     path.write_bytes(path.read_bytes() + writer.bytes())
     power = read_power(path)
     assert power.current is not None and power.throttle is not None
+    assert power.current.name == "SYS_STATUS.current_battery"
     np.testing.assert_allclose(np.sort(power.current.values), 10.0 + np.arange(30), rtol=1e-9)
+    # BATTERY_STATUS of battery 0 is preferred when the vehicle sends it (battery 1's is not the one the firmware uses)
+    monkeypatch.setitem(tlogs.CRC_EXTRA, 147, 154)
+    monkeypatch.setitem(tlogs.PACK, 147, "<iih10HhBBBb")
+    writer = tlogs.TlogWriter()
+    for j in range(30):
+        time = start + j * 1_000_000 + 700
+        writer.add(time, 147, -1, -1, 2500, *([3950] * 10), 2000 + 50 * j, 0, 0, 0, 80)
+        writer.add(time + 1, 147, -1, -1, 2500, *([3950] * 10), 9999, 1, 0, 0, 80)
+    path.write_bytes(path.read_bytes() + writer.bytes())
+    power = read_power(path)
+    assert power.current is not None and power.current.name == "BATTERY_STATUS.current_battery"
+    np.testing.assert_allclose(np.sort(power.current.values), 20.0 + 0.5 * np.arange(30), rtol=1e-9)
     np.testing.assert_allclose(np.sort(power.throttle.values), (30 + np.arange(30)) / 100.0, rtol=1e-9)

@@ -10,8 +10,8 @@ it), and is put on the compass's stamps, at a lag, by :func:`magfit.motor.regres
   (0 to 1000) in old logs.
 - **PX4 ULog**: ``battery_status.current_a`` of instance 0 (amperes; negative is "unknown"), the thrust
   ``|vehicle_thrust_setpoint.xyz|`` (PX4 1.14 on), else ``actuator_controls_0.control[3]`` (the throttle).
-- **MAVLink telemetry log**: ``BATTERY_STATUS.current_battery`` / ``SYS_STATUS.current_battery`` (centiamperes,
-  −1 unknown) and ``VFR_HUD.throttle`` (percent), where the reader knows those messages.
+- **MAVLink telemetry log**: ``BATTERY_STATUS.current_battery`` of battery 0, else ``SYS_STATUS.current_battery``
+  (centiamperes, −1 unknown), and ``VFR_HUD.throttle`` (percent), on the vehicle's clock as the tlog reader sets it.
 
 Nothing here edits the readers: a log is opened again for these streams (the readers keep their own jobs).
 """
@@ -162,6 +162,13 @@ _TLOG_LAYOUTS: dict[str, tuple[int, str]] = {
         "enabled_extended:<u4 health_extended:<u4",
     ),
     "VFR_HUD": (74, "airspeed:<f4 groundspeed:<f4 alt:<f4 climb:<f4 heading:<i2 throttle:<u2"),
+    "BATTERY_STATUS": (
+        147,
+        "current_consumed:<i4 energy_consumed:<i4 temperature:<i2 "
+        + " ".join(f"voltage{i}:<u2" for i in range(10))
+        + " current_battery:<i2 id:u1 battery_function:u1 type:u1 battery_remaining:i1 time_remaining:<i4 "
+        "charge_state:u1 " + " ".join(f"voltage_ext{i}:<u2" for i in range(4)) + " mode:u1 fault_bitmask:<u4",
+    ),
 }
 
 
@@ -185,7 +192,13 @@ def _tlog(path: Path, file: Path) -> Power:
             continue
         records = _messages(log, frames, np.dtype([tuple(f.split(":")) for f in fields.split()]))
         times = vehicle.clock[frames]
-        if name == "SYS_STATUS":
+        if name == "BATTERY_STATUS":  # the first battery's (id 0), preferred to SYS_STATUS's when sent
+            values = records["current_battery"].astype(np.float64)
+            first = _signal(
+                "current", "BATTERY_STATUS.current_battery", times, values / 100.0, (values >= 0) & (records["id"] == 0)
+            )
+            current = first or current
+        elif name == "SYS_STATUS":
             values = records["current_battery"].astype(np.float64)
             current = _signal("current", "SYS_STATUS.current_battery", times, values / 100.0, values >= 0)
         else:
