@@ -127,6 +127,12 @@ def motor_stage(
     if refit_time_s is None:
         return replace(unchanged, notes=(*notes, f"{where}: the method's samples carry no stamps: term not applied"))
     lagged = _clamped(np.asarray(refit_time_s, dtype=np.float64), signal, result.term.lag_s)
+    outside = int(np.count_nonzero((times < signal.time_s[0]) | (times > signal.time_s[-1])))
+    if outside:
+        notes += (
+            f"{where}: {outside} of {len(times)} samples lie outside {signal.name}'s span: corrected with its first "
+            "or last value",
+        )
     try:
         final = with_motor(result, refit_samples, lagged, refit)
     except CalibrationError as error:
