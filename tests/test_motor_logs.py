@@ -211,3 +211,48 @@ def test_a_tlog_current_and_throttle_are_read(tmp_path: Path, monkeypatch: pytes
     assert power.current is not None and power.current.name == "BATTERY_STATUS.current_battery"
     np.testing.assert_allclose(np.sort(power.current.values), 20.0 + 0.5 * np.arange(30), rtol=1e-9)
     np.testing.assert_allclose(np.sort(power.throttle.values), (30 + np.arange(30)) / 100.0, rtol=1e-9)
+
+
+@pytest.mark.slow
+def test_two_compasses_each_get_their_own_term_and_one_motct(tmp_path: Path) -> None:
+    """An external compass far from the power wires (0.3 mG/A: 3 % of the field) and an internal one beside
+    them (4 mG/A): each is fitted on its own; the ArduPilot file carries one COMPASS_MOTCT and each compass's MOT."""
+    from magfit.export import export_several
+
+    external = simulate_motor_flight(240, driver="current", per_unit=0.3, seed=21)
+    internal = simulate_motor_flight(240, driver="current", per_unit=4.0, seed=21)  # same flight, same current
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "QBhhhhhhhhhBI", "TimeUS,I,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOX,MOY,MOZ,Health,S")
+    writer.define(131, "BAT", "QBff", "TimeUS,Inst,Volt,Curr")
+    for suffix in ("", "2"):
+        for axis in "XYZ":
+            writer.write("PARM", 1000, f"COMPASS_OFS{suffix}_{axis}", 0.0)
+            writer.write("PARM", 1000, f"COMPASS_DIA{suffix}_{axis}", 1.0)
+            writer.write("PARM", 1000, f"COMPASS_ODI{suffix}_{axis}", 0.0)
+        writer.write("PARM", 1000, f"COMPASS_SCALE{suffix}", 1.0)
+    writer.write("PARM", 1000, "COMPASS_MOTCT", 0.0)
+    for j, t in enumerate(external.time_s):
+        time = int(1_000_000 + t * 1e6)
+        for instance, flight in enumerate((external, internal)):
+            writer.write("MAG", time, instance, *np.trunc(flight.samples[j]).astype(int), 0, 0, 0, 0, 0, 0, 1, time)
+        if j % 5 == 0:
+            writer.write("BAT", time + 3000, 0, 15.8, float(external.current[j]))
+    path = tmp_path / "two.bin"
+    path.write_bytes(writer.bytes())
+    result = magfit.calibrate_file(path)
+    assert len(result.compasses) == 2
+    for compass, flight in zip(result.compasses, (external, internal), strict=True):
+        term, truth = compass.calibration.motor, flight.truth.motor
+        assert term is not None and truth is not None
+        assert np.linalg.norm(term.coefficients - truth.coefficients) < 0.15 * np.linalg.norm(truth.coefficients)
+    params = {
+        name: float(value)
+        for name, value in (
+            line.split(",")
+            for line in export_several([c.calibration for c in result.compasses], "ardupilot").splitlines()
+            if line and not line.startswith("#")
+        )
+    }
+    assert params["COMPASS_MOTCT"] == 2
+    assert abs(params["COMPASS_MOT2_Y"]) > 5 * abs(params["COMPASS_MOT_Y"]) > 0
