@@ -263,7 +263,7 @@ def test_damaged_records_in_the_real_flight_are_skipped_and_counted(
     keep = np.ones(len(original["MAG/0"]), dtype=bool)
     keep[[1000, 1500]] = False
     np.testing.assert_allclose(read.samples, original["MAG/0"][keep], atol=1e-9)
-    result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "MAG/0"])
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "MAG/0", "--force"])
     assert result.exit_code == 0, result.output
     assert "2 of 2384 records skipped as damaged" in result.stderr
 

@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import DataFileError, MagfitError, SampleError
+from .motorterm import MotorTerm
 
 if TYPE_CHECKING:
     from .findings import Diagnostics
@@ -98,6 +99,9 @@ class Calibration:
         ``"sensor"``: the matrix corrects within the magnetometer's axes (magnitude-only fits; any root
         of the ellipsoid matrix will do). ``"vehicle"``: the matrix is general and also rotates into the
         vehicle's axes (fits against a reference field); its determinant may be negative.
+    motor : MotorTerm or None
+        The motors' field ``k c(t − τ)`` (:mod:`magfit.motorterm`), removed from the raw samples before the
+        offset: ``corrected = matrix @ (raw − offset − k c)``. None: no term (every calibration without one).
     """
 
     method: str
@@ -108,8 +112,11 @@ class Calibration:
     n_samples: int | None = None
     details: Mapping[str, Any] = field(default_factory=dict)
     frame: str = "sensor"
+    motor: MotorTerm | None = None
 
     def __post_init__(self) -> None:
+        if self.motor is not None and not isinstance(self.motor, MotorTerm):
+            raise SampleError(f"Calibration.motor must be a MotorTerm or None, got {type(self.motor).__name__}")
         if self.frame not in FRAMES:
             raise SampleError(f"Calibration.frame must be one of {', '.join(FRAMES)}; got {self.frame!r}")
         object.__setattr__(self, "offset", _frozen_array(self.offset, (3,), "offset"))
@@ -150,8 +157,11 @@ class Calibration:
 
     # ------------------------------------------------------------------ use
 
-    def apply(self, raw: ArrayLike, normalized: bool = False) -> NDArray[np.float64]:
-        """Correct raw samples: ``matrix @ (raw - offset)`` (paper, eq. 5).
+    def apply(
+        self, raw: ArrayLike, normalized: bool = False, *, regressor: ArrayLike | None = None
+    ) -> NDArray[np.float64]:
+        """Correct raw samples: ``matrix @ (raw - offset)`` (paper, eq. 5); with a motor term
+        ``matrix @ (raw - offset - k c)`` (docs/methods.md, eq. M1).
 
         Parameters
         ----------
@@ -160,6 +170,9 @@ class Calibration:
         normalized : bool
             If true, divide by ``field_strength``: the corrected samples then lie on the unit sphere
             (the space the paper evaluates in).
+        regressor : array_like, shape (N,) or scalar, optional
+            The motors' regressor at each sample (amperes or throttle, :attr:`motor`'s, already at its lag).
+            Required when the calibration holds a motor term, refused when it holds none.
 
         Returns
         -------
@@ -172,6 +185,8 @@ class Calibration:
                 f"apply() takes samples of shape (N, 3) or (3,), got shape {array.shape}; rows are samples (x, y, z)"
             )
         offset_free = array - self.offset
+        if self.motor is not None or regressor is not None:
+            offset_free = offset_free - self._motor_field(array, regressor)
         # One matrix-vector product per output axis: NumPy's (N, 3) @ (3, 3) goes through a BLAS gemm that
         # is 10-60x slower on such tall, three-column arrays (worst when BLAS threads compete for cores).
         corrected = np.empty_like(offset_free)
@@ -180,6 +195,24 @@ class Calibration:
         if normalized:
             corrected = corrected / self.field_strength
         return corrected
+
+    def _motor_field(self, array: NDArray[np.float64], regressor: ArrayLike | None) -> NDArray[np.float64]:
+        if self.motor is None:
+            raise SampleError("apply(regressor=...) given to a calibration without a motor term")
+        if regressor is None:
+            raise SampleError(
+                f"this calibration holds the motors' field (the {self.motor.regressor}): correcting a sample needs the "
+                f"{self.motor.regressor} at that sample (Calibration.apply(raw, regressor=...) in Python); for a "
+                "calibration without the term, calibrate again with motor='none' (--motor none)",
+                remedy=(("motor", "none"),),
+            )
+        values = np.asarray(regressor, dtype=np.float64)
+        expected = array.shape[:-1]
+        if values.shape != expected and values.shape != ():
+            raise SampleError(f"apply(): regressor must have shape {expected}, got {values.shape}")
+        if not np.all(np.isfinite(values)):
+            raise SampleError("apply(): the regressor holds NaN or inf")
+        return self.motor.field(np.broadcast_to(values, expected))
 
     @property
     def is_symmetric(self) -> bool:
@@ -250,6 +283,7 @@ class Calibration:
             and self.n_samples == other.n_samples
             and dict(self.details) == dict(other.details)
             and self.frame == other.frame
+            and self.motor == other.motor
         )
 
     __hash__ = None  # type: ignore[assignment]
@@ -257,6 +291,8 @@ class Calibration:
     def __repr__(self) -> str:
         unit = f" {self.unit}" if self.unit else ""
         frame = ", frame='vehicle'" if self.frame == "vehicle" else ""
+        if self.motor is not None:  # the motors' field: its regressor and coefficients
+            frame += f", motor={self.motor.regressor}:{np.array2string(self.motor.coefficients, precision=5)}"
         return (
             f"Calibration(method={self.method!r}{frame}, offset={np.array2string(self.offset, precision=5)}{unit}, "
             f"field_strength={self.field_strength:.6g}{unit}, "
@@ -279,6 +315,7 @@ class Calibration:
             "n_samples": self.n_samples,
             "frame": self.frame,
             "details": _jsonable(dict(self.details)),
+            **({"motor": self.motor.to_dict()} if self.motor is not None else {}),
         }
 
     @classmethod
@@ -358,6 +395,7 @@ class Calibration:
                 n_samples=n_samples,
                 details=details,
                 frame=frame,
+                motor=MotorTerm.from_dict(data["motor"]) if data.get("motor") is not None else None,
             )
             if diagnostics is not None:
                 calibration.diagnostics  # noqa: B018 - read once, so a malformed report fails here, not later

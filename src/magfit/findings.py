@@ -575,6 +575,10 @@ REASON_CODES: dict[str, str] = {
     "compasses_inconsistent": "a firmware's pre-arm check would find the compasses inconsistent",
     "compass_follows_current": "a compass's field follows the battery current or the throttle",
     "firmware_check": "a firmware's own calibration acceptance test fails on these samples",
+    "motor_undetermined": "the motors' regressor does not vary independently of the attitude and the offset",
+    "motor_no_regressor": "the log holds no current or throttle on the compass's stamps to fit the motors' field",
+    "motor_negligible": "the motors' field is too small to matter or to tell from the noise; no term fitted",
+    "motor_not_exportable": "the export format cannot hold the motors' field",
     "unclassified": "a reason without a code of its own yet",
 }
 

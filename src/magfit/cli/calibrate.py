@@ -333,6 +333,15 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     show_default=True,
     help="The gyroscope columns' unit.",
 )
+@click.option(
+    "--motor",
+    type=click.Choice(["auto", "current", "throttle", "none"]),
+    default="auto",
+    show_default=True,
+    help="The motors' field in a flight log: fit it with the calibration from the battery current or the throttle "
+    "when the log determines it and it matters (auto), from the one named whenever it is determined, or never "
+    "(none). Exported as COMPASS_MOT*/COMPASS_MOTCT (ardupilot) or CAL_MAGn_xCOMP/CAL_MAG_COMP_TYP (px4).",
+)
 def calibrate_command(
     file: Path,
     method: str | None,
@@ -358,6 +367,7 @@ def calibrate_command(
     attitude_convention: str = "ned",
     angle_unit: str = "auto",
     gyro_unit: str = "rad/s",
+    motor: str = "auto",
 ) -> None:
     """Fit a calibration to a recording and print it; save it with -o.
 
@@ -406,7 +416,7 @@ def calibrate_command(
             file, method, sensor=sensor, columns=columns, unit=unit, field_strength=field_strength, location=location,
             model_date=model_date, force=force, nonfinite=nonfinite, even=even, max_samples=max_samples,
             attitude=attitude, reference=reference, gyro=gyro, accel=accel, time=time_column,
-            attitude_convention=attitude_convention, angle_unit=angle_unit, gyro_unit=gyro_unit,
+            attitude_convention=attitude_convention, angle_unit=angle_unit, gyro_unit=gyro_unit, motor=motor,
         )  # fmt: skip
     except StreamsMissing as error:
         raise CommandError(
@@ -665,6 +675,22 @@ def _log_lines(run: CompassCalibration) -> list[tuple[str, str]]:
     return lines
 
 
+def _motor_lines(calibration: Calibration) -> list[tuple[str, str]]:
+    """The motors' field, in words, when a log's current or throttle was tried (``details["motor"]``)."""
+    facts = calibration.details.get("motor")
+    if not isinstance(facts, Mapping) or not facts.get("tried"):
+        return []
+    tried = [t for t in facts["tried"] if isinstance(t, Mapping)]
+    chosen = [t for t in tried if t.get("source") == facts.get("chosen")]
+    shown = chosen or tried
+    lines = [("motors", str(shown[0].get("summary", "")))]
+    if calibration.motor is not None:
+        k = vector(calibration.motor.coefficients, lambda v: significant(v, 4))
+        per = "A" if calibration.motor.regressor == "current" else "full throttle"
+        lines.append(("motor term", f"k = {k} {calibration.unit or 'units'} per {per}, raw axes, before the matrix"))
+    return lines
+
+
 def print_summary(out: Console, run: CompassCalibration) -> None:
     """The calibration and its score, one labelled line each (plain text: easy to read and to grep)."""
     calibration = run.calibration
@@ -691,8 +717,9 @@ def print_summary(out: Console, run: CompassCalibration) -> None:
             f"(paper, section V: fraction of the field strength, n = {run.evaluation.n})",
         ),
         *_uncertainty(run),
+        *_motor_lines(calibration),
         *_verdict(calibration),
-        ("convention", CONVENTION),
+        ("convention", CONVENTION if calibration.motor is None else CONVENTION[:-1] + " - k c)"),
     ]
     for label, value in lines:
         out.print(f"{label:<16} {value}", soft_wrap=True)

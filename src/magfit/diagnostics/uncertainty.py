@@ -532,7 +532,7 @@ def compare_with_full(
     try:
         with np.errstate(invalid="ignore"):  # a full model the rows barely hold: a non-finite one-sigma, below
             own = _uncertainty(raw, weights, "full", reference, inclination_deg, uncertainty.n_samples, series)
-    except np.linalg.LinAlgError:
+    except (np.linalg.LinAlgError, ValueError):  # (ValueError: a negative variance, a full model barely held)
         own = None
     sigma = math.inf if own is None or own.heading_sigma_deg is None else own.heading_sigma_deg
     if not sigma <= 90.0:  # not determined: the full fit's heading could be anywhere

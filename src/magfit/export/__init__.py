@@ -45,6 +45,7 @@ from ..errors import ExportError, MagfitError, OptionError
 from ..findings import Reason
 from ..units import field_unit_reason, get_unit
 from ._common import comment_lines, with_applied_rotation
+from ._motor import refuse_motor
 from .adafruit import write_adafruit, write_adafruit_json
 from .ardupilot import write_ardupilot, write_ardupilot_several
 from .betaflight import write_betaflight
@@ -340,8 +341,14 @@ def _with_warning(text: str, format: str, warning: str) -> str:
     return "\n".join([first, *comment_lines(warning, prefix=prefix), rest])
 
 
+#: The formats that hold the motors' field (export/_motor.py).
+MOTOR_FORMATS = ("ardupilot", "px4", "c", "json")
+
+
 def _refuse_residual(calibration: Calibration, format: str) -> None:
     """A fit on samples that still carry the firmware's calibration is a residual: only json may hold it."""
+    if format not in MOTOR_FORMATS:  # the motors' field: written by these, refused with its cost by the others
+        refuse_motor(calibration, format)
     sensor = calibration.details.get("sensor")
     in_use = sensor.get("calibration_in_use") if isinstance(sensor, Mapping) else None
     if in_use and format != "json":

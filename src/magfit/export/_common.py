@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import textwrap
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -437,6 +437,9 @@ def with_applied_rotation(calibration: Calibration, applied_rotation: object) ->
         n_samples=calibration.n_samples,
         details=details,
         frame="vehicle",
+        motor=None if calibration.motor is None else replace(  # the term lives in the raw axes too
+            calibration.motor, coefficients=r0.T @ calibration.motor.coefficients
+        ),
     )
 
 

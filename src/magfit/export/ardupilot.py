@@ -110,6 +110,7 @@ from ._common import (
     vehicle_split,
 )
 from ._heading import ASSUMPTION, heading_error_deg
+from ._motor import ARDUPILOT_MOTCT, MOT_RANGE_MG, ardupilot_mot, chosen_regressor, describe_term, mismatch_comment
 
 #: COMPASS_OFFS_MAX default (AP_COMPASS_OFFSETS_MAX_DEFAULT), mG: arming fails when |COMPASS_OFS| exceeds it.
 OFFSET_MAX_MG = 1800.0
@@ -269,6 +270,13 @@ def _compass(
     scale = _scale(calibration, k, expected_field)
     values = [*offsets, *diagonal, *offdiagonal, scale]
     parameters = dict(zip(parameter_names(where.slot), (float(v) for v in values), strict=True)) | orientation
+    if calibration.motor is not None:  # the motors' field, added after the matrix (export/_motor.py)
+        mot = ardupilot_mot(calibration, matrix @ rotation if calibration.frame == "vehicle" else matrix, k, scale)
+        parameters |= {f"COMPASS_MOT{n}_{axis}": float(v) for axis, v in zip("XYZ", mot, strict=True)}
+        parameters["COMPASS_MOTCT"] = float(ARDUPILOT_MOTCT[calibration.motor.regressor])
+        comments.append(describe_term(calibration))
+        if np.any(np.abs(mot) > MOT_RANGE_MG):
+            comments.append(f"# WARNING: a COMPASS_MOT{n}_* value is beyond +-{MOT_RANGE_MG:.0f}, its documented range")
     if expected_field is not None:
         comments.insert(
             0,
@@ -411,8 +419,28 @@ def write_ardupilot_several(
             custom += 1
         compasses.append(compass)
     check_distinct_slots([c.slot for c in compasses], lambda slot: f"ardupilot compass slot {slot}")
+    compasses = _one_motct(calibrations, compasses)
     order = sorted(range(len(compasses)), key=lambda i: compasses[i].slot)
     return _file([calibrations[i] for i in order], [compasses[i] for i in order], unit)
+
+
+def _one_motct(calibrations: Sequence[Calibration], compasses: list[SlotParameters]) -> list[SlotParameters]:
+    """COMPASS_MOTCT is one setting for all compasses (export/_motor.py): the chosen regressor's; a compass whose
+    term follows the other one, or that has none, gets zero COMPASS_MOTn_* (never the vehicle's old values)."""
+    chosen = chosen_regressor(calibrations)
+    if chosen is None:
+        return compasses
+    result = []
+    for calibration, compass in zip(calibrations, compasses, strict=True):
+        n = suffix(compass.slot)
+        parameters, comments = dict(compass.parameters), list(compass.comments)
+        if calibration.motor is None or calibration.motor.regressor != chosen:
+            if calibration.motor is not None:
+                comments += mismatch_comment(calibration, chosen, "COMPASS_MOTCT")
+            parameters |= {f"COMPASS_MOT{n}_{axis}": 0.0 for axis in "XYZ"}
+        parameters["COMPASS_MOTCT"] = float(ARDUPILOT_MOTCT[chosen])
+        result.append(SlotParameters(compass.slot, parameters, comments))
+    return result
 
 
 def _file(calibrations: Sequence[Calibration], compasses: list[SlotParameters], unit: str | None) -> str:
@@ -448,6 +476,11 @@ def _file(calibrations: Sequence[Calibration], compasses: list[SlotParameters], 
             f"{float32_text(k * first.field_strength)} mG",
             "# Samples must be ArduPilot's body-frame field logged with no calibration applied",
             "#   (COMPASS_OFS = 0, COMPASS_DIA = 1, COMPASS_ODI = 0, COMPASS_SCALE = 0).",
+        ]
+    if any(c.motor is not None for c in calibrations):
+        lines += [
+            "#   mag += MOT * x   (after the matrix; x: the throttle 0-1 if COMPASS_MOTCT = 1, the current in A if 2)",
+            "# motors' field: MOT = -k * SCALE * (D R) * k_m, magfit's term k_m c removed before the offset",
         ]
     lines.append(
         "# Load: Mission Planner > Config > Full Parameter List > Load from file, or MAVProxy 'param load <file>'."

@@ -37,6 +37,7 @@ def write_c_header(calibration: Calibration, unit: str | None = None) -> str:
     check_float32(
         {"offset": calibration.offset, "matrix": calibration.matrix, "field_strength": calibration.field_strength}, "c"
     )
+    motor = _motor_block(calibration)
     label = label_unit(calibration, unit)
     units = unit_phrase(label)
     warning = rotated_frame_warning(calibration)
@@ -73,6 +74,33 @@ static inline void magfit_correct(const float raw[3], float corrected[3])
         corrected[i] = magfit_matrix[i][0] * d[0] + magfit_matrix[i][1] * d[1] + magfit_matrix[i][2] * d[2];
     }}
 }}
-
+{motor}
 #endif /* {GUARD} */
+"""
+
+
+def _motor_block(calibration: Calibration) -> str:
+    """The motors' field (magfit.motorterm), when the calibration holds it: its coefficients, lag and a
+    ``magfit_correct_motor()`` taking the regressor; empty otherwise (the header is then as before)."""
+    term = calibration.motor
+    if term is None:
+        return ""
+    check_float32({"motor": term.coefficients}, "c")
+    what = "the battery's current in A" if term.regressor == "current" else "the throttle, 0 to 1"
+    values = ", ".join(c_float(v) for v in term.coefficients)
+    return f"""
+/* The motors' field: corrected = matrix * (raw - offset - magfit_motor * x), x = {what},
+ * taken magfit_motor_lag_s seconds before the sample (negative: after). magfit_motor: raw units per unit of x. */
+static const float magfit_motor[3] = {{{values}}};
+static const float magfit_motor_lag_s = {c_float(term.lag_s)};
+
+static inline void magfit_correct_motor(const float raw[3], float x, float corrected[3])
+{{
+    const float d[3] = {{raw[0] - magfit_offset[0] - magfit_motor[0] * x,
+                        raw[1] - magfit_offset[1] - magfit_motor[1] * x,
+                        raw[2] - magfit_offset[2] - magfit_motor[2] * x}};
+    for (int i = 0; i < 3; i++) {{
+        corrected[i] = magfit_matrix[i][0] * d[0] + magfit_matrix[i][1] * d[1] + magfit_matrix[i][2] * d[2];
+    }}
+}}
 """

@@ -94,6 +94,7 @@ from ._common import (
     vehicle_split,
 )
 from ._heading import ASSUMPTION, heading_error_deg
+from ._motor import PX4_COMP_TYP, chosen_regressor, describe_term, mismatch_comment, px4_comp
 
 #: check_calibration_result: sphere radius in [0.2, 0.7) gauss.
 FIELD_RANGE_G = (0.2, 0.7)
@@ -109,7 +110,7 @@ INT32 = 6
 #: Calibration slots (Magnetometer::MAX_SENSOR_COUNT): CAL_MAG0 .. CAL_MAG3.
 SLOT_COUNT = 4
 #: Parameters PX4 stores as integers.
-INTEGER_SUFFIXES = ("_ID", "_ROT")
+INTEGER_SUFFIXES = ("_ID", "_ROT", "_COMP_TYP")
 
 
 def parameter_names(slot: int) -> tuple[str, ...]:
@@ -214,6 +215,11 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
     offdiagonal = [matrix[0, 1], matrix[0, 2], matrix[1, 2]]
     values = [*(k * calibration.offset), *diagonal, *offdiagonal]
     parameters = dict(zip(parameter_names(where.slot), (float(v) for v in values), strict=True)) | extra
+    if calibration.motor is not None:  # the motors' field, added before the offset (export/_motor.py)
+        comp = px4_comp(calibration, k)
+        parameters |= {f"{prefix}{axis}COMP": float(v) for axis, v in zip("XYZ", comp, strict=True)}
+        parameters["CAL_MAG_COMP_TYP"] = float(PX4_COMP_TYP[calibration.motor.regressor])
+        comments.append(describe_term(calibration))
     sensor = f" ({where.name})" if where.name else ""
     if where.device_id is not None:
         parameters[f"{prefix}ID"] = float(where.device_id)
@@ -318,8 +324,28 @@ def write_px4_several(
         for i, c in enumerate(calibrations)
     ]
     check_distinct_slots([entry.slot for entry in entries], lambda slot: f"PX4 slot CAL_MAG{slot}")
+    entries = _one_comp_typ(calibrations, entries)
     order = sorted(range(len(entries)), key=lambda i: entries[i].slot)
     return _file([calibrations[i] for i in order], [entries[i] for i in order], unit, system_id)
+
+
+def _one_comp_typ(calibrations: Sequence[Calibration], entries: list[SlotParameters]) -> list[SlotParameters]:
+    """CAL_MAG_COMP_TYP is one setting for all magnetometers (export/_motor.py), as COMPASS_MOTCT in ardupilot.py."""
+    chosen = chosen_regressor(calibrations)
+    if chosen is None:
+        return entries
+    result: list[SlotParameters] = []
+    for calibration, entry in zip(calibrations, entries, strict=True):
+        parameters, comments = dict(entry.parameters), list(entry.comments)
+        if calibration.motor is None or calibration.motor.regressor != chosen:
+            if calibration.motor is not None:
+                comments += mismatch_comment(calibration, chosen, "CAL_MAG_COMP_TYP")
+            parameters |= {f"CAL_MAG{entry.slot}_{axis}COMP": 0.0 for axis in "XYZ"}
+        parameters.pop("CAL_MAG_COMP_TYP", None)
+        if not result:  # written once, with the first magnetometer
+            parameters["CAL_MAG_COMP_TYP"] = float(PX4_COMP_TYP[chosen])
+        result.append(SlotParameters(entry.slot, parameters, comments))
+    return result
 
 
 def _file(calibrations: Sequence[Calibration], entries: list[SlotParameters], unit: str | None, system_id: int) -> str:
@@ -343,6 +369,11 @@ def _file(calibrations: Sequence[Calibration], entries: list[SlotParameters], un
             "# vehicle frame: magfit's matrix M = Q S (rotation Q after the soft-iron S): SCALE/ODIAG = S, R = Q"
         )
         lines += samples_note(next(c for c in calibrations if c.frame == "vehicle"), [])
+    if any(c.motor is not None for c in calibrations):
+        lines += [
+            "#   with the motors' field: corrected = R * (S * ((raw + power * COMP) - OFF)), power = the thrust",
+            "#   (CAL_MAG_COMP_TYP = 1) or battery 0's current in kA (2); COMP = -k_m * 1000 (G/kA) or -k_m (G)",
+        ]
     lines.append("# Load: QGroundControl > Vehicle Setup > Parameters > Tools > Load from file.")
     lines.append(
         f"# PX4 takes a new OFF, SCALE or ODIAG vector only if it moves by more than {CHANGE_THRESHOLD} (Magnetometer)"

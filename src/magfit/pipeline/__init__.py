@@ -266,6 +266,7 @@ def calibrate_file(
     attitude_convention: Literal["ned", "enu"] = "ned",
     angle_unit: Literal["auto", "deg", "rad"] = "auto",
     gyro_unit: Literal["rad/s", "deg/s"] = "rad/s",
+    motor: str = "auto",
 ) -> FileCalibration:
     """Fit a recording: a samples file (text, npy, npz), a PX4 ULog, an ArduPilot DataFlash log or a ROS bag.
 
@@ -321,6 +322,10 @@ def calibrate_file(
         The Euler angles' unit; ``"auto"`` decides from the values and refuses a file they leave ambiguous.
     gyro_unit : {"rad/s", "deg/s"}
         The gyroscope columns' unit (the methods refuse rates that look like degrees per second as rad/s).
+    motor : {"auto", "current", "throttle", "none"}
+        The motors' field in a flight log (:mod:`magfit.pipeline.motor`): ``"auto"`` fits it with the
+        calibration when the log's current or throttle determines it and it matters, a name fits that one
+        whenever it is determined, ``"none"`` never. Said in the notes either way; ignored for samples files.
 
     Returns
     -------
@@ -339,6 +344,9 @@ def calibrate_file(
     """
     path = Path(path)
     get_method(method)  # an unknown method, before the file is read
+    from .motor import check_motor
+
+    check_motor(motor)
     options = dict(options or {})
     if force:  # fit's own keyword, passed with the method's options
         options["allow_undetermined"] = True
@@ -412,7 +420,7 @@ def calibrate_file(
             compass_options["field_strength"] = field_strength
         try:
             compass = _calibrate_compass(
-                source, magnetometer, method, compass_options, unit, even, say, date, max_samples=max_samples
+                source, magnetometer, method, compass_options, unit, even, say, date, motor, max_samples=max_samples
             )
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
@@ -451,6 +459,7 @@ def _calibrate_compass(
     even: bool,
     say: Callable[[str], None],
     date: datetime.date | str | None = None,
+    motor: str = "none",
     *,
     max_samples: int | None = None,
 ) -> CompassCalibration:
@@ -493,17 +502,36 @@ def _calibrate_compass(
         fitted = samples_for_fit(read.samples, even)
     several = len([m for m in source.magnetometers if m.problem is None and m.n_samples > 0]) > 1
     streams_held = ("attitude", "place", "gyro", "time")  # a log's: vector and gyro read them (or say why not)
-    try:
-        calibration = fit(fitted, method=method, **options)
-    except CalibrationError as error:
-        advice = "".join(f"; {note}" for note in magnetometer.notes if "logged at only" in note or "only " in note)
-        chosen = magnetometer.id if several else None
-        works = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
-        if not turned(fitted):  # a compass never turned: only recording again helps
-            raise CalibrationError(f"{where}: {error}{advice}", codes=error.codes, remedy=error.remedy) from None
-        raise RefusedWithAdvice(path, f"{where}: {error}{advice}", works, codes=error.codes) from None
     label = unit or magnetometer.unit
-    calibration = calibration.with_unit(label) if label else calibration
+    from .motor import MotorOutcome, motor_stage  # the motors' field: the method again on raw − k c when kept
+
+    def stage(calibration: Calibration) -> MotorOutcome:
+        return motor_stage(
+            source, read, calibration, motor=motor, where=where, refit_samples=fitted if needs else read.samples,
+            refit_time_s=options.get("time_s") if needs else read.time_s,
+            refit=lambda s: _labelled(
+                fit(s if needs or not even else samples_for_fit(s, even), method=method, **options), label
+            ),
+        )  # fmt: skip
+
+    try:
+        outcome = stage(_labelled(fit(fitted, method=method, **options), label))
+    except CalibrationError as error:
+        # The motors' field may be what the magnitude-only fit cannot describe: the term is fitted from the
+        # forced calibration, and the method judged again on raw − k c (refused again: the first refusal stands).
+        rescued = _with_motor_term(stage, fitted, method, options, label) if motor != "none" else None
+        if rescued is None:
+            advice = "".join(f"; {note}" for note in magnetometer.notes if "logged at only" in note or "only " in note)
+            chosen = magnetometer.id if several else None
+            works = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
+            if not turned(fitted):  # a compass never turned: only recording again helps
+                raise CalibrationError(f"{where}: {error}{advice}", codes=error.codes, remedy=error.remedy) from None
+            raise RefusedWithAdvice(path, f"{where}: {error}{advice}", works, codes=error.codes) from None
+        outcome = rescued
+    for note in outcome.notes:
+        say(note)
+    notes += outcome.notes
+    calibration = outcome.calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
     verdict = calibration.details.get("support", {}).get("verdict")
     vehicle: tuple[Reason, ...] = ()
@@ -520,7 +548,7 @@ def _calibrate_compass(
     return CompassCalibration(
         path=path,
         calibration=calibration,
-        evaluation=evaluate(calibration, read.samples),
+        evaluation=evaluate(replace(calibration, motor=None), outcome.evaluation_samples),
         columns=read.columns,
         n_rows=len(read.samples),
         n_skipped=0,
@@ -732,6 +760,25 @@ def _columns_of(path: Path) -> str:
 
     fmt = sniff(path)
     return ", ".join(fmt.column_label(i) for i in range(fmt.n_columns))
+
+
+def _labelled(calibration: Calibration, label: str | None) -> Calibration:
+    return calibration.with_unit(label) if label else calibration
+
+
+def _with_motor_term(
+    stage: Callable[[Calibration], Any], fitted: Any, method: str, options: Mapping[str, Any], label: str | None
+) -> Any:
+    """The motors' stage from the method's forced fit, when it keeps a term and the method then accepts the
+    samples with the term taken off; None otherwise (the refusal stands)."""
+    if options.get("allow_undetermined"):
+        return None
+    try:
+        start = _labelled(fit(fitted, method=method, **{**options, "allow_undetermined": True}), label)
+        outcome = stage(start)
+    except CalibrationError:
+        return None
+    return outcome if outcome.calibration.motor is not None else None
 
 
 def _calibrate_samples(
