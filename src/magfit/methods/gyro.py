@@ -122,6 +122,9 @@ SCREEN_ROWS = 3_000
 SCREEN_ITER = 40
 #: At most this many stretches (each adds two unknowns); longer recordings get longer stretches.
 MAX_SEGMENTS = 60
+#: The samples' residual RMS (fraction of the field) beyond which the fit is weak, and the other readings of
+#: the inputs are tried by the fit.
+LARGE_RESIDUAL = 0.05
 #: Offset one-sigmas (fraction of the field) above which the offset is not determined / weakly determined.
 UNDETERMINED_OFFSET = 0.05
 WEAK_OFFSET = 0.01
@@ -156,6 +159,22 @@ MIN_TURN_DEG = 30.0
 #: 0.8°); the cars and flights that met the one-sigma turned 0.09-0.48 about their third axis or spanned 69-107°.
 NARROW_THIRD_AXIS = 0.2
 NARROW_TURN_DEG = 60.0
+#: No soft iron squeezes an axis this much (the smallest singular value of H over its largest): a correction
+#: that does only fits samples moving in a plane while it ignores the rates.
+MIN_SINGULAR_RATIO = 0.05
+#: Another reading of the inputs (degrees per second, milliseconds, the other handedness, a lag beyond
+#: MAX_LAG_S) is named when its windowed residual is below this share of the given one's.
+READING_GAIN = 0.25
+#: ... and when it leaves at most this share of the turning unexplained: on a flight the windows' noise leaves
+#: the right reading at 0.03-0.57 (simulate_vehicle, 4 seeds) and its mirror image at 0.07-0.30.
+DECISIVE_SHARE = 0.05
+#: The median time step from which time_s may be in milliseconds (a gyro-aided fit at under 5 Hz).
+MS_STEP = 0.2
+#: Lags beyond MAX_LAG_S are tried, on a grid of WIDE_LAG_STEP_S to MAX_WIDE_LAG_S, when the given reading's
+#: windowed residual is over WIDE_LAG_SHARE of the turning it explains (the gyro explains little of it).
+WIDE_LAG_STEP_S = 0.25
+MAX_WIDE_LAG_S = 10.0
+WIDE_LAG_SHARE = 0.1
 
 _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
@@ -863,7 +882,8 @@ def _choose(
             raise CalibrationError(
                 f"the samples do not support the gyro calibration with mapping={mapping!r}: with the magnetometer's "
                 "axes turned that way no soft iron fits (the fitted one is not positive definite: the mounting is "
-                "another); leave mapping='search' to find it"
+                "another); leave mapping='search' to find it",
+                codes=("gyro",), remedy=(("mapping", "search"),),
             )
         if not screened:
             return _fit_model(y, w, t, segment_s, "general", *_parts(general), gravity=gravity), {}, None
@@ -1026,6 +1046,7 @@ def _support(
     accel_unused: str | None = None,
     inclination_checked: bool = False,
     disagreement: str | None = None,
+    lag_searched: bool = True,
 ) -> Support:
     """The verdict on what the rotations determine (module docstring)."""
     refusals = ReasonList()
@@ -1090,13 +1111,13 @@ def _support(
         )
     if disagreement is not None and not narrow:  # the calibration may be what is off: the user must know
         weak.add("inclination", disagreement)
-    if residual_rms > 0.05:
+    if residual_rms > LARGE_RESIDUAL:
         weak.add("large_residual",
             f"the samples leave {100 * residual_rms:.1f} % of the field (RMS) off the turning field the gyroscope "
             "predicts: the gyro and magnetometer are not on one clock, or the field changed while recording (motors, "
             "a magnet); expect heading errors of a few degrees"
         )
-    if abs(lag) >= MAX_LAG_S - 1e-9:
+    if lag_searched and abs(lag) >= MAX_LAG_S - 1e-9:
         weak.add("lag_at_edge",
             f"the magnetometer and the gyroscope fit best {lag:+.2f} s apart, the end of the range searched: their "
             "time stamps are not on one clock; check them (or give lag_s=)"
@@ -1142,49 +1163,146 @@ def _search_lag(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.fl
     return float(grid[best] + np.clip(shift, -1.0, 1.0) * step)
 
 
-def _check_rate_unit(win: _Windows) -> None:
-    """A gyro given in degrees per second turns the field 57 times too fast: refuse with the fix.
+@dataclass(frozen=True)
+class _Reading:
+    """One reading of the inputs (module docstring, "What the inputs are"): the rates and times as the
+    kinematics would take them, and what the user must change to give them so (code, words, remedy)."""
 
-    Only a correction that is a soft iron counts: samples that move in a plane (turns about one axis) are
-    also fitted by a rank-one H that ignores the rates altogether, which a gyro 57 times too slow favours.
-    """
-    rss = {}
-    for unit, factor in (("rad/s", 1.0), ("deg/s", math.pi / 180.0)):
-        scaled = _Windows(win.dy, win.M * factor, win.Sy, win.Sw * factor, win.T)
-        h, _, rss[unit] = _constrained(_design(scaled, np.zeros(3)), np.eye(9))
-        singular = np.linalg.svd(h, compute_uv=False)
-        if singular[-1] < 0.05 * singular[0]:  # no soft iron squeezes an axis 20 times
-            rss[unit] = math.inf
-    if rss["deg/s"] < 0.25 * rss["rad/s"]:
-        better = "only" if math.isinf(rss["rad/s"]) else f"{rss['rad/s'] / max(rss['deg/s'], 1e-300):.0f} times better"
-        raise OptionError(
-            f"gyro= looks like degrees per second (the kinematics fit {better} after dividing it by 57.3): give it "
-            "in rad/s (numpy.radians(gyro))"
-        )
+    code: str
+    w: NDArray[np.float64]
+    t: NDArray[np.float64]
+    words: str = ""
+    remedy: tuple[tuple[str, str], ...] = ()
 
 
-def _check_rate_unit_by_fit(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], win: _Windows,
-                            segment_s: float, residual_rms: float) -> None:  # fmt: skip
-    """The general fit of stage 2 with the gyro divided by 57.3: far better means degrees per second."""
-    scale = math.pi / 180.0
-    slow = _Windows(win.dy, win.M * scale, win.Sy, win.Sw * scale, win.T)
-    _, beta = _windowed_bias(slow)
-    h, c, _ = _constrained(_design(slow, beta), np.eye(9))
+def _readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Reading]:
+    """The readings compared with the one given: degrees per second, the gyro's axes of the other handedness,
+    and time in milliseconds or microseconds where the steps are long enough to be."""
+    step = float(np.median(np.diff(t)))
+    found = [
+        _Reading("gyro_unit", w * (math.pi / 180.0), t,
+                 "gyro= looks like degrees per second: give it in rad/s (numpy.radians(gyro))",
+                 (("gyro", "numpy.radians(gyro)"),)),
+        _Reading("gyro_axes", -w, t,
+                 "gyro= turns the field the wrong way round: the gyro's axes are of the other handedness than the "
+                 "magnetometer's (two of them swapped, or one with its sign flipped); give them in the order and "
+                 "signs of the sensor's datasheet or the firmware's board rotation, right-handed",
+                 (("gyro", "the rates about right-handed axes"),)),
+    ]  # fmt: skip
+    for factor, unit, minimum in ((1e-3, "milliseconds", MS_STEP), (1e-6, "microseconds", 1e3 * MS_STEP)):
+        if step >= minimum:
+            divisor = f"{1 / factor:.0f}"
+            found.append(_Reading(
+                "time_unit", w, t * factor,
+                f"time_s= looks like {unit}: its steps are a median {step:.3g} units apart, and the gyro explains "
+                f"the samples' turning only with them divided by {divisor}; give it in seconds (time_s / {divisor})",
+                (("time_s", f"time_s / {divisor}"),)))  # fmt: skip
+    return found
+
+
+def _lagged_readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Reading]:
+    """The gyro read earlier or later than :data:`MAX_LAG_S` allows: a grid of :data:`WIDE_LAG_STEP_S` out to
+    :data:`MAX_WIDE_LAG_S` (at most a quarter of the recording)."""
+    reach = min(MAX_WIDE_LAG_S, 0.25 * float(t[-1] - t[0]))
+    grid = np.arange(WIDE_LAG_STEP_S, reach + 1e-9, WIDE_LAG_STEP_S)
+    return [
+        _Reading("lag_at_edge", _delayed(w, t, lag), t,
+                 f"the magnetometer and the gyroscope fit only {lag:+.2f} s apart, beyond the ±{MAX_LAG_S:g} s "
+                 f"searched: their time stamps are not on one clock; align them, or give lag_s={lag:.2f}",
+                 (("lag_s", f"{lag:.2f}"),))
+        for lag in (float(sign * value) for value in grid[grid > MAX_LAG_S] for sign in (1.0, -1.0))
+    ]  # fmt: skip
+
+
+def _windowed_share(y: NDArray[np.float64], reading: _Reading, bias: bool = True) -> float:
+    """The windowed residual of stage 1 (the bias fitted, unless ``bias`` is False) over the turning it explains,
+    ``|r|² / Σ |H dy|²``; inf when only a correction that no soft iron gives fits (an axis squeezed
+    :data:`MIN_SINGULAR_RATIO`: samples that move in a plane are also fitted by a rank-one H that ignores the
+    rates)."""
+    length = max(_MIN_WINDOW, round(WINDOW_S / float(np.median(np.diff(reading.t)))))
+    win = _windows(y, reading.w, reading.t, length)
+    if win.T.size < 20:
+        return math.inf
     try:
-        offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
-        start = np.asarray(np.linalg.inv(h), dtype=np.float64)
-        model = _fit_model(y, w * scale, t, segment_s, "general", start, offset, beta, SCREEN_ROWS)
+        beta = _windowed_bias(win)[1] if bias else np.zeros(3)
+        h, _, rss = _constrained(_design(win, beta), np.eye(9))
     except np.linalg.LinAlgError:
+        return math.inf
+    singular = np.linalg.svd(h, compute_uv=False)
+    turning = float(np.sum((win.dy @ h.T) ** 2))
+    if not (singular[-1] >= MIN_SINGULAR_RATIO * singular[0] and turning > 0):
+        return math.inf
+    return rss / turning
+
+
+def _refuse_reading(best: _Reading, how: str) -> None:
+    """The one-line error for a reading of the inputs that the samples prefer to the one given."""
+    error = CalibrationError if best.code == "lag_at_edge" else OptionError
+    raise error(f"{best.words}; {how}", codes=(best.code,), remedy=best.remedy)
+
+
+def _check_readings(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64],
+                    lag_given: bool = False) -> list[_Reading]:  # fmt: skip
+    """Refuses inputs that the kinematics read far better another way (stage 1's windows): in degrees per
+    second, in milliseconds, of the other handedness, or beyond the lag searched. Returns the candidates the
+    windows left open, best first (what :func:`_check_readings_by_fit` tries when the fit is poor)."""
+    given = _windowed_share(y, _Reading("given", w, t))
+    scored = [(_windowed_share(y, reading), reading) for reading in _readings(w, t)]
+    if not lag_given and not given < WIDE_LAG_SHARE and min(share for share, _ in scored) >= DECISIVE_SHARE:
+        # The gyro explains little of the turning, read any other way too: is it late or early? The lags are
+        # ranked without the bias (a tenth of the cost), the best one scored with it.
+        lagged = _lagged_readings(w, t)
+        shares = [_windowed_share(y, reading, bias=False) for reading in lagged]
+        if lagged and min(shares) < math.inf:
+            best_lag = lagged[int(np.argmin(shares))]
+            scored.append((_windowed_share(y, best_lag), best_lag))
+    scored.sort(key=lambda pair: pair[0])
+    share, best = scored[0]
+    if share < min(READING_GAIN * given, DECISIVE_SHARE):
+        told = (
+            "only read so do the kinematics fit with a soft iron" if math.isinf(given)
+            else f"read so, the kinematics fit {given / max(share, 1e-300):.0f} times better"
+        )  # fmt: skip
+        _refuse_reading(best, told)
+    return [reading for _, reading in scored]
+
+
+def _check_readings_by_fit(y: NDArray[np.float64], t: NDArray[np.float64], readings: list[_Reading],
+                           segment_s: float, residual_rms: float) -> None:  # fmt: skip
+    """The general fit of stage 2 on each open reading (:func:`_check_readings`): one that leaves a third of
+    the given reading's residual or less is named (a slow vehicle's windows cannot tell the unit)."""
+    for reading in readings:
+        length = max(_MIN_WINDOW, round(WINDOW_S / float(np.median(np.diff(reading.t)))))
+        try:
+            win = _windows(y, reading.w, reading.t, length)
+            _, beta = _windowed_bias(win)
+            h, c, _ = _constrained(_design(win, beta), np.eye(9))
+            offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
+            start = np.asarray(np.linalg.inv(h), dtype=np.float64)
+            model = _fit_model(y, reading.w, reading.t, segment_s, "general", start, offset, beta, SCREEN_ROWS)
+        except np.linalg.LinAlgError:
+            continue
+        g = model.traj.distortion(model.solution.params)
+        singular = np.linalg.svd(g, compute_uv=False)
+        if not singular[-1] >= MIN_SINGULAR_RATIO * singular[0]:
+            continue
+        strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
+        rms = math.sqrt(model.rss / model.traj.rows.size) / strength
+        if rms < residual_rms / 3.0:
+            _refuse_reading(reading, f"the samples leave {100 * residual_rms:.0f} % of the field off the turning the "
+                                     f"gyro predicts as given, {100 * rms:.1f} % read so")  # fmt: skip
+
+
+def _check_gyro(w: NDArray[np.float64], y: NDArray[np.float64]) -> None:
+    """A gyro that never changes while the samples do: not a gyroscope's reading (a stream not logged)."""
+    if np.ptp(w, axis=0).max() > 0 or np.ptp(y, axis=0).max() == 0:
         return
-    g = model.traj.distortion(model.solution.params)
-    strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
-    rms = math.sqrt(model.rss / model.traj.rows.size) / strength
-    if rms < residual_rms / 3.0:
-        raise OptionError(
-            f"gyro= looks like degrees per second: the samples leave {100 * residual_rms:.0f} % of the field off the "
-            f"turning the gyro predicts, {100 * rms:.1f} % after dividing it by 57.3; give it in rad/s "
-            "(numpy.radians(gyro))"
-        )
+    what = "(0, 0, 0)" if not np.any(w) else f"the same rate {tuple(float(v) for v in w[0])}"
+    raise CalibrationError(
+        f"the samples do not support the gyro calibration: gyro= reads {what} on every row while the samples "
+        "change: a gyroscope not logged or not running; give its body rates in rad/s",
+        codes=("gyro",),
+    )
 
 
 @register(
@@ -1279,7 +1397,8 @@ def fit_gyro(
         if y.shape[0] < 50:
             raise CalibrationError(
                 f"the samples do not support the gyro calibration: {y.shape[0]} samples are left once those in the "
-                f"gyro's gaps are dropped; {_ADVICE}"
+                f"gyro's gaps are dropped; {_ADVICE}",
+                codes=("too_few_samples",),
             )
     if mapping not in ("search", "general") and mapping not in MAPPINGS:
         raise OptionError(
@@ -1300,17 +1419,30 @@ def fit_gyro(
     if win.T.size < 20:
         raise CalibrationError(
             f"the samples do not support the gyro calibration: the recording is too short, {win.T.size} windows "
-            f"of {length} samples where 20 are needed (about {20 * WINDOW_S:.0f} s); {_ADVICE}"
+            f"of {length} samples where 20 are needed (about {20 * WINDOW_S:.0f} s); {_ADVICE}",
+            codes=("too_few_samples",),
         )
-    _check_rate_unit(win)
+    _check_gyro(w, y)
     if lag_s == "search":
+        open_readings = _check_readings(y, w, t)
         lag = _search_lag(y, w, t, length)
     elif isinstance(lag_s, (int, float)) and math.isfinite(lag_s):
         lag = float(lag_s)
+        open_readings = _check_readings(y, _delayed(w, t, lag), t, lag_given=True)
     else:
         raise OptionError(f"lag_s must be 'search' or a number of seconds, got {lag_s!r}")
     w = _delayed(w, t, lag)
+    inside = (t - lag >= t[0]) & (t - lag <= t[-1])
+    if not inside.all():  # the gyro read before its first sample or after its last: held, not measured
+        y, w, t = y[inside], w[inside], t[inside]
+        a = None if a is None else a[inside]
     win = _windows(y, w, t, length)
+    if win.T.size < 20:
+        raise CalibrationError(
+            f"the samples do not support the gyro calibration: {y.shape[0]} samples are left where the gyro, "
+            f"{lag:+.3g} s apart, has a reading; {_ADVICE}",
+            codes=("too_few_samples",),
+        )
     beta = _windowed_bias(win)[1]
     turns_deg, axes = _turn_axes(win, beta)
     if turns_deg[1] < SINGLE_AXIS * turns_deg[0]:
@@ -1319,7 +1451,8 @@ def fit_gyro(
             f"{_axis_words(axes[:, 0], 'gyro')} only (its turning about any other axis is "
             f"{100 * turns_deg[1] / turns_deg[0]:.1f} % of that): the kinematics then fix the offset across that "
             "axis and the distortion of the plane perpendicular to it, but the offset and the scale along it move "
-            f"with the field's component along it, which never changes, so they are fixed by nothing; {_ADVICE}"
+            f"with the field's component along it, which never changes, so they are fixed by nothing; {_ADVICE}",
+            codes=("single_axis",),
         )
     # The accelerometer on the gyroscope's clock; its still samples gated on the rates with stage 1's bias taken
     # off (a rolling boat has no steady stretch for gravity.still_samples to take it from, and 1°/s of bias
@@ -1357,8 +1490,8 @@ def fit_gyro(
 
     residual = traj.magnetometer_residual(p)
     residual_rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))) / strength
-    if residual_rms > 0.15:  # the windows cannot tell the unit on a slow vehicle: ask the samples' own fit
-        _check_rate_unit_by_fit(y, w, t, win, segment_s, residual_rms)
+    if residual_rms > LARGE_RESIDUAL:  # the windows cannot tell the readings apart on a slow vehicle: the fit can
+        _check_readings_by_fit(y, t, open_readings, segment_s, residual_rms)
     values, vectors = np.linalg.eigh(covariance[k : k + 3, k : k + 3])
     offset_sigma = np.sqrt(np.clip(values, 0, None)) / strength
     heading_sigma = _heading_sigma(g, offset, covariance, traj)
@@ -1370,7 +1503,8 @@ def fit_gyro(
     unused = None if a is None or traj.gravity is not None else str(gravity_facts.get("reason", ""))
     support = _support(ambiguous, offset_sigma, vectors, heading_sigma, residual_rms, span_deg, lag, turns_deg,
                        gravity=traj.gravity is not None, accel_unused=unused,
-                       inclination_checked=inclination_deg is not None, disagreement=disagreement)  # fmt: skip
+                       inclination_checked=inclination_deg is not None, disagreement=disagreement,
+                       lag_searched=lag_s == "search")  # fmt: skip
     if mapping in MAPPINGS and excess.get(mapping, 0.0) > LIKELIHOOD_RATIO:
         support = replace(support, verdict="weak" if support.verdict == "supported" else support.verdict,
                           weaknesses=(*support.weaknesses, Reason(

@@ -286,7 +286,8 @@ def estimate_lag(raw: NDArray[np.float64], reference: NDArray[np.float64], time_
     if int(keep.sum()) < _MIN_WINDOW:
         raise CalibrationError(
             f"the recording is too short to search a lag of ±{limit:.3g} s: {int(keep.sum())} samples remain inside "
-            "the window; record longer, give a smaller max_lag_s, or leave time_s out (no lag)"
+            "the window; record longer, give a smaller max_lag_s, or leave time_s out (no lag)",
+            codes=("too_few_samples",),
         )
     kept_raw, kept_t = raw[keep], time_s[keep]
     # The grid and the jackknife read a regular stride of at most SEARCH_ROWS rows; the final refinement all
@@ -798,12 +799,16 @@ def fit_vector(
             lag_limit = found.lag_s
     singular = design_singularity(used_ref, field)
     if singular is not None:  # nothing to return even when forced: the least-squares solution is arbitrary
-        raise CalibrationError(f"the samples do not support the vector calibration: {singular}; {ADVICE}")
+        raise CalibrationError(
+            f"the samples do not support the vector calibration: {singular}; {ADVICE}",
+            codes=("single_axis" if "hardly turned" in singular else "undetermined",),
+        )
     g, offset = _solve(used_raw, used_ref)
     if not abs(float(np.linalg.det(g))) > 1e-12 * float(np.max(np.abs(g))) ** 3:
         raise CalibrationError(
             "the samples do not support the vector calibration: the fitted matrix is singular (the samples do not "
-            "change with the reference along some direction: a magnetometer axis that is dead or saturated?)"
+            "change with the reference along some direction: a magnetometer axis that is dead or saturated?)",
+            codes=("undetermined",),
         )
     covariance = prior = None
     notes: tuple[str, ...] = ()
