@@ -570,6 +570,9 @@ REASON_CODES: dict[str, str] = {
     "inclination": "the inclination given disagrees with the samples",
     "logging_rate": "the compass was logged too slowly for the motion",
     "calibration_in_use": "the fit corrects an unknown calibration already applied",
+    "gyro_unit": "the gyroscope's rates fit only in another unit (degrees per second)",
+    "time_unit": "the time stamps fit only in another unit (milliseconds, microseconds)",
+    "gyro_axes": "the gyroscope's axes are of the other handedness than the magnetometer's (swapped or sign-flipped)",
     "unclassified": "a reason without a code of its own yet",
 }
 
