@@ -405,3 +405,18 @@ def test_a_gyro_in_degrees_per_second_is_a_one_line_option_error() -> None:
     assert not cal.details["gravity"]["used"] and "degrees per second" in cal.details["gravity"]["note"]
     assert "degrees per second" not in magfit.fit(sim.samples, method="vector", gyro=sim.gyro, **options).details[
         "gravity"]["note"]  # fmt: skip
+
+
+def test_a_lag_beyond_max_lag_s_is_found_by_widening_the_search_and_one_beyond_every_search_refused() -> None:
+    # The attitude 2 s late, max_lag_s 1 s: the search widens until the lag lies inside it (at the edge it
+    # was a 57° error stated as ±4.7°). 20 s late (beyond 8 times max_lag_s) is refused, never returned.
+    sim = _vehicle("flight", mount_deg=20.0, attitude_deg=0.5, lag_s=2.0, n=15000, seed=3)
+    cal = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s, max_lag_s=1.0)
+    assert cal.details["lag_s"] == pytest.approx(2.0, abs=0.05)
+    assert cal.details["lag_search_s"] > 1.0
+    error = _heading_error_deg(sim, cal.apply(sim.clean))
+    assert error < 3.0 * cal.diagnostics.uncertainty.heading_sigma_deg and error < 1.0
+    far = _vehicle("flight", mount_deg=20.0, attitude_deg=0.5, lag_s=20.0, n=15000, seed=3)
+    with pytest.raises(CalibrationError) as caught:
+        magfit.fit(far.samples, method="vector", reference=far.reference, time_s=far.time_s, max_lag_s=1.0)
+    assert {"lag_at_edge", "reference"} & set(caught.value.codes)

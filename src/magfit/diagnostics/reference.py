@@ -483,10 +483,12 @@ def judge_reference_fit(
             f"the samples are {scale:.3g} times the reference field: {mixup}; the calibration converts the samples "
             "into the reference's unit (if the samples are raw counts, this is the sensor's gain)"
         )
-    if lag_at_limit is not None:
-        weaknesses.add("lag_at_edge",
-            f"the lag between the reference and the samples reached the search limit ({lag_at_limit:+.3g} s): the "
-            "true lag may be larger; give a larger max_lag_s or check the two time bases"
+    if lag_at_limit is not None:  # not an estimate: the minimum may lie beyond, and the fit with it
+        refusals.add("lag_at_edge",
+            f"the lag between the reference and the samples reached the edge of the widest search "
+            f"({lag_at_limit:+.3g} s): the true lag may be larger, and a fit at a wrong lag turns the heading by "
+            "what the vehicle turned meanwhile; check the two time bases (the same clock, seconds), or give a "
+            "larger max_lag_s"
         )
     support = Support.judged(refusals, weaknesses, ADVICE)
     directions = reference / np.linalg.norm(reference, axis=1, keepdims=True)

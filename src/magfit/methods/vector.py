@@ -138,6 +138,8 @@ __all__ = ["GravityFit", "LagEstimate", "estimate_lag", "fit_vector"]
 
 #: Fewest samples a vector fit takes: 12 parameters (13 with a lag), and the batch-means covariance needs 80.
 MIN_SAMPLES = 80
+#: The lag search widens, doubling, to at most this many times max_lag_s when the best lag is at its edge.
+WIDEST_LAG = 8.0
 #: Samples the lag search must keep inside the window where every candidate lag has a reference.
 _MIN_WINDOW = 40
 #: Rows the lag's grid search and jackknife read (a regular stride of a longer recording).
@@ -790,13 +792,23 @@ def fit_vector(
         times = check_times(time_s, "time_s", n)
         if rates is not None and acc is not None:
             _check_gyro_unit(ref, times, rates)
-        found = estimate_lag(raw, ref, times, float(max_lag_s))
+        # A lag at the edge of the search is not an estimate: the search widens (doubling, up to
+        # WIDEST_LAG times max_lag_s and a quarter of the recording) until the best lag lies inside it.
+        limit = float(max_lag_s)
+        widest = min(WIDEST_LAG * limit, 0.25 * float(times[-1] - times[0]))
+        found = estimate_lag(raw, ref, times, limit)
+        while found.at_limit and limit < widest:
+            limit = min(2.0 * limit, widest)
+            found = estimate_lag(raw, ref, times, limit)
+        if limit > max_lag_s:
+            details["lag_search_s"] = limit
         used_raw, used_ref, rate = raw[found.keep], found.reference, found.rate
         kept = np.flatnonzero(found.keep)
         details["lag_s"] = found.lag_s
         jackknife = found.lag_sigma_s
         if found.at_limit:
             lag_limit = found.lag_s
+            details["lag_search_s"] = limit
     singular = design_singularity(used_ref, field)
     if singular is not None:  # nothing to return even when forced: the least-squares solution is arbitrary
         raise CalibrationError(
