@@ -420,3 +420,15 @@ def test_a_lag_beyond_max_lag_s_is_found_by_widening_the_search_and_one_beyond_e
     with pytest.raises(CalibrationError) as caught:
         magfit.fit(far.samples, method="vector", reference=far.reference, time_s=far.time_s, max_lag_s=1.0)
     assert {"lag_at_edge", "reference"} & set(caught.value.codes)
+
+
+def test_halves_that_disagree_beyond_their_one_sigma_are_named_and_a_consistent_flight_is_not() -> None:
+    # The attitude's error correlated over 5 s (0.2-1°): the halves differ by 0.5-1.6 of their combined one-sigma
+    # (simulate_vehicle, flight and car, 3 seeds each). A field that steps half-way (a magnet, a motor) is named.
+    sim = _vehicle("car", mount_deg=20.0, attitude_deg=0.2, lag_s=0.1, n=15000, seed=2)
+    cal = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s)
+    assert "inconsistent_halves" not in magfit.findings.Support.from_dict(cal.details["support"]).codes
+    stepped = sim.samples.copy()
+    stepped[7500:] += [2.0, -1.5, 0.0]  # µT, 5 % of the field
+    cal = magfit.fit(stepped, method="vector", reference=sim.reference, time_s=sim.time_s, allow_undetermined=True)
+    assert "inconsistent_halves" in magfit.findings.Support.from_dict(cal.details["support"]).codes
