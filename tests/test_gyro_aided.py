@@ -399,3 +399,15 @@ def test_a_gyro_that_reads_zero_or_one_constant_rate_is_a_calibration_error_with
         with pytest.raises(CalibrationError) as caught:
             magfit.fit(sim.samples, method="gyro", gyro=rates, time_s=sim.time_s)
         assert caught.value.codes == ("gyro",) and "\n" not in str(caught.value)
+
+
+def test_halves_that_disagree_beyond_their_one_sigma_are_named_and_a_consistent_drive_is_not() -> None:
+    # simulate_vehicle car, tumble and boat, 2 seeds each: the halves differ by 0.4-2.1 combined one-sigmas.
+    # The field stepping by 5 % half-way (a magnet, a motor): 21 of them, named.
+    sim = _simulate(3000, "car", np.eye(3), seed=3)
+    cal = _fit(sim)
+    assert "inconsistent_halves" not in magfit.findings.Support.from_dict(cal.details["support"]).codes
+    stepped = sim.samples.copy()
+    stepped[1500:] += [0.05, -0.04, 0.0]
+    cal = magfit.fit(stepped, method="gyro", gyro=sim.gyro, time_s=sim.time_s, allow_undetermined=True)
+    assert "inconsistent_halves" in magfit.findings.Support.from_dict(cal.details["support"]).codes

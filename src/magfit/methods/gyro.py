@@ -122,6 +122,8 @@ SCREEN_ROWS = 3_000
 SCREEN_ITER = 40
 #: At most this many stretches (each adds two unknowns); longer recordings get longer stretches.
 MAX_SEGMENTS = 60
+#: Combined one-sigmas by which the fits of the two halves of a recording may differ before the verdict names it.
+HALVES_SIGMAS = 3.5
 #: The samples' residual RMS (fraction of the field) beyond which the fit is weak, and the other readings of
 #: the inputs are tried by the fit.
 LARGE_RESIDUAL = 0.05
@@ -1125,6 +1127,48 @@ def _support(
     return Support.judged(refusals, weak, _ADVICE)
 
 
+def _level_headings(g: NDArray[np.float64], raw: NDArray[np.float64], offset: NDArray[np.float64]) -> NDArray[Any]:
+    """The headings (radians) of ``raw`` corrected by (G, V), as :func:`_heading_sigma` reads them."""
+    corrected = (raw - offset) @ np.linalg.inv(g).T
+    return np.asarray(np.arctan2(-corrected[:, 1], corrected[:, 0]), dtype=np.float64)
+
+
+def _halves(model: _Model, segment_s: float) -> tuple[float, float] | None:
+    """(RMS heading difference, combined one-sigma), degrees, of the model fitted again on each half of the
+    recording (the same mapping, from the whole fit), at the eight level headings of :func:`_heading_sigma`;
+    None when a half is too short to fit."""
+    traj, p = model.traj, model.solution.params
+    g, offset = traj.distortion(p), p[traj.k : traj.k + 3]
+    g = g * np.sign(np.linalg.det(g))  # (−G, V, antipodal b₀) fits alike: the level fields below are G's own
+    dip = math.radians(60.0)
+    headings_deg = np.radians(np.arange(0, 360, 45))
+    body = np.column_stack(
+        [math.cos(dip) * np.cos(headings_deg), -math.cos(dip) * np.sin(headings_deg), np.full(8, math.sin(dip))]
+    )
+    raw = body @ g.T + offset
+    n = traj.t.size
+    headings, variances = [], []
+    for half in (slice(0, n // 2), slice(n // 2, n)):
+        t = traj.t[half]
+        if float(t[-1] - t[0]) < 20 * WINDOW_S:
+            return None
+        gravity = traj.gravity
+        if gravity is not None:
+            gravity = replace(gravity, down=gravity.down[half], still=gravity.still[half])
+        try:
+            fitted = _fit_model(traj.y[half], traj.w[half], t, segment_s, model.name, *_parts(model), gravity=gravity)
+            g_half = fitted.traj.distortion(fitted.solution.params)
+            offset_half = fitted.solution.params[fitted.traj.k : fitted.traj.k + 3]
+            covariance = _covariance(fitted.traj, fitted.solution.params)
+        except np.linalg.LinAlgError:
+            return None
+        g_half = g_half * np.sign(np.linalg.det(g_half))
+        headings.append(_level_headings(g_half, raw, offset_half))
+        variances.append(_heading_sigma(g_half, offset_half, covariance, fitted.traj) ** 2)
+    difference = np.angle(np.exp(1j * (headings[0] - headings[1])))
+    return math.degrees(float(np.sqrt(np.mean(difference**2)))), math.sqrt(sum(variances))
+
+
 # --------------------------------------------------------------- the delay, the gyro's unit, the method
 
 
@@ -1505,6 +1549,13 @@ def fit_gyro(
                        gravity=traj.gravity is not None, accel_unused=unused,
                        inclination_checked=inclination_deg is not None, disagreement=disagreement,
                        lag_searched=lag_s == "search")  # fmt: skip
+    halves = _halves(model, segment_s) if support.verdict != "refused" else None
+    if halves is not None and halves[0] > HALVES_SIGMAS * halves[1]:
+        support = replace(support, verdict="weak", weaknesses=(*support.weaknesses, Reason(
+            f"the two halves of the recording give headings {halves[0]:.2g}° apart (RMS over level headings), "
+            f"{halves[0] / max(halves[1], 1e-12):.1f} times their combined one-sigma (±{halves[1]:.2g}°): the field, "
+            "the gyro's bias or the clocks changed between them, and the stated one-sigma does not cover that; "
+            "expect heading errors of the order of their difference", "inconsistent_halves")))  # fmt: skip
     if mapping in MAPPINGS and excess.get(mapping, 0.0) > LIKELIHOOD_RATIO:
         support = replace(support, verdict="weak" if support.verdict == "supported" else support.verdict,
                           weaknesses=(*support.weaknesses, Reason(
