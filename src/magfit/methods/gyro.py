@@ -14,28 +14,21 @@ differentiates the samples (``diff(m)/dt``) and adds the gyro's bias β in ``ω 
 (Alonso & Shuster, J. Astronaut. Sci. 50(4), 2002) uses the field's magnitude only; Huang, Hendeby & Skog
 ("Joint magnetometer-IMU calibration via maximum a posteriori estimation", arXiv:2505.16662, 2025) estimate
 the calibration with the orientation trajectory as unknowns, which stage 2 below does in a reduced form (the
-trajectory is the gyro's, integrated, with one unknown start per stretch). Here, in three stages:
+trajectory is the gyro's, integrated, with one unknown start per stretch). Here, in three stages
+(measured figures for each choice: docs/methods.md, "gyro"):
 
 1. **Integrated, not differentiated.** (1) integrated over windows ``[a, b]`` of about a second:
    ``H (y_b − y_a) = −∫ ω × (H y − c) dt`` (trapezoids of ``ω yᵀ``, ``y``, ``ω``). A difference of two
-   samples (MAGYC's ``diff(m)/dt``, L = 1) has the magnetometer noise of two samples for one sample's
-   turn; measured on ``simulate_vehicle`` (6 000 samples at 50 Hz, 0.5 % noise, gyro 0.003 rad/s noise,
-   bias up to 0.02 rad/s, a soft iron and a mounting turned 10/20/25°) the offset error of this linear stage
-   falls from 4.1 % of the field at L = 1 to 0.8 % at L = 25 on a tumble, and a car's from 2 200 % to 98 %:
-   only a tumble is pinned by the derivative at all.
-   The total least-squares solution (smallest singular vector) gives H and c, then Gauss-Newton on the
-   same residual adds the gyro bias.
+   samples (MAGYC's ``diff(m)/dt``) has the magnetometer noise of two samples for one sample's turn; a window
+   of L samples has it for L samples' turn. The total least-squares solution (smallest singular vector) gives
+   H and c, then Gauss-Newton on the same residual adds the gyro bias.
 2. **Maximum likelihood on the samples.** Integrating (1) over whole stretches of ``segment_s`` seconds:
    ``b_k = R_kᵀ b₀`` with ``R_k`` the rotation from the stretch's start integrated from ``ω − β``, so
    ``y_k = G R_kᵀ b₀ + V`` with ``|b₀| = 1`` (G carries the field's magnitude): Levenberg-Marquardt (the
    project's, on the normal equations) on the samples' own residuals over G (general, 9), V, β and each
    stretch's b₀ (2 angles). This uses that the field is one vector for many seconds, which the windows of
-   stage 1 forget: on the runs above (windows of 50 samples with the bias, then this stage) the offset error
-   falls from 7.4 % of the field to 0.2 % (car), 400 % to 1.2 % (flight: the wings tilt ±15° in turns), 17 %
-   to 0.45 % (boat), and the heading error from 3.3° to 0.17° (flight), 12.9° to 0.46° (boat). Stretches of
-   10 s gave the lowest heading error on three of the four motions against 30 s and one stretch for the
-   whole recording (the gyro's noise walks the integrated rotation away in long ones; each stretch adds two
-   unknowns).
+   stage 1 forget. Longer stretches add fewer unknowns but let the gyro's noise walk the integrated rotation
+   away.
    **With the accelerometer** (``accel=``, optional, in the gyroscope's axes): where it sees gravity alone
    (:func:`magfit.gravity.still_samples`, gated on the rates less stage 1's bias), its down direction
    ``d_k = −a_k/|a_k|`` and the unit field ``b_k`` make the inclination's angle, one for the whole recording::
@@ -44,18 +37,14 @@ trajectory is the gyro's, integrated, with one unknown start per stretch). Here,
 
    (the ``d · (H y − c) = B sin δ`` of the vector methods with ``|b| = 1``), one more residual per sample in
    the same Levenberg-Marquardt, δ one more unknown. It is divided by cos δ because its noise, the
-   accelerometer's direction noise across the field, is ``σ cos δ`` in ``d · b``: undivided, the fit lowered
-   it by pulling the field towards the vertical (the dip came out 70-79° for 64° on simulated boats, the
-   heading error 4x worse). Its weight is the magnetometer rows' noise over its own, each the residuals'
-   variance times their correlation in time (five-second batch means), from the general fit without it and
-   once more with it. Its sign is free (δ is fitted), so an accelerometer that reports gravity instead of the
-   specific force fits alike, with the dip's sign turned. The field's magnitude (TWOSTEP's information) needs
-   no rows of its own: ``|b₀| = 1`` holds it in every residual. A rotation about the boat's roll axis turns the
-   field about that axis, which the kinematics cannot tell from the axes' own rotation about it; gravity turns
-   with the boat too, but the field's angle to it changes with the axes' rotation: on ``accuracy_vehicle``'s
-   boat (rolling ±15°, one heading; 8 trials) the RMS heading error falls from 1.51° to 0.27° (``vector``
-   with 1° of attitude error: 0.62°), flight 0.20° to 0.16°, car 0.082° to 0.068°; a tumble keeps no still
-   sample (turning fast throughout) and is unchanged.
+   accelerometer's direction noise across the field, is ``σ cos δ`` in ``d · b``: undivided, a fit lowers it
+   by pulling the field towards the vertical. Its weight is the magnetometer rows' noise over its own, each
+   the residuals' variance times their correlation in time (five-second batch means), from the general fit
+   without it and once more with it. Its sign is free (δ is fitted), so an accelerometer that reports gravity
+   instead of the specific force fits alike, with the dip's sign turned. The field's magnitude (TWOSTEP's
+   information) needs no rows of its own: ``|b₀| = 1`` holds it in every residual. A rotation about a boat's
+   roll axis turns the field about that axis, which the kinematics cannot tell from the axes' own rotation
+   about it; gravity turns with the boat too, but the field's angle to it changes with the axes' rotation.
    A tilted accelerometer (its bias over g, or its mounting) leaves (2)'s residual as small as a true one and
    moves the fitted δ and the axes' rotation instead: the covariance takes it as tilted by an unknown
    :data:`ACCEL_BIAS_PRIOR`, and ``inclination_deg=`` (the reference model's) checks δ, dropping the rows when
@@ -75,14 +64,25 @@ trajectory is the gyro's, integrated, with one unknown start per stretch). Here,
    differently (rotations about one axis cannot tell mappings that differ by a turn about it) are a refusal:
    the alignment is not determined.
 
+What the inputs are. (1) fixes how fast the field turns per unit of ``ω dt``, so a gyro in degrees per second
+or times in milliseconds scale the turn by 57.3 or 1000, a lag between the clocks shifts it, and a gyro whose
+axes are of the other handedness than the magnetometer's (two swapped, or one sign-flipped: ω is a
+pseudovector, ``S ω`` for an improper S is ``−(−S) ω``) turns the field backwards, which no G absorbs. Each
+reading (:func:`_readings`, :func:`_lagged_readings`) is scored by the windowed residual of stage 1 over the
+turning it explains, a correction that no soft iron gives (an axis squeezed :data:`MIN_SINGULAR_RATIO`) not
+counted; one far better than the given reading is refused with its own code and remedy, and where the windows
+cannot tell (a slow vehicle) and the fit leaves a large residual, stage 2's general fit decides.
+
 What the motion determines (the verdict, in ``details["support"]``): turning about one axis ``a`` only,
 ``b``'s component along ``a`` stays constant, so ``G a`` and V along the plane's normal are confounded:
 the kinematics fix the offset across ``a`` and the distortion of the plane perpendicular to ``a`` (even from
 part of a turn: the gyroscope says how far it turned), never the offset along the normal nor the scale
-along ``a``. A second rotation axis, even ±15° of bank, makes everything determined in principle; how well
+along ``a``. A second rotation axis, even a little bank, makes everything determined in principle; how well
 is the covariance of stage 2 (the sandwich of batch sums over the recording, as the diagnostics of the
 magnitude-only methods do, for the gyro's noise walks and is correlated in time): an offset one-sigma above
-5 % of the field is a refusal, above 1 % a weakness, each with the heading error it causes.
+:data:`UNDETERMINED_OFFSET` of the field is a refusal, above :data:`WEAK_OFFSET` a weakness, each with the
+heading error it causes. The model fitted again on each half of the recording (:func:`_halves`) must agree
+within :data:`HALVES_SIGMAS` of their combined heading one-sigmas, or the disagreement is named.
 """
 
 from __future__ import annotations
@@ -170,6 +170,9 @@ READING_GAIN = 0.25
 #: ... and when it leaves at most this share of the turning unexplained: on a flight the windows' noise leaves
 #: the right reading at 0.03-0.57 (simulate_vehicle, 4 seeds) and its mirror image at 0.07-0.30.
 DECISIVE_SHARE = 0.05
+#: Noise variances by which the rates negated (the gyro's axes of the other handedness) must fit better than as
+#: given to be refused: on simulate_vehicle's boats, flights and cars the wrong sense fits worse by 5 000-1 200 000.
+HANDEDNESS_RATIO = 500.0
 #: The median time step from which time_s may be in milliseconds (a gyro-aided fit at under 5 Hz).
 MS_STEP = 0.2
 #: Lags beyond MAX_LAG_S are tried, on a grid of WIDE_LAG_STEP_S to MAX_WIDE_LAG_S, when the given reading's
@@ -861,6 +864,7 @@ def _choose(
     offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
     inverse = np.asarray(np.linalg.inv(h), dtype=np.float64)
     general = _fit_model(y, w, t, segment_s, "general", inverse, offset, beta, SCREEN_ROWS)
+    _check_handedness(y, w, t, win, segment_s, general)
     if gravity is not None:
         # The weight from the kinematic fit's residuals, then once more from the fit with the gravity rows:
         # the first residuals carry the fit's own error in the direction the gravity rows pin.
@@ -902,6 +906,31 @@ def _choose(
                 if separation < LIKELIHOOD_RATIO:
                     ambiguous = (mapping_name(_rotation(best)), mapping_name(_rotation(rivals[0])), separation)
     return _fit_model(y, w, t, segment_s, chosen.name, *_parts(chosen), gravity=gravity), excess, ambiguous
+
+
+def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], win: _Windows,
+                      segment_s: float, general: _Model) -> None:  # fmt: skip
+    """The general fit of stage 2 with the rates negated (the gyro's axes of the other handedness, module
+    docstring): far better by :data:`HANDEDNESS_RATIO` noise variances is refused. Where the windows cannot
+    tell (a boat's roll, a flight), this fit can: on simulate_vehicle the wrong sense fits worse by thousands."""
+    negated = _Windows(win.dy, -win.M, win.Sy, -win.Sw, win.T)
+    try:
+        _, beta = _windowed_bias(negated)
+        h, c, _ = _constrained(_design(negated, beta), np.eye(9))
+        offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
+        start = np.asarray(np.linalg.inv(h), dtype=np.float64)
+        mirrored = _fit_model(y, -w, t, segment_s, "general", start, offset, beta, SCREEN_ROWS)
+    except np.linalg.LinAlgError:
+        return
+    g = mirrored.traj.distortion(mirrored.solution.params)
+    singular = np.linalg.svd(g, compute_uv=False)
+    if not singular[-1] >= MIN_SINGULAR_RATIO * singular[0]:
+        return
+    ratio = (general.rss - mirrored.rss) / max(_noise_variance(mirrored), 1e-300)
+    if ratio > HANDEDNESS_RATIO:
+        reading = next(r for r in _readings(w, t) if r.code == "gyro_axes")
+        _refuse_reading(reading, f"with the rates negated, the samples follow the turning {ratio:.0f} noise "
+                                 "variances better")  # fmt: skip
 
 
 def _definite(model: _Model) -> bool:
