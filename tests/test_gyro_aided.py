@@ -411,3 +411,12 @@ def test_halves_that_disagree_beyond_their_one_sigma_are_named_and_a_consistent_
     stepped[1500:] += [0.05, -0.04, 0.0]
     cal = magfit.fit(stepped, method="gyro", gyro=sim.gyro, time_s=sim.time_s, allow_undetermined=True)
     assert "inconsistent_halves" in magfit.findings.Support.from_dict(cal.details["support"]).codes
+
+
+def test_degenerate_rates_are_a_calibration_error_with_a_code_never_a_raw_numpy_error() -> None:
+    # Rates of 1e-300 rad/s on noise at a time base of 20 units once raised LinAlgError: Singular matrix.
+    rng = np.random.default_rng(0)
+    with pytest.raises(CalibrationError) as caught:
+        magfit.fit(rng.normal(size=(120, 3)), method="gyro", gyro=rng.normal(size=(120, 3)) * 1e-300,
+                   time_s=1e9 + np.arange(120) * 20.0, allow_undetermined=True)  # fmt: skip
+    assert caught.value.codes and "\n" not in str(caught.value)

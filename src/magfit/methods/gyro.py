@@ -1454,6 +1454,21 @@ def fit_gyro(
     CalibrationError
         Too short a recording, or one that turned about one axis only (named).
     """
+    try:
+        return _fit_gyro(data, gyro=gyro, time_s=time_s, mapping=mapping, segment_s=segment_s, lag_s=lag_s,
+                         accel=accel, gyro_time_s=gyro_time_s, inclination_deg=inclination_deg)  # fmt: skip
+    except np.linalg.LinAlgError:  # degenerate inputs the checks above let through (rates of 1e-300 rad/s)
+        raise CalibrationError(
+            "the samples do not support the gyro calibration: with these rates and samples the kinematics are "
+            f"singular (no turning the gyro and the samples agree on); {_ADVICE}",
+            codes=("gyro",),
+        ) from None
+
+
+def _fit_gyro(data: FitInput, *, gyro: ArrayLike | None, time_s: ArrayLike | None, mapping: str, segment_s: float,
+              lag_s: float | str, accel: ArrayLike | None, gyro_time_s: ArrayLike | None,
+              inclination_deg: float | None) -> Calibration:  # fmt: skip
+    """:func:`fit_gyro`'s work (its docstring)."""
     y = data.require_samples("gyro")
     n = y.shape[0]
     gap_notes: list[str] = []
