@@ -61,9 +61,9 @@ def test_vector_is_within_its_stated_heading_sigma_or_refused(motion: str, seed:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [21, 22])
+@pytest.mark.parametrize("seed", [22, 52])
 @pytest.mark.parametrize("motion", ["car", "tumble", "flight"])
-@pytest.mark.parametrize("gyro_lag_s", [0.0, 2.0])
+@pytest.mark.parametrize("gyro_lag_s", [0.0, 0.1, 2.0])
 def test_gyro_is_within_its_stated_heading_sigma_or_refused(motion: str, seed: int, gyro_lag_s: float) -> None:
     sim = _vehicle(motion, seed, n=3000)
     gyro = _late(sim.gyro, sim.time_s, gyro_lag_s) if gyro_lag_s else sim.gyro
@@ -71,6 +71,8 @@ def test_gyro_is_within_its_stated_heading_sigma_or_refused(motion: str, seed: i
         cal = magfit.fit(sim.samples, method="gyro", gyro=gyro, time_s=sim.time_s)
     except magfit.MagfitError as error:
         assert error.codes, f"seed {seed}: a refusal without a code: {error}"
+        # Units, time base and axes are right here: never blamed (a flight 0.1 s late was once "gyro_axes").
+        assert not {"gyro_unit", "time_unit", "gyro_axes"} & set(error.codes), f"seed {seed}: {error}"
         return
     error = _heading_error_deg(cal, sim)
     stated = cal.details["heading_sigma_deg"]
