@@ -397,7 +397,7 @@ def test_a_gyro_in_degrees_per_second_is_a_one_line_option_error() -> None:
     options = {"reference": sim.reference, "time_s": sim.time_s, "accel": sim.accel, "allow_undetermined": True}
     with pytest.raises(OptionError, match=r"gyro= looks like degrees per second.*numpy\.radians") as caught:
         magfit.fit(sim.samples, method="vector", gyro=np.degrees(sim.gyro), **options)
-    assert "\n" not in str(caught.value)
+    assert "\n" not in str(caught.value) and caught.value.codes == ("gyro_unit",)
     assert magfit.fit(sim.samples, method="vector", gyro=sim.gyro, **options).details["gravity"]["used"]
     # Without time_s the reference cannot tell the unit: the note names it where the rows were all dropped.
     del options["time_s"]

@@ -291,7 +291,9 @@ def _check_gyro_unit(reference: NDArray[np.float64], time_s: NDArray[np.float64]
         raise OptionError(
             f"gyro= looks like degrees per second (the reference turns as it predicts "
             f"{rss['rad/s'] / max(rss['deg/s'], 1e-300):.0f} times better after dividing it by 57.3): give it in "
-            "rad/s (numpy.radians(gyro))"
+            "rad/s (numpy.radians(gyro))",
+            codes=("gyro_unit",),
+            remedy=(("gyro", "numpy.radians(gyro)"),),
         )
 
 
