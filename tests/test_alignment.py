@@ -13,7 +13,7 @@ from magfit.alignment import align
 from magfit.rotations import angle_between_deg, euler_matrix
 from magfit.vehicle import GRAVITY, simulate_vehicle
 
-#: Accelerometer noise equivalent to 1° of tilt per sample (the issue's 1° of attitude noise).
+#: Accelerometer noise equivalent to 1° of tilt per sample (as 1° of attitude noise).
 ONE_DEGREE = GRAVITY * np.sin(np.radians(1.0))
 
 
