@@ -13,7 +13,7 @@ from magfit.alignment import align
 from magfit.rotations import angle_between_deg, euler_matrix
 from magfit.vehicle import GRAVITY, simulate_vehicle
 
-#: Accelerometer noise equivalent to 1° of tilt per sample (the issue's 1° of attitude noise).
+#: Accelerometer noise equivalent to 1° of tilt per sample (as 1° of attitude noise).
 ONE_DEGREE = GRAVITY * np.sin(np.radians(1.0))
 
 
@@ -192,7 +192,9 @@ def test_real_mpu9250_magnetometer_is_its_accelerometer_turned_180_about_x(real_
     assert nearest.name == "ROTATION_ROLL_180" and nearest.angle_deg < 3.0
     assert not result.mirror and result.verdict == "weak"
     assert any("dip angles scatter" in w for w in result.warnings)
-    assert np.all(result.sigma_deg < 2.0)
+    # The samples' dip is 64.3°, the model's 68.5°: said, and the rotation's one-sigma widened by it.
+    assert any(getattr(w, "code", None) == "inclination" for w in result.warnings)
+    assert np.all(result.axis_sigma_deg > 4.0) and np.all(result.axis_sigma_deg < 6.0)
 
 
 def test_an_uncalibrated_gyroscope_bias_is_taken_off():
@@ -394,3 +396,25 @@ def test_an_alignment_is_no_better_supported_than_its_calibration(tmp_path, caps
                             "--no-mirror")  # fmt: skip
     assert status == 0, err
     assert re.search(r"verdict\s+weak", out) and "was refused by its samples (forced) (too few)" in out
+
+
+def test_a_wrong_inclination_is_refused_not_absorbed_by_a_tilted_mount():
+    # A boat rolling on one heading, given 30° for a dip of 64°: the mount came out 34° off at a stated ±0.3°.
+    from scipy.spatial.transform import Rotation
+
+    mounting = Rotation.from_euler("xyz", [5.0, -10.0, 20.0], degrees=True).as_matrix()
+    sim = simulate_vehicle(6000, "boat", rate_hz=10.0, mounting=mounting, noise=0.003, accel_noise=0.05,
+                           gyro_noise=0.002, inclination_deg=64.0, seed=1)  # fmt: skip
+    mag = sim.truth_sensor.apply(sim.samples)
+    for wrong in (30.0, 50.0):
+        with pytest.raises(CalibrationError) as caught:
+            align(mag, sim.accel, inclination_deg=wrong, gyro=sim.gyro, time_s=sim.time_s)
+        assert caught.value.codes == ("inclination",)
+    right = align(mag, sim.accel, inclination_deg=64.0, gyro=sim.gyro, time_s=sim.time_s)
+    assert not any(getattr(w, "code", None) == "inclination" for w in right.warnings)
+    error = np.degrees(Rotation.from_matrix(right.matrix @ mounting.T).magnitude())
+    assert error < 3.0 * max(np.linalg.norm(right.axis_sigma_deg), 0.05)
+    # Fitted, the dip is pulled towards the vertical on a boat (72.5° for 64°): refused as not determined.
+    with pytest.raises(CalibrationError) as caught:
+        align(mag, sim.accel, gyro=sim.gyro, time_s=sim.time_s)
+    assert caught.value.codes == ("inclination",)

@@ -164,12 +164,12 @@ def test_real_betaflight_quadcopter_and_ensta_imu(real_data_dir: Path) -> None:
 
 
 @pytest.mark.slow
-def test_a_slow_vehicle_s_gyro_in_degrees_per_second_is_caught_by_the_fit() -> None:
-    # On a flight the one-second windows cannot tell the unit (both read the planar motion alike): the samples'
-    # own fit leaves almost the whole field off the predicted turning, and 1 % after dividing by 57.3.
+def test_a_slow_vehicle_s_gyro_in_degrees_per_second_is_named() -> None:
+    # On a flight the gyro divided by 57.3 is the only reading whose kinematics a soft iron fits.
     sim = _simulate(3000, "flight", np.eye(3), seed=3)
-    with pytest.raises(OptionError, match="degrees per second.*after dividing it by 57.3"):
+    with pytest.raises(OptionError, match="degrees per second") as caught:
         magfit.fit(sim.samples, method="gyro", gyro=np.degrees(sim.gyro), time_s=sim.time_s)
+    assert caught.value.codes == ("gyro_unit",) and caught.value.remedy == (("gyro", "numpy.radians(gyro)"),)
 
 
 def _boat(seed: int = 0) -> magfit.vehicle.VehicleSimulation:
@@ -358,3 +358,71 @@ def test_an_accelerometer_given_but_unused_is_said_with_why_not_asked_for() -> N
     weaknesses = " ".join(cal.details["support"]["weaknesses"])
     assert "accel= was given but the accelerometer saw gravity alone on" in weaknesses
     assert "more than 3 % away from g" in weaknesses and "give accel=" not in weaknesses
+
+
+def _late(rates: np.ndarray, time_s: np.ndarray, lag_s: float) -> np.ndarray:
+    """The rates as logged ``lag_s`` seconds late (the ends held)."""
+    return np.column_stack([np.interp(time_s - lag_s, time_s, rates[:, axis]) for axis in range(3)])
+
+
+@pytest.mark.parametrize(
+    ("name", "code", "error"),
+    [
+        ("degrees per second", "gyro_unit", OptionError),
+        ("time in milliseconds", "time_unit", OptionError),
+        ("x and y swapped", "gyro_axes", OptionError),
+        ("y sign-flipped", "gyro_axes", OptionError),
+        ("2 s late", "lag_at_edge", CalibrationError),
+    ],
+)
+def test_each_wrong_gyro_input_is_diagnosed_with_its_own_code_and_remedy(name: str, code: str, error: type) -> None:
+    sim = _simulate(3000, "car", ROLL_180, seed=1)
+    gyro, time_s = sim.gyro, sim.time_s
+    if name == "degrees per second":
+        gyro = np.degrees(gyro)
+    elif name == "time in milliseconds":
+        time_s = time_s * 1000.0
+    elif name == "x and y swapped":
+        gyro = gyro[:, [1, 0, 2]]
+    elif name == "y sign-flipped":
+        gyro = gyro * [1.0, -1.0, 1.0]
+    else:
+        gyro = _late(gyro, time_s, 2.0)
+    with pytest.raises(error) as caught:
+        magfit.fit(sim.samples, method="gyro", gyro=gyro, time_s=time_s)
+    assert caught.value.codes == (code,), str(caught.value)
+    assert caught.value.remedy and "\n" not in str(caught.value)
+    if code == "lag_at_edge":  # the remedy is the lag: given, the fit recovers the truth
+        assert caught.value.remedy == (("lag_s", "-2.00"),)
+        cal = magfit.fit(sim.samples, method="gyro", gyro=gyro, time_s=time_s, lag_s=-2.0)
+        assert "lag_at_edge" not in magfit.findings.Support.from_dict(cal.details["support"]).codes
+        assert _heading_error_deg(cal, sim) < 0.5
+
+
+def test_a_gyro_that_reads_zero_or_one_constant_rate_is_a_calibration_error_with_a_code() -> None:
+    sim = _simulate(1500, "car", np.eye(3))
+    for rates in (np.zeros((1500, 3)), np.tile([0.1, 0.0, 0.0], (1500, 1))):
+        with pytest.raises(CalibrationError) as caught:
+            magfit.fit(sim.samples, method="gyro", gyro=rates, time_s=sim.time_s)
+        assert caught.value.codes == ("gyro",) and "\n" not in str(caught.value)
+
+
+def test_halves_that_disagree_beyond_their_one_sigma_are_named_and_a_consistent_drive_is_not() -> None:
+    # simulate_vehicle car, tumble and boat, 2 seeds each: the halves differ by 0.4-2.1 combined one-sigmas.
+    # The field stepping by 5 % half-way (a magnet, a motor): 21 of them, named.
+    sim = _simulate(3000, "car", np.eye(3), seed=3)
+    cal = _fit(sim)
+    assert "inconsistent_halves" not in magfit.findings.Support.from_dict(cal.details["support"]).codes
+    stepped = sim.samples.copy()
+    stepped[1500:] += [0.05, -0.04, 0.0]
+    cal = magfit.fit(stepped, method="gyro", gyro=sim.gyro, time_s=sim.time_s, allow_undetermined=True)
+    assert "inconsistent_halves" in magfit.findings.Support.from_dict(cal.details["support"]).codes
+
+
+def test_degenerate_rates_are_a_calibration_error_with_a_code_never_a_raw_numpy_error() -> None:
+    # Rates of 1e-300 rad/s on noise at a time base of 20 units once raised LinAlgError: Singular matrix.
+    rng = np.random.default_rng(0)
+    with pytest.raises(CalibrationError) as caught:
+        magfit.fit(rng.normal(size=(120, 3)), method="gyro", gyro=rng.normal(size=(120, 3)) * 1e-300,
+                   time_s=1e9 + np.arange(120) * 20.0, allow_undetermined=True)  # fmt: skip
+    assert caught.value.codes and "\n" not in str(caught.value)

@@ -62,6 +62,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import CalibrationError, OptionError, SampleError
+from .findings import Reason
 from .gravity import ACCEL_TOLERANCE, MAX_RATE_DPS, MAX_TILT_RATE_DPS, moving_mean, still_samples
 from .rotations import FIRMWARES, StandardRotation, angle_between_deg, euler_angles, nearest_rotation
 
@@ -78,6 +79,15 @@ SHORT_LEVER = math.sin(math.radians(3.0))
 LARGE_RESIDUAL_DEG = 3.0
 #: An inclination fitted worse than this (one-sigma, degrees) is not determined.
 INCLINATION_UNDETERMINED_DEG = 10.0
+#: A given inclination is refused when it fits worse than the samples' own dip by a likelihood ratio of
+#: INCLINATION_CHI2 (five one-sigmas) and differs from it by more than INCLINATION_SIGMAS times the reference
+#: model's error (the World Magnetic Model's, about 0.3° RMS).
+INCLINATION_CHI2 = 25.0
+#: ... a disagreement beyond this (degrees) is refused; within it, the rotation's one-sigma is widened by it
+#: (an uncalibrated accelerometer: the real MPU-9250 recording shows 64.3° where the model says 68.5°).
+INCLINATION_REFUSE_DEG = 5.0
+INCLINATION_SIGMAS = 3.0
+INCLINATION_MODEL_DEG = 0.3
 #: Contiguous blocks of the recording for the batch-means covariance.
 _BATCHES = 20
 #: Samples fitted from each of the 48 starts before the best is refined on all of them.
@@ -475,12 +485,35 @@ def align(
     if fit_s:
         cosine = max(math.cos(math.radians(inclination)), 1e-9)
         inclination_sigma = math.degrees(math.sqrt(max(float(cov[3, 3]), 0.0)) / cosine)
-        if inclination_sigma > INCLINATION_UNDETERMINED_DEG:
+        _, unbiased, _ = _dip_fit(down, mhat, best.matrix, math.radians(inclination), True)
+        allowed = INCLINATION_SIGMAS * max(inclination_sigma, INCLINATION_MODEL_DEG)
+        if abs(math.degrees(unbiased) - inclination) > allowed:
+            # The robust fit of dᵀ R m̂ − sin δ is pulled towards the vertical where the samples hardly pin δ.
+            refusals.append(Reason(
+                f"the inclination is not determined: fitted {inclination:.1f}° ± {inclination_sigma:.1f}°, but "
+                f"{math.degrees(unbiased):.1f}° with the residual taken as a dip angle (the samples leave the dip and "
+                "a tilt of the mount about magnetic east nearly interchangeable: a vehicle on one heading); give "
+                "the inclination (the World Magnetic Model at your place: --location)",
+                "inclination",
+                (("inclination_deg", "the World Magnetic Model's"),),
+            ))  # fmt: skip
+        elif inclination_sigma > INCLINATION_UNDETERMINED_DEG:
             refusals.append(
                 f"the inclination is not determined (fitted {inclination:.1f}° ± {inclination_sigma:.0f}°): "
                 "record more tilt, or give the inclination (the World Magnetic Model at your place: --location)"
             )
     refusals += _judge_alternatives(down, mhat, solutions, residuals, inflation, direction_noise, search_mirrors)
+    if not fit_s and inclination_deg is not None:
+        disagreement = _inclination_disagreement(down, mhat, best, inclination_deg)
+        if disagreement is not None:
+            reason, difference = disagreement
+            if abs(difference) > INCLINATION_REFUSE_DEG:
+                refusals.append(reason)
+            else:  # widened: a wrong δ is taken up by a tilt of the mount of up to as much
+                weak.append(Reason(f"{reason}; the one-sigma of the rotation includes {abs(difference):.1f}° for it",
+                                   "inclination", reason.remedy))  # fmt: skip
+                cov = cov.copy()
+                cov[:3, :3] += math.radians(difference) ** 2 * np.eye(3)
     if allow_mirror is None and _MIRROR_REFUSAL in refusals:
         # The samples cannot tell: right-handed axes, by far the commoner, are assumed and the result says so.
         right_handed = align(
@@ -521,7 +554,12 @@ def align(
         )
     verdict = "refused" if refusals else "weak" if weak else "supported"
     if refusals and not allow_undetermined:
-        raise CalibrationError(f"the alignment is refused: {refusals[0]}")
+        first = refusals[0]
+        raise CalibrationError(
+            f"the alignment is refused: {first}",
+            codes=(first.code,) if isinstance(first, Reason) else ("undetermined",),
+            remedy=first.remedy if isinstance(first, Reason) else (),
+        )
     return Alignment(
         matrix=best.matrix,
         roll_deg=roll,
@@ -542,6 +580,74 @@ def align(
         verdict=verdict,
         warnings=tuple(refusals + weak + notes),
     )
+
+
+def _dip_fit(down: NDArray[np.float64], mhat: NDArray[np.float64], start: NDArray[np.float64], dip: float,
+             free: bool, iterations: int = 20) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:  # fmt: skip
+    """Gauss-Newton on (A1) as a dip error, ``(dᵀ R m̂ − sin δ) / cos δ`` (radians), plain least squares from
+    (``start``, ``dip``), δ fitted when ``free``: (R, δ, residuals).
+
+    Divided by cos δ, its noise (the directions' noise across the field, ``σ cos δ`` in ``dᵀ R m̂``) does not
+    depend on δ; undivided, a fit with δ free lowers it by pulling the field towards the vertical
+    (simulate_vehicle's boat: 72.8° for a dip of 64°, at an RMS residual 14 % below the truth's).
+    """
+    matrix = start.copy()
+    for _ in range(iterations):
+        x = mhat @ matrix.T
+        cosine = max(math.cos(dip), 0.1)
+        r = (np.einsum("ij,ij->i", down, x) - math.sin(dip)) / cosine
+        jac = np.cross(x, down) / cosine
+        if free:
+            jac = np.column_stack([jac, -1.0 + math.tan(dip) * r])
+        step = -np.linalg.lstsq(jac, r, rcond=None)[0]
+        matrix = _exp(step[:3]) @ matrix
+        dip += float(step[3]) if free else 0.0
+        if np.linalg.norm(step) < 1e-10:
+            break
+    u, _, vt = np.linalg.svd(matrix)
+    matrix = u @ vt
+    cosine = max(math.cos(dip), 0.1)
+    return matrix, dip, (np.einsum("ij,ij->i", down, mhat @ matrix.T) - math.sin(dip)) / cosine
+
+
+def _inclination_disagreement(down: NDArray[np.float64], mhat: NDArray[np.float64], best: _Solution,
+                              given_deg: float) -> tuple[Reason, float] | None:  # fmt: skip
+    """The reason and the difference (degrees, the samples' dip less the given one) when the dip the samples
+    show disagrees with the inclination given, else None.
+
+    A wrong δ is otherwise absorbed by a tilt of R (a boat given 30° for 64°: the mount 34° off at a stated
+    ±0.3°). (A1) as a dip error (:func:`_dip_fit`) is fitted with δ given and with δ free, from the fit at
+    the given δ; the given one is refused when it fits worse by a likelihood ratio of
+    :data:`INCLINATION_CHI2` (the residuals' correlation in time counted, batch means) and differs from the
+    samples' own dip by more than :data:`INCLINATION_MODEL_DEG` times :data:`INCLINATION_SIGMAS` (the
+    reference model's error). A likelihood ratio, not the free dip's one-sigma: a boat on one heading leaves
+    the dip and the tilt about magnetic east a flat valley whose local one-sigma means nothing.
+    """
+    dip = math.radians(given_deg)
+    _, _, held = _dip_fit(down, mhat, best.matrix, dip, False)
+    _, fitted, free = _dip_fit(down, mhat, best.matrix, dip, True)
+    n = len(free)
+    variance = float(np.sum(free**2)) / max(n - 4, 1)
+    batches = min(_BATCHES, n // 10)
+    inflation = 1.0
+    if batches >= 4:
+        edges = np.linspace(0, n, batches + 1).astype(np.int64)
+        means = np.add.reduceat(free, edges[:-1]) / np.diff(edges)
+        inflation = max(1.0, float(np.var(means, ddof=1)) * (n / batches) / max(float(np.mean(free**2)), 1e-300))
+    ratio = (float(np.sum(held**2)) - float(np.sum(free**2))) / max(variance * inflation, 1e-300)
+    difference = math.degrees(fitted) - given_deg
+    if ratio <= INCLINATION_CHI2 or abs(difference) <= INCLINATION_SIGMAS * INCLINATION_MODEL_DEG:
+        return None
+    reason = Reason(
+        f"the samples put the field's dip at {math.degrees(fitted):.1f}° (the angle between gravity and the field), "
+        f"where inclination_deg= says {given_deg:.1f}° ({difference:+.1f}°; the given one fits worse by a likelihood "
+        f"ratio of {ratio:.0f}): a wrong inclination is taken up by a tilt of the mount; check the inclination (the "
+        "World Magnetic Model at the place of the recording) and the accelerometer's and magnetometer's "
+        "calibrations, or leave inclination_deg out to fit it",
+        "inclination",
+        (("inclination_deg", "None"),),
+    )
+    return reason, difference
 
 
 def _still_directions(

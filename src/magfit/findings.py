@@ -579,6 +579,9 @@ REASON_CODES: dict[str, str] = {
     "motor_no_regressor": "the log holds no current or throttle on the compass's stamps to fit the motors' field",
     "motor_negligible": "the motors' field is too small to matter or to tell from the noise; no term fitted",
     "motor_not_exportable": "the export format cannot hold the motors' field",
+    "gyro_unit": "the gyroscope's rates fit only in another unit (degrees per second)",
+    "time_unit": "the time stamps fit only in another unit (milliseconds, microseconds)",
+    "gyro_axes": "the gyroscope's axes are of the other handedness than the magnetometer's (swapped or sign-flipped)",
     "unclassified": "a reason without a code of its own yet",
 }
 

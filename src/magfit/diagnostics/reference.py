@@ -42,6 +42,7 @@ __all__ = [
     "BLOCKS",
     "ReferenceReport",
     "design_singularity",
+    "halves_disagreement",
     "jackknife_covariance",
     "judge_reference_fit",
     "judged",
@@ -72,6 +73,10 @@ HEADING_LIMIT_DEG = BIASED_HEADING_DEG
 TILT_DEG = 10.0
 #: A reference whose direction stays within this angle of its mean: the vehicle hardly turned at all.
 STILL_DEG = 10.0
+#: Combined one-sigmas by which the fits of the two halves of a recording may differ before the verdict names it.
+HALVES_SIGMAS = 3.5
+#: Fewest samples in each half for the halves to be compared (the batch-means covariance needs 80).
+MIN_HALF = 80
 #: The design columns, in words.
 _COLUMNS = (
     "the response to the field along the vehicle x axis (the matrix's column x)",
@@ -346,6 +351,38 @@ def _weak_directions(
     return tuple(weak), condition
 
 
+def _level_body(field: float, inclination_deg: float) -> NDArray[np.float64]:
+    """The Earth's field in the vehicle frame (FRD) at 36 level headings, (36, 3)."""
+    delta = math.radians(inclination_deg)
+    psi = np.radians(np.arange(0.0, 360.0, 10.0))
+    return field * np.column_stack([math.cos(delta) * np.cos(psi), -math.cos(delta) * np.sin(psi),
+                                    np.full(psi.size, math.sin(delta))])  # fmt: skip
+
+
+def halves_disagreement(raw: NDArray[np.float64], reference: NDArray[np.float64], g: NDArray[np.float64],
+                        offset: NDArray[np.float64], inclination_deg: float) -> tuple[float, float] | None:  # fmt: skip
+    """(RMS heading difference, combined one-sigma), degrees, of the regressions on the two halves of the
+    recording, each with its own stated heading one-sigma (the block jackknife's, as the whole fit's); None when
+    a half does not determine its fit. The heading of a raw sample ``G b + V`` (the whole fit's model at 36 level
+    headings) is read through each half's calibration."""
+    n = raw.shape[0]
+    field = float(np.median(np.linalg.norm(reference, axis=1)))
+    samples = _level_body(field, inclination_deg) @ g.T + offset
+    headings, variances = [], []
+    for half in (slice(0, n // 2), slice(n // 2, n)):
+        design = np.column_stack([reference[half], np.ones(reference[half].shape[0])])
+        coefficients, *_ = np.linalg.lstsq(design, raw[half], rcond=None)
+        g_half, v_half = coefficients[:3].T, coefficients[3]
+        if not abs(float(np.linalg.det(g_half))) > 1e-12 * float(np.max(np.abs(g_half))) ** 3:
+            return None
+        corrected = (samples - v_half) @ np.linalg.inv(g_half).T
+        headings.append(np.arctan2(corrected[:, 1], corrected[:, 0]))
+        covariance = regression_covariance(raw[half], reference[half], g_half, v_half)
+        variances.append(_heading_sigmas(covariance, g_half, field, inclination_deg)[0] ** 2)
+    difference = np.angle(np.exp(1j * (headings[0] - headings[1])))
+    return math.degrees(float(np.sqrt(np.mean(difference**2)))), math.sqrt(sum(variances))
+
+
 def reference_inclination(reference: NDArray[np.float64]) -> float:
     """The inclination (degrees) at which headings are judged: the reference's own at its median attitude.
 
@@ -483,10 +520,20 @@ def judge_reference_fit(
             f"the samples are {scale:.3g} times the reference field: {mixup}; the calibration converts the samples "
             "into the reference's unit (if the samples are raw counts, this is the sensor's gain)"
         )
-    if lag_at_limit is not None:
-        weaknesses.add("lag_at_edge",
-            f"the lag between the reference and the samples reached the search limit ({lag_at_limit:+.3g} s): the "
-            "true lag may be larger; give a larger max_lag_s or check the two time bases"
+    if lag_at_limit is not None:  # not an estimate: the minimum may lie beyond, and the fit with it
+        refusals.add("lag_at_edge",
+            f"the lag between the reference and the samples reached the edge of the widest search "
+            f"({lag_at_limit:+.3g} s): the true lag may be larger, and a fit at a wrong lag turns the heading by "
+            "what the vehicle turned meanwhile; check the two time bases (the same clock, seconds), or give a "
+            "larger max_lag_s"
+        )
+    halves = halves_disagreement(raw, reference, g, offset, inclination) if n >= 2 * MIN_HALF else None
+    if halves is not None and halves[0] > HALVES_SIGMAS * halves[1]:
+        weaknesses.add("inconsistent_halves",
+            f"the two halves of the recording give headings {halves[0]:.2g}° apart (RMS over level headings), "
+            f"{halves[0] / max(halves[1], 1e-12):.1f} times their combined one-sigma (±{halves[1]:.2g}°): the "
+            "attitude's error, the field or the time bases changed between them, and the stated one-sigma does not "
+            "cover that; expect heading errors of the order of their difference"
         )
     support = Support.judged(refusals, weaknesses, ADVICE)
     directions = reference / np.linalg.norm(reference, axis=1, keepdims=True)

@@ -14,100 +14,54 @@ sensor with left-handed axes), V the hard iron. The calibration returned is ``fr
 (4): where the accelerometer sees gravity alone (:func:`magfit.gravity.still_samples`), its down direction
 ``d_k`` and the calibrated field make the constant angle of the field's inclination, ``s = B sin δ``.
 
-The estimator without ``accel``: linear least squares of (1) on the design ``[r, 1]``, one regression per
-axis of ``raw`` (Vasconcelos et al. 2011 and Kok & Schön 2016 fit the same model by maximum likelihood). The
-variants measured on :func:`magfit.vehicle.simulate_vehicle` (3000 samples at 50 Hz, field 50, noise 0.3, soft
-iron ±8 %, mounting 20°, attitude error correlated over 5 s; RMS heading error over 6 seeds, flight / car / boat):
+**Without accel**: linear least squares of (1) on the design ``[r, 1]``, one regression per axis of ``raw``
+(Vasconcelos et al., IEEE TAES 47(2), 2011, and Kok & Schön, IEEE Sensors J. 16(14), 2016, fit the same model
+by maximum likelihood). The attitude's error makes ``r`` noisy, an errors-in-variables problem whose shrinkage
+of G is of order ``σ_a²``, negligible; what limits any estimator is that the error wanders: its mean over the
+recording, ``σ_a √(2τ_c/T)`` per axis for a correlation time τ_c over a recording of length T, is
+indistinguishable from a turned mounting. An error θ in roll or pitch turns the field's vertical part into the
+horizontal plane, so that mean tilt costs ``tan δ · θ̄`` in heading: the floor is ``√(ψ̄² + (tan δ · θ̄)²)``.
+(The variants tried against it, and why least squares is kept: docs/methods.md, "vector".)
 
-- least squares: 0.34 / 0.33 / 0.29° at 0.2° of attitude error, 0.85 / 0.82 / 0.71° at 0.5°, 1.7 / 1.7 /
-  1.4° at 1°. The mean attitude error over the recording (0.16° and 0.79°) is the floor no estimator can
-  pass: it is indistinguishable from a turned mounting.
-- joint maximum likelihood with the errors-in-variables covariance ``σ_m² I + σ_a² G (|r|² I − r rᵀ) Gᵀ``
-  (σ_m, σ_a estimated from the residuals): 10° and 18° on flight (σ_a is not separable from σ_m on so
-  little tilt and the weights run away), 0.37-1.9° elsewhere. The shrinkage it corrects is σ_a² ≈ 3·10⁻⁴
-  of the scale at 1°: nothing next to the error that the attitude's wandering leaves in G.
-- two steps (magnitude-only ellipsoid, then the rotation by Procrustes between the calibrated samples and r):
-  18° on a car, no ellipsoid at all on flight and boat (their directions do not determine it); on a tumble
-  0.2-1.0°, the same as least squares.
-- least squares plus the magnitude equations ``|G⁻¹ (raw − V)| = |r|`` (attitude-free), each weighted by its
-  own residual: 1-5 % better (0.81 / 0.79 / 0.70° at 0.5°), but its weight is not something the data pin
-  (3x: 12 % better on flight, 4 % worse on boat; 10x: 2.5x worse) and it costs an iterative solve in the
-  lag search. Not kept. (Measured again for the alignment, benchmarks/accuracy_vehicle.py at 1°, 8 trials:
-  at 10-30x the vector equations' weight per row they take the flight's rotation error from 1.75° to
-  0.8-1.1° and the car's from 0.97° to 0.4-0.6°, but worsen the boat's heading 0.31° → 0.47° and the
-  flight's at 0.2° of attitude error 0.12° → 0.23°; at the weight their own scatter gives, the heading
-  error grows 2-5x: fitting them shrinks the matrix along what the restricted motion leaves weak.)
-
-Why least squares cannot do much better: an error in the attitude's roll or pitch turns the field's large
-vertical part into the horizontal plane, so the recording's mean tilt error becomes a tilt of the fitted
-mounting and costs ``tan δ`` times itself in heading (2x at δ = 64°). With the error on one axis at a time
-(car, 1°, 15 000 samples, 5 seeds): yaw errors alone 0.25°, tilt errors alone 0.74°; the floor from the
-mean errors ``√(ψ̄² + (tan δ θ̄)²)`` is 0.6°, least squares 0.77°.
-
-With ``accel``: the joint fit of (3) and (4) at the lag found from (2), linear in (M, c, s). (3) is taken
-in the frame of ``r_k``: its radial component ``r̂_k · (M raw_k − c) = |r_k|`` is free of the attitude's error
-(a small rotation of r changes its direction, not its length: the magnitude equation, linearised), its two
+**With accel**: the joint fit of (3) and (4) at the lag found from (2), linear in (M, c, s). (3) is taken in
+the frame of ``r_k``: its radial component ``r̂_k · (M raw_k − c) = |r_k|`` is free of the attitude's error (a
+small rotation of r changes its direction, not its length: the magnitude equation, linearised), its two
 tangential components carry it. Each kind of equation is weighted by its own noise and time correlation,
 ``w = 1 / (σ² κ)``, σ² the residuals' scatter and κ how far their batch means exceed independent errors'
-(measured at 10 Hz: the tangential components κ = 40-80, the attitude's error correlated over seconds; the
-radial ones and the gravity equations κ ≈ 1-2, the magnetometer's and accelerometer's noise): first from the
-regression's residuals and the sensors' noise, then from the joint fit's own residuals, with Huber weights on
-the gravity equations (accelerations the still-sample gate let through). These weights are where the
-measured optimum is: the radial equations' times 0.3 / 1 / 3 gave a rotation / heading error of 0.78 / 0.42 /
-0.47° and 0.390 / 0.357 / 0.443° on the flight at 1° below, 0.26 / 0.17 / 0.18° and 0.198 / 0.180 / 0.199° on
-the car; the gravity equations' 0.43 / 0.42 / 0.45° and 0.400 / 0.357 / 0.354° (flight), 0.19 / 0.17 / 0.22°
-and 0.228 / 0.180 / 0.212° (car). Both kinds have noise in their
-regressors (the magnetometer's in ``raw``, the accelerometer's in ``d``): least squares would shrink M along
-what the motion leaves weak to fit that noise (the radial equations at their weight without it: M 9 % too
-small on a flight, heading error 3°; a boat's rotation 0.18° → 0.98° on the true reference with the gravity
-equations), so its expected contribution is taken off the normal equations (adjusted least squares, the noises
-from third differences of the samples). The uncertainty is a block jackknife of the joint fit
+(:func:`_inflation`): first from the regression's residuals and the sensors' noise, then from the joint fit's
+own residuals, with Huber weights on the gravity equations (accelerations the still-sample gate let through).
+Both kinds have noise in their regressors (the magnetometer's in ``raw``, the accelerometer's in ``d``): least
+squares would shrink M along what the motion leaves weak to fit it, so its expected contribution is taken off
+the normal equations (adjusted least squares, :meth:`_Equations.normal`; the noises from third differences of
+the samples, :func:`_noise_sigma`). The uncertainty is a block jackknife of the joint fit
 (:data:`magfit.diagnostics.reference.BLOCKS` stretches, each refitted exactly), plus the accelerometer's
-calibration prior (below).
+calibration prior (:func:`_tilt_prior`).
 
-What each kind pins. The tangential components give the rotation about the vertical (the heading), with
-the attitude's error. The gravity equations (4) see the calibrated field's component along gravity: they pin
-the response of the vehicle's vertical output to the horizontal field (M's row z) through the horizontal field
+What each kind pins. The tangential components give the rotation about the vertical (the heading), with the
+attitude's error. The gravity equations (4) see the calibrated field's component along gravity: they pin the
+response of the vehicle's vertical output to the horizontal field (M's row z) through the horizontal field
 turning under it as the vehicle holds still at different headings; the joint fit is made only when the still
-samples' headings spread across both horizontal axes (:data:`MIN_HEADING_SPREAD`: a boat rolling on one heading
-does not). Neither pins the response of the horizontal outputs to the vertical field (M's column z): on a
-vehicle that tilts ±15° the vertical field hardly changes in the vehicle frame, so in (3) and (4) alike it is
-confounded with the offset, and it dominated the rotation error of the regression at 1° of attitude error
-(flight, trial 3: 0.062 in M's (x, z) element against 0.010 in (z, x)). The radial equations pin it: the
-field's length does change with the tilt, and they carry no attitude error. Measured on
-benchmarks/accuracy_vehicle.py (6000 samples at 10 Hz, lag 0.1 s, mounting 5-35°, 8 trials; RMS rotation error
-/ heading error, without → with accel): flight 2.27 → 0.42° / 0.607 → 0.357° at 1° of attitude error, 1.04 →
-0.28° / 0.300 → 0.204° at 0.5°, 0.38 → 0.21° / 0.119 → 0.098° at 0.2°; car 1.01 → 0.17° / 0.505 → 0.180°,
-0.50 → 0.15° / 0.255 → 0.140°, 0.20 → 0.13° / 0.106 → 0.086°; the boat (one heading) and the tumble (never
-still) unchanged. The radial equations alone (no gravity) gave 0.48° / 0.511° (flight, 1°) and 0.44° /
-0.401° (car, with an earlier still-sample gate): the rotation is mostly theirs, the heading gain mostly the
-gravity equations'.
+samples' headings spread across both horizontal axes (:data:`MIN_HEADING_SPREAD`). Neither pins the response of
+the horizontal outputs to the vertical field (M's column z): on a vehicle that tilts little the vertical field
+hardly changes in the vehicle frame, so in (3) and (4) alike it is confounded with the offset. The radial
+equations pin it: the field's length does change with the tilt, and they carry no attitude error.
 
-What the gravity equations cannot check: they align the magnetometer to the accelerometer, biases included.
-An offset b tilts the accelerometer's vertical by b / g (0.1 m/s²: 0.58°), a frame mounted off the vehicle's
-by its angle, and the joint fit follows. Three guards (benchmarks/accuracy_vehicle.py's cases at 1° of attitude
-error, 3 trials; heading error / stated one-sigma):
+What the gravity equations cannot check: they align the magnetometer to the accelerometer, biases included
+(an offset b tilts its vertical by b / g; a frame mounted off the vehicle's by its angle). Three guards:
 
-- no ``time_s`` and no ``gyro``: the still-sample gate sees |a| alone, and a coordinated turn keeps |a| at g
-  while it tilts the apparent vertical (5.8-6.6° on the flight, 4.1-16.1° on the car so). The gravity
-  equations are left out, said in the note.
-- a vertical that disagrees with the reference's: refused (:data:`VERTICAL_CHI2`, :data:`MAX_RESIDUAL_GROWTH`),
-  the fit is the regression, and the verdict's weaknesses name the accelerometer. 0.3 m/s² on x was 1.62-2.10°
-  / 0.45-0.98° on the flight and 1.79-2.26° / 0.31-0.43° on the car, now refused in all six (the regression:
-  0.36-0.78° and 0.38-0.53°); a frame tilted 2° was 1.70-2.15° and 1.87-2.43°, refused in all six; 5° (3.5-6.1°)
-  refused in all. Over flight and car at 0.2 / 0.5 / 1°: 0.3 m/s² refused in 12 of 18 fits, tilted 2° in 12,
-  5° in 17; the rest err by 0.07-0.50° at 0.8-1.6x their one-sigma.
-- what no test can see (0.1 m/s² moves the vertical by no more than the attitude's error does): its cost is in
-  the stated one-sigma, ``accel_sigma`` (default :data:`ACCEL_SIGMA`, 0.1 m/s²) propagated through the joint
-  fit (:func:`_tilt_prior`). 0.1 m/s² on x: 0.62-0.77° on the car at 1° (stated 0.20-0.26° before, 0.99-1.10°
-  now), 0.66-0.76° on the flight (1.01-1.29° now). The price: a right accelerometer's one-sigma is that too
-  (car 0.10-0.12° of error, stated 0.98-1.10°; flight 0.08-0.27°, 1.04-1.28°), where the regression states
-  0.39-0.74°. Give a smaller ``accel_sigma`` for an accelerometer whose offsets are known to be smaller.
+- without ``time_s`` and ``gyro`` the still-sample gate sees |a| alone, and a coordinated turn keeps |a| at g
+  while it tilts the apparent vertical: the gravity equations are left out, said in the note;
+- a vertical that disagrees with the reference's is refused (:func:`_vertical_disagreement`, a Hausman test
+  against :data:`VERTICAL_CHI2`, and :data:`MAX_RESIDUAL_GROWTH`): the fit is the regression, and the verdict's
+  weaknesses name the accelerometer;
+- what no test can see (an offset that moves the vertical by no more than the attitude's error does) is in the
+  stated one-sigma: ``accel_sigma`` propagated through the joint fit (:func:`_tilt_prior`).
 
-A lag between the attitude and the magnetometer (``time_s`` given) is searched on a grid of one sample
-period within ``±max_lag_s``, then refined by a bounded scalar minimisation of the residual sum of squares,
-the reference interpolated in time; the lag joins the parameters of the uncertainty (the reference's rate
-is its column of the design).
+**The lag** (``time_s`` given) is searched on a grid of one sample period within ``±max_lag_s``, then refined
+by a bounded scalar minimisation of the residual sum of squares, the reference interpolated in time
+(:func:`estimate_lag`); the lag joins the parameters of the uncertainty (the reference's rate is its column of
+the design). A best lag at the edge of the grid is not an estimate: the search widens, doubling, up to
+:data:`WIDEST_LAG` times ``max_lag_s`` (and a quarter of the recording), and a lag still at the edge is refused.
 """
 
 from __future__ import annotations
@@ -138,6 +92,8 @@ __all__ = ["GravityFit", "LagEstimate", "estimate_lag", "fit_vector"]
 
 #: Fewest samples a vector fit takes: 12 parameters (13 with a lag), and the batch-means covariance needs 80.
 MIN_SAMPLES = 80
+#: The lag search widens, doubling, to at most this many times max_lag_s when the best lag is at its edge.
+WIDEST_LAG = 8.0
 #: Samples the lag search must keep inside the window where every candidate lag has a reference.
 _MIN_WINDOW = 40
 #: Rows the lag's grid search and jackknife read (a regular stride of a longer recording).
@@ -175,7 +131,7 @@ MAX_RESIDUAL_GROWTH = 1.10
 #: Default one-sigma (m/s², each horizontal axis) of the accelerometer's calibration, the offset that the gravity
 #: equations cannot see: it tilts their vertical by its ratio to g and goes into the calibration, so its cost
 #: is added to the joint fit's covariance (:func:`_tilt_prior`). 0.1 m/s² (0.58°) is what neither test below
-#: detects at 1° of attitude error (it costs 0.6-0.8° of heading there, see the module docstring).
+#: detects at 1° of attitude error (it costs 0.6-0.8° of heading there, docs/methods.md, "vector").
 ACCEL_SIGMA = 0.1
 #: Standard gravity (m/s²): ``accel_sigma`` over it is the tilt of the accelerometer's vertical (radians).
 STANDARD_GRAVITY = 9.80665
@@ -286,7 +242,8 @@ def estimate_lag(raw: NDArray[np.float64], reference: NDArray[np.float64], time_
     if int(keep.sum()) < _MIN_WINDOW:
         raise CalibrationError(
             f"the recording is too short to search a lag of ±{limit:.3g} s: {int(keep.sum())} samples remain inside "
-            "the window; record longer, give a smaller max_lag_s, or leave time_s out (no lag)"
+            "the window; record longer, give a smaller max_lag_s, or leave time_s out (no lag)",
+            codes=("too_few_samples",),
         )
     kept_raw, kept_t = raw[keep], time_s[keep]
     # The grid and the jackknife read a regular stride of at most SEARCH_ROWS rows; the final refinement all
@@ -334,7 +291,9 @@ def _check_gyro_unit(reference: NDArray[np.float64], time_s: NDArray[np.float64]
         raise OptionError(
             f"gyro= looks like degrees per second (the reference turns as it predicts "
             f"{rss['rad/s'] / max(rss['deg/s'], 1e-300):.0f} times better after dividing it by 57.3): give it in "
-            "rad/s (numpy.radians(gyro))"
+            "rad/s (numpy.radians(gyro))",
+            codes=("gyro_unit",),
+            remedy=(("gyro", "numpy.radians(gyro)"),),
         )
 
 
@@ -789,21 +748,35 @@ def fit_vector(
         times = check_times(time_s, "time_s", n)
         if rates is not None and acc is not None:
             _check_gyro_unit(ref, times, rates)
-        found = estimate_lag(raw, ref, times, float(max_lag_s))
+        # A lag at the edge of the search is not an estimate: the search widens (doubling, up to
+        # WIDEST_LAG times max_lag_s and a quarter of the recording) until the best lag lies inside it.
+        limit = float(max_lag_s)
+        widest = min(WIDEST_LAG * limit, 0.25 * float(times[-1] - times[0]))
+        found = estimate_lag(raw, ref, times, limit)
+        while found.at_limit and limit < widest:
+            limit = min(2.0 * limit, widest)
+            found = estimate_lag(raw, ref, times, limit)
+        if limit > max_lag_s:
+            details["lag_search_s"] = limit
         used_raw, used_ref, rate = raw[found.keep], found.reference, found.rate
         kept = np.flatnonzero(found.keep)
         details["lag_s"] = found.lag_s
         jackknife = found.lag_sigma_s
         if found.at_limit:
             lag_limit = found.lag_s
+            details["lag_search_s"] = limit
     singular = design_singularity(used_ref, field)
     if singular is not None:  # nothing to return even when forced: the least-squares solution is arbitrary
-        raise CalibrationError(f"the samples do not support the vector calibration: {singular}; {ADVICE}")
+        raise CalibrationError(
+            f"the samples do not support the vector calibration: {singular}; {ADVICE}",
+            codes=("single_axis" if "hardly turned" in singular else "undetermined",),
+        )
     g, offset = _solve(used_raw, used_ref)
     if not abs(float(np.linalg.det(g))) > 1e-12 * float(np.max(np.abs(g))) ** 3:
         raise CalibrationError(
             "the samples do not support the vector calibration: the fitted matrix is singular (the samples do not "
-            "change with the reference along some direction: a magnetometer axis that is dead or saturated?)"
+            "change with the reference along some direction: a magnetometer axis that is dead or saturated?)",
+            codes=("undetermined",),
         )
     covariance = prior = None
     notes: tuple[str, ...] = ()
