@@ -19,6 +19,8 @@ finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
 def random_calibration(seed: int) -> Calibration:
     rng = np.random.default_rng(seed)
     matrix = np.eye(3) + 0.3 * rng.standard_normal((3, 3))
+    while np.linalg.cond(matrix) > 100:  # a nearly singular matrix is no soft iron: from_json refuses it
+        matrix = np.eye(3) + 0.3 * rng.standard_normal((3, 3))
     matrix[0] *= np.sign(np.linalg.det(matrix))  # a mirror is no calibration: from_json refuses it
     return Calibration("ellipsoid", rng.normal(0, 50, 3), matrix, float(rng.uniform(10, 60)), unit="uT")
 
