@@ -168,17 +168,20 @@ def read_calibration_messages(path: str | Path) -> CalibrationMessages:
     kind = log_kind(target)
     if kind not in ("tlog", "dataflash"):
         return CalibrationMessages()
+    if kind == "dataflash":  # read in blocks (bounded memory), as open_source reads it
+        return _from_dataflash(target)
     try:
         data = target.read_bytes()
     except OSError as error:
         raise DataFileError(f"{target}: cannot be read ({error.strerror}); check the file's permissions") from None
-    return _from_tlog(target, data) if kind == "tlog" else _from_dataflash(target, data)
+    return _from_tlog(target, data)
 
 
-def _from_dataflash(path: Path, data: bytes) -> CalibrationMessages:
+def _from_dataflash(path: Path) -> CalibrationMessages:
+    from ..io.sources import data_file
     from .dataflash import DataFlashLog
 
-    log = DataFlashLog(path, data)
+    log = DataFlashLog(path, data_file(path))
     messages: list[FirmwareMessage] = []
     if log.has("MSG"):
         records = log.messages("MSG")

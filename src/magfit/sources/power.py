@@ -102,7 +102,9 @@ def _dataflash(path: Path, file: Path) -> Power:
     from .dataflash import DataFlashLog, _time_s
 
     try:
-        log = DataFlashLog(path, file.read_bytes())
+        with open(file, "rb"):
+            pass
+        log = DataFlashLog(path, file)  # read in blocks, as open_source reads it (bounded memory)
     except OSError as error:
         raise DataFileError(f"{path}: cannot be read ({error.strerror})") from None
     current = throttle = None
