@@ -56,8 +56,9 @@ def no_progress(description: str, total: int | Callable[[], int] | None = None) 
 
 
 #: Rows per chunk when streaming. Measured on a 4-million-row CSV: peak memory 204 MB with 250 000 rows
-#: against 329 MB with the reader's default of 1 000 000 (153 MB for a tiny file), at the same CPU time.
-STREAM_CHUNK_ROWS = 250_000
+#: against 329 MB with the reader's default of 1 000 000 (153 MB for a tiny file), at the same CPU time;
+#: on a 10-million-row CSV, 100 000 rows peak 30 MB below 250 000, at the same CPU time (50 000: 5 % more).
+STREAM_CHUNK_ROWS = 100_000
 #: Most rows a streamed fit keeps for its diagnostics (2.4 MB); more only sharpen the uncertainty figures.
 DIAGNOSE_SAMPLES = 100_000
 #: Memory an iterative fit (ml, robust, auto) needs per sample, all told: the float64 samples (24 bytes),
@@ -69,6 +70,9 @@ BYTES_PER_FIT_SAMPLE = 256
 #: ml fits a million in about a second; more only costs memory (a 10-million-row CSV fitted whole by auto
 #: peaked at 675 MB; on an even subsample of a million at 310 MB; the issue-10 target is 300 MB).
 DEFAULT_FIT_SAMPLES = 500_000
+#: A file thinned to ``limit`` samples has every k-th row binned by direction, k chosen so that about this
+#: many times ``limit`` rows are binned: enough for the densest directions to give way first.
+SAMPLE_POOL = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,7 +244,6 @@ def _fit_subsample(
     (:func:`magfit.sampling.direction_frame`); without ``even`` the cells are capped only as far as
     ``limit`` requires, so the densest directions give way first (:func:`magfit.sampling.even_subsample_chunks`).
     """
-    from ..compare import evaluate_chunks
     from ..io import iter_sample_chunks
     from ..sampling import direction_frame, even_subsample_chunks
 
@@ -251,14 +254,24 @@ def _fit_subsample(
         statistics, reader, source = first.statistics, first.read, first.source
         _require_rows(path, statistics.n, reader)
         centre, shape = direction_frame(statistics)
+        # Without --even, only every step-th row is binned (a pool of about SAMPLE_POOL x limit rows): the
+        # binning of every row was most of the command's time, and the pool's cells hold the file's shares
+        # of each direction to within their sampling error (docs/scaling.md).
+        step = 1 if even else max(1, statistics.n // (SAMPLE_POOL * limit))
         with progress(f"sampling {path.name} evenly") as advance:
             sampler = even_subsample_chunks(
-                lambda: _counted(source(), advance), centre=centre, shape=shape, max_samples=limit, cap_at_median=even
+                lambda: _every(_counted(source(), advance), step),
+                centre=centre,
+                shape=shape,
+                max_samples=limit,
+                cap_at_median=even,
             )
-        calibration = fit(sampler.samples, method=method, **options)
+        samples = sampler.samples
+        limited = sampler.max_samples == limit and len(samples) < statistics.n
+        del sampler  # its cells' blocks: up to twice the samples kept, freed before the fit's own arrays
+        calibration = fit(samples, method=method, **options)
         with progress(f"scoring the fit on {path.name}", statistics.n) as advance:
-            evaluation = evaluate_chunks(calibration, _counted(source(), advance))
-    limited = sampler.max_samples == limit and len(sampler.indices) < statistics.n
+            evaluation = first.score(calibration, advance)[0]
     return calibration, evaluation, reader, limited
 
 
@@ -436,6 +449,19 @@ def _counted(chunks: Iterable[NDArray[np.float64]], advance: Advance) -> Iterato
     for chunk in chunks:
         advance(len(chunk))
         yield chunk
+
+
+def _every(chunks: Iterable[NDArray[np.float64]], step: int) -> Iterator[NDArray[np.float64]]:
+    """Rows 0, step, 2 step ... of a stream of chunks (the stream itself when ``step`` is 1)."""
+    if step == 1:
+        yield from chunks
+        return
+    seen = 0
+    for chunk in chunks:
+        first = (-seen) % step  # index in this chunk of the next row to keep
+        seen += len(chunk)
+        if first < len(chunk):
+            yield chunk[first::step]
 
 
 class _Strided:
