@@ -7,6 +7,7 @@ fits in memory, and fit an even subsample of a larger one (docs/scaling.md). :fu
 
 from __future__ import annotations
 
+import functools
 import itertools
 import os
 import shutil
@@ -30,6 +31,7 @@ from ..statistics import Statistics
 
 if TYPE_CHECKING:
     from ..io import ChunkReader, FileFormat
+    from ..sampling import EvenSampler
 
 #: What to do with rows holding NaN or inf (the readers' ``nonfinite`` argument).
 Nonfinite = Literal["skip", "error"]
@@ -73,6 +75,9 @@ DEFAULT_FIT_SAMPLES = 500_000
 #: A file thinned to ``limit`` samples has every k-th row binned by direction, k chosen so that about this
 #: many times ``limit`` rows are binned: enough for the densest directions to give way first.
 SAMPLE_POOL = 2
+#: ... and when the pool's sparse directions would have added more than this fraction of ``limit`` rows from
+#: the whole file (a recording parked in one attitude), every row is binned instead (docs/scaling.md).
+POOL_DEFICIT = 0.02
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,18 +259,21 @@ def _fit_subsample(
         statistics, reader, source = first.statistics, first.read, first.source
         _require_rows(path, statistics.n, reader)
         centre, shape = direction_frame(statistics)
-        # Without --even, only every step-th row is binned (a pool of about SAMPLE_POOL x limit rows): the
-        # binning of every row was most of the command's time, and the pool's cells hold the file's shares
-        # of each direction to within their sampling error (docs/scaling.md).
-        step = 1 if even else max(1, statistics.n // (SAMPLE_POOL * limit))
+        # Without --even, first only every step-th row is binned (a pool of about SAMPLE_POOL x limit rows):
+        # binning every row was most of the command's time. When the pool's sparse directions would have
+        # given more than POOL_DEFICIT of the subsample from the whole file, every row is binned after all.
+        pool_step = 1 if even else max(1, statistics.n // (SAMPLE_POOL * limit))
         with progress(f"sampling {path.name} evenly") as advance:
-            sampler = even_subsample_chunks(
-                lambda: _every(_counted(source(), advance), step),
-                centre=centre,
-                shape=shape,
-                max_samples=limit,
-                cap_at_median=even,
-            )
+            for step in dict.fromkeys((pool_step, 1)):  # the pool, then every row if the pool will not do
+                sampler = even_subsample_chunks(
+                    functools.partial(_pooled_rows, source, advance, step),
+                    centre=centre,
+                    shape=shape,
+                    max_samples=limit,
+                    cap_at_median=even,
+                )
+                if step == 1 or _pool_deficit(sampler, step) <= POOL_DEFICIT * limit:
+                    break
         samples = sampler.samples
         limited = sampler.max_samples == limit and len(samples) < statistics.n
         del sampler  # its cells' blocks: up to twice the samples kept, freed before the fit's own arrays
@@ -449,6 +457,25 @@ def _counted(chunks: Iterable[NDArray[np.float64]], advance: Advance) -> Iterato
     for chunk in chunks:
         advance(len(chunk))
         yield chunk
+
+
+def _pool_deficit(sampler: EvenSampler, step: int) -> float:
+    """Rows the directions left uncapped in a pool of every ``step``-th row would have added from the whole file.
+
+    A cell the pool fills below the sampler's cap keeps all its pool rows; the whole file holds about
+    ``step`` times as many there, and would have kept up to the cap of them. The sum over such cells
+    overstates what binning every row would change (the cap of the whole file is at most the pool's).
+    """
+    counts = sampler._counts  # rows offered per cell (sampling.py has no public view of them)
+    sparse = counts[(counts > 0) & (counts < sampler.cap)]
+    return float(np.sum(np.minimum(step * sparse, sampler.cap) - sparse))
+
+
+def _pooled_rows(
+    source: Callable[[], Iterable[NDArray[np.float64]]], advance: Advance, step: int
+) -> Iterator[NDArray[np.float64]]:
+    """Every ``step``-th row of a fresh pass over ``source``, the progress counting every row read."""
+    return _every(_counted(source(), advance), step)
 
 
 def _every(chunks: Iterable[NDArray[np.float64]], step: int) -> Iterator[NDArray[np.float64]]:
