@@ -77,7 +77,7 @@ PARALLEL_BYTES = 32 << 20
 #: At most this many pieces (threads) for one file.
 MAX_PIECES = 4
 #: Text files (or pieces) up to this size are parsed here, line by line, rather than by pandas: importing
-#: pandas takes longer than parsing this much in Python (benchmarks/results/speed.md).
+#: pandas takes several times longer than parsing this much in Python (docs/scaling.md, "Measured speed").
 SMALL_TEXT_BYTES = 256 * 1024
 
 
