@@ -78,6 +78,9 @@ SAMPLE_POOL = 2
 #: ... and when the pool's sparse directions would have added more than this fraction of ``limit`` rows from
 #: the whole file (a recording parked in one attitude), every row is binned instead (docs/scaling.md).
 POOL_DEFICIT = 0.02
+#: Rows of the pool offered to the sampler at a time. Measured on 1 million rows kept to 500 000: 0.23 s
+#: in blocks of 50 000, 0.26 s of 20 000, 0.45 s of 10 000 (one strided chunk of the file), 0.8 s of 100 000.
+POOL_BLOCK_ROWS = 50_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -479,16 +482,28 @@ def _pooled_rows(
 
 
 def _every(chunks: Iterable[NDArray[np.float64]], step: int) -> Iterator[NDArray[np.float64]]:
-    """Rows 0, step, 2 step ... of a stream of chunks (the stream itself when ``step`` is 1)."""
+    """Rows 0, step, 2 step ... of a stream of chunks (the stream itself when ``step`` is 1).
+
+    The rows kept are passed on in blocks of about :data:`POOL_BLOCK_ROWS`, not one small block per chunk
+    read: the sampler's cost per block has a part per cell.
+    """
     if step == 1:
         yield from chunks
         return
     seen = 0
+    kept: list[NDArray[np.float64]] = []
+    n_kept = 0
     for chunk in chunks:
         first = (-seen) % step  # index in this chunk of the next row to keep
         seen += len(chunk)
         if first < len(chunk):
-            yield chunk[first::step]
+            kept.append(chunk[first::step])
+            n_kept += len(kept[-1])
+        if n_kept >= POOL_BLOCK_ROWS:
+            yield np.concatenate(kept)
+            kept, n_kept = [], 0
+    if kept:
+        yield np.concatenate(kept)
 
 
 class _Strided:
