@@ -624,11 +624,11 @@ def report(results: dict[str, Any]) -> str:
             f"## 2. `magfit calibrate` on a {cli['n']:,}-row CSV ({cli['csv_mb']:.0f} MB)",
             "",
             "Each row is a separate process (interpreter start and imports included), as a user runs it. The "
-            f"readers and the target's command take turns, {results['repeat']} rounds, best of each; the other "
-            "rows run once. Peak RSS and CPU time come from `resource.getrusage` in a launcher process whose only "
-            "child is the row's command. CPU time (user + system) is less disturbed than wall time by other "
-            "processes on the machine; pyarrow and magfit parse on several threads, so their CPU time exceeds "
-            "their wall time.",
+            f"readers and the two commands with targets take turns, {results['repeat']} rounds, best (min) of "
+            "each; the ml rows run once. Peak RSS and CPU time come from `resource.getrusage` in a launcher "
+            "process whose only child is the row's command. CPU time (user + system) is less disturbed than "
+            "wall time by other processes on the machine; pyarrow and magfit parse on several threads, so "
+            "their CPU time exceeds their wall time.",
             "",
             "| what | time | CPU time | peak RSS |",
             "|---|---|---|---|",
