@@ -9,9 +9,10 @@ Four parts, each a ratio to a baseline timed in the same run (absolute times dep
    chunked NumPy pass that builds the 10-column design matrix of eq. (4) and sums ``XᵀX`` (target: at
    most 3x), and against ``numpy.linalg.lstsq`` on the full design matrix (target: at least 10x
    faster); the fit's peak extra memory (tracemalloc, and RSS in a fresh process; target < 64 MB).
-2. ``magfit calibrate`` on a CSV of N rows, as a subprocess, against the fastest reader alone (pandas'
-   C engine, pandas' pyarrow engine, pyarrow.csv; each a subprocess reading the three columns; target
-   at most 1.5x) and its peak RSS (target < 300 MB, the samples alone are 24 bytes a row).
+2. ``magfit calibrate`` on a CSV of N rows, as a subprocess, with ``-m ellipsoid`` and with the default
+   method, against the fastest reader alone (pandas' C engine, pandas' pyarrow engine, pyarrow.csv whole
+   and streamed; each a subprocess reading the three columns; target at most 1.5x) and their peak RSS
+   (target < 300 MB, the samples alone are 24 bytes a row). The readers and both commands take turns.
 3. ``magfit.fit(samples, "ml")`` on 1 million samples (target under 2 s).
 4. The peers (magyc's ellipsoid fit, magcal, circuitpython-mag-cal) on the same samples at growing
    sizes, each size in its own process with a one-minute limit (run from ``benchmarks/.peers-venv``,
@@ -21,7 +22,8 @@ Four parts, each a ratio to a baseline timed in the same run (absolute times dep
    ``magfit.fit(samples, "auto")`` against ``magfit.fit(samples, "ellipsoid")`` on the same 10 000 samples,
    default diagnostics (target at most 3x: ``auto`` fast enough to refit live), and ``magfit calibrate``
    (default method) on a 300-row CSV against ``python -c "import magfit.cli"``, both as processes (target
-   at most 2x: the command costs little beyond its imports).
+   at most 2x: the command costs little beyond its imports), and ``import magfit.cli`` against
+   ``import numpy`` (no target: what magfit's own start-up costs).
 6. ``magfit calibrate`` (default method) on the CSV of part 2 (10 million rows): its peak RSS (target
    < 300 MB), alone, so that it can be measured without the readers of part 2.
 
@@ -29,8 +31,9 @@ Four parts, each a ratio to a baseline timed in the same run (absolute times dep
 Times are the best of ``--repeat`` runs (the least disturbed by other processes); the machine's load
 average is recorded with the results, since other work on the machine slows every row alike. The
 pyarrow readers of part 2 need ``pip install pyarrow`` (a row says so when it is missing); the peak RSS
-of subprocesses comes from GNU time (``/usr/bin/time``). Results: ``benchmarks/results/speed.md`` and
-every number in ``speed.json`` beside it; the data files go to ``--workdir`` (a temporary folder).
+and CPU time of a subprocess come from ``resource.getrusage`` in a small launcher process. Results:
+``benchmarks/results/speed.md`` and every number in ``speed.json`` beside it; the data files go to
+``--workdir`` (a temporary folder).
 """
 
 from __future__ import annotations
@@ -76,6 +79,7 @@ TARGETS = {
     "auto_vs_ellipsoid": 3.0,
     "calibrate_vs_import": 2.0,
     "default_rss_mb": 300.0,
+    "default_vs_reader": 1.5,
 }
 #: The parts, in the order they run (``--parts``).
 PARTS = ("fit", "ml", "cli", "peers", "ratios", "memory")
@@ -135,31 +139,38 @@ class ProcessRun:
     cpu_seconds: float = float("nan")
 
 
-#: GNU time reports the peak RSS of the command it runs. (``wait4`` from this process would not do:
-#: Linux counts in a forked child's peak the parent's memory at fork time.)
-GNU_TIME = Path("/usr/bin/time")
+#: Runs the command given in its arguments and prints its peak RSS (kB) and CPU time (s) from
+#: ``resource.getrusage(RUSAGE_CHILDREN)``: the launcher's only child is the command, so the children's
+#: peak is the command's. (``wait4`` from the benchmark itself would not do: a child's peak can count
+#: the memory of the parent it was forked from, and the benchmark holds the samples.)
+_LAUNCHER = """
+import resource, subprocess, sys
+status = subprocess.call(sys.argv[2:])
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+with open(sys.argv[1], "w") as out:
+    out.write(f"{usage.ru_maxrss} {usage.ru_utime + usage.ru_stime}")
+sys.exit(status)
+"""
 
 
 def run_process(command: Sequence[str], timeout: float | None = None) -> ProcessRun:
-    """Run ``command`` in its own session; its peak RSS comes from GNU time (NaN when absent)."""
+    """Run ``command`` in its own session under a small launcher that reports its peak RSS and CPU time."""
     with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss_file:
-        wrapped = list(command)
-        if GNU_TIME.exists():
-            wrapped = [str(GNU_TIME), "-f", "%M %U %S", "-o", rss_file.name, *wrapped]
+        wrapped = [sys.executable, "-c", _LAUNCHER, rss_file.name, *command]
         start = time.perf_counter()
         process = subprocess.Popen(wrapped, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             output_bytes, _ = process.communicate(timeout=timeout)
             status = process.returncode
         except subprocess.TimeoutExpired:
-            os.killpg(process.pid, 9)  # the whole session: GNU time and the command under it
+            os.killpg(process.pid, 9)  # the whole session: the launcher and the command under it
             output_bytes, _ = process.communicate()
             status = -9
         seconds = time.perf_counter() - start
         rss_text = rss_file.read().strip().splitlines()
     fields = rss_text[-1].split() if rss_text else []
     try:
-        rss_mb, cpu = float(fields[0]) / 1024, float(fields[1]) + float(fields[2])
+        rss_mb, cpu = float(fields[0]) / 1024, float(fields[1])
     except (IndexError, ValueError):
         rss_mb, cpu = float("nan"), float("nan")
     return ProcessRun(seconds, rss_mb, status, output_bytes.decode(errors="replace")[-2000:], cpu)
@@ -264,6 +275,12 @@ _READERS = {
     "pyarrow.csv": "import pyarrow.csv as c, numpy as np, sys; "
     "t = c.read_csv(sys.argv[1], convert_options=c.ConvertOptions(include_columns=['mx', 'my', 'mz'])); "
     "a = np.column_stack([t.column(k).to_numpy() for k in ('mx', 'my', 'mz')])",
+    # The bounded-memory form of the same reader: record batches of block_size bytes, parsed on threads.
+    "pyarrow.csv, streamed (open_csv, 4 MB blocks)": "import pyarrow as pa, pyarrow.csv as c, numpy as np, sys; "
+    "r = c.open_csv(sys.argv[1], read_options=c.ReadOptions(block_size=4 << 20), "
+    "convert_options=c.ConvertOptions(include_columns=['mx', 'my', 'mz'], "
+    "column_types={k: pa.float64() for k in ('mx', 'my', 'mz')})); "
+    "n = sum(len(np.column_stack([b.column(i).to_numpy() for i in range(3)])) for b in r)",
 }
 
 
@@ -306,6 +323,7 @@ def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
     # The target's command and the readers take turns, so that both see the same machine.
     commands = {name: [sys.executable, "-c", code, str(csv)] for name, code in _READERS.items()}
     commands["-m ellipsoid"] = target
+    commands["(default: auto)"] = magfit_command
     best = _interleaved(commands, repeat)
     readers: dict[str, dict[str, Any]] = {}
     for name in _READERS:
@@ -315,15 +333,12 @@ def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
         else:
             readers[name] = {"seconds": run.seconds, "rss_mb": run.rss_mb, "cpu_seconds": run.cpu_seconds}
     runs: dict[str, dict[str, Any]] = {}
-    ellipsoid_run = best["-m ellipsoid"]
-    runs["-m ellipsoid"] = (
-        {"error": str(ellipsoid_run)[-300:]}
-        if isinstance(ellipsoid_run, RuntimeError)
-        else _calibrate_row(ellipsoid_run)
-    )
-    # Once each: the default method (auto) and ml, whole and on an even subsample (no targets).
+    for label in ("(default: auto)", "-m ellipsoid"):
+        run = best[label]
+        runs[label] = {"error": str(run)[-300:]} if isinstance(run, RuntimeError) else _calibrate_row(run)
+    # Once each: ml, whole and on an even subsample (no targets).
     subsample = str(max(n // 10, 1000))
-    for options in ([], ["-m", "ml"], ["-m", "ml", "--max-samples", subsample]):
+    for options in (["-m", "ml"], ["-m", "ml", "--max-samples", subsample]):
         label = " ".join(options) or "(default: auto)"
         command = [*magfit_command, *options]
         try:
@@ -333,6 +348,7 @@ def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
     timed = [value["seconds"] for value in readers.values() if "seconds" in value]
     fastest = min(timed) if timed else float("nan")
     ellipsoid = runs["-m ellipsoid"]
+    default = runs["(default: auto)"]
     return {
         "n": n,
         "csv_mb": csv.stat().st_size / 1e6,
@@ -344,6 +360,11 @@ def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
         "cli_cpu_vs_reader": ellipsoid.get("cpu_seconds", float("nan"))
         / min((value["cpu_seconds"] for value in readers.values() if "cpu_seconds" in value), default=float("nan")),
         "cli_rss_mb": ellipsoid.get("rss_mb", float("nan")),
+        "default_command": shlex.join(magfit_command),
+        "default_vs_reader": default.get("seconds", float("nan")) / fastest,
+        "default_cpu_vs_reader": default.get("cpu_seconds", float("nan"))
+        / min((value["cpu_seconds"] for value in readers.values() if "cpu_seconds" in value), default=float("nan")),
+        "default_rss_mb": default.get("rss_mb", float("nan")),
     }
 
 
@@ -411,6 +432,7 @@ def part_ratios(rounds: int, workdir: Path) -> dict[str, Any]:
     write_csv(make_samples(N_RATIO_CSV, seed=11), csv)
     print(f"[ratios] magfit calibrate on {N_RATIO_CSV} rows vs import magfit.cli, {rounds} rounds", flush=True)
     commands = {
+        "numpy": [sys.executable, "-c", "import numpy"],
         "import": [sys.executable, "-c", "import magfit.cli"],
         "calibrate": [str(Path(sys.executable).parent / "magfit"), "calibrate", str(csv)],
     }
@@ -427,6 +449,9 @@ def part_ratios(rounds: int, workdir: Path) -> dict[str, Any]:
     results["processes"] = processes
     results["commands"] = {name: shlex.join(command) for name, command in commands.items()}
     results["calibrate_vs_import"] = processes["calibrate"].get("seconds", float("nan")) / processes["import"].get(
+        "seconds", float("nan")
+    )
+    results["import_vs_numpy"] = processes["import"].get("seconds", float("nan")) / processes["numpy"].get(
         "seconds", float("nan")
     )
     return results
@@ -599,9 +624,11 @@ def report(results: dict[str, Any]) -> str:
             f"## 2. `magfit calibrate` on a {cli['n']:,}-row CSV ({cli['csv_mb']:.0f} MB)",
             "",
             "Each row is a separate process (interpreter start and imports included), as a user runs it. The "
-            f"readers and the target's command take turns, {results['repeat']} rounds, best of each; the other "
-            "rows run once. CPU time (user + system) is less disturbed than wall time by other processes on the "
-            "machine; pyarrow and magfit parse on several threads, so their CPU time exceeds their wall time.",
+            f"readers and the two commands with targets take turns, {results['repeat']} rounds, best (min) of "
+            "each; the ml rows run once. Peak RSS and CPU time come from `resource.getrusage` in a launcher "
+            "process whose only child is the row's command. CPU time (user + system) is less disturbed than "
+            "wall time by other processes on the machine; pyarrow and magfit parse on several threads, so "
+            "their CPU time exceeds their wall time.",
             "",
             "| what | time | CPU time | peak RSS |",
             "|---|---|---|---|",
@@ -625,12 +652,15 @@ def report(results: dict[str, Any]) -> str:
                 )
             else:
                 lines.append(f"| {name} | failed: {value['error']} | | |")
-        default: dict[str, Any] = next((v for k, v in cli["calibrate"].items() if k.startswith("(")), {})
-        if "rss_mb" in default:
+        if "default_vs_reader" in cli:
+            ratio, rss = cli["default_vs_reader"], cli["default_rss_mb"]
             lines += [
                 "",
-                f"The default method's peak RSS: {default['rss_mb']:.0f} MB (target < "
-                f"{TARGETS['default_rss_mb']:g} MB: {_verdict(default['rss_mb'] < TARGETS['default_rss_mb'])}).",
+                f"`{cli['default_command']}` (the default method): {ratio:.2f} x the fastest reader (target <= "
+                f"{TARGETS['default_vs_reader']:g} x: {_verdict(ratio <= TARGETS['default_vs_reader'])}); peak RSS "
+                f"{rss:.0f} MB (target < {TARGETS['default_rss_mb']:g} MB: "
+                f"{_verdict(rss < TARGETS['default_rss_mb'])}). In CPU time: {cli['default_cpu_vs_reader']:.2f} x "
+                "the reader that used the least.",
             ]
         lines += [
             "",
@@ -709,7 +739,8 @@ def _ratios_section(ratios: dict[str, Any] | None) -> list[str]:
     lines = [
         "## 5. Issue 10's ratios (fast enough to refit live)",
         "",
-        f"Both sides of each ratio take turns, {ratios['rounds']} rounds, best of each.",
+        f"Both sides of each ratio take turns, {ratios['rounds']} rounds, best (min) of each: the machine is "
+        "shared, and the least disturbed run is the one that measures the program.",
         "",
         "| what | time | ratio | target |",
         "|---|---|---|---|",
@@ -724,6 +755,13 @@ def _ratios_section(ratios: dict[str, Any] | None) -> list[str]:
     if "seconds" in base and "seconds" in calibrate:
         cli_ok = ratios["calibrate_vs_import"] <= TARGETS["calibrate_vs_import"]
         chose = f"; chose the {calibrate['chose']} model" if "chose" in calibrate else ""
+        numpy_import = processes.get("numpy", {})
+        if "seconds" in numpy_import:
+            lines += [
+                f"| `{ratios['commands']['numpy']}` (process) | {_fmt(numpy_import['seconds'])} | 1 | |",
+                f"| `{ratios['commands']['import']}` (process) | {_fmt(base['seconds'])} | "
+                f"{ratios['import_vs_numpy']:.2f} x numpy | |",
+            ]
         lines += [
             f"| `{ratios['commands']['import']}` (process) | {_fmt(base['seconds'])} | 1 | |",
             f"| `magfit calibrate` on a {ratios['n_csv']}-row CSV, default method (process{chose}) | "
@@ -735,7 +773,7 @@ def _ratios_section(ratios: dict[str, Any] | None) -> list[str]:
         lines.append(f"| `magfit calibrate` on {ratios['n_csv']} rows vs the import | failed: {failed} | | |")
     lines += [
         "",
-        "CPU time (user + system) of the two processes: "
+        "CPU time (user + system) of the processes: "
         + ", ".join(f"{name} {_fmt(v['cpu_seconds'])}" for name, v in processes.items() if "cpu_seconds" in v)
         + ".",
         "",

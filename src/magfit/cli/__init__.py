@@ -21,6 +21,7 @@ Importing :mod:`magfit` never imports this package (click and rich are the ``cli
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 import signal
 import sys
@@ -80,6 +81,12 @@ class MagfitGroup(click.Group):
         except click.UsageError as error:
             raise as_command_error(error) from None
 
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted({*self.commands, *COMMANDS})
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        return _lazy_command(self, cmd_name)
+
     def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
@@ -111,36 +118,29 @@ def cli(debug: bool) -> None:
     """
 
 
-def _register_commands() -> None:
-    from .align import align_command
-    from .apply import apply_command
-    from .calibrate import calibrate_command
-    from .compare import compare_command
-    from .demo import demo_command
-    from .fleet import fleet_command
-    from .inspect import inspect_command
-    from .live import live_command
-    from .plot import plot_command
-    from .report import report_command
-    from .simulate import simulate_command
-
-    for command in (
-        demo_command,
-        calibrate_command,
-        compare_command,
-        apply_command,
-        simulate_command,
-        plot_command,
-        report_command,
-        live_command,
-        inspect_command,
-        align_command,
-        fleet_command,
-    ):
-        cli.add_command(command)
+#: The commands: each is ``<name>_command`` in the module ``magfit.cli.<name>``, imported only when it runs
+#: (or when ``--help`` lists them), so that one command does not pay for the others' imports.
+COMMANDS = (
+    "demo",
+    "calibrate",
+    "compare",
+    "apply",
+    "simulate",
+    "plot",
+    "report",
+    "live",
+    "inspect",
+    "align",
+    "fleet",
+)
 
 
-_register_commands()
+def _lazy_command(group: click.Group, name: str) -> click.Command | None:
+    """The command ``name`` of ``group``, imported and added on first use."""
+    if name not in group.commands and name in COMMANDS:
+        module = importlib.import_module(f"{__name__}.{name}")
+        group.add_command(getattr(module, f"{name}_command"))
+    return group.commands.get(name)
 
 
 @contextlib.contextmanager

@@ -59,7 +59,15 @@ from .selection import (
 )
 from .sources import check_file, file_error
 
-__all__ = ["MAX_PIECES", "MAX_REPORTED_LINES", "PARALLEL_BYTES", "ChunkReader", "PiecesRead", "read_pieces"]
+__all__ = [
+    "MAX_PIECES",
+    "MAX_REPORTED_LINES",
+    "PARALLEL_BYTES",
+    "SMALL_TEXT_BYTES",
+    "ChunkReader",
+    "PiecesRead",
+    "read_pieces",
+]
 
 #: How many skipped rows are remembered by line number (all of them are counted).
 MAX_REPORTED_LINES = 10
@@ -68,6 +76,9 @@ MAX_REPORTED_LINES = 10
 PARALLEL_BYTES = 32 << 20
 #: At most this many pieces (threads) for one file.
 MAX_PIECES = 4
+#: Text files (or pieces) up to this size are parsed here, line by line, rather than by pandas: importing
+#: pandas takes several times longer than parsing this much in Python (docs/scaling.md, "Measured speed").
+SMALL_TEXT_BYTES = 256 * 1024
 
 
 # ---------------------------------------------------------------------------------------------- reading
@@ -397,46 +408,30 @@ class ChunkReader:
         return text_encoding(self.format)
 
     def _iter_text(self) -> Iterator[NDArray[np.float64]]:
-        pandas = pandas_module()
         fmt = self.format
         assert fmt.delimiter is not None
         instance = self._sensor_column
         used = sorted({*self._indices, *([instance.index] if instance is not None else [])})
         order = [used.index(index) for index in self._indices]
-        rows_before = 0  # data rows pandas has given so far (all sensors'), for the line numbers
+        rows_before = 0  # data rows parsed so far (all sensors'), for the line numbers
         with open(self.path, "rb") as handle:
             start, stop = self._byte_range if self._byte_range is not None else (fmt.data_offset, None)
             handle.seek(start)
             source = _CheckedSource(self, _Bounded(handle, stop), self._block_bytes, start)
-            try:
-                reader = pandas.read_csv(source, chunksize=self.chunk_rows, **self._read_options(used))
-            except pandas.errors.EmptyDataError:  # blank lines only (a piece of a file can be): no rows
-                return
-            except (ValueError, TypeError) as error:  # pandas checks the first line when it opens
-                if isinstance(error, DataFileError):
-                    raise
-                raise self._bad_cell_error(str(error)) from None
-            with reader:
-                while True:
-                    try:
-                        frame = next(reader)
-                    except StopIteration:
-                        break
-                    except (ValueError, TypeError) as error:
-                        if isinstance(error, DataFileError):
-                            raise
-                        raise self._bad_cell_error(str(error)) from None
-                    values = frame.to_numpy(dtype=np.float64)
-                    to_line = source.line_of_rows
-                    if instance is not None:
-                        kept = self._sensor_rows(values[:, used.index(instance.index)], rows_before, to_line)
-                        if kept is not None:  # this sensor's rows; their line numbers through the rows kept
-                            to_line = functools.partial(_kept_lines, to_line, rows_before + kept, self.n_rows)
-                            values = values[kept]
-                        rows_before += len(frame)
-                    if order != list(range(len(order))):  # columns asked in another order than the file's
-                        values = values[:, order]
-                    yield self._filter(values, to_line)
+            end = self.path.stat().st_size if stop is None else stop
+            small = end - start <= SMALL_TEXT_BYTES
+            for values in self._parse_small(source, used) if small else self._parse_pandas(source, used):
+                to_line = source.line_of_rows
+                n_parsed = len(values)
+                if instance is not None:
+                    kept = self._sensor_rows(values[:, used.index(instance.index)], rows_before, to_line)
+                    if kept is not None:  # this sensor's rows; their line numbers through the rows kept
+                        to_line = functools.partial(_kept_lines, to_line, rows_before + kept, self.n_rows)
+                        values = values[kept]
+                    rows_before += n_parsed
+                if order != list(range(len(order))):  # columns asked in another order than the file's
+                    values = values[:, order]
+                yield self._filter(values, to_line)
         if source.cut_line is not None:  # counted as a skipped row (and refused by nonfinite="error")
             if self.nonfinite == "error":
                 raise file_error(
@@ -448,6 +443,56 @@ class ChunkReader:
             self.n_skipped += 1
             if len(self._skipped) < MAX_REPORTED_LINES:
                 self._skipped.append(source.cut_line)
+
+    def _parse_pandas(self, source: _CheckedSource, used: list[int]) -> Iterator[NDArray[np.float64]]:
+        """The ``used`` columns of the checked lines, parsed by pandas' C reader in chunks of ``chunk_rows``."""
+        pandas = pandas_module()
+        try:
+            reader = pandas.read_csv(source, chunksize=self.chunk_rows, **self._read_options(used))
+        except pandas.errors.EmptyDataError:  # blank lines only (a piece of a file can be): no rows
+            return
+        except (ValueError, TypeError) as error:  # pandas checks the first line when it opens
+            if isinstance(error, DataFileError):
+                raise
+            raise self._bad_cell_error(str(error)) from None
+        with reader:
+            while True:
+                try:
+                    frame = next(reader)
+                except StopIteration:
+                    break
+                except (ValueError, TypeError) as error:
+                    if isinstance(error, DataFileError):
+                        raise
+                    raise self._bad_cell_error(str(error)) from None
+                yield frame.to_numpy(dtype=np.float64)
+
+    def _parse_small(self, source: _CheckedSource, used: list[int]) -> Iterator[NDArray[np.float64]]:
+        """The ``used`` columns of a small file's checked lines, parsed here (no pandas to import).
+
+        The cells are those the messages see (:func:`~magfit.io.layout.split_fields`: stripped, unquoted),
+        classified by :func:`~magfit.io.layout.cell_kind`: a missing value is NaN, a number is parsed by
+        ``float``, anything else is the error :meth:`_bad_cell_error` names. Blank lines are skipped, as
+        pandas skips them (the checked source has noted them for the line numbers).
+        """
+        fmt = self.format
+        data = b"".join(iter(lambda: source.read(-1), b""))
+        decimal = fmt.decimal
+        rows: list[list[float]] = []
+        for line in data.decode(self._text_encoding, errors="replace").split("\n"):
+            if not line.strip():
+                continue
+            fields = split_fields(line.rstrip("\r"), fmt.delimiter)
+            row = []
+            for index in used:
+                cell = fields[index] if index < len(fields) else ""
+                kind = cell_kind(cell, decimal)
+                if kind == "text":
+                    raise self._bad_cell_error(f"{cell!r} is not a number")
+                row.append(float(cell.replace(",", ".") if decimal == "," else cell) if kind == "number" else np.nan)
+            rows.append(row)
+        for first in range(0, len(rows), self.chunk_rows):
+            yield np.array(rows[first : first + self.chunk_rows], dtype=np.float64).reshape(-1, len(used))
 
     def _sensor_rows(
         self,
