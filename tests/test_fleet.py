@@ -206,3 +206,13 @@ def test_a_changed_recording_is_fitted_again_on_resume(tmp_path: Path, vehicles:
     assert after.offset_x == pytest.approx(before.offset_x + 20.0, abs=0.5)
     # Fitted another way (the method), every recording runs again.
     assert fleet([tmp_path / "v"], table, workers=1, method="ellipsoid").skipped == 0
+
+
+def test_a_log_names_its_vehicle_wherever_its_file_lies(tmp_path: Path) -> None:
+    """The board and unique id ArduPilot logs at boot group a vehicle's logs kept in different folders."""
+    log = DATA / "ardupilot_real" / "copter33_log171_trimmed.bin"
+    for folder in ("monday", "tuesday"):
+        (tmp_path / folder).mkdir()
+        shutil.copy(log, tmp_path / folder / "flight.bin")
+    result = fleet([tmp_path], workers=1, method="sphere", combine=False)
+    assert {row.vehicle for row in result.rows} == {"PX4v2 004A002F 33345119 32383433"}

@@ -93,7 +93,9 @@ class FleetRow:
         A compass of one recording, the union of a vehicle's agreeing flights, or a recording that could not
         be read or fitted at all.
     vehicle : str
-        The vehicle: the folder that holds the recording (logs that name their vehicle are grouped by it).
+        The vehicle: the log's own identity where it has one (the flight controller's board and unique id:
+        ArduPilot's boot message, PX4's ``sys_uuid``), else the folder that holds the recording, as a path below
+        the folder that holds every recording of the run.
     path : str
         The recording ("flight", "error"); the recordings merged, ``;``-separated ("combined").
     sensor, device_id : str, int or None
@@ -334,7 +336,10 @@ class _Settings:
 
 def _fit_recording(path: Path, vehicle: str, settings: _Settings) -> _Outcome:
     """Every compass of one recording: its row and its statistics; a failure is one row, never an exception."""
+    from .sources.identity import vehicle_identity
+
     fingerprint = _fingerprint(path, settings)
+    vehicle = vehicle_identity(path) or vehicle  # the log's own board and id, wherever its file lies
     try:
         outcome = _fit_recording_or_raise(path, vehicle, settings)
     except MagfitError as error:
