@@ -57,7 +57,10 @@ def mild_soft_iron(rng: np.random.Generator, amplitude: float) -> NDArray[np.flo
 
 
 def hemisphere_attitudes(
-    n: int, rng: np.random.Generator, inclination_deg: float = 64.0, share: float = 0.5,
+    n: int,
+    rng: np.random.Generator,
+    inclination_deg: float = 64.0,
+    share: float = 0.5,
     axis: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Uniform attitudes (roll, pitch, yaw; degrees) whose field direction in the sensor frame lies in the cap

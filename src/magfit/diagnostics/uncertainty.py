@@ -426,6 +426,9 @@ MODEL_TEST_LEVEL = 1e-3
 #: whether or not the verdict names it: widening costs an adequate model little, and a borderline test
 #: on a log whose field drifts (level flight) is where a sphere's soft iron hides.
 WIDEN_LEVEL = 0.05
+#: A restricted model's level heading further than this many of its one-sigmas from the full fit's, the F test
+#: not rejecting it, is known only to that difference (:func:`covering`).
+UNRULED_SIGMAS = 2.0
 #: The restricted and full fits of the comparison run on at most this many of the analysed rows.
 COMPARISON_ROWS = 2_000
 #: The heading difference from the full fit is taken as measured beyond this many of the full fit's one-sigmas.
@@ -561,6 +564,10 @@ def covering(
 
     - A restricted model that misses distortion the samples show (``comparison.p_value`` below
       :data:`WIDEN_LEVEL`) is off the full model's heading by up to ``comparison.heading_cost_deg``.
+    - A restricted model the test does not reject is not thereby right: on correlated residuals (a field
+      drifting along a flight: some hundred effective samples of thousands) the test has little power. Where
+      its level heading is more than :data:`UNRULED_SIGMAS` of its own one-sigmas from the full fit's (itself
+      determined), the samples pin the heading no closer than ``comparison.heading_difference_deg``.
     - A biased method (``check`` not consistent) is off its own model's maximum-likelihood fit by
       ``check.heading_difference_deg``.
     """
@@ -569,6 +576,12 @@ def covering(
     extra = 0.0
     if comparison is not None and comparison.p_value < WIDEN_LEVEL and math.isfinite(comparison.heading_cost_deg):
         extra += comparison.heading_cost_deg**2
+    elif (
+        comparison is not None
+        and math.isfinite(comparison.full_heading_sigma_deg)
+        and comparison.heading_difference_deg > UNRULED_SIGMAS * uncertainty.heading_sigma_deg
+    ):
+        extra += comparison.heading_difference_deg**2
     if check is not None and not check.consistent:
         extra += check.heading_difference_deg**2
     if extra == 0.0:
