@@ -54,6 +54,13 @@ def test_the_new_campaign_kinds_are_refused_or_covered_by_auto_and_sphere(kind: 
     _check(kind, seed, ("auto", "sphere"))
 
 
+@pytest.mark.parametrize("seed", [1])
+def test_a_full_fit_that_follows_a_drifting_field_is_refused_or_covered(seed: int) -> None:
+    # Before: als, ml and robust on a flight whose field drifted came back weak (restricted_attitude) 9.3-9.9° off
+    # stating ±2.7-2.9°: the combination the samples do not determine followed the drift.
+    _check("drifting flight", seed, ("als", "ml", "robust"))
+
+
 def _covered_or_refused(sim: magfit.Simulation, samples: np.ndarray, method: str = "auto") -> str:
     """The verdict of ``method`` on ``samples``; when returned, its true heading error within COVER stated sigmas."""
     try:
@@ -125,9 +132,9 @@ def test_the_flight_reproducers_are_refused_or_covered(name: str, seed: int) -> 
     _covered_or_refused(sim, sim.samples)
 
 
-#: Kinds where fits of the full ellipsoid (als, ml, robust) or diag still exceed: a full model with a combination
-#: the samples do not determine follows a drifting field with it (drifting flight, seeds 1 and 5: 3.4x), diag on a
-#: cap of 10 % (seed 0: 5.3x). benchmarks/results/campaign.md lists them.
+#: Kinds where fits of the full ellipsoid (als, ml) or diag still exceed: a full model with a combination the
+#: samples do not determine follows a drifting field with it (drifting flight, seed 5: 3.1-3.3x), diag on a cap
+#: of 10 % (seed 0: 5.3x). benchmarks/results/campaign.md lists them.
 KNOWN_GAPS = {"drifting flight", "cap 10 %"}
 
 
