@@ -8,7 +8,9 @@ Run (from the checkout, in magfit's development environment)::
 It simulates the kinds of data the second fuzz campaign found wrong calibrations on, each with a known
 truth (the paper's eq. 1): a sensor clipped at its full scale, half a sphere of directions with mild soft
 iron, clusters of a few attitudes, tilt cones (a vehicle that cannot be turned over), coarse integer
-counts, level flight with banked turns. It fits every magnitude-only method to each trial (as
+counts, level flight with banked turns; then level turns only with strong horizontal soft iron, tilt
+within ±5-10°, flight with a drifting field, eddy currents and induced fields, and a cap of 10 % of the
+directions. It fits every magnitude-only method to each trial (as
 ``magfit.fit`` does by default: the verdict with the full diagnostics) and scores each returned
 ("supported" or "weak") calibration against the truth with the accuracy benchmark's heading error
 (``accuracy.heading_error_deg``: RMS over level headings, the unobservable rotation removed). A fit
@@ -54,17 +56,25 @@ def mild_soft_iron(rng: np.random.Generator, amplitude: float) -> NDArray[np.flo
     return np.asarray(np.eye(3) + (spread + spread.T) / 2.0)
 
 
-def hemisphere_attitudes(n: int, rng: np.random.Generator, inclination_deg: float = 64.0) -> NDArray[np.float64]:
-    """Uniform attitudes (roll, pitch, yaw; degrees) whose field direction in the sensor frame has z > 0."""
+def hemisphere_attitudes(
+    n: int,
+    rng: np.random.Generator,
+    inclination_deg: float = 64.0,
+    share: float = 0.5,
+    axis: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """Uniform attitudes (roll, pitch, yaw; degrees) whose field direction in the sensor frame lies in the cap
+    around ``axis`` (default +z) covering ``share`` of the sphere (a half: z > 0)."""
     from scipy.spatial.transform import Rotation
 
     delta = np.radians(inclination_deg)
     earth = np.array([np.cos(delta), 0.0, np.sin(delta)])
+    toward = np.array([0.0, 0.0, 1.0]) if axis is None else np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
     kept: list[NDArray[np.float64]] = []
     while sum(len(k) for k in kept) < n:
-        rotations = Rotation.random(4 * n, random_state=rng)
+        rotations = Rotation.random(max(4 * n, int(4 * n / share)), random_state=rng)
         seen = rotations.as_matrix() @ earth
-        kept.append(np.degrees(rotations.as_euler("XYZ"))[seen[:, 2] > 0.0])
+        kept.append(np.degrees(rotations.as_euler("XYZ"))[seen @ toward > 1.0 - 2.0 * share])
     return np.concatenate(kept)[:n]
 
 
@@ -128,6 +138,51 @@ def _flight(rng: np.random.Generator, seed: int) -> tuple[magfit.Simulation, NDA
     return sim, sim.samples
 
 
+def _level_turns(rng: np.random.Generator, seed: int) -> tuple[magfit.Simulation, NDArray[np.float64]]:
+    """Level turns only (yaw), strong horizontal soft iron: scales 0.9-1.4 on x and y, 0.9-1.1 on z."""
+    soft_iron = np.diag([*rng.uniform(0.9, 1.4, 2), rng.uniform(0.9, 1.1)])
+    sim = magfit.simulate(
+        3000, soft_iron=soft_iron, hard_iron=rng.uniform(-3.0, 3.0, 3), noise=0.01,
+        inclination_deg=float(rng.choice([-1.0, 1.0]) * rng.uniform(20.0, 70.0)), orientations="yaw", seed=seed,
+    )  # fmt: skip
+    return sim, sim.samples
+
+
+def _shallow_tilt(rng: np.random.Generator, seed: int) -> tuple[magfit.Simulation, NDArray[np.float64]]:
+    """Full yaw, roll and pitch within ±5° or ±10°, soft iron within ±5 % to ±30 %."""
+    sim = magfit.simulate(
+        1500, soft_iron=mild_soft_iron(rng, rng.uniform(0.05, 0.3)), hard_iron=rng.uniform(-0.5, 0.5, 3),
+        noise=0.01, orientations="restricted", max_tilt_deg=float(rng.choice([5.0, 10.0])), seed=seed,
+    )  # fmt: skip
+    return sim, sim.samples
+
+
+def _drifting_flight(rng: np.random.Generator, seed: int) -> tuple[magfit.Simulation, NDArray[np.float64]]:
+    """Flight with banked turns within ±20° to ±60°, the field drifting by up to ±2 %, eddy currents
+    N(0, 0.01 s) (eq. 1e of :mod:`magfit.simulate`) and an aircraft's induced field (±3 %, cross ±1.5 %)."""
+    cross = rng.uniform(-0.015, 0.015, 3)
+    soft_iron = np.diag(1.0 + rng.uniform(-0.03, 0.03, 3))
+    soft_iron[[0, 0, 1], [1, 2, 2]] = cross
+    soft_iron[[1, 2, 2], [0, 0, 1]] = cross
+    sim = magfit.simulate(
+        6000, soft_iron=soft_iron, hard_iron=rng.uniform(-0.4, 0.4, 3), noise=0.005, orientations="flight",
+        max_tilt_deg=float(rng.uniform(20.0, 60.0)), field_drift=float(rng.uniform(0.0, 0.02)),
+        eddy_current=rng.normal(0.0, 0.01, (3, 3)), seed=seed,
+    )  # fmt: skip
+    return sim, sim.samples
+
+
+def _cap(rng: np.random.Generator, seed: int) -> tuple[magfit.Simulation, NDArray[np.float64]]:
+    """A cap of 10 % of the directions around a random axis, soft iron within ±10 %."""
+    axis = rng.normal(size=3)
+    attitudes = hemisphere_attitudes(2000, rng, share=0.1, axis=axis)
+    sim = magfit.simulate(
+        2000, soft_iron=mild_soft_iron(rng, 0.1), hard_iron=rng.uniform(-0.5, 0.5, 3), noise=0.05,
+        orientations=attitudes, seed=seed,
+    )  # fmt: skip
+    return sim, sim.samples
+
+
 KINDS: dict[str, Maker] = {
     "saturated": _saturated,
     "hemisphere": _hemisphere,
@@ -135,6 +190,10 @@ KINDS: dict[str, Maker] = {
     "tilt cone": _tilt_cone,
     "quantised": _quantised,
     "flight": _flight,
+    "level turns": _level_turns,
+    "shallow tilt": _shallow_tilt,
+    "drifting flight": _drifting_flight,
+    "cap 10 %": _cap,
 }
 
 

@@ -267,8 +267,11 @@ def test_covering_adds_the_known_biases_to_the_heading_one_sigma_in_quadrature()
     assert widened.heading_sigma_deg == pytest.approx(np.sqrt(0.3**2 + 5.0**2 + 12.0**2))
     assert widened.heading_sigma_max_deg == pytest.approx(np.sqrt(0.4**2 + 25.0 + 144.0))
     assert widened.offset_sigma == stated.offset_sigma  # only the heading
-    not_significant = ModelComparison("sphere", 1.0, 0.1, 0.9, 3.0, 4.0)
+    not_significant = ModelComparison("sphere", 1.0, 0.1, 0.9, 0.5, 4.0)  # within 2 of the stated one-sigmas
     assert covering(stated, not_significant, None) == stated
+    # Not rejected, but 3° from the full fit where ±0.3° is stated: the test had no power to tell, so counted.
+    unruled = ModelComparison("sphere", 1.0, 0.1, 0.9, 3.0, 4.0)
+    assert covering(stated, unruled, None).heading_sigma_deg == pytest.approx(np.hypot(0.3, 3.0))
 
 
 def test_clipped_rows_are_named_beside_a_refusal() -> None:

@@ -43,6 +43,7 @@ from .uncertainty import (
     WeakDirection,
     analyse,
     compare_with_full,
+    compare_with_sphere,
     consistency,
     covering,
     level_heading_difference_deg,
@@ -225,7 +226,10 @@ def diagnose(
     comparison = None
     if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
         comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
-    uncertainty = covering(uncertainty, comparison, check)  # the heading one-sigma covers known biases too
+    drift = None
+    if kind == "full" and uncertainty.offset_sigma is not None and any(not w.determined for w in observability.weak):
+        drift = compare_with_sphere(raw, calibration, uncertainty, inclination_deg)
+    uncertainty = covering(uncertainty, comparison, check, drift)  # the heading one-sigma covers known biases too
     if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion
         uncertainty = replace(
             uncertainty,

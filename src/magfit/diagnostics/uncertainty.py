@@ -53,6 +53,7 @@ __all__ = [
     "WeakDirection",
     "analyse",
     "compare_with_full",
+    "compare_with_sphere",
     "consistency",
     "covering",
     "level_heading_difference_deg",
@@ -426,6 +427,12 @@ MODEL_TEST_LEVEL = 1e-3
 #: whether or not the verdict names it: widening costs an adequate model little, and a borderline test
 #: on a log whose field drifts (level flight) is where a sphere's soft iron hides.
 WIDEN_LEVEL = 0.05
+#: A restricted model's level heading further than this many of its one-sigmas from the full fit's, the F test
+#: not rejecting it, is known only to that difference (:func:`covering`).
+UNRULED_SIGMAS = 2.0
+#: Residuals whose effective samples are fewer than this share of the samples are correlated in time: something
+#: changed along the recording (:func:`compare_with_sphere`).
+CORRELATED_SHARE = 0.25
 #: The restricted and full fits of the comparison run on at most this many of the analysed rows.
 COMPARISON_ROWS = 2_000
 #: The heading difference from the full fit is taken as measured beyond this many of the full fit's one-sigmas.
@@ -549,10 +556,43 @@ def compare_with_full(
     return ModelComparison(kind, ratio, float(statistic), p_value, heading, sigma)
 
 
+def compare_with_sphere(
+    raw: NDArray[np.float64],
+    calibration: Calibration,
+    uncertainty: Uncertainty,
+    inclination_deg: float,
+) -> float | None:
+    """The level-heading difference (degrees) between ``calibration`` (a full model) and the sphere's
+    maximum-likelihood fit to the same rows, when the full model's residuals are correlated in time.
+
+    A full model some of whose combinations the samples do not determine (restricted attitudes) can follow
+    with them what no calibration holds: a field that drifts along a flight shows as residuals correlated
+    from one stretch of the recording to the next (fewer than :data:`CORRELATED_SHARE` of the samples
+    effective), and the undetermined combination tilts with it. The sphere, which the samples determine,
+    cannot follow it; how far the two headings are apart bounds what the drift may have moved. None when
+    the residuals are not that correlated or the sphere's fit fails.
+    """
+    from ..errors import MagfitError
+    from ..geometry.frame import calibration_from_parameters, maximum_likelihood
+
+    effective = uncertainty.effective_samples
+    if effective is None or effective >= CORRELATED_SHARE * uncertainty.n_samples or raw.shape[0] < 30:
+        return None
+    raw = raw[:: max(1, raw.shape[0] // COMPARISON_ROWS)]
+    frame = Frame(np.array(calibration.offset), np.eye(3) / calibration.field_strength)
+    try:
+        _, optimum = maximum_likelihood(frame.normalise(raw), "sphere", [parameters(calibration, "sphere", frame)])
+        sphere = calibration_from_parameters(optimum, "sphere", frame, "sphere")
+    except (MagfitError, np.linalg.LinAlgError):
+        return None
+    return level_heading_difference_deg(sphere, calibration, inclination_deg)
+
+
 def covering(
     uncertainty: Uncertainty,
     comparison: ModelComparison | None,
     check: Consistency | None,
+    drift_heading_deg: float | None = None,
 ) -> Uncertainty:
     """``uncertainty`` with the heading one-sigma widened by the errors the fit is known to carry beyond noise.
 
@@ -561,6 +601,15 @@ def covering(
 
     - A restricted model that misses distortion the samples show (``comparison.p_value`` below
       :data:`WIDEN_LEVEL`) is off the full model's heading by up to ``comparison.heading_cost_deg``.
+    - A restricted model the test does not reject is not thereby right: on correlated residuals (a field
+      drifting along a flight: some hundred effective samples of thousands) the test has little power. Where
+      its level heading is more than :data:`UNRULED_SIGMAS` of its own one-sigmas from the full fit's (itself
+      determined), the samples pin the heading no closer than ``comparison.heading_difference_deg`` (that
+      difference may be the full fit's noise as well as the restricted model's error: neither is ruled out).
+    - A full model with an undetermined combination on residuals correlated in time: the sphere's heading
+      difference ``drift_heading_deg`` (:func:`compare_with_sphere`), beyond :data:`UNRULED_SIGMAS` one-sigmas:
+      the samples cannot tell the drift the undetermined combination followed from the soft iron the sphere
+      leaves out, so the heading is known no better than the two apart.
     - A biased method (``check`` not consistent) is off its own model's maximum-likelihood fit by
       ``check.heading_difference_deg``.
     """
@@ -569,6 +618,14 @@ def covering(
     extra = 0.0
     if comparison is not None and comparison.p_value < WIDEN_LEVEL and math.isfinite(comparison.heading_cost_deg):
         extra += comparison.heading_cost_deg**2
+    elif (
+        comparison is not None
+        and math.isfinite(comparison.full_heading_sigma_deg)
+        and comparison.heading_difference_deg > UNRULED_SIGMAS * uncertainty.heading_sigma_deg
+    ):
+        extra += comparison.heading_difference_deg**2
+    if drift_heading_deg is not None and drift_heading_deg > UNRULED_SIGMAS * uncertainty.heading_sigma_deg:
+        extra += drift_heading_deg**2
     if check is not None and not check.consistent:
         extra += check.heading_difference_deg**2
     if extra == 0.0:

@@ -67,6 +67,7 @@ __all__ = [
     "FIELD_TOLERANCE",
     "LARGE_RESIDUAL_RMS",
     "NO_ELLIPSOID_RMS",
+    "USELESS_BOUND_DEG",
     "Evidence",
     "judge",
     "unit_mixup",
@@ -94,6 +95,9 @@ UNDETERMINED_HEADING_DEG = 3.0
 #: when what that costs the level heading exceeds this, degrees; below, it is weak, the cost counted in its
 #: heading uncertainty.
 MODEL_HEADING_DEG = 3.0
+#: A calibration whose level heading one-sigma exceeds this, degrees, is refused: a bound that wide tells the
+#: user nothing a compass without calibration would not (``auto`` refuses its choice on the same bound).
+USELESS_BOUND_DEG = 10.0
 #: Halves of a recording whose offsets differ by more than this many combined one-sigmas disagree.
 HALVES_SIGMAS = 3.0
 
@@ -344,6 +348,12 @@ def judge(evidence: Evidence) -> Support:
             f"{clipped.n_kept}, which miss the directions where the field plus the offset left the range; set a "
             "larger full-scale range on the magnetometer (its range or gain setting), or mount it further from the "
             "iron that pushes it out of range"
+        )
+    if heading is not None and heading > USELESS_BOUND_DEG and not refusals:
+        weakest = "; ".join(w.description for w in observability.weak)
+        refusals.add("undetermined",
+            f"the level heading one-sigma of this calibration is ±{heading:.2g}°, beyond {USELESS_BOUND_DEG:g}°: a "
+            "bound that wide is no calibration" + (f" (the samples hardly fix {weakest})" if weakest else "")
         )
     return Support.judged(refusals, weak, _RECORD_ADVICE)
 

@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 from .._validation import check_choice
 from ..calibration import Calibration
 from ..diagnostics import DEFAULT_INCLINATION_DEG, diagnose
+from ..diagnostics.verdict import USELESS_BOUND_DEG
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import unchecked_sphere_distances
 from ..findings import Diagnostics, Reason, Support
@@ -100,9 +101,8 @@ MIN_GAIN = 0.01
 #: returns (weak: it pins the heading near the attitudes recorded) is taken instead of it.
 WITNESS_GAIN = 0.15
 PREFERRED_BOUND_DEG = 5.0
-#: Otherwise the chosen model is returned, weak, its heading bound stated; beyond this many degrees auto
-#: refuses: no compass.
-USELESS_BOUND_DEG = 10.0
+#: Otherwise the chosen model is returned, weak, its heading bound stated; beyond USELESS_BOUND_DEG (the
+#: verdict's) auto refuses: no compass.
 
 
 class UndeterminedChoice(CalibrationError):
@@ -222,15 +222,25 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     # one chosen, determined or not, may show a distortion it leaves out; on a full tumble none does.
     richer = [model for model in CANDIDATES[CANDIDATES.index(chosen) + 1 :] if model in held_out]
     missed = _missed(chosen, richer, held_out) if witnesses else None
+    # Samples in a plane (level turns) flatten every richer ellipsoid, so none witnesses; the ellipse they
+    # trace in their plane is determined, and the soft iron it shows is in the chosen model's headings.
+    flattened = [model for model in CANDIDATES[CANDIDATES.index(chosen) + 1 :] if model in degenerate]
+    planar = _planar_witness(optima[chosen], kept) if missed is None and flattened else None
     omitted: dict[str, Any] | None = None
     refusal: str | None = None
-    if missed is not None:
-        witness, words, clear = missed
+    if missed is not None or planar is not None:
+        if missed is not None:
+            witness, words, clear = missed
+            witness_fit = optima[witness]
+        else:
+            assert planar is not None
+            witness, words, clear = "planar ellipse", planar[1], False
+            witness_fit = planar[0]
         # The heading error the left-out distortion can cause: how far the chosen model's level headings are
         # from the richer model's (which holds the distortion), plus that model's own heading one-sigma (the
         # difference is known no better): on the benchmark's aircraft the difference alone fell short of the
         # sphere's error on 5 of 20 trials, with the richer model's one-sigma on 1.
-        difference = heading_difference_deg(optima[chosen], optima[witness])
+        difference = heading_difference_deg(optima[chosen], witness_fit)
         witness_sigma = _heading_sigma(reports.get(witness))
         effect = difference + (witness_sigma or 0.0)
         sigma = _heading_sigma(reports.get(chosen))
@@ -679,6 +689,52 @@ def _missed(
                 clear,
             )
     return None
+
+
+def _planar_witness(chosen: Calibration, kept: NDArray[np.float64]) -> tuple[Calibration, str] | None:
+    """``chosen`` with the ellipse the samples trace in their plane in place of its section; None if none.
+
+    Samples that lie in a plane (a sensor turned about one axis only) determine the conic they trace there
+    (5 numbers) though no ellipsoid through them is determined. With ``u`` the samples' two widest principal
+    directions (``P``, 3×2) and ``n`` the third, the centred in-plane coordinates ``y = Pᵀ(x − x̄)`` are fitted
+    algebraically, ``yᵀ Q y + gᵀ y = 1``; the ellipse's centre is ``c = −½ Q⁻¹ g`` and its unit map
+    ``M = (Q / k)^½`` with ``k = 1 + cᵀ Q c``. The witness keeps the chosen model's offset and scale along
+    ``n`` (the samples say nothing there) and takes ``x̄ + P c`` in the plane with ``M`` scaled to the chosen
+    model's mean in-plane scale: its headings differ from the chosen model's by the soft iron in the plane.
+    """
+    from ..geometry.frame import symmetric_unit_map
+
+    rows = _stride(kept, CHOICE_ROWS)
+    mean = rows.mean(axis=0)
+    _, directions = np.linalg.eigh(np.cov(rows.T))
+    plane, normal = directions[:, 1:], directions[:, 0]
+    y = (rows - mean) @ plane
+    design = np.column_stack([y[:, 0] ** 2, y[:, 0] * y[:, 1], y[:, 1] ** 2, y[:, 0], y[:, 1]])
+    coefficients, *_ = np.linalg.lstsq(design, np.ones(y.shape[0]), rcond=None)
+    a, b, c, d, e = coefficients
+    quadratic = np.array([[a, b / 2.0], [b / 2.0, c]])
+    if not np.all(np.isfinite(quadratic)) or np.linalg.eigvalsh(quadratic)[0] <= 0.0:
+        return None
+    centre = -0.5 * np.linalg.solve(quadratic, np.array([d, e]))
+    level = 1.0 + float(centre @ quadratic @ centre)
+    if level <= 0.0:
+        return None
+    values, vectors = np.linalg.eigh(quadratic / level)
+    in_plane = (vectors * np.sqrt(values)) @ vectors.T
+    unit = symmetric_unit_map(chosen)
+    scale_normal = float(normal @ unit @ normal)
+    scale_plane = math.sqrt(max(float(np.linalg.det(plane.T @ unit @ plane)), 1e-300))
+    in_plane *= scale_plane / math.sqrt(float(np.linalg.det(in_plane)))
+    witness_map = plane @ in_plane @ plane.T + scale_normal * np.outer(normal, normal)
+    offset = mean + plane @ centre + normal * float(normal @ (chosen.offset - mean))
+    strength = chosen.field_strength
+    witness = Calibration("auto", offset, witness_map * strength, strength, n_samples=kept.shape[0])
+    ratio = math.sqrt(values[1] / values[0])
+    words = (
+        f"leaves out the soft iron the samples show in their plane: they trace an ellipse there whose axes differ "
+        f"by {100 * (ratio - 1.0):.1f} % (no ellipsoid through samples in a plane is determined)"
+    )
+    return witness, words
 
 
 def heading_difference_deg(
