@@ -109,7 +109,8 @@ def check_support(statistics: Moments, method: str, min_samples: int) -> None:
     if n < min_samples:
         raise CalibrationError(
             f"method {method!r} needs at least {min_samples} samples, got {n}; "
-            "record more while turning the sensor in all directions"
+            "record more while turning the sensor in all directions",
+            codes=("too_few_samples",),
         )
     # The covariance in the normalised frame (unit = the samples' RMS spread): in input units its entries,
     # squares of the spread, would underflow for tiny samples (1e-200) and call them identical.
@@ -123,7 +124,8 @@ def check_support(statistics: Moments, method: str, min_samples: int) -> None:
     if not largest > resolution:
         raise CalibrationError(
             f"all {n} samples are identical ({_format_vector(statistics.mean)}): the sensor was not turned "
-            "or not read; record while rotating it"
+            "or not read; record while rotating it",
+            codes=("no_ellipsoid",),
         )
     low, high = SPREAD_RANGE
     if not low <= largest <= high:
@@ -135,13 +137,15 @@ def check_support(statistics: Moments, method: str, min_samples: int) -> None:
     if spreads[1] < FLATNESS_LIMIT * largest:
         raise CalibrationError(
             f"the samples lie on a line along {_format_direction(directions[:, 2])}: they do not span three "
-            "dimensions; rotate the sensor about more axes"
+            "dimensions; rotate the sensor about more axes",
+            codes=("single_axis",),
         )
     if spreads[0] < FLATNESS_LIMIT * largest:
         raise CalibrationError(
             f"the samples lie in a plane: nothing varies along {_format_direction(directions[:, 0])}, so the "
             "data do not span three dimensions; tilt the sensor so that this direction is also covered "
-            "(a full tumble is best)"
+            "(a full tumble is best)",
+            codes=("single_axis",),
         )
 
 

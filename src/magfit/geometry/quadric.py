@@ -82,7 +82,9 @@ def ellipsoid_from_quadric(
     if isinstance(result, str):
         raise CalibrationError(
             f"the {method} fit failed: {result}; the samples probably cover too few directions: rotate the "
-            "sensor through more attitudes, or use method='sphere' (hard iron only), which needs less coverage"
+            "sensor through more attitudes, or use method='sphere' (hard iron only), which needs less coverage",
+            codes=("no_ellipsoid",),
+            remedy=(("method", "sphere"),),
         )
     return result
 
