@@ -3,14 +3,17 @@
 The data flow, one way:
 
     paths → recordings (folders, globs, @lists) → per recording, in parallel: calibrate_file's fit and verdict
-    for each compass (a "flight" row) and the samples' sufficient statistics → per vehicle and compass: the
-    flights in time order, split where they stop agreeing → each part's merged statistics → one fit and verdict
-    on the union (a "combined" row)
+    for each compass (a "flight" row) and the sufficient statistics of the samples its fit kept → per vehicle
+    and compass: the flights in time order, split where they stop agreeing (from the statistics alone) → each
+    part's flights read again and fitted together with the run's method, judged as any recording (a "combined"
+    row)
 
-**Why statistics.** The linear fits read only the scatter ``S = Σ d(z) d(z)ᵀ`` of the design vector
-(:mod:`magfit.statistics`), and scatters of different recordings of one sensor add. Several partial flights,
-each covering a part of the sphere of directions that determines no calibration alone, merge into one that
-does: the verdict is computed on the union (:func:`magfit.diagnostics.diagnose_statistics`).
+**Why statistics.** The scatter ``S = Σ d(z) d(z)ᵀ`` of the design vector (:mod:`magfit.statistics`) is a few
+hundred numbers per compass, and scatters of different recordings of one sensor add: whether flights agree is
+decided on them in the client (and kept in the journal), without holding any flight's samples. Several partial
+flights, each covering a part of the sphere of directions that determines no calibration alone, together
+determine one; the combined fit then runs on their samples, so that its verdict has everything a recording's
+has (the halves of the union, the correlation in time, the heading one-sigma).
 
 **Do the flights agree?** Merging is only right while the sensor's distortion stayed the same. A calibration
 ``(V, M, B)`` is the quadric ``|M (x − V)|² / B² − 1 = 0``; in a recording's canonical frame
@@ -23,8 +26,8 @@ samples; half its root is the RMS distance to the ellipsoid in units of the fiel
 distance to the calibration of the flights merged with it exceeds its distance to its own best ellipsoid
 (each about its own field strength: a flight at another site is no change) significantly
 (:data:`DISAGREEMENT_CHI2`) and by more than :data:`DISAGREEMENT_FLOOR` of the field sits on another
-ellipsoid: the vehicle was magnetised, or its hardware or payload changed. The flights from it on start a new
-part, named with its date and size.
+ellipsoid: the vehicle was magnetised, its hardware or payload changed, or it flew where the Earth's field
+differs. The flights from it on start a new part, named with its date and size.
 
 **Where it runs.** Local processes by default (the standard library's process pool: no set-up); a Dask
 cluster with ``scheduler="tcp://host:8786"`` (the ``fleet`` extra's ``distributed``). Each recording is one
@@ -32,7 +35,8 @@ task; a recording that fails is one row with its reason and never stops the run.
 
 **Resumable.** Every finished recording is appended, with its compasses' statistics, to a journal beside the
 table (``TABLE.journal.jsonl``, one JSON line per recording, flushed); a run given the same table skips the
-recordings its journal holds, and the table is rewritten (atomically) from the journal at the end.
+recordings its journal holds fitted the same way from the same file (size, modification time, settings),
+runs again those that failed, and rewrites the table (atomically) at the end.
 """
 
 from __future__ import annotations
