@@ -83,7 +83,8 @@ PARTIAL_CODES = frozenset(
 #: File name endings the folder walk takes as recordings (after a compression suffix).
 RECORDING_SUFFIXES = (".bin", ".ulg", ".tlog", ".csv", ".tsv", ".txt", ".npy", ".npz", ".bag", ".mcap")
 _COMPRESSED = (".gz", ".bz2", ".xz", ".zst")
-#: The combined fit: a linear method (it reads the merged statistics alone) without the algebraic fit's bias.
+#: The combined fit of a vehicle-frame method's flights (vector, gyro: their streams are not read again): the
+#: magnitude-only fit without the algebraic fit's bias.
 COMBINE_METHOD = "als"
 
 
