@@ -216,3 +216,5 @@ def test_a_log_names_its_vehicle_wherever_its_file_lies(tmp_path: Path) -> None:
         shutil.copy(log, tmp_path / folder / "flight.bin")
     result = fleet([tmp_path], workers=1, method="sphere", combine=False)
     assert {row.vehicle for row in result.rows} == {"PX4v2 004A002F 33345119 32383433"}
+    # Every row dated by the log's GNSS time, refused compasses too (not by the copy's modification time).
+    assert {row.date for row in result.rows} == {"2015-11-21 23:44 UTC"}

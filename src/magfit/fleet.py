@@ -375,7 +375,9 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
         location=settings.location, date=settings.date,
     )  # fmt: skip
     fitted = {_sensor_of(compass.calibration): compass.calibration for compass in result.compasses}
-    reads = {c.sensor: c for c in _read_compasses(path, settings.unit, fitted)}
+    read_compasses, logged = _read_compasses(path, settings.unit, fitted)
+    reads = {c.sensor: c for c in read_compasses}
+    date = logged or _file_date(path)  # every row of a recording dated alike: its log's GNSS time where it has one
     rows: list[FleetRow] = []
     compasses: list[_Compass] = []
     for compass in result.compasses:
@@ -389,7 +391,7 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
                 ratio = cal.field_strength / model.field.total_in(cal.unit)
             except MagfitError:
                 ratio = math.nan
-        rows.append(_row("flight", vehicle, str(path), cal, sensor, device_id, _log_date(compass, path), ratio))
+        rows.append(_row("flight", vehicle, str(path), cal, sensor, device_id, date, ratio))
         read = reads.get(sensor)
         if read is not None:
             compasses.append(read)
@@ -397,7 +399,7 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
         codes = failure.codes
         read = reads.get(failure.sensor)
         rows.append(FleetRow("flight", vehicle, str(path), sensor=failure.sensor,
-                             device_id=read.device_id if read is not None else None, date=_file_date(path),
+                             device_id=read.device_id if read is not None else None, date=date,
                              method=settings.method, verdict="refused", codes=";".join(codes),
                              reason=_one_line(failure.reason)))  # fmt: skip
         if read is not None:
@@ -418,12 +420,14 @@ def _compasses_anyway(path: Path, settings: _Settings, error: MagfitError) -> tu
     if not error.codes or not set(error.codes) <= PARTIAL_CODES:
         return ()
     try:
-        return tuple(_read_compasses(path, settings.unit, {}))
+        return tuple(_read_compasses(path, settings.unit, {})[0])
     except (MagfitError, OSError, MemoryError):
         return ()
 
 
-def _read_compasses(path: Path, unit: str | None, fitted: dict[str, Calibration]) -> list[_Compass]:
+def _read_compasses(
+    path: Path, unit: str | None, fitted: dict[str, Calibration]
+) -> tuple[list[_Compass], str | None]:
     """The statistics of each compass of a recording (a log's every usable compass, or a samples file's), of the
     samples its fit kept: a robust fit's rejected samples (spikes, a passing magnet) stay out of the union."""
     from .diagnostics import _inlier_mask  # the same rule the diagnostics leave those samples out by
@@ -442,8 +446,11 @@ def _read_compasses(path: Path, unit: str | None, fitted: dict[str, Calibration]
 
         table = read_samples(path)
         key = "columns " + ",".join(str(column) for column in table.columns)
-        return [_Compass("", None, unit or "", kept(table.samples, ""), True, key)]
+        return [_Compass("", None, unit or "", kept(table.samples, ""), True, key)], None
     source = open_source(path, everything=False)
+    date = None
+    if source.position is not None and math.isfinite(source.position.time_s):  # the log's GNSS time
+        date = _utc(source.position.time_s)
     compasses = []
     for magnetometer in source.magnetometers:
         if magnetometer.problem is not None or magnetometer.n_samples == 0:
@@ -457,7 +464,7 @@ def _read_compasses(path: Path, unit: str | None, fitted: dict[str, Calibration]
         key = f"device {magnetometer.device_id}" if magnetometer.device_id is not None else magnetometer.id
         compasses.append(_Compass(magnetometer.id, magnetometer.device_id, unit or magnetometer.unit,
                                   kept(samples, magnetometer.id), True, key))  # fmt: skip
-    return compasses
+    return compasses, date
 
 
 def _row(
@@ -494,18 +501,15 @@ def _row(
     )  # fmt: skip
 
 
-def _log_date(compass: Any, path: Path) -> str:
-    model = getattr(compass, "model_field", None)
-    if model is not None and "first at " in model.origin:
-        return model.origin.split("first at ", 1)[1].rstrip(")").strip()
-    return _file_date(path)
-
-
 def _file_date(path: Path) -> str:
+    """A recording's date when it logs none: the file's modification time."""
     try:
-        stamp = path.stat().st_mtime
+        return _utc(path.stat().st_mtime)
     except OSError:
         return ""
+
+
+def _utc(stamp: float) -> str:
     return datetime.datetime.fromtimestamp(stamp, tz=datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
 
