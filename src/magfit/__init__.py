@@ -12,14 +12,17 @@ True
 
 from __future__ import annotations
 
-from .alignment import align
+from .alignment import Alignment, align
 from .calibration import CONVENTION, Calibration
+from .compare import Comparison, MethodResult
 from .diagnostics import Diagnostics
 from .errors import CalibrationError, DataFileError, ExportError, MagfitError, OptionError, SampleError
 from .evaluate import Evaluation, evaluate, sphere_distances
 from .findings import REASON_CODES, Reason, Support
 from .fit import diagnose, fit, refit
+from .fleet import FleetResult, FleetRow, fleet
 from .methods import METHODS
+from .motorterm import MotorTerm
 from .pipeline import CompassCalibration, FileCalibration, calibrate_file
 from .simulate import DISTURBANCES, SENSORS, Scenario, Simulation, scenario, simulate
 from .statistics import Statistics
@@ -32,15 +35,21 @@ __all__ = [
     "METHODS",
     "REASON_CODES",
     "SENSORS",
+    "Alignment",
     "Calibration",
     "CalibrationError",
+    "Comparison",
     "CompassCalibration",
     "DataFileError",
     "Diagnostics",
     "Evaluation",
     "ExportError",
     "FileCalibration",
+    "FleetResult",
+    "FleetRow",
     "MagfitError",
+    "MethodResult",
+    "MotorTerm",
     "OptionError",
     "Reason",
     "SampleError",
@@ -54,6 +63,7 @@ __all__ = [
     "diagnose",
     "evaluate",
     "fit",
+    "fleet",
     "refit",
     "scenario",
     "simulate",
