@@ -45,7 +45,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
-from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 from .ardupilot import (
     compass_mounting,
     compass_parameters,
@@ -57,6 +56,7 @@ from .ardupilot import (
     without_damaged_changes,
 )
 from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
+from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
 __all__ = ["DataFlashLog", "open_dataflash", "undo_calibration"]
 

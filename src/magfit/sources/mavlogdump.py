@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
-from . import Source
+from .types import Source
 
 __all__ = ["MavlogdumpLog", "is_mavlogdump", "open_mavlogdump"]
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from . import Position
+from .position import Position
 
 __all__ = ["Motion", "Stream", "align", "euler_quaternions", "quaternion_wxyz"]
 

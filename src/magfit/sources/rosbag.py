@@ -40,7 +40,7 @@ from ..errors import DataFileError
 from .motion import Motion, Stream, align
 
 if TYPE_CHECKING:
-    from . import Source
+    from .types import Source
 
 __all__ = [
     "BagContents",
@@ -260,7 +260,7 @@ def open_rosbag(path: str | os.PathLike[str]) -> Source:
     The samples are given in µT (the messages' tesla times 10⁶, an exact power of ten): the unit of the
     calibration and of the exports. The Imu topics and the other topics are listed in ``other``.
     """
-    from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source
+    from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source
 
     path = Path(path)
     contents = read_bag_contents(path)

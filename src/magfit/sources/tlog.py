@@ -55,7 +55,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
-from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 from .ardupilot import (
     compass_mounting,
     compass_parameters,
@@ -65,6 +64,7 @@ from .ardupilot import (
     untrimmed,
 )
 from .motion import Motion, Stream, align, euler_quaternions
+from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
 __all__ = ["TelemetryLog", "is_tlog", "open_tlog"]
 

@@ -50,8 +50,8 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError
 from ..rotations import standard_rotations
-from . import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 from .motion import Motion, Stream, align, quaternion_wxyz
+from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
 __all__ = ["open_ulog", "undo_px4_calibration"]
 
