@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 from .._validation import check_choice
 from ..calibration import Calibration
 from ..diagnostics import DEFAULT_INCLINATION_DEG, diagnose
+from ..diagnostics.uncertainty import level_heading_difference_deg
 from ..diagnostics.verdict import USELESS_BOUND_DEG
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import unchecked_sphere_distances
@@ -57,7 +58,7 @@ from ..statistics import Statistics
 from .registry import METHODS, FitInput, register
 from .robust import encode_indices, fit_model, fit_robust, resolve_model, robust_scale
 
-__all__ = ["CANDIDATES", "UndeterminedChoice", "fit_auto", "fit_chosen", "heading_difference_deg"]
+__all__ = ["CANDIDATES", "UndeterminedChoice", "fit_auto", "fit_chosen"]
 
 #: Candidate models, simplest first.
 CANDIDATES = ("sphere", "diag", "full")
@@ -240,7 +241,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
         # from the richer model's (which holds the distortion), plus that model's own heading one-sigma (the
         # difference is known no better): on the benchmark's aircraft the difference alone fell short of the
         # sphere's error on 5 of 20 trials, with the richer model's one-sigma on 1.
-        difference = heading_difference_deg(optima[chosen], witness_fit)
+        difference = level_heading_difference_deg(optima[chosen], witness_fit, DEFAULT_INCLINATION_DEG)
         witness_sigma = _heading_sigma(reports.get(witness))
         effect = difference + (witness_sigma or 0.0)
         sigma = _heading_sigma(reports.get(chosen))
@@ -735,30 +736,6 @@ def _planar_witness(chosen: Calibration, kept: NDArray[np.float64]) -> tuple[Cal
         f"by {100 * (ratio - 1.0):.1f} % (no ellipsoid through samples in a plane is determined)"
     )
     return witness, words
-
-
-def heading_difference_deg(
-    calibration: Calibration, other: Calibration, inclination_deg: float = DEFAULT_INCLINATION_DEG
-) -> float:
-    """RMS over level headings of the heading difference between two calibrations of one sensor, degrees.
-
-    The field at level attitude, ``f(ψ) = (cos δ cos ψ, cos δ sin ψ, sin δ)`` in ``other``'s corrected
-    frame, is mapped back to raw readings by ``other`` and corrected again by ``calibration`` (both by
-    their symmetric unit maps, as the heading uncertainty is stated); the difference of the headings
-    ``atan2(y, x)`` is taken over 180 headings 2° apart.
-    """
-    from ..geometry.frame import symmetric_unit_map
-
-    delta = math.radians(inclination_deg)
-    psi = np.radians(np.arange(0.0, 360.0, 2.0))
-    field = np.column_stack(
-        [math.cos(delta) * np.cos(psi), math.cos(delta) * np.sin(psi), np.full(psi.size, math.sin(delta))]
-    )
-    readings = other.offset + field @ np.linalg.inv(symmetric_unit_map(other)).T
-    seen = (readings - calibration.offset) @ symmetric_unit_map(calibration).T
-    angle = np.arctan2(seen[:, 1], seen[:, 0]) - np.arctan2(field[:, 1], field[:, 0])
-    angle = (angle + math.pi) % (2.0 * math.pi) - math.pi
-    return float(np.degrees(np.sqrt(np.mean(angle**2))))
 
 
 def _holds(optimum: Calibration, kept: NDArray[np.float64], model: str) -> bool:
