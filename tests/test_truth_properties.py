@@ -148,10 +148,25 @@ KNOWN_GAPS = {"drifting flight", "cap 10 %"}
         for kind in campaign.KINDS
     ],
 )
-@settings(max_examples=2, deadline=None, print_blob=True, suppress_health_check=[HealthCheck.too_slow])
+# derandomize: the same seeds on every run, so that CI's verdict does not depend on the draw; a counterexample a
+# random run finds is kept as a test of its own (below), not left to chance.
+@settings(
+    max_examples=2, deadline=None, print_blob=True, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 @given(seed=st.integers(100, 10_000))
 def test_returned_calibrations_cover_their_true_heading_error(kind: str, seed: int) -> None:
     _check(kind, seed)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    reason="known gap, found by a random run of the property above: on a level flight (seed 1564) als comes back "
+    "weak (restricted_attitude) 1.98° off stating ±0.48° (4.2x); the full fit's undetermined combination is not "
+    "checked against the sphere when its residuals are not correlated enough",
+    strict=True,
+)
+def test_a_flight_that_als_states_too_tightly() -> None:
+    _check("flight", 1564, ("als",))
 
 
 def test_the_heading_error_metric_sees_a_wrong_calibration() -> None:
