@@ -80,7 +80,7 @@ def test_calibrate_file_on_a_samples_file_is_what_the_command_prints(tmp_path: P
     assert printed.exit_code == 0, printed.output
     assert magfit.Calibration.from_json(output.read_text()) == result.calibration
     assert "time  " not in printed.stdout and "directions  " not in printed.stdout  # samples files: as before
-    with pytest.raises(DataFileError, match="--sensor chooses a compass of a flight log"):
+    with pytest.raises(DataFileError, match="sensor='ID' chooses a compass of a flight log"):
         magfit.calibrate_file(path, "sphere", sensor="MAG/0")
     with pytest.raises(OptionError, match="field_strength='wmm' needs location="):
         magfit.calibrate_file(path, "sphere", unit="uT", field_strength="wmm")

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import OptionError
+from .remedy import option
 from .units import conversion_factor, get_unit
 
 __all__ = ["Field", "decimal_year", "field_at", "parse_date", "parse_location"]
@@ -109,7 +110,8 @@ def _factor_from_nt(unit: str) -> float:
     if not get_unit(unit).is_physical:
         raise OptionError(
             "the World Magnetic Model gives the field in physical units; samples in raw counts (unknown scale) "
-            "cannot be pinned to it: give the samples' unit (unit='uT', 'G', 'mG' ...) or a field strength in counts"
+            f"cannot be pinned to it: give the samples' unit ({option('unit', 'uT')}, G, mG ...) or a field "
+            "strength in counts"
         )
     return conversion_factor("nT", unit)
 

@@ -26,6 +26,7 @@ from types import MappingProxyType
 
 from .errors import OptionError
 from .findings import Reason
+from .remedy import option
 
 __all__ = [
     "EARTH_FIELD_UT",
@@ -202,14 +203,14 @@ def field_unit_reason(field_strength: float, unit: str | None) -> Reason | None:
         if EARTH_FIELD_UT[0] / LIKELY_MARGIN <= as_candidate <= EARTH_FIELD_UT[1] * LIKELY_MARGIN:
             return Reason(
                 f"{earth}: the samples look like {candidate.description} ({value:.6g} {candidate.name} = "
-                f"{as_candidate:.3g} uT), not {declared.description}; declare unit={candidate.name!r}",
+                f"{as_candidate:.3g} uT), not {declared.description}; declare {option('unit', candidate.name)}",
                 "unit_mismatch",
                 (("unit", candidate.name),),
             )
     return Reason(
         f"{earth}, nor in any other unit: the samples are most likely the sensor's raw counts (or the sensor "
-        "sits in steel); declare unit='counts', or convert the counts with the sensor's sensitivity (counts per "
-        "gauss) before fitting",
+        f"sits in steel); declare {option('unit', 'counts')}, or convert the counts with the sensor's sensitivity "
+        "(counts per gauss) before fitting",
         "unit_mismatch",
         (("unit", "counts"),),
     )

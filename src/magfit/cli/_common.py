@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike
 from rich.console import Console
 
 from ..errors import CalibrationError, MagfitError, OptionError
+from ..remedy import command_line as command_line  # (the commands import it from here)
 from ._extras import hint_for
 from ._wording import after_keywords, collapse_repeats
 
@@ -106,23 +107,6 @@ def as_command_error(error: BaseException) -> CommandError:
         f"unexpected {type(error).__name__}: {one_line(str(error))} (a bug in magfit: rerun with --debug "
         "and report the traceback)"
     )
-
-
-#: Remedy arguments whose command-line form is a flag (its value "True").
-_REMEDY_FLAGS = {"force": "--force", "allow_undetermined": "--force", "even": "--even"}
-
-
-def command_line(command: str, path: Path | str, remedy: Sequence[tuple[str, str]]) -> str:
-    """A remedy (``(argument, value)`` pairs, :class:`magfit.findings.Reason`'s) as the command to type:
-    ``magfit calibrate flight.csv --method vector --attitude roll,pitch,yaw``."""
-    parts = ["magfit", command, str(path)]
-    for name, value in remedy:
-        if name in _REMEDY_FLAGS:
-            if value == "True":
-                parts.append(_REMEDY_FLAGS[name])
-            continue
-        parts += [f"--{name.replace('_', '-')}", value]
-    return " ".join(parts)
 
 
 def fail(message: str) -> NoReturn:

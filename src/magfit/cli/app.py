@@ -14,6 +14,7 @@ from typing import Any
 import click
 
 from .. import __version__
+from ..remedy import for_command_line
 from ._common import CommandError, as_command_error
 
 __all__ = ["MagfitGroup", "cli", "main"]
@@ -71,7 +72,8 @@ class MagfitGroup(click.Group):
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
-            return super().invoke(ctx)
+            with for_command_line():  # the library's messages name remedies as this command's options
+                return super().invoke(ctx)
         except (click.exceptions.Exit, click.Abort, CommandError, click.exceptions.NoArgsIsHelpError):
             raise
         except (KeyboardInterrupt, Terminated) as error:  # click would turn Ctrl-C into "Aborted!", status 1

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from .._validation import check_choice
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
+from ..remedy import option
 from ..statistics import Statistics
 
 ROOTS = ("sqrt", "cholesky")
@@ -82,7 +83,8 @@ def ellipsoid_from_quadric(
     if isinstance(result, str):
         raise CalibrationError(
             f"the {method} fit failed: {result}; the samples probably cover too few directions: rotate the "
-            "sensor through more attitudes, or use method='sphere' (hard iron only), which needs less coverage",
+            f"sensor through more attitudes, or use {option('method', 'sphere')} (hard iron only), which needs less "
+            "coverage",
             codes=("no_ellipsoid",),
             remedy=(("method", "sphere"),),
         )

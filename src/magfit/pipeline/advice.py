@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError, OptionError
 from ..findings import Reason
+from ..remedy import STREAM_ARGUMENTS, python_call
 
 __all__ = [
     "STREAM_ARGUMENTS",
@@ -27,38 +28,11 @@ __all__ = [
     "vehicle_advice",
 ]
 
-#: The arguments whose value is a list of columns (``attitude=['roll', 'pitch', 'yaw']``; ``--attitude roll,...``).
-STREAM_ARGUMENTS = ("columns", "attitude", "reference", "gyro", "accel", "time")
 #: Samples whose smallest principal spread is below this share of their largest turned about one axis
 #: mostly (level with turns, a car, a boat): a vehicle's.
 LEVEL_SHARE = 0.35
 #: Samples whose largest spread is below this share of the field's strength did not turn.
 TURNED_SHARE = 0.05
-
-
-def _python_value(name: str, value: str) -> str:
-    if name in STREAM_ARGUMENTS:
-        items = [item.strip() for item in value.split(",")]
-        return "[" + ", ".join(item if item.isdigit() else repr(item) for item in items) + "]"
-    if name == "location":
-        return "(" + value + ")" if "," in value else repr(value)
-    if value in ("True", "False") or _is_number(value):
-        return value
-    return repr(value)
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def python_call(path: Path | str, remedy: Sequence[tuple[str, str]]) -> str:
-    """``magfit.calibrate_file('flight.csv', method='vector', attitude=['roll', 'pitch', 'yaw'])``."""
-    arguments = ", ".join(f"{name}={_python_value(name, value)}" for name, value in remedy)
-    return f"magfit.calibrate_file({str(path)!r}" + (f", {arguments})" if arguments else ")")
 
 
 class RefusedWithAdvice(CalibrationError):

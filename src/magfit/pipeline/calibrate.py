@@ -19,6 +19,7 @@ from ..evaluate import evaluate
 from ..findings import Reason
 from ..fit import fit
 from ..methods import get_method
+from ..remedy import option
 from ..sources import Magnetometer, Source, log_kind, open_source
 from ..units import field_unit_reason, get_unit
 from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, turned, vehicle_advice
@@ -88,9 +89,10 @@ def calibrate_file(
     field_strength : float, ``"wmm"`` or None
         The known field strength in the samples' unit, or ``"wmm"``: the World Magnetic Model's at
         ``location`` (or at the log's own GNSS fixes); the fit scales the corrected field to it.
-    location : (lat, lon, alt_km), ``"log"`` or None
-        Where the recording was made, for the model's field (checked against the fitted one); ``"log"``: the
-        log's own GNSS fixes (the median of its 3-D fixes).
+    location : (lat, lon) or (lat, lon, alt_km), ``"log"`` or None
+        Where the recording was made (degrees, degrees, km above sea level; 0 km when left out), for the
+        model's field (checked against the fitted one); ``"log"``: the log's own GNSS fixes (the median of its
+        3-D fixes).
     date : date, str or None
         When, for the model; None is the date of the log's first fix with a time, else today.
     force : bool
@@ -149,13 +151,14 @@ def calibrate_file(
     from .motor import check_motor
 
     check_motor(motor)
+    location = _checked_location(location)
     options = dict(options or {})
     if force:  # fit's own keyword, passed with the method's options
         options["allow_undetermined"] = True
     if date is not None and location is None and field_strength != "wmm" and not get_method(method).needs:
         raise OptionError(
-            "date='YYYY-MM-DD' goes with location='LAT,LON[,ALT]' or field_strength='wmm': the World Magnetic "
-            "Model needs the place too"
+            f"{option('date', 'YYYY-MM-DD')} goes with {option('location', 'LAT,LON[,ALT]')} or "
+            f"{option('field_strength', 'wmm')}: the World Magnetic Model needs the place too"
         )
     say = notify or (lambda note: None)
     given = [name for name, value in (("attitude", attitude), ("reference", reference), ("gyro", gyro),
@@ -165,8 +168,8 @@ def calibrate_file(
             "a flight log's streams are its own" if log_kind(path) is not None else f"{method} takes the samples alone"
         )
         raise OptionError(
-            f"{path}: {', '.join(f'{name}=[...]' for name in given)} names a samples file's columns for the methods "
-            f"that read them (vector, gyro); {what}"
+            f"{path}: {', '.join(option(name, '...') for name in given)} names a samples file's columns for the "
+            f"methods that read them (vector, gyro); {what}"
         )
     from ..io.instances import head_sensors
 
@@ -175,16 +178,21 @@ def calibrate_file(
     ids = head_sensors(path) if kind is None else ()
     if kind is None and not (ids and (sensor is not None or len(ids) > 1)):
         if sensor is not None:
-            raise DataFileError(f"{path}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
+            raise DataFileError(
+                f"{path}: {option('sensor', 'ID')} chooses a compass of a flight log or bag (ULog, DataFlash, ROS)"
+            )
         needs = get_method(method).needs
         spec = StreamSpec(attitude, reference, gyro, accel, time, attitude_convention, angle_unit, gyro_unit)
         model = _model(path, None, location, date)  # (no log: "wmm" without a place is refused below)
         if needs and not all(need in options for need in needs):
             if field_strength is not None:
-                raise OptionError(f"{path}: field_strength='...' goes with a magnitude-only method, not {method}")
+                raise OptionError(
+                    f"{path}: {option('field_strength', '...')} goes with a magnitude-only method, not {method}"
+                )
             if even:
                 raise OptionError(
-                    f"{path}: even=True subsamples by direction; the {method} method needs every sample in time order"
+                    f"{path}: {option('even', True)} subsamples by direction; the {method} method needs every sample "
+                    "in time order"
                 )
             where = location if location is not None and location != FROM_LOG else None
             compass = _calibrate_samples_streams(
@@ -202,7 +210,10 @@ def calibrate_file(
         compass = _vehicle_weak(compass, columns, nonfinite, unit, method)
         return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
     if columns is not None:
-        raise OptionError(f"{path}: columns=[...] chooses the columns of a samples file; a log's compass by sensor=")
+        raise OptionError(
+            f"{path}: {option('columns', '...')} chooses the columns of a samples file; a log's compass by "
+            f"{option('sensor', 'ID')}"
+        )
     source = open_source(path, everything=False)  # the magnetometers (and the GNSS): what a fit needs
     place: tuple[float, float, float] | Literal["log"] | None = location
     if place is None and field_strength == "wmm":
@@ -524,7 +535,7 @@ def _calibrate_samples_streams(
         gyro_columns = next((note.split(": gyro ", 1)[1] for note in notes if ": gyro " in note), "gyro")
         raise OptionError(
             f"{path}: {error} (the file's gyroscope columns {gyro_columns}; if they hold degrees per second, say so "
-            "with gyro_unit='deg/s')"
+            f"with {option('gyro_unit', 'deg/s')})"
         ) from None
     except CalibrationError as error:
         used = f"columns {source.magnetometers[0].description}"
@@ -646,6 +657,23 @@ def _calibrate_samples(
     )
 
 
+def _checked_location(location: Any) -> tuple[float, float, float] | Literal["log"] | None:
+    """``location`` as (lat, lon, alt_km), ``"log"`` or None; anything else refused in one line."""
+    if location is None or (isinstance(location, str) and location == FROM_LOG):
+        return location
+    try:
+        values = [float(value) for value in location]
+    except (TypeError, ValueError):
+        values = []
+    if len(values) not in (2, 3) or not all(map(math.isfinite, values)):
+        raise OptionError(
+            f"location={location!r} is no place: give (latitude, longitude) in degrees, optionally with the altitude "
+            f"in km, e.g. {option('location', '52.1,4.3,0.1')}, or {FROM_LOG!r} for a log's own GNSS fixes"
+        )
+    lat, lon, alt_km = (*values, 0.0) if len(values) == 2 else values
+    return (lat, lon, alt_km)  # (their ranges: magfit.geomag.field_at)
+
+
 def _model(
     path: Path,
     source: Source | None,
@@ -668,7 +696,7 @@ def _model(
         what = "this file is no flight log or bag" if source is None else "this log holds no 3-D GNSS fix"
         raise OptionError(
             f"{path}: the World Magnetic Model needs the place of the recording and {what}: give "
-            "location='LAT,LON[,ALT]'"
+            f"{option('location', 'LAT,LON[,ALT]')}"
         )
     when = ""
     if math.isfinite(position.time_s):
@@ -683,12 +711,12 @@ def _model_strength(model: ModelField | None, unit: str | None) -> float:
     """The model's field strength in ``unit`` for ``field_strength="wmm"``; refuses a missing place or unit."""
     if model is None:
         raise OptionError(
-            "field_strength='wmm' needs location='LAT,LON[,ALT]' (where the recording was made), or a flight log or "
-            "bag with its own GNSS fixes"
+            f"{option('field_strength', 'wmm')} needs {option('location', 'LAT,LON[,ALT]')} (where the recording was "
+            "made), or a flight log or bag with its own GNSS fixes"
         )
     if unit is None or not get_unit(unit).is_physical:
         raise OptionError(
-            "field_strength='wmm' needs the samples' physical unit (unit='uT', 'G', 'mG' ...): the model gives the "
-            "field in tesla units, and raw counts have no known scale"
+            f"{option('field_strength', 'wmm')} needs the samples' physical unit ({option('unit', 'uT')}, G, mG ...): "
+            "the model gives the field in tesla units, and raw counts have no known scale"
         )
     return model.field.total_in(unit)

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError, OptionError
 from ..methods import get_method
+from ..remedy import option
 from ..sources import Source
 from ..units import get_unit
 
@@ -136,7 +137,7 @@ def method_streams(
             if motion.gyro is None and source.kind == "samples":
                 raise DataFileError(
                     f"{where}: the file holds no gyroscope columns beside the magnetometer (gx, gy, gz, gyro_x ...); "
-                    "the gyro method needs them, in rad/s (name them with gyro=[...])"
+                    f"the gyro method needs them, in rad/s (name them with {option('gyro', '...')})"
                 )
             if motion.gyro is None:
                 raise DataFileError(
@@ -218,7 +219,7 @@ def _reference(
     if motion.attitude is None and source.kind == "samples":
         raise DataFileError(
             f"{where}: the file holds no attitude columns beside the magnetometer (roll, pitch, yaw or qw, qx, qy, "
-            "qz); the vector method needs them (name them with attitude=[...])"
+            f"qz); the vector method needs them (name them with {option('attitude', '...')})"
         )
     if motion.attitude is None:
         raise DataFileError(
@@ -235,14 +236,14 @@ def _reference(
     if not label or not get_unit(label).is_physical:
         raise OptionError(
             f"{where}: the vector method compares the samples with the World Magnetic Model's field, which needs "
-            "their physical unit (unit='uT', 'G', 'mG' ...): raw counts have no known scale"
+            f"their physical unit ({option('unit', 'uT')}, G, mG ...): raw counts have no known scale"
         )
     position = motion.position or source.position
     if position is None and source.kind == "samples":
         raise DataFileError(
             f"{where}: the file holds neither the reference field's N/E/D columns nor latitude and longitude "
             "columns, and no location was given: the vector method needs the field at each sample (name the "
-            "reference columns with reference=[...], or give location='LAT,LON[,ALT]')"
+            f"reference columns with {option('reference', '...')}, or give {option('location', 'LAT,LON[,ALT]')})"
         )
     if position is None:
         raise DataFileError(

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError, OptionError
 from ..io.layout import FileFormat
+from ..remedy import option
 from ..sources import LogSamples, Magnetometer, Position, Source, median_position
 from ..sources.motion import Motion
 
@@ -88,7 +89,7 @@ def angle_unit(path: Path, angles: NDArray[np.float64], given: str) -> str:
         return "rad"
     raise DataFileError(
         f"{path}: the attitude's angles all lie within ±{largest:.3g}: radians, or degrees of a vehicle that "
-        "hardly turned; say which with angle_unit='deg' or angle_unit='rad'"
+        f"hardly turned; say which with {option('angle_unit', 'deg')} or {option('angle_unit', 'rad')}"
     )
 
 
@@ -162,7 +163,7 @@ def samples_source(
         first = int(np.flatnonzero(~good)[0]) + 1
         raise DataFileError(
             f"{path}: data row {first} holds a missing value (NaN, inf or empty) in a column used; pass "
-            "nonfinite='skip' to drop such rows"
+            f"{option('nonfinite', 'skip')} to drop such rows"
         )
     rows = {name: values[good] for name, values in read.items()}
     if "gyro" in rows and spec.gyro_unit == "deg/s":
