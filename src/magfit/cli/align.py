@@ -11,7 +11,6 @@ from __future__ import annotations
 import datetime
 import math
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from numpy.typing import NDArray
 
 from ..alignment import Alignment, _mirror_axis, align, nearest_rotations
 from ..calibration import Calibration
+from ..diagnostics.settle import starting_weakness
 from ..errors import CalibrationError, DataFileError
 from ..fit import fit
 from ..geomag import field_at, parse_date, parse_location
@@ -179,14 +179,15 @@ def _align_by_reference(
     compass = result.compasses[0]
     calibration = compass.calibration
     rotation, _ = polar_decomposition(calibration.matrix)
-    sigma = float(calibration.details.get("alignment_sigma_deg", math.nan))
+    facts = calibration.vector
+    sigma = facts.alignment_sigma_deg if facts is not None and facts.alignment_sigma_deg is not None else math.nan
     mirror = bool(np.linalg.det(rotation) < 0)
     inverted, nearest = _mirror_axis(rotation) if mirror else (None, nearest_rotations(rotation))
     proper = rotation @ np.diag([-1.0 if axis == inverted else 1.0 for axis in "xyz"]) if mirror else rotation
     roll, pitch, yaw = euler_angles(proper)
-    support = calibration.details.get("support", {})
-    verdict = str(support.get("verdict", "supported")) if isinstance(support, Mapping) else "supported"
-    warnings = tuple(str(w) for w in (*support.get("refusals", ()), *support.get("weaknesses", ())))
+    support = calibration.support
+    verdict = support.verdict if support is not None else "supported"
+    warnings = tuple(str(w) for w in (*support.refusals, *support.weaknesses)) if support is not None else ()
     aligned = Alignment(
         matrix=rotation, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw, sigma_deg=np.full(3, sigma),
         axis_sigma_deg=np.full(3, sigma), inclination_deg=math.nan, inclination_sigma_deg=math.nan,
@@ -259,7 +260,7 @@ def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | 
 def _starting_calibration(recording: _Recording, inclination: float | None) -> Calibration:
     """The magnitude-only calibration the alignment starts from, fitted on the recording.
 
-    With a gyroscope and time stamps, the gyro-aided fit's magnitude-only part (``details["sensor_matrix"]``):
+    With a gyroscope and time stamps, the gyro-aided fit's magnitude-only part (``gyro.sensor_matrix``):
     a vehicle that cannot tumble leaves ``auto`` the field's vertical part, which the dip angles rest on,
     poorly pinned, while the rotation kinematics pin it (benchmarks/results/vehicle: flight, car and boat at
     6 000 samples, 8 trials each, the alignment 0.45°, 0.15°, 0.32° RMS from the true mounting starting from it,
@@ -273,13 +274,13 @@ def _starting_calibration(recording: _Recording, inclination: float | None) -> C
             )  # fmt: skip
         except CalibrationError:
             kinematic = None  # auto below, with its own refusal if it has one
-        if kinematic is not None and "sensor_matrix" in kinematic.details:
+        if kinematic is not None and kinematic.gyro is not None and kinematic.gyro.sensor_matrix is not None:
             return Calibration(
                 "gyro (its magnitude-only part)",
                 kinematic.offset,
-                np.asarray(kinematic.details["sensor_matrix"], dtype=np.float64),
+                np.asarray(kinematic.gyro.sensor_matrix, dtype=np.float64),
                 kinematic.field_strength,
-                details={"support": kinematic.details.get("support", {})},
+                support=kinematic.support,
             )
     try:
         return fit(recording.samples, method="auto")
@@ -290,29 +291,14 @@ def _starting_calibration(recording: _Recording, inclination: float | None) -> C
         ) from None
 
 
-def _verdict_of(calibration: Calibration) -> str | None:
-    support = calibration.details.get("support")
-    return str(support["verdict"]) if isinstance(support, Mapping) and "verdict" in support else None
-
-
 def _capped_by_calibration(result: Alignment, calibration: Calibration) -> Alignment:
-    """An alignment is no better supported than the calibration it starts from: its one-sigma counts the dips'
-    scatter, not an error of the calibrated field's vertical part, which turns every dip alike (simulated
-    car, auto's weak calibration: 5.0° off where the alignment alone said supported ±0.9°)."""
-    verdict_of_calibration = _verdict_of(calibration)
-    if verdict_of_calibration not in ("weak", "refused"):
+    """An alignment is no better supported than the calibration it starts from (the cap of the verdict step,
+    :func:`magfit.diagnostics.settle.starting_weakness`)."""
+    weakness = starting_weakness(calibration)
+    if weakness is None:
         return result
-    support = calibration.details["support"]
-    first = ((support.get("refusals") or []) + (support.get("weaknesses") or []) + [""])[0]
-    said = "is weak" if verdict_of_calibration == "weak" else "was refused by its samples (forced)"
-    warning = (
-        f"the calibration it starts from ({calibration.method}) {said}"
-        + (f" ({first})" if first else "")
-        + ": its error in the field's vertical part turns the dip angles, which the one-sigma above does not "
-        "count; calibrate with a tumble first and give it with --calibration"
-    )
     verdict = "weak" if result.verdict == "supported" else result.verdict
-    return replace(result, verdict=verdict, warnings=(*result.warnings, warning))
+    return replace(result, verdict=verdict, warnings=(*result.warnings, str(weakness)))
 
 
 @click.command("align")
@@ -440,7 +426,8 @@ def align_command(
     out = click.echo
     out(f"{'file':16s} {recording.description}")
     origin = f"read from {calibration_path}" if calibration_path else "fitted"
-    out(f"{'calibration':16s} {calibration.method} ({origin}, {_verdict_of(calibration) or 'no verdict recorded'})")
+    verdict = calibration.support.verdict if calibration.support is not None else "no verdict recorded"
+    out(f"{'calibration':16s} {calibration.method} ({origin}, {verdict})")
     dropped = "; ".join(f"{count} {reason}" for reason, count in result.dropped.items())
     out(f"{'samples used':16s} {result.n_used} of {result.n_samples}" + (f" (dropped: {dropped})" if dropped else ""))
     fitted = f"fitted: {result.inclination_deg:.2f} ± {result.inclination_sigma_deg:.2f}°"

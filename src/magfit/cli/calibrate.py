@@ -576,16 +576,16 @@ def _print_model_field(
     spread = f" ± {significant(sigma * conversion_factor('nT', shown), 2)}" if sigma else ""
     line = f"{significant(field.total_in(shown), 6)}{spread} {shown} ({field.describe()}, inclination "
     line += f"{field.inclination_deg:.1f}°)"
-    fitted = calibration.details.get("fitted_field_strength")
+    fitted = calibration.known_field.fitted if calibration.known_field is not None else None
     if unit is None:
         line += "; not compared with the fit: the samples' unit is unknown (give --unit)"
-    elif calibration.details.get("field_strength_given") and isinstance(fitted, float):
+    elif fitted is not None:
         line += f"; used as the field strength (the samples alone: {significant(fitted, 6)} {unit})"
     out.print(f"{'model field':<16} {line}", soft_wrap=True)
     if origin != "the location given":
         out.print(f"{'':<16} at {origin}", soft_wrap=True)
     if unit is not None:
-        mismatch = compare_fitted(fitted if isinstance(fitted, float) else calibration.field_strength, unit, field)
+        mismatch = compare_fitted(fitted if fitted is not None else calibration.field_strength, unit, field)
         if mismatch is not None:
             warn(mismatch)
 
@@ -609,24 +609,23 @@ def _check_extension(output: Path, export_format: str) -> None:
 
 def _choice(calibration: Calibration) -> list[tuple[str, str]]:
     """For a method that chooses among others (``auto``): the method it used and why."""
-    chosen = calibration.details.get("chosen")
-    if chosen is None:
+    choice = calibration.auto
+    if choice is None:
         return []
-    used = calibration.details.get("method_used")
-    model = f"{chosen} model" + (f", maximum-likelihood fit started from {used}" if used else "")
-    reason = calibration.details.get("reason")
+    used, reason = choice.method_used, choice.reason
+    model = f"{choice.chosen} model" + (f", maximum-likelihood fit started from {used}" if used else "")
     return [("chose", model + (f" ({reason})" if reason else ""))]
 
 
 def _verdict(calibration: Calibration) -> list[tuple[str, str]]:
-    """Whether the samples support the calibration (``details["support"]``, when the fit reached a verdict)."""
-    support = calibration.details.get("support")
-    if not isinstance(support, Mapping) or "verdict" not in support:
+    """Whether the samples support the calibration (``calibration.support``, when the fit reached a verdict)."""
+    support = calibration.support
+    if support is None:
         return []
-    verdict = str(support["verdict"])
+    verdict = support.verdict
     if verdict == "refused":
         return [("verdict", "NOT SUPPORTED by the samples, returned because of --force: do not use these numbers")]
-    weaknesses = support.get("weaknesses") or []
+    weaknesses = support.weaknesses
     if verdict == "weak" and weaknesses:
         return [("verdict", f"weak: {len(weaknesses)} weakness(es), in the warnings above")]
     return [("verdict", verdict)]

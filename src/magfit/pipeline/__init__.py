@@ -533,7 +533,7 @@ def _calibrate_compass(
     notes += outcome.notes
     calibration = outcome.calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
-    verdict = calibration.details.get("support", {}).get("verdict")
+    verdict = calibration.support.verdict if calibration.support is not None else None
     vehicle: tuple[Reason, ...] = ()
     if verdict in ("weak", "refused") and turned(fitted):  # a flight log is a vehicle's: what works for it
         chosen = magnetometer.id if several else None
@@ -624,8 +624,8 @@ def _vehicle_weak(
     method: str,
 ) -> CompassCalibration:
     """A weak fit of a vehicle's samples gets the methods that work for a vehicle (``advice``)."""
-    support = compass.calibration.details.get("support")
-    if not isinstance(support, Mapping) or support.get("verdict") not in ("weak", "refused"):
+    support = compass.calibration.support
+    if support is None or support.verdict not in ("weak", "refused"):
         return compass
     chosen = columns if columns is not None else compass.calibration.details.get("source", {}).get("column_indices")
     return replace(compass, advice=_samples_file_advice(compass.path, chosen, nonfinite, unit, method))
