@@ -19,9 +19,16 @@ from rich.console import Console
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import CalibrationError
-from ..geomag import Field, compare_fitted, parse_date, parse_location
+from ..geomag import parse_date, parse_location
 from ..methods import get_method
-from ..pipeline import CompassCalibration, FileCalibration, RefusedWithAdvice, StreamsMissing, calibrate_file
+from ..pipeline import (
+    CompassCalibration,
+    FileCalibration,
+    ModelField,
+    RefusedWithAdvice,
+    StreamsMissing,
+    calibrate_file,
+)
 from ..pipeline.streaming import Advance
 from ..units import conversion_factor, get_unit
 from ._common import (
@@ -522,7 +529,7 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
         if compass.model_field is not None:
             model, unit = compass.model_field, compass.calibration.unit
             physical = unit if unit and get_unit(unit).is_physical else None
-            _print_model_field(out, compass.calibration, model.field, physical, model.origin)
+            _print_model_field(out, compass.calibration, model, physical)
     if not result.compasses and result.model_field is not None:  # nothing fitted: the model still says what to expect
         field = result.model_field.field
         out.print("")
@@ -566,11 +573,10 @@ def plot_calibration(samples: Any, calibration: Calibration, output: Path, title
     return figure_bytes(figure, output), f"{figure.get_supxlabel()} Wrote the figure to {output}"
 
 
-def _print_model_field(
-    out: Console, calibration: Calibration, field: Field, unit: str | None, origin: str = "the location given"
-) -> None:
-    """The model's field (strength and inclination) beside the fitted one, and a warning when they differ by more
-    than 10 %; where the place came from when it is the log's own fixes."""
+def _print_model_field(out: Console, calibration: Calibration, model: ModelField, unit: str | None) -> None:
+    """The model's field (strength and inclination) beside the fitted one, and the library's warning when they
+    differ by more than 10 % (``model.mismatch``); where the place came from when it is the log's own fixes."""
+    field = model.field
     shown = unit or "uT"
     sigma = field.total_uncertainty
     spread = f" ± {significant(sigma * conversion_factor('nT', shown), 2)}" if sigma else ""
@@ -582,12 +588,10 @@ def _print_model_field(
     elif fitted is not None:
         line += f"; used as the field strength (the samples alone: {significant(fitted, 6)} {unit})"
     out.print(f"{'model field':<16} {line}", soft_wrap=True)
-    if origin != "the location given":
-        out.print(f"{'':<16} at {origin}", soft_wrap=True)
-    if unit is not None:
-        mismatch = compare_fitted(fitted if fitted is not None else calibration.field_strength, unit, field)
-        if mismatch is not None:
-            warn(mismatch)
+    if model.origin != "the location given":
+        out.print(f"{'':<16} at {model.origin}", soft_wrap=True)
+    if model.mismatch is not None:
+        warn(str(model.mismatch))
 
 
 def _fit_warnings(calibration: Calibration) -> list[str]:

@@ -80,10 +80,15 @@ class ModelField:
     origin : str
         Where the place came from, in words: ``"the location given"`` or ``"the log's GNSS fixes (median of
         12 3-D fixes, first at 2026-01-01 10:00 UTC)"``.
+    mismatch : Reason or None
+        On a compass's result: the fitted field strength (the samples' own, when a known one was given)
+        differs from the model's by more than :data:`magfit.geomag.MODEL_TOLERANCE` (code ``field_mismatch``),
+        with the likely causes; None when they agree or the samples' unit is not physical.
     """
 
     field: Field
     origin: str
+    mismatch: Reason | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,6 +185,22 @@ class CompassCalibration:
         if diagnostics is None or diagnostics.coverage is None:
             return None
         return float(diagnostics.coverage.share)
+
+
+def _with_model_field(compass: CompassCalibration, model: ModelField | None) -> CompassCalibration:
+    """``compass`` with the model's field, compared with the fitted one (:attr:`ModelField.mismatch`)."""
+    if model is None:
+        return replace(compass, model_field=None)
+    from ..geomag import compare_fitted
+    from ..units import get_unit
+
+    calibration, mismatch = compass.calibration, None
+    if calibration.unit and get_unit(calibration.unit).is_physical:
+        known = calibration.known_field
+        fitted = known.fitted if known is not None and known.fitted is not None else calibration.field_strength
+        text = compare_fitted(fitted, calibration.unit, model.field)
+        mismatch = Reason(text, "field_mismatch") if text is not None else None
+    return replace(compass, model_field=replace(model, mismatch=mismatch))
 
 
 @dataclass(frozen=True)
@@ -388,7 +409,7 @@ def calibrate_file(
             compass = _calibrate_samples_streams(
                 path, method, columns, spec, unit, where, date, options, say, nonfinite
             )
-            return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
+            return FileCalibration(path, (_with_model_field(compass, model),), model_field=model)
         if field_strength == "wmm":
             options["field_strength"] = _model_strength(model, unit)
         elif field_strength is not None:
@@ -398,7 +419,7 @@ def calibrate_file(
         except CalibrationError as error:
             raise _with_vehicle_advice(path, error, columns, unit, method, nonfinite) from None
         compass = _vehicle_weak(compass, columns, nonfinite, unit, method)
-        return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
+        return FileCalibration(path, (_with_model_field(compass, model),), model_field=model)
     if columns is not None:
         raise OptionError(f"{path}: columns=[...] chooses the columns of a samples file; a log's compass by sensor=")
     source = open_source(path, everything=False)  # the magnetometers (and the GNSS): what a fit needs
@@ -431,7 +452,7 @@ def calibrate_file(
             else:
                 failures.append(CompassFailure(magnetometer.id, str(error), notes, codes=error.codes))
             continue
-        compasses.append(replace(compass, model_field=model))
+        compasses.append(_with_model_field(compass, model))
     tried = tuple(compass.sensor or "" for compass in compasses) + tuple(f.sensor for f in failures)
     order = [m.id for m in source.magnetometers]
     sensors = tuple(sorted(tried, key=lambda sensor_id: order.index(sensor_id) if sensor_id in order else len(order)))
