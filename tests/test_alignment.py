@@ -391,7 +391,8 @@ def test_an_alignment_is_no_better_supported_than_its_calibration(tmp_path, caps
     assert re.search(r"verdict\s+weak", out) and "the calibration it starts from (auto) is weak" in out
     # A calibration forced past its refusal: the alignment from it says so, weak at best.
     forced = weak.to_dict()
-    forced["support"] = {**forced["support"], "verdict": "refused", "refusals": ["too few"], "refusal_codes": ["undetermined"]}
+    forced["support"] = {**forced["support"], "verdict": "refused", "refusals": ["too few"],
+                         "refusal_codes": ["undetermined"]}  # fmt: skip
     given.write_text(magfit.Calibration.from_dict(forced).to_json())
     status, out, err = _run(capsys, path, "--calibration", given, "--gyro-columns", "gx,gy,gz", "--inclination", "64",
                             "--no-mirror")  # fmt: skip

@@ -61,7 +61,8 @@ def test_version_1_auto_known_field_and_solver_facts() -> None:
     pinned, _ = _load("sphere_known_diagnostics")
     assert pinned.known_field is not None and pinned.known_field.pinned and pinned.diagnostics is not None
     ml, raw = _load("ml")
-    assert ml.solver is not None and ml.solver.converged is True and ml.solver.iterations == raw["details"]["iterations"]
+    assert ml.solver is not None and ml.solver.converged is True
+    assert ml.solver.iterations == raw["details"]["iterations"]
     assert ml.details["covariance"] == raw["details"]["covariance"]  # free-form extras stay in details
 
 

@@ -43,7 +43,8 @@ def test_the_documented_method_registers_and_fits_the_simulated_offset(midrange:
     assert calibration.support is not None and calibration.support.codes == ("biased",)
     assert dict(calibration.options) == {"field_strength": None}
     # the same entry serves the statistics, a refit, and a known field strength
-    assert magfit.fit(magfit.Statistics.from_samples(sim.samples), "midrange").offset == pytest.approx(calibration.offset)
+    from_statistics = magfit.fit(magfit.Statistics.from_samples(sim.samples), "midrange")
+    assert from_statistics.offset == pytest.approx(calibration.offset)
     assert magfit.refit(calibration, sim.samples[::2]).method == "midrange"
     assert magfit.fit(sim.samples, "midrange", field_strength=50.0).field_strength == 50.0
 

@@ -217,7 +217,7 @@ def diagnose(
     """Diagnose any calibration on samples (its verdict, coverage, observability, uncertainty, goodness).
 
     The held-out evaluation and the two-halves check refit the calibration's method with the options it
-    recorded (``details["options"]``); a calibration of an unknown method gets the other checks.
+    recorded (``calibration.options``); a calibration of an unknown method gets the other checks.
     See :func:`magfit.diagnostics.diagnose` for the parameters.
 
     Raises

@@ -7,7 +7,7 @@ sees them, and counted in ``details["saturation"]``; when too few rows remain th
 :func:`magfit.fit` (with the verdict and the diagnostics on top), the robust fit's inner models, ``auto``'s
 candidates and the held-out refits of the diagnostics all go through :func:`estimate`, so a method refuses
 the same data whoever calls it. The user's options are recorded explicitly in
-``details["options"]`` (see :func:`recorded_options`), so that a refit or a later diagnosis uses exactly
+``Calibration.options`` (see :func:`recorded_options`), so that a refit or a later diagnosis uses exactly
 what the user asked for, never options guessed back from other entries of ``details``.
 """
 
