@@ -32,7 +32,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -55,7 +55,7 @@ from .motorterm import MotorTerm
 if TYPE_CHECKING:
     from .findings import Diagnostics
 
-__all__ = ["CONVENTION", "FRAMES", "SCHEMA_VERSION", "Calibration"]
+__all__ = ["CONVENTION", "FRAMES", "SCHEMA_VERSION", "Calibration", "Frame"]
 
 #: The formula every exported calibration states, word for word.
 CONVENTION = "corrected = matrix @ (raw - offset)"
@@ -70,7 +70,8 @@ MATRIX_SINGULAR_RANGE = (1e-3, 1e3)
 #: (:data:`magfit._validation.MAX_MAGNITUDE`), so that raw - offset stays finite.
 MAX_OFFSET = 1e150
 #: What the corrected field's axes are: the magnetometer's own, or the vehicle's (see the module docstring).
-FRAMES = ("sensor", "vehicle")
+Frame = Literal["sensor", "vehicle"]
+FRAMES: tuple[Frame, ...] = ("sensor", "vehicle")
 #: Version of the JSON layout written by :meth:`Calibration.to_dict`. Version 2 writes the typed facts
 #: (``support``, ``model``, ``options``, ``known_field``, ``rejected``, ``solver``, ``auto``, ``vector``,
 #: ``gyro``) beside ``details``; version 1 kept them in ``details`` and is still read (:func:`split_details`).
@@ -153,7 +154,7 @@ class Calibration:
     unit: str | None = None
     n_samples: int | None = None
     details: Mapping[str, Any] = field(default_factory=dict)
-    frame: str = "sensor"
+    frame: Frame = "sensor"
     motor: MotorTerm | None = None
     support: Support | None = None
     model: ModelKind | None = None
