@@ -82,3 +82,18 @@ def test_version_2_writes_the_facts_beside_details_and_refuses_them_in_a_version
         magfit.Calibration.from_dict({**data, "model": "banana"})
     with pytest.raises(magfit.DataFileError, match="beyond the range of float64"):
         magfit.Calibration.from_json(calibration.to_json().replace('"pinned": true', '"pinned": true, "x": 1e999'))
+
+
+def test_version_1_vehicle_fits_become_their_family_records() -> None:
+    vector, raw = _load("vector")
+    assert vector.frame == "vehicle" and vector.model == "vehicle" and vector.vector is not None
+    assert vector.vector.lag_s == raw["details"]["lag_s"] and vector.vector.lag_sigma_s == raw["details"]["lag_sigma_s"]
+    assert vector.vector.alignment_sigma_deg == raw["details"]["alignment_sigma_deg"]
+    assert vector.support is not None and vector.support.verdict == "weak" and vector.diagnostics is not None
+    gyro, raw = _load("gyro")
+    assert gyro.gyro is not None and gyro.gyro.mapping == raw["details"]["mapping"] == "+x+y+z"  # the simulated axes
+    np.testing.assert_allclose(gyro.gyro.bias, raw["details"]["gyro_bias"])
+    assert gyro.gyro.sensor_matrix is not None and np.shape(gyro.gyro.sensor_matrix) == (3, 3)
+    assert gyro.solver is not None and gyro.solver.iterations == raw["details"]["solver"]["iterations"]
+    for calibration in (vector, gyro):
+        assert magfit.Calibration.from_json(calibration.to_json()) == calibration
