@@ -8,7 +8,6 @@ accelerometer but with the attitude is aligned by the vector fit (:func:`magfit.
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -16,16 +15,16 @@ import click
 import numpy as np
 from numpy.typing import NDArray
 
-from ..alignment import Alignment, _mirror_axis, nearest_rotations
+from ..alignment import Alignment, nearest_rotations
 from ..calibration import Calibration
 from ..errors import CalibrationError
 from ..geomag import parse_date, parse_location
 from ..io.layout import sniff
 from ..io.streams import find_stream_columns
 from ..pipeline import RefusedWithAdvice, StreamsMissing, calibrate_file
-from ..pipeline.align import ACCEL_COLUMNS, SECONDS, FileAlignment, align_file, columns_by_name
+from ..pipeline.align import ACCEL_COLUMNS, SECONDS, FileAlignment, align_file, alignment_of_vector, columns_by_name
 from ..pipeline.table import StreamSpec
-from ..rotations import CUSTOM, custom_angles, euler_angles, polar_decomposition
+from ..rotations import CUSTOM, custom_angles
 from ..sources import log_kind
 from ._common import command_line, fail, geomag_option, one_line, parse_columns, parse_stream, vector, warn
 
@@ -71,22 +70,10 @@ def _align_by_reference(
         raise CalibrationError(f"{one_line(error.text)}; what works for a vehicle: {said}") from None
     compass = result.compasses[0]
     calibration = compass.calibration
-    rotation, _ = polar_decomposition(calibration.matrix)
-    facts = calibration.vector
-    sigma = facts.alignment_sigma_deg if facts is not None and facts.alignment_sigma_deg is not None else math.nan
-    mirror = bool(np.linalg.det(rotation) < 0)
-    inverted, nearest = _mirror_axis(rotation) if mirror else (None, nearest_rotations(rotation))
-    proper = rotation @ np.diag([-1.0 if axis == inverted else 1.0 for axis in "xyz"]) if mirror else rotation
-    roll, pitch, yaw = euler_angles(proper)
-    support = calibration.support
-    verdict = support.verdict if support is not None else "supported"
-    warnings = tuple(str(w) for w in (*support.refusals, *support.weaknesses)) if support is not None else ()
-    aligned = Alignment(
-        matrix=rotation, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw, sigma_deg=np.full(3, sigma),
-        axis_sigma_deg=np.full(3, sigma), inclination_deg=math.nan, inclination_sigma_deg=math.nan,
-        inclination_fitted=False, mirror=mirror, inverted_axis=inverted, nearest=nearest, residual_deg=math.nan,
-        n_samples=compass.n_rows, n_used=int(calibration.n_samples or 0), verdict=verdict, warnings=warnings,
-    )  # fmt: skip
+    aligned = alignment_of_vector(calibration, compass.n_rows)
+    rotation, mirror, inverted, proper = aligned.matrix, aligned.mirror, aligned.inverted_axis, aligned.proper_matrix
+    roll, pitch, yaw = aligned.roll_deg, aligned.pitch_deg, aligned.yaw_deg
+    sigma, verdict, warnings = float(aligned.sigma_deg[0]), aligned.verdict, aligned.warnings
     out = click.echo
     out(f"{'file':16s} {path} (magnetometer {', '.join(map(str, compass.columns))})")
     out(f"{'calibration':16s} vector: against the file's attitude and reference field ({verdict})")

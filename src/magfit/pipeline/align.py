@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..alignment import Alignment, align
+from ..alignment import Alignment, _mirror_axis, align, nearest_rotations
 from ..calibration import Calibration
 from ..diagnostics.settle import starting_weakness
 from ..errors import CalibrationError, DataFileError
@@ -28,6 +28,7 @@ from ..fit import fit
 from ..geomag import field_at
 from ..io.layout import sniff
 from ..io.readers import read_samples
+from ..rotations import euler_angles, polar_decomposition
 
 __all__ = ["ACCEL_COLUMNS", "SECONDS", "FileAlignment", "Recording", "align_file", "read_recording"]
 
@@ -303,6 +304,31 @@ def align_file(
     # A log's magnetometer already turned by the firmware's orientation M: the rotation to set is R @ M.
     total = result.proper_matrix if recording.mounting is None else result.proper_matrix @ recording.mounting
     return FileAlignment(recording, calibration, result, inclination_deg, source, total)
+
+
+def alignment_of_vector(calibration: Calibration, n_samples: int) -> Alignment:
+    """The rotation into the vehicle frame held by a fit against a reference field (``method="vector"``).
+
+    The rotation is the polar factor of the calibration's matrix (soft iron times misalignment), its one-sigma
+    the fit's (``calibration.vector.alignment_sigma_deg``), its verdict the fit's; a mirror names the axis to
+    invert. ``n_samples``: the rows read (the fit's ``n_samples`` are those it used).
+    """
+    rotation, _ = polar_decomposition(calibration.matrix)
+    facts = calibration.vector
+    sigma = facts.alignment_sigma_deg if facts is not None and facts.alignment_sigma_deg is not None else math.nan
+    mirror = bool(np.linalg.det(rotation) < 0)
+    inverted, nearest = _mirror_axis(rotation) if mirror else (None, nearest_rotations(rotation))
+    proper = rotation @ np.diag([-1.0 if axis == inverted else 1.0 for axis in "xyz"]) if mirror else rotation
+    roll, pitch, yaw = euler_angles(proper)
+    support = calibration.support
+    verdict = support.verdict if support is not None else "supported"
+    warnings = tuple(str(w) for w in (*support.refusals, *support.weaknesses)) if support is not None else ()
+    return Alignment(
+        matrix=rotation, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw, sigma_deg=np.full(3, sigma),
+        axis_sigma_deg=np.full(3, sigma), inclination_deg=math.nan, inclination_sigma_deg=math.nan,
+        inclination_fitted=False, mirror=mirror, inverted_axis=inverted, nearest=nearest, residual_deg=math.nan,
+        n_samples=n_samples, n_used=int(calibration.n_samples or 0), verdict=verdict, warnings=warnings,
+    )  # fmt: skip
 
 
 def _recorded_date(recording: Recording) -> datetime.date | None:
