@@ -38,7 +38,7 @@ def mild_distortion(rng: np.random.Generator) -> tuple[NDArray[np.float64], NDAr
 
 
 def verdict_of(calibration: magfit.Calibration | None, error: str) -> tuple[str | None, str | None]:
-    """(verdict, its first reason) of a magfit fit, from ``details["support"]`` or a refusal's message.
+    """(verdict, its first reason) of a magfit fit, from ``calibration.support`` or a refusal's message.
 
     A forced fit keeps the verdict "refused" (with ``forced``); a ``CalibrationError`` of an unforced fit
     is a refusal too. A peer's calibration carries no verdict: (None, None).
@@ -47,11 +47,11 @@ def verdict_of(calibration: magfit.Calibration | None, error: str) -> tuple[str 
         if error.startswith("CalibrationError"):
             return "refused", error.removeprefix("CalibrationError: ")
         return None, None
-    support = calibration.details.get("support")
-    if not isinstance(support, Mapping):
+    support = calibration.support
+    if support is None:
         return None, None
-    reasons = [*support.get("refusals", []), *support.get("weaknesses", [])]
-    return str(support.get("verdict")), (str(reasons[0]) if reasons else None)
+    reasons = [*support.refusals, *support.weaknesses]
+    return support.verdict, (str(reasons[0]) if reasons else None)
 
 
 def failure_message(error: BaseException) -> str:

@@ -38,7 +38,7 @@ sphere distances
 no calibration
     The heading error of the raw readings (offset 0, identity matrix), per trial: the yardstick.
 support verdict
-    magfit's own judgement of each fit (``details["support"]``: supported, weak, refused). Every magfit
+    magfit's own judgement of each fit (``calibration.support``: supported, weak, refused). Every magfit
     method but ``auto`` is fitted with ``allow_undetermined=True``, so the numbers above are what the
     method gives even where the samples do not support it; the verdicts are counted beside them.
     ``auto`` is not forced: its refusal is its answer, a failure with its reason.
@@ -1276,7 +1276,7 @@ def _verdict_section(
         "",
         "## Support verdict: refused / weak trials per method",
         "",
-        'magfit judges every fit (`details["support"]`). The methods other than '
+        'magfit judges every fit (`calibration.support`). The methods other than '
         + ", ".join(f"`{m}`" for m in NOT_FORCED)
         + " are fitted with `allow_undetermined=True`, so the tables above score what they give even where "
         "the samples do not support them; this table says how often that was. `auto` is not forced: its "

@@ -411,11 +411,11 @@ def run_case(case: VehicleCase, fitters: Mapping[str, Fitter], root_seed: int) -
         if aligning:
             outcomes[ALIGN_TRUE].append(_align_outcome(simulation, simulation.truth_sensor))
             outcomes[ALIGN_AUTO].append(_align_outcome(simulation, fitted.get("auto")))
-            if GYRO in fitted and "sensor_matrix" in fitted[GYRO].details:
-                kinematic = fitted[GYRO]
+            kinematic = fitted.get(GYRO)
+            if kinematic is not None and kinematic.gyro is not None and kinematic.gyro.sensor_matrix is not None:
                 sensor_part = magfit.Calibration(
                     "gyro (magnitude-only part)", kinematic.offset,
-                    np.asarray(kinematic.details["sensor_matrix"], dtype=np.float64), kinematic.field_strength,
+                    np.asarray(kinematic.gyro.sensor_matrix, dtype=np.float64), kinematic.field_strength,
                 )  # fmt: skip
                 outcomes[ALIGN_GYRO].append(_align_outcome(simulation, sensor_part))
     return {name: values for name, values in outcomes.items() if values}
@@ -912,9 +912,8 @@ def run_real(recording: AttitudeRecording, methods: Sequence[str] | None = None)
         }
         if calibration.frame == "vehicle":
             row["rotation_deg"] = rotation_angle_deg(polar_rotation(calibration.matrix))
-        support = calibration.details.get("support")
-        if isinstance(support, Mapping):
-            row["verdict"] = support.get("verdict")
+        if calibration.support is not None:
+            row["verdict"] = calibration.support.verdict
         rows[name] = row
     return {
         "samples": len(recording.samples),

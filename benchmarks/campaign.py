@@ -229,7 +229,8 @@ def score(kind: str, seed: int, method: str, sim: magfit.Simulation, samples: ND
         calibration = magfit.fit(samples, method)
     except magfit.CalibrationError as error:
         return Outcome(kind, seed, method, "refused", tuple(error.codes))
-    support = magfit.Support.from_dict(calibration.details["support"])
+    support = calibration.support
+    assert support is not None  # every fit is judged
     report = calibration.diagnostics
     stated = report.uncertainty.heading_sigma_deg if report is not None and report.uncertainty else None
     return Outcome(kind, seed, method, support.verdict, support.codes, heading_error_deg(calibration, sim), stated)

@@ -420,9 +420,9 @@ def part_ratios(rounds: int, workdir: Path) -> dict[str, Any]:
                 calibration = None  # a refusal is timed too, and said below
             fits[method].append(time.perf_counter() - start)
             if calibration is not None:
-                support = calibration.details.get("support", {})
-                chosen = calibration.details.get("chosen")
-                outcome[method] = f"verdict {support.get('verdict')}" + (f", chose {chosen}" if chosen else "")
+                verdict = calibration.support.verdict if calibration.support is not None else None
+                chosen = calibration.auto.chosen if calibration.auto is not None else None
+                outcome[method] = f"verdict {verdict}" + (f", chose {chosen}" if chosen else "")
     results["fit_seconds"] = {method: min(times) for method, times in fits.items()}
     results["fit_all_seconds"] = fits
     results["fit_outcome"] = outcome

@@ -379,8 +379,9 @@ def test_an_alignment_is_no_better_supported_than_its_calibration(tmp_path, caps
     # A boat: from the field's magnitude alone the distortion a tumble would show is not determined (auto refuses);
     # forced, then marked weak, as a calibration that holds near the attitudes seen.
     fitted = magfit.fit(sim.samples, method="auto", allow_undetermined=True).to_dict()
-    fitted["details"]["support"] = {**fitted["details"]["support"], "verdict": "weak", "refusals": [],
-                                    "weaknesses": ["near the attitudes seen"], "forced": False}  # fmt: skip
+    fitted["support"] = {**fitted["support"], "verdict": "weak", "refusals": [], "refusal_codes": [],
+                         "weaknesses": ["near the attitudes seen"], "weakness_codes": ["weakly_determined"],
+                         "forced": False}  # fmt: skip
     weak = magfit.Calibration.from_dict(fitted)
     given = tmp_path / "weak.json"
     given.write_text(weak.to_json())
@@ -390,7 +391,8 @@ def test_an_alignment_is_no_better_supported_than_its_calibration(tmp_path, caps
     assert re.search(r"verdict\s+weak", out) and "the calibration it starts from (auto) is weak" in out
     # A calibration forced past its refusal: the alignment from it says so, weak at best.
     forced = weak.to_dict()
-    forced["details"]["support"] = {**forced["details"]["support"], "verdict": "refused", "refusals": ["too few"]}
+    forced["support"] = {**forced["support"], "verdict": "refused", "refusals": ["too few"],
+                         "refusal_codes": ["undetermined"]}  # fmt: skip
     given.write_text(magfit.Calibration.from_dict(forced).to_json())
     status, out, err = _run(capsys, path, "--calibration", given, "--gyro-columns", "gx,gy,gz", "--inclination", "64",
                             "--no-mirror")  # fmt: skip

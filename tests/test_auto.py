@@ -26,7 +26,7 @@ def _heading_error_deg(calibration: magfit.Calibration, simulation: magfit.Simul
 def test_pure_hard_iron_picks_the_sphere() -> None:
     sim = magfit.simulate(2000, hard_iron=[30.0, -12.0, 7.0], field_strength=50.0, noise=0.5, seed=1)
     cal = magfit.fit(sim.samples, "auto")
-    assert cal.details["chosen"] == "sphere"
+    assert cal.auto.chosen == "sphere"
     assert set(cal.details["criterion"]["values"]) == {"sphere", "diag", "full"}
     values = cal.details["criterion"]["values"]
     assert values["sphere"] == min(v for v in values.values() if v is not None)
@@ -36,8 +36,8 @@ def test_pure_hard_iron_picks_the_sphere() -> None:
 def test_steel_picks_the_full_ellipsoid() -> None:
     sim = magfit.scenario("mpu9250", "steel").simulate(2000, seed=2)
     cal = magfit.fit(sim.samples, "auto")
-    assert cal.details["chosen"] == "full"
-    assert "lowest BIC: full" in cal.details["reason"]
+    assert cal.auto.chosen == "full"
+    assert "lowest BIC: full" in cal.auto.reason
     np.testing.assert_allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, rtol=0.03, atol=3e-8)
 
 
@@ -47,7 +47,7 @@ def test_full_model_at_high_noise_is_the_bias_corrected_ml_fit() -> None:
     soft_iron = np.array([[1.2, 0.1, -0.05], [0.1, 0.9, 0.08], [-0.05, 0.08, 1.05]])
     sim = magfit.simulate(50_000, soft_iron=soft_iron, hard_iron=[0.3, -0.2, 0.1], noise=0.1, seed=4)
     cal = magfit.fit(sim.samples, "auto", diagnostics=False)
-    assert cal.details["chosen"] == "full"
+    assert cal.auto.chosen == "full"
     truth = sim.truth.ellipsoid_matrix
     error = np.linalg.norm(cal.ellipsoid_matrix - truth) / np.linalg.norm(truth)
     assert error < 0.008, f"ellipsoid matrix off by {100 * error:.2f} %"
@@ -59,14 +59,14 @@ def test_an_eccentric_ellipsoid_in_heavy_noise_is_not_taken_for_flat_samples() -
     # residuals, but the samples spread 4 residuals along it, not the one of samples in a plane.
     sim = magfit.scenario("mpu9250", "steel").simulate(3000, seed=1, noise=27.0)
     cal = magfit.fit(sim.samples, "auto", diagnostics=False)
-    assert cal.details["chosen"] == "full"
+    assert cal.auto.chosen == "full"
     np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=0.02 * sim.field_strength)
 
 
 def test_axis_aligned_scale_picks_diag() -> None:
     sim = magfit.simulate(3000, soft_iron=np.diag([1.15, 0.9, 1.0]), hard_iron=[0.2, -0.1, 0.3], noise=0.01, seed=3)
     cal = magfit.fit(sim.samples, "auto")
-    assert cal.details["chosen"] == "diag"
+    assert cal.auto.chosen == "diag"
     np.testing.assert_allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, rtol=0.01, atol=1e-3)
 
 
@@ -78,12 +78,12 @@ def test_restricted_attitude_with_strong_soft_iron_names_what_it_holds_for() -> 
     calibration = magfit.fit(sim.samples, "auto")
     report = calibration.diagnostics
     assert report is not None and report.support is not None
-    assert calibration.details["chosen"] == "full" and report.support.verdict == "weak"
+    assert calibration.auto.chosen == "full" and report.support.verdict == "weak"
     assert any(
         "do not determine the scale along z" in w and "near the attitudes recorded" in w
         for w in report.support.weaknesses
     )
-    assert "the sphere model was passed over: it leaves residuals" in calibration.details["reason"]
+    assert "the sphere model was passed over: it leaves residuals" in calibration.auto.reason
 
 
 @pytest.mark.parametrize(("sensor", "disturbance"), [("mpu9250", "none")])
@@ -95,8 +95,8 @@ def test_restricted_attitude_names_the_weak_direction_and_stays_near_the_best(se
     for seed in range(3):
         sim = scenario.simulate(2000, seed=seed, orientations="restricted")
         auto = magfit.fit(sim.samples, "auto", diagnostics=False)
-        weak = " ".join(auto.details["weak"]) + auto.details["reason"]
-        assert "along z" in weak, auto.details["reason"]
+        weak = " ".join(auto.support.weaknesses) + auto.auto.reason
+        assert "along z" in weak, auto.auto.reason
         errors["auto"].append(_heading_error_deg(auto, sim, attitudes))
         for name, method in (("sphere", "sphere"), ("diag", "diag"), ("full", "als")):
             try:  # forced: auto is compared with what each model gives, supported or not
@@ -120,8 +120,8 @@ def test_spikes_switch_auto_to_robust() -> None:
     index = np.arange(10, 2000, 50)  # 2 %
     spiked[index] = sim.samples.mean(axis=0) + 3.0 * (sim.samples[index] - sim.samples.mean(axis=0))
     cal = magfit.fit(spiked, "auto")
-    assert cal.details["robust"] and cal.details["chosen"].startswith("robust ")
-    assert cal.details["n_rejected"] >= index.size
+    assert cal.details["robust"] and cal.auto.chosen.startswith("robust ")
+    assert cal.rejected.count >= index.size
     np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=0.01)  # σ ≈ 0.011 / √(2000/3) ≈ 4e-4
     clean = magfit.fit(sim.samples, "auto")
     assert not clean.details["robust"]
@@ -138,7 +138,7 @@ def test_real_recordings_fall_back_or_refuse_with_a_reason(real_data_dir) -> Non
         except magfit.CalibrationError as error:
             assert "record again" in str(error).lower() or "rotate the sensor" in str(error)
         else:  # a fallback must say why and carry a diagnosis that warns
-            assert cal.details["reason"]
+            assert cal.auto.reason
             assert cal.diagnostics is not None and not cal.diagnostics.ok
 
 
@@ -172,9 +172,9 @@ def test_an_aircraft_gets_the_model_the_samples_determine_with_a_heading_bound_t
     auto = magfit.fit(sim.samples, "auto")
     report = auto.diagnostics
     assert report is not None and report.support is not None and report.uncertainty is not None
-    assert auto.details["chosen_model"] == "sphere" and report.support.verdict == "weak"
+    assert auto.auto.model == "sphere" and report.support.verdict == "weak"
     assert "model_inadequate" in report.support.codes
-    omitted = auto.details["omitted_distortion"]
+    omitted = auto.auto.omitted
     assert omitted["heading_deg"] == pytest.approx(
         omitted["heading_difference_deg"] + omitted["witness_heading_sigma_deg"]
     )
@@ -196,7 +196,7 @@ def test_an_aircraft_gets_the_model_the_samples_determine_with_a_heading_bound_t
     # Forcing changes nothing where auto answers: the same calibration, never the full model it passed over.
     again = magfit.fit(sim.samples, "auto", allow_undetermined=True)
     np.testing.assert_array_equal(again.offset, auto.offset)
-    assert again.details["support"]["forced"] is False
+    assert again.support.forced is False
 
 
 def test_forced_auto_returns_what_the_unforced_choice_ranks_best_with_the_refusal_first() -> None:
@@ -205,12 +205,12 @@ def test_forced_auto_returns_what_the_unforced_choice_ranks_best_with_the_refusa
         magfit.fit(sim.samples, "auto")
     assert refused.value.codes
     forced = magfit.fit(sim.samples, "auto", allow_undetermined=True)
-    support = forced.details["support"]
+    support = forced.support.to_dict()
     assert support["verdict"] == "refused" and support["forced"] is True
     assert support["refusal_codes"][0] == refused.value.codes[0]
-    assert forced.details["chosen_model"] == "sphere"  # the simplest: fewest numbers the samples fail to fix
+    assert forced.auto.model == "sphere"  # the simplest: fewest numbers the samples fail to fix
     assert forced.diagnostics is not None and forced.diagnostics.warnings[0].startswith("NOT SUPPORTED (forced): ")
-    assert forced.details["options"]["outliers"] == "detect"  # recorded as every fit's options
+    assert forced.options["outliers"] == "detect"  # recorded as every fit's options
 
 
 def test_one_heading_uncertainty_is_quoted_everywhere() -> None:
@@ -220,9 +220,9 @@ def test_one_heading_uncertainty_is_quoted_everywhere() -> None:
     auto = magfit.fit(sim.samples, "auto")
     report = auto.diagnostics
     assert report is not None and report.uncertainty is not None and report.uncertainty.heading_sigma_deg
-    saved = magfit.Calibration.from_json(auto.to_json()).details
-    assert saved["weak"] == saved["support"]["weaknesses"] == list(report.warnings)
+    saved = magfit.Calibration.from_json(auto.to_json())
+    assert saved.support is not None and list(saved.support.weaknesses) == list(report.warnings)
     stated = f"±{report.uncertainty.heading_sigma_deg:.2g}°"
     quoted = [w for w in report.warnings if "heading uncertainty" in w]
     assert quoted and all(stated in w for w in quoted), (stated, quoted)
-    assert "weak in the" not in auto.details["reason"]  # it quoted the candidate's one-sigma (±0.68° for ±1.2°)
+    assert "weak in the" not in auto.auto.reason  # it quoted the candidate's one-sigma (±0.68° for ±1.2°)

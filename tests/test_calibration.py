@@ -65,7 +65,7 @@ def test_json_round_trip_is_lossless(seed: int) -> None:
 
 def test_json_states_schema_and_convention() -> None:
     data = json.loads(random_calibration(2).to_json())
-    assert data["schema_version"] == 1
+    assert data["schema_version"] == 2
     assert data["convention"] == "corrected = matrix @ (raw - offset)" == magfit.CONVENTION
     assert data["method"] == "ellipsoid" and data["unit"] == "uT"
 

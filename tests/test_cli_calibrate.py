@@ -302,8 +302,8 @@ def test_a_self_judged_method_prints_its_weaknesses_as_warnings() -> None:
 
     sim = simulate_vehicle(3000, "boat", rate_hz=10.0, noise=0.005, gyro_noise=0.002, seed=3)
     calibration = magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s)
-    weaknesses = calibration.details["support"]["weaknesses"]
-    assert calibration.details["support"]["verdict"] == "weak" and weaknesses
+    weaknesses = list(calibration.support.weaknesses)
+    assert calibration.support.verdict == "weak" and weaknesses
     assert calibration.diagnostics is not None and calibration.diagnostics.support.verdict == "weak"
     assert _fit_warnings(calibration) == weaknesses
     assert _verdict(calibration) == [("verdict", f"weak: {len(weaknesses)} weakness(es), in the warnings above")]

@@ -53,7 +53,7 @@ def test_table_lists_each_method_with_mean_std_axes_and_offset(steel_file: tuple
     assert f"{path}: 1500 samples (1500 rows; columns mx, my, mz)" in result.stdout
     for method_result in expected:
         assert method_result.evaluation is not None and method_result.calibration is not None
-        refused = method_result.calibration.details["support"]["verdict"] == "refused"
+        refused = method_result.calibration.support.verdict == "refused"
         label = f"{method_result.method}*" if refused else method_result.method
         line = next(line for line in result.stdout.splitlines() if line.startswith(f"│ {label} "))
         assert f"{method_result.evaluation.mean:.4f}" in line
@@ -97,7 +97,7 @@ def test_csv_carries_the_library_numbers_at_full_precision(steel_file: tuple[Pat
     for row in rows:
         truth = expected[row["method"]]
         assert truth.evaluation is not None and truth.calibration is not None
-        supported = truth.calibration.details["support"]["verdict"] != "refused"
+        supported = truth.calibration.support.verdict != "refused"
         assert row["status"] == ("ok" if supported else "not supported")
         assert row["file"] == str(path) and row["error"] == ""
         assert float(row["std"]) == truth.evaluation.std

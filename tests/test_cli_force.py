@@ -38,7 +38,7 @@ def test_refused_without_force_returned_and_marked_with_it(tmp_path: Path) -> No
     assert "magfit: warning: NOT SUPPORTED (forced): " in forced.stderr
     assert "verdict          NOT SUPPORTED by the samples, returned because of --force" in forced.stdout
     saved = magfit.Calibration.from_json((tmp_path / "cal.json").read_text())
-    assert saved.details["support"]["verdict"] == "refused" and saved.details["support"]["forced"] is True
+    assert saved.support.verdict == "refused" and saved.support.forced is True
 
 
 def test_a_supported_fit_says_so(tmp_path: Path) -> None:
@@ -63,6 +63,6 @@ def test_auto_is_refused_without_force_and_returned_with_it(tmp_path: Path) -> N
     assert forced.stderr.startswith("magfit: warning: NOT SUPPORTED (forced): the samples determine no calibration")
     assert "verdict          NOT SUPPORTED by the samples, returned because of --force" in forced.stdout
     saved = magfit.Calibration.from_json((tmp_path / "cal.json").read_text())
-    assert saved.method == "auto" and saved.details["support"]["forced"] is True
+    assert saved.method == "auto" and saved.support.forced is True
     # The ring is a circle of radius 30 about (0, 0, 20): the sphere through it has that centre in x and y.
     np.testing.assert_allclose(saved.offset[:2], [0.0, 0.0], atol=0.5)

@@ -53,8 +53,8 @@ def test_biased_on_rotated_distortion_where_the_full_ellipsoid_is_exact() -> Non
     diag = magfit.fit(sim.samples, method="diag", allow_undetermined=True)
     full = magfit.fit(sim.samples, method="ellipsoid")
     # The verdict knows: the full ellipsoid leaves far less on the same samples (F test) and turns the heading.
-    assert diag.details["support"]["verdict"] == "refused"
-    assert "model_inadequate" in diag.details["support"]["refusal_codes"]
+    assert diag.support.verdict == "refused"
+    assert "model_inadequate" in diag.support.to_dict()["refusal_codes"]
     assert shape_error(full, sim.truth) < 1e-9
     assert shape_error(diag, sim.truth) > 0.1  # a 30° turn of a 1.3 : 0.8 stretch cannot be diagonal
     assert np.count_nonzero(diag.matrix - np.diag(np.diag(diag.matrix))) == 0

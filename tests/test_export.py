@@ -177,7 +177,7 @@ def test_json_is_lossless_and_records_the_unit(fitted_any_root: tuple[magfit.Cal
     assert back == cal.with_unit("uT")  # the unit passed is recorded, canonically
     data = json.loads(text)
     assert data["convention"] == "corrected = matrix @ (raw - offset)"
-    assert data["schema_version"] == 1 and data["n_samples"] == len(samples)
+    assert data["schema_version"] == 2 and data["n_samples"] == len(samples)
     assert data["details"]["root"] in ("sqrt", "cholesky")  # the fit's details travel with it
     np.testing.assert_array_equal(back.apply(samples), cal.apply(samples))
     assert magfit.Calibration.from_json(export(cal, "json")) == cal  # no unit given: the recorded one stays

@@ -52,15 +52,15 @@ def test_car_without_tumble_recovers_the_truth_and_the_half_turn_about_x() -> No
     # One minute of driving (turns, slopes and camber within 15°) with the magnetometer upside down.
     sim = _simulate(3000, "car", ROLL_180)
     cal = _fit(sim)
-    assert cal.frame == "vehicle" and cal.details["support"]["verdict"] == "supported"
-    assert cal.details["mapping"] == "+x-y-z"
+    assert cal.frame == "vehicle" and cal.support.verdict == "supported"
+    assert cal.gyro.mapping == "+x-y-z"
     assert np.linalg.norm(cal.offset - HARD_IRON) < 0.01
     assert np.allclose(cal.ellipsoid_matrix, sim.truth.ellipsoid_matrix, atol=0.02)
     truth = sim.truth.matrix / np.cbrt(np.linalg.det(sim.truth.matrix))  # the vehicle matrix, det 1
     assert np.allclose(cal.matrix, truth, atol=0.02)
-    assert np.allclose(cal.details["gyro_bias"], GYRO_BIAS, atol=0.001)
+    assert np.allclose(cal.gyro.bias, GYRO_BIAS, atol=0.001)
     assert _heading_error_deg(cal, sim) < 0.5
-    assert cal.details["options"]["gyro"] == "an array of 3000 rows"
+    assert cal.options["gyro"] == "an array of 3000 rows"
     assert magfit.Calibration.from_json(cal.to_json()) == cal
 
 
@@ -68,12 +68,12 @@ def test_a_mounting_between_standard_rotations_is_fitted_as_a_general_rotation()
     mounting = Rotation.from_euler("xyz", [20.0, -10.0, 15.0], degrees=True).as_matrix()
     sim = _simulate(1500, "tumble", mounting)
     cal = _fit(sim)
-    assert cal.details["mapping"] == "general"
-    rotation = np.array(cal.details["rotation"])
+    assert cal.gyro.mapping == "general"
+    rotation = np.array(cal.gyro.rotation)
     assert np.degrees(Rotation.from_matrix(rotation @ mounting.T).magnitude()) < 0.5
     expected = np.degrees(Rotation.from_matrix(mounting).magnitude())  # from the nearest mapping, the identity
-    assert cal.details["nearest_mapping"] == "+x+y+z"
-    assert cal.details["angle_from_nearest_deg"] == pytest.approx(expected, abs=0.5)
+    assert cal.gyro.nearest_mapping == "+x+y+z"
+    assert cal.gyro.angle_from_nearest_deg == pytest.approx(expected, abs=0.5)
     assert np.linalg.norm(cal.offset - HARD_IRON) < 0.002
     assert _heading_error_deg(cal, sim) < 0.1
 
@@ -104,7 +104,7 @@ def test_a_short_flight_is_refused_not_guessed() -> None:
     with pytest.raises(CalibrationError, match="the gyro calibration"):
         _fit(sim)
     forced = _fit(sim, allow_undetermined=True)
-    assert forced.details["support"]["verdict"] == "refused" and forced.details["support"]["forced"]
+    assert forced.support.verdict == "refused" and forced.support.forced
 
 
 def test_bad_gyro_and_time_inputs_are_one_line_option_errors() -> None:
@@ -131,17 +131,17 @@ def test_a_magnetometer_late_behind_the_gyro_is_found_and_undone() -> None:
     sim = _simulate(1500, "tumble", np.eye(3))
     late = np.column_stack([np.interp(sim.time_s - 0.04, sim.time_s, sim.samples[:, i]) for i in range(3)])
     cal = magfit.fit(late[10:], method="gyro", gyro=sim.gyro[10:], time_s=sim.time_s[10:])
-    assert cal.details["lag_s"] == pytest.approx(0.04, abs=0.004)
+    assert cal.gyro.lag_s == pytest.approx(0.04, abs=0.004)
     assert np.linalg.norm(cal.offset - HARD_IRON) < 0.002
     unchanged = _fit(sim)  # no delay: none is applied (the gate keeps a shallow minimum out)
-    assert unchanged.details["lag_s"] == 0.0
+    assert unchanged.gyro.lag_s == 0.0
 
 
 def test_an_imposed_mapping_the_samples_contradict_is_refused() -> None:
     sim = _simulate(1500, "tumble", ROLL_180)
     with pytest.raises(CalibrationError, match=r"mapping='\+x\+y\+z'.*leave mapping='search'"):
         _fit(sim, mapping="+x+y+z")
-    assert _fit(sim, mapping="+x-y-z").details["mapping"] == "+x-y-z"
+    assert _fit(sim, mapping="+x-y-z").gyro.mapping == "+x-y-z"
 
 
 def test_real_betaflight_quadcopter_and_ensta_imu(real_data_dir: Path) -> None:
@@ -151,8 +151,8 @@ def test_real_betaflight_quadcopter_and_ensta_imu(real_data_dir: Path) -> None:
     cal = magfit.fit(flight[:, :3], method="gyro", gyro=flight[:, 3:], time_s=np.arange(len(flight)) / 200.0)
     controller = np.array([957.0, 417.0, 502.0])  # the flight controller's own hard iron (the recordings' README)
     assert np.linalg.norm(cal.offset - controller) < 0.015 * cal.field_strength
-    assert cal.details["lag_s"] == pytest.approx(0.006, abs=0.002)  # its magnetometer samples are held
-    assert cal.details["nearest_mapping"] == "+x+y+z" and cal.details["angle_from_nearest_deg"] < 8.0
+    assert cal.gyro.lag_s == pytest.approx(0.006, abs=0.002)  # its magnetometer samples are held
+    assert cal.gyro.nearest_mapping == "+x+y+z" and cal.gyro.angle_from_nearest_deg < 8.0
     # The ENSTA IMU: the magnetometer is the gyroscope's frame turned 180° about x; its gyro is in deg/s.
     imu = np.load(real_data_dir / "ensta_tlefloch_imu" / "raw_data.npz")
     mag = np.column_stack([imu["mag_x"], imu["mag_y"], imu["mag_z"]])
@@ -160,7 +160,7 @@ def test_real_betaflight_quadcopter_and_ensta_imu(real_data_dir: Path) -> None:
     with pytest.raises(OptionError, match="degrees per second"):
         magfit.fit(mag, method="gyro", gyro=rates, time_s=imu["time"])
     cal = magfit.fit(mag, method="gyro", gyro=np.radians(rates), time_s=imu["time"])
-    assert cal.details["mapping"] == "+x-y-z"
+    assert cal.gyro.mapping == "+x-y-z"
 
 
 @pytest.mark.slow
@@ -189,19 +189,19 @@ def test_a_boat_rolling_on_one_heading_is_pinned_by_the_accelerometer() -> None:
     alone = _fit(sim, allow_undetermined=True)
     aided = _fit(sim, accel=sim.accel, allow_undetermined=True)
     assert _heading_error_deg(alone, sim) > 2.0
-    assert "give accel=" in " ".join(alone.details["support"]["weaknesses"])
-    assert "gravity" not in alone.details
+    assert "give accel=" in " ".join(alone.support.weaknesses)
+    assert alone.gyro.gravity is None
     assert _heading_error_deg(aided, sim) < 0.2
     assert np.linalg.norm(aided.offset - HARD_IRON) < 0.02
-    gravity = aided.details["gravity"]
+    gravity = aided.gyro.gravity
     assert gravity["used"] and gravity["still_samples"] > 2000  # the gyro's bias off: the roll is no heading turn
     assert gravity["inclination_deg"] == pytest.approx(64.0, abs=max(1.5, 3 * gravity["inclination_sigma_deg"]))
     assert gravity["residual_rms_deg"] < 1.0  # the accelerometer's noise: 0.05 / 9.81 rad = 0.3° per sample
-    assert aided.details["options"]["accel"] == "an array of 3000 rows"
+    assert aided.options["accel"] == "an array of 3000 rows"
     # An accelerometer that reports gravity (the specific force's negative) fits alike: only the dip's sign turns.
     flipped = _fit(sim, accel=-sim.accel, allow_undetermined=True)
     assert np.allclose(flipped.offset, aided.offset, atol=1e-6)
-    assert flipped.details["gravity"]["inclination_deg"] == pytest.approx(-gravity["inclination_deg"], abs=1e-4)
+    assert flipped.gyro.gravity["inclination_deg"] == pytest.approx(-gravity["inclination_deg"], abs=1e-4)
 
 
 def test_an_accelerometer_that_never_sees_gravity_alone_leaves_the_fit_as_without_it() -> None:
@@ -209,9 +209,9 @@ def test_an_accelerometer_that_never_sees_gravity_alone_leaves_the_fit_as_withou
                            gyro_bias=GYRO_BIAS, accel_noise=0.05, seed=3)  # fmt: skip
     alone = _fit(sim)
     aided = _fit(sim, accel=sim.accel)  # turning fast all the time: no sample passes the gates
-    assert not aided.details["gravity"]["used"] and "not used" in aided.details["gravity"]["reason"]
-    assert "(dropped: " in aided.details["gravity"]["reason"]  # the gates' counts: why none was kept
-    assert aided.details["support"] == alone.details["support"]  # the fit needs no gravity: not a weakness
+    assert not aided.gyro.gravity["used"] and "not used" in aided.gyro.gravity["reason"]
+    assert "(dropped: " in aided.gyro.gravity["reason"]  # the gates' counts: why none was kept
+    assert aided.support.to_dict() == alone.support.to_dict()  # the fit needs no gravity: not a weakness
     assert np.array_equal(aided.offset, alone.offset) and np.array_equal(aided.matrix, alone.matrix)
     assert np.linalg.norm(alone.offset - HARD_IRON) < 0.005
 
@@ -254,7 +254,7 @@ def test_a_fast_gyro_is_averaged_over_each_magnetometer_interval_not_interpolate
 
     own = magfit.fit(samples, method="gyro", gyro=gyro, gyro_time_s=sim.time_s, time_s=t)
     assert heading_error(own) < 0.2 and np.linalg.norm(own.offset - HARD_IRON) < 0.015
-    assert own.details["options"]["gyro"] == "an array of 30000 rows"
+    assert own.options["gyro"] == "an array of 30000 rows"
     point = np.column_stack([np.interp(t, sim.time_s, gyro[:, axis]) for axis in range(3)])
     interpolated = magfit.fit(samples, method="gyro", gyro=point, time_s=t, allow_undetermined=True)
     assert heading_error(interpolated) > 0.4
@@ -289,14 +289,14 @@ def test_a_gap_in_a_fast_gyro_drops_the_samples_it_spans_and_restarts_the_integr
     for start, end in ((40.0, 46.0), (100.0, 115.0)):
         keep = ~((sim.time_s > start) & (sim.time_s < end))
         cal = magfit.fit(samples, method="gyro", gyro=sim.gyro[keep], gyro_time_s=sim.time_s[keep], time_s=t)
-        assert cal.details["support"]["verdict"] == "supported"
+        assert cal.support.verdict == "supported"
         heading = _heading_error_deg_at(cal, sim, rows)
-        assert heading < 0.15 and heading < 2 * cal.details["heading_sigma_deg"]
+        assert heading < 0.15 and heading < 2 * cal.gyro.heading_sigma_deg
         assert np.linalg.norm(cal.offset - HARD_IRON) < 0.01
         (note,) = cal.details["gyro_gaps"]
         dropped = int(np.sum((t > start - 0.1) & (t < end + 0.1)))
         assert f"from {start:g} s to {end:g} s" in note and abs(cal.n_samples - (rows.size - dropped)) <= 2
-        assert cal.details["heading_sigma_deg"] == pytest.approx(whole.details["heading_sigma_deg"], rel=0.5)
+        assert cal.gyro.heading_sigma_deg == pytest.approx(whole.gyro.heading_sigma_deg, rel=0.5)
     assert "gyro_gaps" not in whole.details and whole.n_samples == rows.size
 
 
@@ -328,20 +328,20 @@ def test_an_accelerometer_that_disagrees_with_the_given_inclination_is_dropped_a
     tilted = sim.accel @ Rotation.from_euler("y", 5.0, degrees=True).as_matrix().T
     unchecked = _fit(sim, accel=tilted, allow_undetermined=True)
     assert _heading_error_deg(unchecked, sim) > 1.5  # the hazard: only a weakness says it is not checked
-    assert unchecked.details["support"]["verdict"] != "supported"
-    assert "give inclination_deg=" in " ".join(unchecked.details["support"]["weaknesses"])
+    assert unchecked.support.verdict != "supported"
+    assert "give inclination_deg=" in " ".join(unchecked.support.weaknesses)
     checked = _fit(sim, accel=tilted, inclination_deg=64.0, allow_undetermined=True)
-    gravity = checked.details["gravity"]
+    gravity = checked.gyro.gravity
     assert not gravity["used"] and gravity["inclination_given_deg"] == 64.0
     assert gravity["inclination_deg"] == pytest.approx(60.3, abs=0.5) and "says 64.0°" in gravity["reason"]
-    support = checked.details["support"]
+    support = checked.support.to_dict()
     assert support["verdict"] == "weak"
     assert "accel= was given but the accelerometer's gravity puts" in " ".join(support["weaknesses"])
     true = _fit(sim, accel=sim.accel, inclination_deg=64.0, allow_undetermined=True)
-    assert true.details["gravity"]["used"] and _heading_error_deg(true, sim) < 0.3
-    assert _heading_error_deg(true, sim) < true.details["heading_sigma_deg"]
+    assert true.gyro.gravity["used"] and _heading_error_deg(true, sim) < 0.3
+    assert _heading_error_deg(true, sim) < true.gyro.heading_sigma_deg
     # the dip cannot see a tilt about the field's horizontal direction: the boat stays weak, saying so
-    assert "not checked by the dip" in " ".join(true.details["support"]["weaknesses"])
+    assert "not checked by the dip" in " ".join(true.support.weaknesses)
     for bad in (95.0, float("nan"), "64°"):
         with pytest.raises(OptionError, match="inclination_deg must be the field's dip in degrees within ±90"):
             _fit(sim, accel=sim.accel, inclination_deg=bad)
@@ -353,9 +353,9 @@ def test_an_accelerometer_given_but_unused_is_said_with_why_not_asked_for() -> N
     sim = _boat(seed=4)
     heave = sim.accel + np.column_stack([np.zeros((3000, 2)), 30.0 * np.sin(2 * np.pi * 1.3 * sim.time_s)])
     cal = _fit(sim, accel=heave, allow_undetermined=True)
-    gravity = cal.details["gravity"]
+    gravity = cal.gyro.gravity
     assert not gravity["used"] and gravity["still_samples"] < 50
-    weaknesses = " ".join(cal.details["support"]["weaknesses"])
+    weaknesses = " ".join(cal.support.weaknesses)
     assert "accel= was given but the accelerometer saw gravity alone on" in weaknesses
     assert "more than 3 % away from g" in weaknesses and "give accel=" not in weaknesses
 
@@ -395,7 +395,7 @@ def test_each_wrong_gyro_input_is_diagnosed_with_its_own_code_and_remedy(name: s
     if code == "lag_at_edge":  # the remedy is the lag: given, the fit recovers the truth
         assert caught.value.remedy == (("lag_s", "-2.00"),)
         cal = magfit.fit(sim.samples, method="gyro", gyro=gyro, time_s=time_s, lag_s=-2.0)
-        assert "lag_at_edge" not in magfit.findings.Support.from_dict(cal.details["support"]).codes
+        assert "lag_at_edge" not in cal.support.codes
         assert _heading_error_deg(cal, sim) < 0.5
 
 
@@ -412,11 +412,11 @@ def test_halves_that_disagree_beyond_their_one_sigma_are_named_and_a_consistent_
     # The field stepping by 5 % half-way (a magnet, a motor): 21 of them, named.
     sim = _simulate(3000, "car", np.eye(3), seed=3)
     cal = _fit(sim)
-    assert "inconsistent_halves" not in magfit.findings.Support.from_dict(cal.details["support"]).codes
+    assert "inconsistent_halves" not in cal.support.codes
     stepped = sim.samples.copy()
     stepped[1500:] += [0.05, -0.04, 0.0]
     cal = magfit.fit(stepped, method="gyro", gyro=sim.gyro, time_s=sim.time_s, allow_undetermined=True)
-    assert "inconsistent_halves" in magfit.findings.Support.from_dict(cal.details["support"]).codes
+    assert "inconsistent_halves" in cal.support.codes
 
 
 def test_degenerate_rates_are_a_calibration_error_with_a_code_never_a_raw_numpy_error() -> None:

@@ -30,8 +30,8 @@ def test_ellipsoid_type_fits_keep_the_ellipsoid_and_take_the_given_radius(method
     assert np.linalg.det(pinned.matrix) == pytest.approx((given / free.field_strength) ** 3, rel=1e-10)
     radii = np.linalg.norm(pinned.apply(sim.samples), axis=1)
     assert np.mean(radii) == pytest.approx(given, rel=0.01)  # noise 2.4 % per sample, 3000 samples
-    assert pinned.details["field_strength_given"] is True
-    assert pinned.details["fitted_field_strength"] == pytest.approx(free.field_strength, rel=1e-12)
+    assert pinned.known_field is not None
+    assert pinned.known_field.fitted == pytest.approx(free.field_strength, rel=1e-12)
     assert "field_strength_given" not in free.details
 
 
@@ -50,8 +50,8 @@ def test_pinned_radius_places_the_sphere_centre_on_partial_coverage(tilt: float)
     assert np.linalg.norm(pinned.offset - truth_offset) < 0.25
     assert np.linalg.norm(free.offset - truth_offset) > 2 * np.linalg.norm(pinned.offset - truth_offset)
     assert pinned.field_strength == 50.0 and np.array_equal(pinned.matrix, np.eye(3))
-    assert pinned.details["field_strength_given"] is True
-    assert pinned.details["fitted_field_strength"] == pytest.approx(free.field_strength)
+    assert pinned.known_field is not None
+    assert pinned.known_field.fitted == pytest.approx(free.field_strength)
 
 
 def test_pinned_sphere_from_statistics_equals_from_samples() -> None:

@@ -32,8 +32,8 @@ def test_auto_and_robust_scale_to_the_given_field(method: str) -> None:
     given = magfit.fit(sim.samples, method=method, field_strength=known)
     assert given.field_strength == known
     np.testing.assert_allclose(np.linalg.norm(given.apply(sim.samples), axis=1).mean(), known, rtol=0.01)
-    assert given.details["field_strength_given"] is True
-    assert given.details["fitted_field_strength"] == pytest.approx(free.field_strength)
+    assert given.known_field is not None
+    assert given.known_field.fitted == pytest.approx(free.field_strength)
     np.testing.assert_allclose(given.offset, free.offset)  # the ellipsoid itself is unchanged
 
 
@@ -70,7 +70,7 @@ def test_cli_field_strength(tmp_path: Path) -> None:
     result = runner.invoke(cli, ["calibrate", str(path), "--field-strength", "48", "-o", str(tmp_path / "c.json")])
     assert result.exit_code == 0, result.output
     cal = magfit.Calibration.from_json((tmp_path / "c.json").read_text())
-    assert cal.field_strength == 48.0 and cal.details["field_strength_given"] is True
+    assert cal.field_strength == 48.0 and cal.known_field is not None
     refused = runner.invoke(cli, ["calibrate", str(path), "--field-strength", "48", "-m", "minmax"])
     assert refused.exit_code == 2
     assert "method 'minmax' has no option 'field_strength'" in refused.output

@@ -116,7 +116,7 @@ def test_details_report_the_solver_and_a_calibrated_covariance() -> None:
     # If (JᵀJ)⁻¹σ² is the estimator's covariance, squared z-scores average 1 (90 values: 0.5..2 is generous).
     assert 0.5 < float(np.mean(squared_z_scores)) < 2.0
     assert cal.details["noise_std"] == pytest.approx(scenario.noise, rel=0.1)
-    assert isinstance(cal.details["message"], str) and cal.details["iterations"] >= 1 and cal.details["cost"] > 0
+    assert isinstance(cal.details["message"], str) and cal.solver.iterations >= 1 and cal.details["cost"] > 0
     json.dumps(dict(cal.details))  # JSON-serialisable
     assert Calibration.from_json(cal.to_json()) == cal
 
@@ -249,5 +249,5 @@ def test_an_unconverged_fit_is_refused_by_the_verdict_in_the_solvers_words() -> 
     with pytest.raises(magfit.CalibrationError, match="the ml fit did not converge"):
         magfit.fit(sim.samples, "ml", max_iterations=1)
     forced = magfit.fit(sim.samples, "ml", max_iterations=1, allow_undetermined=True)
-    assert forced.details["converged"] is False and forced.details["support"]["verdict"] == "refused"
-    assert magfit.fit(sim.samples, "ml").details["converged"] is True
+    assert forced.solver.converged is False and forced.support.verdict == "refused"
+    assert magfit.fit(sim.samples, "ml").solver.converged is True

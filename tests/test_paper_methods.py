@@ -100,7 +100,7 @@ def test_minmax_is_biased_when_soft_iron_is_not_axis_aligned() -> None:
     # magfit.simulate.Scenario), and min/max then misses the shape by far more than the noise explains.
     sim = magfit.scenario("ellipse2a", "steel").simulate(N, seed=14)
     minmax = magfit.fit(sim.samples, method="minmax", centre="midrange", allow_undetermined=True)
-    assert "model_inadequate" in minmax.details["support"]["refusal_codes"]  # and the verdict says so
+    assert "model_inadequate" in minmax.support.to_dict()["refusal_codes"]  # and the verdict says so
     ellipsoid = magfit.fit(sim.samples, method="ellipsoid")
     assert shape_error(minmax, sim.truth) > 0.1
     assert shape_error(ellipsoid, sim.truth) < 0.02

@@ -68,9 +68,9 @@ def test_calibrate_file_fits_the_vector_method_on_a_log(tmp_path, monkeypatch) -
     np.testing.assert_allclose(np.linalg.inv(calibration.matrix), motion_log.SOFT, atol=0.01)
     assert calibration.details["sensor"]["applied_rotation"] is not None
     # the log's stamps are given: the attitude's lag is fitted (the synthetic ATT is on time)
-    assert calibration.details["lag_s"] is not None and abs(calibration.details["lag_s"]) < 0.02
+    assert calibration.vector.lag_s is not None and abs(calibration.vector.lag_s) < 0.02
     # and the accelerometer and gyro reached the fit (a tumble that never holds still: no gravity rows used)
-    gravity = calibration.details["gravity"]
+    gravity = calibration.vector.gravity
     assert gravity["of"] > 1000 and not gravity["used"] and "turning faster" in gravity["note"]
 
 

@@ -211,7 +211,7 @@ def test_calibration_figure_panels_carry_units_methods_and_the_papers_metric(ste
     title = figure.get_suptitle()
     for calibration, entry in zip(fits, legend, strict=True):
         score = magfit.evaluate(calibration, simulation.samples)
-        refused = calibration.details["support"]["verdict"] == "refused"  # sphere and minmax on this soft iron
+        refused = calibration.support.verdict == "refused"  # sphere and minmax on this soft iron
         name = f"{calibration.method} (not supported)" if refused else calibration.method
         assert entry.startswith(f"{name}: mean {score.mean:+.4f}, std {score.std:.4f}")
         assert f"{name} {score.mean:+.4f} / {score.std:.4f}" in title

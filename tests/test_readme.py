@@ -97,7 +97,7 @@ def test_allow_undetermined_returns_it_all_the_same_refusal_first(method: str) -
     with pytest.raises(magfit.CalibrationError):
         magfit.fit(samples, method)
     forced = magfit.fit(samples, method, allow_undetermined=True)
-    assert forced.details["support"]["forced"] is True
+    assert forced.support.forced is True
     assert forced.diagnostics is not None and forced.diagnostics.warnings[0].startswith("NOT SUPPORTED (forced): ")
 
 
@@ -114,7 +114,7 @@ def test_force_on_the_command_line_exits_0_and_writes_it_marked(tmp_path: Path, 
     assert refused.exit_code == 1 and not out.exists()
     forced = CliRunner().invoke(cli, ["calibrate", str(path), "-m", method, "--force", "-o", str(out)])
     assert forced.exit_code == 0, forced.output
-    assert magfit.Calibration.from_json(out.read_text()).details["support"]["forced"] is True
+    assert magfit.Calibration.from_json(out.read_text()).support.forced is True
 
 
 def test_calibrate_prints_the_verdict_the_coverage_and_the_heading_one_sigma_of_a_supported_fit(

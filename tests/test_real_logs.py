@@ -336,6 +336,6 @@ def test_the_halves_of_a_real_flight_agree_or_the_disagreement_is_named(
     except CalibrationError as refused:
         assert "inconsistent_halves" in refused.codes, f"halves {apart:.1f} sigmas apart, refused for: {refused}"
         return
-    support = whole.details["support"]
+    support = whole.support.to_dict()
     named = [*support["refusal_codes"], *support["weakness_codes"]]
     assert "inconsistent_halves" in named, f"halves {apart:.1f} sigmas apart; the whole log's fit names {named}"

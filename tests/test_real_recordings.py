@@ -87,13 +87,13 @@ def test_every_recording_calibrates_or_is_refused_with_its_reason(real_data_dir:
         with pytest.raises(CalibrationError, match=reason):
             magfit.fit(samples, method=method)
         cal = magfit.fit(samples, method=method, allow_undetermined=True)  # forced: returned, with the refusal
-        assert cal.details["support"]["forced"] and cal.diagnostics is not None
+        assert cal.support.forced and cal.diagnostics is not None
         assert any(w.startswith("NOT SUPPORTED") for w in cal.diagnostics.warnings)
         return
     cal = magfit.fit(samples, method=method)
     result = magfit.evaluate(cal, samples)
     assert np.all(np.isfinite(cal.matrix)) and cal.field_strength > 0
-    assert cal.details["support"]["verdict"] in ("supported", "weak")
+    assert cal.support.verdict in ("supported", "weak")
     # Calibrated samples lie near the unit sphere: within 45 % even for min/max on strong soft iron.
     assert abs(result.mean) < 0.7 and result.std < 0.45
     if method == "ellipsoid":  # the full model fits every real recording to a few percent

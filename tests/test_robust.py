@@ -36,7 +36,7 @@ def test_robust_flags_the_spikes_and_recovers_the_truth() -> None:
     spiked, injected = _with_spikes(sim.samples, 0.02, seed=12)
     cal = magfit.fit(spiked, "robust")
     flagged = rejected_indices(cal)
-    assert cal.details["n_rejected"] == flagged.size
+    assert cal.rejected.count == flagged.size
     # Every spike is flagged; at most 0.5 % of the good samples are (a Gaussian beyond 3.5 σ: 0.05 %).
     assert set(injected) <= set(flagged)
     assert len(set(flagged) - set(injected)) <= 0.005 * sim.samples.shape[0]

@@ -40,7 +40,7 @@ def test_clipped_rows_are_left_out_counted_and_named(method: str, seed: int) -> 
     recorded = calibration.details["saturation"]
     assert recorded["n_clipped"] == int(truly_clipped.sum()), (seed, recorded)
     assert calibration.n_samples == samples.shape[0] - recorded["n_clipped"]
-    support = magfit.Support.from_dict(calibration.details["support"])
+    support = calibration.support
     assert support.verdict == "weak" and "saturated" in support.codes, support
     error = heading_error_deg(calibration, sim)
     stated = calibration.diagnostics.uncertainty.heading_sigma_deg  # type: ignore[union-attr]

@@ -72,7 +72,7 @@ def _covered_or_refused(sim: magfit.Simulation, samples: np.ndarray, method: str
     stated = report.uncertainty.heading_sigma_deg
     error = campaign.heading_error_deg(calibration, sim)
     assert stated is not None and (error <= campaign.COVER * stated or error <= campaign.FLOOR_DEG), (error, stated)
-    return str(calibration.details["support"]["verdict"])
+    return str(calibration.support.verdict)
 
 
 @pytest.mark.parametrize("seed", [200582])
@@ -85,7 +85,7 @@ def test_level_turns_with_strong_horizontal_soft_iron_state_the_soft_iron(seed: 
     )  # fmt: skip
     verdict = _covered_or_refused(sim, sim.samples)
     if verdict == "weak":
-        codes = magfit.fit(sim.samples, method="auto").details["support"]["weakness_codes"]
+        codes = magfit.fit(sim.samples, method="auto").support.to_dict()["weakness_codes"]
         assert "model_inadequate" in codes
 
 

@@ -57,10 +57,10 @@ def test_each_motion_recovers_the_aligned_truth_and_the_lag(
     if motion == "tumble":  # every direction determined: the fitted and true corrections differ by a small rotation
         residual_rotation = Rotation.from_matrix(_polar(cal.matrix @ np.linalg.inv(sim.truth.matrix)))
         assert np.degrees(residual_rotation.magnitude()) < 2.0 * attitude_deg
-    lag, sigma = cal.details["lag_s"], cal.details["lag_sigma_s"]
+    lag, sigma = cal.vector.lag_s, cal.vector.lag_sigma_s
     assert abs(lag - lag_s) < max(4.0 * sigma, 0.01), (lag, sigma)
     assert sigma < 0.05
-    support = cal.details["support"]
+    support = cal.support.to_dict()
     assert support["verdict"] in ("supported", "weak"), support
     if motion == "tumble":
         assert support["verdict"] == "supported", support
@@ -83,8 +83,8 @@ def test_noise_free_data_give_the_truth_exactly() -> None:
     cal = magfit.fit(clean, method="vector", reference=sim.reference)
     np.testing.assert_allclose(cal.matrix, sim.truth.matrix, atol=1e-9)
     np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=1e-7)
-    assert cal.details["lag_s"] is None and "no lag" in cal.details["lag_note"]
-    assert cal.details["support"]["verdict"] == "supported"
+    assert cal.vector.lag_s is None and "no lag" in cal.details["lag_note"]
+    assert cal.support.verdict == "supported"
 
 
 def test_a_mirror_mounting_is_returned_as_a_mirror() -> None:
@@ -103,7 +103,7 @@ def test_level_turns_only_are_refused_naming_the_confounded_combination() -> Non
     assert "column z" in message and "offset" in message and "tilt" in message, message
     assert "\n" not in message
     forced = magfit.fit(sim.samples, method="vector", reference=sim.reference, allow_undetermined=True)
-    assert forced.details["support"]["forced"]
+    assert forced.support.forced
     assert forced.diagnostics is not None
     assert forced.diagnostics.warnings[0].startswith("NOT SUPPORTED (forced): the reference does not determine")
 
@@ -131,7 +131,7 @@ def test_a_reference_in_the_wrong_frame_is_refused() -> None:
 def test_a_reference_in_another_unit_is_named(factor: float, words: str) -> None:
     sim = _vehicle("tumble", mount_deg=10.0, attitude_deg=0.3, lag_s=0.0, n=2000)
     cal = magfit.fit(sim.samples, method="vector", reference=sim.reference * factor)
-    weaknesses = cal.details["support"]["weaknesses"]
+    weaknesses = cal.support.weaknesses
     assert any("unit mix-up" in w and words in w for w in weaknesses), weaknesses
     # The calibration converts into the reference's unit: still right there.
     assert cal.field_strength == pytest.approx(FIELD * factor, rel=1e-6)
@@ -145,11 +145,11 @@ def test_without_time_no_lag_is_fitted_and_with_it_the_lag_is_found() -> None:
         magfit.fit(sim.samples, method="vector", reference=sim.reference)
     plain = magfit.fit(sim.samples, method="vector", reference=sim.reference, allow_undetermined=True)
     timed = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s)
-    assert plain.details["lag_s"] is None
-    assert timed.details["lag_s"] == pytest.approx(0.25, abs=0.01)
+    assert plain.vector.lag_s is None
+    assert timed.vector.lag_s == pytest.approx(0.25, abs=0.01)
     assert _heading_error_deg(sim, timed.apply(sim.clean)) < _heading_error_deg(sim, plain.apply(sim.clean))
     assert timed.details["residual_rms"] < plain.details["residual_rms"]
-    assert timed.details["options"]["reference"] == f"an array of {sim.samples.shape[0]} rows"
+    assert timed.options["reference"] == f"an array of {sim.samples.shape[0]} rows"
 
 
 def test_malformed_references_and_times_are_one_line_option_errors() -> None:
@@ -200,7 +200,7 @@ def test_the_lag_is_found_across_gaps_in_the_recording() -> None:
     sim = _vehicle("tumble", mount_deg=10.0, attitude_deg=0.2, lag_s=0.15, n=4000)
     rows = np.flatnonzero((sim.time_s // 10.0) % 2 == 0)
     cal = magfit.fit(sim.samples[rows], method="vector", reference=sim.reference[rows], time_s=sim.time_s[rows])
-    assert cal.details["lag_s"] == pytest.approx(0.15, abs=0.01)
+    assert cal.vector.lag_s == pytest.approx(0.15, abs=0.01)
     assert cal.details["residual_rms"] < 0.02
 
 
@@ -242,7 +242,7 @@ def test_with_accel_a_flight_meets_the_alignment_target_of_half_a_degree() -> No
         options = {"reference": sim.reference, "time_s": sim.time_s, "allow_undetermined": True}
         without = magfit.fit(sim.samples, method="vector", **options)
         cal = magfit.fit(sim.samples, method="vector", accel=sim.accel, gyro=sim.gyro, **options)
-        assert cal.details["gravity"]["used"], cal.details["gravity"]
+        assert cal.vector.gravity["used"], cal.vector.gravity
         plain.append(_rotation_error_deg(without.matrix, sim.mounting))
         joint.append(_rotation_error_deg(cal.matrix, sim.mounting))
         assert _heading_error_deg(sim, cal.apply(sim.clean)) < _heading_error_deg(sim, without.apply(sim.clean))
@@ -257,14 +257,14 @@ def test_the_accelerometer_pins_the_vertical_and_the_rotation_improves() -> None
     plain = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s)
     joint = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s, accel=sim.accel,
                        gyro=sim.gyro)  # fmt: skip
-    gravity = joint.details["gravity"]
+    gravity = joint.vector.gravity
     assert gravity["used"] and gravity["rows"] >= 400 and gravity["of"] == 2980, gravity
     assert any("turning faster" in reason for reason in gravity["dropped"]), gravity["dropped"]
     assert gravity["vertical_field"] == pytest.approx(FIELD * np.sin(np.radians(64.0)), rel=0.01)
     assert _vertical_tilt_deg(joint.matrix, sim.truth.matrix) < 0.2 < _vertical_tilt_deg(plain.matrix, sim.truth.matrix)
     assert _rotation_error_deg(joint.matrix, sim.mounting) < 0.6 < _rotation_error_deg(plain.matrix, sim.mounting)
     assert _heading_error_deg(sim, joint.apply(sim.clean)) < 0.7 * _heading_error_deg(sim, plain.apply(sim.clean))
-    assert joint.details["alignment_sigma_deg"] > 0
+    assert joint.vector.alignment_sigma_deg > 0
     assert any("gravity equations joined the fit" in note for note in joint.diagnostics.notes)
     assert magfit.Calibration.from_json(joint.to_json()) == joint
 
@@ -274,7 +274,7 @@ def test_noise_free_data_with_accel_give_the_truth() -> None:
                            .as_matrix(), hard_iron=[3.0, -2.0, 1.0], field_strength=FIELD, seed=5)  # fmt: skip
     cal = magfit.fit(sim.clean, method="vector", reference=sim.reference, accel=sim.accel, gyro=sim.gyro,
                      allow_undetermined=True)  # fmt: skip
-    assert cal.details["gravity"]["used"]
+    assert cal.vector.gravity["used"]
     np.testing.assert_allclose(cal.matrix, sim.truth.matrix, atol=1e-6)
     np.testing.assert_allclose(cal.offset, sim.truth.offset, atol=1e-4)
 
@@ -294,7 +294,7 @@ def test_no_still_samples_falls_back_to_the_reference_alone_and_says_so() -> Non
     shaken = sim.accel * np.random.default_rng(0).uniform(0.5, 0.9, (len(sim.accel), 1))  # |a| never near g
     plain = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s)
     cal = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s, accel=shaken)
-    gravity = cal.details["gravity"]
+    gravity = cal.vector.gravity
     assert not gravity["used"] and gravity["rows"] < 50, gravity
     assert any("|a| more than 3 %" in reason for reason in gravity["dropped"]), gravity
     assert "regression on the reference alone" in gravity["note"]
@@ -306,7 +306,7 @@ def test_a_boat_on_one_heading_does_not_use_the_gravity_equations() -> None:
     sim = _driven("boat", attitude_deg=1.0, seed=1)
     cal = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s, accel=sim.accel,
                      gyro=sim.gyro, allow_undetermined=True)  # fmt: skip
-    gravity = cal.details["gravity"]
+    gravity = cal.vector.gravity
     assert not gravity["used"] and gravity["rows"] > 1000 and gravity["heading_spread"] < 0.1, gravity
     assert "headings across both horizontal axes" in gravity["note"]
 
@@ -328,7 +328,7 @@ def test_malformed_accel_and_gyro_are_one_line_option_errors() -> None:
         assert "\n" not in str(caught.value)
     # The gyroscope alone (compare() passes every stream a method takes) is not used, and that is said.
     alone = magfit.fit(sim.samples, method="vector", gyro=sim.gyro, allow_undetermined=True, **base)
-    assert "used only with accel=" in alone.details["gyro_note"] and "gravity" not in alone.details
+    assert "used only with accel=" in alone.details["gyro_note"] and alone.vector.gravity is None
 
 
 # ---------------------------------------------------------------- an accelerometer that cannot be trusted
@@ -345,19 +345,19 @@ def test_a_biased_or_tilted_accelerometer_is_refused_and_the_fit_is_the_regressi
     tilt = Rotation.from_euler("y", 2.0, degrees=True).as_matrix()
     for accel in (sim.accel + np.array([0.3, 0.0, 0.0]), sim.accel @ tilt.T):
         cal = magfit.fit(sim.samples, method="vector", accel=accel, gyro=sim.gyro, **options)
-        gravity = cal.details["gravity"]
+        gravity = cal.vector.gravity
         assert not gravity["used"], gravity
         assert gravity["vertical_chi2"] > 9.21 or gravity["residual_growth"] > 1.1, gravity
         np.testing.assert_allclose(cal.matrix, plain.matrix, atol=1e-12)
         assert _heading_error_deg(sim, cal.apply(sim.clean)) == pytest.approx(plain_error)
         assert plain_error < 0.7
-        support = cal.details["support"]
+        support = cal.support.to_dict()
         assert support["verdict"] != "supported"
         assert any("accelerometer disagrees with the reference" in w for w in support["weaknesses"]), support
         assert any("calibrate the accelerometer's offsets" in w for w in support["weaknesses"])
     # The right accelerometer is kept and beats the regression.
     right = magfit.fit(sim.samples, method="vector", accel=sim.accel, gyro=sim.gyro, **options)
-    assert right.details["gravity"]["used"], right.details["gravity"]
+    assert right.vector.gravity["used"], right.vector.gravity
     assert _heading_error_deg(sim, right.apply(sim.clean)) < 0.7 * plain_error
 
 
@@ -371,11 +371,11 @@ def test_the_accelerometers_calibration_is_in_the_stated_one_sigma() -> None:
                "gyro": sim.gyro, "allow_undetermined": True}  # fmt: skip
     cal = magfit.fit(sim.samples, method="vector", **options)
     bare = magfit.fit(sim.samples, method="vector", accel_sigma=0.0, **options)
-    assert cal.details["gravity"]["used"] and bare.details["gravity"]["used"]
+    assert cal.vector.gravity["used"] and bare.vector.gravity["used"]
     np.testing.assert_allclose(cal.matrix, bare.matrix, atol=1e-12)  # the prior changes the one-sigma only
     error = _heading_error_deg(sim, cal.apply(sim.clean))
     assert bare.diagnostics.uncertainty.heading_sigma_deg < error <= cal.diagnostics.uncertainty.heading_sigma_deg
-    assert "accel_sigma=0.1 m/s²" in cal.details["gravity"]["note"]
+    assert "accel_sigma=0.1 m/s²" in cal.vector.gravity["note"]
     with pytest.raises(OptionError, match="accel_sigma must be"):
         magfit.fit(sim.samples, method="vector", accel_sigma=-1.0, **options)
 
@@ -386,7 +386,7 @@ def test_without_time_or_gyro_the_gravity_equations_are_left_out() -> None:
     sim = _driven("flight", attitude_deg=1.0, seed=2)
     plain = magfit.fit(sim.samples, method="vector", reference=sim.reference, allow_undetermined=True)
     cal = magfit.fit(sim.samples, method="vector", reference=sim.reference, accel=sim.accel, allow_undetermined=True)
-    gravity = cal.details["gravity"]
+    gravity = cal.vector.gravity
     assert not gravity["used"] and "give time_s= or gyro=" in gravity["note"], gravity
     np.testing.assert_allclose(cal.matrix, plain.matrix, atol=1e-12)
     assert any("give time_s= or gyro=" in note for note in cal.diagnostics.notes)
@@ -399,13 +399,13 @@ def test_a_gyro_in_degrees_per_second_is_a_one_line_option_error() -> None:
     with pytest.raises(OptionError, match=r"gyro= looks like degrees per second.*numpy\.radians") as caught:
         magfit.fit(sim.samples, method="vector", gyro=np.degrees(sim.gyro), **options)
     assert "\n" not in str(caught.value) and caught.value.codes == ("gyro_unit",)
-    assert magfit.fit(sim.samples, method="vector", gyro=sim.gyro, **options).details["gravity"]["used"]
+    assert magfit.fit(sim.samples, method="vector", gyro=sim.gyro, **options).vector.gravity["used"]
     # Without time_s the reference cannot tell the unit: the note names it where the rows were all dropped.
     del options["time_s"]
     cal = magfit.fit(sim.samples, method="vector", gyro=np.degrees(sim.gyro), **options)
-    assert not cal.details["gravity"]["used"] and "degrees per second" in cal.details["gravity"]["note"]
-    assert "degrees per second" not in magfit.fit(sim.samples, method="vector", gyro=sim.gyro, **options).details[
-        "gravity"]["note"]  # fmt: skip
+    assert not cal.vector.gravity["used"] and "degrees per second" in cal.vector.gravity["note"]
+    again = magfit.fit(sim.samples, method="vector", gyro=sim.gyro, **options)
+    assert "degrees per second" not in again.vector.gravity["note"]
 
 
 def test_a_lag_beyond_max_lag_s_is_found_by_widening_the_search_and_one_beyond_every_search_refused() -> None:
@@ -413,7 +413,7 @@ def test_a_lag_beyond_max_lag_s_is_found_by_widening_the_search_and_one_beyond_e
     # was a 57° error stated as ±4.7°). 20 s late (beyond 8 times max_lag_s) is refused, never returned.
     sim = _vehicle("flight", mount_deg=20.0, attitude_deg=0.5, lag_s=2.0, n=15000, seed=3)
     cal = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s, max_lag_s=1.0)
-    assert cal.details["lag_s"] == pytest.approx(2.0, abs=0.05)
+    assert cal.vector.lag_s == pytest.approx(2.0, abs=0.05)
     assert cal.details["lag_search_s"] > 1.0
     error = _heading_error_deg(sim, cal.apply(sim.clean))
     assert error < 3.0 * cal.diagnostics.uncertainty.heading_sigma_deg and error < 1.0
@@ -428,8 +428,8 @@ def test_halves_that_disagree_beyond_their_one_sigma_are_named_and_a_consistent_
     # (simulate_vehicle, flight and car, 3 seeds each). A field that steps half-way (a magnet, a motor) is named.
     sim = _vehicle("car", mount_deg=20.0, attitude_deg=0.2, lag_s=0.1, n=15000, seed=2)
     cal = magfit.fit(sim.samples, method="vector", reference=sim.reference, time_s=sim.time_s)
-    assert "inconsistent_halves" not in magfit.findings.Support.from_dict(cal.details["support"]).codes
+    assert "inconsistent_halves" not in cal.support.codes
     stepped = sim.samples.copy()
     stepped[7500:] += [2.0, -1.5, 0.0]  # µT, 5 % of the field
     cal = magfit.fit(stepped, method="vector", reference=sim.reference, time_s=sim.time_s, allow_undetermined=True)
-    assert "inconsistent_halves" in magfit.findings.Support.from_dict(cal.details["support"]).codes
+    assert "inconsistent_halves" in cal.support.codes

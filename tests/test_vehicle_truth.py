@@ -75,7 +75,7 @@ def test_gyro_is_within_its_stated_heading_sigma_or_refused(motion: str, seed: i
         assert not {"gyro_unit", "time_unit", "gyro_axes"} & set(error.codes), f"seed {seed}: {error}"
         return
     error = _heading_error_deg(cal, sim)
-    stated = cal.details["heading_sigma_deg"]
+    stated = cal.gyro.heading_sigma_deg
     assert error <= COVERAGE * stated, f"seed {seed}: {error:.2f}° off, stated ±{stated:.2f}°"
 
 

@@ -18,12 +18,14 @@ from .compare import Comparison, MethodResult
 from .diagnostics import Diagnostics
 from .errors import CalibrationError, DataFileError, ExportError, MagfitError, OptionError, SampleError
 from .evaluate import Evaluation, evaluate, sphere_distances
+from .facts import AutoChoice, GyroFacts, KnownField, Rejected, SolverStatus, VectorFacts
 from .findings import REASON_CODES, Reason, Support
 from .fit import diagnose, fit, refit
 from .fleet import FleetResult, FleetRow, fleet
 from .methods import METHODS
 from .motorterm import MotorTerm
 from .pipeline import CompassCalibration, FileCalibration, calibrate_file
+from .pipeline.align import FileAlignment, align_file
 from .simulate import DISTURBANCES, SENSORS, Scenario, Simulation, scenario, simulate
 from .statistics import Statistics
 
@@ -36,6 +38,7 @@ __all__ = [
     "REASON_CODES",
     "SENSORS",
     "Alignment",
+    "AutoChoice",
     "Calibration",
     "CalibrationError",
     "Comparison",
@@ -44,21 +47,28 @@ __all__ = [
     "Diagnostics",
     "Evaluation",
     "ExportError",
+    "FileAlignment",
     "FileCalibration",
     "FleetResult",
     "FleetRow",
+    "GyroFacts",
+    "KnownField",
     "MagfitError",
     "MethodResult",
     "MotorTerm",
     "OptionError",
     "Reason",
+    "Rejected",
     "SampleError",
     "Scenario",
     "Simulation",
+    "SolverStatus",
     "Statistics",
     "Support",
+    "VectorFacts",
     "__version__",
     "align",
+    "align_file",
     "calibrate_file",
     "diagnose",
     "evaluate",

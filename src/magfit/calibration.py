@@ -32,18 +32,30 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import DataFileError, MagfitError, SampleError
+from .facts import (
+    MODEL_KINDS,
+    AutoChoice,
+    GyroFacts,
+    KnownField,
+    ModelKind,
+    Rejected,
+    SolverStatus,
+    VectorFacts,
+    split_details,
+)
+from .findings import Support
 from .motorterm import MotorTerm
 
 if TYPE_CHECKING:
     from .findings import Diagnostics
 
-__all__ = ["CONVENTION", "FRAMES", "SCHEMA_VERSION", "Calibration"]
+__all__ = ["CONVENTION", "FRAMES", "SCHEMA_VERSION", "Calibration", "Frame"]
 
 #: The formula every exported calibration states, word for word.
 CONVENTION = "corrected = matrix @ (raw - offset)"
@@ -58,9 +70,23 @@ MATRIX_SINGULAR_RANGE = (1e-3, 1e3)
 #: (:data:`magfit._validation.MAX_MAGNITUDE`), so that raw - offset stays finite.
 MAX_OFFSET = 1e150
 #: What the corrected field's axes are: the magnetometer's own, or the vehicle's (see the module docstring).
-FRAMES = ("sensor", "vehicle")
-#: Version of the JSON layout written by :meth:`Calibration.to_dict`.
-SCHEMA_VERSION = 1
+Frame = Literal["sensor", "vehicle"]
+FRAMES: tuple[Frame, ...] = ("sensor", "vehicle")
+#: Version of the JSON layout written by :meth:`Calibration.to_dict`. Version 2 writes the typed facts
+#: (``support``, ``model``, ``options``, ``known_field``, ``rejected``, ``solver``, ``auto``, ``vector``,
+#: ``gyro``) beside ``details``; version 1 kept them in ``details`` and is still read (:func:`split_details`).
+SCHEMA_VERSION = 2
+#: The versions :meth:`Calibration.from_dict` reads.
+READABLE_VERSIONS = (1, 2)
+#: The typed facts written to the JSON, in order, with their record types (``options`` is a plain object).
+_TYPED: dict[str, Any] = {
+    "known_field": KnownField,
+    "rejected": Rejected,
+    "solver": SolverStatus,
+    "auto": AutoChoice,
+    "vector": VectorFacts,
+    "gyro": GyroFacts,
+}
 _SCHEMA_NAME = "magfit.calibration"
 
 
@@ -93,8 +119,9 @@ class Calibration:
     n_samples : int or None
         Number of samples the fit used.
     details : mapping
-        Method-specific, JSON-serialisable facts about the fit (options used, solver status,
-        rejected samples, diagnostics ...). Read-only.
+        Free-form, JSON-serialisable extras of the method (its diagnostics report, intermediate figures).
+        Read-only. Keys of schema version 1 that name a typed fact below (``"support"``, ``"options"``,
+        ``"rejected"``, ...) are read into that field and leave ``details`` (:func:`magfit.facts.split_details`).
     frame : {"sensor", "vehicle"}
         ``"sensor"``: the matrix corrects within the magnetometer's axes (magnitude-only fits; any root
         of the ellipsoid matrix will do). ``"vehicle"``: the matrix is general and also rotates into the
@@ -102,6 +129,22 @@ class Calibration:
     motor : MotorTerm or None
         The motors' field ``k c(t − τ)`` (:mod:`magfit.motorterm`), removed from the raw samples before the
         offset: ``corrected = matrix @ (raw − offset − k c)``. None: no term (every calibration without one).
+    support : Support or None
+        The verdict: supported, weak or refused (forced), each reason with its code. None: not judged
+        (a method's bare result, before :func:`magfit.fit` reaches the verdict).
+    model : {"sphere", "diag", "full", "vehicle"} or None
+        The model family fitted (:data:`magfit.facts.MODEL_KINDS`); None: not said (a calibration made by hand).
+    options : mapping
+        The options the method ran with, every one (the caller's and the defaults), as JSON holds them.
+    known_field : KnownField or None
+        The field strength was given (``field_strength=``): the fitted radius, and whether the fit pinned it.
+    rejected : Rejected or None
+        The samples an outlier-robust fit left out.
+    solver : SolverStatus or None
+        How an iterative method's solver ended.
+    auto, vector, gyro : AutoChoice, VectorFacts, GyroFacts or None
+        The facts of that method family: auto's choice, the reference fit's lag and alignment, the gyro-aided
+        fit's axis mapping and bias.
     """
 
     method: str
@@ -111,8 +154,17 @@ class Calibration:
     unit: str | None = None
     n_samples: int | None = None
     details: Mapping[str, Any] = field(default_factory=dict)
-    frame: str = "sensor"
+    frame: Frame = "sensor"
     motor: MotorTerm | None = None
+    support: Support | None = None
+    model: ModelKind | None = None
+    options: Mapping[str, Any] = field(default_factory=dict)
+    known_field: KnownField | None = None
+    rejected: Rejected | None = None
+    solver: SolverStatus | None = None
+    auto: AutoChoice | None = None
+    vector: VectorFacts | None = None
+    gyro: GyroFacts | None = None
 
     def __post_init__(self) -> None:
         if self.motor is not None and not isinstance(self.motor, MotorTerm):
@@ -141,8 +193,23 @@ class Calibration:
                 "Calibration.matrix is a mirror (negative determinant): a correction within the sensor's own axes "
                 "never is; a mirror belongs to frame='vehicle' (a sensor with left-handed axes)"
             )
+        # A details key that names a typed fact (schema 1, or a method that still writes it) is read into it.
+        facts, rest = split_details(self.details)
+        for name, value in facts.items():
+            if name == "options" and self.options:
+                continue
+            if name != "options" and getattr(self, name) is not None:
+                continue
+            object.__setattr__(self, name, value)
+        if self.model is None and self.frame == "vehicle":
+            object.__setattr__(self, "model", "vehicle")
+        if self.model is not None and self.model not in MODEL_KINDS:
+            raise SampleError(f"Calibration.model must be one of {', '.join(MODEL_KINDS)} or None; got {self.model!r}")
+        if self.support is not None and not isinstance(self.support, Support):
+            raise SampleError(f"Calibration.support must be a Support or None, got {type(self.support).__name__}")
         # Stored as plain JSON types so that a JSON round trip gives back an equal calibration.
-        object.__setattr__(self, "details", MappingProxyType(_jsonable(dict(self.details))))
+        object.__setattr__(self, "details", MappingProxyType(_jsonable(rest)))
+        object.__setattr__(self, "options", MappingProxyType(_jsonable(dict(self.options))))
 
     # ------------------------------------------------------------------ construction
 
@@ -284,6 +351,7 @@ class Calibration:
             and dict(self.details) == dict(other.details)
             and self.frame == other.frame
             and self.motor == other.motor
+            and _facts(self) == _facts(other)
         )
 
     __hash__ = None  # type: ignore[assignment]
@@ -316,6 +384,7 @@ class Calibration:
             "frame": self.frame,
             "details": _jsonable(dict(self.details)),
             **({"motor": self.motor.to_dict()} if self.motor is not None else {}),
+            **_facts(self),
         }
 
     @classmethod
@@ -339,10 +408,10 @@ class Calibration:
                 f"not a magfit calibration (schema is {_shown(data.get('schema'))}, expected {_SCHEMA_NAME!r})"
             )
         version = data.get("schema_version")
-        if version != SCHEMA_VERSION:
+        if not _is_int(version) or version not in READABLE_VERSIONS:
             raise DataFileError(
                 f"calibration schema version {_shown(version)} is not supported (this magfit reads "
-                f"{SCHEMA_VERSION}); upgrade magfit or re-run the calibration"
+                f"{' and '.join(map(str, READABLE_VERSIONS))}); upgrade magfit or re-run the calibration"
             )
         if data.get("convention") != CONVENTION:
             raise DataFileError(f"calibration convention {_shown(data.get('convention'))} is not {CONVENTION!r}")
@@ -385,7 +454,16 @@ class Calibration:
             raise DataFileError(f"calibration 'matrix' is {what}: no soft-iron correction is; re-run the calibration")
         _check_usable(offset, matrix)
         _check_finite_details(details)
+        typed = {name: data[name] for name in ("support", "model", "options", *_TYPED) if data.get(name) is not None}
+        for name, value in typed.items():
+            _check_finite_details(value, name)
+        if version == 1 and typed:
+            raise DataFileError(
+                f"calibration schema version 1 keeps its facts in 'details', not {', '.join(map(repr, typed))}; "
+                "re-run the calibration"
+            )
         try:
+            facts = _read_facts(typed)
             calibration = cls(
                 method=method,
                 offset=offset,
@@ -396,14 +474,16 @@ class Calibration:
                 details=details,
                 frame=frame,
                 motor=MotorTerm.from_dict(data["motor"]) if data.get("motor") is not None else None,
+                **facts,
             )
             if diagnostics is not None:
                 calibration.diagnostics  # noqa: B018 - read once, so a malformed report fails here, not later
         except MagfitError as error:
             raise DataFileError(f"calibration is not usable: {error}") from None
         except (TypeError, ValueError, KeyError, AttributeError, IndexError, OverflowError) as error:
+            where = "'details.diagnostics'" if diagnostics is not None else "one of its facts"
             raise DataFileError(
-                f"calibration 'details.diagnostics' is malformed ({type(error).__name__}: {error}); "
+                f"calibration {where} is malformed ({type(error).__name__}: {error}); "
                 "re-run the calibration or delete that entry"
             ) from None
         except RecursionError:
@@ -461,10 +541,46 @@ def _check_usable(offset: NDArray[np.float64], matrix: NDArray[np.float64]) -> N
         )
 
 
-def _check_finite_details(details: Mapping[str, Any]) -> None:
+def _facts(calibration: Calibration) -> dict[str, Any]:
+    """The typed facts as JSON holds them (schema version 2), those that are set."""
+    facts: dict[str, Any] = {}
+    if calibration.support is not None:
+        facts["support"] = calibration.support.to_dict()
+    if calibration.model is not None:
+        facts["model"] = calibration.model
+    if calibration.options:
+        facts["options"] = _jsonable(dict(calibration.options))
+    for name in _TYPED:
+        value = getattr(calibration, name)
+        if value is not None:
+            facts[name] = _jsonable(value.to_dict())
+    return facts
+
+
+def _read_facts(typed: Mapping[str, Any]) -> dict[str, Any]:
+    """The typed facts of a version-2 file (the inverse of :func:`_facts`); raises on a malformed entry."""
+    facts: dict[str, Any] = {}
+    for name, value in typed.items():
+        if name == "model":
+            if value not in MODEL_KINDS:
+                raise ValueError(f"'model' must be one of {', '.join(MODEL_KINDS)}, got {_shown(value)}")
+            facts[name] = value
+            continue
+        if not isinstance(value, Mapping):
+            raise TypeError(f"{name!r} must be an object, got {type(value).__name__}")
+        if name == "support":
+            facts[name] = Support.from_dict(dict(value))
+        elif name == "options":
+            facts[name] = dict(value)
+        else:
+            facts[name] = _TYPED[name].from_dict(value)
+    return facts
+
+
+def _check_finite_details(details: Any, root: str = "details") -> None:
     """Refuse a number in ``details`` beyond float64 (``1e999`` reads as inf, which :meth:`Calibration.to_json`
     cannot write back), naming where it is."""
-    pending: list[tuple[str, Any]] = [("details", details)]
+    pending: list[tuple[str, Any]] = [(root, details)]
     while pending:
         where, value = pending.pop()
         if isinstance(value, float) and not math.isfinite(value):

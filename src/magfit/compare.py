@@ -139,7 +139,7 @@ def compare(
         Per-method keyword options, e.g. ``{"minmax": {"centre": "midrange"}}``.
     allow_undetermined : bool
         Score a fit the samples do not support instead of reporting its refusal (the paper's tables,
-        which show every method on every case; the refusal is then in ``details["support"]``).
+        which show every method on every case; the refusal is then in ``calibration.support``).
     streams : mapping, optional
         What was recorded beside the samples, one row per sample, by the option name the methods take
         (``reference``: the expected field in the vehicle frame; ``gyro``: body rates, rad/s; ``time_s``).

@@ -945,8 +945,7 @@ def compass_fields(result: FileCalibration) -> tuple[list[CompassField], list[st
         down = None
         if attitude is not None:
             down = np.asarray(attitude[:, 2, :], dtype=np.float64)  # Aᵀ e_z: row 2 of body->NED
-        support = calibration.details.get("support")
-        supported = not (isinstance(support, Mapping) and support.get("verdict") not in (None, "supported"))
+        supported = calibration.support is None or calibration.support.verdict == "supported"
         fields.append(
             CompassField(
                 sensor,

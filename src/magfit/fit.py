@@ -15,22 +15,29 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .calibration import Calibration
-from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refit, diagnose_statistics, model_kind
+from .diagnostics import DEFAULT_INCLINATION_DEG, MAX_SAMPLES, Diagnostics, Refit, diagnose_statistics
 from .diagnostics import diagnose as diagnose_samples
 from .diagnostics.reference import judged as judged_against_reference
-from .errors import CalibrationError, MagfitError, OptionError
-from .findings import Reason, Support
-from .methods import METHODS, FitInput, get_method
-from .methods.auto import UndeterminedChoice, refit_first_order
+from .diagnostics.settle import settle, with_reasons
+from .errors import MagfitError, OptionError
+from .findings import Reason
+from .methods import METHODS, FitInput
 from .methods.core import estimate, is_recorded_array, method_spec, prepare, recorded_options, refitter
+from .methods.registry import MethodSpec, Undetermined
 from .statistics import Statistics
 
 __all__ = ["diagnose", "fit", "refit"]
 
 
+#: The default method of :func:`fit`. ``calibrate_file`` and live calibration default to ``"auto"``; a
+#: Python call keeps the paper's algebraic ellipsoid, which also runs on :class:`Statistics` (``auto``
+#: needs the samples) and answers in one linear solve (see docs/methods.md, "The default method").
+DEFAULT_METHOD = "ellipsoid"
+
+
 def fit(
     samples: ArrayLike | Statistics,
-    method: str = "ellipsoid",
+    method: str = DEFAULT_METHOD,
     *,
     diagnostics: bool | Literal["quick"] = True,
     allow_undetermined: bool = False,
@@ -45,13 +52,17 @@ def fit(
         turning the sensor in all directions. The linear methods also accept a :class:`Statistics`
         accumulated in chunks.
     method : str
-        A name in ``magfit.METHODS``: ``"ellipsoid"`` (hard + soft iron, paper section II),
-        ``"sphere"`` (hard iron only, section III), ``"minmax"`` (pseudo-calibration, section IV), ...
+        A name in ``magfit.METHODS``: ``"ellipsoid"`` (hard + soft iron, paper section II, the default),
+        ``"sphere"`` (hard iron only, section III), ``"minmax"`` (pseudo-calibration, section IV),
+        ``"auto"`` (the simplest model the samples determine: the default of ``calibrate_file``, the
+        command line and live calibration), ... The default stays ``"ellipsoid"`` here because it also
+        takes a :class:`Statistics` (chunked, merged across processes), which ``auto`` cannot, and because
+        a Python caller who named no method has relied on it since the first release.
     diagnostics : bool or "quick"
         Attach :func:`diagnose`'s full report as ``details["diagnostics"]`` (read it typed with
         ``calibration.diagnostics``). It runs on at most 20 000 spatially even samples; from
         ``Statistics`` only what statistics allow is attached. ``False``: the verdict is still reached
-        (``details["support"]``), on the checks that need no refit of the method. ``"quick"``: those
+        (``calibration.support``), on the checks that need no refit of the method. ``"quick"``: those
         checks' findings are attached too (coverage, observability, the uncertainty without the block
         jackknife, consistency): what a live view refreshed several times a second needs.
     allow_undetermined : bool
@@ -65,8 +76,8 @@ def fit(
     -------
     Calibration
         ``corrected = matrix @ (raw - offset)`` lies on a sphere of radius ``field_strength``.
-        ``details["support"]`` holds the verdict: ``"supported"`` or ``"weak"`` (with the weaknesses
-        named, in words).
+        ``calibration.support`` holds the verdict: ``"supported"`` or ``"weak"`` (with the weaknesses
+        named, each with its code).
 
     Raises
     ------
@@ -83,15 +94,14 @@ def fit(
     data = prepare(samples, spec)
     try:
         calibration = estimate(data, spec.name, options)
-    except UndeterminedChoice as refused:
+    except Undetermined as refused:
         if not allow_undetermined:
             raise
-        # auto refused: forced, it returns the model its unforced choice ranks best, its refusal the first warning.
-        chosen = refused.calibration
-        recorded = {**chosen.details, "options": recorded_options({**spec.defaults, **options})}
+        # Refused with a best answer all the same: forced, that answer, its refusal the first warning.
+        chosen = replace(refused.calibration, options=recorded_options({**spec.defaults, **options}))
         refusal = Reason(str(refused), refused.codes[0] if refused.codes else "model_inadequate")
-        return _judged(replace(chosen, details=recorded), data, spec.name, options, diagnostics, True, refusal)
-    return _judged(calibration, data, spec.name, options, diagnostics, allow_undetermined)
+        return _judged(chosen, data, spec, options, diagnostics, True, refusal)
+    return _judged(calibration, data, spec, options, diagnostics, allow_undetermined)
 
 
 def refit(
@@ -104,15 +114,14 @@ def refit(
 ) -> Calibration:
     """``calibration``'s method fitted again to ``samples`` with the options it recorded, judged as :func:`fit` judges.
 
-    For an ``auto`` calibration the model it chose is refitted (its first-order maximum-likelihood fit,
-    from ``calibration``: a few iterations) without a new model choice: what a live calibration does
-    between two full ``auto`` fits, as new samples arrive. A calibration fitted with arrays beside the samples
+    A method may refit by its own rule (its registry entry's ``Judging.refit``): for an ``auto`` calibration
+    the model it chose is refitted (its first-order maximum-likelihood fit, from ``calibration``: a few
+    iterations) without a new model choice: what a live calibration does between two full ``auto`` fits, as
+    new samples arrive; what the method said of its choice is kept. A calibration fitted with arrays beside the samples
     (``vector``: ``reference=``, ``time_s=``; ``gyro``: ``gyro=``, ``time_s=``) records only their length: the
     new samples' own arrays are given as keywords (``streams``), the same ones. Raises as :func:`fit` does.
     """
-    options = calibration.details.get("options", {})
-    if not isinstance(options, dict):
-        raise CalibrationError(f"the {calibration.method} calibration records no options to refit it with")
+    options = dict(calibration.options)
     arrays = [name for name, value in options.items() if is_recorded_array(value)]
     unexpected = sorted(set(streams) - set(arrays))
     if unexpected:
@@ -132,122 +141,68 @@ def refit(
     data = prepare(samples, spec)
     assert data.samples is not None  # an array was given
     refitted = refit_of(calibration, spec.name, options)(np.asarray(data.samples, dtype=np.float64))
-    if spec.name == "auto":  # keep what auto said of its choice, with the refitted numbers
-        refitted = replace(refitted, method="auto", details={**calibration.details, **refitted.details})
-        refitted = replace(refitted, details={k: v for k, v in refitted.details.items() if k != "diagnostics"})
-    return _judged(refitted, data, spec.name, options, diagnostics, allow_undetermined)
+    if refitted.method != calibration.method:  # the method's own refit (auto's chosen model): keep what it said
+        details = {k: v for k, v in {**calibration.details, **refitted.details}.items() if k != "diagnostics"}
+        kept = {name: getattr(calibration, name) for name in ("auto", "vector", "gyro", "rejected")}
+        refitted = replace(refitted, method=calibration.method, details=details, options=options, **kept)
+    return _judged(refitted, data, spec, options, diagnostics, allow_undetermined)
 
 
 def _judged(
     calibration: Calibration,
     data: FitInput,
-    method: str,
+    spec: MethodSpec,
     options: dict[str, Any],
     diagnostics: bool | Literal["quick"],
     allow_undetermined: bool,
     refusal: Reason | None = None,
 ) -> Calibration:
-    """``calibration`` with its verdict (and diagnostics) attached, or the refusal raised.
+    """``calibration`` with its verdict (and diagnostics) attached, or the refusal raised (:func:`settle`).
 
     ``refusal``: the method's own, when it was forced to return a calibration (``auto``: no model the samples
-    determine describes them within a useful heading bound). ``auto``'s chosen model may leave out a
-    distortion that a richer model, which the samples do not determine, shows (``details["omitted_distortion"]``):
-    the heading error it can cause joins the heading one-sigma before the verdict, and is named a weakness.
+    determine describes them within a useful heading bound). The method's registry entry adds what it knows
+    (:class:`~magfit.methods.registry.Judging`): a model error joins the heading one-sigma before the verdict,
+    and its own weaknesses join the verdict's.
     """
     if calibration.frame == "vehicle":  # fitted against a reference field: judged there, not by its magnitude
-        return judged_against_reference(calibration, method, diagnostics, allow_undetermined)
+        return judged_against_reference(calibration, spec.name, diagnostics, allow_undetermined)
+    judging = spec.judging
+    model_error = judging.model_error_deg(calibration) if judging.model_error_deg is not None else 0.0
     if data.samples is None:
         report = diagnose_statistics(calibration, data.statistics)
     else:
         thorough = diagnostics is True
-        refit = refit_of(calibration, method, options) if thorough else None
+        refit = refit_of(calibration, spec.name, options) if thorough else None
         # The halves and the block jackknife refit 10 times: an iterative method (ml, robust: seconds on a
-        # long log) is stood in for by its model's first-order maximum-likelihood fit, which the same
-        # stretches of the recording move the same way.
-        iterative = get_method(method).data == "samples" and method != "auto"
-        variation = _first_order_refit(calibration, options) if thorough and iterative else None
-        # auto returns its chosen model's maximum-likelihood fit: the comparison with that fit is moot.
+        # long log) is stood in for by its registry entry's quick fit, which the same stretches move the same way.
+        variation = judging.stand_in(calibration, options) if thorough and judging.stand_in is not None else None
         report = diagnose_samples(
             calibration,
             data.samples,
             refit=refit,
             thorough=thorough,
-            compare_ml=method != "auto",
+            compare_ml=judging.compare_ml,
             variation_refit=variation,
-            model_error_heading_deg=_omitted_heading_deg(calibration),
+            model_error_heading_deg=model_error,
         )
-    support = report.support
-    assert support is not None  # both diagnoses reach a verdict
-    omitted = _omitted_weakness(calibration, report)
-    if omitted is not None or refusal is not None:
-        support = Support.judged(
-            (*(() if refusal is None else (refusal,)), *support.refusals),
-            (*support.weaknesses, *(() if omitted is None else (omitted,))),
-            support.advice,
-        )
-        report = replace(report, support=support, warnings=support.warnings)
-    if support.verdict == "refused":
-        if not allow_undetermined:
-            raise CalibrationError(support.message(method), codes=support.codes)
-        support = replace(support, forced=True)
-        report = replace(report, support=support, warnings=support.warnings)
-    details: dict[str, Any] = {**calibration.details, "support": support.to_dict()}
-    if method == "auto" and "weak" in details:  # the chosen model's weaknesses: the verdict's, one uncertainty
-        details["weak"] = [str(w) for w in support.weaknesses]
-    if diagnostics:
-        details["diagnostics"] = report.to_dict()
-    return replace(calibration, details=details)
-
-
-def _omitted_heading_deg(calibration: Calibration) -> float:
-    """The heading error (degrees) of the distortion ``auto``'s chosen model leaves out, 0 when none."""
-    omitted = calibration.details.get("omitted_distortion")
-    if not isinstance(omitted, dict):
-        return 0.0
-    value = omitted.get("heading_deg")
-    return float(value) if isinstance(value, (int, float)) and value > 0 else 0.0
-
-
-def _omitted_weakness(calibration: Calibration, report: Diagnostics) -> Reason | None:
-    """The weakness naming the distortion ``auto``'s chosen model leaves out, with the heading error it causes."""
-    heading = _omitted_heading_deg(calibration)
-    omitted = calibration.details.get("omitted_distortion")
-    if not heading or not isinstance(omitted, dict):
-        return None
-    model = calibration.details.get("chosen_model", "chosen")
-    stated = report.uncertainty.heading_sigma_deg if report.uncertainty is not None else None
-    total = "" if stated is None else f"; the heading one-sigma stated includes it: ±{stated:.2g}°"
-    difference = omitted.get("heading_difference_deg")
-    witness_sigma = omitted.get("witness_heading_sigma_deg")
-    parts = (
-        f"their level headings differ by {difference:.2g}° (RMS) and the {omitted.get('model')} model's own heading "
-        f"one-sigma is ±{witness_sigma:.2g}°: "
-        if isinstance(difference, (int, float)) and isinstance(witness_sigma, (int, float))
-        else ""
-    )
-    return Reason(
-        f"the {model} model may leave out a distortion the samples show but do not determine (the "
-        f"{omitted.get('model')} model, fitted to the same samples, predicts held-out stretches of the recording as "
-        f"well or better); {parts}the heading error it can cause is ±{heading:.2g}°{total}; a reference field "
-        "(method 'vector' with the attitude) or more tilt while recording would determine it",
-        "model_inadequate",
+    assert report.support is not None  # both diagnoses reach a verdict
+    own = judging.weaknesses(calibration, report) if judging.weaknesses is not None else ()
+    support = with_reasons(report.support, () if refusal is None else (refusal,), own)
+    return settle(
+        calibration,
+        support,
+        method=spec.name,
+        allow_undetermined=allow_undetermined,
+        report=report if diagnostics else None,
     )
 
 
 def refit_of(calibration: Calibration, method: str, options: dict[str, Any]) -> Refit:
-    """The refit the diagnostics use: the method with the user's options, or ``auto``'s chosen model."""
-    if method == "auto" and "chosen_model" in calibration.details:
-        chosen = str(calibration.details["chosen_model"])
-        known = options.get("field_strength")
-        return lambda samples: refit_first_order(chosen, calibration, samples, field_strength=known)
+    """The refit the diagnostics use: the method's own (its registry entry's), else the method with the options."""
+    spec = METHODS.get(method)
+    if spec is not None and spec.judging.refit is not None:
+        return spec.judging.refit(calibration, options)
     return refitter(method, options)
-
-
-def _first_order_refit(calibration: Calibration, options: dict[str, Any]) -> Refit:
-    """The first-order maximum-likelihood fit of ``calibration``'s model, from it (see :func:`_judged`)."""
-    kind = model_kind(calibration)
-    known = options.get("field_strength")
-    return lambda samples: refit_first_order(kind, calibration, samples, field_strength=known)
 
 
 def diagnose(
@@ -262,14 +217,14 @@ def diagnose(
     """Diagnose any calibration on samples (its verdict, coverage, observability, uncertainty, goodness).
 
     The held-out evaluation and the two-halves check refit the calibration's method with the options it
-    recorded (``details["options"]``); a calibration of an unknown method gets the other checks.
+    recorded (``calibration.options``); a calibration of an unknown method gets the other checks.
     See :func:`magfit.diagnostics.diagnose` for the parameters.
 
     Raises
     ------
     OptionError
         The calibration's method rests on more than the samples (``vector``: a reference field; ``gyro``: the
-        body rates): its verdict is the one made when it was fitted (``details["support"]``).
+        body rates): its verdict is the one made when it was fitted (``calibration.support``).
     """
     spec = METHODS.get(calibration.method)
     if spec is not None and spec.needs:
@@ -277,17 +232,18 @@ def diagnose(
         # magnitude-only verdict (a flight "covers 7 % of the directions") would contradict its own.
         raise OptionError(
             f"magfit.diagnose judges a calibration from the samples alone; a {calibration.method!r} calibration also "
-            f"rests on {' and '.join(spec.needs)}: its verdict, made when it was fitted, is details['support'] "
+            f"rests on {' and '.join(spec.needs)}: its verdict, made when it was fitted, is calibration.support "
             f"(fit it again with magfit.fit(samples, method={calibration.method!r}, ...) to judge it on new samples)"
         )
     refit = None
-    options = calibration.details.get("options", {})
-    if isinstance(options, dict):
-        try:
-            method_spec(calibration.method, options)
-            refit = refit_of(calibration, calibration.method, options)
-        except MagfitError:
-            refit = None
+    options = dict(calibration.options)
+    try:
+        method_spec(calibration.method, options)
+        refit = refit_of(calibration, calibration.method, options)
+    except MagfitError:
+        refit = None
+    judging = spec.judging if spec is not None else None
+    model_error = judging.model_error_deg(calibration) if judging and judging.model_error_deg else 0.0
     report = diagnose_samples(
         calibration,
         samples,
@@ -296,10 +252,10 @@ def diagnose(
         held_out=held_out,
         represents=represents,
         refit=refit,
-        model_error_heading_deg=_omitted_heading_deg(calibration),
+        model_error_heading_deg=model_error,
     )
-    omitted = _omitted_weakness(calibration, report)
-    if omitted is None or report.support is None:
+    own = judging.weaknesses(calibration, report) if judging and judging.weaknesses else ()
+    if not own or report.support is None:
         return report
-    support = Support.judged(report.support.refusals, (*report.support.weaknesses, omitted), report.support.advice)
+    support = with_reasons(report.support, (), own)
     return replace(report, support=support, warnings=support.warnings)

@@ -430,13 +430,13 @@ def _read_compasses(
 ) -> tuple[list[_Compass], str | None]:
     """The statistics of each compass of a recording (a log's every usable compass, or a samples file's), of the
     samples its fit kept: a robust fit's rejected samples (spikes, a passing magnet) stay out of the union."""
-    from .diagnostics import _inlier_mask  # the same rule the diagnostics leave those samples out by
+    from .outliers import inlier_mask  # the same rule the diagnostics leave those samples out by
     from .sources import log_kind, open_source
 
     def kept(samples: np.ndarray, sensor: str) -> Statistics:
         calibration = fitted.get(sensor)
         if calibration is not None:
-            mask, _ = _inlier_mask(calibration, samples)
+            mask, _ = inlier_mask(calibration, samples)
             if mask is not None:
                 samples = samples[mask]
         return Statistics.from_samples(samples)

@@ -1,46 +1,32 @@
 """``magfit align``: the magnetometer's rotation into the vehicle frame, from gravity and the inclination.
 
-The work is :func:`magfit.alignment.align`; this module reads the magnetometer and the accelerometer (a
-samples file with both, or a flight log through :mod:`magfit.sources`), fits the magnitude-only calibration
-the alignment needs (or reads one), and prints the rotation, its one-sigma, the nearest rotation of each
-firmware and the parameter lines to set.
+The work is :func:`magfit.pipeline.align.align_file` (reading the recording, the starting calibration, the
+alignment and its cap); this module parses the options, reads a calibration given, and prints the rotation,
+its one-sigma, the nearest rotation of each firmware and the parameter lines to set. A samples file without an
+accelerometer but with the attitude is aligned by the vector fit (:func:`magfit.calibrate_file`).
 """
 
 from __future__ import annotations
 
-import datetime
-import math
-import re
-from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import click
 import numpy as np
 from numpy.typing import NDArray
 
-from ..alignment import Alignment, _mirror_axis, align, nearest_rotations
+from ..alignment import Alignment, nearest_rotations
 from ..calibration import Calibration
-from ..errors import CalibrationError, DataFileError
-from ..fit import fit
-from ..geomag import field_at, parse_date, parse_location
+from ..errors import CalibrationError
+from ..geomag import parse_date, parse_location
 from ..io.layout import sniff
-from ..io.readers import read_samples
 from ..io.streams import find_stream_columns
 from ..pipeline import RefusedWithAdvice, StreamsMissing, calibrate_file
+from ..pipeline.align import ACCEL_COLUMNS, SECONDS, FileAlignment, align_file, alignment_of_vector, columns_by_name
 from ..pipeline.table import StreamSpec
-from ..rotations import CUSTOM, custom_angles, euler_angles, polar_decomposition
-from ..sources import log_kind, open_source
+from ..rotations import CUSTOM, custom_angles
+from ..sources import log_kind
 from ._common import command_line, fail, geomag_option, one_line, parse_columns, parse_stream, vector, warn
-
-#: Header names of accelerometer columns: ``ax``, ``imu_ax``, ``accel_x``, ``Ax``, ``acc_x`` ... (gyroscope columns are
-#: not guessed: raw counts taken for rad/s would drop every sample as turning).
-_ACCEL = re.compile(r"^(?:imu_?)?(?:a|acc|accel|accl|accelerometer)_?([xyz])$", re.IGNORECASE)
-_TIME = re.compile(r"^(?:t|time|time_s|timestamp|seconds)$", re.IGNORECASE)
-
-
-#: Seconds per unit of a time column.
-_SECONDS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 
 #: The library's keywords in its messages, and the options that set them here.
 _OPTIONS = {
@@ -51,105 +37,11 @@ _OPTIONS = {
 }
 
 
-@dataclass(frozen=True)
-class _Recording:
-    """What the command aligns: the raw field, the accelerometer, and what else the file holds."""
-
-    description: str
-    samples: NDArray[np.float64]
-    accel: NDArray[np.float64]
-    gyro: NDArray[np.float64] | None
-    time_s: NDArray[np.float64] | None
-    mounting: NDArray[np.float64] | None  # already applied to the samples (a log's magnetometer in the body frame)
-    mounting_note: str
-    slot: int | None
-    position: tuple[float, float, float] | None
-    notes: tuple[str, ...]
-    recorded: datetime.datetime | None = None  # when the log's GNSS says it was recorded (for the model)
-
-
-def _columns_by_name(header: tuple[str, ...] | None, pattern: re.Pattern[str]) -> list[str] | None:
-    if header is None:
-        return None
-    found = {}
-    for name in header:
-        match = pattern.match(name.strip())
-        if match and match.group(1).lower() not in found:
-            found[match.group(1).lower()] = name
-    return [found[a] for a in "xyz"] if len(found) == 3 else None
-
-
-def _read_samples_file(
-    path: Path,
-    columns: list[str | int] | None,
-    accel_columns: list[str | int] | None,
-    gyro_columns: list[str | int] | None,
-    gyro_unit: str,
-    time_column: str | None,
-    time_unit: str,
-) -> _Recording:
-    header = sniff(path).header
-    accel_columns = accel_columns or _columns_by_name(header, _ACCEL)  # type: ignore[assignment]
-    if accel_columns is None:
-        fail(
-            f"{path}: no accelerometer columns found (ax/ay/az, accel_x ..., imu_ax ...); name them with "
-            "--accel-columns AX,AY,AZ, or give the vehicle's attitude and the reference field instead (--attitude "
-            "ROLL,PITCH,YAW --reference N,E,D: the rotation from the vector fit)"
-        )
-    mag = read_samples(path, columns=columns, nonfinite="error")
-    accel = read_samples(path, columns=accel_columns, nonfinite="error").samples
-    gyro = None
-    if gyro_columns is not None:
-        gyro = read_samples(path, columns=gyro_columns, nonfinite="error").samples
-        gyro = np.radians(gyro) if gyro_unit == "deg/s" else gyro
-    if time_column is None and header is not None:
-        time_column = next((name for name in header if _TIME.match(name.strip())), None)
-    time_s = None
-    if time_column is not None:
-        # The reader reads triples of distinct columns: the time beside two of the magnetometer's.
-        triple: list[str | int] = [time_column, *mag.columns[:2]]
-        time_s = read_samples(path, columns=triple, nonfinite="error").samples[:, 0] * _SECONDS[time_unit]
-        step = float(np.median(np.diff(time_s))) if len(time_s) > 1 else 0.0
-        if step >= 1.0:  # a 1 Hz magnetometer is rare; milliseconds read as seconds are not
-            warn(f"{path}: the time column {time_column} steps by {step:g} s between samples: if it counts "
-                 "milliseconds or microseconds, say so with --time-unit ms (or us); the rate gate uses it")  # fmt: skip
-    described = f"{path} (magnetometer {', '.join(mag.columns)}; accelerometer {', '.join(map(str, accel_columns))}"
-    if gyro_columns is not None:
-        described += f"; gyroscope {', '.join(map(str, gyro_columns))} in {gyro_unit}"
-    if time_column is not None:
-        described += f"; time {time_column} in {time_unit}"
-    return _Recording(described + ")", mag.samples, accel, gyro, time_s, None, "", None, None, ())
-
-
-def _read_log(path: Path, sensor: str | None) -> _Recording:
-    source = open_source(path)
-    motion = source.read_motion(sensor)
-    if motion.accel is None:
-        raise DataFileError(f"{path}: logs no accelerometer beside {motion.sensor}: the alignment needs one")
-    notes = list(motion.notes)
-    if motion.imu_frame and "body" not in motion.imu_frame.lower():
-        notes.append(f"the accelerometer is in the {motion.imu_frame} frame: the rotation found is into that frame")
-    mounting = motion.mounting if motion.magnetometer_frame == "body" else None
-    if motion.magnetometer_frame == "body" and mounting is None:
-        notes.append("the log's magnetometer is already rotated by an orientation it does not record: the rotation "
-                     "found is what remains after it")  # fmt: skip
-    slot = next((m.slot for m in source.magnetometers if m.id == motion.sensor), None)
-    position, recorded = None, None
-    if motion.position is not None:
-        position = (motion.position.lat_deg, motion.position.lon_deg, motion.position.alt_km)
-        if math.isfinite(motion.position.time_s):
-            recorded = datetime.datetime.fromtimestamp(motion.position.time_s, tz=datetime.timezone.utc)
-    return _Recording(
-        f"{path} ({source.format}, {motion.sensor})", motion.samples, motion.accel, motion.gyro, motion.time_s,
-        mounting, motion.mounting_note, slot, position, tuple(notes), recorded,
-    )  # fmt: skip
-
-
 def _by_reference(path: Path, attitude: list[str | int] | None) -> bool:
     """Whether a samples file is aligned by the vector fit: attitude columns (given or found by name) and no
     accelerometer columns found by name."""
     header = sniff(path).header
-    if header is not None and _columns_by_name(header, _ACCEL) is not None:
+    if header is not None and columns_by_name(header, ACCEL_COLUMNS) is not None:
         return False
     return attitude is not None or (header is not None and "attitude" in find_stream_columns(header))
 
@@ -178,21 +70,10 @@ def _align_by_reference(
         raise CalibrationError(f"{one_line(error.text)}; what works for a vehicle: {said}") from None
     compass = result.compasses[0]
     calibration = compass.calibration
-    rotation, _ = polar_decomposition(calibration.matrix)
-    sigma = float(calibration.details.get("alignment_sigma_deg", math.nan))
-    mirror = bool(np.linalg.det(rotation) < 0)
-    inverted, nearest = _mirror_axis(rotation) if mirror else (None, nearest_rotations(rotation))
-    proper = rotation @ np.diag([-1.0 if axis == inverted else 1.0 for axis in "xyz"]) if mirror else rotation
-    roll, pitch, yaw = euler_angles(proper)
-    support = calibration.details.get("support", {})
-    verdict = str(support.get("verdict", "supported")) if isinstance(support, Mapping) else "supported"
-    warnings = tuple(str(w) for w in (*support.get("refusals", ()), *support.get("weaknesses", ())))
-    aligned = Alignment(
-        matrix=rotation, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw, sigma_deg=np.full(3, sigma),
-        axis_sigma_deg=np.full(3, sigma), inclination_deg=math.nan, inclination_sigma_deg=math.nan,
-        inclination_fitted=False, mirror=mirror, inverted_axis=inverted, nearest=nearest, residual_deg=math.nan,
-        n_samples=compass.n_rows, n_used=int(calibration.n_samples or 0), verdict=verdict, warnings=warnings,
-    )  # fmt: skip
+    aligned = alignment_of_vector(calibration, compass.n_rows)
+    rotation, mirror, inverted, proper = aligned.matrix, aligned.mirror, aligned.inverted_axis, aligned.proper_matrix
+    roll, pitch, yaw = aligned.roll_deg, aligned.pitch_deg, aligned.yaw_deg
+    sigma, verdict, warnings = float(aligned.sigma_deg[0]), aligned.verdict, aligned.warnings
     out = click.echo
     out(f"{'file':16s} {path} (magnetometer {', '.join(map(str, compass.columns))})")
     out(f"{'calibration':16s} vector: against the file's attitude and reference field ({verdict})")
@@ -216,11 +97,6 @@ def _align_by_reference(
         out(f"{'set' if index == 0 and not mirror else '':16s} {line}")
     if verdict == "refused":
         warn(f"printed because of --force: {warnings[0] if warnings else 'refused'}")
-
-
-def _recorded_date(recording: _Recording) -> datetime.date | None:
-    """The date of a log's GNSS fixes (the model of that date), or None (today)."""
-    return recording.recorded.date() if recording.recorded is not None else None
 
 
 def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | None) -> list[str]:
@@ -256,65 +132,6 @@ def _parameter_lines(result: Alignment, total: NDArray[np.float64], slot: int | 
     return lines
 
 
-def _starting_calibration(recording: _Recording, inclination: float | None) -> Calibration:
-    """The magnitude-only calibration the alignment starts from, fitted on the recording.
-
-    With a gyroscope and time stamps, the gyro-aided fit's magnitude-only part (``details["sensor_matrix"]``):
-    a vehicle that cannot tumble leaves ``auto`` the field's vertical part, which the dip angles rest on,
-    poorly pinned, while the rotation kinematics pin it (benchmarks/results/vehicle: flight, car and boat at
-    6 000 samples, 8 trials each, the alignment 0.45°, 0.15°, 0.32° RMS from the true mounting starting from it,
-    2.5°, 1.9°, 1.5° starting from ``auto``). Otherwise, or where the gyro-aided fit is refused, ``auto``.
-    """
-    if recording.gyro is not None and recording.time_s is not None:
-        try:
-            kinematic = fit(
-                recording.samples, method="gyro", gyro=recording.gyro, time_s=recording.time_s, accel=recording.accel,
-                inclination_deg=inclination,  # the accelerometer's check, where it is known
-            )  # fmt: skip
-        except CalibrationError:
-            kinematic = None  # auto below, with its own refusal if it has one
-        if kinematic is not None and "sensor_matrix" in kinematic.details:
-            return Calibration(
-                "gyro (its magnitude-only part)",
-                kinematic.offset,
-                np.asarray(kinematic.details["sensor_matrix"], dtype=np.float64),
-                kinematic.field_strength,
-                details={"support": kinematic.details.get("support", {})},
-            )
-    try:
-        return fit(recording.samples, method="auto")
-    except CalibrationError as error:  # its advice names fit's options, which align does not take
-        raise CalibrationError(
-            f"the magnitude-only calibration the alignment starts from could not be fitted ({error}); "
-            "calibrate first (magfit calibrate FILE --method ... -o cal.json) and give it with --calibration"
-        ) from None
-
-
-def _verdict_of(calibration: Calibration) -> str | None:
-    support = calibration.details.get("support")
-    return str(support["verdict"]) if isinstance(support, Mapping) and "verdict" in support else None
-
-
-def _capped_by_calibration(result: Alignment, calibration: Calibration) -> Alignment:
-    """An alignment is no better supported than the calibration it starts from: its one-sigma counts the dips'
-    scatter, not an error of the calibrated field's vertical part, which turns every dip alike (simulated
-    car, auto's weak calibration: 5.0° off where the alignment alone said supported ±0.9°)."""
-    verdict_of_calibration = _verdict_of(calibration)
-    if verdict_of_calibration not in ("weak", "refused"):
-        return result
-    support = calibration.details["support"]
-    first = ((support.get("refusals") or []) + (support.get("weaknesses") or []) + [""])[0]
-    said = "is weak" if verdict_of_calibration == "weak" else "was refused by its samples (forced)"
-    warning = (
-        f"the calibration it starts from ({calibration.method}) {said}"
-        + (f" ({first})" if first else "")
-        + ": its error in the field's vertical part turns the dip angles, which the one-sigma above does not "
-        "count; calibrate with a tumble first and give it with --calibration"
-    )
-    verdict = "weak" if result.verdict == "supported" else result.verdict
-    return replace(result, verdict=verdict, warnings=(*result.warnings, warning))
-
-
 @click.command("align")
 @click.argument("file", type=click.Path(dir_okay=True, path_type=Path))
 @click.option("--sensor", help="The magnetometer of a log (its id or device id, see 'magfit inspect').")
@@ -325,7 +142,7 @@ def _capped_by_calibration(result: Alignment, calibration: Calibration) -> Align
               help="Gyroscope columns, in --gyro-unit (not guessed).")  # fmt: skip
 @click.option("--gyro-unit", type=click.Choice(["rad/s", "deg/s"]), default="rad/s", show_default=True)
 @click.option("--time-column", "--time", "time_column", help="Time column (found by name: t, time, timestamp).")
-@click.option("--time-unit", type=click.Choice(list(_SECONDS)), default="s", show_default=True)
+@click.option("--time-unit", type=click.Choice(list(SECONDS)), default="s", show_default=True)
 @click.option("--calibration", "calibration_path", type=click.Path(dir_okay=False, path_type=Path),
               help="A magnitude-only calibration (JSON) to correct the field with; fitted by default.")  # fmt: skip
 @click.option("--inclination", type=float, help="The field's inclination, degrees (positive down).")
@@ -398,55 +215,47 @@ def align_command(
             fail(f"--max-rate takes a number of °/s or 'none', got {max_rate!r}")
     if inclination is not None and location is not None:
         fail("give --inclination or --location, not both")
-    if log_kind(file) is not None:
-        recording = _read_log(file, sensor)
-    elif accel_columns is None and _by_reference(file, attitude):
+    if log_kind(file) is None and accel_columns is None and _by_reference(file, attitude):
         spec = StreamSpec(attitude, reference, gyro_columns, None, [time_column] if time_column else None,
                           attitude_convention, angle_unit, gyro_unit)  # type: ignore[arg-type]  # fmt: skip
         _align_by_reference(file, columns, spec, unit, location, date, force)
         return
-    else:
-        recording = _read_samples_file(file, columns, accel_columns, gyro_columns, gyro_unit, time_column, time_unit)
-    place = location or recording.position
-    source_of_inclination = "given"
-    if inclination is None and place is not None:
-        when = date if date is not None or location is not None else _recorded_date(recording)
-        field = field_at(*place, date=when)  # type: ignore[arg-type]
-        inclination = field.inclination_deg
-        source_of_inclination = field.describe()
-
+    calibration = None
     if calibration_path is not None:
         calibration = Calibration.from_json(calibration_path.read_text(encoding="utf-8"))
         if calibration.frame != "sensor":
             fail(f"{calibration_path}: is a vehicle-frame calibration, already aligned; give a magnitude-only one")
-    else:
-        calibration = _starting_calibration(recording, inclination)
-    corrected = calibration.apply(recording.samples)
     try:
-        result = align(
-            corrected, recording.accel, inclination_deg=inclination, gyro=recording.gyro, time_s=recording.time_s,
-            max_rate_dps=max_rate_dps, max_tilt_rate_dps=max_tilt_rate, allow_mirror=False if no_mirror else None,
-            allow_undetermined=force,
+        found = align_file(
+            file, sensor=sensor, columns=columns, accel_columns=accel_columns, gyro_columns=gyro_columns,
+            gyro_unit=gyro_unit, time_column=time_column, time_unit=time_unit, calibration=calibration,
+            inclination_deg=inclination, location=location, date=date, max_rate_dps=max_rate_dps,
+            max_tilt_rate_dps=max_tilt_rate, allow_mirror=False if no_mirror else None, allow_undetermined=force,
         )  # fmt: skip
     except CalibrationError as error:  # the library's keywords as this command's options
         message = str(error)
         for keyword, option in _OPTIONS.items():
             message = message.replace(keyword, option)
         raise CalibrationError(message) from None
-    result = _capped_by_calibration(result, calibration)
-    # A log's magnetometer already turned by the firmware's orientation M: the rotation to set is R @ M.
-    total = result.proper_matrix if recording.mounting is None else result.proper_matrix @ recording.mounting
+    _print_alignment(found, calibration_path)
 
+
+def _print_alignment(found: FileAlignment, calibration_path: Path | None) -> None:
+    """What ``magfit align`` prints of :func:`magfit.pipeline.align.align_file`'s result."""
+    recording, calibration, result, total = found.recording, found.calibration, found.alignment, found.total
+    for message in recording.warnings:
+        warn(message)
     out = click.echo
     out(f"{'file':16s} {recording.description}")
     origin = f"read from {calibration_path}" if calibration_path else "fitted"
-    out(f"{'calibration':16s} {calibration.method} ({origin}, {_verdict_of(calibration) or 'no verdict recorded'})")
+    verdict = calibration.support.verdict if calibration.support is not None else "no verdict recorded"
+    out(f"{'calibration':16s} {calibration.method} ({origin}, {verdict})")
     dropped = "; ".join(f"{count} {reason}" for reason, count in result.dropped.items())
     out(f"{'samples used':16s} {result.n_used} of {result.n_samples}" + (f" (dropped: {dropped})" if dropped else ""))
     fitted = f"fitted: {result.inclination_deg:.2f} ± {result.inclination_sigma_deg:.2f}°"
     out(
         f"{'inclination':16s} "
-        + (fitted if result.inclination_fitted else f"{inclination:.2f}° ({source_of_inclination})")
+        + (fitted if result.inclination_fitted else f"{found.inclination_deg:.2f}° ({found.inclination_source})")
     )
     matrix_lines = [vector(row, lambda v: f"{v:+.5f}") for row in result.matrix]
     out(f"{'rotation':16s} {matrix_lines[0]}    body = rotation @ sensor")

@@ -19,9 +19,16 @@ from rich.console import Console
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import CalibrationError
-from ..geomag import Field, compare_fitted, parse_date, parse_location
+from ..geomag import parse_date, parse_location
 from ..methods import get_method
-from ..pipeline import CompassCalibration, FileCalibration, RefusedWithAdvice, StreamsMissing, calibrate_file
+from ..pipeline import (
+    CompassCalibration,
+    FileCalibration,
+    ModelField,
+    RefusedWithAdvice,
+    StreamsMissing,
+    calibrate_file,
+)
 from ..pipeline.streaming import Advance
 from ..units import conversion_factor, get_unit
 from ._common import (
@@ -522,7 +529,7 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
         if compass.model_field is not None:
             model, unit = compass.model_field, compass.calibration.unit
             physical = unit if unit and get_unit(unit).is_physical else None
-            _print_model_field(out, compass.calibration, model.field, physical, model.origin)
+            _print_model_field(out, compass.calibration, model, physical)
     if not result.compasses and result.model_field is not None:  # nothing fitted: the model still says what to expect
         field = result.model_field.field
         out.print("")
@@ -566,28 +573,25 @@ def plot_calibration(samples: Any, calibration: Calibration, output: Path, title
     return figure_bytes(figure, output), f"{figure.get_supxlabel()} Wrote the figure to {output}"
 
 
-def _print_model_field(
-    out: Console, calibration: Calibration, field: Field, unit: str | None, origin: str = "the location given"
-) -> None:
-    """The model's field (strength and inclination) beside the fitted one, and a warning when they differ by more
-    than 10 %; where the place came from when it is the log's own fixes."""
+def _print_model_field(out: Console, calibration: Calibration, model: ModelField, unit: str | None) -> None:
+    """The model's field (strength and inclination) beside the fitted one, and the library's warning when they
+    differ by more than 10 % (``model.mismatch``); where the place came from when it is the log's own fixes."""
+    field = model.field
     shown = unit or "uT"
     sigma = field.total_uncertainty
     spread = f" ± {significant(sigma * conversion_factor('nT', shown), 2)}" if sigma else ""
     line = f"{significant(field.total_in(shown), 6)}{spread} {shown} ({field.describe()}, inclination "
     line += f"{field.inclination_deg:.1f}°)"
-    fitted = calibration.details.get("fitted_field_strength")
+    fitted = calibration.known_field.fitted if calibration.known_field is not None else None
     if unit is None:
         line += "; not compared with the fit: the samples' unit is unknown (give --unit)"
-    elif calibration.details.get("field_strength_given") and isinstance(fitted, float):
+    elif fitted is not None:
         line += f"; used as the field strength (the samples alone: {significant(fitted, 6)} {unit})"
     out.print(f"{'model field':<16} {line}", soft_wrap=True)
-    if origin != "the location given":
-        out.print(f"{'':<16} at {origin}", soft_wrap=True)
-    if unit is not None:
-        mismatch = compare_fitted(fitted if isinstance(fitted, float) else calibration.field_strength, unit, field)
-        if mismatch is not None:
-            warn(mismatch)
+    if model.origin != "the location given":
+        out.print(f"{'':<16} at {model.origin}", soft_wrap=True)
+    if model.mismatch is not None:
+        warn(str(model.mismatch))
 
 
 def _fit_warnings(calibration: Calibration) -> list[str]:
@@ -609,24 +613,23 @@ def _check_extension(output: Path, export_format: str) -> None:
 
 def _choice(calibration: Calibration) -> list[tuple[str, str]]:
     """For a method that chooses among others (``auto``): the method it used and why."""
-    chosen = calibration.details.get("chosen")
-    if chosen is None:
+    choice = calibration.auto
+    if choice is None:
         return []
-    used = calibration.details.get("method_used")
-    model = f"{chosen} model" + (f", maximum-likelihood fit started from {used}" if used else "")
-    reason = calibration.details.get("reason")
+    used, reason = choice.method_used, choice.reason
+    model = f"{choice.chosen} model" + (f", maximum-likelihood fit started from {used}" if used else "")
     return [("chose", model + (f" ({reason})" if reason else ""))]
 
 
 def _verdict(calibration: Calibration) -> list[tuple[str, str]]:
-    """Whether the samples support the calibration (``details["support"]``, when the fit reached a verdict)."""
-    support = calibration.details.get("support")
-    if not isinstance(support, Mapping) or "verdict" not in support:
+    """Whether the samples support the calibration (``calibration.support``, when the fit reached a verdict)."""
+    support = calibration.support
+    if support is None:
         return []
-    verdict = str(support["verdict"])
+    verdict = support.verdict
     if verdict == "refused":
         return [("verdict", "NOT SUPPORTED by the samples, returned because of --force: do not use these numbers")]
-    weaknesses = support.get("weaknesses") or []
+    weaknesses = support.weaknesses
     if verdict == "weak" and weaknesses:
         return [("verdict", f"weak: {len(weaknesses)} weakness(es), in the warnings above")]
     return [("verdict", verdict)]

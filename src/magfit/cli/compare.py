@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -228,10 +228,10 @@ def _reason(result: MethodResult) -> str:
 
 def _refusals(result: MethodResult) -> list[str] | None:
     """Why the samples do not support a fit scored only because of ``--force``; None for a supported one."""
-    support = result.calibration.details.get("support") if result.calibration is not None else None
-    if not (isinstance(support, Mapping) and support.get("verdict") == "refused"):
+    support = result.calibration.support if result.calibration is not None else None
+    if support is None or support.verdict != "refused":
         return None
-    return [str(reason) for reason in support.get("refusals") or []]
+    return [str(reason) for reason in support.refusals]
 
 
 def _label(result: MethodResult, mark: str = " (NOT SUPPORTED)") -> str:

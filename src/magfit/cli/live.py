@@ -236,7 +236,7 @@ def _summary(out: Console, run: LiveRun, calibration: Calibration, verdict: obje
             + (f", {run.source.reconnections} reconnections)" if run.source.reconnections else ")"),
         ),
         ("stopped by", run.stopped_by or run.ended or "the end of the stream"),
-        ("chose", str(calibration.details.get("chosen", calibration.method))),
+        ("chose", calibration.auto.chosen if calibration.auto is not None else calibration.method),
         ("offset", vector(calibration.offset) + u),
     ]
     m = calibration.matrix

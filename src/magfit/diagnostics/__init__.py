@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,6 +30,7 @@ from ..evaluate import Evaluation, unchecked_sphere_distances
 from ..findings import Diagnostics, Goodness, Reason, ReasonList, Support
 from ..geometry.frame import Frame
 from ..geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
+from ..outliers import inlier_mask
 from ..sampling import MAX_ANALYSED, thin, weighted_even_subsample
 from ..saturation import find_clipped
 from ..statistics import Statistics
@@ -86,7 +86,14 @@ GOODNESS_SAMPLES = 3_000
 
 
 def model_kind(calibration: Calibration) -> str:
-    """The model family of a calibration, from its structure: sphere, diag (axis-aligned) or full."""
+    """The model family of a calibration: sphere, diag (axis-aligned) or full.
+
+    ``calibration.model`` when it says (every fit does); a vehicle-frame matrix is ``full``. A calibration
+    without it (made by hand, or read from a version-1 file) gets the family its ellipsoid has: ``full``
+    with cross terms, ``sphere`` with equal axes, ``diag`` otherwise.
+    """
+    if calibration.model is not None:
+        return "full" if calibration.model == "vehicle" else calibration.model
     shape = calibration.ellipsoid_matrix
     scale = float(np.max(np.abs(shape)))
     off_diagonal = shape - np.diag(np.diag(shape))
@@ -96,28 +103,6 @@ def model_kind(calibration: Calibration) -> str:
     if np.ptp(diagonal) <= 1e-9 * scale:
         return "sphere"
     return "diag"
-
-
-def _inlier_mask(calibration: Calibration, samples: NDArray[Any]) -> tuple[NDArray[np.bool_] | None, str]:
-    """The samples a robust fit kept (None: all), and how they were found.
-
-    The recorded indices when they refer to these samples; otherwise (a subsample, a truncated list) the
-    robust fit's own rule applied again: ``|r − median(r)| > threshold · 1.4826 MAD(r)``.
-    """
-    stored = calibration.details.get("rejected")
-    if not isinstance(stored, dict):
-        return None, ""
-    n = samples.shape[0]
-    if not stored.get("truncated") and calibration.n_samples == n:
-        mask = np.ones(n, dtype=bool)
-        for start, stop in stored.get("runs", []):
-            mask[int(start) : int(stop)] = False
-        return mask, "the robust fit rejected"
-    residuals = unchecked_sphere_distances(calibration, samples)
-    centre = float(np.median(residuals))
-    sigma = 1.4826 * float(np.median(np.abs(residuals - centre)))
-    threshold = float(calibration.details.get("threshold", 3.5))
-    return np.abs(residuals - centre) <= threshold * max(sigma, 1e-12), "lie beyond the robust fit's threshold"
 
 
 def diagnose(
@@ -142,7 +127,7 @@ def diagnose(
         Any calibration.
     samples : array_like, shape (N, 3)
         The raw samples, input units, in recording order (the one-sigmas count the correlation of
-        neighbouring samples). Samples a robust fit rejected (``details["rejected"]``) are left out.
+        neighbouring samples). Samples a robust fit rejected (``calibration.rejected``) are left out.
     inclination_deg : float
         Magnetic inclination assumed for the heading uncertainty, degrees (default 60°).
     max_samples : int
@@ -186,7 +171,7 @@ def diagnose(
     if clipping.n_clipped:
         notes.append(f"{clipping.n_clipped} samples clipped at the sensor's full scale are left out of these figures.")
         array = array[~clipping.clipped]
-    mask, how = _inlier_mask(calibration, array)
+    mask, how = inlier_mask(calibration, array)
     if mask is not None and not mask.all():
         notes.append(f"{int((~mask).sum())} samples {how} are left out of the diagnostics.")
         array = array[mask]
@@ -207,7 +192,7 @@ def diagnose(
         )
     kind = model_kind(calibration)
     cover = coverage(z)
-    pinned = bool(calibration.details.get("radius_pinned"))
+    pinned = calibration.known_field is not None and calibration.known_field.pinned
     observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg, series=rows, pinned=pinned)
     fitted = _weighted_evaluation(np.linalg.norm(z, axis=1) - 1.0, weights)
     goodness = check = halves = None
@@ -252,7 +237,7 @@ def diagnose(
         field_strength=calibration.field_strength,
         flat=flat_axis(raw, weights),
         axis_ratio=float(np.max(calibration.semi_axes) / np.min(calibration.semi_axes)),
-        solver_problem=calibration.details.get("solver_problem"),
+        solver_problem=calibration.solver.problem if calibration.solver is not None else None,
         clipping=clipping if clipping.n_clipped else None,
         comparison=comparison,
     )
@@ -304,12 +289,12 @@ def _ellipsoid_rms(raw: NDArray[np.float64], weights: NDArray[np.float64]) -> fl
 
 def _known_field(calibration: Calibration) -> tuple[float, float] | None:
     """(given, fitted) field strength when the user gave one and the method kept the fitted value."""
-    fitted = calibration.details.get("fitted_field_strength")
-    if not calibration.details.get("field_strength_given") or not isinstance(fitted, (int, float)):
+    known = calibration.known_field
+    if known is None or known.fitted is None:
         return None
-    if calibration.details.get("radius_pinned"):
+    if known.pinned:
         return None  # the sphere fitted with the radius pinned checked it against the samples itself
-    return float(calibration.field_strength), float(fitted)
+    return float(calibration.field_strength), known.fitted
 
 
 #: Each half of the recording is refitted on at most this many samples.

@@ -35,6 +35,7 @@ from ..calibration import Calibration
 from ..errors import CalibrationError
 from ..findings import Coverage, Diagnostics, Observability, ReasonList, Support, Uncertainty, WeakDirection, reasons
 from .coverage import coverage
+from .settle import settle
 from .uncertainty import DEFAULT_INCLINATION_DEG, UNDETERMINED_SIGMA, WEAK_INFORMATION
 from .verdict import BIASED_HEADING_DEG, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
 
@@ -558,27 +559,22 @@ def judged(calibration: Calibration, method: str, diagnostics: bool | str, allow
     """A vehicle-frame calibration with the verdict its method reached: raised when refused (unless forced).
 
     What :func:`magfit.fit` does for a calibration in the vehicle frame, in place of the magnitude-only
-    diagnosis: the method judged it against its reference (``details["support"]``, ``details["diagnostics"]``).
+    diagnosis: the method judged it against its reference (``calibration.support``, ``details["diagnostics"]``),
+    and the verdict is settled by the one verdict step (:func:`magfit.diagnostics.settle.settle`).
     A method with a verdict but no report of its own (``gyro``) gets diagnostics that carry the verdict and its
     warnings only, so that every fit's ``calibration.diagnostics`` says what to read before trusting it.
     """
-    stored = calibration.details.get("support")
-    if not isinstance(stored, dict):
+    support = calibration.support
+    if support is None:
         raise CalibrationError(f"the {method} calibration carries no verdict of its own")
-    support = Support.from_dict(stored)
-    if support.verdict == "refused":
-        if not allow_undetermined:
-            raise CalibrationError(support.message(method), codes=support.codes)
-        support = replace(support, forced=True)
-    details = {key: value for key, value in calibration.details.items() if key != "diagnostics"}
-    details["support"] = support.to_dict()
-    report = calibration.details.get("diagnostics")
+    stored = calibration.details.get("diagnostics")
+    bare = replace(calibration, details={k: v for k, v in calibration.details.items() if k != "diagnostics"})
+    typed = None
     if diagnostics:
-        if isinstance(report, dict):
-            typed = replace(Diagnostics.from_dict(report), support=support, warnings=support.warnings)
+        if isinstance(stored, dict):
+            typed = Diagnostics.from_dict(stored)
         else:  # a method that judged itself without a report of its own (gyro): its verdict is the whole of it
             used = int(calibration.n_samples or 0)
             typed = Diagnostics(used, used, None, None, None, None, support.warnings, (), calibration.unit,
                                 support=support)  # fmt: skip
-        details["diagnostics"] = typed.to_dict()
-    return replace(calibration, details=details)
+    return settle(bare, support, method=method, allow_undetermined=allow_undetermined, report=typed)

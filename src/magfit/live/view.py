@@ -130,7 +130,7 @@ def _fit_panel(s: Snapshot, unit: str | None) -> Text:
         text.append(" ".join((fit.error or "").split())[:300])
     else:
         cal = fit.calibration
-        chosen = cal.details.get("chosen")
+        chosen = cal.auto.chosen if cal.auto is not None else None
         text.append(f"model     {chosen or cal.method}\n")
         text.append("offset    (" + ", ".join(_number(v) for v in cal.offset) + f"){u}\n")
         text.append(f"field     {_number(cal.field_strength)}{u}\n")

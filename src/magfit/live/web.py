@@ -61,7 +61,7 @@ def state(run: LiveRun) -> dict[str, Any]:
         "fit": None
         if calibration is None
         else {
-            "model": str(calibration.details.get("chosen", calibration.method)),
+            "model": calibration.auto.chosen if calibration.auto is not None else calibration.method,
             "offset": [round(float(v), 4) for v in calibration.offset],
             "field": round(calibration.field_strength, 4),
             "unit": run.parser.unit,

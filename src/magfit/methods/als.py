@@ -151,6 +151,7 @@ def _check_noise_std(noise_std: float | None) -> float | None:
     min_samples=10,
     data="statistics",
     summary="hard + soft iron: adjusted least squares, consistent under noise (paper's reference [3])",
+    model="full",
 )
 def fit_als(
     data: FitInput, *, noise_std: float | None = None, field_strength: float | None = None, root: str = "sqrt"

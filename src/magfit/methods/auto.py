@@ -20,11 +20,11 @@ clearly better on stretches of the recording it did not see (docs/diagnostics.md
 4. Where a richer model is not determined (restricted attitudes: a vehicle), every richer model that predicts
    the held-out blocks as well or better shows a distortion the chosen model may leave out. Its heading error
    (the level-heading difference of the two models plus the richer one's heading one-sigma) joins the
-   chosen model's heading one-sigma (``details["omitted_distortion"]``, read by :func:`magfit.fit`), named
-   as a weakness. When the richer model clearly wins (:data:`WITNESS_GAIN`) and that bound passes
-   :data:`PREFERRED_BOUND_DEG`, a full model the verdict returns weak is taken instead; beyond
-   :data:`USELESS_BOUND_DEG` without one, auto refuses (:class:`UndeterminedChoice`, which carries the
-   model the choice ranks best for a forced fit).
+   chosen model's heading one-sigma (``Calibration.auto.omitted``, added by this method's registry
+   entry, :class:`~magfit.methods.registry.Judging`), named as a weakness. When the richer model clearly
+   wins (:data:`WITNESS_GAIN`) and that bound passes :data:`PREFERRED_BOUND_DEG`, a full model the verdict
+   returns weak is taken instead; beyond :data:`USELESS_BOUND_DEG` without one, auto refuses
+   (:class:`UndeterminedChoice`, which carries the model the choice ranks best for a forced fit).
 
 The calibration returned is the chosen model's maximum-likelihood fit on a stride of at most 200 000
 samples: for the full ellipsoid the ``ml`` method's fit (exact orthogonal distances, corrected for the
@@ -51,12 +51,15 @@ from ..diagnostics.uncertainty import level_heading_difference_deg
 from ..diagnostics.verdict import USELESS_BOUND_DEG
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import unchecked_sphere_distances
+from ..facts import AutoChoice
 from ..findings import Diagnostics, Reason, Support
 from ..geometry.quadric import check_field_strength, pin_field_strength
+from ..outliers import DEFAULT_THRESHOLD
 from ..sampling import thin
 from ..statistics import Statistics
-from .registry import METHODS, FitInput, register
-from .robust import encode_indices, fit_model, fit_robust, resolve_model, robust_scale
+from .core import estimate, first_order_refit
+from .registry import METHODS, FitInput, Judging, Refit, Undetermined, register
+from .robust import fit_model, rejected_runs, resolve_model, robust_scale
 
 __all__ = ["CANDIDATES", "UndeterminedChoice", "fit_auto", "fit_chosen"]
 
@@ -106,16 +109,57 @@ PREFERRED_BOUND_DEG = 5.0
 #: verdict's) auto refuses: no compass.
 
 
-class UndeterminedChoice(CalibrationError):
+class UndeterminedChoice(Undetermined):
     """``auto`` refused: no model the samples determine describes them within a useful heading bound.
 
     ``calibration`` is what the unforced choice ranks best (the richest model the samples determine), which
     :func:`magfit.fit` returns with this refusal when ``allow_undetermined=True``.
     """
 
-    def __init__(self, message: str, calibration: Calibration, code: str = "model_inadequate") -> None:
-        super().__init__(message, codes=(code,))
-        self.calibration = calibration
+
+def _chosen_refit(calibration: Calibration, options: Any) -> Refit:
+    """The diagnostics' refit of an ``auto`` calibration: its chosen model's first-order fit, from it."""
+    if calibration.auto is None:  # a calibration saved without its choice: the model it has
+        return _model_refit(calibration, options)
+    chosen, known = calibration.auto.model, options.get("field_strength")
+    return lambda samples: first_order_refit(chosen, calibration, samples, field_strength=known)
+
+
+def _model_refit(calibration: Calibration, options: Any) -> Refit:
+    from ..diagnostics import model_kind
+
+    kind, known = model_kind(calibration), options.get("field_strength")
+    return lambda samples: first_order_refit(kind, calibration, samples, field_strength=known)
+
+
+def omitted_heading_deg(calibration: Calibration) -> float:
+    """The heading error (degrees) of the distortion the chosen model leaves out, 0 when none."""
+    return calibration.auto.omitted_heading_deg if calibration.auto is not None else 0.0
+
+
+def omitted_weakness(calibration: Calibration, report: Diagnostics) -> tuple[Reason, ...]:
+    """The weakness naming the distortion the chosen model leaves out, with the heading error it causes."""
+    heading = omitted_heading_deg(calibration)
+    if not heading or calibration.auto is None or calibration.auto.omitted is None:
+        return ()
+    omitted, model = calibration.auto.omitted, calibration.auto.model
+    stated = report.uncertainty.heading_sigma_deg if report.uncertainty is not None else None
+    total = "" if stated is None else f"; the heading one-sigma stated includes it: ±{stated:.2g}°"
+    difference = omitted.get("heading_difference_deg")
+    witness_sigma = omitted.get("witness_heading_sigma_deg")
+    parts = (
+        f"their level headings differ by {difference:.2g}° (RMS) and the {omitted.get('model')} model's own heading "
+        f"one-sigma is ±{witness_sigma:.2g}°: "
+        if isinstance(difference, (int, float)) and isinstance(witness_sigma, (int, float))
+        else ""
+    )
+    return (Reason(
+        f"the {model} model may leave out a distortion the samples show but do not determine (the "
+        f"{omitted.get('model')} model, fitted to the same samples, predicts held-out stretches of the recording as "
+        f"well or better); {parts}the heading error it can cause is ±{heading:.2g}°{total}; a reference field "
+        "(method 'vector' with the attitude) or more tilt while recording would determine it",
+        "model_inadequate",
+    ),)  # fmt: skip
 
 
 @register(
@@ -124,6 +168,10 @@ class UndeterminedChoice(CalibrationError):
     data="samples",
     summary="the simplest of sphere, diag and full ellipsoid that the samples determine and that held-out "
     "stretches of the recording do not reject; robust when outliers are found",
+    # It returns its chosen model's maximum-likelihood fit: the comparison with that fit is moot.
+    judging=Judging(
+        refit=_chosen_refit, model_error_deg=omitted_heading_deg, weaknesses=omitted_weakness, compare_ml=False
+    ),
 )
 def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float | None = None) -> Calibration:
     """Fit the simplest model the samples support, robustly when they hold outliers.
@@ -277,7 +325,6 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
                 "attitudes (tilt it further: a full tumble is best), or fit against a reference field "
                 "(method='vector' with the attitude)"
             )
-    weak = list(verdicts[chosen].weaknesses)
     calibration = optima[chosen]
     if chosen == "full" or kept.shape[0] > 20_000:  # the optimum came from a stride of 20 000, or ml is due
         calibration = refine_chosen(chosen, calibration, kept)
@@ -295,11 +342,14 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
         "(see below)"
     )
     reason = _reason(best, chosen, opening, bic, steps, passed_over, failed, screen_note)
+    choice = AutoChoice(
+        model=chosen,
+        chosen=prefix + chosen,
+        method_used=("robust/" if robust else "") + resolve_model(chosen)[0],
+        reason=reason,
+        omitted=omitted,
+    )
     details: dict[str, Any] = {
-        "chosen": prefix + chosen,
-        "chosen_model": chosen,
-        "method_used": ("robust/" if robust else "") + resolve_model(chosen)[0],
-        "reason": reason,
         "criterion": {
             "name": "BIC",
             "values": {model: bic.get(model) for model in CANDIDATES},
@@ -312,17 +362,11 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
             "values": {m: [float(v) for v in held_out[m]] if m in held_out else None for m in CANDIDATES},
             "determined": determined,
         },
-        "weak": [str(w) for w in weak],
         "failed": failed,
         "outliers": outliers,
         "robust": robust,
     }
-    if robust:
-        rejected = np.flatnonzero(~inliers)
-        details["n_rejected"] = int(rejected.size)
-        details["rejected"] = encode_indices(rejected)
-    if omitted is not None:
-        details["omitted_distortion"] = omitted
+    rejected = rejected_runs(np.flatnonzero(~inliers), DEFAULT_THRESHOLD) if robust else None
     chosen_fit = Calibration(
         method="auto",
         offset=calibration.offset,
@@ -330,6 +374,9 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
         field_strength=calibration.field_strength,
         n_samples=n,
         details=details,
+        model=chosen,  # type: ignore[arg-type]
+        rejected=rejected,
+        auto=choice,
     )
     chosen_fit = pin_field_strength(chosen_fit, known_field)
     if refusal is not None:
@@ -339,8 +386,9 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
 
 def _bare(model: str, optimum: Calibration, n: int, reason: str, known_field: float | None) -> Calibration:
     """``model``'s optimum as ``auto``'s calibration when no model is determined (returned only when forced)."""
-    details = {"chosen": model, "chosen_model": model, "method_used": resolve_model(model)[0], "reason": reason}
-    bare = Calibration("auto", optimum.offset, optimum.matrix, optimum.field_strength, n_samples=n, details=details)
+    choice = AutoChoice(model=model, chosen=model, method_used=resolve_model(model)[0], reason=reason)
+    bare = Calibration("auto", optimum.offset, optimum.matrix, optimum.field_strength, n_samples=n,
+                       model=model, auto=choice)  # type: ignore[arg-type]  # fmt: skip
     return pin_field_strength(bare, known_field)
 
 
@@ -434,8 +482,8 @@ def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) 
     rows = samples[thin(samples.shape[0], MAX_SAMPLES)]
     if model == "full" and "ml" in METHODS:
         try:
-            fitted = METHODS["ml"].function(FitInput(Statistics.from_samples(rows), rows))
-            if fitted.details.get("converged", True):
+            fitted = estimate(FitInput(Statistics.from_samples(rows), rows), "ml")
+            if fitted.solver is None or fitted.solver.converged is not False:
                 return fitted
         except (MagfitError, np.linalg.LinAlgError):
             pass  # e.g. no ellipsoid to start from, or too few directions: the first-order fit below
@@ -449,23 +497,9 @@ def _stride(samples: NDArray[np.float64], rows: int) -> NDArray[np.float64]:
     return samples[:: max(1, math.ceil(samples.shape[0] / rows))]
 
 
-def refit_first_order(
-    model: str, start: Calibration, samples: NDArray[np.float64], *, field_strength: float | None = None
-) -> Calibration:
-    """The first-order maximum-likelihood fit of ``model`` to ``samples``, from ``start``.
-
-    What the diagnostics refit for an ``auto`` calibration (held-out folds, halves): the chosen model,
-    fitted as the model choice fits it, from the returned calibration (a few iterations).
-    """
-    from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters
-
-    frame = Frame.of(samples)
-    z = frame.normalise(samples)
-    _, optimum = maximum_likelihood(
-        z, model, [parameters(start, model, frame)], cost_tolerance=SCORE_TOLERANCE, max_iterations=SCORE_ITERATIONS
-    )
-    fitted = calibration_from_parameters(optimum, model, frame, model)
-    return pin_field_strength(fitted, check_field_strength(field_strength))
+#: What the diagnostics refit for an ``auto`` calibration (held-out folds, halves): the chosen model,
+#: fitted as the model choice fits it, from the returned calibration (a few iterations).
+refit_first_order = first_order_refit
 
 
 def fit_chosen(model: str, samples: NDArray[np.float64], *, field_strength: float | None = None) -> Calibration:
@@ -506,7 +540,7 @@ def _screen(samples: NDArray[np.float64], mode: str) -> tuple[bool, NDArray[np.b
     screen = None
     for model in ("ellipsoid", "sphere"):  # the algebraic fit: enough to see far samples, and cheap
         try:
-            screen = fit_robust(FitInput(Statistics.from_samples(rows), rows), model=model)
+            screen = estimate(FitInput(Statistics.from_samples(rows), rows), "robust", {"model": model})
             break
         except MagfitError:
             continue
@@ -558,15 +592,18 @@ def _refusal(opening: str, samples: NDArray[np.float64], failed: dict[str, str])
 
 def _kept(calibration: Calibration, n: int) -> NDArray[np.bool_]:
     mask = np.ones(n, dtype=bool)
-    for start, stop in calibration.details.get("rejected", {}).get("runs", []):
+    for start, stop in calibration.rejected.runs if calibration.rejected is not None else ():
         mask[start:stop] = False
     return mask
 
 
 def _fit_candidate(model: str, samples: NDArray[np.float64], robust: bool, statistics: Statistics) -> Calibration:
-    """``model`` fitted to the samples, robustly or not; ``statistics`` are the samples' (one pass saved)."""
+    """``model`` fitted to the samples, robustly or not; ``statistics`` are the samples' (one pass saved).
+
+    Through :func:`~magfit.methods.core.estimate`, like every method: a candidate refuses what the method
+    refuses for any caller."""
     if robust:
-        return fit_robust(FitInput(statistics, samples), model=model)
+        return estimate(FitInput(statistics, samples), "robust", {"model": model})
     return fit_model(model, samples, statistics)
 
 
@@ -746,7 +783,7 @@ def _holds(optimum: Calibration, kept: NDArray[np.float64], model: str) -> bool:
     its own verdict then refuses (a forced fit would return it, worse than the model passed over).
     """
     calibration = refine_chosen(model, optimum, kept) if model == "full" else optimum
-    calibration = replace(calibration, method="auto", details={"chosen_model": model})
+    calibration = replace(calibration, method="auto", details={}, auto=AutoChoice(model=model))
     report = diagnose(
         calibration,
         kept,

@@ -7,14 +7,14 @@ sees them, and counted in ``details["saturation"]``; when too few rows remain th
 :func:`magfit.fit` (with the verdict and the diagnostics on top), the robust fit's inner models, ``auto``'s
 candidates and the held-out refits of the diagnostics all go through :func:`estimate`, so a method refuses
 the same data whoever calls it. The user's options are recorded explicitly in
-``details["options"]`` (see :func:`recorded_options`), so that a refit or a later diagnosis uses exactly
+``Calibration.options`` (see :func:`recorded_options`), so that a refit or a later diagnosis uses exactly
 what the user asked for, never options guessed back from other entries of ``details``.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
@@ -26,12 +26,14 @@ from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..saturation import Clipping, find_clipped
 from ..statistics import Statistics
-from .registry import METHODS, FitInput, MethodSpec, get_method
+from .registry import METHODS, FitInput, MethodSpec, Refit, get_method
 
-__all__ = ["Refit", "estimate", "prepare", "recorded_options", "refitter"]
+__all__ = ["Refit", "estimate", "first_order_refit", "first_order_stand_in", "prepare", "recorded_options", "refitter"]
 
-#: A function that fits a method (with fixed options) to (n, 3) samples: what the diagnostics receive.
-Refit = Callable[[NDArray[np.float64]], Calibration]
+#: The first-order refits stop at this relative change of Σd² or after this many iterations: they start
+#: at the calibration refitted, which a stretch of the recording moves a little.
+FIRST_ORDER_TOLERANCE = 1e-4
+FIRST_ORDER_ITERATIONS = 5
 
 
 def method_spec(method: str, options: Mapping[str, Any]) -> MethodSpec:
@@ -68,7 +70,8 @@ def estimate(data: FitInput, method: str, options: Mapping[str, Any] | None = No
     """Run ``method`` on prepared data: the support checks every fit gets, the method's own, the method.
 
     Returns the method's calibration with its options (the user's, and the defaults of the others)
-    recorded in ``details["options"]``; no verdict and no diagnostics (:func:`magfit.fit` adds those).
+    recorded (``Calibration.options``) and its model family (the method's, or the registry entry's);
+    no verdict and no diagnostics (:func:`magfit.fit` adds those).
     """
     options = dict(options or {})
     spec = method_spec(method, options)
@@ -80,10 +83,11 @@ def estimate(data: FitInput, method: str, options: Mapping[str, Any] | None = No
         check(data.statistics, spec.name)
     calibration = spec.function(data, **options)
     effective = {**spec.defaults, **options}  # every option, as the method ran: a refit needs no guessing
-    details = {**calibration.details, "options": recorded_options(effective)}
+    details = dict(calibration.details)
     if clipping is not None:
         details["saturation"] = clipping.to_dict()
-    return replace(calibration, details=details)
+    model = calibration.model if calibration.model is not None else spec.model
+    return replace(calibration, details=details, options=recorded_options(effective), model=model)
 
 
 #: A fit is refused when more than this share of the rows is clipped at the full scale: what is left is
@@ -153,3 +157,35 @@ def refitter(method: str, options: Mapping[str, Any]) -> Refit:
         return estimate(prepare(samples, spec), method, fixed)
 
     return refit
+
+
+def first_order_refit(
+    model: str, start: Calibration, samples: NDArray[np.float64], *, field_strength: float | None = None
+) -> Calibration:
+    """The first-order maximum-likelihood fit of ``model`` (sphere, diag, full) to ``samples``, from ``start``.
+
+    A few Levenberg-Marquardt iterations on the first-order distances of :mod:`magfit.geometry.frame`; the
+    result is scaled to ``field_strength`` when given.
+    """
+    from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters
+    from ..geometry.quadric import check_field_strength, pin_field_strength
+
+    frame = Frame.of(samples)
+    z = frame.normalise(samples)
+    _, optimum = maximum_likelihood(
+        z, model, [parameters(start, model, frame)], cost_tolerance=FIRST_ORDER_TOLERANCE,
+        max_iterations=FIRST_ORDER_ITERATIONS,
+    )  # fmt: skip
+    fitted = calibration_from_parameters(optimum, model, frame, model)
+    fitted = replace(fitted, model=model)  # type: ignore[arg-type]
+    return pin_field_strength(fitted, check_field_strength(field_strength))
+
+
+def first_order_stand_in(calibration: Calibration, options: Mapping[str, Any]) -> Refit:
+    """The first-order fit of ``calibration``'s model, from it: the stand-in of an iterative method
+    (:attr:`magfit.methods.registry.Judging.stand_in`)."""
+    from ..diagnostics import model_kind
+
+    kind = model_kind(calibration)
+    known = options.get("field_strength")
+    return lambda samples: first_order_refit(kind, calibration, samples, field_strength=known)

@@ -34,6 +34,7 @@ DIAGONAL_TERMS = (0, 1, 2, 6, 7, 8, 9)
     min_samples=7,
     data="statistics",
     summary="hard iron + per-axis scale: axis-aligned ellipsoid fit (magcal 'diag', MotionCal 7 elements)",
+    model="diag",
 )
 def fit_diag(data: FitInput, *, field_strength: float | None = None) -> Calibration:
     """Fit eq. (4) without cross terms by least squares: offset and a diagonal correction matrix.

@@ -20,6 +20,7 @@ from .registry import FitInput, register
     min_samples=9,
     data="statistics",
     summary="hard + soft iron: algebraic least-squares ellipsoid fit (paper, section II)",
+    model="full",
 )
 def fit_ellipsoid(data: FitInput, *, root: str = "sqrt", field_strength: float | None = None) -> Calibration:
     """Fit eq. (4) by least squares, then ``V = −½ M⁻¹ b``, ``A = M / (Vᵀ M V − d)``, ``W⁻¹ = A^½``.

@@ -28,6 +28,7 @@ MIN_RANGE_RATIO = 0.1
     min_samples=4,
     data="statistics",
     summary="pseudo-calibration: per-axis min/max scaling (paper, section IV)",
+    model="diag",
 )
 def fit_minmax(data: FitInput, *, centre: str = "mean") -> Calibration:
     """Scale each axis by its half-range around its mean (as published) or its mid-range.

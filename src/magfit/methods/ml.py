@@ -39,7 +39,7 @@ correction matrix only.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -48,10 +48,12 @@ from numpy.typing import NDArray
 from .._optimize import Evaluation, Solution, levenberg_marquardt
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
+from ..facts import SolverStatus
 from ..geometry.quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
 from ..statistics import Statistics
 from .als import als_theta
-from .registry import FitInput, register
+from .core import first_order_stand_in
+from .registry import FitInput, Judging, register
 
 __all__ = ["COVARIANCE_PARAMETERS", "fit_ml", "orthogonal_distances"]
 
@@ -312,6 +314,8 @@ def _solve_estimating_equation(model: _Model, solution: Solution, max_iterations
     min_samples=10,
     data="samples",
     summary="hard + soft iron: maximum likelihood (orthogonal distance), bias-corrected, started from als",
+    model="full",
+    judging=Judging(stand_in=first_order_stand_in),  # iterative: 10 refits would take seconds on a long log
 )
 def fit_ml(
     data: FitInput,
@@ -392,24 +396,23 @@ def fit_ml(
     details: dict[str, Any] = {
         "status": solution.status,
         "message": solution.message,
-        "iterations": solution.iterations,
         "cost": solution.evaluation.cost * scale**2,
         "start": start,
         "bias_correction": bool(bias_correction),
         "noise_std": math.sqrt(residual_variance) * scale,
         "covariance_parameters": list(COVARIANCE_PARAMETERS),
         "covariance": _covariance(model, solution, residual_variance, scale),
-        "converged": solution.status > 0,
     }
     if polish is not None:
         details["polish"] = f"the bias-corrected estimating equation was not solved further ({polish})"
+    problem = None
     if solution.status <= 0:  # judged by the verdict, which refuses it (or returns it forced, marked)
-        details["solver_problem"] = (
+        problem = (
             f"the ml fit did not converge ({solution.message}, after {solution.iterations} iterations): it crawled "
             "along a combination the samples hardly determine; record more attitudes, raise max_iterations, or use "
             "method='auto'"
         )
-    return calibration_from_ellipsoid(
+    fitted = calibration_from_ellipsoid(
         "ml",
         statistics.centre + scale * centre_z,
         shape_z / scale**2,
@@ -418,6 +421,8 @@ def fit_ml(
         details=details,
         field_strength=known_field,
     )
+    status = SolverStatus(converged=solution.status > 0, iterations=solution.iterations, problem=problem)
+    return replace(fitted, solver=status)
 
 
 def _covariance(model: _Model, solution: Solution, variance: float, scale: float) -> list[list[float]]:

@@ -4,25 +4,78 @@ A method is a function ``f(data: FitInput, *, <options>) -> Calibration`` regist
 :func:`register`. Its keyword-only parameters are its options: :func:`magfit.fit` rejects any other
 name, listing the valid ones. ``data="statistics"`` methods read only the sufficient statistics (so they
 also accept a :class:`~magfit.Statistics` built in chunks); ``data="samples"`` methods need the samples.
+
+What a method adds to its verdict travels in its entry too (:class:`Judging`): its own refit for the
+diagnostics, a quick stand-in for the repeated refits, a model error to add to the heading one-sigma and
+weaknesses of its own. :func:`magfit.fit` reads them from the entry and names no method.
 """
 
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import OptionError
+from ..errors import CalibrationError, OptionError
 
 if TYPE_CHECKING:
     from ..calibration import Calibration
+    from ..facts import ModelKind
+    from ..findings import Diagnostics, Reason
     from ..statistics import Statistics
 
-__all__ = ["METHODS", "FitInput", "MethodSpec", "get_method", "register"]
+__all__ = ["METHODS", "FitInput", "Judging", "MethodSpec", "Undetermined", "get_method", "register"]
+
+#: A function that fits a method (with fixed options) to (n, 3) samples: what the diagnostics receive.
+Refit = Callable[[NDArray[np.float64]], "Calibration"]
+#: Given the calibration and the options it ran with, the refit the diagnostics use.
+RefitFactory = Callable[["Calibration", Mapping[str, Any]], Refit]
+
+
+class Undetermined(CalibrationError):
+    """A method's refusal that carries the calibration a forced fit returns (``allow_undetermined=True``).
+
+    ``calibration`` is the method's best answer all the same (``auto``: the model its unforced choice ranks
+    best); :func:`magfit.fit` judges it, with this refusal first among its warnings.
+    """
+
+    def __init__(self, message: str, calibration: Calibration, code: str = "model_inadequate") -> None:
+        super().__init__(message, codes=(code,))
+        self.calibration = calibration
+
+
+@dataclass(frozen=True)
+class Judging:
+    """What a method adds to the verdict :func:`magfit.fit` reaches on its calibration. Every field optional.
+
+    Attributes
+    ----------
+    refit : callable or None
+        ``refit(calibration, options) -> Refit``: how the diagnostics refit a calibration of this method
+        (held-out folds, halves). None: the method itself with the options it ran with.
+    stand_in : callable or None
+        ``stand_in(calibration, options) -> Refit``: a quick fit that stands in for an iterative method in the
+        refits repeated 10 times (the halves, the block jackknife): the same stretches of the recording move
+        it the same way. None: the refit itself.
+    model_error_deg : callable or None
+        ``model_error_deg(calibration) -> float``: a heading error (degrees) the method knows its model may
+        make, added to the heading one-sigma before the verdict.
+    weaknesses : callable or None
+        ``weaknesses(calibration, report) -> tuple of Reason``: weaknesses the method names from its own facts.
+    compare_ml : bool
+        Whether the diagnostics compare the calibration with the maximum-likelihood fit of its model (moot for
+        a method that returns that fit).
+    """
+
+    refit: RefitFactory | None = None
+    stand_in: RefitFactory | None = None
+    model_error_deg: Callable[[Calibration], float] | None = None
+    weaknesses: Callable[[Calibration, Diagnostics], tuple[Reason, ...]] | None = None
+    compare_ml: bool = True
 
 
 @dataclass(frozen=True)
@@ -57,6 +110,11 @@ class MethodSpec:
     #: Options the method cannot run without: inputs beyond the samples (``vector``'s reference field).
     #: Methods that run on samples alone (every magnitude-only fit) need none.
     needs: tuple[str, ...] = ()
+    #: The model family the method fits (:data:`magfit.facts.MODEL_KINDS`), recorded on its calibration by
+    #: :func:`magfit.methods.core.estimate`; None: the method sets it itself (it depends on its options).
+    model: ModelKind | None = None
+    #: What the method adds to its verdict.
+    judging: Judging = Judging()
 
     @property
     def options(self) -> tuple[str, ...]:
@@ -81,13 +139,17 @@ def register(
     summary: str,
     checks: tuple[Callable[[Statistics, str], None], ...] = (),
     needs: tuple[str, ...] = (),
+    model: ModelKind | None = None,
+    judging: Judging | None = None,
 ) -> Callable[[Callable[..., Calibration]], Callable[..., Calibration]]:
-    """Decorator that adds a method to :data:`METHODS` under ``name``."""
+    """Decorator that adds a method to :data:`METHODS` under ``name`` (see :class:`MethodSpec`)."""
 
     def decorate(function: Callable[..., Calibration]) -> Callable[..., Calibration]:
         if name in METHODS:
             raise RuntimeError(f"method {name!r} registered twice")
-        METHODS[name] = MethodSpec(name, function, min_samples, data, summary, checks, needs)
+        METHODS[name] = MethodSpec(
+            name, function, min_samples, data, summary, checks, needs, model, judging if judging else Judging()
+        )
         return function
 
     return decorate

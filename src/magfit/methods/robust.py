@@ -26,24 +26,25 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import check_support
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..evaluate import unchecked_sphere_distances
+from ..facts import Rejected, SolverStatus
 from ..geometry.quadric import check_field_strength, pin_field_strength
+from ..outliers import DEFAULT_THRESHOLD, inlier_mask, robust_scale
 from ..statistics import Statistics
-from .core import estimate
-from .registry import METHODS, FitInput, register
+from .core import estimate, first_order_stand_in
+from .registry import METHODS, FitInput, Judging, register
 
-__all__ = ["MODELS", "fit_model", "fit_robust", "rejected_indices", "resolve_model"]
+__all__ = [
+    "DEFAULT_THRESHOLD", "MODELS", "fit_model", "fit_robust", "inlier_mask", "rejected_indices", "rejected_runs",
+    "resolve_model", "robust_scale",
+]  # fmt: skip
 
 #: Inner models ``robust`` and ``auto`` accept; ``"full"`` is the best full-ellipsoid estimator registered.
 MODELS = ("full", "sphere", "diag", "ellipsoid", "als", "ml")
-#: Cut-off c of the loss, in units of σ: a Gaussian inlier is rejected with probability 5e-4.
-DEFAULT_THRESHOLD = 3.5
 #: At most this many runs of rejected samples are stored in ``details`` (see :func:`encode_indices`).
 MAX_STORED_RUNS = 10_000
-_MAD_TO_SIGMA = 1.4826
 
 
 def resolve_model(model: str) -> tuple[str, Callable[..., Calibration]]:
@@ -51,8 +52,7 @@ def resolve_model(model: str) -> tuple[str, Callable[..., Calibration]]:
 
     The function is ``run(samples, statistics=None)``: ``statistics``, when given, are those of exactly
     these samples (computed when not). ``"full"`` is the consistent ``"als"`` when it is registered, else
-    the paper's ``"ellipsoid"``; ``"diag"`` is the registered ``"diag"`` method, else an axis-aligned
-    algebraic fit (eq. 4 without the cross terms).
+    the paper's ``"ellipsoid"``; ``"diag"`` is the registered ``"diag"`` method.
     """
     if model not in MODELS:
         raise OptionError(f"model={model!r} is not valid; choose one of: {', '.join(MODELS)}")
@@ -60,8 +60,6 @@ def resolve_model(model: str) -> tuple[str, Callable[..., Calibration]]:
     if model == "full":
         name = "als" if "als" in METHODS else "ellipsoid"
     if name not in METHODS:
-        if name == "diag":
-            return "diag (algebraic, axis-aligned)", _fit_diag_algebraic
         raise OptionError(f"model={model!r} needs the method {name!r}, which this magfit does not have")
     def run(samples: NDArray[np.float64], statistics: Statistics | None = None) -> Calibration:
         statistics = Statistics.from_samples(samples) if statistics is None else statistics
@@ -77,27 +75,6 @@ def fit_model(model: str, samples: NDArray[np.float64], statistics: Statistics |
     saved per model).
     """
     return resolve_model(model)[1](samples, statistics)
-
-
-def _fit_diag_algebraic(samples: NDArray[np.float64], statistics: Statistics | None = None) -> Calibration:
-    """Offset + axis-aligned scales: eq. (4) with m₂ = m₃ = m₅ = 0, least squares under |θ| = 1."""
-    from ..geometry.quadric import calibration_from_ellipsoid, ellipsoid_from_quadric
-
-    statistics = Statistics.from_samples(samples) if statistics is None else statistics
-    check_support(statistics, "diag", 7)
-    keep = [0, 1, 2, 6, 7, 8, 9]  # z₁², z₂², z₃², z₁, z₂, z₃, 1 (no cross terms)
-    scatter = statistics.scatter[np.ix_(keep, keep)] / statistics.n
-    _, eigenvectors = np.linalg.eigh(scatter)
-    theta = np.zeros(10)
-    theta[keep] = eigenvectors[:, 0]
-    offset, shape = ellipsoid_from_quadric(theta, statistics, "diag")
-    return calibration_from_ellipsoid("diag", offset, shape, n_samples=statistics.n)
-
-
-def robust_scale(residuals: NDArray[np.float64]) -> tuple[float, float]:
-    """Median and σ = 1.4826 MAD of the residuals (a Gaussian's standard deviation, robustly)."""
-    centre = float(np.median(residuals))
-    return centre, _MAD_TO_SIGMA * float(np.median(np.abs(residuals - centre)))
 
 
 def _band(samples: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -179,6 +156,7 @@ def _start(
     min_samples=12,
     data="samples",
     summary="outlier-robust fit: redescending M-estimator (IRLS, MAD scale) around sphere/diag/full models",
+    judging=Judging(stand_in=first_order_stand_in),  # iterative: 10 refits would take seconds on a long log
 )
 def fit_robust(
     data: FitInput,
@@ -206,10 +184,10 @@ def fit_robust(
     Returns
     -------
     Calibration
-        The inner model fitted on the inliers. ``details``: ``model`` (the inner method used),
-        ``n_rejected``, ``rejected`` (run-length encoded indices, see :func:`rejected_indices`),
-        ``residual_sigma`` (σ, fraction of the field strength), ``threshold``, ``iterations``,
-        ``converged`` and ``inner`` (the inner fit's own details).
+        The inner model fitted on the inliers; ``rejected`` (:class:`~magfit.facts.Rejected`: the count, the
+        run-length encoded indices, see :func:`rejected_indices`, the threshold), ``solver`` (iterations,
+        converged), ``model`` the inner model's family. ``details``: ``model`` (the inner method used),
+        ``residual_sigma`` (σ, fraction of the field strength) and ``inner`` (the inner fit's own details).
     """
     samples = data.require_samples("robust")
     known_field = check_field_strength(field_strength)
@@ -233,16 +211,7 @@ def fit_robust(
         inliers = new_inliers
         calibration = _fit_subset(run, samples, inliers, name)
     rejected = np.flatnonzero(~inliers)
-    details: dict[str, Any] = {
-        "model": name,
-        "n_rejected": int(rejected.size),
-        "rejected": encode_indices(rejected),
-        "residual_sigma": sigma,
-        "threshold": float(threshold),
-        "iterations": iterations,
-        "converged": converged,
-        "inner": dict(calibration.details),
-    }
+    details: dict[str, Any] = {"model": name, "residual_sigma": sigma, "inner": dict(calibration.details)}
     robust_fit = Calibration(
         method="robust",
         offset=calibration.offset,
@@ -250,6 +219,9 @@ def fit_robust(
         field_strength=calibration.field_strength,
         n_samples=n,
         details=details,
+        model=calibration.model,
+        rejected=rejected_runs(rejected, threshold),
+        solver=SolverStatus(converged=converged, iterations=iterations),
     )
     return pin_field_strength(robust_fit, known_field)
 
@@ -288,23 +260,33 @@ def encode_indices(indices: NDArray[np.integer[Any]]) -> dict[str, Any]:
     }
 
 
+def rejected_runs(indices: NDArray[np.integer[Any]], threshold: float | None = None) -> Rejected:
+    """The typed record of rejected sample indices (sorted): the count and the runs (:func:`encode_indices`)."""
+    encoded = encode_indices(indices)
+    return Rejected(
+        count=int(np.asarray(indices).size),
+        runs=tuple((int(start), int(stop)) for start, stop in encoded["runs"]),
+        truncated=bool(encoded["truncated"]),
+        threshold=None if threshold is None else float(threshold),
+    )
+
+
 def rejected_indices(calibration: Calibration) -> NDArray[np.int64]:
     """The indices of the samples a robust fit rejected, sorted, shape (n_rejected,).
 
-    Reads ``details["rejected"]`` of a ``robust`` (or ``auto`` with a robust choice) calibration;
+    Reads ``Calibration.rejected`` of a ``robust`` (or ``auto`` with a robust choice) calibration;
     raises :class:`~magfit.errors.MagfitError` when the list was truncated or the calibration has none.
     """
     from ..errors import MagfitError
 
-    stored = calibration.details.get("rejected")
+    stored = calibration.rejected
     if stored is None:
         raise MagfitError(f"a {calibration.method!r} calibration records no rejected samples")
-    if stored.get("truncated"):
+    if stored.truncated:
         raise MagfitError(
             f"the list of rejected samples was truncated to its first {MAX_STORED_RUNS} runs "
-            f"({calibration.details.get('n_rejected')} samples were rejected); refit with fewer outliers"
+            f"({stored.count} samples were rejected); refit with fewer outliers"
         )
-    runs = stored.get("runs", [])
-    if not runs:
+    if not stored.runs:
         return np.zeros(0, dtype=np.int64)
-    return np.concatenate([np.arange(start, stop, dtype=np.int64) for start, stop in runs])
+    return np.concatenate([np.arange(start, stop, dtype=np.int64) for start, stop in stored.runs])

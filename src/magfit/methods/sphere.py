@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
+from ..facts import KnownField, SolverStatus
 from ..geometry.quadric import check_field_strength
 from ..statistics import Statistics
 from .registry import FitInput, register
@@ -45,6 +46,7 @@ def solve_sphere(statistics: Statistics) -> tuple[NDArray[np.float64], float]:
     min_samples=4,
     data="statistics",
     summary="hard iron only: least-squares sphere fit (paper, section III)",
+    model="sphere",
 )
 def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibration:
     """Solve eq. (7) by least squares; the calibration is ``raw − V`` on a sphere of radius B (eq. 8).
@@ -53,8 +55,8 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
     ----------
     field_strength : float, optional
         Known magnitude B of the local field, input units (e.g. from the World Magnetic Model). The
-        offset is then fitted with the radius pinned to B (``details["field_strength_given"]``), starting
-        from the free fit's centre; the free fit's radius is kept in ``details["fitted_field_strength"]``.
+        offset is then fitted with the radius pinned to B, starting from the free fit's centre; the free fit's
+        radius is kept in ``known_field.fitted``.
     """
     known_field = check_field_strength(field_strength)
     statistics = data.statistics
@@ -82,12 +84,8 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
             matrix=np.eye(3),
             field_strength=known_field,
             n_samples=statistics.n,
-            details={
-                "field_strength_given": True,
-                "fitted_field_strength": fitted,
-                "radius_pinned": True,  # the fit itself used the known field: only the offset was fitted
-                "iterations": iterations,
-            },
+            known_field=KnownField(fitted=fitted, pinned=True),  # the fit itself used it: only the offset was fitted
+            solver=SolverStatus(iterations=iterations),
         )
     if not radius_squared_z > 0:
         raise CalibrationError(

@@ -23,7 +23,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
-from ..errors import CalibrationError, DataFileError, MagfitError
+from ..diagnostics.settle import settle
+from ..errors import DataFileError, MagfitError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
 from ..methods import get_method
@@ -555,7 +556,8 @@ def _with_diagnostics(
     calibration: Calibration, subsample: NDArray[np.float64], n_total: int, allow_undetermined: bool = False
 ) -> Calibration:
     """``calibration`` with :func:`magfit.diagnose` of the strided subsample in ``details["diagnostics"]``,
-    and its verdict in ``details["support"]``.
+    and its verdict (``calibration.support``), settled by the one verdict step
+    (:func:`magfit.diagnostics.settle.settle`).
 
     A fit from Statistics carries no coverage or uncertainty (they need samples); the stream provides
     them. Above :data:`DIAGNOSE_SAMPLES` rows the uncertainty is that of the subsample: conservative. The
@@ -577,17 +579,9 @@ def _with_diagnostics(
             f"{n_total}); the uncertainty is that of the subsample (conservative)."
         )
         report = replace(report, notes=(*report.notes, note))
-    details = {**calibration.details}
-    support = report.support
-    if support is not None:
-        if support.verdict == "refused":
-            if not allow_undetermined:
-                raise CalibrationError(support.message(calibration.method), codes=support.codes)
-            support = replace(support, forced=True)
-            report = replace(report, support=support, warnings=support.warnings)
-        details["support"] = support.to_dict()
-    details["diagnostics"] = report.to_dict()
-    return replace(calibration, details=details)
+    if report.support is None:
+        return replace(calibration, details={**calibration.details, "diagnostics": report.to_dict()})
+    return settle(calibration, report.support, allow_undetermined=allow_undetermined, report=report)
 
 
 def _require_rows(path: Path, n_samples: int, read: _ReadResult) -> None:

@@ -7,7 +7,7 @@ Agg canvas of its own, without pyplot: no global state, no display needed, safe 
 from __future__ import annotations
 
 import io
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -74,8 +74,7 @@ def method_labels(calibrations: Sequence[Calibration]) -> tuple[str, ...]:
         label = calibration.method
         repeat = sum(1 for other in labels if other == label or other.startswith((f"{label} #", f"{label} (")))
         label = label if repeat == 0 else f"{label} #{repeat + 1}"
-        support = calibration.details.get("support")
-        refused = isinstance(support, Mapping) and support.get("verdict") == "refused"
+        refused = calibration.support is not None and calibration.support.verdict == "refused"
         labels.append(f"{label} (not supported)" if refused else label)
     return tuple(labels)
 

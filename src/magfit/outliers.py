@@ -1,0 +1,54 @@
+"""The outlier rule of the robust fits, in one place: below :mod:`magfit.methods` and :mod:`magfit.diagnostics`.
+
+A sample is an outlier when its sphere distance ``r`` lies farther than ``threshold`` robust standard
+deviations from the median, ``|r − median(r)| > threshold · σ`` with ``σ = 1.4826 MAD(r)`` (a Gaussian's
+standard deviation, estimated robustly: Huber & Ronchetti, *Robust Statistics*, 2nd ed., 2009, section 5.1).
+:mod:`magfit.methods.robust` fits by it; the diagnostics leave out the samples it rejected
+(:func:`inlier_mask`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .evaluate import unchecked_sphere_distances
+
+if TYPE_CHECKING:
+    from .calibration import Calibration
+
+__all__ = ["DEFAULT_THRESHOLD", "MAD_TO_SIGMA", "inlier_mask", "robust_scale"]
+
+#: σ = 1.4826 MAD is a Gaussian's standard deviation.
+MAD_TO_SIGMA = 1.4826
+#: Cut-off c of the loss, in units of σ: a Gaussian inlier is rejected with probability 5e-4.
+DEFAULT_THRESHOLD = 3.5
+
+
+def robust_scale(residuals: NDArray[np.float64]) -> tuple[float, float]:
+    """Median and σ = 1.4826 MAD of the residuals (a Gaussian's standard deviation, robustly)."""
+    centre = float(np.median(residuals))
+    return centre, MAD_TO_SIGMA * float(np.median(np.abs(residuals - centre)))
+
+
+def inlier_mask(calibration: Calibration, samples: NDArray[Any]) -> tuple[NDArray[np.bool_] | None, str]:
+    """The samples a robust fit kept (None: all, or no robust fit), and how they were found.
+
+    The recorded runs (:attr:`Calibration.rejected`) when they refer to these samples; otherwise (a subsample,
+    a truncated list) the rule applied again with the fit's threshold.
+    """
+    stored = calibration.rejected
+    if stored is None:
+        return None, ""
+    n = samples.shape[0]
+    if not stored.truncated and calibration.n_samples == n:
+        mask = np.ones(n, dtype=bool)
+        for start, stop in stored.runs:
+            mask[start:stop] = False
+        return mask, "the robust fit rejected"
+    residuals = unchecked_sphere_distances(calibration, samples)
+    centre, sigma = robust_scale(residuals)
+    threshold = DEFAULT_THRESHOLD if stored.threshold is None else stored.threshold
+    return np.abs(residuals - centre) <= threshold * max(sigma, 1e-12), "lie beyond the robust fit's threshold"
