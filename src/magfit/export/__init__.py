@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike
 from ..calibration import Calibration
 from ..errors import ExportError, MagfitError, OptionError
 from ..findings import Reason
+from ..temperature import TemperatureDrift
 from ..units import field_unit_reason, get_unit
 from ._common import comment_lines, with_applied_rotation
 from ._motor import refuse_motor
@@ -105,7 +106,7 @@ _SPECS = (
     ),
     FormatSpec(
         "px4", ".params", "PX4 CAL_MAG0_OFF/SCALE/ODIAG parameters in gauss (QGroundControl parameter file)",
-        "G", write_px4, ("system_id", "slot", "device_id", "applied_rotation"),
+        "G", write_px4, ("system_id", "slot", "device_id", "applied_rotation", "temperature"),
     ),
     FormatSpec(
         "fusion", ".h", "x-io Fusion softIronMatrix / hardIronOffset (C header) with the imufusion Python names",
@@ -160,6 +161,7 @@ def export(
     expected_field: float | None = None,
     applied_rotation: ArrayLike | None = None,
     allow_unit_mismatch: bool = False,
+    temperature: TemperatureDrift | None = None,
 ) -> str:
     """The text of a file that carries ``calibration`` in the convention of ``format``.
 
@@ -197,6 +199,10 @@ def export(
         The formats of :data:`UNIT_CHECKED` write the field in a physical unit, and refuse a calibration
         whose field strength is no place's Earth field in the declared unit
         (:func:`magfit.units.field_unit_reason`: a wrong ``unit``); True writes it all the same.
+    temperature : TemperatureDrift or None
+        ``px4``: the offset's drift with temperature a log determined (:func:`magfit.temperature.log_drifts`),
+        written as PX4's ``TC_M_ENABLE``/``TC_Mn_*`` thermal compensation (a straight line about the log's
+        mean temperature; refused, code ``undetermined``, when the log does not determine it).
 
     Returns
     -------
@@ -218,7 +224,8 @@ def export(
     if not isinstance(calibration, Calibration):
         raise MagfitError(f"export() takes a magfit.Calibration, got {type(calibration).__name__}")
     _refuse_residual(calibration, format)
-    options = {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field}
+    options = {"system_id": system_id, "slot": slot, "device_id": device_id, "expected_field": expected_field,
+               "temperature": temperature}  # fmt: skip
     given = _options(spec, {**options, "applied_rotation": applied_rotation})
     mismatch = _refuse_unit_mismatch(calibration, format, unit, allow_unit_mismatch)
     given.pop("applied_rotation", None)
