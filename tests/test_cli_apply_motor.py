@@ -158,3 +158,24 @@ def test_a_log_without_the_current_is_refused_in_one_line(flight: MotorFlight, t
     errors = [line for line in result.stderr.splitlines() if line.startswith("magfit: error:")]
     assert len(errors) == 1 and errors[0] == result.stderr.strip().splitlines()[-1]
     assert "BAT.Curr" in errors[0] and "--no-motor" in errors[0] and "deg of heading" in errors[0]
+
+
+def test_a_ulog_is_corrected_with_its_battery_current(flight: MotorFlight, tmp_path: Path) -> None:
+    pytest.importorskip("pyulog")
+    from magfit.motorterm import MotorTerm
+    from test_motor_logs import write_px4_flight
+
+    truth, term = flight.truth, flight.truth.motor
+    assert term is not None
+    in_gauss = Calibration(
+        "truth", truth.offset * 1e-3, truth.matrix, truth.field_strength * 1e-3, unit="G",
+        motor=MotorTerm("current", term.coefficients * 1e-3, lag_s=term.lag_s, full_scale=term.full_scale),
+    )  # fmt: skip
+    cal = tmp_path / "truth_g.json"
+    cal.write_text(in_gauss.to_json())
+    log = write_px4_flight(tmp_path / "quad.ulg", flight)
+    out = tmp_path / "out.csv"
+    result = CliRunner().invoke(cli, ["apply", str(cal), str(log), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "battery_status.current_a" in result.stdout
+    assert _heading(out, flight) < 1.0
