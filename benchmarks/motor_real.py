@@ -69,15 +69,20 @@ class Flight:
     current: np.ndarray
     params: dict[str, float]
     index: int
+    time_s: np.ndarray | None = None
+
+    def subset(self, keep: np.ndarray) -> Flight:
+        """The samples ``keep`` selects."""
+        time_s = None if self.time_s is None else self.time_s[keep]
+        return Flight(self.sensor, self.raw[keep], self.attitude[keep], self.field_ned, self.current[keep],
+                      self.params, self.index, time_s)  # fmt: skip
 
 
 def scores(corrected: np.ndarray, flight: Flight) -> list[float]:
     """RMS residuals (mG) over every sample: against the field turned by the whole attitude, with the yaw
     recomputed, of the magnitude; then the last two over the upright samples only (tilt below 90°)."""
     up = flight.attitude[:, 2, 2] > 0
-    upright = Flight(flight.sensor, flight.raw[up], flight.attitude[up], flight.field_ned, flight.current[up],
-                     flight.params, flight.index)  # fmt: skip
-    return [*_scores(corrected, flight), *_scores(corrected[up], upright)[1:]]
+    return [*_scores(corrected, flight), *_scores(corrected[up], flight.subset(up))[1:]]
 
 
 def _scores(corrected: np.ndarray, flight: Flight) -> tuple[float, float, float]:
@@ -140,14 +145,19 @@ def flights(path: Path) -> tuple[list[Flight], str]:
         if motion.attitude is None:
             continue
         current = _held(power.current.time_s, power.current.values, motion.time_s)
-        out.append(Flight(mag.id, motion.samples, motion.attitude, field, current, params, index))
+        out.append(Flight(mag.id, motion.samples, motion.attitude, field, current, params, index, motion.time_s))
     where = f"{model.model} at {model.latitude:.3f}°, {model.longitude:.3f}°, {model.year:.2f}"
     return out, f"{where}: |B| {np.linalg.norm(field):.1f} mG, inclination {model.inclination_deg:.1f}°"
 
 
-def magfit_rows(path: Path, flight: Flight) -> list[tuple[str, np.ndarray | None, str]]:
+def magfit_rows(
+    path: Path, flight: Flight, on: Flight | None = None, choices: tuple[tuple[str, str], ...] | None = None
+) -> list[tuple[str, np.ndarray | None, str]]:
+    """magfit's calibrations of ``path`` (``--motor`` and ``--method`` per ``choices``) applied to ``on``."""
+    on = flight if on is None else on
     rows: list[tuple[str, np.ndarray | None, str]] = []
-    for method, motor in (("auto", "none"), ("auto", "auto"), ("auto", "current"), ("sphere", "auto")):
+    choices = choices or (("auto", "none"), ("auto", "auto"), ("auto", "current"), ("sphere", "auto"))
+    for method, motor in choices:
         name = f"magfit --motor {motor}" + (f" --method {method}" if method != "auto" else "")
         start = time.perf_counter()
         try:
@@ -159,7 +169,7 @@ def magfit_rows(path: Path, flight: Flight) -> list[tuple[str, np.ndarray | None
         seconds = time.perf_counter() - start
         calibration = result.calibration
         params = _params_ardupilot(export(calibration, "ardupilot"))
-        corrected = ardupilot_correct(params, flight.raw, flight.current, flight.current)
+        corrected = ardupilot_correct(params, on.raw, on.current, on.current)
         term = calibration.motor
         if term is None:
             note = f"no term; {seconds:.0f} s"
@@ -172,13 +182,15 @@ def magfit_rows(path: Path, flight: Flight) -> list[tuple[str, np.ndarray | None
     return rows
 
 
-def plain_regression(flight: Flight) -> tuple[np.ndarray, str]:
-    """``raw − Aᵀ B = V + k c`` per axis by least squares: the naive fit that takes the attitude as true."""
+def plain_regression(flight: Flight, on: Flight | None = None) -> tuple[np.ndarray, str]:
+    """``raw − Aᵀ B = V + k c`` per axis by least squares: the naive fit that takes the attitude as true
+    (fitted on ``flight``, applied to ``on``, by default the same)."""
+    on = flight if on is None else on
     expected = np.einsum("nji,j->ni", flight.attitude, flight.field_ned)
     design = np.column_stack([np.ones(len(flight.raw)), flight.current])
     coef, *_ = np.linalg.lstsq(design, flight.raw - expected, rcond=None)
     offset, k = coef[0], coef[1]
-    corrected = flight.raw - offset - np.outer(flight.current, k)
+    corrected = on.raw - offset - np.outer(on.current, k)
     return (
         corrected,
         f"offset ({offset[0]:.0f}, {offset[1]:.0f}, {offset[2]:.0f}) mG, k ({k[0]:.2f}, {k[1]:.2f}, {k[2]:.2f}) mG/A",
@@ -284,12 +296,66 @@ def wmm_correct(params: dict[str, float], raw: np.ndarray, current: np.ndarray) 
     return out + np.outer(current, [params[f"COMPASS_MOT_{a}"] for a in "XYZ"])
 
 
+def truncated(path: Path, cut_s: float, into: Path) -> Path:
+    """The log up to its first MAG record stamped after ``cut_s`` (every message before it, bytes unchanged)."""
+    data = path.read_bytes()
+    formats: dict[int, tuple[int, str, str]] = {}
+    i = 0
+    while i + 3 <= len(data):
+        if data[i : i + 2] != FMT_HEADER[:2]:
+            i += 1
+            continue
+        kind = data[i + 2]
+        if kind == FMT_HEADER[2]:
+            type_id, length = data[i + 3], data[i + 4]
+            name = data[i + 5 : i + 9].rstrip(b"\x00").decode()
+            letters = data[i + 9 : i + 25].rstrip(b"\x00").decode()
+            formats[type_id] = (length, name, letters)
+            i += FMT_SIZE
+            continue
+        if kind not in formats:
+            i += 1
+            continue
+        length, name, letters = formats[kind]
+        if name == "MAG" and letters[:1] in "IQ":
+            stamp = int.from_bytes(data[i + 3 : i + 3 + (4 if letters[0] == "I" else 8)], "little")
+            if stamp * (1e-3 if letters[0] == "I" else 1e-6) > cut_s:
+                out = into / f"{path.stem}_to{cut_s:.0f}s.bin"
+                out.write_bytes(data[:i])
+                return out
+        i += length
+    raise SystemExit(f"{path}: no MAG record after {cut_s} s")
+
+
+def holdout(path: Path, flight: Flight, cut_s: float, python: str, saved: Path | None) -> list[str]:
+    """Each calibration fitted on the log up to ``cut_s`` and scored on the upright samples after it."""
+    assert flight.time_s is not None
+    test = flight.subset((flight.time_s > cut_s) & (flight.attitude[:, 2, 2] > 0))
+    train = flight.subset(flight.time_s <= cut_s)
+    with tempfile.TemporaryDirectory() as tmp:
+        cut = truncated(path, cut_s, Path(tmp))
+        rows = magfit_rows(cut, flight, test, (("auto", "none"), ("auto", "auto")))
+        rows.append(("plain regression (offset + k c)", *plain_regression(train, test)))
+        for options in (("--cmot",), ("--cmot", "--elliptical")):
+            params, note = magfit_wmm(cut, flight, python, saved, options)
+            corrected = None if params is None else wmm_correct(params, test.raw, test.current)
+            rows.append((f"magfit_WMM {' '.join(options)}", corrected, note))
+    lines = []
+    for name, corrected, note in rows:
+        figures = " | ".join(f"{v:.1f}" for v in _scores(corrected, test)) if corrected is not None else "- | - | -"
+        lines.append(f"| {flight.sensor} | {name} | {figures} | {note} |")
+        print(lines[-1], flush=True)
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("logs", nargs="+", type=Path)
     parser.add_argument("--pymavlink-python", default=sys.executable)
     parser.add_argument("--wmm-params", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--holdout", type=float, default=None, metavar="SECONDS",
+                        help="also fit the first compass on the log up to SECONDS and score on the rest")  # fmt: skip
     args = parser.parse_args(argv)
     lines = []
     for path in args.logs:
@@ -321,6 +387,14 @@ def main(argv: list[str] | None = None) -> int:
                 print(line, flush=True)
                 lines.append(line)
         lines.append("")
+        if args.holdout is not None and found:
+            first = found[0]
+            lines += [f"Held out: {first.sensor} fitted on the log up to {args.holdout:.0f} s, scored on the upright "
+                      "samples after it (RMS, mG).", "",
+                      "| compass | calibration | att | rp | \\|B\\| | term and notes |",
+                      "|---|---|---|---|---|---|"]  # fmt: skip
+            lines += holdout(path, first, args.holdout, args.pymavlink_python, args.wmm_params)
+            lines.append("")
     _write(args.out, lines)
     return 0
 

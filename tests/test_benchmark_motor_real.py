@@ -51,3 +51,19 @@ def test_the_copy_for_magfit_wmm_renames_curr_to_bat_in_amperes(tmp_path: Path) 
     data = copy.read_bytes()
     assert b"BAT\x00IhhcHfh" in data and b"CURR" not in data
     assert len(data) == len(log.read_bytes())
+
+
+def _log(records: int) -> bytes:
+    writer = DataFlashWriter()
+    writer.define(130, "MAG", "QhhhI", "TimeUS,MagX,MagY,MagZ,S")
+    writer.define(131, "BAT", "Qf", "TimeUS,Curr")
+    for j in range(records):
+        writer.write("MAG", 1_000_000 * j, 1, 2, 3, j)
+        writer.write("BAT", 1_000_000 * j + 10, float(j))
+    return writer.bytes()
+
+
+def test_the_log_is_cut_before_its_first_mag_record_after_the_time(tmp_path: Path) -> None:
+    log = tmp_path / "full.bin"
+    log.write_bytes(_log(10))
+    assert motor_real.truncated(log, 4.5, tmp_path).read_bytes() == _log(5)
