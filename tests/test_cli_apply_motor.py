@@ -147,6 +147,8 @@ def test_a_log_is_corrected_with_its_own_current(flight: MotorFlight, tmp_path: 
     plain = tmp_path / "plain.csv"
     assert CliRunner().invoke(cli, ["apply", str(cal), str(log), "--no-motor", "-o", str(plain)]).exit_code == 0
     assert _heading(plain, flight) > 3 * _heading(out, flight)
+    given = CliRunner().invoke(cli, ["apply", str(cal), str(log), "--regressor", "x", "-o", str(tmp_path / "o.csv")])
+    assert given.exit_code == 2 and "is a log" in given.stderr
 
 
 def test_a_log_without_the_current_is_refused_in_one_line(flight: MotorFlight, tmp_path: Path) -> None:

@@ -126,6 +126,9 @@ def apply_command(
     calibration = read_calibration(calibration_file)
     calibration = _motor_choice(calibration, calibration_file, regressor, no_motor)
     if is_log(file):
+        if regressor is not None:
+            raise OptionError(f"--regressor names a samples file's column; {file} is a log, whose own current or "
+                              "throttle is used")  # fmt: skip
         _apply_to_log(calibration, calibration_file, file, output, columns, normalized, sensor)
         return
     if sensor is not None:
