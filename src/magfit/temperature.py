@@ -21,9 +21,10 @@ up slowly).
 It is determined when the temperature varies (a standard deviation of 1 °C at least) and the directions the
 field took while it varied let (T1) separate ``d`` from ``δV`` (the smallest singular value of the centred
 design, relative to the largest, at least 0.05); otherwise it is refused with the reason (code
-``undetermined``). Over a few degrees a straight line is all the data determine; a log does not cover the
-range PX4's thermal calibration needs (its ``TC_Mn_*`` cubic is fitted over tens of degrees on a bench), so
-no ``TC_Mn_*`` export is written from a log.
+``undetermined``). Over a few degrees a straight line is all the data determine: where it is determined,
+PX4's ``TC_Mn_*`` thermal compensation is exported as that line (:mod:`magfit.export.px4_temperature`: the
+cubic's higher coefficients zero, the temperature clipped to the log's range), and refused with the reason
+where it is not.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from .findings import Reason, ReasonList
 if TYPE_CHECKING:
     from .pipeline import FileCalibration
 
-__all__ = ["TemperatureDrift", "log_drifts", "offset_drift", "read_mag_temperature"]
+__all__ = ["TemperatureDrift", "compass_drift", "log_drifts", "offset_drift", "read_mag_temperature"]
 
 _PAIRS = ((0, 1), (0, 2), (1, 2))
 #: Below this standard deviation of the temperature (°C) no drift is determined.
@@ -201,21 +202,33 @@ def log_drifts(result: FileCalibration) -> dict[str, TemperatureDrift]:
     DataFileError
         The log cannot be read again.
     """
-    from .sources import log_kind, open_source
-
-    if log_kind(result.path) != "ulog":
-        return {}
-    source = open_source(result.path)
     drifts = {}
     for compass in result.compasses:
-        sensor = compass.sensor
-        if sensor is None:
+        if compass.sensor is None:
             continue
-        read = read_mag_temperature(result.path, sensor)
-        if read is None or len(read[0]) < 2:
-            continue
-        samples = source.read(sensor)
-        inside = (samples.time_s >= read[0][0]) & (samples.time_s <= read[0][-1])
-        temperature = np.interp(samples.time_s[inside], *read)
-        drifts[sensor] = offset_drift(samples.samples[inside], temperature, compass.calibration)
+        drift = compass_drift(result.path, compass.sensor, compass.calibration)
+        if drift is not None:
+            drifts[compass.sensor] = drift
     return drifts
+
+
+def compass_drift(path: str | Path, sensor: str, calibration: Calibration) -> TemperatureDrift | None:
+    """:func:`offset_drift` of one compass of a PX4 ULog (``sensor_mag/N``) with the calibration fitted on it;
+    None when the file is no ULog or that ``sensor_mag`` logs no temperature.
+
+    Raises
+    ------
+    DataFileError
+        The log cannot be read again.
+    """
+    from .sources import log_kind, open_source
+
+    if log_kind(path) != "ulog":
+        return None
+    read = read_mag_temperature(path, sensor)
+    if read is None or len(read[0]) < 2:
+        return None
+    samples = open_source(path).read(sensor)
+    inside = (samples.time_s >= read[0][0]) & (samples.time_s <= read[0][-1])
+    temperature = np.interp(samples.time_s[inside], *read)
+    return offset_drift(samples.samples[inside], temperature, calibration)

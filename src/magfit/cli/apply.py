@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
 
 from ..calibration import CONVENTION, Calibration
-from ..errors import DataFileError, MagfitError
+from ..errors import DataFileError, MagfitError, OptionError
+from ..pipeline.motor import column_regressor, log_regressor
 from ._common import columns_text, console, parse_columns, refuse_overwriting_input, warn
 from ._logs import is_log, read_recordings
 
@@ -77,6 +79,17 @@ def remembered_columns(calibration: Calibration, fmt: FileFormat) -> list[str | 
     metavar="ID",
     help="The compass of a flight log or bag to correct. Default: the one CAL was fitted on (or the log's only one).",
 )
+@click.option(
+    "--regressor",
+    metavar="COLUMN",
+    help="For a CAL with the motors' field: the samples file's current (A) or throttle (0-1) column, a name or "
+    "0-based number. Default: found by its name (current, curr, throttle, thr ...). A log's own is always used.",
+)
+@click.option(
+    "--no-motor",
+    is_flag=True,
+    help="Apply a CAL that holds the motors' field without it (the heading error that leaves is said).",
+)
 def apply_command(
     calibration_file: Path,
     file: Path,
@@ -84,13 +97,17 @@ def apply_command(
     columns: list[str | int] | None,
     normalized: bool,
     sensor: str | None,
+    regressor: str | None,
+    no_motor: bool,
 ) -> None:
     """Correct the samples of FILE with the calibration CAL and write them to -o.
 
     Each sample becomes matrix @ (raw - offset); the file's other columns (time, gyro ...) and its
-    format (delimiter, header) are kept. CAL is a JSON file written by 'magfit calibrate -o'. FILE may be a
-    flight log or bag (ULog, DataFlash, ROS): its compass's corrected samples are written as CSV with their
-    time stamps (time_s, then x, y, z), or as an (N, 4) array when -o ends in .npy.
+    format (delimiter, header) are kept. A CAL with the motors' field (fitted with --motor) becomes
+    matrix @ (raw - offset - k c), c the log's battery current or throttle, or a samples file's column.
+    CAL is a JSON file written by 'magfit calibrate -o'. FILE may be a flight log or bag (ULog, DataFlash,
+    ROS): its compass's corrected samples are written as CSV with their time stamps (time_s, then x, y, z),
+    or as an (N, 4) array when -o ends in .npy.
 
     \b
     Examples:
@@ -98,6 +115,7 @@ def apply_command(
       magfit apply cal.json flight.csv --columns mx,my,mz -o flight_calibrated.csv
       magfit calibrate 00000042.BIN --sensor MAG/0 -o mag0.json
       magfit apply mag0.json 00000042.BIN -o mag0_calibrated.csv
+      magfit apply quad.json quad.csv --regressor bat_amps -o quad_calibrated.csv
     """
     from ..io import STDOUT, check_output, iter_sample_chunks, sniff, write_calibrated
 
@@ -106,7 +124,11 @@ def apply_command(
         refuse_overwriting_input(output, [file, calibration_file])
     check_output(output)
     calibration = read_calibration(calibration_file)
+    calibration = _motor_choice(calibration, calibration_file, regressor, no_motor)
     if is_log(file):
+        if regressor is not None:
+            raise OptionError(f"--regressor names a samples file's column; {file} is a log, whose own current or "
+                              "throttle is used")  # fmt: skip
         _apply_to_log(calibration, calibration_file, file, output, columns, normalized, sensor)
         return
     if sensor is not None:
@@ -123,16 +145,56 @@ def apply_command(
             f"{error} ({calibration_file} was fitted on the columns {columns_text(remembered)}; choose the columns "
             f"of {file} with --columns)"
         ) from None
-    written = write_calibrated(file, calibration, output, columns=chosen, normalized=normalized)
+    values, motor_note = None, ""
+    if calibration.motor is not None:
+        values, label = column_regressor(file, calibration.motor, _column(regressor), held_by=str(calibration_file),
+                                         cost=omission_text(calibration))  # fmt: skip
+        found = "--regressor" if regressor is not None else "found by name"
+        motor_note = f"; the motors' field with the {calibration.motor.regressor} of {label} ({found})"
+    written = write_calibrated(file, calibration, output, columns=chosen, normalized=normalized, regressor=values)
     out = console(stderr=to_stdout)
     scale = "unit sphere" if normalized else f"input units{f' ({calibration.unit})' if calibration.unit else ''}"
     how = "--columns" if columns is not None else f"as fitted, {calibration_file}" if remembered else reader.column_note
     used = f" (columns {columns_text(reader.columns)}{f'; {how}' if how else ''})"
     out.print(
-        f"wrote {written}: {file}{used} corrected with {calibration_file} ({calibration.method}), {scale}",
+        f"wrote {written}: {file}{used} corrected with {calibration_file} ({calibration.method}), {scale}{motor_note}",
         soft_wrap=True,
     )
     out.print(f"convention: {CONVENTION}")
+
+
+def omission_text(calibration: Calibration) -> str:
+    """What leaving the calibration's motor term out costs, in words."""
+    from ..export._motor import omission_deg
+
+    term = calibration.motor
+    assert term is not None
+    at = f"{term.full_scale:.3g} A" if term.regressor == "current" else "full throttle"
+    return f"up to {omission_deg(calibration):.1f} deg of heading error at {at}"
+
+
+def _motor_choice(
+    calibration: Calibration, calibration_file: Path, regressor: str | None, no_motor: bool
+) -> Calibration:
+    """The calibration as it will be applied: without its motor term under --no-motor (said, with the cost)."""
+    if no_motor and regressor is not None:
+        raise OptionError("--no-motor leaves the motors' field out and --regressor names its column: give one")
+    if calibration.motor is None:
+        if regressor is not None:
+            raise OptionError(f"--regressor: {calibration_file} holds no motors' field (it was fitted without one)")
+        return calibration
+    if no_motor:
+        warn(f"--no-motor: {calibration_file}'s motors' field ({calibration.motor.regressor}) is left out: "
+             f"{omission_text(calibration)}")  # fmt: skip
+        return replace(calibration, motor=None)
+    return calibration
+
+
+def _column(regressor: str | None) -> str | int | None:
+    """--regressor's column: a 0-based number when it is one, else a name."""
+    if regressor is not None and regressor.strip().isdigit():
+        return int(regressor)
+    return regressor
 
 
 def fitted_sensor(calibration: Calibration) -> str | None:
@@ -171,8 +233,15 @@ def _apply_to_log(
             f"{calibration_file} is in {calibration.unit} and {file} ({recording.sensor}) logs {recording.unit}: "
             f"fit the calibration on this log ('magfit calibrate {file} --sensor {recording.sensor}')"
         )
-    corrected = calibration.apply(recording.samples, normalized=normalized)
     assert recording.time_s is not None
+    motor_note = ""
+    if calibration.motor is not None:
+        values, name = log_regressor(file, calibration.motor, recording.time_s, held_by=str(calibration_file),
+                                     cost=omission_text(calibration))  # fmt: skip
+        corrected = calibration.apply(recording.samples, normalized=normalized, regressor=values)
+        motor_note = f"; the motors' field with {name} at {1000 * calibration.motor.lag_s:.0f} ms lag"
+    else:
+        corrected = calibration.apply(recording.samples, normalized=normalized)
     table = np.column_stack([recording.time_s, corrected])
     if output.suffix.lower() == ".npy" and str(output) != STDOUT:
         buffer = io.BytesIO()
@@ -188,7 +257,7 @@ def _apply_to_log(
     scale = "unit sphere" if normalized else f"input units{f' ({calibration.unit})' if calibration.unit else ''}"
     out.print(
         f"wrote {output}: {len(table)} samples of {recording.name} with their time stamps, corrected with "
-        f"{calibration_file} ({calibration.method}), {scale}",
+        f"{calibration_file} ({calibration.method}), {scale}{motor_note}",
         soft_wrap=True,
     )
     out.print(f"convention: {CONVENTION}")

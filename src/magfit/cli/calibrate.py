@@ -141,6 +141,14 @@ def _export_options(
     model = compass.model_field
     if model is not None and "expected_field" in FORMATS[export_format].options and unit and get_unit(unit).is_physical:
         options["expected_field"] = model.field.total_in(unit)
+    sensor = compass.calibration.details.get("sensor")
+    known = isinstance(sensor, dict) and sensor.get("device_id") is not None
+    if export_format == "px4" and compass.sensor is not None and known:  # TC_Mn_* where the log determines it
+        from ..temperature import compass_drift
+
+        drift = compass_drift(compass.path, compass.sensor, compass.calibration)
+        if drift is not None and drift.determined:
+            options["temperature"] = drift
     return options
 
 

@@ -78,6 +78,7 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
 from ..rotations import PX4_ROTATION_MAX
+from ..temperature import TemperatureDrift
 from ..units import field_unit_reason
 from ._common import (
     ROTATION_TOLERANCE_DEG,
@@ -95,6 +96,7 @@ from ._common import (
 )
 from ._heading import ASSUMPTION, heading_error_deg
 from ._motor import PX4_COMP_TYP, chosen_regressor, describe_term, mismatch_comment, px4_comp
+from .px4_temperature import px4_temperature
 
 #: check_calibration_result: sphere radius in [0.2, 0.7) gauss.
 FIELD_RANGE_G = (0.2, 0.7)
@@ -110,7 +112,7 @@ INT32 = 6
 #: Calibration slots (Magnetometer::MAX_SENSOR_COUNT): CAL_MAG0 .. CAL_MAG3.
 SLOT_COUNT = 4
 #: Parameters PX4 stores as integers.
-INTEGER_SUFFIXES = ("_ID", "_ROT", "_COMP_TYP")
+INTEGER_SUFFIXES = ("_ID", "_ROT", "_COMP_TYP", "_ENABLE")
 
 
 def parameter_names(slot: int) -> tuple[str, ...]:
@@ -284,6 +286,7 @@ def write_px4(
     system_id: int = 1,
     slot: int | None = None,
     device_id: int | None = None,
+    temperature: TemperatureDrift | None = None,
 ) -> str:
     """The calibration as a QGroundControl parameter file for PX4 (see the module docstring).
 
@@ -297,16 +300,24 @@ def write_px4(
         The vehicle's MAVLink system id (MAV_SYS_ID), 1 to 255, written in the first column.
     slot, device_id : int or None
         The calibration slot (CAL_MAGn, 0-3) and the sensor's device id (see :func:`px4_parameters`).
+    temperature : TemperatureDrift or None
+        The offset's drift with temperature the log determined (:func:`magfit.temperature.log_drifts`): written
+        as PX4's ``TC_M_ENABLE`` and ``TC_Mn_*`` (:mod:`.px4_temperature`), n the calibration's slot.
 
     Raises
     ------
     ExportError
-        No physical unit, or PX4 would reject the values.
+        No physical unit, PX4 would reject the values, or ``temperature`` is not determined.
     OptionError
         ``unit`` is not a unit magfit knows, ``system_id`` is not 1 to 255, or ``slot``/``device_id`` out of range.
     """
     system_id = _check_system_id(system_id)
-    return _file([calibration], [_slot(calibration, unit, slot, device_id)], unit, system_id)
+    entry = _slot(calibration, unit, slot, device_id)
+    if temperature is not None:
+        known = entry.parameters.get(f"CAL_MAG{entry.slot}_ID")
+        block = px4_temperature(temperature, slot=entry.slot, device_id=None if known is None else int(known))
+        entry = SlotParameters(entry.slot, entry.parameters | block.parameters, entry.comments + block.comments)
+    return _file([calibration], [entry], unit, system_id)
 
 
 def write_px4_several(

@@ -60,6 +60,7 @@ def write_calibrated(
     *,
     columns: Sequence[str | int] | None = None,
     normalized: bool = False,
+    regressor: NDArray[np.float64] | None = None,
 ) -> Path:
     """Write ``source`` again with its magnetometer columns calibrated.
 
@@ -76,6 +77,9 @@ def write_calibrated(
         The x, y, z columns (names or 0-based indices); None as in :func:`~magfit.io.read_samples`.
     normalized : bool
         Write values divided by ``field_strength`` (unit sphere) instead of input units.
+    regressor : ndarray, shape (N,), optional
+        For a calibration with a motor term: the regressor of each data row, in the file's row order
+        (``calibration.apply(..., regressor=...)``); a row where it is NaN gets ``nan`` like a non-finite row.
 
     Returns
     -------
@@ -107,17 +111,47 @@ def write_calibrated(
         )
     reader = ChunkReader(path, columns=chosen)
     kind = reader.format.kind
+    rows = _Rows(regressor)
     if kind == "text":
-        _write_text(reader, calibration, out, normalized)
+        _write_text(reader, calibration, out, normalized, rows)
     elif kind == "npy":
-        _write_npy(reader, calibration, out, normalized)
+        _write_npy(reader, calibration, out, normalized, rows)
     else:
-        _write_npz(reader, calibration, out, normalized)
+        _write_npz(reader, calibration, out, normalized, rows)
     return out
 
 
+class _Rows:
+    """The regressor's values handed out row block by row block, in the order the writers calibrate them."""
+
+    def __init__(self, regressor: NDArray[np.float64] | None) -> None:
+        self.values = None if regressor is None else np.asarray(regressor, dtype=np.float64)
+        self.position = 0
+
+    def take(self, n: int) -> NDArray[np.float64] | None:
+        if self.values is None:
+            return None
+        if self.position + n > len(self.values):
+            raise DataFileError(f"the regressor has {len(self.values)} values, fewer than the file's data rows")
+        block = self.values[self.position : self.position + n]
+        self.position += n
+        return block
+
+    def done(self) -> None:
+        """Raise unless every value went to a row (checked before the output is committed)."""
+        if self.values is not None and self.position != len(self.values):
+            raise DataFileError(
+                f"the regressor has {len(self.values)} values and the file {self.position} data rows: they do not "
+                "pair row for row"
+            )
+
+    def again(self) -> _Rows:
+        """A fresh cursor over the same values (an .npz's x, y and z members are each written in one pass)."""
+        return _Rows(self.values)
+
+
 def _calibrate_finite(
-    values: NDArray[np.float64], calibration: Calibration, normalized: bool
+    values: NDArray[np.float64], calibration: Calibration, normalized: bool, rows: _Rows | None = None
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Calibrated copy of ``values`` (N, 3): rows within ±MAX_MAGNITUDE corrected, the others (NaN, inf, a
     value whose square overflows, all skipped by the readers) all NaN.
@@ -126,9 +160,13 @@ def _calibrate_finite(
     raw and calibrated values in the same columns, so all three become NaN.
     """
     finite: NDArray[np.bool_] = np.asarray((np.abs(values) <= MAX_MAGNITUDE).all(axis=1))  # NaN compares False
+    regressor = rows.take(len(values)) if rows is not None else None
+    if regressor is not None:
+        finite &= np.isfinite(regressor)
     result = np.full(np.shape(values), np.nan, dtype=np.float64)
     if finite.any():
-        result[finite] = calibration.apply(values[finite], normalized=normalized)
+        chosen = None if regressor is None else regressor[finite]
+        result[finite] = calibration.apply(values[finite], normalized=normalized, regressor=chosen)
     return result, finite
 
 
@@ -138,8 +176,9 @@ def _calibrate_finite(
 class _TextRewriter:
     """Rewrites the data lines of one text file, block by block, keeping every other byte."""
 
-    def __init__(self, reader: ChunkReader, calibration: Calibration, normalized: bool) -> None:
+    def __init__(self, reader: ChunkReader, calibration: Calibration, normalized: bool, rows: _Rows) -> None:
         fmt = reader.format
+        self.rows = rows
         assert fmt.delimiter is not None
         self.reader = reader
         self.fmt = fmt
@@ -271,7 +310,7 @@ class _TextRewriter:
             return None
         if len(values) != len(parts):
             return None
-        corrected, _ = _calibrate_finite(values, self.calibration, self.normalized)
+        corrected, _ = _calibrate_finite(values, self.calibration, self.normalized, self.rows)
         texts = self._format_all(corrected)
         for k, fields in enumerate(parts):
             fields[x] = lx + texts[3 * k]
@@ -293,7 +332,8 @@ class _TextRewriter:
             kept.append((offset, fields, spans, body, raw[len(body) :]))
         if not kept:
             return block
-        corrected, _ = _calibrate_finite(self._parse(block, kept, first_line), self.calibration, self.normalized)
+        corrected, _ = _calibrate_finite(self._parse(block, kept, first_line), self.calibration, self.normalized,
+                                         self.rows)  # fmt: skip
         texts = self._format_all(corrected)
         position = 0
         for offset, fields, spans, body, ending in kept:
@@ -319,8 +359,8 @@ class _TextRewriter:
         return b"\n".join(lines)
 
 
-def _write_text(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool) -> None:
-    rewriter = _TextRewriter(reader, calibration, normalized)
+def _write_text(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool, rows: _Rows) -> None:
+    rewriter = _TextRewriter(reader, calibration, normalized, rows)
     fmt = reader.format
     with open(reader.path, "rb") as source, atomic_open(out, "wb") as target:
         target.write(source.read(fmt.data_offset))  # byte-order mark, preamble and header, verbatim
@@ -333,12 +373,13 @@ def _write_text(reader: ChunkReader, calibration: Calibration, out: Path, normal
                 block += source.readline()
             target.write(rewriter.rewrite(block, line))
             line += block.count(b"\n")
+        rows.done()
 
 
 # ---------------------------------------------------------------------------------------------- npy / npz
 
 
-def _write_npy(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool) -> None:
+def _write_npy(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool, rows: _Rows) -> None:
     array = np.load(reader.path, mmap_mode="r", allow_pickle=False)
     dtype = np.result_type(array.dtype, np.float64)
     columns = list(reader.column_indices)
@@ -348,11 +389,12 @@ def _write_npy(reader: ChunkReader, calibration: Calibration, out: Path, normali
         for start in range(0, array.shape[0], reader.chunk_rows):
             # A copy: for a float64 file ascontiguousarray would return a view of the read-only memory map.
             block = np.array(array[start : start + reader.chunk_rows], dtype=dtype, order="C")
-            block[:, columns], _ = _calibrate_finite(block[:, columns], calibration, normalized)
+            block[:, columns], _ = _calibrate_finite(block[:, columns], calibration, normalized, rows)
             target.write(block.tobytes(order="C"))
+        rows.done()
 
 
-def _write_npz(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool) -> None:
+def _write_npz(reader: ChunkReader, calibration: Calibration, out: Path, normalized: bool, rows: _Rows) -> None:
     """Write the archive again member by member, a chunk of rows at a time: the magnetometer's member(s)
     calibrated, every other member copied byte for byte. Memory stays at a few chunks whatever the size
     (loading every array, as numpy.load does, made a 467 KB archive of 20 million rows take 3.5 GB)."""
@@ -375,10 +417,10 @@ def _write_npz(reader: ChunkReader, calibration: Calibration, out: Path, normali
                                     member.write(block)
                         elif selection.key_columns is None:
                             _write_npz_axis(archive, selection.keys, selected[info.filename], reader, calibration,
-                                            normalized, member)  # fmt: skip
+                                            normalized, member, rows.again())  # fmt: skip
                         else:
                             _write_npz_matrix(archive, selection.keys[0], list(selection.key_columns), reader,
-                                              calibration, normalized, member)  # fmt: skip
+                                              calibration, normalized, member, rows)  # fmt: skip
     except (zipfile.BadZipFile, zlib.error, *BROKEN_NPY) as error:  # a member damaged past its header
         if isinstance(error, DataFileError):
             raise
@@ -395,6 +437,7 @@ def _write_npz_axis(
     calibration: Calibration,
     normalized: bool,
     member: Any,
+    rows: _Rows,
 ) -> None:
     """One of three 1-D members (x, y or z), calibrated: the three read together, a chunk at a time."""
     streams = [NpyStream(archive, key, reader.chunk_rows) for key in keys]
@@ -404,8 +447,9 @@ def _write_npz_axis(
         np.lib.format.write_array_header_2_0(member, {"descr": descr, "fortran_order": False, "shape": (total,)})
         for _ in range(0, total, reader.chunk_rows):
             raw = np.column_stack([np.asarray(stream.next_rows(), dtype=np.float64) for stream in streams])
-            corrected, _ = _calibrate_finite(raw, calibration, normalized)
+            corrected, _ = _calibrate_finite(raw, calibration, normalized, rows)
             member.write(np.ascontiguousarray(corrected[:, axis]).tobytes())
+        rows.done()
     finally:
         for stream in streams:
             stream.close()
@@ -419,6 +463,7 @@ def _write_npz_matrix(
     calibration: Calibration,
     normalized: bool,
     member: Any,
+    rows: _Rows,
 ) -> None:
     """The (N, k) member holding the magnetometer's columns, those calibrated, a chunk of rows at a time."""
     stream = NpyStream(archive, key, reader.chunk_rows)
@@ -429,7 +474,8 @@ def _write_npz_matrix(
         np.lib.format.write_array_header_2_0(member, header)
         for _ in range(0, shape[0], reader.chunk_rows):
             block = np.array(stream.next_rows(), dtype=dtype, order="C")
-            block[:, columns], _ = _calibrate_finite(block[:, columns], calibration, normalized)
+            block[:, columns], _ = _calibrate_finite(block[:, columns], calibration, normalized, rows)
             member.write(block.tobytes(order="C"))
+        rows.done()
     finally:
         stream.close()

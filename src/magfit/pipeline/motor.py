@@ -12,6 +12,7 @@ import functools
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,10 +22,18 @@ from ..calibration import Calibration
 from ..errors import CalibrationError, DataFileError, OptionError
 from ..findings import Reason
 from ..motor import MOTOR_CHOICES, MotorFit, fit_motor, with_motor
+from ..motorterm import MotorTerm
 from ..sources import LogSamples, Source
 from ..sources.power import Power, Signal, read_power
 
-__all__ = ["MotorOutcome", "motor_stage"]
+__all__ = ["REGRESSOR_COLUMNS", "MotorOutcome", "column_regressor", "log_regressor", "motor_stage"]
+
+#: The column names (normalised: lower case, units dropped) that hold each regressor in a samples file.
+REGRESSOR_COLUMNS = {
+    "current": ("current", "curr", "current_a", "amps", "amp", "ibat", "i_bat", "battery_current", "bat_curr",
+                "batt_curr", "bat_current", "batt_current"),
+    "throttle": ("throttle", "thr", "tho", "thr_out", "throttle_out", "thrust"),
+}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -48,6 +57,104 @@ _WANTED = {
     "current": "BAT.Curr, battery_status.current_a or SYS_STATUS.current_battery",
     "throttle": "CTUN.ThO, vehicle_thrust_setpoint or VFR_HUD.throttle",
 }
+
+
+def log_regressor(
+    path: str | os.PathLike[str], term: MotorTerm, time_s: NDArray[np.float64], *, held_by: str, cost: str
+) -> tuple[NDArray[np.float64], str]:
+    """The regressor ``term`` needs at the samples' stamps ``time_s`` (the log's time base), taken at the
+    term's lag (its first or last value beyond its span, as the fit took it), and the stream it came from.
+
+    Raises
+    ------
+    DataFileError
+        The log holds no such stream (code ``motor_no_regressor``); ``held_by`` names the calibration in the
+        message and ``cost`` says what leaving the term out costs.
+    """
+    power = read_power(path)
+    signal = power.get(term.regressor)
+    if signal is None:
+        raise DataFileError(
+            f"{held_by} holds the motors' field ({_per(term)}) and {path} logs no {term.regressor} magfit reads "
+            f"({_WANTED[term.regressor]}); apply it to a log that does, or leave the term out "
+            f"(--no-motor: {cost})",
+            codes=("motor_no_regressor",),
+        )
+    return _clamped(np.asarray(time_s, dtype=np.float64), signal, term.lag_s), signal.name
+
+
+def column_regressor(
+    path: str | os.PathLike[str], term: MotorTerm, column: str | int | None, *, held_by: str, cost: str
+) -> tuple[NDArray[np.float64], str]:
+    """The regressor ``term`` needs from a samples file's column (named or 0-based, or found by its name in
+    :data:`REGRESSOR_COLUMNS`), one value per data row in the file's order (NaN where a cell is empty), and
+    where it came from in words. The current in amperes, the throttle from 0 to 1 (a column above 1.5 is
+    refused: a percentage). With a time column (found by its name, as ``calibrate`` finds it) the value is
+    taken at the term's lag, as the fit took it; without one the row's own value is used (and said).
+
+    Raises
+    ------
+    DataFileError
+        No such column, none found by name (code ``motor_no_regressor``), or a throttle column in percent.
+    """
+    from ..io import sniff
+    from ..io.selection import _match_name
+    from ..io.streams import find_stream_columns, read_stream_columns
+
+    file = Path(path)
+    fmt = sniff(file)
+    labels = [fmt.column_label(i) for i in range(fmt.n_columns)]
+    if column is None:
+        names = REGRESSOR_COLUMNS[term.regressor]
+        found = [i for i, label in enumerate(labels) if fmt.header is not None and _key(label) in names]
+        if len(found) != 1:
+            what = "several columns" if found else "no column"
+            raise DataFileError(
+                f"{held_by} holds the motors' field ({_per(term)}) and {path} has {what} named like the "
+                f"{term.regressor} ({', '.join(names[:4])} ...): name it with --regressor COLUMN, or leave the "
+                f"term out (--no-motor: {cost})",
+                codes=("motor_no_regressor",),
+            )
+        index = found[0]
+    elif isinstance(column, int):
+        if not 0 <= column < fmt.n_columns:
+            raise DataFileError(f"{path}: regressor column {column} is out of range: 0 to {fmt.n_columns - 1}")
+        index = column
+    else:
+        index = _match_name(file, column, labels, fmt.header is not None)
+    time = find_stream_columns(fmt.header).get("time") if fmt.header is not None else None
+    wanted = {"regressor": [index], **({"time": list(time.indices)} if time is not None else {})}
+    read = read_stream_columns(file, fmt, wanted)
+    values = read["regressor"][:, 0]
+    finite = values[np.isfinite(values)]
+    if term.regressor == "throttle" and finite.size and float(np.max(np.abs(finite))) > 1.5:
+        raise DataFileError(
+            f"{path}: column {labels[index]!r} reaches {float(np.max(np.abs(finite))):.4g}: the throttle of this "
+            "calibration is a fraction of full (0 to 1); divide a percentage by 100"
+        )
+    where = f"column {labels[index]!r}"
+    if term.lag_s == 0.0:
+        return values, where
+    if time is None:
+        return values, f"{where}, each row's own value (no time column for the {1000 * term.lag_s:.0f} ms lag)"
+    stamps = read["time"][:, 0] * time.scale
+    good = np.isfinite(stamps) & np.isfinite(values)
+    if np.count_nonzero(good) < 2 or np.any(np.diff(stamps[good]) < 0):
+        return values, f"{where}, each row's own value (column {time.labels[0]!r} is not increasing: no lag)"
+    lagged = np.full(len(values), np.nan)
+    signal = Signal(term.regressor, where, stamps[good], values[good])
+    lagged[np.isfinite(stamps)] = _clamped(stamps[np.isfinite(stamps)], signal, term.lag_s)
+    return lagged, f"{where} at {1000 * term.lag_s:.0f} ms lag (time column {time.labels[0]!r})"
+
+
+def _key(label: str) -> str:
+    from ..io.columns import normalise_name
+
+    return normalise_name(label).strip("_ ")
+
+
+def _per(term: MotorTerm) -> str:
+    return "per ampere of battery current" if term.regressor == "current" else "per unit of throttle"
 
 
 def _stamp(path: Any) -> tuple[int, int]:
