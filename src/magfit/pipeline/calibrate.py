@@ -198,7 +198,7 @@ def calibrate_file(
             compass = _calibrate_samples_streams(
                 path, method, columns, spec, unit, where, date, options, say, nonfinite
             )
-            return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
+            return FileCalibration(path, (_with_model_field(compass, model),), model_field=model)
         if field_strength == "wmm":
             options["field_strength"] = _model_strength(model, unit)
         elif field_strength is not None:
@@ -208,7 +208,7 @@ def calibrate_file(
         except CalibrationError as error:
             raise _with_vehicle_advice(path, error, columns, unit, method, nonfinite) from None
         compass = _vehicle_weak(compass, columns, nonfinite, unit, method)
-        return FileCalibration(path, (replace(compass, model_field=model),), model_field=model)
+        return FileCalibration(path, (_with_model_field(compass, model),), model_field=model)
     if columns is not None:
         raise OptionError(
             f"{path}: {option('columns', '...')} chooses the columns of a samples file; a log's compass by "
@@ -244,11 +244,26 @@ def calibrate_file(
             else:
                 failures.append(CompassFailure(magnetometer.id, str(error), notes, codes=error.codes))
             continue
-        compasses.append(replace(compass, model_field=model))
+        compasses.append(_with_model_field(compass, model))
     tried = tuple(compass.sensor or "" for compass in compasses) + tuple(f.sensor for f in failures)
     order = [m.id for m in source.magnetometers]
     sensors = tuple(sorted(tried, key=lambda sensor_id: order.index(sensor_id) if sensor_id in order else len(order)))
     return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors)
+
+
+def _with_model_field(compass: CompassCalibration, model: ModelField | None) -> CompassCalibration:
+    """``compass`` with the model's field, compared with the fitted one (:attr:`ModelField.mismatch`)."""
+    if model is None:
+        return replace(compass, model_field=None)
+    from ..geomag import compare_fitted
+
+    calibration, mismatch = compass.calibration, None
+    if calibration.unit and get_unit(calibration.unit).is_physical:
+        known = calibration.known_field
+        fitted = known.fitted if known is not None and known.fitted is not None else calibration.field_strength
+        text = compare_fitted(fitted, calibration.unit, model.field)
+        mismatch = Reason(text, "field_mismatch") if text is not None else None
+    return replace(compass, model_field=replace(model, mismatch=mismatch))
 
 
 def _usable(source: Source) -> list[str | None]:
@@ -346,7 +361,7 @@ def _calibrate_compass(
     notes += outcome.notes
     calibration = outcome.calibration
     sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
-    verdict = calibration.details.get("support", {}).get("verdict")
+    verdict = calibration.support.verdict if calibration.support is not None else None
     vehicle: tuple[Reason, ...] = ()
     if verdict in ("weak", "refused") and turned(fitted):  # a flight log is a vehicle's: what works for it
         chosen = magnetometer.id if several else None
@@ -437,8 +452,8 @@ def _vehicle_weak(
     method: str,
 ) -> CompassCalibration:
     """A weak fit of a vehicle's samples gets the methods that work for a vehicle (``advice``)."""
-    support = compass.calibration.details.get("support")
-    if not isinstance(support, Mapping) or support.get("verdict") not in ("weak", "refused"):
+    support = compass.calibration.support
+    if support is None or support.verdict not in ("weak", "refused"):
         return compass
     chosen = columns if columns is not None else compass.calibration.details.get("source", {}).get("column_indices")
     return replace(compass, advice=_samples_file_advice(compass.path, chosen, nonfinite, unit, method))

@@ -31,10 +31,15 @@ class ModelField:
     origin : str
         Where the place came from, in words: ``"the location given"`` or ``"the log's GNSS fixes (median of
         12 3-D fixes, first at 2026-01-01 10:00 UTC)"``.
+    mismatch : Reason or None
+        On a compass's result: the fitted field strength (the samples' own, when a known one was given)
+        differs from the model's by more than :data:`magfit.geomag.MODEL_TOLERANCE` (code ``field_mismatch``),
+        with the likely causes; None when they agree or the samples' unit is not physical.
     """
 
     field: Field
     origin: str
+    mismatch: Reason | None = None
 
 
 @dataclass(frozen=True, eq=False)
