@@ -42,8 +42,8 @@ from .uncertainty import (
     Uncertainty,
     WeakDirection,
     analyse,
+    compare_with_drift,
     compare_with_full,
-    compare_with_sphere,
     consistency,
     covering,
     level_heading_difference_deg,
@@ -226,10 +226,13 @@ def diagnose(
     comparison = None
     if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
         comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
-    drift = None
-    if kind == "full" and uncertainty.offset_sigma is not None and any(not w.determined for w in observability.weak):
-        drift = compare_with_sphere(raw, calibration, uncertainty, inclination_deg)
-    uncertainty = covering(uncertainty, comparison, check, drift)  # the heading one-sigma covers known biases too
+    drifting = None
+    # A field strength changing along the recording. Not for auto's candidates (neither thorough nor compared
+    # with their ML fit): a richer candidate's one-sigma is what auto adds to a simpler one's as the witness of a
+    # distortion it leaves out, and the drift is in their heading difference already; auto's choice is judged with it.
+    if uncertainty.offset_sigma is not None and not pinned and (thorough or compare_ml):
+        drifting = compare_with_drift(rows, kind, calibration, uncertainty, inclination_deg)
+    uncertainty = covering(uncertainty, comparison, check, drifting)  # the heading one-sigma covers known biases too
     if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion
         uncertainty = replace(
             uncertainty,
@@ -255,6 +258,7 @@ def diagnose(
         solver_problem=calibration.details.get("solver_problem"),
         clipping=clipping if clipping.n_clipped else None,
         comparison=comparison,
+        drifting=drifting,
     )
     support = judge(evidence)
     return Diagnostics(
