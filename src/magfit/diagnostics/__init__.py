@@ -218,7 +218,8 @@ def diagnose(
     if thorough:
         goodness = _goodness(fitted, raw, weights, refit if held_out else None)
         vary = variation_refit or refit
-        if vary is not None and check is not None and check.consistent:  # a biased method's halves differ anyway
+        # A biased method's halves differ anyway; auto (no check: its choice is a maximum-likelihood fit) is not.
+        if vary is not None and (check.consistent if check is not None else uncertainty.offset_sigma is not None):
             halves = _halves(rows, vary, uncertainty, total)
         if vary is not None and uncertainty.offset_sigma is not None:
             # After the halves: a change between them is named as such, not hidden in a wider one-sigma.
