@@ -228,10 +228,7 @@ def diagnose(
     if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
         comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
     drifting = None
-    # A field strength changing along the recording. Not for auto's candidates (neither thorough nor compared
-    # with their ML fit): a richer candidate's one-sigma is what auto adds to a simpler one's as the witness of a
-    # distortion it leaves out, and the drift is in their heading difference already; auto's choice is judged with it.
-    if uncertainty.offset_sigma is not None and not pinned and (thorough or compare_ml):
+    if uncertainty.offset_sigma is not None and not pinned:  # a field strength changing along the recording
         drifting = compare_with_drift(rows, kind, calibration, uncertainty, inclination_deg)
     uncertainty = covering(uncertainty, comparison, check, drifting)  # the heading one-sigma covers known biases too
     if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion

@@ -57,6 +57,7 @@ __all__ = [
     "compare_with_full",
     "consistency",
     "covering",
+    "drift_allowing_fit",
     "level_heading_difference_deg",
 ]
 
@@ -534,6 +535,14 @@ def compare_with_full(
     except (MagfitError, np.linalg.LinAlgError):
         return None
     full = min(cost, restricted)  # Σ d² at the optimum
+    if series is not None:
+        # A field that drifts along the recording, which the samples show: the full model fitted with the drift
+        # allowed is the one to compare headings with. The plain fit bends its soft iron to follow the drift, and
+        # its own one-sigma says nothing of it (an aircraft: 3.3° from the sphere, "5 one-sigmas", the sphere
+        # 0.4° off and the full fit 3.6°).
+        drifted = _drift_fits(series, "full", reference)
+        if drifted is not None and _drift_p_value(*drifted[:2], drifted[4]) < WIDEN_LEVEL:
+            reference = drifted[3]
     try:
         with np.errstate(invalid="ignore"):  # a full model the rows barely hold: a non-finite one-sigma, below
             own = _uncertainty(raw, weights, "full", reference, inclination_deg, uncertainty.n_samples, series)
@@ -616,21 +625,14 @@ class DriftComparison:
         return self.significant and stated is not None and self.heading_difference_deg > UNRULED_SIGMAS * stated
 
 
-def compare_with_drift(
-    series: NDArray[np.float64],
-    kind: str,
-    calibration: Calibration,
-    uncertainty: Uncertainty,
-    inclination_deg: float,
-) -> DriftComparison | None:
-    """The drift model (D) of :class:`DriftComparison` against ``calibration``'s model on the same rows.
+def _drift_fits(
+    series: NDArray[np.float64], kind: str, calibration: Calibration
+) -> tuple[float, float, NDArray[np.float64], Calibration, NDArray[np.float64], int] | None:
+    """The plain and the drift model (D) fitted to at most :data:`COMPARISON_ROWS` rows of ``series``.
 
-    ``series``: the samples in recording order, a regular stride of the recording (their position stands
-    for the time). At most :data:`COMPARISON_ROWS` of them are fitted. None when too few rows, or when a
-    fit fails.
+    Returned: RSS of the plain model, RSS of (D), the fitted drift at each row, (D)'s calibration, and the rows
+    and parameters counted (m, k + :data:`DRIFT_TERMS`); None when too few rows or a fit fails.
     """
-    from scipy.special import betainc
-
     from .._optimize import Evaluation, levenberg_marquardt
     from ..errors import MagfitError
     from ..geometry.frame import calibration_from_parameters
@@ -642,8 +644,7 @@ def compare_with_drift(
     m = rows.shape[0]
     frame = Frame.corrected(calibration)
     z = frame.normalise(rows)
-    time = np.linspace(-1.0, 1.0, m)
-    legendre = np.polynomial.legendre.legvander(time, DRIFT_TERMS)[:, 1:]  # P_1 … P_K at each row
+    legendre = np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, m), DRIFT_TERMS)[:, 1:]  # P_k(t_i)
     basis, _ = np.linalg.qr(legendre)  # Q
 
     def fit(projected: bool) -> tuple[float, NDArray[np.float64]]:
@@ -667,15 +668,58 @@ def compare_with_drift(
         return None
     if not (math.isfinite(still) and math.isfinite(drifting)):
         return None
-    drifting = min(drifting, still)
-    dof = max(m - k - DRIFT_TERMS, 1.0)
-    statistic = (still / max(drifting, 1e-300) - 1.0) * dof / DRIFT_TERMS
-    p_value = float(betainc(dof / 2.0, DRIFT_TERMS / 2.0, dof / (dof + DRIFT_TERMS * max(statistic, 0.0))))
     with np.errstate(all="ignore"):
         residual = distances(optimum, z, kind)
-    drift = float(np.max(np.abs(basis @ (basis.T @ residual))))
+    return still, min(drifting, still), basis @ (basis.T @ residual), reference, z.shape[0], k
+
+
+def drift_allowing_fit(series: NDArray[np.float64], kind: str, calibration: Calibration) -> Calibration | None:
+    """``calibration``'s model fitted with a field strength that drifts along the recording ((D) of
+    :class:`DriftComparison`), from ``calibration``, on ``series`` in recording order; None when it fails."""
+    fits = _drift_fits(series, kind, calibration)
+    return None if fits is None else fits[3]
+
+
+def compare_with_drift(
+    series: NDArray[np.float64],
+    kind: str,
+    calibration: Calibration,
+    uncertainty: Uncertainty,
+    inclination_deg: float,
+) -> DriftComparison | None:
+    """The drift model (D) of :class:`DriftComparison` against ``calibration``'s model on the same rows.
+
+    ``series``: the samples in recording order, a regular stride of the recording (their position stands
+    for the time). At most :data:`COMPARISON_ROWS` of them are fitted. None when too few rows, or when a
+    fit fails.
+    """
+    fits = _drift_fits(series, kind, calibration)
+    if fits is None:
+        return None
+    still, drifting, drift, reference, m, k = fits
     heading = level_heading_difference_deg(calibration, reference, inclination_deg)
-    return DriftComparison(float(statistic), p_value, heading, drift, uncertainty.heading_sigma_deg)
+    return DriftComparison(
+        _drift_statistic(still, drifting, m, k),
+        _drift_p_value(still, drifting, m, k),
+        heading,
+        float(np.max(np.abs(drift))),
+        uncertainty.heading_sigma_deg,
+    )
+
+
+def _drift_statistic(still: float, drifting: float, m: int, k: int) -> float:
+    """F of the drift model (D) against the plain one: RSS without and with drift, m rows, k parameters."""
+    dof = max(m - k - DRIFT_TERMS, 1.0)
+    return float((still / max(drifting, 1e-300) - 1.0) * dof / DRIFT_TERMS)
+
+
+def _drift_p_value(still: float, drifting: float, m: int, k: int = N_PARAMETERS["full"]) -> float:
+    """P(F > f) of :func:`_drift_statistic` (regularised incomplete beta function, as in :func:`compare_with_full`)."""
+    from scipy.special import betainc
+
+    dof = max(m - k - DRIFT_TERMS, 1.0)
+    statistic = max(_drift_statistic(still, drifting, m, k), 0.0)
+    return float(betainc(dof / 2.0, DRIFT_TERMS / 2.0, dof / (dof + DRIFT_TERMS * statistic)))
 
 
 def covering(
@@ -699,8 +743,11 @@ def covering(
     - A field strength that changes along the recording, which the samples show, moving the level heading by
       more than :data:`UNRULED_SIGMAS` one-sigmas (``drifting.counted``, :class:`DriftComparison`): the
       calibration follows the drift by ``drifting.heading_difference_deg``, which no noise figure holds.
-    - A biased method (``check`` not consistent) is off its own model's maximum-likelihood fit by
-      ``check.heading_difference_deg``.
+    - A method is off its own model's maximum-likelihood fit by ``check.heading_difference_deg``, whether or not
+      the check calls that a bias: within 3 one-sigmas of offset it can still be more than the heading one-sigma
+      (an algebraic ellipsoid on level flight, seed 1046 of the campaign: 0.20° from the ML fit, ±0.16° stated,
+      0.50° off): counted beyond half the one-sigma (the fit of a consistent method is within a small share
+      of its noise of the maximum-likelihood one, and its one-sigma is then what every diagnosis states).
     """
     if uncertainty.heading_sigma_deg is None:
         return uncertainty
@@ -715,7 +762,9 @@ def covering(
         extra += comparison.heading_difference_deg**2
     if drifting is not None and drifting.counted:
         extra += drifting.heading_difference_deg**2
-    if check is not None and not check.consistent:
+    if check is not None and (
+        not check.consistent or check.heading_difference_deg > 0.5 * uncertainty.heading_sigma_deg
+    ):
         extra += check.heading_difference_deg**2
     if extra == 0.0:
         return uncertainty
