@@ -627,7 +627,7 @@ class DriftComparison:
 
 def _drift_fits(
     series: NDArray[np.float64], kind: str, calibration: Calibration
-) -> tuple[float, float, NDArray[np.float64], Calibration, NDArray[np.float64], int] | None:
+) -> tuple[float, float, NDArray[np.float64], Calibration, int, int] | None:
     """The plain and the drift model (D) fitted to at most :data:`COMPARISON_ROWS` rows of ``series``.
 
     Returned: RSS of the plain model, RSS of (D), the fitted drift at each row, (D)'s calibration, and the rows
