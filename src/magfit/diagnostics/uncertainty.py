@@ -563,6 +563,8 @@ def compare_with_full(
     return ModelComparison(kind, ratio, float(statistic), p_value, heading, sigma)
 
 
+#: A shown drift moving the level heading by more than this many stated one-sigmas is in the heading one-sigma.
+DRIFT_WIDEN_SIGMAS = 1.0
 #: Smooth terms of the field strength's change along the recording in the drift model (Legendre polynomials of
 #: time of degrees 1 to this, :func:`compare_with_drift`).
 DRIFT_TERMS = 4
@@ -614,13 +616,21 @@ class DriftComparison:
         return self.p_value < WIDEN_LEVEL
 
     @property
-    def counted(self) -> bool:
-        """The drift is shown and moves the level heading by more than :data:`UNRULED_SIGMAS` stated one-sigmas.
+    def widens(self) -> bool:
+        """The drift is shown and moves the level heading by more than :data:`DRIFT_WIDEN_SIGMAS` stated one-sigmas:
+        the difference joins the heading one-sigma (:func:`covering`).
 
-        Below that, the difference is within what the stated one-sigma already allows for (real handheld
-        recordings: 0.1-1.5 one-sigmas, their field's small changes with where the sensor was held); above,
-        the calibration follows the drift, and the difference is an error to state (:func:`covering`).
+        On the real handheld recordings in ``shared/data/real`` the drift is shown (their field changes a little
+        with where the sensor was held) and moves the heading by 0.1-1.5 one-sigmas; on level flight whose field
+        drifted, the plain fit is off by about twice the difference (campaign ``flight`` seed 1062: 0.70° apart,
+        ±0.36° stated, 1.39° off).
         """
+        stated = self.stated_heading_sigma_deg
+        return self.significant and stated is not None and self.heading_difference_deg > DRIFT_WIDEN_SIGMAS * stated
+
+    @property
+    def named(self) -> bool:
+        """Beyond :data:`UNRULED_SIGMAS` stated one-sigmas: the calibration follows the drift, a weakness to name."""
         stated = self.stated_heading_sigma_deg
         return self.significant and stated is not None and self.heading_difference_deg > UNRULED_SIGMAS * stated
 
@@ -741,7 +751,7 @@ def covering(
       determined), the samples pin the heading no closer than ``comparison.heading_difference_deg`` (that
       difference may be the full fit's noise as well as the restricted model's error: neither is ruled out).
     - A field strength that changes along the recording, which the samples show, moving the level heading by
-      more than :data:`UNRULED_SIGMAS` one-sigmas (``drifting.counted``, :class:`DriftComparison`): the
+      more than :data:`DRIFT_WIDEN_SIGMAS` one-sigmas (``drifting.widens``, :class:`DriftComparison`): the
       calibration follows the drift by ``drifting.heading_difference_deg``, which no noise figure holds.
     - A method is off its own model's maximum-likelihood fit by ``check.heading_difference_deg``, whether or not
       the check calls that a bias: within 3 one-sigmas of offset it can still be more than the heading one-sigma
@@ -760,7 +770,7 @@ def covering(
         and comparison.heading_difference_deg > UNRULED_SIGMAS * uncertainty.heading_sigma_deg
     ):
         extra += comparison.heading_difference_deg**2
-    if drifting is not None and drifting.counted:
+    if drifting is not None and drifting.widens:
         extra += drifting.heading_difference_deg**2
     if check is not None and (
         not check.consistent or check.heading_difference_deg > 0.5 * uncertainty.heading_sigma_deg

@@ -149,7 +149,7 @@ class Evidence:
         The calibration's field strength (input units), to judge offsets by.
     drifting : DriftComparison or None
         The same model with a field strength that changes along the recording; ``uncertainty`` already
-        covers its heading difference when it counts.
+        covers its heading difference when it widens it.
     """
 
     kind: str
@@ -354,7 +354,7 @@ def judge(evidence: Evidence) -> Support:
                 "temperature); calibrate on a recording where nothing near the sensor changes"
             )
     drifting = evidence.drifting
-    if drifting is not None and drifting.counted:
+    if drifting is not None and drifting.named:
         weak.add("field_drift",
             f"the field strength changed by up to {100 * drifting.drift:.2g} % along the recording (F test, "
             f"p = {drifting.p_value:.1g}) and this fit follows the change: its level heading is "
