@@ -582,6 +582,7 @@ REASON_CODES: dict[str, str] = {
     "gyro_unit": "the gyroscope's rates fit only in another unit (degrees per second)",
     "time_unit": "the time stamps fit only in another unit (milliseconds, microseconds)",
     "gyro_axes": "the gyroscope's axes are of the other handedness than the magnetometer's (swapped or sign-flipped)",
+    "field_drift": "the field strength changed along the recording and the fit follows the change",
     "unclassified": "a reason without a code of its own yet",
 }
 

@@ -42,8 +42,8 @@ from .uncertainty import (
     Uncertainty,
     WeakDirection,
     analyse,
+    compare_with_drift,
     compare_with_full,
-    compare_with_sphere,
     consistency,
     covering,
     level_heading_difference_deg,
@@ -203,7 +203,8 @@ def diagnose(
     if thorough:
         goodness = _goodness(fitted, raw, weights, refit if held_out else None)
         vary = variation_refit or refit
-        if vary is not None and check is not None and check.consistent:  # a biased method's halves differ anyway
+        # A biased method's halves differ anyway; auto (no check: its choice is a maximum-likelihood fit) is not.
+        if vary is not None and (check.consistent if check is not None else uncertainty.offset_sigma is not None):
             halves = _halves(rows, vary, uncertainty, total)
         if vary is not None and uncertainty.offset_sigma is not None:
             # After the halves: a change between them is named as such, not hidden in a wider one-sigma.
@@ -211,10 +212,10 @@ def diagnose(
     comparison = None
     if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
         comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
-    drift = None
-    if kind == "full" and uncertainty.offset_sigma is not None and any(not w.determined for w in observability.weak):
-        drift = compare_with_sphere(raw, calibration, uncertainty, inclination_deg)
-    uncertainty = covering(uncertainty, comparison, check, drift)  # the heading one-sigma covers known biases too
+    drifting = None
+    if uncertainty.offset_sigma is not None and not pinned:  # a field strength changing along the recording
+        drifting = compare_with_drift(rows, kind, calibration, uncertainty, inclination_deg)
+    uncertainty = covering(uncertainty, comparison, check, drifting)  # the heading one-sigma covers known biases too
     if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion
         uncertainty = replace(
             uncertainty,
@@ -240,6 +241,7 @@ def diagnose(
         solver_problem=calibration.solver.problem if calibration.solver is not None else None,
         clipping=clipping if clipping.n_clipped else None,
         comparison=comparison,
+        drifting=drifting,
     )
     support = judge(evidence)
     return Diagnostics(

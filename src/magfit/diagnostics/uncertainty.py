@@ -47,15 +47,17 @@ from ..geometry.frame import (
 
 __all__ = [
     "Consistency",
+    "DriftComparison",
     "ModelComparison",
     "Observability",
     "Uncertainty",
     "WeakDirection",
     "analyse",
+    "compare_with_drift",
     "compare_with_full",
-    "compare_with_sphere",
     "consistency",
     "covering",
+    "drift_allowing_fit",
     "level_heading_difference_deg",
 ]
 
@@ -430,9 +432,6 @@ WIDEN_LEVEL = 0.05
 #: A restricted model's level heading further than this many of its one-sigmas from the full fit's, the F test
 #: not rejecting it, is known only to that difference (:func:`covering`).
 UNRULED_SIGMAS = 2.0
-#: Residuals whose effective samples are fewer than this share of the samples are correlated in time: something
-#: changed along the recording (:func:`compare_with_sphere`).
-CORRELATED_SHARE = 0.25
 #: The restricted and full fits of the comparison run on at most this many of the analysed rows.
 COMPARISON_ROWS = 2_000
 #: The heading difference from the full fit is taken as measured beyond this many of the full fit's one-sigmas.
@@ -536,6 +535,14 @@ def compare_with_full(
     except (MagfitError, np.linalg.LinAlgError):
         return None
     full = min(cost, restricted)  # Σ d² at the optimum
+    if series is not None:
+        # A field that drifts along the recording, which the samples show: the full model fitted with the drift
+        # allowed is the one to compare headings with. The plain fit bends its soft iron to follow the drift, and
+        # its own one-sigma says nothing of it (an aircraft: 3.3° from the sphere, "5 one-sigmas", the sphere
+        # 0.4° off and the full fit 3.6°).
+        drifted = _drift_fits(series, "full", reference)
+        if drifted is not None and _drift_p_value(*drifted[:2], drifted[4]) < WIDEN_LEVEL:
+            reference = drifted[3]
     try:
         with np.errstate(invalid="ignore"):  # a full model the rows barely hold: a non-finite one-sigma, below
             own = _uncertainty(raw, weights, "full", reference, inclination_deg, uncertainty.n_samples, series)
@@ -556,43 +563,180 @@ def compare_with_full(
     return ModelComparison(kind, ratio, float(statistic), p_value, heading, sigma)
 
 
-def compare_with_sphere(
-    raw: NDArray[np.float64],
+#: A shown drift moving the level heading by more than this many stated one-sigmas is in the heading one-sigma.
+DRIFT_WIDEN_SIGMAS = 1.0
+#: Smooth terms of the field strength's change along the recording in the drift model (Legendre polynomials of
+#: time of degrees 1 to this, :func:`compare_with_drift`).
+DRIFT_TERMS = 4
+
+
+@dataclass(frozen=True)
+class DriftComparison:
+    """A calibration against the same model with a field strength that changes along the recording.
+
+    The field a vehicle's magnetometer sees changes in strength along a flight or a drive (altitude, a
+    crustal anomaly, its own slowly changing fields). No calibration model holds that; a model with more
+    freedom than the samples pin down (a full ellipsoid on level flight) bends its soft iron to follow it
+    wherever the headings flown and the times they were flown at go together, and its level heading moves
+    with it, although its Gauss-Newton one-sigma (which assumes the model right) says nothing of it. The
+    drift model adds to the distances a smooth function of time,
+
+        d_i(p) + Σ_k c_k P_k(t_i),    t_i ∈ [−1, 1] the position in the recording,                    (D)
+
+    P_k the Legendre polynomials of degrees 1 to :data:`DRIFT_TERMS` (a field strength that changes by
+    ``a(t)`` moves each sample's distance to the ellipsoid by about ``a(t)``, in fractions of the field).
+    The c are eliminated (variable projection, Golub & Pereyra, SIAM J. Numer. Anal. 10, 1973): the fit
+    minimises ``|(I − Q Qᵀ) d(p)|²``, Q an orthonormal basis of the P_k at the samples' times. Whether the
+    samples show a drift is the F test of nested least squares (as :class:`ModelComparison`'s) with
+    :data:`DRIFT_TERMS` extra parameters; what it costs the calibration's heading is the level-heading
+    difference between the two fits.
+
+    Attributes
+    ----------
+    f_statistic, p_value : float
+        Of the F test of (D) against the model without drift.
+    heading_difference_deg : float
+        RMS over level headings between the calibration and the drift model's fit
+        (:func:`level_heading_difference_deg`).
+    drift : float
+        The largest change of the fitted field strength along the recording, a fraction of the field.
+    stated_heading_sigma_deg : float or None
+        The calibration's heading one-sigma before any widening, which the difference is judged against.
+    """
+
+    f_statistic: float
+    p_value: float
+    heading_difference_deg: float
+    drift: float
+    stated_heading_sigma_deg: float | None
+
+    @property
+    def significant(self) -> bool:
+        """The samples show a drift: p below :data:`WIDEN_LEVEL`."""
+        return self.p_value < WIDEN_LEVEL
+
+    @property
+    def widens(self) -> bool:
+        """The drift is shown and moves the level heading by more than :data:`DRIFT_WIDEN_SIGMAS` stated one-sigmas:
+        the difference joins the heading one-sigma (:func:`covering`).
+
+        On the real handheld recordings in ``shared/data/real`` the drift is shown (their field changes a little
+        with where the sensor was held) and moves the heading by 0.1-1.5 one-sigmas; on level flight whose field
+        drifted, the plain fit is off by about twice the difference (campaign ``flight`` seed 1062: 0.70° apart,
+        ±0.36° stated, 1.39° off).
+        """
+        stated = self.stated_heading_sigma_deg
+        return self.significant and stated is not None and self.heading_difference_deg > DRIFT_WIDEN_SIGMAS * stated
+
+    @property
+    def named(self) -> bool:
+        """Beyond :data:`UNRULED_SIGMAS` stated one-sigmas: the calibration follows the drift, a weakness to name."""
+        stated = self.stated_heading_sigma_deg
+        return self.significant and stated is not None and self.heading_difference_deg > UNRULED_SIGMAS * stated
+
+
+def _drift_fits(
+    series: NDArray[np.float64], kind: str, calibration: Calibration
+) -> tuple[float, float, NDArray[np.float64], Calibration, int, int] | None:
+    """The plain and the drift model (D) fitted to at most :data:`COMPARISON_ROWS` rows of ``series``.
+
+    Returned: RSS of the plain model, RSS of (D), the fitted drift at each row, (D)'s calibration, and the rows
+    and parameters counted (m, k + :data:`DRIFT_TERMS`); None when too few rows or a fit fails.
+    """
+    from .._optimize import Evaluation, levenberg_marquardt
+    from ..errors import MagfitError
+    from ..geometry.frame import calibration_from_parameters
+
+    k = N_PARAMETERS[kind]
+    if series.shape[0] < 10 * (k + DRIFT_TERMS):
+        return None
+    rows = series[:: max(1, series.shape[0] // COMPARISON_ROWS)]
+    m = rows.shape[0]
+    frame = Frame.corrected(calibration)
+    z = frame.normalise(rows)
+    legendre = np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, m), DRIFT_TERMS)[:, 1:]  # P_k(t_i)
+    basis, _ = np.linalg.qr(legendre)  # Q
+
+    def fit(projected: bool) -> tuple[float, NDArray[np.float64]]:
+        def evaluate(p: NDArray[np.float64], _: object) -> Evaluation:
+            with np.errstate(all="ignore"):
+                residual, jac = distances_and_jacobian(p, z, kind)
+            if projected:  # (I − Q Qᵀ) d and its Jacobian: the drift's c at their optimum for this p
+                residual = residual - basis @ (basis.T @ residual)
+                jac = jac - basis @ (basis.T @ jac)
+            return Evaluation(0.5 * float(residual @ residual), jac.T @ jac, jac.T @ residual)
+
+        start = _identity_parameters(kind)
+        solution = levenberg_marquardt(evaluate, start, n_residuals=m, max_iterations=20 * k, cost_tolerance=1e-8)
+        return 2.0 * float(solution.evaluation.cost), solution.params
+
+    try:
+        still, _ = fit(False)
+        drifting, optimum = fit(True)
+        reference = calibration_from_parameters(optimum, kind, frame, kind)
+    except (MagfitError, np.linalg.LinAlgError):
+        return None
+    if not (math.isfinite(still) and math.isfinite(drifting)):
+        return None
+    with np.errstate(all="ignore"):
+        residual = distances(optimum, z, kind)
+    return still, min(drifting, still), basis @ (basis.T @ residual), reference, z.shape[0], k
+
+
+def drift_allowing_fit(series: NDArray[np.float64], kind: str, calibration: Calibration) -> Calibration | None:
+    """``calibration``'s model fitted with a field strength that drifts along the recording ((D) of
+    :class:`DriftComparison`), from ``calibration``, on ``series`` in recording order; None when it fails."""
+    fits = _drift_fits(series, kind, calibration)
+    return None if fits is None else fits[3]
+
+
+def compare_with_drift(
+    series: NDArray[np.float64],
+    kind: str,
     calibration: Calibration,
     uncertainty: Uncertainty,
     inclination_deg: float,
-) -> float | None:
-    """The level-heading difference (degrees) between ``calibration`` (a full model) and the sphere's
-    maximum-likelihood fit to the same rows, when the full model's residuals are correlated in time.
+) -> DriftComparison | None:
+    """The drift model (D) of :class:`DriftComparison` against ``calibration``'s model on the same rows.
 
-    A full model some of whose combinations the samples do not determine (restricted attitudes) can follow
-    with them what no calibration holds: a field that drifts along a flight shows as residuals correlated
-    from one stretch of the recording to the next (fewer than :data:`CORRELATED_SHARE` of the samples
-    effective), and the undetermined combination tilts with it. The sphere, which the samples determine,
-    cannot follow it; how far the two headings are apart bounds what the drift may have moved. None when
-    the residuals are not that correlated or the sphere's fit fails.
+    ``series``: the samples in recording order, a regular stride of the recording (their position stands
+    for the time). At most :data:`COMPARISON_ROWS` of them are fitted. None when too few rows, or when a
+    fit fails.
     """
-    from ..errors import MagfitError
-    from ..geometry.frame import calibration_from_parameters, maximum_likelihood
+    fits = _drift_fits(series, kind, calibration)
+    if fits is None:
+        return None
+    still, drifting, drift, reference, m, k = fits
+    heading = level_heading_difference_deg(calibration, reference, inclination_deg)
+    return DriftComparison(
+        _drift_statistic(still, drifting, m, k),
+        _drift_p_value(still, drifting, m, k),
+        heading,
+        float(np.max(np.abs(drift))),
+        uncertainty.heading_sigma_deg,
+    )
 
-    effective = uncertainty.effective_samples
-    if effective is None or effective >= CORRELATED_SHARE * uncertainty.n_samples or raw.shape[0] < 30:
-        return None
-    raw = raw[:: max(1, raw.shape[0] // COMPARISON_ROWS)]
-    frame = Frame(np.array(calibration.offset), np.eye(3) / calibration.field_strength)
-    try:
-        _, optimum = maximum_likelihood(frame.normalise(raw), "sphere", [parameters(calibration, "sphere", frame)])
-        sphere = calibration_from_parameters(optimum, "sphere", frame, "sphere")
-    except (MagfitError, np.linalg.LinAlgError):
-        return None
-    return level_heading_difference_deg(sphere, calibration, inclination_deg)
+
+def _drift_statistic(still: float, drifting: float, m: int, k: int) -> float:
+    """F of the drift model (D) against the plain one: RSS without and with drift, m rows, k parameters."""
+    dof = max(m - k - DRIFT_TERMS, 1.0)
+    return float((still / max(drifting, 1e-300) - 1.0) * dof / DRIFT_TERMS)
+
+
+def _drift_p_value(still: float, drifting: float, m: int, k: int = N_PARAMETERS["full"]) -> float:
+    """P(F > f) of :func:`_drift_statistic` (regularised incomplete beta function, as in :func:`compare_with_full`)."""
+    from scipy.special import betainc
+
+    dof = max(m - k - DRIFT_TERMS, 1.0)
+    statistic = max(_drift_statistic(still, drifting, m, k), 0.0)
+    return float(betainc(dof / 2.0, DRIFT_TERMS / 2.0, dof / (dof + DRIFT_TERMS * statistic)))
 
 
 def covering(
     uncertainty: Uncertainty,
     comparison: ModelComparison | None,
     check: Consistency | None,
-    drift_heading_deg: float | None = None,
+    drifting: DriftComparison | None = None,
 ) -> Uncertainty:
     """``uncertainty`` with the heading one-sigma widened by the errors the fit is known to carry beyond noise.
 
@@ -606,12 +750,14 @@ def covering(
       its level heading is more than :data:`UNRULED_SIGMAS` of its own one-sigmas from the full fit's (itself
       determined), the samples pin the heading no closer than ``comparison.heading_difference_deg`` (that
       difference may be the full fit's noise as well as the restricted model's error: neither is ruled out).
-    - A full model with an undetermined combination on residuals correlated in time: the sphere's heading
-      difference ``drift_heading_deg`` (:func:`compare_with_sphere`), beyond :data:`UNRULED_SIGMAS` one-sigmas:
-      the samples cannot tell the drift the undetermined combination followed from the soft iron the sphere
-      leaves out, so the heading is known no better than the two apart.
-    - A biased method (``check`` not consistent) is off its own model's maximum-likelihood fit by
-      ``check.heading_difference_deg``.
+    - A field strength that changes along the recording, which the samples show, moving the level heading by
+      more than :data:`DRIFT_WIDEN_SIGMAS` one-sigmas (``drifting.widens``, :class:`DriftComparison`): the
+      calibration follows the drift by ``drifting.heading_difference_deg``, which no noise figure holds.
+    - A method is off its own model's maximum-likelihood fit by ``check.heading_difference_deg``, whether or not
+      the check calls that a bias: within 3 one-sigmas of offset it can still be more than the heading one-sigma
+      (an algebraic ellipsoid on level flight, seed 1046 of the campaign: 0.20° from the ML fit, ±0.16° stated,
+      0.50° off): counted beyond half the one-sigma (the fit of a consistent method is within a small share
+      of its noise of the maximum-likelihood one, and its one-sigma is then what every diagnosis states).
     """
     if uncertainty.heading_sigma_deg is None:
         return uncertainty
@@ -624,9 +770,11 @@ def covering(
         and comparison.heading_difference_deg > UNRULED_SIGMAS * uncertainty.heading_sigma_deg
     ):
         extra += comparison.heading_difference_deg**2
-    if drift_heading_deg is not None and drift_heading_deg > UNRULED_SIGMAS * uncertainty.heading_sigma_deg:
-        extra += drift_heading_deg**2
-    if check is not None and not check.consistent:
+    if drifting is not None and drifting.widens:
+        extra += drifting.heading_difference_deg**2
+    if check is not None and (
+        not check.consistent or check.heading_difference_deg > 0.5 * uncertainty.heading_sigma_deg
+    ):
         extra += check.heading_difference_deg**2
     if extra == 0.0:
         return uncertainty

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 
 from ..findings import Consistency, Coverage, Goodness, Observability, ReasonList, Support, Uncertainty
 from ..saturation import Clipping
-from .uncertainty import ModelComparison
+from .uncertainty import DriftComparison, ModelComparison
 
 __all__ = [
     "FIELD_TOLERANCE",
@@ -147,6 +147,9 @@ class Evidence:
         model. ``uncertainty`` already covers its heading cost when it is significant.
     field_strength : float or None
         The calibration's field strength (input units), to judge offsets by.
+    drifting : DriftComparison or None
+        The same model with a field strength that changes along the recording; ``uncertainty`` already
+        covers its heading difference when it widens it.
     """
 
     kind: str
@@ -167,6 +170,7 @@ class Evidence:
     solver_problem: str | None = None
     clipping: Clipping | None = None
     comparison: ModelComparison | None = None
+    drifting: DriftComparison | None = None
 
 
 def judge(evidence: Evidence) -> Support:
@@ -288,6 +292,15 @@ def judge(evidence: Evidence) -> Support:
                 f"full ellipsoid's, counted in the heading uncertainty of ±{heading:.2g}°; the ellipsoid or auto "
                 "method would remove it"
             )
+    elif comparison is not None and comparison.significant and all(r.code != "model_inadequate" for r in refusals):
+        # The full model fits better beyond chance but the samples do not determine it: what this model misses
+        # moves the heading by an amount nothing here can bound (a 10 % cap: diag ±3.1° stated, 16° wrong).
+        refusals.add("model_inadequate",
+            f"the {_fit_name(evidence)} leaves {comparison.rss_ratio:.3g} times the squared residual of a full "
+            f"ellipsoid on the same samples (F test, p = {comparison.p_value:.1g}): there is soft iron this model "
+            "cannot remove, and the samples do not determine the full ellipsoid, so what that soft iron costs the "
+            "heading cannot be bounded"
+        )
     elif (
         comparison is None
         and evidence.kind != "full"
@@ -340,6 +353,15 @@ def judge(evidence: Evidence) -> Support:
                 "their one-sigma: the distortion or the field changed while recording (a magnet moved, motors, "
                 "temperature); calibrate on a recording where nothing near the sensor changes"
             )
+    drifting = evidence.drifting
+    if drifting is not None and drifting.named:
+        weak.add("field_drift",
+            f"the field strength changed by up to {100 * drifting.drift:.2g} % along the recording (F test, "
+            f"p = {drifting.p_value:.1g}) and this fit follows the change: its level heading is "
+            f"{drifting.heading_difference_deg:.2g}° from a fit that allows for it, counted in the heading "
+            f"uncertainty of ±{heading:.2g}°; record where the field is steady (the same height, away from moving "
+            "iron), or use the vector method with the attitude and the reference field"
+        )
     if evidence.clipping is not None:
         clipped = evidence.clipping
         (refusals if refusals else weak).add("saturated",

@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 from .._validation import check_choice
 from ..calibration import Calibration
 from ..diagnostics import DEFAULT_INCLINATION_DEG, diagnose
-from ..diagnostics.uncertainty import level_heading_difference_deg
+from ..diagnostics.uncertainty import drift_allowing_fit, level_heading_difference_deg
 from ..diagnostics.verdict import USELESS_BOUND_DEG
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import unchecked_sphere_distances
@@ -289,6 +289,10 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
         # from the richer model's (which holds the distortion), plus that model's own heading one-sigma (the
         # difference is known no better): on the benchmark's aircraft the difference alone fell short of the
         # sphere's error on 5 of 20 trials, with the richer model's one-sigma on 1.
+        # The witness fitted with a field strength that may drift along the recording: a drift its soft iron
+        # followed is no distortion the chosen model leaves out (its one-sigma counts what the drift moved).
+        if missed is not None:
+            witness_fit = drift_allowing_fit(kept, witness, witness_fit) or witness_fit
         difference = level_heading_difference_deg(optima[chosen], witness_fit, DEFAULT_INCLINATION_DEG)
         witness_sigma = _heading_sigma(reports.get(witness))
         effect = difference + (witness_sigma or 0.0)
