@@ -174,3 +174,24 @@ def report_json(report: Mapping[str, Any]) -> str:
         return value
 
     return json.dumps(convert(report), separators=(",", ":"), allow_nan=False)
+
+
+def kept_details(calibration: magfit.Calibration, keys: Sequence[str]) -> dict[str, Any]:
+    """The facts named ``keys`` as the results record them (the names of a calibration's schema-1 ``details``),
+    read from its typed fields: ``support``, ``chosen``, ``method_used``, ``reason``, ``weak`` (auto's: the
+    verdict's weaknesses), ``n_rejected``, ``lag_s``, ``mapping``; any other key from ``details``."""
+    facts: dict[str, Any] = dict(calibration.details)
+    if calibration.support is not None:
+        facts["support"] = calibration.support.to_dict()
+    if calibration.auto is not None:
+        facts.update(chosen=calibration.auto.chosen, method_used=calibration.auto.method_used,
+                     reason=calibration.auto.reason)  # fmt: skip
+        if calibration.support is not None:
+            facts["weak"] = [str(w) for w in calibration.support.weaknesses]
+    if calibration.rejected is not None:
+        facts["n_rejected"] = calibration.rejected.count
+    if calibration.vector is not None:
+        facts["lag_s"] = calibration.vector.lag_s
+    if calibration.gyro is not None:
+        facts.update(lag_s=calibration.gyro.lag_s, mapping=calibration.gyro.mapping)
+    return {key: value for key, value in facts.items() if key in keys}

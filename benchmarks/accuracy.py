@@ -66,7 +66,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import Ratio, Target, mild_distortion, paired_ratio, report_json, verdict_of, versions
+from _common import Ratio, Target, kept_details, mild_distortion, paired_ratio, report_json, verdict_of, versions
 from _common import failure_message as _failure_message
 from _common import note as _note
 from _common import pass_fail as _status
@@ -668,7 +668,7 @@ def run_case(
             else:
                 outcome = score(calibration, simulation, samples, heldout)
                 if name in keep:
-                    outcome.details = {k: v for k, v in calibration.details.items() if k in KEPT_DETAILS}
+                    outcome.details = kept_details(calibration, KEPT_DETAILS)
             if name in magfit.METHODS:
                 # A forced method that raises failed to fit (no convergence, a hyperboloid): no verdict.
                 outcome.verdict, outcome.verdict_reason = verdict_of(calibration, error if name in NOT_FORCED else "")

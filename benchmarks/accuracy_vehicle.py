@@ -59,6 +59,7 @@ from _common import (
     Ratio,
     Target,
     failure_message,
+    kept_details,
     mild_distortion,
     note,
     paired_ratio,
@@ -400,7 +401,7 @@ def run_case(case: VehicleCase, fitters: Mapping[str, Fitter], root_seed: int) -
             else:
                 outcome = score(calibration, simulation)
                 fitted[name] = calibration
-                outcome.details = {k: v for k, v in calibration.details.items() if k in KEPT_DETAILS} or None
+                outcome.details = kept_details(calibration, KEPT_DETAILS) or None
             outcome.seconds = time.perf_counter() - start
             method = METHOD_OF.get(name, name)
             if method in magfit.METHODS:

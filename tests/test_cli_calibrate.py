@@ -227,9 +227,9 @@ def test_diagnostic_warnings_and_autos_choice_are_shown(tmp_path: Path) -> None:
     assert any("cover only" in message for message in warnings)  # the diagnostics saw the gap
     for message in warnings:
         assert f"magfit: warning: {message}" in result.stderr
-    if "method_used" in calibration.details:
-        details = calibration.details
-        chose = rf"chose +{details['chosen']} model, maximum-likelihood fit started from {details['method_used']} \("
+    if calibration.auto is not None:
+        choice = calibration.auto
+        chose = rf"chose +{choice.chosen} model, maximum-likelihood fit started from {choice.method_used} \("
         assert re.search(chose, result.stdout)
 
 

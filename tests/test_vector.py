@@ -286,7 +286,7 @@ def test_without_accel_the_fit_is_the_plain_regression() -> None:
     solution, *_ = np.linalg.lstsq(design, sim.samples, rcond=None)  # raw = G r + V, one regression per axis
     np.testing.assert_allclose(cal.matrix, np.linalg.inv(solution[:3].T), atol=1e-10)
     np.testing.assert_allclose(cal.offset, solution[3], atol=1e-8)
-    assert "gravity" not in cal.details
+    assert cal.vector.gravity is None
 
 
 def test_no_still_samples_falls_back_to_the_reference_alone_and_says_so() -> None:
