@@ -208,7 +208,8 @@ def diagnose(
     kind = model_kind(calibration)
     cover = coverage(z)
     pinned = bool(calibration.details.get("radius_pinned"))
-    observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg, series=rows, pinned=pinned)
+    # The correlation in time is read on the recording itself (a bounded part of it: uncertainty.correlation_rows).
+    observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg, series=array, pinned=pinned)
     fitted = _weighted_evaluation(np.linalg.norm(z, axis=1) - 1.0, weights)
     goodness = check = halves = None
     if compare_ml and uncertainty.offset_sigma is not None:  # an undetermined model has no ML fit to compare
@@ -225,7 +226,7 @@ def diagnose(
             uncertainty = _with_block_jackknife(uncertainty, rows, vary, calibration, total)
     comparison = None
     if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
-        comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
+        comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, array)
     drift = None
     if kind == "full" and uncertainty.offset_sigma is not None and any(not w.determined for w in observability.weak):
         drift = compare_with_sphere(raw, calibration, uncertainty, inclination_deg)

@@ -71,6 +71,11 @@ TURN_SPREAD = 0.02
 #: Batches of the recording for the batch-means covariance, and the fewest rows a batch needs.
 _BATCHES = 20
 _BATCH_ROWS = 10
+#: The correlation in time is read on at most this many rows of a recording (:func:`correlation_rows`): all
+#: of them up to it, else CORRELATION_WINDOWS windows of contiguous rows, each cut into _WINDOW_BATCHES.
+CORRELATION_ROWS = 100_000
+CORRELATION_WINDOWS = 20
+_WINDOW_BATCHES = 10
 
 
 def _parameter_field_map(kind: str, y: NDArray[np.float64], lmat: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -128,7 +133,7 @@ def analyse(
     kind: str,
     calibration: Calibration,
     inclination_deg: float,
-    series: NDArray[np.float64] | None = None,
+    series: NDArray[np.generic] | None = None,
     pinned: bool = False,
 ) -> tuple[Observability, Uncertainty]:
     """Observability and uncertainty of ``calibration`` (a model of ``kind``) on raw samples.
@@ -144,9 +149,10 @@ def analyse(
     inclination_deg : float
         Inclination assumed for the heading uncertainty, degrees.
     series : ndarray, shape (m, 3), optional
-        The samples in recording order (all of them, or a regular stride), each standing for the same
-        number of samples: the one-sigmas then also cover what independent samples would not
-        (:func:`correlation_excess`). None: the samples are taken as independent.
+        The samples in recording order (all of them, any dtype), each standing for the same number of
+        samples: the one-sigmas then also cover what independent samples would not
+        (:func:`correlation_excess`, on the rows :func:`correlation_rows` picks). None: the samples are
+        taken as independent.
     pinned : bool
         The fit pinned the scale to a known field strength (a sphere with ``field_strength``): only the
         offset was fitted, so only the offset is analysed.
@@ -162,19 +168,76 @@ def analyse(
     information = (jac * weights[:, None]).T @ jac  # Jᵀ W J
     dof = max(total - k, 1.0)
     residual_variance = float(np.sum(weights * residual**2) / dof)
-    excess = None
     free = 3 if pinned else k
-    if series is not None:
-        z_series = Frame.corrected(calibration).normalise(series)
-        excess = correlation_excess(p, z_series, kind, total, residual_variance, free=free)
-    condition, weak, null = _weak_directions(information, residual_variance, total, kind, excess, free=free)
+    # The excess of correlated samples, computed once in the isotropic frame (where _uncertainty states the
+    # covariance) and carried into the corrected frame's parameters for the weak directions.
+    excess = None if series is None else _series_excess(raw, weights, kind, calibration, series, free)
+    corrected_excess = None if excess is None else _isotropic_to_corrected(calibration, kind, excess)
+    condition, weak, null = _weak_directions(information, residual_variance, total, kind, corrected_excess, free=free)
     observability = Observability(kind, condition, weak, _turn_axis(z, weights))
     n_samples = round(total)
     if null:
         return observability, Uncertainty(
             None, None, None, None, None, float(inclination_deg), math.sqrt(residual_variance), n_samples
         )
-    return observability, _uncertainty(raw, weights, kind, calibration, inclination_deg, n_samples, series, pinned)
+    return observability, _uncertainty(
+        raw, weights, kind, calibration, inclination_deg, n_samples, pinned=pinned, excess=excess
+    )
+
+
+def _isotropic_frame(calibration: Calibration) -> Frame:
+    """The frame ``(x − V) / B`` of the calibration's offset V and field strength B (isotropic sensor noise)."""
+    return Frame(np.array(calibration.offset), np.eye(3) / calibration.field_strength)
+
+
+def _series_excess(
+    raw: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    kind: str,
+    calibration: Calibration,
+    series: NDArray[np.generic],
+    free: int,
+) -> NDArray[np.float64]:
+    """:func:`correlation_excess` of ``calibration`` on the recording ``series``, in the isotropic frame's p.
+
+    The residual variance it is measured against is that of the analysed rows ``raw`` (weighted), as in
+    :func:`_uncertainty`; the rows of ``series`` it reads are :func:`correlation_rows`.
+    """
+    frame = _isotropic_frame(calibration)
+    p = parameters(calibration, kind, frame)
+    distance = distances(p, frame.normalise(raw), kind)
+    total = float(weights.sum())
+    residual_variance = float(np.sum(weights * distance**2) / max(total - p.size, 1.0))
+    rows, windows = correlation_rows(series)
+    return correlation_excess(p, frame.normalise(rows), kind, total, residual_variance, free=free, windows=windows)
+
+
+def _isotropic_to_corrected(
+    calibration: Calibration, kind: str, covariance: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """A covariance of the isotropic frame's parameters carried into the corrected frame's (first order).
+
+    With L the symmetric root of the ellipsoid matrix and B the field strength, an offset step B·dv of the
+    isotropic frame is ``dv_c = B L dv`` in the corrected frame ``z = L (x − V)``; a step dL of its unit
+    map, ``E = dL / B`` in input units, turns ``L⁻¹ (L + E)² L⁻¹ = I + L⁻¹E + EL⁻¹ + O(E²)`` into the
+    corrected unit map ``I + (L⁻¹E + EL⁻¹) / 2``. The columns of that linear map G give ``G C Gᵀ``.
+    """
+    strength = calibration.field_strength
+    root = symmetric_unit_map(calibration)
+    inverse = np.linalg.inv(root)
+    k = N_PARAMETERS[kind]
+    gmap = np.zeros((k, k))
+    gmap[:3, :3] = strength * root
+    for column in range(3, k):
+        step = unit_map(np.eye(k)[column], kind) / strength  # E of a unit step of this parameter
+        moved = 0.5 * (inverse @ step + step @ inverse)
+        if kind == "sphere":
+            gmap[3, column] = float(np.trace(moved)) / 3.0
+            continue
+        gmap[3:6, column] = np.diag(moved)
+        if kind == "full":
+            gmap[6:9, column] = [moved[0, 1], moved[0, 2], moved[1, 2]]
+    return np.asarray(gmap @ covariance @ gmap.T, dtype=np.float64)
 
 
 def _weak_directions(
@@ -230,18 +293,20 @@ def _uncertainty(
     calibration: Calibration,
     inclination_deg: float,
     n_samples: int,
-    series: NDArray[np.float64] | None = None,
+    series: NDArray[np.generic] | None = None,
     pinned: bool = False,
+    excess: NDArray[np.float64] | None = None,
 ) -> Uncertainty:
     """The Gauss-Newton covariance of the distances to the ellipsoid, in the isotropic frame (x − V) / B.
 
     The noise is isotropic on the raw samples, so the residual whose covariance formula holds is the
     distance to the ellipsoid measured there (``geometry.frame.distances``), not the residual in the
     corrected space, whose noise is stretched by the soft-iron correction. With ``series`` (the samples
-    in recording order), the excess that correlated samples and model error add is included.
+    in recording order), the excess that correlated samples and model error add is included; ``excess``:
+    that excess already computed (:func:`_series_excess`).
     """
     strength = calibration.field_strength
-    frame = Frame(np.array(calibration.offset), np.eye(3) / strength)
+    frame = _isotropic_frame(calibration)
     z = frame.normalise(raw)
     p = parameters(calibration, kind, frame)
     k = p.size
@@ -255,12 +320,35 @@ def _uncertainty(
     covariance = np.zeros((k, k))
     covariance[:free, :free] = residual_variance * np.linalg.inv(information[:free, :free])  # σ² (Jᵀ W J)⁻¹
     independent_trace = float(np.trace(covariance))
-    if series is not None:
-        covariance += correlation_excess(p, frame.normalise(series), kind, total, residual_variance, free=free)
+    if excess is None and series is not None:
+        rows, windows = correlation_rows(series)
+        excess = correlation_excess(
+            p, frame.normalise(rows), kind, total, residual_variance, free=free, windows=windows
+        )
+    if excess is not None:
+        covariance += excess
     effective = n_samples * independent_trace / max(float(np.trace(covariance)), 1e-300)
     return _report(
         covariance, kind, lmat, strength * np.eye(3), inclination_deg, residual_variance, n_samples, effective
     )
+
+
+def correlation_rows(series: NDArray[np.generic]) -> tuple[NDArray[np.float64], int]:
+    """The rows of a recording :func:`correlation_excess` reads (float64), and how many windows they form.
+
+    Up to :data:`CORRELATION_ROWS` rows: all of them (0 windows: one series). A longer recording:
+    :data:`CORRELATION_WINDOWS` windows of ``CORRELATION_ROWS / CORRELATION_WINDOWS`` contiguous rows,
+    spread evenly from its start to its end, concatenated; a fixed cost whatever its length.
+    """
+    n = series.shape[0]
+    if n <= CORRELATION_ROWS:
+        return np.asarray(series, dtype=np.float64), 0
+    length = CORRELATION_ROWS // CORRELATION_WINDOWS
+    starts = np.linspace(0, n - length, CORRELATION_WINDOWS).astype(np.int64)
+    rows = np.empty((CORRELATION_WINDOWS * length, 3))
+    for i, first in enumerate(starts):
+        rows[i * length : (i + 1) * length] = series[first : first + length]
+    return rows, CORRELATION_WINDOWS
 
 
 def correlation_excess(
@@ -270,6 +358,8 @@ def correlation_excess(
     total: float,
     residual_variance: float,
     free: int | None = None,
+    *,
+    windows: int = 0,
 ) -> NDArray[np.float64]:
     """The covariance that samples in recording order add beyond ``σ² (JᵀWJ)⁻¹``: batch means of the score.
 
@@ -282,39 +372,109 @@ def correlation_excess(
     correlation within a batch (batch means, e.g. Flegal & Jones, Ann. Statist. 38, 2010; with the
     Jacobian, the sandwich covariance of a misspecified model, White, Econometrica 50, 1982):
 
-        Cov_sandwich = H⁻¹ (Σ_b S_b S_bᵀ · B / (B − 1)) H⁻¹,    H = Σ J_iᵀ J_i,  S_b = Σ_{i ∈ b} s_i
+        Cov_sandwich = H⁻¹ (Σ_b S_b S_bᵀ · B / (B − 1)) H⁻¹,    H = Σ J_iᵀ J_i,  S_b = Σ_{i ∈ b} s_i      (1)
 
     ``z`` are the samples in recording order (normalised as ``p``), each standing for ``total / m`` of
-    the fitted samples. Returned: the part of ``Cov_sandwich`` beyond ``σ² H⁻¹`` (the positive eigenvalues
-    of the difference), scaled from the m rows to the ``total`` samples, in the parameters of ``p``. Up to
-    200 000 samples the rows are all of them; a longer log is read at a regular stride, which sees no
-    correlation shorter than its step (at 100 Hz and 10⁷ samples, a step of half a second).
+    the fitted samples. Returned: the part of the covariance beyond ``σ² H⁻¹`` (the positive eigenvalues
+    of the difference), for the ``total`` samples, in the parameters of ``p``.
+
+    ``windows = 0``: ``z`` is the whole recording (at most :data:`CORRELATION_ROWS` rows, see
+    :func:`correlation_rows`), read with B = 20 batches in (1), scaled from the m rows to ``total``.
+
+    ``windows = K``: ``z`` is K windows of r contiguous rows spread over a longer recording of N rows
+    (a stride would not do: it sees no correlation shorter than its step, and one longer than it
+    k = N/m times too weakly, so that the sum it reads must be scaled up by k, its noise with it).
+    Two parts, with h = Σ J_iᵀ J_i / m the information per row:
+
+    - Correlation shorter than a window: each window is cut into G = 10 batches of r/G rows; their
+      deviations from their window's mean give the long-run covariance of the score per row,
+
+          Λ = Σ_w Σ_g (S_wg − S̄_w)(S_wg − S̄_w)ᵀ / (K (G − 1) r/G),                                 (2)
+
+      and the covariance of the fit on all N rows is ``h⁻¹ Λ h⁻¹ / N``; beyond ``σ² h⁻¹ / N`` it is the
+      excess (positive part). Error: Λ rests on K (G − 1) = 180 batch deviations, so its relative
+      standard error is about √(2 / 180) ≈ 0.11 per direction (chi-square with 180 degrees of
+      freedom); correlation lasting a good part of r/G rows is understated (batch means' bias, about
+      its length over r/G).
+    - Correlation longer than a window (a drift): the window sums ``W_w = Σ_g S_wg`` vary more than the
+      ``r Λ`` that (2) predicts. Whitened by ``r Λ``, the eigenvalues ρ of their covariance
+      ``Σ (W_w − W̄)(W_w − W̄)ᵀ / (K − 1)`` follow χ²(K − 1)/(K − 1) without a drift; where ρ exceeds its
+      99th percentile ρ₉₉ (1.90 for K = 20), ``(ρ − 1) r Λ`` along that direction is the drift's share
+      ``r² D`` of a window sum, and the recording's B = K batches of N/K rows carry ``N² D / K`` of
+      ``Var(Σ s)``: an excess ``h⁻¹ D h⁻¹ / K``, which does not fall with N. Error: a drift below the
+      percentile is not counted; it adds at most ``(ρ₉₉ − 1) N / (K r)`` times the independent
+      variance, 0.9 N / :data:`CORRELATION_ROWS` (9 times at 10⁶ rows, 90 at 10⁷: a one-sigma up to
+      3 and 9.5 times too small on a drift that 10⁵ rows cannot show, whose size is then below what a
+      fit on 10⁵ rows resolves). The halves of the recording and the block jackknife test the same
+      drift on the fit itself.
     """
     k = p.size
     m = z.shape[0]
-    batches = min(_BATCHES, m // _BATCH_ROWS)
     excess = np.zeros((k, k))
+    batches = min(_BATCHES, m // _BATCH_ROWS) if not windows else windows
     if batches < 4:
         return excess
     distance, jac = distances_and_jacobian(p, z, kind)
     jac = jac[:, : k if free is None else free]  # held parameters have no score
     scores = jac * distance[:, None]
-    edges = np.linspace(0, m, batches + 1).astype(np.int64)
-    sums = np.add.reduceat(scores, edges[:-1], axis=0)
-    sums -= sums.mean(axis=0)
-    spread = sums.T @ sums * batches / (batches - 1)
     hessian = jac.T @ jac
     try:
         inverse = np.linalg.inv(hessian)
     except np.linalg.LinAlgError:
         return excess
-    sandwich = inverse @ spread @ inverse
-    difference = sandwich - residual_variance * inverse  # beyond what m independent rows would give
-    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (difference + difference.T))
     fitted = jac.shape[1]
-    # Variance falls as 1 / samples: from the m rows to the ``total`` samples they stand for.
-    excess[:fitted, :fitted] = (eigenvectors * np.clip(eigenvalues, 0.0, None)) @ eigenvectors.T * (m / total)
+    if not windows:
+        edges = np.linspace(0, m, batches + 1).astype(np.int64)
+        sums = np.add.reduceat(scores, edges[:-1], axis=0)
+        sums -= sums.mean(axis=0)
+        spread = sums.T @ sums * batches / (batches - 1)
+        sandwich = inverse @ spread @ inverse
+        difference = sandwich - residual_variance * inverse  # beyond what m independent rows would give
+        # Variance falls as 1 / samples: from the m rows to the ``total`` samples they stand for.
+        excess[:fitted, :fitted] = _positive_part(difference) * (m / total)
+        return excess
+    length = m // windows
+    per_batch = length // _WINDOW_BATCHES
+    used = scores[: windows * length].reshape(windows, length, fitted)[:, : _WINDOW_BATCHES * per_batch]
+    sums = used.reshape(windows, _WINDOW_BATCHES, per_batch, fitted).sum(axis=2)  # S_wg
+    within = sums - sums.mean(axis=1, keepdims=True)
+    flat = within.reshape(-1, fitted)
+    long_run = flat.T @ flat / (windows * (_WINDOW_BATCHES - 1) * per_batch)  # Λ of (2), per row
+    information = hessian / m  # h
+    per_row = np.linalg.inv(information)
+    short = per_row @ long_run @ per_row - residual_variance * per_row
+    excess[:fitted, :fitted] = _positive_part(short) / total
+    # The drift: window sums against what Λ predicts for them, whitened.
+    window_sums = sums.sum(axis=1)
+    window_sums -= window_sums.mean(axis=0)
+    between = window_sums.T @ window_sums / (windows - 1)
+    expected = (_WINDOW_BATCHES * per_batch) * long_run  # r Λ
+    values, vectors = np.linalg.eigh(0.5 * (expected + expected.T))
+    if values[0] <= 0:
+        return excess
+    root = (vectors * np.sqrt(values)) @ vectors.T
+    root_inverse = (vectors / np.sqrt(values)) @ vectors.T
+    ratios, directions = np.linalg.eigh(root_inverse @ between @ root_inverse)
+    beyond = np.where(ratios > _drift_ratio(windows), ratios - 1.0, 0.0)
+    if beyond.any():
+        drift = root @ (directions * beyond) @ directions.T @ root / (_WINDOW_BATCHES * per_batch) ** 2  # D
+        excess[:fitted, :fitted] += per_row @ drift @ per_row / windows
     return excess
+
+
+def _positive_part(matrix: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The symmetric part of ``matrix`` with its negative eigenvalues set to zero."""
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
+    return np.asarray((eigenvectors * np.clip(eigenvalues, 0.0, None)) @ eigenvectors.T, dtype=np.float64)
+
+
+@functools.lru_cache(maxsize=4)
+def _drift_ratio(windows: int) -> float:
+    """The 99th percentile of χ²(K − 1) / (K − 1), K = ``windows``: χ² = 2 P⁻¹(ν/2, q) (regularised gamma)."""
+    from scipy.special import gammaincinv
+
+    dof = windows - 1
+    return float(2.0 * gammaincinv(dof / 2.0, 0.99) / dof)
 
 
 def _report(
@@ -502,7 +662,7 @@ def compare_with_full(
     calibration: Calibration,
     uncertainty: Uncertainty,
     inclination_deg: float,
-    series: NDArray[np.float64] | None = None,
+    series: NDArray[np.generic] | None = None,
 ) -> ModelComparison | None:
     """The F test (see :class:`ModelComparison`) of ``calibration`` (a restricted model) against the full one.
 
