@@ -72,10 +72,9 @@ TURN_SPREAD = 0.02
 _BATCHES = 20
 _BATCH_ROWS = 10
 #: The correlation in time is read on at most this many rows of a recording (:func:`correlation_rows`): all
-#: of them up to it, else CORRELATION_WINDOWS windows of contiguous rows, each cut into _WINDOW_BATCHES.
+#: of them up to it, else CORRELATION_WINDOWS windows of contiguous rows.
 CORRELATION_ROWS = 100_000
 CORRELATION_WINDOWS = 20
-_WINDOW_BATCHES = 10
 
 
 def _parameter_field_map(kind: str, y: NDArray[np.float64], lmat: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -381,32 +380,26 @@ def correlation_excess(
     ``windows = 0``: ``z`` is the whole recording (at most :data:`CORRELATION_ROWS` rows, see
     :func:`correlation_rows`), read with B = 20 batches in (1), scaled from the m rows to ``total``.
 
-    ``windows = K``: ``z`` is K windows of r contiguous rows spread over a longer recording of N rows
-    (a stride would not do: it sees no correlation shorter than its step, and one longer than it
-    k = N/m times too weakly, so that the sum it reads must be scaled up by k, its noise with it).
-    Two parts, with h = Σ J_iᵀ J_i / m the information per row:
+    ``windows = K``: ``z`` is K windows of r contiguous rows spread evenly over a longer recording of N
+    rows (:func:`correlation_rows`), and the batches of (1) are the windows. A stride would not do: it
+    sees no correlation shorter than its step, and one longer than it k = N/m times too weakly (the sum
+    of every k-th score is 1/k of the sum of all), so that what it reads must be scaled up by k, and its
+    noise with it. With ``W_w`` the window sums of the score and h = Σ J_iᵀ J_i / m the information per
+    row, the long-run covariance of the score per row and the covariance of the fit on all N rows are
 
-    - Correlation shorter than a window: each window is cut into G = 10 batches of r/G rows; their
-      deviations from their window's mean give the long-run covariance of the score per row,
+        Λ = Σ_w (W_w − W̄)(W_w − W̄)ᵀ / ((K − 1) r),      Cov = h⁻¹ Λ h⁻¹ / N,                        (2)
 
-          Λ = Σ_w Σ_g (S_wg − S̄_w)(S_wg − S̄_w)ᵀ / (K (G − 1) r/G),                                 (2)
+    and the excess is its part beyond ``σ² h⁻¹ / N`` (positive part). When the windows tile the whole
+    recording (r = N/K) this is (1) itself; windows with gaps between them read the same per-row
+    quantity, so (2) holds for any N at a fixed cost. Its error, stated:
 
-      and the covariance of the fit on all N rows is ``h⁻¹ Λ h⁻¹ / N``; beyond ``σ² h⁻¹ / N`` it is the
-      excess (positive part). Error: Λ rests on K (G − 1) = 180 batch deviations, so its relative
-      standard error is about √(2 / 180) ≈ 0.11 per direction (chi-square with 180 degrees of
-      freedom); correlation lasting a good part of r/G rows is understated (batch means' bias, about
-      its length over r/G).
-    - Correlation longer than a window (a drift): the window sums ``W_w = Σ_g S_wg`` vary more than the
-      ``r Λ`` that (2) predicts. Whitened by ``r Λ``, the eigenvalues ρ of their covariance
-      ``Σ (W_w − W̄)(W_w − W̄)ᵀ / (K − 1)`` follow χ²(K − 1)/(K − 1) without a drift; where ρ exceeds its
-      99th percentile ρ₉₉ (1.90 for K = 20), ``(ρ − 1) r Λ`` along that direction is the drift's share
-      ``r² D`` of a window sum, and the recording's B = K batches of N/K rows carry ``N² D / K`` of
-      ``Var(Σ s)``: an excess ``h⁻¹ D h⁻¹ / K``, which does not fall with N. Error: a drift below the
-      percentile is not counted; it adds at most ``(ρ₉₉ − 1) N / (K r)`` times the independent
-      variance, 0.9 N / :data:`CORRELATION_ROWS` (9 times at 10⁶ rows, 90 at 10⁷: a one-sigma up to
-      3 and 9.5 times too small on a drift that 10⁵ rows cannot show, whose size is then below what a
-      fit on 10⁵ rows resolves). The halves of the recording and the block jackknife test the same
-      drift on the fit itself.
+    - Noise: Λ rests on K − 1 = 19 degrees of freedom, a relative standard error of √(2/19) ≈ 0.32 per
+      direction, as (1) on a whole recording of 20 batches; the positive part leans the other way, to a
+      wider one-sigma on independent samples (measured: docs/scaling.md).
+    - Correlation lasting a good part of a window (r = 5 000 rows, 50 s at 100 Hz) is understated,
+      about by its length over r (batch means' bias); a drift slower than a window (a field changing
+      along a flight) is not read here at all: the two halves of the recording and the block jackknife
+      test it on the fit itself.
     """
     k = p.size
     m = z.shape[0]
@@ -434,31 +427,11 @@ def correlation_excess(
         excess[:fitted, :fitted] = _positive_part(difference) * (m / total)
         return excess
     length = m // windows
-    per_batch = length // _WINDOW_BATCHES
-    used = scores[: windows * length].reshape(windows, length, fitted)[:, : _WINDOW_BATCHES * per_batch]
-    sums = used.reshape(windows, _WINDOW_BATCHES, per_batch, fitted).sum(axis=2)  # S_wg
-    within = sums - sums.mean(axis=1, keepdims=True)
-    flat = within.reshape(-1, fitted)
-    long_run = flat.T @ flat / (windows * (_WINDOW_BATCHES - 1) * per_batch)  # Λ of (2), per row
-    information = hessian / m  # h
-    per_row = np.linalg.inv(information)
-    short = per_row @ long_run @ per_row - residual_variance * per_row
-    excess[:fitted, :fitted] = _positive_part(short) / total
-    # The drift: window sums against what Λ predicts for them, whitened.
-    window_sums = sums.sum(axis=1)
+    window_sums = scores[: windows * length].reshape(windows, length, fitted).sum(axis=1)  # W_w
     window_sums -= window_sums.mean(axis=0)
-    between = window_sums.T @ window_sums / (windows - 1)
-    expected = (_WINDOW_BATCHES * per_batch) * long_run  # r Λ
-    values, vectors = np.linalg.eigh(0.5 * (expected + expected.T))
-    if values[0] <= 0:
-        return excess
-    root = (vectors * np.sqrt(values)) @ vectors.T
-    root_inverse = (vectors / np.sqrt(values)) @ vectors.T
-    ratios, directions = np.linalg.eigh(root_inverse @ between @ root_inverse)
-    beyond = np.where(ratios > _drift_ratio(windows), ratios - 1.0, 0.0)
-    if beyond.any():
-        drift = root @ (directions * beyond) @ directions.T @ root / (_WINDOW_BATCHES * per_batch) ** 2  # D
-        excess[:fitted, :fitted] += per_row @ drift @ per_row / windows
+    long_run = window_sums.T @ window_sums / ((windows - 1) * length)  # Λ of (2), per row
+    per_row = np.linalg.inv(hessian / m)  # h⁻¹
+    excess[:fitted, :fitted] = _positive_part(per_row @ long_run @ per_row - residual_variance * per_row) / total
     return excess
 
 
@@ -466,15 +439,6 @@ def _positive_part(matrix: NDArray[np.float64]) -> NDArray[np.float64]:
     """The symmetric part of ``matrix`` with its negative eigenvalues set to zero."""
     eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
     return np.asarray((eigenvectors * np.clip(eigenvalues, 0.0, None)) @ eigenvectors.T, dtype=np.float64)
-
-
-@functools.lru_cache(maxsize=4)
-def _drift_ratio(windows: int) -> float:
-    """The 99th percentile of χ²(K − 1) / (K − 1), K = ``windows``: χ² = 2 P⁻¹(ν/2, q) (regularised gamma)."""
-    from scipy.special import gammaincinv
-
-    dof = windows - 1
-    return float(2.0 * gammaincinv(dof / 2.0, 0.99) / dof)
 
 
 def _report(
