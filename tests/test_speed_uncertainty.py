@@ -51,8 +51,9 @@ def test_correlation_rows_are_bounded_windows_of_the_recording() -> None:
     series = np.arange(3 * 1_000_000, dtype=np.float64).reshape(-1, 3)
     rows, windows = correlation_rows(series)
     assert rows.shape == (CORRELATION_ROWS, 3) and windows == 20
+    length = CORRELATION_ROWS // 20
     assert rows[0, 0] == 0 and rows[-1, 0] == series[-1, 0]  # from the start to the end
-    assert np.all(np.diff(rows[:5_000, 0]) == 3)  # contiguous within a window
+    assert np.all(np.diff(rows[:length, 0]) == 3)  # contiguous within a window
     small, none = correlation_rows(series[:1000])
     assert none == 0 and small.shape == (1000, 3)
 
@@ -97,3 +98,23 @@ def test_isotropic_covariance_carried_into_the_corrected_frame(kind: str) -> Non
     covariance = covariance @ covariance.T
     expected = numeric @ covariance @ numeric.T
     np.testing.assert_allclose(_isotropic_to_corrected(calibration, kind, covariance), expected, rtol=1e-3, atol=1e-6)
+
+
+def test_regularized_beta_is_scipys() -> None:
+    from scipy.special import betainc
+
+    from magfit.diagnostics.uncertainty import regularized_beta
+
+    for a in (0.5, 1.5, 3.0, 50.0, 2_000.0, 5e5):
+        for b in (0.5, 1.0, 1.5, 2.5, 3.0):
+            for x in (0.0, 1e-6, 0.01, 0.3, 0.5, 0.9, 0.99, 0.999_99, 1.0):
+                expected = float(betainc(a, b, x))
+                assert regularized_beta(a, b, x) == pytest.approx(expected, rel=1e-8, abs=1e-300), (a, b, x)
+    # The F test's p-values where the verdict is decided (n − 9 degrees of freedom, 3 or 5 extra parameters).
+    for dof in (40.0, 3_000.0, 1e6):
+        for extra in (3.0, 5.0):
+            for statistic in (0.5, 3.0, 6.0, 20.0):
+                x = dof / (dof + extra * statistic)
+                assert regularized_beta(dof / 2, extra / 2, x) == pytest.approx(
+                    float(betainc(dof / 2, extra / 2, x)), rel=1e-9
+                )

@@ -92,7 +92,7 @@ class Clipping:
 
 
 #: The threshold below each end is read off a regular stride of about this many rows (see :func:`find_clipped`).
-_PROBE_ROWS = 20_000
+_PROBE_ROWS = 5_000
 #: Rows compared with the thresholds at a time (a block of three columns stays in the cache).
 _CHUNK_ROWS = 1 << 15
 
