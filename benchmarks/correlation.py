@@ -84,7 +84,8 @@ def main() -> None:
         "",
         f"Command: `python benchmarks/correlation.py --n {args.n} --seeds {args.seeds} --correlations "
         f"{args.correlations}`  ",
-        f"Date: {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} UTC, runtime {(time.time() - started) / 60:.1f} min  ",
+        f"Date: {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} UTC, "
+        f"runtime {(time.time() - started) / 60:.1f} min  ",
         f"Load average (1, 5, 15 min) at the start: {', '.join(f'{v:.1f}' for v in load)}; at the end: "
         f"{', '.join(f'{v:.1f}' for v in end_load)} (2 cores shared)",
         "",
@@ -93,7 +94,8 @@ def main() -> None:
         f"`magfit.fit(samples, 'ellipsoid')`, {args.seeds} seeds per row. z: offset error over its stated one-sigma "
         "(per axis); 1 is honest.",
         "",
-        "| L (samples) | RMS z | largest abs z | stated offset one-sigma (counts) | true spread over seeds (counts) | verdicts |",
+        "| L (samples) | RMS z | largest abs z | stated offset one-sigma (counts) | true spread over seeds (counts) "
+        "| verdicts |",
         "|---|---|---|---|---|---|",
         *lines,
         "",
