@@ -193,7 +193,8 @@ def diagnose(
     kind = model_kind(calibration)
     cover = coverage(z)
     pinned = calibration.known_field is not None and calibration.known_field.pinned
-    observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg, series=rows, pinned=pinned)
+    # The correlation in time is read on the recording itself (a bounded part of it: uncertainty.correlation_rows).
+    observability, uncertainty = analyse(raw, weights, kind, calibration, inclination_deg, series=array, pinned=pinned)
     fitted = _weighted_evaluation(np.linalg.norm(z, axis=1) - 1.0, weights)
     goodness = check = halves = None
     if compare_ml and uncertainty.offset_sigma is not None:  # an undetermined model has no ML fit to compare
@@ -211,7 +212,7 @@ def diagnose(
             uncertainty = _with_block_jackknife(uncertainty, rows, vary, calibration, total)
     comparison = None
     if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
-        comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, rows)
+        comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, array)
     drifting = None
     if uncertainty.offset_sigma is not None and not pinned:  # a field strength changing along the recording
         drifting = compare_with_drift(rows, kind, calibration, uncertainty, inclination_deg)
