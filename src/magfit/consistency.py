@@ -73,6 +73,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import DataFileError, MagfitError, SampleError
 from .findings import Reason, ReasonList
+from .remedy import option
 from .rotations import StandardRotation, nearest_rotation, polar_decomposition
 from .units import conversion_factor, get_unit
 
@@ -707,7 +708,7 @@ def compare_fields(
             "compasses_inconsistent",
             f"{p.first} and {p.second} do not see the same field under any rotation (residual "
             f"{100 * p.residual_rms / field_size:.0f} % of the field): one of them is disturbed or faulty, or they "
-            "were not sampled together; compare each with the World Magnetic Model (method='vector')",
+            f"were not sampled together; compare each with the World Magnetic Model ({option('method', 'vector')})",
         )
     misoriented, said = _misoriented(fields, [p for p in pairs if p not in apart])
     notes += said

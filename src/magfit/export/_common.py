@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import ExportError, OptionError
+from ..remedy import option
 from ..rotations import StandardRotation, angle_between_deg, nearest_rotation, polar_decomposition
 from ..units import Unit, conversion_factor, get_unit
 from ._heading import ASSUMPTION, heading_error_deg
@@ -142,7 +143,7 @@ def physical_unit(calibration: Calibration, unit: str | None, target: str, targe
     elif calibration.unit is None:
         raise ExportError(
             f"the {target} export needs values in {target_unit}, but the calibration does not record the unit "
-            "of its samples; pass unit='uT' (or 'nT', 'mT', 'G', 'mG')"
+            f"of its samples; pass {option('unit', 'uT')} (or nT, mT, G, mG)"
         )
     else:
         try:
@@ -150,12 +151,13 @@ def physical_unit(calibration: Calibration, unit: str | None, target: str, targe
         except OptionError:
             raise ExportError(
                 f"the {target} export needs values in {target_unit}, but the calibration's unit "
-                f"{calibration.unit!r} is not one magfit knows; pass unit='uT' (or 'nT', 'mT', 'G', 'mG')"
+                f"{calibration.unit!r} is not one magfit knows; pass {option('unit', 'uT')} (or nT, mT, G, mG)"
             ) from None
     if not resolved.is_physical:
         raise ExportError(
             f"the {target} export needs values in {target_unit}, but the samples are raw counts of unknown "
-            "scale; pass the physical unit of the samples (e.g. unit='uT') or refit on samples in a physical unit"
+            f"scale; pass the physical unit of the samples (e.g. {option('unit', 'uT')}) or refit on samples in a "
+            "physical unit"
         )
     return resolved
 
@@ -177,7 +179,7 @@ def raw_counts(calibration: Calibration, unit: str | None, target: str) -> str |
     if resolved.is_physical:
         raise ExportError(
             f"the {target} export writes the sensor's raw counts, but the samples are in {resolved.name}; fit the "
-            f"counts {target} reads from the sensor (unit='counts'), not a converted field"
+            f"counts {target} reads from the sensor ({option('unit', 'counts')}), not a converted field"
         )
     return resolved.name
 

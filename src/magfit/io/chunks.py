@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from .._validation import MAX_MAGNITUDE
 from ..errors import DataFileError, OptionError
+from ..remedy import option
 from .instances import (
     SensorColumn,
     choose,
@@ -164,8 +165,9 @@ class ChunkReader:
         if sensor is not None and self._sensor_column is None:
             raise file_error(
                 self.path,
-                "has no column that tells magnetometers apart (I, instance, device_id, sensor_id ...): sensor='ID' "
-                "chooses one of a file that interleaves several; this one is read whole without it",
+                "has no column that tells magnetometers apart (I, instance, device_id, sensor_id ...): "
+                f"{option('sensor', 'ID')} chooses one of a file that interleaves several; this one is read whole "
+                "without it",
             )
 
     def _choose_sensor(self, sensor: str | None) -> SensorColumn | None:
@@ -256,10 +258,10 @@ class ChunkReader:
             value = values[row, axis]
             problem = (
                 f"{value:.3g} is beyond ±{MAX_MAGNITUDE:g}, more than float64 can square; fix or delete that row, or "
-                "skip such rows (nonfinite='skip')"
+                f"skip such rows ({option('nonfinite', 'skip')})"
                 if np.isfinite(value)
                 else f"the value is {_nonfinite_word(value)}; fix or delete that row, or skip such rows "
-                "(nonfinite='skip')"
+                f"({option('nonfinite', 'skip')})"
             )
             raise file_error(self.path, f"{place} {line}, column {self.columns[axis]!r}: {problem}")
         self.n_skipped += bad.size
@@ -364,7 +366,7 @@ class ChunkReader:
                         return file_error(
                             self.path,
                             f"line {number}, column {self.columns[axis]!r} (column {index + 1}): {cell!r} is not "
-                            "a number; fix that cell, or choose other columns with columns=[...]",
+                            f"a number; fix that cell, or choose other columns with {option('columns', '...')}",
                         )
                 instance = self._sensor_column
                 if (
@@ -437,7 +439,7 @@ class ChunkReader:
                 raise file_error(
                     self.path,
                     f"line {source.cut_line} is cut short (fields missing, no line end): the recording was "
-                    "interrupted; delete that line, or skip it (nonfinite='skip')",
+                    f"interrupted; delete that line, or skip it ({option('nonfinite', 'skip')})",
                 )
             self.n_rows += 1
             self.n_skipped += 1

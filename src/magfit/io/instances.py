@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataFileError
+from ..remedy import option
 from .columns import Converter
 from .layout import (
     FileFormat,
@@ -164,7 +165,7 @@ def interleaved_error(path: Path, name: str, values: Sequence[float], where: str
     return file_error(
         path,
         f"{where}interleaves {len(values)} magnetometers in column {name!r} ({_ids(name, values)}): they are not "
-        f"one cloud of samples; fit one at a time with sensor='{ids[0]}'",
+        f"one cloud of samples; fit one at a time with {option('sensor', ids[0])}",
     )
 
 

@@ -24,6 +24,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from ..remedy import option
 from .chunks import ChunkReader, PiecesRead, read_pieces
 from .layout import FileFormat, sniff
 from .sources import display_name, file_error
@@ -186,7 +187,7 @@ def read_samples(
         raise file_error(
             reader.path,
             f"all {read.n_rows} rows have a NaN, infinite or empty value in {', '.join(reader.columns)} "
-            f"(first at line {read.skipped_lines[0]}); check the columns (columns=[...])",
+            f"(first at line {read.skipped_lines[0]}); check the columns ({option('columns', '...')})",
         )
     return SampleTable(
         path=Path(display_name(reader.path)),

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataFileError, OptionError
+from ..remedy import option
 from .columns import (
     CONTENT_ROWS,
     ContentChoice,
@@ -44,8 +45,8 @@ __all__ = [
 
 def _ambiguity(path: Path, candidates: Sequence[Any]) -> DataFileError:
     listed = "; ".join(f"({triple.describe()})" for triple in candidates[:6])
-    example = ", ".join(repr(name) for name in candidates[0].names)
-    return file_error(path, f"several magnetometer column triples match: {listed}; choose one with columns=[{example}]")
+    example = option("columns", list(candidates[0].names))
+    return file_error(path, f"several magnetometer column triples match: {listed}; choose one with {example}")
 
 
 def _check_columns_option(columns: Sequence[str | int]) -> list[str | int]:
@@ -103,7 +104,7 @@ def resolve_table_columns(
                 raise file_error(
                     path,
                     f"no magnetometer columns found among: {', '.join(labels)}; name the x, y, z columns with "
-                    "columns=[...]",
+                    f"{option('columns', '...')}",
                 )
             best = [triple for triple in candidates if triple.score == candidates[0].score]
             if len(best) > 1:
@@ -125,7 +126,7 @@ def resolve_table_columns(
                     path,
                     f"has no header and several column triples look like a magnetometer: {found}"
                     + (f" ({note})" if (note := choice.describe(labels)) else "")
-                    + f"; choose one with columns=[{', '.join(str(i) for i in choice.indices)}] (0-based)",
+                    + f"; choose one with {option('columns', list(choice.indices))} (0-based)",
                 )
             indices = choice.indices
     else:
@@ -215,12 +216,13 @@ def resolve_npz_columns(path: Path, members: dict[str, NpyInfo], columns: Sequen
             raise file_error(
                 path,
                 f"several (N, 3) arrays could be the samples: {', '.join(triples)} ({shapes}); choose the raw "
-                f"magnetometer's with columns=['{triples[0]}']",
+                f"magnetometer's with {option('columns', triples[0])}",
             )
         raise file_error(
             path,
-            f"no magnetometer arrays found among the keys: {listing}; name them with columns=['mag_x', 'mag_y', "
-            "'mag_z'] (three 1-D keys) or columns=['key'] (one (N, 3) key)",
+            f"no magnetometer arrays found among the keys: {listing}; name them with "
+            f"{option('columns', ['mag_x', 'mag_y', 'mag_z'])} (three 1-D keys) or {option('columns', 'key')} (one "
+            "(N, 3) key)",
         )
     chosen = _check_columns_option(columns)
     if len(chosen) == 1 and isinstance(chosen[0], str):

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from .._validation import MAX_MAGNITUDE
 from ..errors import DataFileError
+from ..remedy import option
 from .atomic import atomic_open
 from .chunks import ChunkReader
 from .layout import NA_VALUES
@@ -205,7 +206,7 @@ class _TextRewriter:
             raise file_error(
                 self.reader.path,
                 f"line {line}, column {self.reader.columns[axis]!r} (column {index + 1}): {shown!r} is not a number; "
-                "fix that cell, or choose other columns with columns=[...]",
+                f"fix that cell, or choose other columns with {option('columns', '...')}",
             ) from None
 
     def _format_all(self, values: NDArray[np.float64]) -> list[bytes]:

@@ -46,6 +46,7 @@ from .._optimize import bracketed_root
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..geometry.quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
+from ..remedy import option
 from ..statistics import DESIGN_EXPONENTS, DESIGN_WEIGHTS, Statistics
 from .registry import FitInput, register
 
@@ -115,7 +116,8 @@ def estimate_noise_variance(statistics: Statistics, psi: tuple[NDArray[np.float6
         previous = s
     raise CalibrationError(
         "the als fit found no noise variance at which the data fit an ellipsoid (λ_min of ψ_als never reaches 0); "
-        "the samples do not outline an ellipsoid plus isotropic noise: use method='ellipsoid' or give noise_std"
+        f"the samples do not outline an ellipsoid plus isotropic noise: use {option('method', 'ellipsoid')} or give "
+        "noise_std"
     )
 
 

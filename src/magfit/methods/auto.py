@@ -55,6 +55,7 @@ from ..facts import AutoChoice
 from ..findings import Diagnostics, Reason, Support
 from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..outliers import DEFAULT_THRESHOLD
+from ..remedy import option
 from ..sampling import thin
 from ..statistics import Statistics
 from .core import estimate, first_order_refit
@@ -327,7 +328,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
                 f"(±{bound:.2g}°, beyond {USELESS_BOUND_DEG:g}°) leaves no usable calibration; that model is not "
                 "determined" + (f" ({why})" if why else "") + "; record again turning the sensor through more "
                 "attitudes (tilt it further: a full tumble is best), or fit against a reference field "
-                "(method='vector' with the attitude)"
+                f"({option('method', 'vector')} with the attitude)"
             )
     calibration = optima[chosen]
     if chosen == "full" or kept.shape[0] > 20_000:  # the optimum came from a stride of 20 000, or ml is due

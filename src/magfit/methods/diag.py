@@ -21,6 +21,7 @@ import numpy as np
 from ..calibration import Calibration
 from ..errors import CalibrationError
 from ..geometry.quadric import calibration_from_ellipsoid, check_field_strength, quadric_ellipsoid
+from ..remedy import option
 from .registry import FitInput, register
 
 __all__ = ["DIAGONAL_TERMS", "fit_diag"]
@@ -57,8 +58,8 @@ def fit_diag(data: FitInput, *, field_strength: float | None = None) -> Calibrat
     if isinstance(ellipsoid, str):
         raise CalibrationError(
             f"the diag fit failed: {ellipsoid}; either the soft iron is turned off the sensor axes, which the "
-            "axis-aligned model cannot represent (use method='als'), or the samples cover too few directions "
-            "(rotate the sensor through more attitudes)",
+            f"axis-aligned model cannot represent (use {option('method', 'als')}), or the samples cover too few "
+            "directions (rotate the sensor through more attitudes)",
             codes=("no_ellipsoid",),
         )
     offset, shape = ellipsoid

@@ -50,6 +50,7 @@ from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..facts import SolverStatus
 from ..geometry.quadric import calibration_from_ellipsoid, check_field_strength, ellipsoid_from_quadric
+from ..remedy import option
 from ..statistics import Statistics
 from .als import als_theta
 from .core import first_order_stand_in
@@ -263,7 +264,7 @@ def _start(statistics: Statistics) -> tuple[str, NDArray[np.float64], NDArray[np
         reasons.append(str(error).split(";")[0])
     raise CalibrationError(
         "the ml fit has no starting ellipsoid (" + "; ".join(reasons) + "): the samples cover too few directions; "
-        "rotate the sensor through more attitudes, or use method='sphere' (hard iron only)"
+        f"rotate the sensor through more attitudes, or use {option('method', 'sphere')} (hard iron only)"
     )
 
 
@@ -366,7 +367,7 @@ def fit_ml(
     if not np.isfinite(current.cost):
         raise CalibrationError(
             "the ml fit cannot measure the distances of the samples to the starting ellipsoid (non-finite); "
-            "use method='als'"
+            f"use {option('method', 'als')}"
         )
     try:
         solution = levenberg_marquardt(
@@ -381,17 +382,19 @@ def fit_ml(
     except np.linalg.LinAlgError as error:  # JᵀJ singular at the optimum: the samples do not fix all 9 parameters
         raise CalibrationError(
             f"the ml fit cannot determine the ellipsoid from these samples ({error}); they cover too few "
-            "directions: rotate the sensor through more attitudes, or use method='auto'"
+            f"directions: rotate the sensor through more attitudes, or use {option('method', 'auto')}"
         ) from None
     if not np.all(np.isfinite(solution.params)):
         raise CalibrationError(
             f"the ml fit did not converge ({solution.message}, after {solution.iterations} iterations); "
-            "raise max_iterations, or use method='als' (no iterations)"
+            f"raise max_iterations, or use {option('method', 'als')} (no iterations)"
         )
     centre_z, lower = model.unpack(solution.params)
     shape_z = lower @ lower.T
     if not np.linalg.eigvalsh(shape_z)[0] > 0:
-        raise CalibrationError("the ml fit ended on a quadric that is not positive-definite; use method='als'")
+        raise CalibrationError(
+            f"the ml fit ended on a quadric that is not positive-definite; use {option('method', 'als')}"
+        )
     residual_variance = 2.0 * solution.evaluation.cost / max(zt.shape[1] - model.size, 1)
     details: dict[str, Any] = {
         "status": solution.status,
@@ -410,7 +413,7 @@ def fit_ml(
         problem = (
             f"the ml fit did not converge ({solution.message}, after {solution.iterations} iterations): it crawled "
             "along a combination the samples hardly determine; record more attitudes, raise max_iterations, or use "
-            "method='auto'"
+            f"{option('method', 'auto')}"
         )
     fitted = calibration_from_ellipsoid(
         "ml",

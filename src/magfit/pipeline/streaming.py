@@ -28,6 +28,7 @@ from ..errors import DataFileError, MagfitError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
 from ..methods import get_method
+from ..remedy import option
 from ..statistics import Statistics
 
 if TYPE_CHECKING:
@@ -133,7 +134,7 @@ def fit_samples_file(
     """
     spec = get_method(method)
     limit = memory_sample_limit() if max_samples is None else max_samples
-    subsample = "even=True" if even else None
+    subsample = option("even", True) if even else None
     if spec.data == "statistics" and not even:
         calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite, options, progress)
         return FileFit(calibration, evaluation, read, True, subsample)
@@ -148,7 +149,7 @@ def fit_samples_file(
         if max_samples is None:
             default = f"{DEFAULT_FIT_SAMPLES:,}".replace(",", " ")
             bound += f", the default: {default} or half the available memory"
-        subsample = f"even=True; {bound}" if even else bound
+        subsample = f"{option('even', True)}; {bound}" if even else bound
     return FileFit(calibration, evaluation, read, True, subsample)
 
 
@@ -192,7 +193,7 @@ def log_subsample(n_records: int, every: int, max_samples: int | None, even: boo
     """What ``CompassCalibration.subsample`` says of a log's compass read one record in every ``every``
     (``LogSamples.every``) of its ``n_records``; None when every record was read and ``even`` is off."""
     if every <= 1:
-        return "even=True" if even else None
+        return option("even", True) if even else None
     limit = log_read_limit(max_samples)
     bound = f"stride: one in every {every} of {n_records} records read, "
     if n_records > limit:
@@ -201,7 +202,7 @@ def log_subsample(n_records: int, every: int, max_samples: int | None, even: boo
             bound += f", the default: {DEFAULT_FIT_SAMPLES:,} or half the available memory".replace(",", " ")
     else:
         bound += "more than the log's reader keeps of one topic"
-    return f"even=True; {bound}" if even else bound
+    return f"{option('even', True)}; {bound}" if even else bound
 
 
 def _estimated_rows(path: Path) -> int:
