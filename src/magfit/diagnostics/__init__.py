@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._scale import robust_scale
 from .._validation import check_finite, check_shape
 from ..calibration import Calibration
 from ..errors import MagfitError, SampleError
@@ -114,8 +115,7 @@ def _inlier_mask(calibration: Calibration, samples: NDArray[Any]) -> tuple[NDArr
             mask[int(start) : int(stop)] = False
         return mask, "the robust fit rejected"
     residuals = unchecked_sphere_distances(calibration, samples)
-    centre = float(np.median(residuals))
-    sigma = 1.4826 * float(np.median(np.abs(residuals - centre)))
+    centre, sigma = robust_scale(residuals)
     threshold = float(calibration.details.get("threshold", 3.5))
     return np.abs(residuals - centre) <= threshold * max(sigma, 1e-12), "lie beyond the robust fit's threshold"
 

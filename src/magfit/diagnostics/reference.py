@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..errors import CalibrationError
 from ..findings import Coverage, Diagnostics, Observability, ReasonList, Support, Uncertainty, WeakDirection, reasons
+from ..rotations import polar_decomposition
 from .coverage import coverage
 from .uncertainty import DEFAULT_INCLINATION_DEG, UNDETERMINED_SIGMA, WEAK_INFORMATION
 from .verdict import BIASED_HEADING_DEG, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
@@ -277,8 +278,7 @@ def rotation_sigma_deg(covariance: NDArray[np.float64], g: NDArray[np.float64]) 
 
 
 def _polar(matrix: NDArray[Any]) -> NDArray[np.float64]:
-    u, _, vt = np.linalg.svd(matrix)
-    return np.asarray(u @ vt, dtype=np.float64)
+    return polar_decomposition(matrix)[0]
 
 
 def _heading_sigmas(

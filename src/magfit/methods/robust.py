@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._scale import robust_scale
 from .._validation import check_support
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
@@ -43,7 +44,6 @@ MODELS = ("full", "sphere", "diag", "ellipsoid", "als", "ml")
 DEFAULT_THRESHOLD = 3.5
 #: At most this many runs of rejected samples are stored in ``details`` (see :func:`encode_indices`).
 MAX_STORED_RUNS = 10_000
-_MAD_TO_SIGMA = 1.4826
 
 
 def resolve_model(model: str) -> tuple[str, Callable[..., Calibration]]:
@@ -92,12 +92,6 @@ def _fit_diag_algebraic(samples: NDArray[np.float64], statistics: Statistics | N
     theta[keep] = eigenvectors[:, 0]
     offset, shape = ellipsoid_from_quadric(theta, statistics, "diag")
     return calibration_from_ellipsoid("diag", offset, shape, n_samples=statistics.n)
-
-
-def robust_scale(residuals: NDArray[np.float64]) -> tuple[float, float]:
-    """Median and σ = 1.4826 MAD of the residuals (a Gaussian's standard deviation, robustly)."""
-    centre = float(np.median(residuals))
-    return centre, _MAD_TO_SIGMA * float(np.median(np.abs(residuals - centre)))
 
 
 def _band(samples: NDArray[np.float64]) -> NDArray[np.bool_]:
