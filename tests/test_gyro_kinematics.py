@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from magfit.methods.gyro.kinematics import _quaternion_product, _segmented_scan, _turns
-from magfit.methods.gyro.model import _solve_arrow
+from magfit.methods.gyro.model import _inverse_arrow, _solve_arrow
 
 
 def _unit_quaternions(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -61,3 +61,19 @@ def test_the_arrow_solve_is_the_dense_solve() -> None:
     singular[:, head : head + 2] = 0.0
     with pytest.raises(np.linalg.LinAlgError):
         _solve_arrow(singular, rhs, head)
+
+
+def test_the_arrow_inverse_is_the_dense_inverse_or_declines() -> None:
+    rng = np.random.default_rng(7)
+    head, count, rows = 16, 40, 3000
+    jac = np.zeros((rows, head + 2 * count))
+    jac[:, :head] = rng.normal(size=(rows, head))
+    stretch = np.sort(rng.integers(0, count, rows))
+    for shift in range(2):
+        jac[np.arange(rows), head + 2 * stretch + shift] = rng.normal(size=rows)
+    information = jac.T @ jac
+    inverse = _inverse_arrow(information, head)
+    assert inverse is not None
+    assert np.allclose(inverse, np.linalg.pinv(information), rtol=1e-9, atol=1e-12)
+    jac[:, 3] = jac[:, 2]  # a direction the data do not determine: left to the pseudo-inverse
+    assert _inverse_arrow(jac.T @ jac, head) is None

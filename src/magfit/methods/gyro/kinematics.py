@@ -62,7 +62,8 @@ def _segmented_scan(q: NDArray[np.float64], start: NDArray[np.bool_]) -> NDArray
     rows = padded.reshape(blocks, _BLOCK, 4)
     resets = flags.reshape(blocks, _BLOCK)
     for j in range(1, _BLOCK):  # (a)
-        rows[:, j] = np.where(resets[:, j, None], rows[:, j], _quaternion_product(rows[:, j - 1], rows[:, j]))
+        product = _quaternion_product(rows[:, j - 1], rows[:, j])
+        rows[:, j] = np.where(resets[:, j, None], rows[:, j], product) if resets[:, j].any() else product
     reaches = ~np.logical_or.accumulate(resets, axis=1)  # the row's chain runs back into the block before
     totals = _segmented_scan(rows[:, -1], ~reaches[:, -1])  # (b): the product up to each block's last row
     inbound = np.broadcast_to(totals[:-1, None, :], (blocks - 1, _BLOCK, 4))
@@ -74,16 +75,23 @@ def _turns(w: NDArray[np.float64], t: NDArray[np.float64], beta: NDArray[np.floa
            segment: NDArray[np.int64]) -> NDArray[np.float64]:  # fmt: skip
     """R_k (n, 3, 3): the body's rotation from its stretch's first sample to sample k (``v_start = R_k v_k``),
     (K1) and (K2)."""
-    rates = 0.5 * (w[:-1] + w[1:]) - beta
-    phi = rates * np.diff(t)[:, None]
+    start = np.ones(t.size, dtype=bool)
+    start[1:] = segment[1:] != segment[:-1]
+    return _rotations(0.5 * (w[:-1] + w[1:]), np.diff(t), beta, start)
+
+
+def _rotations(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: NDArray[np.float64],
+               start: NDArray[np.bool_]) -> NDArray[np.float64]:  # fmt: skip
+    """:func:`_turns` from the steps' mean rates (n − 1, 3) and lengths (n − 1,) and the stretches' first samples
+    (n,): what a trajectory keeps, so that each new bias costs only the integration."""
+    phi = (mean_rates - beta) * dt[:, None]
     angle = np.linalg.norm(phi, axis=1)
     sinc = np.where(angle > 1e-12, np.sin(0.5 * angle) / np.maximum(angle, 1e-300), 0.5)
-    n = t.size
-    q = np.zeros((n, 4))
-    q[:, 0] = 1.0
-    q[1:] = np.column_stack([np.cos(0.5 * angle), phi * sinc[:, None]])
-    start = np.ones(n, dtype=bool)
-    start[1:] = segment[1:] != segment[:-1]
+    n = start.size
+    q = np.empty((n, 4))
+    q[0] = (1.0, 0.0, 0.0, 0.0)
+    q[1:, 0] = np.cos(0.5 * angle)
+    q[1:, 1:] = phi * sinc[:, None]
     q[start] = (1.0, 0.0, 0.0, 0.0)  # a stretch starts from itself
     s, x, y, z = _segmented_scan(q, start).T
     xx, yy, zz, xy, xz, yz, sx, sy, sz = x * x, y * y, z * z, x * y, x * z, y * z, s * x, s * y, s * z

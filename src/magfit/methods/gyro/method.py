@@ -49,7 +49,7 @@ from .inclination import _dip, _gravity_residual, _inclination_disagreement
 from .judge import _ADVICE, HALVES_SIGMAS, LARGE_RESIDUAL, SINGLE_AXIS, _halves, _heading_sigma, _support
 from .lag import _delayed, _search_lag
 from .mapping import MAPPINGS, mapping_name
-from .model import _covariance, _Model
+from .model import _covariance, _Model, forget_integration
 from .rates import _check_gyro, _check_readings, _check_readings_by_fit, _motion, _own_rate, _Reading
 from .windows import WINDOW_S, _turn_axes, _windowed_bias, _Windows, _windows, window_length
 
@@ -139,6 +139,8 @@ def fit_gyro(
             f"singular (no turning the gyro and the samples agree on); {_ADVICE}",
             codes=("gyro",),
         ) from None
+    finally:
+        forget_integration()
 
 
 def _fit_gyro(data: FitInput, *, gyro: ArrayLike | None, time_s: ArrayLike | None, mapping: str, segment_s: float,

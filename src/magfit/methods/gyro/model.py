@@ -24,6 +24,7 @@ residuals' ``σ² I⁻¹`` (:func:`_covariance`).
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -34,7 +35,7 @@ from numpy.typing import NDArray
 from ..._optimize import Evaluation, Solution, levenberg_marquardt
 from ...rotations import skew
 from .gravity import ACCEL_BIAS_PRIOR, _cos, _Gravity, _gravity_angle
-from .kinematics import _turns, _unit
+from .kinematics import _rotations, _unit
 from .mapping import MAPPINGS
 from .windows import _gaps, _symmetric
 
@@ -67,6 +68,17 @@ class _Trajectory:
     count: int
     basis: NDArray[np.float64]
     gravity: _Gravity | None = None
+
+    @cached_property
+    def steps(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+        """What every integration reuses: the steps' mean rates (n − 1, 3) and lengths (n − 1,), the stretches'
+        first samples (n,), and the weight of R_k in the running sum C (``dt_{k−1}``, 0 at a stretch's start)."""
+        dt = np.diff(self.t)
+        start = np.ones(self.t.size, dtype=bool)
+        start[1:] = self.segment[1:] != self.segment[:-1]
+        weights = np.concatenate([[0.0], dt])
+        weights[start] = 0.0
+        return 0.5 * (self.w[:-1] + self.w[1:]), dt, start, weights
 
     @cached_property
     def first(self) -> NDArray[np.int64]:
@@ -108,16 +120,12 @@ class _Trajectory:
         ``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1}`` (a running sum over the stretch), and
         ``∂b_k/∂β = −R_kᵀ [b₀]× C_k``.
         """
-        k = self.k
-        turns = _turns(self.w, self.t, p[k + 3 : k + 6], self.segment)
-        steps = np.zeros_like(turns)
-        steps[1:] = turns[1:] * np.diff(self.t)[:, None, None]
-        steps[1:][self.segment[1:] != self.segment[:-1]] = 0.0
-        running = np.cumsum(steps, axis=0)
+        turns, running = _integrated(self, p[self.k + 3 : self.k + 6])
         running = running[self.rows] - running[self.first[self.rows]]
         turns = turns[self.rows]
         start = _unit(p[self.head :].reshape(self.count, 2))[self.segment[self.rows]]
-        d_beta = -np.einsum("kji,kjl,klm->kim", turns, skew(start), running)  # [b₀]×: (b₀ × v) = [b₀]× v
+        # (M2), R_kᵀ [b₀]× C_k: stacked 3×3 products (numpy's own loop, no threaded BLAS, far quicker than einsum)
+        d_beta = -np.matmul(np.matmul(turns.transpose(0, 2, 1), skew(start)), running)
         return np.einsum("kji,kj->ki", turns, start), turns, d_beta
 
     def _gravity_rows(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -154,7 +162,7 @@ class _Trajectory:
             # ∂(G b)_i / ∂G_ij = b_j, through the basis
             dense[:, i, :k] = np.einsum("kj,jq->kq", b, self.basis[3 * i : 3 * i + 3])
         dense[:, :3, k : k + 3] = np.eye(3)
-        dense[:, :3, k + 3 : k + 6] = np.einsum("ij,kjm->kim", g, d_beta)
+        dense[:, :3, k + 3 : k + 6] = np.matmul(g, d_beta)
         angles = p[self.head :].reshape(self.count, 2)[self.segment[self.rows]]
         elevation, azimuth = angles[:, 0], angles[:, 1]
         up, across = np.sin(elevation), np.cos(elevation)
@@ -163,7 +171,8 @@ class _Trajectory:
             np.column_stack([-across * np.sin(azimuth), across * np.cos(azimuth), np.zeros(rows)]),
         ], axis=2)  # fmt: skip
         angular = np.zeros((rows, self.components, 2))
-        angular[:, :3] = np.einsum("ij,kmj,kmn->kin", g, turns, d_start)  # G R_kᵀ ∂b₀
+        turned = np.matmul(turns.transpose(0, 2, 1), d_start)  # R_kᵀ ∂b₀
+        angular[:, :3] = np.matmul(g, turned)  # G R_kᵀ ∂b₀
         if self.gravity is not None:
             down, weight = self._gravity_rows()
             inclination = p[k + 6]
@@ -171,7 +180,7 @@ class _Trajectory:
             dense[:, 3, k + 3 : k + 6] = across[:, None] * np.einsum("ki,kim->km", down, d_beta)
             # ∂/∂δ of (x − sin δ) / cos δ = −1 + tan δ · (x − sin δ) / cos δ
             dense[:, 3, k + 6] = weight * (-1.0 + math.tan(inclination) * _gravity_angle(down, b, inclination))
-            angular[:, 3] = across[:, None] * np.einsum("ki,kmi,kmn->kn", down, turns, d_start)
+            angular[:, 3] = across[:, None] * np.einsum("ki,kin->kn", down, turned)
         return residual, dense, angular
 
     def normal_equations(self, p: NDArray[np.float64]) -> Evaluation:
@@ -200,8 +209,8 @@ class _Trajectory:
         size = head + 2 * self.count
         normal = np.zeros((size, size))
         normal[:head, :head] = np.einsum("kip,kiq->pq", dense, dense)
-        cross = self._by_stretch(np.einsum("kip,kin->kpn", dense, angular))  # (count, head, 2)
-        own = self._by_stretch(np.einsum("kim,kin->kmn", angular, angular))  # (count, 2, 2)
+        cross = self._by_stretch(np.matmul(dense.transpose(0, 2, 1), angular))  # (count, head, 2)
+        own = self._by_stretch(np.matmul(angular.transpose(0, 2, 1), angular))  # (count, 2, 2)
         for s in range(self.count):
             columns = slice(head + 2 * s, head + 2 * s + 2)
             normal[:head, columns] = cross[s]
@@ -224,8 +233,50 @@ class _Trajectory:
     def times(self, dense: NDArray[np.float64], angular: NDArray[np.float64],
               other: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
         """``Jᵀ X`` (p.size, m) for X (rows, C, m) from the blocks of :meth:`blocks`."""
-        angles = self._by_stretch(np.einsum("kin,kiq->knq", angular, other))  # (count, 2, m)
+        angles = self._by_stretch(np.matmul(angular.transpose(0, 2, 1), other))  # (count, 2, m)
         return np.concatenate([np.einsum("kip,kiq->pq", dense, other), angles.reshape(-1, other.shape[2])])
+
+
+@dataclass(frozen=True)
+class _Integration:
+    """The rotations R_k (n, 3, 3) and running sums Σ dt_j R_{j+1} (n, 3, 3) of one recording at one bias."""
+
+    w: NDArray[np.float64]
+    t: NDArray[np.float64]
+    segment: NDArray[np.int64]
+    beta: bytes
+    turns: NDArray[np.float64]
+    running: NDArray[np.float64]
+
+
+#: The last integration, reused while the next fit starts at the same bias on the same recording (the candidate
+#: mappings start from the general fit, the covariance and the residuals at the solution the fit last
+#: integrated): one entry, emptied when a gyro fit ends (:func:`forget_integration`).
+_LAST: list[_Integration] = []
+_LOCK = threading.Lock()
+
+
+def _integrated(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """R_k and the running sums of ``traj``'s recording at bias ``beta`` (:class:`_Integration`), integrated or
+    reused."""
+    key = np.asarray(beta, dtype=np.float64).tobytes()
+    with _LOCK:
+        for last in _LAST:
+            if (last.w is traj.w and last.t is traj.t and last.beta == key
+                    and (last.segment is traj.segment or np.array_equal(last.segment, traj.segment))):  # fmt: skip
+                return last.turns, last.running
+    mean_rates, dt, start, weights = traj.steps
+    turns = _rotations(mean_rates, dt, beta, start)
+    running = np.cumsum(turns * weights[:, None, None], axis=0)  # Σ dt_j R_{j+1} (none across a start)
+    with _LOCK:
+        _LAST[:] = [_Integration(traj.w, traj.t, traj.segment, key, turns, running)]
+    return turns, running
+
+
+def forget_integration() -> None:
+    """Drop the kept integration (its arrays are the size of the recording)."""
+    with _LOCK:
+        _LAST.clear()
 
 
 def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
@@ -274,6 +325,67 @@ def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iteration
                                solve=solve)  # fmt: skip
 
 
+#: The head's Schur complement (eq. M3) is inverted only below this condition number; above it the pseudo-inverse
+#: of the whole matrix is taken (which truncates what the data do not determine, as before).
+_ARROW_CONDITION = 1e10
+
+
+def _arrow_blocks(matrix: NDArray[np.float64], head: int) -> tuple[NDArray[np.float64], ...] | None:
+    """The 2×2 diagonal blocks of an arrow matrix's tail, as (d00, d01, d10, d11, det), or None if one is singular."""
+    count = (matrix.shape[0] - head) // 2
+    index = head + 2 * np.arange(count)
+    d00, d01 = matrix[index, index], matrix[index, index + 1]
+    d10, d11 = matrix[index + 1, index], matrix[index + 1, index + 1]
+    det = d00 * d11 - d01 * d10
+    if not np.all(np.isfinite(det)) or np.any(det == 0.0):
+        return None
+    return d00, d01, d10, d11, det
+
+
+def _block_solve(blocks: tuple[NDArray[np.float64], ...], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """D⁻¹ v for v (2·count, ...), D block-diagonal with the 2×2 ``blocks`` of :func:`_arrow_blocks`."""
+    d00, d01, d10, d11, det = (x.reshape((-1,) + (1,) * (v.ndim - 1)) for x in blocks)
+    first, second = v[0::2], v[1::2]
+    out = np.empty_like(v)
+    out[0::2] = (d11 * first - d01 * second) / det
+    out[1::2] = (d00 * second - d10 * first) / det
+    return out
+
+
+def _inverse_arrow(matrix: NDArray[np.float64], head: int) -> NDArray[np.float64] | None:
+    """The inverse of a symmetric arrow matrix (the information of (M1)) by its blocks (eq. M3)::
+
+        [[A, B], [Bᵀ, D]]⁻¹ = [[S⁻¹, −S⁻¹ Eᵀ], [−E S⁻¹, D⁻¹ + E S⁻¹ Eᵀ]],   E = D⁻¹ Bᵀ,  S = A − B E
+
+    or None when a block is singular or S is ill-conditioned (:data:`_ARROW_CONDITION`). Products by einsum:
+    a threaded matrix product of this size costs more than its arithmetic on a shared machine.
+    """
+    blocks = _arrow_blocks(matrix, head)
+    if blocks is None:
+        return None
+    b = matrix[:head, head:]
+    e = _block_solve(blocks, np.ascontiguousarray(b.T))  # (2·count, head)
+    schur = matrix[:head, :head] - np.einsum("ij,jk->ik", b, e)
+    if not np.linalg.cond(schur) < _ARROW_CONDITION:
+        return None
+    s_inv = np.linalg.inv(schur)
+    es = np.einsum("ij,jk->ik", e, s_inv)
+    size = matrix.shape[0]
+    inverse = np.zeros((size, size))
+    inverse[:head, :head] = s_inv
+    inverse[head:, :head] = -es
+    inverse[:head, head:] = -es.T
+    inverse[head:, head:] = np.einsum("ij,kj->ik", es, e)
+    index = 2 * np.arange((size - head) // 2)
+    d00, d01, d10, d11, det = blocks
+    tail = inverse[head:, head:]
+    tail[index, index] += d11 / det
+    tail[index, index + 1] -= d01 / det
+    tail[index + 1, index] -= d10 / det
+    tail[index + 1, index + 1] += d00 / det
+    return inverse
+
+
 def _solve_arrow(matrix: NDArray[np.float64], rhs: NDArray[np.float64], head: int) -> NDArray[np.float64]:
     """``matrix⁻¹ rhs`` for the normal matrix of (M1): dense in its first ``head`` parameters, and 2×2 blocks on
     the diagonal for each stretch's two angles (a stretch's angles meet only its own rows).
@@ -287,40 +399,30 @@ def _solve_arrow(matrix: NDArray[np.float64], rhs: NDArray[np.float64], head: in
     singular, as a dense solve would.
     """
     a, b, c = matrix[:head, :head], matrix[:head, head:], matrix[head:, :head]
-    count = (matrix.shape[0] - head) // 2
-    index = head + 2 * np.arange(count)
-    d00, d01 = matrix[index, index], matrix[index, index + 1]
-    d10, d11 = matrix[index + 1, index], matrix[index + 1, index + 1]
-    det = d00 * d11 - d01 * d10
-    if not np.all(np.isfinite(det)) or np.any(det == 0.0):
+    blocks = _arrow_blocks(matrix, head)
+    if blocks is None:
         raise np.linalg.LinAlgError("a stretch's angle block is singular")
-
-    def block_solve(v: NDArray[np.float64]) -> NDArray[np.float64]:
-        """D⁻¹ v for v (2·count, ...), block by block."""
-        first, second = v[0::2], v[1::2]
-        shape = (-1,) + (1,) * (v.ndim - 1)
-        out = np.empty_like(v)
-        out[0::2] = (d11.reshape(shape) * first - d01.reshape(shape) * second) / det.reshape(shape)
-        out[1::2] = (d00.reshape(shape) * second - d10.reshape(shape) * first) / det.reshape(shape)
-        return out
-
     r_h, r_a = rhs[:head], rhs[head:]
-    x_h = np.linalg.solve(a - b @ block_solve(c), r_h - b @ block_solve(r_a))
-    return np.asarray(np.concatenate([x_h, block_solve(r_a - c @ x_h)]), dtype=np.float64)
+    x_h = np.linalg.solve(a - b @ _block_solve(blocks, c), r_h - b @ _block_solve(blocks, r_a))
+    return np.asarray(np.concatenate([x_h, _block_solve(blocks, r_a - c @ x_h)]), dtype=np.float64)
 
 
 def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64]:
     """The sandwich covariance of p: batch sums of the score over 20-40 contiguous stretches of the recording."""
     rows, components = traj.rows.size, traj.components
     residual, dense, angular = traj.blocks(p)
-    inverse = np.linalg.pinv(traj.information(dense, angular))
+    information = traj.information(dense, angular)
+    structured = _inverse_arrow(information, traj.head)
+    # ill-conditioned: the pseudo-inverse leaves out what the data do not determine
+    inverse = np.asarray(np.linalg.pinv(information) if structured is None else structured, dtype=np.float64)
     dof = max(traj.n_residuals() - p.size, 1)
     independent = inverse * float(np.sum(residual**2)) / dof
     score = traj.score(dense, angular, residual)
     batches = max(2, min(40, rows // 50))
     sums = np.array([s.sum(axis=0) for s in np.array_split(score, batches)])
-    middle = sums.T @ sums * batches / (batches - 1)
-    sandwich = inverse @ middle @ inverse
+    # Products by einsum: BLAS's threads on matrices of this size cost more than the arithmetic on shared cores.
+    middle = np.einsum("bi,bj->ij", sums, sums) * batches / (batches - 1)
+    sandwich = np.einsum("ij,jk->ik", np.einsum("ij,jk->ik", inverse, middle), inverse)
     # Never below the independent-noise covariance (a few batches can understate it by chance).
     covariance = _larger(sandwich, independent)
     if traj.gravity is not None:
@@ -330,15 +432,15 @@ def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64
         down, weight = traj._gravity_rows()
         tilt = np.zeros((rows, components, 3))
         tilt[:, 3] = (weight / _cos(float(p[traj.k + 6])))[:, None] * np.cross(down, b)  # ∂(d·b)/∂θ = d × b
-        shift = -inverse @ traj.times(dense, angular, tilt)
-        covariance = covariance + (ACCEL_BIAS_PRIOR / 9.81) ** 2 * shift @ shift.T
+        shift = -np.einsum("ij,jk->ik", inverse, traj.times(dense, angular, tilt))
+        covariance = covariance + (ACCEL_BIAS_PRIOR / 9.81) ** 2 * np.einsum("ik,jk->ij", shift, shift)
     return covariance
 
 
 def _larger(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """``b`` plus the positive part of ``a − b``: the larger of two covariances."""
     values, vectors = np.linalg.eigh(a - b)
-    return b + (vectors * np.clip(values, 0, None)) @ vectors.T
+    return b + np.einsum("ik,jk->ij", vectors * np.clip(values, 0, None), vectors)
 
 
 @dataclass(frozen=True)

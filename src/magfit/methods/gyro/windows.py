@@ -52,23 +52,35 @@ def _gaps(t: NDArray[np.float64]) -> NDArray[np.bool_]:
 
 
 def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Windows:
-    """The integrals of (W1) over consecutive windows of ``length`` samples, those across a gap left out."""
+    """The integrals of (W1) over consecutive windows of ``length`` samples, those across a gap left out.
+
+    Trapezoids: over a window ``[s, s + L]``, ``∫ f dt = Σ_{k=s}^{s+L−1} ½ dt_k (f_k + f_{k+1})``, summed window
+    by window (each sample weighted by the half-steps beside it), not as differences of running sums.
+    """
     dt = np.diff(t)
-    # Trapezoids of each interval, summed cumulatively: every window is a difference of two sums.
-    outer = w[:, :, None] * y[:, None, :]  # ω yᵀ at each sample
-    pieces_m = 0.5 * (outer[:-1] + outer[1:]) * dt[:, None, None]
-    pieces_y = 0.5 * (y[:-1] + y[1:]) * dt[:, None]
-    pieces_w = 0.5 * (w[:-1] + w[1:]) * dt[:, None]
-    cm = np.concatenate([np.zeros((1, 3, 3)), np.cumsum(pieces_m, axis=0)])
-    cy = np.concatenate([np.zeros((1, 3)), np.cumsum(pieces_y, axis=0)])
-    cw = np.concatenate([np.zeros((1, 3)), np.cumsum(pieces_w, axis=0)])
     starts = np.arange(0, len(y) - length, length)
+    windows = starts.size
+    used = windows * length  # the pieces k = 0 … used − 1 (every window's), samples 0 … used
+    half = 0.5 * dt[:used]
+    # ½ dt_k weighs sample k (the piece's left end) and sample k + 1 (its right end), window by window
+    left = half.reshape(windows, length, 1)
+
+    def integral(f: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(
+            np.sum(left * (f[:used].reshape(windows, length, -1) + f[1 : used + 1].reshape(windows, length, -1)),
+                   axis=1),
+            dtype=np.float64,
+        )  # fmt: skip
+
+    wl, yl = (w[:used] * left.reshape(-1, 1)).reshape(windows, length, 3), y[:used].reshape(windows, length, 3)
+    wr = (w[1 : used + 1] * left.reshape(-1, 1)).reshape(windows, length, 3)
+    yr = y[1 : used + 1].reshape(windows, length, 3)
+    moment = np.matmul(wl.transpose(0, 2, 1), yl) + np.matmul(wr.transpose(0, 2, 1), yr)  # ∫ ω yᵀ dt
     ends = starts + length
     crossed = np.concatenate([[0], np.cumsum(_gaps(t))])  # gaps among the steps before each sample
     whole = crossed[ends] == crossed[starts]  # a window across a gap would integrate a turn nobody measured
-    starts, ends = starts[whole], ends[whole]
-    return _Windows(y[ends] - y[starts], cm[ends] - cm[starts], cy[ends] - cy[starts], cw[ends] - cw[starts],
-                    t[ends] - t[starts])  # fmt: skip
+    return _Windows(y[ends[whole]] - y[starts[whole]], moment[whole], integral(y)[whole], integral(w)[whole],
+                    t[ends[whole]] - t[starts[whole]])  # fmt: skip
 
 
 def _design(win: _Windows, beta: NDArray[np.float64]) -> NDArray[np.float64]:
