@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from magfit.methods.gyro.kinematics import _quaternion_product, _segmented_scan, _turns
-from magfit.methods.gyro.model import _inverse_arrow, _solve_arrow
+from magfit.methods.gyro.model import _eigh_serial, _inverse_arrow, _solve_arrow
 
 
 def _unit_quaternions(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -77,3 +77,17 @@ def test_the_arrow_inverse_is_the_dense_inverse_or_declines() -> None:
     assert np.allclose(inverse, np.linalg.pinv(information), rtol=1e-9, atol=1e-12)
     jac[:, 3] = jac[:, 2]  # a direction the data do not determine: left to the pseudo-inverse
     assert _inverse_arrow(jac.T @ jac, head) is None
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 10, 136])
+def test_the_serial_eigh_is_numpy_s(size: int) -> None:
+    rng = np.random.default_rng(size)
+    matrix = rng.normal(size=(size, size))
+    matrix = matrix + matrix.T
+    matrix[:, -1] *= 1e-6  # scales as different as a covariance's
+    matrix[-1, :] *= 1e-6
+    values, vectors = _eigh_serial(matrix)
+    expected = np.linalg.eigvalsh(matrix)
+    assert np.allclose(np.sort(values), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    assert np.allclose(vectors.T @ vectors, np.eye(size), atol=1e-12)
+    assert np.allclose((vectors * values) @ vectors.T, matrix, atol=1e-12 * np.abs(matrix).max())
