@@ -584,8 +584,7 @@ def _dip_fit(down: NDArray[np.float64], mhat: NDArray[np.float64], start: NDArra
     (``start``, ``dip``), δ fitted when ``free``: (R, δ, residuals).
 
     Divided by cos δ, its noise (the directions' noise across the field, ``σ cos δ`` in ``dᵀ R m̂``) does not
-    depend on δ; undivided, a fit with δ free lowers it by pulling the field towards the vertical
-    (simulate_vehicle's boat: 72.8° for a dip of 64°, at an RMS residual 14 % below the truth's).
+    depend on δ; undivided, a fit with δ free lowers it by pulling the field towards the vertical.
     """
     matrix = start.copy()
     for _ in range(iterations):
@@ -742,8 +741,7 @@ def _judge_axes(
             weak.append(f"the rotation about {_axis_words(vector)} is weakly determined (one-sigma {sigma:.1f}°)")
         elif lever < SHORT_LEVER:
             # The one-sigma counts the noise; a bias of the apparent gravity (the edge of a coordinated turn, an
-            # accelerometer offset) is magnified by 1/lever, and no scatter shows it (simulated level flight:
-            # errors about this axis 2-4 times its one-sigma).
+            # accelerometer offset) is magnified by 1/lever, and no scatter shows it (docs/methods.md).
             weak.append(
                 f"the rotation about {_axis_words(vector)} is seen through only {math.degrees(lever):.1f}° of tilt: "
                 f"its one-sigma ({sigma:.2f}°) counts the noise, not a bias of the apparent gravity (turns, the "
