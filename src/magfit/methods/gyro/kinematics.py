@@ -93,13 +93,15 @@ def _rotations(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: N
     q[1:, 0] = np.cos(0.5 * angle)
     q[1:, 1:] = phi * sinc[:, None]
     q[start] = (1.0, 0.0, 0.0, 0.0)  # a stretch starts from itself
-    s, x, y, z = _segmented_scan(q, start).T
+    s, x, y, z = np.ascontiguousarray(_segmented_scan(q, start).T)
     xx, yy, zz, xy, xz, yz, sx, sy, sz = x * x, y * y, z * z, x * y, x * z, y * z, s * x, s * y, s * z
-    r = np.empty((n, 3, 3))
-    r[:, 0, 0], r[:, 0, 1], r[:, 0, 2] = 1 - 2 * (yy + zz), 2 * (xy - sz), 2 * (xz + sy)
-    r[:, 1, 0], r[:, 1, 1], r[:, 1, 2] = 2 * (xy + sz), 1 - 2 * (xx + zz), 2 * (yz - sx)
-    r[:, 2, 0], r[:, 2, 1], r[:, 2, 2] = 2 * (xz - sy), 2 * (yz + sx), 1 - 2 * (xx + yy)
-    return r
+    # Entry by entry, each contiguous over the samples: the (n, 3, 3) view's running sums over the samples (the
+    # caller's) then walk memory in order.
+    r = np.empty((9, n))
+    r[0], r[1], r[2] = 1 - 2 * (yy + zz), 2 * (xy - sz), 2 * (xz + sy)
+    r[3], r[4], r[5] = 2 * (xy + sz), 1 - 2 * (xx + zz), 2 * (yz - sx)
+    r[6], r[7], r[8] = 2 * (xz - sy), 2 * (yz + sx), 1 - 2 * (xx + yy)
+    return r.T.reshape(n, 3, 3)
 
 
 def _unit(angles: NDArray[np.float64]) -> NDArray[np.float64]:
