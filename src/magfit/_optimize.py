@@ -57,13 +57,15 @@ def levenberg_marquardt(
     max_iterations: int,
     current: Evaluation | None = None,
     cost_tolerance: float = 1e-12,
+    solve: Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]] | None = None,
 ) -> Solution:
     """Minimise ``½ Σ r²`` from ``params``, with Marquardt's diagonal scaling of the damping (the running
     maximum of diag(JᵀJ), as MINPACK scales).
 
     ``evaluate(params, warm)`` returns the :class:`Evaluation` at ``params``; ``warm`` is the ``warm`` of
     the evaluation the step starts from (None at first). ``current`` is the evaluation at ``params`` when
-    the caller has it already.
+    the caller has it already. ``solve(matrix, rhs)`` solves the damped normal equations (a caller whose
+    normal matrix has a structure may solve them faster; it raises ``LinAlgError`` when singular).
 
     The damping follows the gain ratio (actual over predicted cost reduction) as Nielsen's rule does
     (H. B. Nielsen, *Damping parameter in Marquardt's method*, IMM-REP-1999-05; Madsen, Nielsen &
@@ -92,7 +94,8 @@ def levenberg_marquardt(
             return Solution(params, current, 1, "the gradient is zero to tolerance", iteration - 1)
         while True:
             try:
-                step = np.linalg.solve(current.normal + damping * np.diag(scaling), -current.gradient)
+                damped = current.normal + damping * np.diag(scaling)
+                step = np.linalg.solve(damped, -current.gradient) if solve is None else solve(damped, -current.gradient)
                 trial = evaluate(params + step, current.warm)
                 if np.isfinite(trial.cost) and trial.cost <= current.cost:
                     break

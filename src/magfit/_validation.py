@@ -205,3 +205,21 @@ def check_times(value: object, name: str, n: int) -> NDArray[np.float64]:
             "sort the samples by time and drop repeated ones"
         )
     return array
+
+
+def check_inclination(value: object, name: str = "inclination_deg") -> float:
+    """The field's inclination (dip), degrees, strictly inside (−90, 90); a one-line :class:`OptionError` if not.
+
+    At ±90° the field lies along gravity: its horizontal part, which the heading is read from, is zero, so no
+    calibration against it can fix a heading.
+    """
+    try:
+        dip = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        dip = math.nan
+    if not -90.0 < dip < 90.0:  # NaN fails too
+        raise OptionError(
+            f"{name} must be the field's dip in degrees within ±90 (not ±90 itself: a vertical field gives no "
+            f"heading), got {value!r}"
+        )
+    return dip

@@ -61,10 +61,22 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._scale import robust_scale
+from ._validation import check_inclination
 from .errors import CalibrationError, OptionError, SampleError
 from .findings import Reason
 from .gravity import ACCEL_TOLERANCE, MAX_RATE_DPS, MAX_TILT_RATE_DPS, moving_mean, still_samples
-from .rotations import FIRMWARES, StandardRotation, angle_between_deg, euler_angles, nearest_rotation
+from .rotations import (
+    FIRMWARES,
+    StandardRotation,
+    angle_between_deg,
+    axis_words,
+    euler_angles,
+    nearest_rotation,
+    polar_decomposition,
+    signed_permutations,
+    skew,
+)
 
 __all__ = ["ACCEL_TOLERANCE", "Alignment", "FirmwareRotation", "align", "nearest_rotations"]
 
@@ -187,14 +199,10 @@ class Alignment:
 # --- small rotation algebra -------------------------------------------------------------------------------
 
 
-def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
 def _exp(theta: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rodrigues: the rotation by |θ| about θ."""
     angle = float(np.linalg.norm(theta))
-    k = _skew(theta)
+    k = skew(theta)
     if angle < 1e-12:
         return np.eye(3) + k
     return np.eye(3) + math.sin(angle) / angle * k + (1.0 - math.cos(angle)) / angle**2 * (k @ k)
@@ -207,27 +215,16 @@ def _flip(axis: str | None) -> NDArray[np.float64]:
     return np.diag(d)
 
 
-def _cube_rotations() -> list[NDArray[np.float64]]:
-    """The 24 proper signed permutation matrices: every rotation is within 62.8° of one of them."""
-    out = []
-    for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):
-        for signs in np.array(np.meshgrid([1, -1], [1, -1], [1, -1])).T.reshape(-1, 3):
-            m = np.zeros((3, 3))
-            m[np.arange(3), perm] = signs
-            if np.linalg.det(m) > 0:
-                out.append(m)
-    return out
+#: A rotation axis of the body frame in words (:func:`magfit.rotations.axis_words`).
+_BODY_AXES = (
+    "body x (forward; the mount's roll)",
+    "body y (right; the mount's pitch)",
+    "body z (down; the mount's yaw)",
+)
 
 
 def _axis_words(axis: NDArray[np.float64]) -> str:
-    """A rotation axis of the body frame in words: ``body z (down; the mount's yaw)`` or its components."""
-    names = {0: "body x (forward; the mount's roll)", 1: "body y (right; the mount's pitch)",
-             2: "body z (down; the mount's yaw)"}  # fmt: skip
-    a = axis / np.linalg.norm(axis)
-    i = int(np.argmax(np.abs(a)))
-    if abs(a[i]) > math.cos(math.radians(20.0)):
-        return names[i]
-    return "the body axis ({:+.2f}, {:+.2f}, {:+.2f})".format(*(a if a[i] > 0 else -a))
+    return axis_words(axis, "body", names=_BODY_AXES, within_deg=20.0, noun="axis", unsigned=True)
 
 
 # --- the gates ----------------------------------------------------------------------------------------------
@@ -256,7 +253,7 @@ def _huber_loss(r: NDArray[np.float64], scale: float) -> float:
 
 
 def _robust_scale(r: NDArray[np.float64]) -> float:
-    return max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 1e-6)
+    return max(robust_scale(r)[1], 1e-6)
 
 
 def _residuals(down: NDArray[np.float64], mhat: NDArray[np.float64], matrix: NDArray[np.float64], s: float
@@ -300,8 +297,7 @@ def _solve(
             break
         if np.linalg.norm(step) < 1e-10:
             break
-    u, _, vt = np.linalg.svd(matrix)  # keep it orthogonal against rounding
-    matrix = u @ vt
+    matrix = polar_decomposition(matrix)[0]  # keep it orthogonal against rounding
     return _Solution(matrix, float(s), float(np.median(_residuals(down, mhat, matrix, s) ** 2)))
 
 
@@ -456,8 +452,8 @@ def align(
         times = np.asarray(time_s, dtype=np.float64)
         if times.shape != (n,) or not np.all(np.isfinite(times)):
             raise SampleError(f"time_s must be {n} finite times (seconds), got shape {times.shape}")
-    if inclination_deg is not None and not -90.0 < inclination_deg < 90.0:
-        raise OptionError(f"inclination_deg must be within (-90, 90) degrees, got {inclination_deg}")
+    if inclination_deg is not None:
+        inclination_deg = check_inclination(inclination_deg)
     if not 0.0 < accel_tolerance < 1.0:
         raise OptionError(f"accel_tolerance must be within (0, 1), got {accel_tolerance}")
     if max_rate_dps is not None and not max_rate_dps > 0:
@@ -588,8 +584,7 @@ def _dip_fit(down: NDArray[np.float64], mhat: NDArray[np.float64], start: NDArra
     (``start``, ``dip``), δ fitted when ``free``: (R, δ, residuals).
 
     Divided by cos δ, its noise (the directions' noise across the field, ``σ cos δ`` in ``dᵀ R m̂``) does not
-    depend on δ; undivided, a fit with δ free lowers it by pulling the field towards the vertical
-    (simulate_vehicle's boat: 72.8° for a dip of 64°, at an RMS residual 14 % below the truth's).
+    depend on δ; undivided, a fit with δ free lowers it by pulling the field towards the vertical.
     """
     matrix = start.copy()
     for _ in range(iterations):
@@ -604,8 +599,7 @@ def _dip_fit(down: NDArray[np.float64], mhat: NDArray[np.float64], start: NDArra
         dip += float(step[3]) if free else 0.0
         if np.linalg.norm(step) < 1e-10:
             break
-    u, _, vt = np.linalg.svd(matrix)
-    matrix = u @ vt
+    matrix = polar_decomposition(matrix)[0]
     cosine = max(math.cos(dip), 0.1)
     return matrix, dip, (np.einsum("ij,ij->i", down, mhat @ matrix.T) - math.sin(dip)) / cosine
 
@@ -747,8 +741,7 @@ def _judge_axes(
             weak.append(f"the rotation about {_axis_words(vector)} is weakly determined (one-sigma {sigma:.1f}°)")
         elif lever < SHORT_LEVER:
             # The one-sigma counts the noise; a bias of the apparent gravity (the edge of a coordinated turn, an
-            # accelerometer offset) is magnified by 1/lever, and no scatter shows it (simulated level flight:
-            # errors about this axis 2-4 times its one-sigma).
+            # accelerometer offset) is magnified by 1/lever, and no scatter shows it (docs/methods.md).
             weak.append(
                 f"the rotation about {_axis_words(vector)} is seen through only {math.degrees(lever):.1f}° of tilt: "
                 f"its one-sigma ({sigma:.2f}°) counts the noise, not a bias of the apparent gravity (turns, the "
@@ -853,7 +846,7 @@ def _search(
     d_sub, m_sub = down[::stride], mhat[::stride]
     start_s = s0 if not fit_s else 0.5
     found: list[_Solution] = []
-    for start in _cube_rotations():
+    for start in signed_permutations():
         for handed in (np.eye(3), _flip("z")) if allow_mirror else (np.eye(3),):
             found.append(_solve(d_sub, m_sub, start @ handed, start_s, fit_s, iterations=15))
     found = [_northern(f, fit_s, allow_mirror) for f in found]

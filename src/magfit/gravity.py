@@ -25,8 +25,8 @@ Its still samples are the hover; the alignment's robust loss and its dip scatter
 
 Without a gyroscope the heading's rate and the rest cannot be told apart: the rate at which the field and
 gravity directions turn (the larger of the two, over two seconds) is held to ``max_rate_dps`` as a whole. It is
-a weaker gate (the directions' own noise): on a simulated car at 10 Hz it kept 14-100 of 6 000 samples, a median
-0.35-0.44° from the true vertical, and on one drive a fifth of them 2.4-3° off at the edges of slow turns.
+a weaker gate (the directions' own noise; what it kept on simulated cars: docs/methods.md, "Alignment without
+attitude").
 """
 
 from __future__ import annotations

@@ -2,7 +2,8 @@
 
 A sample is an outlier when its sphere distance ``r`` lies farther than ``threshold`` robust standard
 deviations from the median, ``|r − median(r)| > threshold · σ`` with ``σ = 1.4826 MAD(r)`` (a Gaussian's
-standard deviation, estimated robustly: Huber & Ronchetti, *Robust Statistics*, 2nd ed., 2009, section 5.1).
+standard deviation, estimated robustly: Huber & Ronchetti, *Robust Statistics*, 2nd ed., 2009, section 5.1;
+:func:`magfit._scale.robust_scale`).
 :mod:`magfit.methods.robust` fits by it; the diagnostics leave out the samples it rejected
 (:func:`inlier_mask`).
 """
@@ -14,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._scale import MAD_TO_SIGMA, robust_scale
 from .evaluate import unchecked_sphere_distances
 
 if TYPE_CHECKING:
@@ -21,16 +23,8 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULT_THRESHOLD", "MAD_TO_SIGMA", "inlier_mask", "robust_scale"]
 
-#: σ = 1.4826 MAD is a Gaussian's standard deviation.
-MAD_TO_SIGMA = 1.4826
 #: Cut-off c of the loss, in units of σ: a Gaussian inlier is rejected with probability 5e-4.
 DEFAULT_THRESHOLD = 3.5
-
-
-def robust_scale(residuals: NDArray[np.float64]) -> tuple[float, float]:
-    """Median and σ = 1.4826 MAD of the residuals (a Gaussian's standard deviation, robustly)."""
-    centre = float(np.median(residuals))
-    return centre, MAD_TO_SIGMA * float(np.median(np.abs(residuals - centre)))
 
 
 def inlier_mask(calibration: Calibration, samples: NDArray[Any]) -> tuple[NDArray[np.bool_] | None, str]:

@@ -51,6 +51,7 @@ checks each table against vectors worked out by hand from those sources.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -68,12 +69,15 @@ __all__ = [
     "PX4_ROTATION_MAX",
     "StandardRotation",
     "angle_between_deg",
+    "axis_words",
     "custom_angles",
     "custom_rotation",
     "euler_angles",
     "euler_matrix",
     "nearest_rotation",
     "polar_decomposition",
+    "signed_permutations",
+    "skew",
     "standard_rotations",
 ]
 
@@ -392,3 +396,57 @@ def polar_decomposition(matrix: ArrayLike) -> tuple[NDArray[np.float64], NDArray
     q: NDArray[np.float64] = u @ vt
     s: NDArray[np.float64] = (vt.T * singular) @ vt
     return q, 0.5 * (s + s.T)
+
+
+def skew(vectors: ArrayLike) -> NDArray[np.float64]:
+    """The cross-product matrices ``[v]×`` (..., 3, 3) of vectors (..., 3): ``skew(v) @ u = v × u``.
+
+    ``[v]×_ik = ε_ijk v_j`` (the Levi-Civita symbol), i.e. rows ``(0, −v_z, v_y)``, ``(v_z, 0, −v_x)``,
+    ``(−v_y, v_x, 0)``.
+    """
+    v = np.asarray(vectors, dtype=np.float64)
+    out = np.zeros((*v.shape[:-1], 3, 3))
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    out[..., 0, 1], out[..., 0, 2] = -z, y
+    out[..., 1, 0], out[..., 1, 2] = z, -x
+    out[..., 2, 0], out[..., 2, 1] = -y, x
+    return out
+
+
+def axis_words(direction: ArrayLike, frame: str | None = None, *, within_deg: float = 15.0,
+               names: tuple[str, str, str] | None = None, noun: str = "direction",
+               unsigned: bool = False) -> str:  # fmt: skip
+    """A direction of a sensor's or a vehicle's axes in words.
+
+    Without ``frame``: by its axes, e.g. ``"−z"`` or ``"+x−y"`` (the components of at least 0.4 of the unit
+    direction, largest first). With ``frame``: ``"the gyro's z axis"`` (or ``names[i]``) when the direction
+    is within ``within_deg`` of an axis, else ``"the gyro direction (+0.10, −0.70, +0.71)"`` (``noun`` instead
+    of "direction"); ``unsigned`` for a rotation axis, whose sign means nothing: the components are turned so
+    that the largest is positive.
+    """
+    unit = np.asarray(direction, dtype=np.float64)
+    unit = unit / float(np.linalg.norm(unit))
+    if frame is None:
+        return "".join(
+            ("+" if unit[i] > 0 else "−") + "xyz"[i] for i in np.argsort(-np.abs(unit)) if abs(unit[i]) >= 0.4
+        )
+    axis = int(np.argmax(np.abs(unit)))
+    if abs(unit[axis]) > math.cos(math.radians(within_deg)):
+        return names[axis] if names is not None else f"the {frame}'s {'xyz'[axis]} axis"
+    if unsigned and unit[axis] < 0:
+        unit = -unit
+    return f"the {frame} {noun} ({unit[0]:+.2f}, {unit[1]:+.2f}, {unit[2]:+.2f})"
+
+
+def signed_permutations() -> list[NDArray[np.float64]]:
+    """The 24 proper signed permutation matrices (the rotations of a cube onto itself): every rotation lies
+    within 62.8° of one. Ordered by the permutation of the columns' axes, then their signs (+ before −)."""
+    found = []
+    for order in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            p = np.zeros((3, 3))
+            for column, (row, sign) in enumerate(zip(order, signs, strict=True)):
+                p[row, column] = sign  # column `column` lies along axis `row`
+            if np.linalg.det(p) > 0:
+                found.append(p)
+    return found

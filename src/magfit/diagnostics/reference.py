@@ -34,10 +34,11 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..errors import CalibrationError
 from ..findings import Coverage, Diagnostics, Observability, ReasonList, Support, Uncertainty, WeakDirection, reasons
+from ..rotations import polar_decomposition
 from .coverage import coverage
 from .settle import settle
 from .uncertainty import DEFAULT_INCLINATION_DEG, UNDETERMINED_SIGMA, WEAK_INFORMATION
-from .verdict import BIASED_HEADING_DEG, HALVES_SIGMAS, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
+from .verdict import BIASED_HEADING_DEG, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
 
 __all__ = [
     "BLOCKS",
@@ -74,6 +75,8 @@ HEADING_LIMIT_DEG = BIASED_HEADING_DEG
 TILT_DEG = 10.0
 #: A reference whose direction stays within this angle of its mean: the vehicle hardly turned at all.
 STILL_DEG = 10.0
+#: Combined one-sigmas by which the fits of the two halves of a recording may differ before the verdict names it.
+HALVES_SIGMAS = 3.5
 #: Fewest samples in each half for the halves to be compared (the batch-means covariance needs 80).
 MIN_HALF = 80
 #: The design columns, in words.
@@ -276,8 +279,7 @@ def rotation_sigma_deg(covariance: NDArray[np.float64], g: NDArray[np.float64]) 
 
 
 def _polar(matrix: NDArray[Any]) -> NDArray[np.float64]:
-    u, _, vt = np.linalg.svd(matrix)
-    return np.asarray(u @ vt, dtype=np.float64)
+    return polar_decomposition(matrix)[0]
 
 
 def _heading_sigmas(

@@ -236,10 +236,7 @@ def _asymmetry(m: NDArray[np.float64]) -> float:
 
 def _polar(m: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
     """The symmetric root ``S = sqrtm(Mᵀ M)`` and the angle (degrees) of the rotation ``Q = M S⁻¹``."""
-    eigenvalues, eigenvectors = np.linalg.eigh(m.T @ m)
-    root = (eigenvectors * np.sqrt(eigenvalues)) @ eigenvectors.T
-    root = 0.5 * (root + root.T)
-    rotation = m @ np.linalg.inv(root)  # orthogonal: M = Q S (polar decomposition)
+    rotation, root = polar_decomposition(m)  # orthogonal: M = Q S
     angle = math.degrees(math.acos(min(1.0, max(-1.0, (float(np.trace(rotation)) - 1.0) / 2.0))))
     return root, angle
 

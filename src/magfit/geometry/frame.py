@@ -35,11 +35,11 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import CalibrationError
+from ..rotations import axis_words as axis_words  # one copy (rotations.py); imported from here by diagnostics
 
 Kind = Literal["sphere", "diag", "full"]
 KINDS: tuple[Kind, ...] = ("sphere", "diag", "full")
 N_PARAMETERS: dict[str, int] = {"sphere": 4, "diag": 6, "full": 9}
-_AXES = "xyz"
 #: Names of the entries of p, for messages and for the covariance layout in ``details``.
 PARAMETER_NAMES: dict[str, tuple[str, ...]] = {
     "sphere": ("offset_x", "offset_y", "offset_z", "scale"),
@@ -315,14 +315,3 @@ def _parameter_words(name: str) -> str:
     if family == "scale":
         return f"the scale along {axis}"
     return f"the {axis[0]}-{axis[1]} cross-coupling of the soft-iron matrix"
-
-
-def axis_words(direction: NDArray[np.float64]) -> str:
-    """Name a unit direction by its sensor axis, e.g. ``"−z"`` or ``"+x−y"`` (components >= 0.4)."""
-    direction = np.asarray(direction, dtype=np.float64) / float(np.linalg.norm(direction))
-    parts = [
-        ("+" if direction[i] > 0 else "−") + _AXES[i]
-        for i in np.argsort(-np.abs(direction))
-        if abs(direction[i]) >= 0.4
-    ]
-    return "".join(parts)

@@ -1,0 +1,57 @@
+"""The magnetometer's delay behind the gyroscope.
+
+A magnetometer read at a lower rate and held, or filtered, reports the field late: (1) of :mod:`.method` then
+pairs the field with the rate of a moment earlier. The delay τ minimises the windowed residual of stage 1
+with the gyro read τ earlier (:func:`_delayed`, linear interpolation): a grid of ±:data:`MAX_LAG_S` in steps
+of the sample interval (at least 5 ms) with the bias of no delay held, kept only when it lowers the
+residual below :data:`LAG_GAIN` of no delay's (on a slowly turning vehicle the minimum is shallow and
+biased), then refined by a bounded scalar minimisation with the bias fitted at each candidate (held at no
+delay's, it pulls the minimum towards zero). The figures behind these choices: docs/methods.md, "gyro".
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .windows import _constrained, _design, _windowed_bias, _windows
+
+#: The magnetometer's delay behind the gyroscope is searched within ± this (seconds).
+MAX_LAG_S = 0.25
+#: ... and kept when it brings the windowed residual below this share of no delay's.
+LAG_GAIN = 0.8
+
+
+def _delayed(w: NDArray[np.float64], t: NDArray[np.float64], lag: float) -> NDArray[np.float64]:
+    """The gyro read ``lag`` seconds earlier at each sample time (linear interpolation; the ends held)."""
+    if lag == 0.0:
+        return w
+    return np.column_stack([np.interp(t - lag, t, w[:, axis]) for axis in range(3)])
+
+
+def _search_lag(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> float:
+    """The magnetometer's delay behind the gyroscope (s) that minimises the windowed residual of stage 1.
+
+    A grid of ±MAX_LAG_S in steps of the sample interval (at least 5 ms), the bias of no delay held; kept
+    only when it lowers the windowed residual by more than LAG_GAIN (module docstring), then refined.
+    """
+    step = max(float(np.median(np.diff(t))), 0.005)
+    grid = np.arange(-MAX_LAG_S, MAX_LAG_S + step / 2, step)
+    _, beta = _windowed_bias(_windows(y, w, t, length))
+    residual = np.array([_constrained(_design(_windows(y, _delayed(w, t, lag), t, length), beta), np.eye(9))[2]
+                         for lag in grid])  # fmt: skip
+    best = int(np.argmin(residual))
+    if residual[best] > LAG_GAIN * residual[int(np.argmin(np.abs(grid)))]:
+        return 0.0
+    if best in (0, grid.size - 1):
+        return float(grid[best])
+    # Refined with the bias fitted at each candidate: held at no delay's, it pulls the minimum towards zero.
+    from scipy.optimize import minimize_scalar  # not needed to import magfit
+
+    def refitted(lag: float) -> float:
+        win = _windows(y, _delayed(w, t, lag), t, length)
+        return _constrained(_design(win, _windowed_bias(win)[1]), np.eye(9))[2]
+
+    low, high = float(grid[best] - 2 * step), float(grid[best] + 2 * step)
+    result = minimize_scalar(refitted, bounds=(low, high), method="bounded", options={"xatol": 1e-3 * step})
+    return float(result.x)

@@ -1,0 +1,541 @@
+"""Stage 2: maximum likelihood on the samples over stretches of the recording, and its covariance.
+
+Integrating (1) of :mod:`.method` over a stretch of ``segment_s`` seconds from its first sample::
+
+    b_k = R_kᵀ b₀,    y_k = G R_kᵀ b₀ + V,    |b₀| = 1                            (M1)
+
+with ``R_k`` the body's rotation from the stretch's start (:func:`.kinematics._turns`, from ``ω − β``) and G
+carrying the field's magnitude. The unknowns ``p = (q, V, β, [δ,] (elevation, azimuth) of each b₀)``, G =
+``basis @ q`` (general, or ``W Pᵀ`` with W symmetric for a standard mapping), are fitted by
+Levenberg-Marquardt on the residuals ``G b_k + V − y_k`` (and, with the accelerometer, the gravity rows (2) of
+:mod:`.gravity`). This uses that the field is one vector for many seconds, which the windows of stage 1
+forget; longer stretches add fewer unknowns but let the gyro's noise walk the integrated rotation away.
+
+The Jacobian in β follows from ``R_k = D_0 … D_{k−1}``: to first order in each step
+``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1}`` (a running sum over the stretch), so::
+
+    ∂b_k/∂β = −R_kᵀ [b₀]× C_k                                                     (M2)
+
+The covariance is the sandwich ``I⁻¹ (Σ_batches s sᵀ) I⁻¹`` of the score summed over contiguous batches of the
+recording (the gyro's noise walks, so neighbouring residuals are correlated), never below the independent
+residuals' ``σ² I⁻¹`` (:func:`_covariance`).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..._optimize import Evaluation, Solution, levenberg_marquardt
+from ...rotations import skew
+from .gravity import ACCEL_BIAS_PRIOR, _cos, _Gravity, _gravity_angle
+from .kinematics import _rotations, _unit
+from .mapping import MAPPINGS
+from .windows import _gaps, _symmetric
+
+#: At most this many samples enter the maximum-likelihood residuals (a regular stride of the recording);
+#: the gyro is integrated at every sample all the same.
+MAX_RESIDUAL_SAMPLES = 20_000
+#: Rows the candidate mappings are told apart on.
+SCREEN_ROWS = 3_000
+#: Iterations each candidate mapping gets from the general fit.
+SCREEN_ITER = 40
+#: At most this many stretches (each adds two unknowns); longer recordings get longer stretches.
+MAX_SEGMENTS = 60
+
+
+@dataclass(frozen=True)
+class _Trajectory:
+    """What the maximum-likelihood residual needs: the recording, its stretches, the rows it is read at and
+    the model of G (``G.ravel() = basis @ q``: general, or ``W Pᵀ`` with W symmetric for a standard mapping).
+
+    The parameters are ``p = (q, V, β, [δ,] the stretches' (elevation, azimuth) of b₀)``, the inclination δ
+    only with gravity rows. Each row has three magnetometer residuals ``G b_k + V − y_k`` and, with gravity, a
+    fourth ``weight · (d_k · b_k − sin δ) / cos δ`` (zero where the accelerometer does not see gravity alone).
+    """
+
+    y: NDArray[np.float64]
+    w: NDArray[np.float64]
+    t: NDArray[np.float64]
+    segment: NDArray[np.int64]
+    rows: NDArray[np.int64]
+    count: int
+    basis: NDArray[np.float64]
+    gravity: _Gravity | None = None
+
+    @cached_property
+    def steps(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+        """What every integration reuses: the steps' mean rates (n − 1, 3) and lengths (n − 1,), the stretches'
+        first samples (n,), and the weight of R_k in the running sum C (``dt_{k−1}``, 0 at a stretch's start)."""
+        dt = np.diff(self.t)
+        start = np.ones(self.t.size, dtype=bool)
+        start[1:] = self.segment[1:] != self.segment[:-1]
+        weights = np.concatenate([[0.0], dt])
+        weights[start] = 0.0
+        return 0.5 * (self.w[:-1] + self.w[1:]), dt, start, weights
+
+    @cached_property
+    def first(self) -> NDArray[np.int64]:
+        """Each sample's stretch start (n,) (stretches ascend)."""
+        return np.searchsorted(self.segment, self.segment)
+
+    @cached_property
+    def starts(self) -> NDArray[np.int64]:
+        """Each stretch's first row among ``rows`` (count,) (rows ascend in stretch)."""
+        return np.searchsorted(self.segment[self.rows], np.arange(self.count))
+
+    @property
+    def k(self) -> int:
+        return int(self.basis.shape[1])
+
+    @property
+    def head(self) -> int:
+        """Parameters every row may depend on: q, V, β (and δ with gravity); the stretches' angles follow."""
+        return self.k + 6 + (self.gravity is not None)
+
+    @property
+    def components(self) -> int:
+        """Residuals per row: the magnetometer's three, and the gravity row's."""
+        return 3 + (self.gravity is not None)
+
+    def n_residuals(self) -> int:
+        """Residuals that carry data (the gravity rows of moving samples are zeros)."""
+        gravity = 0 if self.gravity is None else int(np.sum(self.gravity.still[self.rows]))
+        return 3 * self.rows.size + gravity
+
+    def distortion(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
+        """G (3, 3) from the parameters."""
+        return np.asarray(self.basis @ p[: self.k], dtype=np.float64).reshape(3, 3)
+
+    def field(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """b_k = R_kᵀ b₀ at ``rows``, the (rows, 3, 3) rotations, and ∂b_k/∂β (rows, 3, 3).
+
+        ``R_k = D_0 … D_{k−1}`` with ``D_j = exp([(ω̄_j − β) dt_j]×)``, so to first order in each step
+        ``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1}`` (a running sum over the stretch), and
+        ``∂b_k/∂β = −R_kᵀ [b₀]× C_k``.
+        """
+        turns, running = _integrated(self, p[self.k + 3 : self.k + 6])
+        running = running[self.rows] - running[self.first[self.rows]]
+        turns = turns[self.rows]
+        start = _unit(p[self.head :].reshape(self.count, 2))[self.segment[self.rows]]
+        # (M2), R_kᵀ [b₀]× C_k: stacked 3×3 products (numpy's own loop, no threaded BLAS, far quicker than einsum)
+        d_beta = -np.matmul(np.matmul(turns.transpose(0, 2, 1), skew(start)), running)
+        return np.einsum("kji,kj->ki", turns, start), turns, d_beta
+
+    def _gravity_rows(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """d_k (rows, 3) and each row's weight (rows,): 0 where the accelerometer is not still."""
+        assert self.gravity is not None
+        down = self.gravity.down[self.rows]
+        return down, self.gravity.weight * self.gravity.still[self.rows].astype(np.float64)
+
+    def _residual_of(self, p: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        magnetometer = np.einsum("ij,kj->ki", self.distortion(p), b) + p[self.k : self.k + 3] - self.y[self.rows]
+        if self.gravity is None:
+            return magnetometer
+        down, weight = self._gravity_rows()
+        return np.column_stack([magnetometer, weight * _gravity_angle(down, b, p[self.k + 6])])
+
+    def residual(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
+        """All residuals, (rows · components,): row by row, the magnetometer's three then the gravity row."""
+        return self._residual_of(p, self.field(p)[0]).ravel()
+
+    def magnetometer_residual(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The samples' own residuals ``G b_k + V − y_k``, (rows, 3), in the samples' unit."""
+        return self.residual(p).reshape(-1, self.components)[:, :3]
+
+    def blocks(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The residual (rows, C), its Jacobian in (q, V, β[, s]) (rows, C, head), and in the row's own
+        stretch's two angles (rows, C, 2): every other angle column of a row is zero. C = :attr:`components`."""
+        k = self.k
+        g = self.distortion(p)
+        b, turns, d_beta = self.field(p)
+        rows = self.rows.size
+        residual = self._residual_of(p, b)
+        dense = np.zeros((rows, self.components, self.head))
+        for i in range(3):
+            # ∂(G b)_i / ∂G_ij = b_j, through the basis
+            dense[:, i, :k] = np.einsum("kj,jq->kq", b, self.basis[3 * i : 3 * i + 3])
+        dense[:, :3, k : k + 3] = np.eye(3)
+        dense[:, :3, k + 3 : k + 6] = np.matmul(g, d_beta)
+        angles = p[self.head :].reshape(self.count, 2)[self.segment[self.rows]]
+        elevation, azimuth = angles[:, 0], angles[:, 1]
+        up, across = np.sin(elevation), np.cos(elevation)
+        d_start = np.stack([
+            np.column_stack([-up * np.cos(azimuth), -up * np.sin(azimuth), across]),
+            np.column_stack([-across * np.sin(azimuth), across * np.cos(azimuth), np.zeros(rows)]),
+        ], axis=2)  # fmt: skip
+        angular = np.zeros((rows, self.components, 2))
+        turned = np.matmul(turns.transpose(0, 2, 1), d_start)  # R_kᵀ ∂b₀
+        angular[:, :3] = np.matmul(g, turned)  # G R_kᵀ ∂b₀
+        if self.gravity is not None:
+            down, weight = self._gravity_rows()
+            inclination = p[k + 6]
+            across = weight / _cos(inclination)
+            dense[:, 3, k + 3 : k + 6] = across[:, None] * np.einsum("ki,kim->km", down, d_beta)
+            # ∂/∂δ of (x − sin δ) / cos δ = −1 + tan δ · (x − sin δ) / cos δ
+            dense[:, 3, k + 6] = weight * (-1.0 + math.tan(inclination) * _gravity_angle(down, b, inclination))
+            angular[:, 3] = across[:, None] * np.einsum("ki,kin->kn", down, turned)
+        return residual, dense, angular
+
+    def normal_equations(self, p: NDArray[np.float64]) -> Evaluation:
+        """½ Σ r², JᵀJ and Jᵀr from the blocks: the angle columns of a stretch only meet its own rows.
+
+        einsum, not BLAS: a threaded gemm on a tall, narrow Jacobian is far slower when cores are shared.
+        """
+        residual, dense, angular = self.blocks(p)
+        gradient = np.concatenate([
+            np.einsum("kip,ki->p", dense, residual),
+            self._by_stretch(np.einsum("kin,ki->kn", angular, residual)).ravel(),
+        ])  # fmt: skip
+        return Evaluation(0.5 * float(np.sum(residual**2)), self.information(dense, angular), gradient)
+
+    def _by_stretch(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Sums of ``values`` (rows, ...) over each stretch's rows (count, ...); zero for a stretch with none."""
+        counts = np.diff(np.append(self.starts, self.rows.size))
+        out = np.zeros((self.count, *values.shape[1:]))
+        held = counts > 0
+        out[held] = np.add.reduceat(values, self.starts[held], axis=0)
+        return out
+
+    def information(self, dense: NDArray[np.float64], angular: NDArray[np.float64]) -> NDArray[np.float64]:
+        """JᵀJ (p.size, p.size) from the blocks of :meth:`blocks`: a stretch's angles meet only its own rows."""
+        head = self.head
+        size = head + 2 * self.count
+        normal = np.zeros((size, size))
+        normal[:head, :head] = np.einsum("kip,kiq->pq", dense, dense)
+        cross = self._by_stretch(np.matmul(dense.transpose(0, 2, 1), angular))  # (count, head, 2)
+        own = self._by_stretch(np.matmul(angular.transpose(0, 2, 1), angular))  # (count, 2, 2)
+        for s in range(self.count):
+            columns = slice(head + 2 * s, head + 2 * s + 2)
+            normal[:head, columns] = cross[s]
+            normal[columns, :head] = cross[s].T
+            normal[columns, columns] = own[s]
+        return normal
+
+    def score(self, dense: NDArray[np.float64], angular: NDArray[np.float64],
+              residual: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+        """Each row's ``Jᵀ r`` (rows, p.size): the gradient's terms, which the sandwich sums by batch."""
+        rows = self.rows.size
+        terms = np.zeros((rows, self.head + 2 * self.count))
+        terms[:, : self.head] = np.einsum("kip,ki->kp", dense, residual)
+        columns = self.head + 2 * self.segment[self.rows]
+        own = np.einsum("kin,ki->kn", angular, residual)
+        for shift in range(2):
+            terms[np.arange(rows), columns + shift] = own[:, shift]
+        return terms
+
+    def times(self, dense: NDArray[np.float64], angular: NDArray[np.float64],
+              other: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+        """``Jᵀ X`` (p.size, m) for X (rows, C, m) from the blocks of :meth:`blocks`."""
+        angles = self._by_stretch(np.matmul(angular.transpose(0, 2, 1), other))  # (count, 2, m)
+        return np.concatenate([np.einsum("kip,kiq->pq", dense, other), angles.reshape(-1, other.shape[2])])
+
+
+@dataclass(frozen=True)
+class _Integration:
+    """The rotations R_k (n, 3, 3) and running sums Σ dt_j R_{j+1} (n, 3, 3) of one recording at one bias."""
+
+    w: NDArray[np.float64]
+    t: NDArray[np.float64]
+    segment: NDArray[np.int64]
+    beta: bytes
+    turns: NDArray[np.float64]
+    running: NDArray[np.float64]
+
+
+#: The last integration, reused while the next fit starts at the same bias on the same recording (the candidate
+#: mappings start from the general fit, the covariance and the residuals at the solution the fit last
+#: integrated): one entry, emptied when a gyro fit ends (:func:`forget_integration`).
+_LAST: list[_Integration] = []
+_LOCK = threading.Lock()
+
+
+def _integrated(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """R_k and the running sums of ``traj``'s recording at bias ``beta`` (:class:`_Integration`), integrated or
+    reused."""
+    key = np.asarray(beta, dtype=np.float64).tobytes()
+    with _LOCK:
+        for last in _LAST:
+            if (last.w is traj.w and last.t is traj.t and last.beta == key
+                    and (last.segment is traj.segment or np.array_equal(last.segment, traj.segment))):  # fmt: skip
+                return last.turns, last.running
+    mean_rates, dt, start, weights = traj.steps
+    turns = _rotations(mean_rates, dt, beta, start)
+    running = np.cumsum(turns * weights[:, None, None], axis=0)  # Σ dt_j R_{j+1} (none across a start)
+    with _LOCK:
+        _LAST[:] = [_Integration(traj.w, traj.t, traj.segment, key, turns, running)]
+    return turns, running
+
+
+def forget_integration() -> None:
+    """Drop the kept integration (its arrays are the size of the recording)."""
+    with _LOCK:
+        _LAST.clear()
+
+
+def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
+                basis: NDArray[np.float64], max_rows: int = MAX_RESIDUAL_SAMPLES,
+                gravity: _Gravity | None = None) -> _Trajectory:  # fmt: skip
+    span = float(t[-1] - t[0])
+    length = max(segment_s, span / MAX_SEGMENTS)
+    segment = np.minimum(((t - t[0]) // length).astype(np.int64), max(int(span // length) - 1, 0))
+    # a gap in the time stamps starts a new stretch too: the gyro's turn across it is unknown
+    segment = np.concatenate([[0], np.cumsum((np.diff(segment) != 0) | _gaps(t))]).astype(np.int64)
+    stride = max(1, math.ceil(y.shape[0] / max_rows))
+    rows = np.arange(0, y.shape[0], stride)
+    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity)
+
+
+def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64],
+           beta: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+    """Parameters for ``traj`` from G (any scale: |b₀| = 1 rescales it), V and β; b₀ (and s) read off the
+    samples."""
+    h = np.linalg.inv(g)
+    field = np.einsum("ij,kj->ki", h, traj.y - offset)
+    radius = float(np.median(np.linalg.norm(field, axis=1)))
+    first = np.array([field[np.argmax(traj.segment == s)] for s in range(traj.count)])
+    first /= np.linalg.norm(first, axis=1)[:, None]
+    angles = np.column_stack([np.arcsin(np.clip(first[:, 2], -1, 1)), np.arctan2(first[:, 1], first[:, 0])])
+    q, *_ = np.linalg.lstsq(traj.basis, (g * radius).ravel(), rcond=None)
+    head = [q, offset, beta]
+    if traj.gravity is not None:
+        still = traj.gravity.still
+        unit = field[still] / np.linalg.norm(field[still], axis=1)[:, None]
+        dots = np.einsum("ki,ki->k", traj.gravity.down[still], unit)
+        head.append(np.array([math.asin(float(np.clip(np.median(dots), -0.99, 0.99)))]))
+    return np.concatenate([*head, angles.ravel()])
+
+
+def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iterations: int = 60) -> Solution:
+    """Levenberg-Marquardt on the samples' residuals (the project's solver: normal equations, k ≤ 135)."""
+
+    def evaluate(p: NDArray[np.float64], warm: Any) -> Evaluation:
+        return traj.normal_equations(p)
+
+    def solve(matrix: NDArray[np.float64], rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+        return _solve_arrow(matrix, rhs, traj.head)
+
+    return levenberg_marquardt(evaluate, start, n_residuals=traj.n_residuals(), max_iterations=iterations,
+                               solve=solve)  # fmt: skip
+
+
+#: The head's Schur complement (eq. M3) is inverted only below this condition number; above it the pseudo-inverse
+#: of the whole matrix is taken (which truncates what the data do not determine, as before).
+_ARROW_CONDITION = 1e10
+
+
+def _arrow_blocks(matrix: NDArray[np.float64], head: int) -> tuple[NDArray[np.float64], ...] | None:
+    """The 2×2 diagonal blocks of an arrow matrix's tail, as (d00, d01, d10, d11, det), or None if one is singular."""
+    count = (matrix.shape[0] - head) // 2
+    index = head + 2 * np.arange(count)
+    d00, d01 = matrix[index, index], matrix[index, index + 1]
+    d10, d11 = matrix[index + 1, index], matrix[index + 1, index + 1]
+    det = d00 * d11 - d01 * d10
+    if not np.all(np.isfinite(det)) or np.any(det == 0.0):
+        return None
+    return d00, d01, d10, d11, det
+
+
+def _block_solve(blocks: tuple[NDArray[np.float64], ...], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """D⁻¹ v for v (2·count, ...), D block-diagonal with the 2×2 ``blocks`` of :func:`_arrow_blocks`."""
+    d00, d01, d10, d11, det = (x.reshape((-1,) + (1,) * (v.ndim - 1)) for x in blocks)
+    first, second = v[0::2], v[1::2]
+    out = np.empty_like(v)
+    out[0::2] = (d11 * first - d01 * second) / det
+    out[1::2] = (d00 * second - d10 * first) / det
+    return out
+
+
+def _inverse_arrow(matrix: NDArray[np.float64], head: int) -> NDArray[np.float64] | None:
+    """The inverse of a symmetric arrow matrix (the information of (M1)) by its blocks (eq. M3)::
+
+        [[A, B], [Bᵀ, D]]⁻¹ = [[S⁻¹, −S⁻¹ Eᵀ], [−E S⁻¹, D⁻¹ + E S⁻¹ Eᵀ]],   E = D⁻¹ Bᵀ,  S = A − B E
+
+    or None when a block is singular or S is ill-conditioned (:data:`_ARROW_CONDITION`). Products by einsum:
+    a threaded matrix product of this size costs more than its arithmetic on a shared machine.
+    """
+    blocks = _arrow_blocks(matrix, head)
+    if blocks is None:
+        return None
+    b = matrix[:head, head:]
+    e = _block_solve(blocks, np.ascontiguousarray(b.T))  # (2·count, head)
+    schur = matrix[:head, :head] - np.einsum("ij,jk->ik", b, e)
+    if not np.linalg.cond(schur) < _ARROW_CONDITION:
+        return None
+    s_inv = np.linalg.inv(schur)
+    es = np.einsum("ij,jk->ik", e, s_inv)
+    size = matrix.shape[0]
+    inverse = np.zeros((size, size))
+    inverse[:head, :head] = s_inv
+    inverse[head:, :head] = -es
+    inverse[:head, head:] = -es.T
+    inverse[head:, head:] = np.einsum("ij,kj->ik", es, e)
+    index = 2 * np.arange((size - head) // 2)
+    d00, d01, d10, d11, det = blocks
+    tail = inverse[head:, head:]
+    tail[index, index] += d11 / det
+    tail[index, index + 1] -= d01 / det
+    tail[index + 1, index] -= d10 / det
+    tail[index + 1, index + 1] += d00 / det
+    return inverse
+
+
+def _solve_arrow(matrix: NDArray[np.float64], rhs: NDArray[np.float64], head: int) -> NDArray[np.float64]:
+    """``matrix⁻¹ rhs`` for the normal matrix of (M1): dense in its first ``head`` parameters, and 2×2 blocks on
+    the diagonal for each stretch's two angles (a stretch's angles meet only its own rows).
+
+    With ``matrix = [[A, B], [C, D]]`` and D block-diagonal, the Schur complement::
+
+        (A − B D⁻¹ C) x_h = r_h − B D⁻¹ r_a,    x_a = D⁻¹ (r_a − C x_h)                  (M3)
+
+    leaves one head × head system: no LAPACK call on the whole matrix, whose threads cost far more than the
+    arithmetic when the machine's cores are shared. Raises ``LinAlgError`` when a block or the complement is
+    singular, as a dense solve would.
+    """
+    a, b, c = matrix[:head, :head], matrix[:head, head:], matrix[head:, :head]
+    blocks = _arrow_blocks(matrix, head)
+    if blocks is None:
+        raise np.linalg.LinAlgError("a stretch's angle block is singular")
+    r_h, r_a = rhs[:head], rhs[head:]
+    x_h = np.linalg.solve(a - b @ _block_solve(blocks, c), r_h - b @ _block_solve(blocks, r_a))
+    return np.asarray(np.concatenate([x_h, _block_solve(blocks, r_a - c @ x_h)]), dtype=np.float64)
+
+
+def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The sandwich covariance of p: batch sums of the score over 20-40 contiguous stretches of the recording."""
+    rows, components = traj.rows.size, traj.components
+    residual, dense, angular = traj.blocks(p)
+    information = traj.information(dense, angular)
+    structured = _inverse_arrow(information, traj.head)
+    # ill-conditioned: the pseudo-inverse leaves out what the data do not determine
+    inverse = np.asarray(np.linalg.pinv(information) if structured is None else structured, dtype=np.float64)
+    dof = max(traj.n_residuals() - p.size, 1)
+    independent = inverse * float(np.sum(residual**2)) / dof
+    score = traj.score(dense, angular, residual)
+    batches = max(2, min(40, rows // 50))
+    sums = np.array([s.sum(axis=0) for s in np.array_split(score, batches)])
+    # Products by einsum: BLAS's threads on matrices of this size cost more than the arithmetic on shared cores.
+    middle = np.einsum("bi,bj->ij", sums, sums) * batches / (batches - 1)
+    sandwich = np.einsum("ij,jk->ik", np.einsum("ij,jk->ik", inverse, middle), inverse)
+    # Never below the independent-noise covariance (a few batches can understate it by chance).
+    covariance = _larger(sandwich, independent)
+    if traj.gravity is not None:
+        # An accelerometer tilted by θ (its bias over g, or its mounting against the gyro) moves every d_k by
+        # θ × d_k, which the fit absorbs: p moves by −(JᵀJ)⁻¹ Jᵀ ∂r/∂θ, added for θ of ACCEL_BIAS_PRIOR / g.
+        b = traj.field(p)[0]
+        down, weight = traj._gravity_rows()
+        tilt = np.zeros((rows, components, 3))
+        tilt[:, 3] = (weight / _cos(float(p[traj.k + 6])))[:, None] * np.cross(down, b)  # ∂(d·b)/∂θ = d × b
+        shift = -np.einsum("ij,jk->ik", inverse, traj.times(dense, angular, tilt))
+        covariance = covariance + (ACCEL_BIAS_PRIOR / 9.81) ** 2 * np.einsum("ik,jk->ij", shift, shift)
+    return covariance
+
+
+def _larger(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``b`` plus the positive part of ``a − b``: the larger of two covariances."""
+    values, vectors = _eigh_serial(a - b)
+    return b + np.einsum("ik,jk->ij", vectors * np.clip(values, 0, None), vectors)
+
+
+@dataclass(frozen=True)
+class _Model:
+    """One model of G fitted by maximum likelihood: ``"general"`` or a :data:`MAPPINGS` name."""
+
+    name: str
+    traj: _Trajectory
+    solution: Solution
+
+    @property
+    def rss(self) -> float:
+        return 2.0 * self.solution.evaluation.cost
+
+
+def _fit_model(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
+               name: str, g: NDArray[np.float64], offset: NDArray[np.float64], beta: NDArray[np.float64],
+               max_rows: int = MAX_RESIDUAL_SAMPLES, iterations: int = 60,
+               gravity: _Gravity | None = None) -> _Model:  # fmt: skip
+    basis = np.eye(9) if name == "general" else _symmetric(np.eye(3), MAPPINGS[name].T)  # G = W Pᵀ = (P S)⁻¹
+    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity)
+    return _Model(name, traj, _maximum_likelihood(traj, _start(traj, g, offset, beta), iterations))
+
+
+def _parts(model: _Model) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """G, V and β of a fitted model."""
+    params, k = model.solution.params, model.traj.k
+    return model.traj.distortion(params), params[k : k + 3], params[k + 3 : k + 6]
+
+
+def _effective_variance(residual: NDArray[np.float64], times: NDArray[np.float64], unknowns: int) -> float:
+    """The variance per component of ``residual`` (rows, m), times the correlation excess of the residuals in
+    time.
+
+    Neighbouring residuals share the gyro's integrated noise (a random walk over each stretch) and the
+    magnetometer's filtering: the variance of means over five-second blocks of rows, times the block length,
+    over the plain variance (at least 1).
+    """
+    variance = float(np.sum(residual**2)) / max(residual.size - unknowns, 1)
+    step = float(np.median(np.diff(times))) if times.size > 1 else 1.0
+    block = max(1, round(5.0 / step))
+    blocks = residual.shape[0] // block
+    if blocks < 10:
+        return variance
+    means = residual[: blocks * block].reshape(blocks, block, residual.shape[1]).mean(axis=1)
+    excess = block * float(np.mean(means**2)) / max(float(np.mean(residual**2)), 1e-300)
+    return variance * max(1.0, excess)
+
+
+def _noise_variance(model: _Model) -> float:
+    """The magnetometer residuals' variance per component, times their correlation excess in time."""
+    traj = model.traj
+    residual = traj.magnetometer_residual(model.solution.params)
+    return _effective_variance(residual, traj.t[traj.rows], model.solution.params.size)
+
+
+def _eigh_serial(matrix: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Eigenvalues and orthonormal eigenvectors (columns) of a symmetric matrix without threaded BLAS.
+
+    Householder reflections ``H_k = I − 2 v_k v_kᵀ`` bring it to tridiagonal form ``T = Qᵀ A Q`` (each a rank-two
+    update ``A − v wᵀ − w vᵀ`` with ``w = 2 A v − 2 (vᵀ A v) v``), LAPACK's tridiagonal solver (which calls no
+    level-3 BLAS) gives ``T = Z Λ Zᵀ``, and the eigenvectors are ``Q Z``, the reflections applied in reverse.
+    Normwise backward stable as LAPACK's own; on a 2-core machine shared with other work it takes tens of
+    milliseconds on the 136×136 matrices here where ``numpy.linalg.eigh``'s threads wait for hundreds.
+    """
+    from scipy.linalg import eigh_tridiagonal  # not needed to import magfit
+
+    a = np.array(matrix, dtype=np.float64, copy=True)
+    n = a.shape[0]
+    if n < 3:
+        values, vectors = np.linalg.eigh(a)
+        return np.asarray(values, dtype=np.float64), np.asarray(vectors, dtype=np.float64)
+    reflectors: list[NDArray[np.float64] | None] = []
+    for k in range(n - 2):
+        x = a[k + 1 :, k]
+        norm = math.sqrt(float(np.einsum("i,i->", x, x)))
+        if norm == 0.0:
+            reflectors.append(None)
+            continue
+        alpha = -math.copysign(norm, float(x[0]))
+        v = x.copy()
+        v[0] -= alpha
+        v /= math.sqrt(float(np.einsum("i,i->", v, v)))
+        sub = a[k + 1 :, k + 1 :]
+        p = np.einsum("ij,j->i", sub, v)
+        w = 2.0 * p - 2.0 * float(np.einsum("i,i->", v, p)) * v
+        sub -= v[:, None] * w[None, :] + w[:, None] * v[None, :]
+        a[k + 1, k] = a[k, k + 1] = alpha
+        a[k + 2 :, k] = 0.0
+        a[k, k + 2 :] = 0.0
+        reflectors.append(v)
+    values, z = eigh_tridiagonal(np.diag(a).copy(), np.diag(a, 1).copy())
+    for k in range(n - 3, -1, -1):
+        v = reflectors[k]
+        if v is not None:
+            block = z[k + 1 :]
+            block -= 2.0 * v[:, None] * np.einsum("i,ij->j", v, block)[None, :]
+    return np.asarray(values, dtype=np.float64), np.asarray(z, dtype=np.float64)

@@ -1,0 +1,175 @@
+"""Stage 1: the kinematics (1) of :mod:`.method` integrated over windows, linear in the correction.
+
+Over a window ``[a, b]`` (about :data:`WINDOW_S`), (1) integrates to::
+
+    H (y_b − y_a) = −∫ (ω − β) × (H y − c) dt                                    (W1)
+
+with the integrals as sums of trapezoids of ``ω yᵀ``, ``y`` and ``ω`` (:class:`_Windows`, each window a
+difference of running sums). A difference of two samples (MAGYC's ``diff(m)/dt``) has the magnetometer noise
+of two samples for one sample's turn; a window of L samples has it for L samples' turn. (W1) is linear and
+homogeneous in ``θ = (H, c)``: its rows ``A θ = 0`` (:func:`_design`) are solved for the unit θ of least
+residual, the eigenvector of the smallest eigenvalue of ``AᵀA`` with c eliminated (:func:`_constrained`),
+for a general H or one restricted to ``P S`` (S symmetric, :func:`_symmetric`). The bias enters (W1) as
+``β × (H ∫y − T c)``, linear once θ is held: Gauss-Newton on (θ on its unit sphere, β) from the bias-free
+solution (:func:`_windowed_bias`). A window never spans a gap of the time stamps (:func:`_gaps`): the turn
+across it was not measured.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...rotations import skew
+
+#: Window of the integrated kinematic residual (stage 1), seconds; at least ``_MIN_WINDOW`` samples.
+WINDOW_S = 1.0
+_MIN_WINDOW = 5
+#: A step of the time stamps longer than this many of their median steps (and than GAP_MIN_S) is a gap: the
+#: gyro's turn across it is unknown, so the stages do not integrate across it (a new stretch, no window).
+GAP_STEPS = 5.0
+GAP_MIN_S = 0.05
+
+
+@dataclass(frozen=True)
+class _Windows:
+    """Per window ``[a, b]``: ``dy = y_b − y_a``, ``M = ∫ ω yᵀ dt``, ``Sy = ∫ y dt``, ``Sw = ∫ ω dt``, ``T``."""
+
+    dy: NDArray[np.float64]
+    M: NDArray[np.float64]
+    Sy: NDArray[np.float64]
+    Sw: NDArray[np.float64]
+    T: NDArray[np.float64]
+
+
+def _gaps(t: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """(n − 1,) True at the steps of ``t`` that are gaps (:data:`GAP_STEPS`): nothing is integrated across them."""
+    steps = np.diff(t)
+    return np.asarray(steps > max(GAP_STEPS * float(np.median(steps)), GAP_MIN_S), dtype=bool)
+
+
+def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Windows:
+    """The integrals of (W1) over consecutive windows of ``length`` samples, those across a gap left out.
+
+    Trapezoids: over a window ``[s, s + L]``, ``∫ f dt = Σ_{k=s}^{s+L−1} ½ dt_k (f_k + f_{k+1})``, summed window
+    by window (each sample weighted by the half-steps beside it), not as differences of running sums.
+    """
+    dt = np.diff(t)
+    starts = np.arange(0, len(y) - length, length)
+    windows = starts.size
+    used = windows * length  # the pieces k = 0 … used − 1 (every window's), samples 0 … used
+    half = 0.5 * dt[:used]
+    # ½ dt_k weighs sample k (the piece's left end) and sample k + 1 (its right end), window by window
+    left = half.reshape(windows, length, 1)
+
+    def integral(f: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(
+            np.sum(left * (f[:used].reshape(windows, length, -1) + f[1 : used + 1].reshape(windows, length, -1)),
+                   axis=1),
+            dtype=np.float64,
+        )  # fmt: skip
+
+    wl, yl = (w[:used] * left.reshape(-1, 1)).reshape(windows, length, 3), y[:used].reshape(windows, length, 3)
+    wr = (w[1 : used + 1] * left.reshape(-1, 1)).reshape(windows, length, 3)
+    yr = y[1 : used + 1].reshape(windows, length, 3)
+    moment = np.matmul(wl.transpose(0, 2, 1), yl) + np.matmul(wr.transpose(0, 2, 1), yr)  # ∫ ω yᵀ dt
+    ends = starts + length
+    crossed = np.concatenate([[0], np.cumsum(_gaps(t))])  # gaps among the steps before each sample
+    whole = crossed[ends] == crossed[starts]  # a window across a gap would integrate a turn nobody measured
+    return _Windows(y[ends[whole]] - y[starts[whole]], moment[whole], integral(y)[whole], integral(w)[whole],
+                    t[ends[whole]] - t[starts[whole]])  # fmt: skip
+
+
+def _design(win: _Windows, beta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rows of the integrated (1) in θ = (H row by row, c): ``H dy + ∫ (ω−β) × (H y) − ∫(ω−β) × c``, (3m, 12)."""
+    m = win.T.size
+    moment = win.M - beta[None, :, None] * win.Sy[:, None, :]  # ∫ (ω − β) yᵀ
+    turn = win.Sw - beta * win.T[:, None]  # ∫ (ω − β)
+    design = np.zeros((m, 3, 12))
+    for i in range(3):
+        design[:, i, 3 * i : 3 * i + 3] = win.dy
+    # (ω × H y)_i = ε_ijk ω_j H_kl y_l: [column l of the moment]× in H's row k, column l
+    design[:, :, :9] += skew(moment.transpose(0, 2, 1)).transpose(0, 2, 3, 1).reshape(m, 3, 9)
+    design[:, :, 9:] = -skew(turn)
+    return design.reshape(3 * m, 12)
+
+
+def _symmetric(left: NDArray[np.float64], right: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(9, 6): ``left @ S @ right`` row by row for S symmetric, over an orthonormal basis of S (unit |S|_F)."""
+    basis = np.zeros((9, 6))
+    pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+    for column, (a, b) in enumerate(pairs):
+        s = np.zeros((3, 3))
+        s[a, b] = s[b, a] = 1.0 if a == b else math.sqrt(0.5)
+        basis[:, column] = (left @ s @ right).ravel()
+    return basis
+
+
+def _constrained(
+    design: NDArray[np.float64], basis: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """H = basis @ h with |h| = 1 and the best c minimising the windowed residual: (H, c, residual²).
+
+    c is eliminated (the Schur complement of the normal equations) and h is the eigenvector of the smallest
+    eigenvalue of what is left, so the residuals of different models of H (general, or ``P S`` for each
+    mapping) are on one scale (|H|_F = 1). Normal equations through einsum, not an SVD or QR of the tall
+    design: LAPACK's threads on a shared machine made those most of a long recording's fit.
+    """
+    d_h = np.einsum("rj,jk->rk", design[:, :9], basis)
+    d_c = design[:, 9:]
+    n_hh = np.einsum("rj,rk->jk", d_h, d_h)
+    n_hc = np.einsum("rj,rk->jk", d_h, d_c)
+    n_cc = np.einsum("rj,rk->jk", d_c, d_c)
+    eliminate = np.linalg.solve(n_cc, n_hc.T)  # c = −N_cc⁻¹ N_chᵀ h
+    values, vectors = np.linalg.eigh(n_hh - n_hc @ eliminate)
+    h = vectors[:, 0]
+    return (basis @ h).reshape(3, 3), -eliminate @ h, float(max(values[0], 0.0))
+
+
+def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Gauss-Newton on the windowed residual over θ = (H, c) (on its unit sphere: the scale is free) and β,
+    from the bias-free total least-squares solution."""
+    h, c, _ = _constrained(_design(win, np.zeros(3)), np.eye(9))
+    theta = np.concatenate([h.ravel(), c])
+    theta /= np.linalg.norm(theta)
+    beta = np.zeros(3)
+    m = win.T.size
+    for _ in range(iterations):
+        h, c = theta[:9].reshape(3, 3), theta[9:]
+        residual = np.einsum("rj,j->r", _design(win, beta), theta)
+        # H ∫y − T c: the residual is linear in β through −β × u
+        u = np.einsum("ij,mj->mi", h, win.Sy) - win.T[:, None] * c
+        jac_theta = _design(win, beta)
+        jac_beta = skew(u).reshape(3 * m, 3)
+        q, _ = np.linalg.qr(np.column_stack([theta, np.eye(12)]))
+        tangent = q[:, 1:12]
+        jac = np.column_stack([np.einsum("rj,jk->rk", jac_theta, tangent), jac_beta])
+        normal = np.einsum("rp,rq->pq", jac, jac)
+        step, *_ = np.linalg.lstsq(normal, -np.einsum("rp,r->p", jac, residual), rcond=None)
+        theta = theta + tangent @ step[:11]
+        theta = theta / np.linalg.norm(theta)
+        beta = beta + step[11:]
+        if np.linalg.norm(step) < 1e-10:
+            break
+    return theta, beta
+
+
+def _turn_axes(win: _Windows, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """How much the recording turned about each principal axis and those axes (columns), largest first.
+
+    The scatter of the windows' turns ``∫ (ω − β) dt`` (a second each: the gyro's noise averages out of
+    them, where the scatter of the rates themselves would count it as turning); the square roots of its
+    eigenvalues, in degrees, in proportion to the turning about each axis.
+    """
+    turns = win.Sw - beta * win.T[:, None]
+    values, vectors = np.linalg.eigh(turns.T @ turns)
+    order = values.argsort()[::-1]
+    return np.degrees(np.sqrt(np.clip(values[order], 0, None))), vectors[:, order]
+
+
+def window_length(t: NDArray[np.float64]) -> int:
+    """Samples per window of stage 1: :data:`WINDOW_S` at the median step, at least ``_MIN_WINDOW``."""
+    return max(_MIN_WINDOW, round(WINDOW_S / float(np.median(np.diff(t)))))
