@@ -166,6 +166,16 @@ def test_flights_a_random_run_found_are_covered(seed: int, method: str) -> None:
     _check("flight", seed, (method,))
 
 
+@pytest.mark.xfail(
+    reason="known gap, found by the campaign on fresh seeds (100-111): a drifting flight whose eddy currents, not a "
+    "drift, move the full fit (seed 106): als, robust, ml and auto 1.1° off stating ±0.25-0.28° (3.8-4.6x); the drift "
+    "model does not hold an eddy-current field, and one that adds its nine terms masks the drift on other flights",
+    strict=True,
+)
+def test_a_drifting_flight_whose_eddy_currents_move_the_full_fit() -> None:
+    _check("drifting flight", 106, ("ml",))
+
+
 def test_a_drift_the_samples_do_not_show_changes_nothing() -> None:
     # The same flight without the drift: the drift model's F test does not count, nothing is widened or named.
     sim = magfit.simulate(
