@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..._validation import check_inclination
 from ...calibration import Calibration
 from ...errors import CalibrationError, OptionError
+from ...facts import GyroFacts, SolverStatus
 from ...findings import Reason, Support
 from ...rotations import angle_between_deg, axis_words, polar_decomposition
 from ..registry import FitInput, register
@@ -92,7 +93,7 @@ def fit_gyro(
         Length of the stretches over which the gyro is integrated (:mod:`.model`, stage 2).
     lag_s : float or "search"
         The magnetometer's delay behind the gyroscope, seconds: searched within ±0.25 s on the windowed
-        residual by default (``details["lag_s"]``), or given.
+        residual by default (``calibration.gyro.lag_s``), or given.
     gyro_time_s : array_like, shape (M,), optional
         The gyroscope's own times (seconds, the magnetometer's clock) when it is logged at its own rate: then
         ``gyro`` is (M, 3) and is averaged over each magnetometer sample's interval, not interpolated.
@@ -272,7 +273,7 @@ def _turning(win: _Windows) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 @dataclass(frozen=True)
 class _Fitted:
     """The model kept (:mod:`.choice`), the candidates' likelihood ratios, the mappings not told apart, the
-    accelerometer's disagreement with the given inclination, and ``details["gravity"]``."""
+    accelerometer's disagreement with the given inclination, and ``calibration.gyro.gravity``."""
 
     model: _Model
     excess: dict[str, float]
@@ -315,31 +316,39 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
     support, residual_rms, heading_sigma = _verdict(inputs, aligned, fitted, turns_deg, g, offset, covariance,
                                                     matrix, strength, mapping, segment_s, lag_s)  # fmt: skip
     diagonal = np.sqrt(np.clip(np.diag(covariance), 0, None))
-    details: dict[str, Any] = {
-        "mapping": "general" if model.name == "general" else nearest,
+    facts = GyroFacts(
+        mapping="general" if model.name == "general" else nearest,
+        nearest_mapping=nearest,
+        angle_from_nearest_deg=angle,
+        rotation=_rows(rotation),
+        sensor_matrix=_rows(symmetric),
+        bias=tuple(float(v) for v in beta),
+        bias_sigma=tuple(float(v) for v in diagonal[k + 3 : k + 6]),
+        heading_sigma_deg=heading_sigma,
+        lag_s=lag,
+        gravity=gravity_facts or None,
+    )
+    solver = SolverStatus(iterations=solution.iterations, message=solution.message)
+    details: dict[str, Any] = {  # free-form figures no other code reads
         "mapping_likelihood_ratios": excess,
-        "rotation": rotation.tolist(),
-        "nearest_mapping": nearest,
-        "angle_from_nearest_deg": angle,
         "mirror": "not determined by the kinematics: the magnetometer is taken to be right-handed",
-        "sensor_matrix": symmetric.tolist(),
-        "gyro_bias": beta.tolist(),
-        "gyro_bias_sigma": diagonal[k + 3 : k + 6].tolist(),
         "offset_sigma": diagonal[k : k + 3].tolist(),
-        "heading_sigma_deg": heading_sigma,
         "residual_rms": residual_rms,
         "turns_deg": turns_deg.tolist(),
         "segments": traj.count,
         "window_samples": length,
-        "lag_s": lag,
-        "solver": {"status": solution.status, "iterations": solution.iterations, "message": solution.message},
-        "support": support.to_dict(),
+        "solver_status": solution.status,
     }
-    if gravity_facts:
-        details["gravity"] = gravity_facts
     if gap_notes:
         details["gyro_gaps"] = gap_notes
-    return Calibration("gyro", offset, matrix, strength, n_samples=int(y.shape[0]), details=details, frame="vehicle")
+    return Calibration(
+        "gyro", offset, matrix, strength, n_samples=int(y.shape[0]), details=details, frame="vehicle",
+        support=support, solver=solver, gyro=facts,
+    )  # fmt: skip
+
+
+def _rows(matrix: NDArray[np.float64]) -> tuple[tuple[float, ...], ...]:
+    return tuple(tuple(float(v) for v in row) for row in matrix)
 
 
 def _correction(model: _Model, gravity_facts: dict[str, Any]) -> tuple[NDArray[np.float64], NDArray[np.float64],

@@ -71,7 +71,7 @@ class GravityFit:
     with the reference (``caution`` then says so, for the verdict's weaknesses). ``covariance`` (of G
     row-major and V, block jackknife) is None also when one of the jackknife's refits had no solution: the
     verdict then computes the regression's covariance at the joint fit (the note says so). ``prior`` (12, 12)
-    is the accelerometer's calibration cost (:func:`_tilt_prior`). ``facts`` go to ``details["gravity"]``,
+    is the accelerometer's calibration cost (:func:`_tilt_prior`). ``facts`` go to ``calibration.vector.gravity``,
     ``note`` to the diagnostics' notes.
     """
 
@@ -140,7 +140,7 @@ def _unused(facts: dict[str, Any], note: str, caution: str | None = None) -> Gra
 @dataclass(frozen=True)
 class _Still:
     """The rows the accelerometer sees gravity alone on (:func:`_still_rows`): ``still`` indexes the kept
-    samples, ``facts`` start ``details["gravity"]``, ``reasons`` say what the gate dropped."""
+    samples, ``facts`` start ``calibration.vector.gravity``, ``reasons`` say what the gate dropped."""
 
     still: NDArray[np.int64]
     facts: dict[str, Any]
@@ -201,7 +201,7 @@ def _heading_spread(down: NDArray[np.float64], body: NDArray[np.float64]) -> flo
 class _Joint:
     """The joint fit of (3) and (4) (:func:`_joint_fit`): its solution ``p`` (None: no positive definite
     normal matrix), the weights and whole normal equations (the jackknife and the tilt prior refit with them),
-    and the noise figures that go to ``details["gravity"]``."""
+    and the noise figures that go to ``calibration.vector.gravity``."""
 
     p: NDArray[np.float64] | None
     equations: _Equations

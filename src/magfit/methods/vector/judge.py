@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from ...calibration import Calibration
 from ...diagnostics.reference import judge_reference_fit
+from ...facts import VectorFacts
 from .gravity import GravityFit
 from .lag import _Lagged
 
@@ -23,8 +24,9 @@ def _judged(lag: _Lagged, g: NDArray[Any], offset: NDArray[Any], field: float,
     covariance = prior = None
     notes: tuple[str, ...] = ()
     cautions: tuple[str, ...] = ()
+    gravity = None
     if joint is not None:
-        details["gravity"] = joint.facts
+        gravity = joint.facts
         notes = (joint.note,)
         cautions = () if joint.caution is None else (joint.caution,)
         if joint.g is not None and joint.offset is not None:
@@ -33,14 +35,15 @@ def _judged(lag: _Lagged, g: NDArray[Any], offset: NDArray[Any], field: float,
         used_raw, used_ref, g, offset, rate=rate, lag_at_limit=lag_limit, covariance=covariance, prior=prior,
         notes=notes, cautions=cautions,
     )  # fmt: skip
+    lag_sigma = None
     if rate is not None:  # the larger of the lag search's jackknife and the fit's covariance (when it has the lag)
         lag_variance = report.covariance[12, 12] if report.covariance.shape[0] > 12 else 0.0
-        details["lag_sigma_s"] = max(jackknife, float(np.sqrt(max(lag_variance, 0.0))))
-    details["alignment_sigma_deg"] = report.rotation_sigma_deg
+        lag_sigma = max(jackknife, float(np.sqrt(max(lag_variance, 0.0))))
+    facts = VectorFacts(lag.lag_s, lag_sigma, report.rotation_sigma_deg, gravity)
     details["residual_rms"] = report.residual_rms
     details["scale"] = report.scale
-    details["support"] = report.support.to_dict()
     details["diagnostics"] = report.diagnostics(int(used_raw.shape[0])).to_dict()
     return Calibration(
-        "vector", offset, np.linalg.inv(g), field, n_samples=int(used_raw.shape[0]), details=details, frame="vehicle"
-    )
+        "vector", offset, np.linalg.inv(g), field, n_samples=int(used_raw.shape[0]), details=details, frame="vehicle",
+        support=report.support, vector=facts,
+    )  # fmt: skip

@@ -151,6 +151,7 @@ class _Lagged:
     times: NDArray[np.float64] | None = None
     lag_limit: float | None = None
     jackknife: float = 0.0
+    lag_s: float | None = None  # the lag found (None: no time stamps, no lag fitted)
 
 
 def _lag(raw: NDArray[np.float64], ref: NDArray[np.float64], time_s: ArrayLike | None, max_lag_s: float,
@@ -160,7 +161,6 @@ def _lag(raw: NDArray[np.float64], ref: NDArray[np.float64], time_s: ArrayLike |
     facts go to ``details``. Without time_s no lag is fitted."""
     n = raw.shape[0]
     if time_s is None:
-        details["lag_s"] = None
         details["lag_note"] = "no time_s given: the reference is taken as simultaneous with the samples (no lag fitted)"
         return _Lagged(raw, ref, np.arange(n))
     times = check_times(time_s, "time_s", n)
@@ -176,10 +176,9 @@ def _lag(raw: NDArray[np.float64], ref: NDArray[np.float64], time_s: ArrayLike |
         found = estimate_lag(raw, ref, times, limit)
     if limit > max_lag_s:
         details["lag_search_s"] = limit
-    details["lag_s"] = found.lag_s
     lag_limit = None
     if found.at_limit:
         lag_limit = found.lag_s
         details["lag_search_s"] = limit
     return _Lagged(raw[found.keep], found.reference, np.flatnonzero(found.keep), found.rate, times, lag_limit,
-                   found.lag_sigma_s)  # fmt: skip
+                   found.lag_sigma_s, found.lag_s)  # fmt: skip

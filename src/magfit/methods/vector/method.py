@@ -121,7 +121,7 @@ def fit_vector(
     accel : array_like, shape (N, 3), optional
         The accelerometer's specific force at each sample in the reference's (vehicle) frame, any unit. Given,
         its gravity equations (4) join the fit where it sees gravity alone (:func:`magfit.gravity.still_samples`):
-        ``details["gravity"]`` says on how many samples and why the others were left out.
+        ``calibration.vector.gravity`` says on how many samples and why the others were left out.
     gyro : array_like, shape (N, 3), optional
         Body rates in rad/s in the same frame, for the still-sample gate (only with ``accel``; without it
         unused, said in ``details["gyro_note"]``). One that looks like degrees per second (the reference turns
