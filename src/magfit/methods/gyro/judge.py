@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...diagnostics.reference import HALVES_SIGMAS as HALVES_SIGMAS  # (the same bound as vector's)
 from ...findings import ReasonList, Support
 from ...rotations import axis_words
 from .choice import LIKELIHOOD_RATIO
@@ -33,8 +34,6 @@ from .lag import MAX_LAG_S
 from .model import _covariance, _fit_model, _Model, _parts, _Trajectory
 from .windows import WINDOW_S
 
-#: Combined one-sigmas by which the fits of the two halves of a recording may differ before the verdict names it.
-HALVES_SIGMAS = 3.5
 #: The samples' residual RMS (fraction of the field) beyond which the fit is weak, and the other readings of
 #: the inputs are tried by the fit.
 LARGE_RESIDUAL = 0.05
