@@ -13,7 +13,7 @@ from click.testing import CliRunner, Result
 
 import magfit
 from magfit.cli import cli
-from magfit.cli._common import option_wording
+from magfit.remedy import for_command_line, option
 
 
 def _run(*args: str) -> Result:
@@ -192,15 +192,16 @@ def test_a_file_of_only_nan_rows_is_an_input_error(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("library", "command_line"),
+    ("name", "value", "command_line"),
     [
-        ("skip such rows (nonfinite='skip')", "skip such rows (--nonfinite skip)"),
-        ("pass unit='uT' (or 'nT')", "pass --unit uT (or nT)"),
-        ("or use method='sphere' (hard iron only)", "or use --method sphere (hard iron only)"),
-        ("check the columns (columns=[...])", "check the columns (--columns X,Y,Z)"),
-        ("give columns=['mx', 'my', 'mz']", "give --columns mx,my,mz"),
-        ("the unit of the samples is unknown", "the unit of the samples is unknown"),
+        ("nonfinite", "skip", "--nonfinite skip"),
+        ("unit", "uT", "--unit uT"),
+        ("method", "sphere", "--method sphere"),
+        ("columns", "...", "--columns X,Y,Z"),
+        ("columns", ["mx", "my", "mz"], "--columns mx,my,mz"),
+        ("allow_undetermined", True, "--force"),
     ],
 )
-def test_library_hints_are_worded_as_options(library: str, command_line: str) -> None:
-    assert option_wording(library) == command_line
+def test_library_hints_are_worded_as_options(name: str, value: object, command_line: str) -> None:
+    with for_command_line():
+        assert option(name, value) == command_line

@@ -10,68 +10,49 @@ import pytest
 from click.testing import CliRunner
 
 from magfit.cli import cli
-from magfit.cli._common import option_wording, warn
-from magfit.cli._wording import collapse_repeats, unquoted_alternatives, without_own_advice
+from magfit.cli._common import warn
+from magfit.findings import said_once
+from magfit.remedy import for_command_line, option
 
 REASON = (
     "the samples do not outline an ellipsoid (the fitted quadric is a hyperboloid), as every hard- and soft-iron "
     "distortion should: they cover too few directions; the {} fit to them would mean nothing. Record again"
-)
-REFUSAL = (
-    "no model could be fitted to these samples: sphere: "
-    + REASON.format("sphere")
-    + "; diag: "
-    + REASON.format("diag")
-    + "; full: the als fit failed: the fitted quadric is a hyperboloid; or use method='sphere' (hard iron only)"
 )
 #: Python in a message: a keyword argument with a quoted, bracketed, boolean or numeric value.
 PYTHON_SYNTAX = re.compile(r"\b[a-z_]+=(?:'|\[|True\b|False\b|None\b|\d)")
 
 
 def test_a_reason_repeated_for_another_model_is_said_once() -> None:
-    text = collapse_repeats(REFUSAL)
+    items = [
+        ("sphere", "sphere", [REASON.format("sphere")]),
+        ("diag", "diag", [REASON.format("diag")]),
+        ("full", "full", ["the als fit failed: the fitted quadric is a hyperboloid"]),
+    ]
+    text = said_once(items)
     assert text.count("as every hard- and soft-iron distortion should") == 1
     assert "; diag: as sphere; full: the als fit failed" in text
-    assert text.startswith("no model could be fitted to these samples: sphere: the samples do not outline")
-    assert collapse_repeats("the ellipsoid fit failed: too few samples") == "the ellipsoid fit failed: too few samples"
+    assert text.startswith("sphere: the samples do not outline")
+    assert said_once([("ellipsoid", "ellipsoid", ["too few samples"])]) == "ellipsoid: too few samples"
 
 
 def test_only_the_repeated_clauses_are_referred_to() -> None:
     """diag's first clause differs from sphere's and is kept; its second is sphere's, named for diag."""
     other = REASON.format("diag").replace("few", "many")
-    text = collapse_repeats("no model: sphere: " + REASON.format("sphere") + "; diag: " + other)
-    assert text == "no model: sphere: " + REASON.format("sphere") + "; diag: " + other.split("; ")[0] + "; as sphere"
+    text = said_once([("sphere", "sphere", [REASON.format("sphere")]), ("diag", "diag", [other])])
+    assert text == "sphere: " + REASON.format("sphere") + "; diag: " + other.split("; ")[0] + "; as sphere"
 
 
-def test_the_model_list_of_auto_is_collapsed_in_either_wording() -> None:
-    turned = "the sensor only turned about z: the field was never seen near +z or −z"
-    tilt = "tilt the sensor so that both ends of z face the field in turn"
-    text = (
-        f"the samples determine no calibration model: the sphere model: {turned}; {tilt}; the diag model: the "
-        f"fitted ellipsoid is 989602 times longer than it is thick; {turned}; {tilt}; record again"
-    )
-    assert collapse_repeats(text) == (
-        f"the samples determine no calibration model: the sphere model: {turned}; {tilt}; the diag model: the "
-        "fitted ellipsoid is 989602 times longer than it is thick; as the sphere model; record again"
-    )
+def test_remedies_are_said_as_options_inside_the_command() -> None:
+    with for_command_line():
+        assert f"prefer {option('method', 'auto')} (or ml, als)" == "prefer --method auto (or ml, als)"
+        assert f"pass {option('field_strength', 48.2)}" == "pass --field-strength 48.2"
+        assert option("columns", [1, 2, 3]) == "--columns 1,2,3"
+    assert option("columns", [1, 2, 3]) == "columns=[1, 2, 3]"
 
 
-def test_keyword_hints_become_options() -> None:
-    assert option_wording("prefer method='auto' (or 'ml', 'als')") == "prefer --method auto (or ml, als)"
-    assert option_wording("pass field_strength=48.2 or unit='uT'") == "pass --field-strength 48.2 or --unit uT"
-    assert option_wording("choose one with columns=[1, 2, 3] (0-based)") == "choose one with --columns 1,2,3 (0-based)"
-    assert unquoted_alternatives("--method als (or 'ml')") == "--method als (or ml)"
-
-
-def test_no_advice_to_use_the_method_that_was_used() -> None:
-    warning = "the method is biased on these samples; prefer method='auto' (or 'ml', 'als')"
-    assert without_own_advice(warning, "auto") == "the method is biased on these samples; prefer method='ml' (or 'als')"
-    assert without_own_advice(warning, "ellipsoid") == warning
-    assert without_own_advice("not positive-definite; use method='als'", "als") == "not positive-definite"
-
-
-def test_warnings_reach_the_terminal_in_option_syntax(capsys: pytest.CaptureFixture[str]) -> None:
-    warn("the method is biased on these samples; prefer method='auto' (or 'ml', 'als')")
+def test_warnings_reach_the_terminal_as_the_library_said_them(capsys: pytest.CaptureFixture[str]) -> None:
+    with for_command_line():
+        warn(f"the method is biased on these samples; prefer {option('method', 'auto')} (or ml, als)")
     assert (
         capsys.readouterr().err
         == "magfit: warning: the method is biased on these samples; prefer --method auto (or ml, als)\n"

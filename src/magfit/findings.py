@@ -9,11 +9,13 @@ diagnostics back typed), so it imports nothing of magfit but the errors.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import re
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from .errors import MagfitError
+from .remedy import option
 
 __all__ = [
     "AXIS_DIRECTIONS",
@@ -30,6 +32,7 @@ __all__ = [
     "Uncertainty",
     "WeakDirection",
     "reasons",
+    "said_once",
 ]
 
 _SCHEMA = 1
@@ -467,7 +470,7 @@ class Consistency:
         elif self.consistent:
             verdict = "beyond the offset's uncertainty, but less than 0.1° of level heading"
         else:
-            verdict = "beyond the uncertainty: this fit is biased, prefer method='auto' (or 'ml', 'als')"
+            verdict = f"beyond the uncertainty: this fit is biased, prefer {option('method', 'auto')} (or ml, als)"
         return [
             f"Consistency: the maximum-likelihood fit of the same model differs by ({offset}){label} in offset"
             f"{size} and by {self.heading_difference_deg:.2g}° in level heading: {verdict}."
@@ -524,6 +527,40 @@ class Reason(str):
             remedy = tuple((str(pair[0]), str(pair[1])) for pair in value.get("remedy", ()))
             return cls(str(value["text"]), str(value.get("code", "unclassified")), remedy)
         return cls(str(value))
+
+
+#: A clause shorter than this is said again rather than referred to (``as the sphere model`` saves nothing).
+SAID_ONCE_MIN = 30
+
+
+def said_once(items: Sequence[tuple[str, str, Sequence[str]]]) -> str:
+    """Each item's reasons as one line, each reason said once: ``label: r1; r2; label2: as label``.
+
+    ``items``: (label, name, reasons), e.g. ``("the diag model", "diag", support.refusals)``; a reason may hold
+    several clauses separated by ``"; "``. A clause that an earlier item gave (the item's own ``name`` aside: the
+    sphere's "the sphere fit would mean nothing" is diag's "the diag fit ...") becomes ``as <that label>``, said
+    once for consecutive such clauses. The refusals of several models often share their cause (too few
+    directions), which a reader should read once.
+    """
+    out: list[str] = []
+    seen: dict[str, str] = {}  # a clause with its item's name blanked -> the label that gave it first
+    for label, name, given in items:
+        clauses = [clause for reason in given for clause in str(reason).split("; ")]
+        said: list[str] = []
+        referred: str | None = None
+        for clause in clauses:
+            key = re.sub(rf"\b{re.escape(name)}\b", "\0", clause) if name else clause
+            first = seen.get(key)
+            if first is not None and first != label and len(clause) >= SAID_ONCE_MIN:
+                if referred != first:
+                    said.append(f"as {first}")
+                referred = first
+                continue
+            seen.setdefault(key, label)
+            said.append(clause)
+            referred = None
+        out.append(f"{label}: " + "; ".join(said))
+    return "; ".join(out)
 
 
 def reasons(values: Any, code: str = "unclassified") -> tuple[Reason, ...]:

@@ -2,10 +2,11 @@
 
 The library speaks Python (``method='vector'``, ``allow_undetermined=True``), the ``magfit`` command its
 options (``--method vector``, ``--force``). A message that suggests a remedy builds it with :func:`option`
-(one argument) or :func:`options` (several), which render it for the audience of the current context:
-keywords by default, options while :func:`for_command_line` is active (the ``magfit`` command enters it at
-its boundary, :class:`magfit.cli.app.MagfitGroup`). So no layer rewrites another's words: the command line
-never parses the library's prose, and the library never names a flag.
+(one argument) or :func:`options` (several), which render it for the process's audience: keywords by
+default, options while :func:`for_command_line` is active (the ``magfit`` command enters it at its boundary,
+:class:`magfit.cli.app.MagfitGroup`, for the whole process: the threads that read a file in pieces or fit a
+live session say it the same way). So no layer rewrites another's words: the command line never parses the
+library's prose, and the library never names a flag.
 
 The same pairs are the data a :class:`magfit.findings.Reason` or a :class:`magfit.MagfitError` carries
 (``remedy``): :func:`python_call` and :func:`command_line` render them as a whole call.
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator, Sequence
-from contextvars import ContextVar
 from pathlib import Path
 from typing import Literal
 
@@ -37,7 +37,8 @@ __all__ = [
 ]
 
 Audience = Literal["python", "command line"]
-_AUDIENCE: ContextVar[Audience] = ContextVar("magfit_remedy_audience", default="python")
+#: Who reads the messages built now (a process-wide setting: the command line is a whole process).
+_audience: list[Audience] = ["python"]
 
 #: The arguments whose value is a list of columns (``attitude=['roll', 'pitch', 'yaw']``; ``--attitude roll,...``).
 STREAM_ARGUMENTS = ("columns", "attitude", "reference", "gyro", "accel", "time")
@@ -47,17 +48,17 @@ FLAGS = {"allow_undetermined": "--force", "force": "--force", "even": "--even"}
 
 def audience() -> Audience:
     """Who reads the messages built now: ``"python"`` (the default) or ``"command line"``."""
-    return _AUDIENCE.get()
+    return _audience[-1]
 
 
 @contextlib.contextmanager
 def for_command_line() -> Iterator[None]:
     """Build messages for the ``magfit`` command while inside: remedies as its options."""
-    token = _AUDIENCE.set("command line")
+    _audience.append("command line")
     try:
         yield
     finally:
-        _AUDIENCE.reset(token)
+        _audience.pop()
 
 
 def _as_text(value: object) -> str:

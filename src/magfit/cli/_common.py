@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import re
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -17,7 +16,6 @@ from rich.console import Console
 from ..errors import CalibrationError, MagfitError, OptionError
 from ..remedy import command_line as command_line  # (the commands import it from here)
 from ._extras import hint_for
-from ._wording import after_keywords, collapse_repeats
 
 #: What to do with rows holding NaN or inf (the readers' ``nonfinite`` argument).
 Nonfinite = Literal["skip", "error"]
@@ -60,34 +58,12 @@ def one_line(message: str) -> str:
     return " ".join(str(message).split())
 
 
-#: Library hints that name a keyword argument (``nonfinite='skip'``, ``columns=[...]``): the options that set them.
-_KEYWORD_HINT = re.compile(
-    r"\b(nonfinite|unit|method|columns|field_strength|max_samples|location|date|sensor|attitude|reference|gyro|accel|angle_unit|gyro_unit)"
-    r"=(?:'([^']*)'|\[([^\]]*)\]|(-?\d[\w.+-]*))"
-)
-
-
-def option_wording(message: str) -> str:
-    """Rewrite the library's keyword hints as the command line's options: ``unit='uT'`` -> ``--unit uT``."""
-
-    def option(match: re.Match[str]) -> str:
-        name, text, items, number = match.groups()
-        name = name.replace("_", "-")
-        if text is not None or number is not None:
-            return f"--{name} {text if text is not None else number}"
-        value = "X,Y,Z" if items.strip() in ("", "...") else ",".join(i.strip().strip("'\"") for i in items.split(","))
-        return f"--{name} {value}"
-
-    # Each model's reason said once; flags named (--force); alternatives unquoted: --method auto (or ml, als).
-    return after_keywords(_KEYWORD_HINT.sub(option, collapse_repeats(message)))
-
-
 def as_command_error(error: BaseException) -> CommandError:
     """The :class:`CommandError` (message and exit status) that reports ``error``."""
     if isinstance(error, CalibrationError):
-        return FitFailedError(option_wording(one_line(str(error))))
+        return FitFailedError(one_line(str(error)))
     if isinstance(error, MagfitError):
-        return CommandError(option_wording(one_line(str(error))))
+        return CommandError(one_line(str(error)))
     if isinstance(error, click.UsageError):
         hint = f" (see '{error.ctx.command_path} --help')" if error.ctx is not None else ""
         return CommandError(one_line(error.format_message()) + hint)
@@ -116,7 +92,7 @@ def fail(message: str) -> NoReturn:
 
 def warn(message: str) -> None:
     """Print ``magfit: warning: <message>`` on stderr."""
-    click.echo(f"magfit: warning: {option_wording(one_line(message))}", err=True)
+    click.echo(f"magfit: warning: {one_line(message)}", err=True)
 
 
 # ---------------------------------------------------------------------- output

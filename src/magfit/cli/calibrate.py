@@ -48,7 +48,6 @@ from ._common import (
     method_names,
     nonfinite_option,
     one_line,
-    option_wording,
     parse_columns,
     parse_stream,
     refuse_overwriting_input,
@@ -60,7 +59,6 @@ from ._common import (
 )
 from ._consistency import print_log_checks
 from ._extras import require
-from ._wording import without_own_advice
 
 #: Formats whose one file holds every compass of a vehicle (``magfit.export.export_several``). JSON is written
 #: one file per compass, each a calibration that ``magfit apply`` and ``Calibration.from_json`` read.
@@ -440,7 +438,7 @@ def calibrate_command(
     except RefusedWithAdvice as error:
         said = "; ".join(f"{reason} ({command_line('calibrate', file, reason.remedy)})" for reason in error.advice)
         works = f"; what works for a vehicle: {said}" if said else ""
-        raise FitFailedError(f"{option_wording(one_line(error.text))}{works}") from None
+        raise FitFailedError(f"{one_line(error.text)}{works}") from None
     several = len(result.compasses) + len(result.failures) > 1
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
     files: list[tuple[Path, bytes]] = []
@@ -529,7 +527,7 @@ def _print_all(result: FileCalibration, *, stderr: bool = False) -> None:
                 f"{lines}{more}); pass --nonfinite error to refuse such files"
             )
         for message in _fit_warnings(compass.calibration):
-            warn(without_own_advice(message, compass.calibration.method))  # "prefer method='auto'" after auto
+            warn(message)
         for reason in compass.warnings:  # the unit check (unit_mismatch) and the like
             warn(str(reason))
         _warn_advice(compass.advice, compass.path, " (level with turns)" if compass.magnetometer is None else "")
@@ -669,7 +667,7 @@ def _fitted_on(run: CompassCalibration) -> list[tuple[str, str]]:
     if run.subsample is None:
         return []
     used = run.calibration.n_samples
-    why = option_wording(run.subsample)  # even=True -> --even, max_samples=N -> --max-samples N
+    why = run.subsample  # (said in the command line's words: magfit.remedy)
     kind = "a regular stride" if run.subsample.startswith("stride") else "an even subsample"  # a long log's
     return [("fitted on", f"{kind}: {used} of {run.n_rows - run.n_skipped} samples ({why})")]
 

@@ -25,7 +25,6 @@ from ._common import (
     fixed,
     method_names,
     nonfinite_option,
-    option_wording,
     parse_columns,
     significant,
     vector,
@@ -223,7 +222,7 @@ def with_streams(
 
 def _reason(result: MethodResult) -> str:
     """Why a method failed, as the command line words it (``--method sphere``, each reason once)."""
-    return option_wording(str(result.error))
+    return str(result.error)
 
 
 def _refusals(result: MethodResult) -> list[str] | None:
@@ -284,7 +283,7 @@ def _print_tables(results: Sequence[FileComparison]) -> None:
                 table.add_row(_label(method_result, "*"), *_numbers(method_result))
                 refusals = _refusals(method_result)
                 if refusals is not None:
-                    why = option_wording("; ".join(refusals))
+                    why = "; ".join(refusals)
                     reasons.append(Text(f"{method_result.method}*: NOT SUPPORTED by the samples: {why}", style="red"))
             else:
                 table.add_row(method_result.method, "failed", "", "", "", "")

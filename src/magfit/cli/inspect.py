@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from ..sources import Magnetometer, Source, open_source
-from ._common import console, option_wording, time_span
+from ._common import console, time_span
 from ._consistency import inspect_lines
 
 
@@ -26,7 +26,7 @@ def _magnetometer_lines(magnetometer: Magnetometer, time_base: str = "") -> list
     lines = [(magnetometer.id, f"{magnetometer.description}: {magnetometer.n_samples} samples in {unit}{timing}")]
     lines += [("", f"note: {note}") for note in magnetometer.notes]
     if magnetometer.problem is not None:
-        lines.append(("", f"cannot be fitted: {option_wording(magnetometer.problem)}"))
+        lines.append(("", f"cannot be fitted: {magnetometer.problem}"))
     return lines
 
 

@@ -92,6 +92,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
+from ..remedy import option
 from ..rotations import custom_angles
 from ..units import field_unit_reason
 from ._common import (
@@ -232,7 +233,7 @@ def _compass(
         raise ExportError(
             f"ArduPilot would refuse to arm ('Check mag field'): the corrected field is {field:.4g} mG, outside "
             f"{FIELD_RANGE_MG[0]:.0f}-{FIELD_RANGE_MG[1]:.0f} mG; "
-            + f"check the unit of the samples (unit={source.name!r} was used)"
+            + f"check the unit of the samples ({option('unit', source.name)} was used)"
             + (f": {mismatch}" if mismatch else ""),
             codes=("unit_mismatch",) if mismatch else (),
             remedy=mismatch.remedy if mismatch else (),

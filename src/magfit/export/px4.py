@@ -77,6 +77,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import ExportError, OptionError
+from ..remedy import option
 from ..rotations import PX4_ROTATION_MAX
 from ..temperature import TemperatureDrift
 from ..units import field_unit_reason
@@ -171,7 +172,7 @@ def _slot(calibration: Calibration, unit: str | None, slot: int | None, device_i
         raise ExportError(
             f"PX4 rejects a magnetometer calibration whose sphere radius is outside [{low}, {high}) G; the "
             f"corrected field is {field:.4g} G; "
-            + f"check the unit of the samples (unit={source.name!r} was used)"
+            + f"check the unit of the samples ({option('unit', source.name)} was used)"
             + (f": {mismatch}" if mismatch else ""),
             codes=("unit_mismatch",) if mismatch else (),
             remedy=mismatch.remedy if mismatch else (),

@@ -151,7 +151,7 @@ def choose(path: Path, name: str, sensor: str, values: Sequence[float]) -> float
         return float(text)
     except ValueError:
         raise file_error(
-            path, f"sensor={sensor!r} is not a value of column {name!r}; choose one of {_ids(name, values)}"
+            path, f"{option('sensor', sensor)} is not a value of column {name!r}; choose one of {_ids(name, values)}"
         ) from None
 
 

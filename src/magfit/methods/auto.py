@@ -52,7 +52,7 @@ from ..diagnostics.verdict import USELESS_BOUND_DEG
 from ..errors import CalibrationError, MagfitError
 from ..evaluate import unchecked_sphere_distances
 from ..facts import AutoChoice
-from ..findings import Diagnostics, Reason, Support
+from ..findings import Diagnostics, Reason, Support, said_once
 from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..outliers import DEFAULT_THRESHOLD
 from ..remedy import option
@@ -250,7 +250,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     if not determined:
         message = (
             "the samples determine no calibration model: "
-            + "; ".join(f"the {model} model: {'; '.join(verdicts[model].refusals)}" for model in verdicts)
+            + said_once([(f"the {model} model", model, verdicts[model].refusals) for model in verdicts])
             + "; record again turning the sensor through more attitudes (a full tumble is best)"
         )
         # Forced (allow_undetermined), the simplest model that can describe the samples: the fewest numbers
@@ -591,7 +591,7 @@ def _far_from_plain_fit(rows: NDArray[np.float64]) -> int:
 
 def _refusal(opening: str, samples: NDArray[np.float64], failed: dict[str, str]) -> CalibrationError:
     """Why no model is left: ``opening``, what the samples' shape says, and each model's reason."""
-    reasons = "; ".join(f"{model}: {reason}" for model, reason in failed.items())
+    reasons = said_once([(model, model, (reason,)) for model, reason in failed.items()])
     return CalibrationError(opening + _flatness(samples) + ": " + reasons)
 
 

@@ -145,7 +145,7 @@ def fit_samples_file(
         path, method, columns, nonfinite, options, even=even, limit=limit, progress=progress
     )
     if limited:
-        bound = f"the file has more rows than max_samples={limit}"
+        bound = f"the file has more rows than {option('max_samples', limit)}"
         if max_samples is None:
             default = f"{DEFAULT_FIT_SAMPLES:,}".replace(",", " ")
             bound += f", the default: {default} or half the available memory"
@@ -197,7 +197,7 @@ def log_subsample(n_records: int, every: int, max_samples: int | None, even: boo
     limit = log_read_limit(max_samples)
     bound = f"stride: one in every {every} of {n_records} records read, "
     if n_records > limit:
-        bound += f"more than max_samples={limit}"
+        bound += f"more than {option('max_samples', limit)}"
         if max_samples is None:
             bound += f", the default: {DEFAULT_FIT_SAMPLES:,} or half the available memory".replace(",", " ")
     else:

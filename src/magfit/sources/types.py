@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError, OptionError
+from ..remedy import option
 from .position import Position, median_position
 
 if TYPE_CHECKING:
@@ -247,7 +248,7 @@ def strided(read: LogSamples, max_samples: int | None) -> LogSamples:
     every = -(-n // max_samples)
     note = (
         f"one sample in every {every} kept ({len(range(0, n, every))} of {n}): the stream holds more than "
-        f"max_samples={max_samples}, so a regular stride over the whole recording is fitted"
+        f"{option('max_samples', max_samples)}, so a regular stride over the whole recording is fitted"
     )
     return LogSamples(
         read.magnetometer,
