@@ -39,9 +39,7 @@ def _fit(path: Path, monkeypatch: pytest.MonkeyPatch, *, pool: int | None = None
         patch.setattr(streaming, "_every", every)
         if pool is not None:
             patch.setattr(streaming, "SAMPLE_POOL", pool)
-        run = streaming.fit_samples_file(
-            path, "ml", columns=None, nonfinite="skip", options={}, even=False, max_samples=LIMIT
-        )
+        run = streaming.fit_samples_file(streaming.SamplesFileFit(path, "ml", max_samples=LIMIT))
     return run, steps
 
 

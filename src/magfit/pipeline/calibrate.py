@@ -27,6 +27,7 @@ from .results import CompassCalibration, CompassFailure, FileCalibration, ModelF
 from .streaming import (
     Nonfinite,
     Progress,
+    SamplesFileFit,
     fit_samples_file,
     log_read_limit,
     log_subsample,
@@ -628,14 +629,7 @@ def _calibrate_samples(
     chosen = ChunkReader(path, columns=columns, nonfinite=nonfinite)  # not iterated: layout and columns only
     try:
         fitted = fit_samples_file(
-            path,
-            method,
-            columns=columns,
-            nonfinite=nonfinite,
-            options=options,
-            even=even,
-            max_samples=max_samples,
-            progress=progress,
+            SamplesFileFit(path, method, columns, nonfinite, options, even, max_samples, progress)
         )
     except CalibrationError as error:
         used = "columns " + ", ".join(str(c) for c in chosen.columns)

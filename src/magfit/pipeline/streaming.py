@@ -15,7 +15,7 @@ import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager, contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Literal, Protocol
 
@@ -111,18 +111,28 @@ class _ReadResult(Protocol):
     def format(self) -> Any: ...
 
 
-def fit_samples_file(
-    path: Path,
-    method: str,
-    *,
-    columns: Sequence[str | int] | None,
-    nonfinite: Nonfinite,
-    options: Mapping[str, Any],
-    even: bool,
-    max_samples: int | None,
-    progress: Progress = no_progress,
-) -> FileFit:
-    """Fit ``method`` to the samples of ``path`` and score it, within bounded memory.
+@dataclass(frozen=True)
+class SamplesFileFit:
+    """What to fit to a samples file, as :func:`fit_samples_file` and its three ways of reading take it.
+
+    ``columns`` and ``nonfinite`` choose and clean the samples (:func:`magfit.io.read_samples`); ``options`` are
+    the method's (and :func:`magfit.fit`'s: ``allow_undetermined``); ``even`` fits the direction-even subsample;
+    ``max_samples`` bounds the rows a method that needs the samples holds (default
+    :func:`memory_sample_limit`); ``progress`` reports each pass.
+    """
+
+    path: Path
+    method: str
+    columns: Sequence[str | int] | None = None
+    nonfinite: Nonfinite = "skip"
+    options: Mapping[str, Any] = field(default_factory=dict)
+    even: bool = False
+    max_samples: int | None = None
+    progress: Progress = no_progress
+
+
+def fit_samples_file(request: SamplesFileFit) -> FileFit:
+    """Fit ``request.method`` to the samples of ``request.path`` and score it, within bounded memory.
 
     Methods whose ``METHODS[method].data`` is ``"statistics"`` read the file in chunks into a
     :class:`~magfit.Statistics` (a first pass), fit, then score the fit in a second pass over the chunks:
@@ -132,24 +142,22 @@ def fit_samples_file(
     :func:`magfit.sampling.even_subsample` (every direction weighs the same) with any method.
     ``FileFit.subsample`` says why an even subsample was fitted (None when every sample was).
     """
-    spec = get_method(method)
-    limit = memory_sample_limit() if max_samples is None else max_samples
-    subsample = option("even", True) if even else None
-    if spec.data == "statistics" and not even:
-        calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite, options, progress)
+    spec = get_method(request.method)
+    limit = memory_sample_limit() if request.max_samples is None else request.max_samples
+    subsample = option("even", True) if request.even else None
+    if spec.data == "statistics" and not request.even:
+        calibration, evaluation, read = _fit_streaming(request)
         return FileFit(calibration, evaluation, read, True, subsample)
-    if _estimated_rows(path) <= limit:
-        calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite, options, even, progress)
+    if _estimated_rows(request.path) <= limit:
+        calibration, evaluation, read = _fit_in_memory(request)
         return FileFit(calibration, evaluation, read, False, subsample)
-    calibration, evaluation, read, limited = _fit_subsample(
-        path, method, columns, nonfinite, options, even=even, limit=limit, progress=progress
-    )
+    calibration, evaluation, read, limited = _fit_subsample(request, limit)
     if limited:
         bound = f"the file has more rows than {option('max_samples', limit)}"
-        if max_samples is None:
+        if request.max_samples is None:
             default = f"{DEFAULT_FIT_SAMPLES:,}".replace(",", " ")
             bound += f", the default: {default} or half the available memory"
-        subsample = f"{option('even', True)}; {bound}" if even else bound
+        subsample = f"{option('even', True)}; {bound}" if request.even else bound
     return FileFit(calibration, evaluation, read, True, subsample)
 
 
@@ -230,22 +238,15 @@ def _rows_in(path: Path, fmt: FileFormat) -> int:
     return int(size * max(head.count(b"\n"), 1) / max(len(head), 1))
 
 
-def _fit_in_memory(
-    path: Path,
-    method: str,
-    columns: Sequence[str | int] | None,
-    nonfinite: Nonfinite,
-    options: Mapping[str, Any],
-    even: bool,
-    progress: Progress,
-) -> tuple[Calibration, Evaluation, _ReadResult]:
+def _fit_in_memory(request: SamplesFileFit) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import read_samples
 
-    with progress(f"reading {path.name}", lambda: _estimated_rows(path)) as advance:
-        table = read_samples(path, columns=columns, nonfinite=nonfinite, progress=advance)
+    path = request.path
+    with request.progress(f"reading {path.name}", lambda: _estimated_rows(path)) as advance:
+        table = read_samples(path, columns=request.columns, nonfinite=request.nonfinite, progress=advance)
     _require_rows(path, table.samples.shape[0], table)
-    samples = samples_for_fit(table.samples, even)
-    calibration = fit(samples, method=method, **options)
+    samples = samples_for_fit(table.samples, request.even)
+    calibration = fit(samples, method=request.method, **request.options)
     return calibration, evaluate(calibration, table.samples), table
 
 
@@ -261,17 +262,7 @@ def samples_for_fit(samples: NDArray[np.float64], even: bool) -> NDArray[np.floa
     return samples[even_subsample(samples)]
 
 
-def _fit_subsample(
-    path: Path,
-    method: str,
-    columns: Sequence[str | int] | None,
-    nonfinite: Nonfinite,
-    options: Mapping[str, Any],
-    *,
-    even: bool,
-    limit: int,
-    progress: Progress,
-) -> tuple[Calibration, Evaluation, _ReadResult, bool]:
+def _fit_subsample(request: SamplesFileFit, limit: int) -> tuple[Calibration, Evaluation, _ReadResult, bool]:
     """Stream a file too large for memory: statistics, an even subsample of at most ``limit`` rows, fit, score.
 
     The last item returned is true when ``limit`` thinned the samples (not only ``even``).
@@ -283,8 +274,18 @@ def _fit_subsample(
     from ..io import iter_sample_chunks
     from ..sampling import direction_frame, even_subsample_chunks
 
+    path, method, options, even, progress = (
+        request.path,
+        request.method,
+        request.options,
+        request.even,
+        request.progress,
+    )
+
     def chunks() -> ChunkReader:
-        return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
+        return iter_sample_chunks(
+            path, columns=request.columns, nonfinite=request.nonfinite, chunk_rows=STREAM_CHUNK_ROWS
+        )
 
     with _FirstPass(chunks, progress) as first:
         statistics, reader, source = first.statistics, first.read, first.source
@@ -457,18 +458,15 @@ class _Spill:
             yield np.frombuffer(block, dtype=np.float64).reshape(-1, 3)
 
 
-def _fit_streaming(
-    path: Path,
-    method: str,
-    columns: Sequence[str | int] | None,
-    nonfinite: Nonfinite,
-    options: Mapping[str, Any],
-    progress: Progress,
-) -> tuple[Calibration, Evaluation, _ReadResult]:
+def _fit_streaming(request: SamplesFileFit) -> tuple[Calibration, Evaluation, _ReadResult]:
     from ..io import iter_sample_chunks
 
+    path, method, options, progress = request.path, request.method, request.options, request.progress
+
     def chunks() -> ChunkReader:
-        return iter_sample_chunks(path, columns=columns, nonfinite=nonfinite, chunk_rows=STREAM_CHUNK_ROWS)
+        return iter_sample_chunks(
+            path, columns=request.columns, nonfinite=request.nonfinite, chunk_rows=STREAM_CHUNK_ROWS
+        )
 
     # Pass 1: the sufficient statistics of eq. (4), one chunk at a time (a text file's samples are spilled
     # to a temporary binary file on the way, so that pass 2 does not parse the text again).
