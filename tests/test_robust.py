@@ -119,3 +119,21 @@ def test_rotation_helper_is_consistent() -> None:
         [[np.cos(np.pi / 6), -np.sin(np.pi / 6)], [np.sin(np.pi / 6), np.cos(np.pi / 6)]],
         atol=1e-12,
     )
+
+
+def test_few_samples_are_not_trimmed_to_a_fit_that_overstates_itself() -> None:
+    """16 clean samples, 9 parameters: the residuals' scatter is the noise's sqrt(7/16); taken for the noise, 3 good
+    samples were rejected and the fit on the rest was 6.3° off stating ±1.3° (5x; the fuzz campaign's case). With
+    fewer than MIN_RESIDUAL_DOF residual degrees of freedom nothing is rejected, and the fit is within 3 one-sigmas."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from accuracy import heading_error_deg
+
+    simulation = magfit.scenario("mpu9250", "none").simulate(400, seed=12)
+    calibration = magfit.fit(simulation.samples[:16], method="robust")
+    assert calibration.rejected is not None and calibration.rejected.count == 0
+    stated = calibration.diagnostics.uncertainty.heading_sigma_deg
+    error = heading_error_deg(calibration, simulation)
+    assert error <= 3 * stated, (error, stated)

@@ -30,6 +30,7 @@ from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
 from ..evaluate import unchecked_sphere_distances
 from ..facts import Rejected, SolverStatus
+from ..geometry.frame import N_PARAMETERS
 from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..outliers import DEFAULT_THRESHOLD, inlier_mask, robust_scale
 from ..statistics import Statistics
@@ -201,9 +202,19 @@ def fit_robust(
     converged = False
     iterations = 0
     sigma = 0.0
+    parameters = N_PARAMETERS.get(str(calibration.model), N_PARAMETERS["full"])
     for iterations in range(1, max_iterations + 1):  # noqa: B007  (the count is reported)
         residuals = unchecked_sphere_distances(calibration, samples)
         centre, sigma = robust_scale(residuals)
+        kept = int(np.count_nonzero(inliers))
+        if kept - parameters < MIN_RESIDUAL_DOF:  # too few residuals beyond the model's own to tell an outlier
+            inliers = np.ones(n, dtype=bool)
+            calibration = _fit_subset(run, samples, inliers, name)
+            converged = True
+            break
+        # Residuals of a fit of k parameters to m samples scatter by sqrt((m - k) / m) of the noise (the fit
+        # absorbs k of their degrees of freedom): the threshold is on the noise, not on that shrunken scatter.
+        sigma *= float(np.sqrt(kept / (kept - parameters)))
         new_inliers = np.abs(residuals - centre) <= threshold * max(sigma, 1e-12)
         if np.array_equal(new_inliers, inliers):
             converged = True
@@ -224,6 +235,12 @@ def fit_robust(
         solver=SolverStatus(converged=converged, iterations=iterations),
     )
     return pin_field_strength(robust_fit, known_field)
+
+
+#: Fewest residual degrees of freedom (inliers beyond the model's parameters) with which samples are rejected:
+#: below, the robust scale of the residuals is itself too uncertain (a MAD of 10 residuals is off by ±40 %) and
+#: a fit that has absorbed most of the noise makes good samples look like outliers; every sample is kept.
+MIN_RESIDUAL_DOF = 10
 
 
 def _fit_subset(
