@@ -1,8 +1,9 @@
-"""What the accuracy benchmarks share: the mild random sensor, magfit's verdict on a fit, paired ratios of RMS
-heading errors, checked targets, the versions line and the compact JSON of a report.
+"""What the benchmarks share: the heading metric (RMS over level headings against the simulated truth), the mild
+random sensor, magfit's verdict on a fit, paired ratios of RMS heading errors, checked targets, the versions line
+and the compact JSON of a report.
 
-``accuracy.py`` (the magnitude-only grid) and ``accuracy_vehicle.py`` (the vehicle scenarios) both import from
-here and not from each other.
+``accuracy.py`` (the magnitude-only grid), ``accuracy_vehicle.py`` (the vehicle scenarios), ``campaign.py`` and the
+tests that score against truth import from here, not from each other.
 """
 
 from __future__ import annotations
@@ -23,6 +24,63 @@ from numpy.typing import NDArray
 import magfit
 
 ROOT = Path(__file__).resolve().parent.parent
+#: Level headings the heading metric averages over (one per degree).
+N_HEADINGS = 360
+
+
+def best_rotation(fitted_matrix: NDArray[np.float64], true_matrix: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The rotation Q that best turns ``fitted_matrix @ d`` into ``true_matrix @ d`` over all directions.
+
+    Parameters
+    ----------
+    fitted_matrix, true_matrix : ndarray, shape (3, 3)
+        Soft-iron corrections (any positive scale, det > 0).
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        ``polar(true_matrix @ inv(fitted_matrix))``: the orthogonal factor of its polar decomposition
+        (eq. (P) of the module docstring), a proper rotation.
+    """
+    left, _, right = np.linalg.svd(true_matrix @ np.linalg.inv(fitted_matrix))
+    rotation = left @ right
+    if np.linalg.det(rotation) < 0:  # only for a reflecting fit; keep Q a rotation
+        left[:, -1] *= -1
+        rotation = left @ right
+    return rotation
+
+
+def level_readings(simulation: magfit.Simulation, n_headings: int = N_HEADINGS) -> NDArray[np.float64]:
+    """Noise-free raw readings at roll = pitch = 0 and ``n_headings`` yaws 0 … 360°, shape (n_headings, 3)."""
+    yaw = np.arange(n_headings) * (360.0 / n_headings)
+    attitudes = np.column_stack([np.zeros(n_headings), np.zeros(n_headings), yaw])
+    return simulation.distort(attitudes)
+
+
+def heading_differences_deg(
+    offset: NDArray[np.float64],
+    matrix: NDArray[np.float64],
+    simulation: magfit.Simulation,
+    raw: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Heading of ``Q matrix (raw − offset)`` minus that of the true calibration, degrees, in (−180, 180].
+
+    ``Q = best_rotation(matrix, truth.matrix)``; the heading of a level vector is ``atan2(y, x)``.
+    """
+    rotation = best_rotation(matrix, simulation.truth.matrix)
+    fitted = (raw - offset) @ (rotation @ matrix).T
+    true = simulation.truth.apply(raw)
+    difference = np.degrees(np.arctan2(fitted[:, 1], fitted[:, 0]) - np.arctan2(true[:, 1], true[:, 0]))
+    return (difference + 180.0) % 360.0 - 180.0
+
+
+def heading_error_deg(
+    calibration: magfit.Calibration, simulation: magfit.Simulation, n_headings: int = N_HEADINGS
+) -> float:
+    """Calibration heading error: RMS over level headings of the heading difference, degrees (see module doc)."""
+    raw = level_readings(simulation, n_headings)
+    differences = heading_differences_deg(calibration.offset, calibration.matrix, simulation, raw)
+    return float(np.sqrt(np.mean(differences**2)))
 
 
 def mild_distortion(rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

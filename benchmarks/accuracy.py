@@ -66,7 +66,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import Ratio, Target, kept_details, mild_distortion, paired_ratio, report_json, verdict_of, versions
+from _common import (
+    N_HEADINGS,
+    Ratio,
+    Target,
+    heading_differences_deg,
+    heading_error_deg,
+    kept_details,
+    level_readings,
+    mild_distortion,
+    paired_ratio,
+    report_json,
+    verdict_of,
+    versions,
+)
+from _common import (
+    best_rotation as best_rotation,  # (its tests read it here)
+)
 from _common import failure_message as _failure_message
 from _common import note as _note
 from _common import pass_fail as _status
@@ -79,7 +95,6 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 DEFAULT_REAL_DATA = Path(os.environ.get("MAGFIT_REAL_DATA", ROOT.parent / "shared" / "data" / "real"))
 HELDOUT_SAMPLES = 10_000
-N_HEADINGS = 360
 MAX_TILT_DEG = 20.0
 SPIKE_FRACTION = 0.02
 #: Spike magnitudes, as fractions of the field strength B: a random direction and a length uniform in
@@ -387,60 +402,7 @@ def _ordered(cases: list[Case]) -> list[Case]:
 
 # ====================================================================== metrics
 
-
-def best_rotation(fitted_matrix: NDArray[np.float64], true_matrix: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The rotation Q that best turns ``fitted_matrix @ d`` into ``true_matrix @ d`` over all directions.
-
-    Parameters
-    ----------
-    fitted_matrix, true_matrix : ndarray, shape (3, 3)
-        Soft-iron corrections (any positive scale, det > 0).
-
-    Returns
-    -------
-    ndarray, shape (3, 3)
-        ``polar(true_matrix @ inv(fitted_matrix))``: the orthogonal factor of its polar decomposition
-        (eq. (P) of the module docstring), a proper rotation.
-    """
-    left, _, right = np.linalg.svd(true_matrix @ np.linalg.inv(fitted_matrix))
-    rotation = left @ right
-    if np.linalg.det(rotation) < 0:  # only for a reflecting fit; keep Q a rotation
-        left[:, -1] *= -1
-        rotation = left @ right
-    return rotation
-
-
-def level_readings(simulation: magfit.Simulation, n_headings: int = N_HEADINGS) -> NDArray[np.float64]:
-    """Noise-free raw readings at roll = pitch = 0 and ``n_headings`` yaws 0 … 360°, shape (n_headings, 3)."""
-    yaw = np.arange(n_headings) * (360.0 / n_headings)
-    attitudes = np.column_stack([np.zeros(n_headings), np.zeros(n_headings), yaw])
-    return simulation.distort(attitudes)
-
-
-def heading_differences_deg(
-    offset: NDArray[np.float64],
-    matrix: NDArray[np.float64],
-    simulation: magfit.Simulation,
-    raw: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """Heading of ``Q matrix (raw − offset)`` minus that of the true calibration, degrees, in (−180, 180].
-
-    ``Q = best_rotation(matrix, truth.matrix)``; the heading of a level vector is ``atan2(y, x)``.
-    """
-    rotation = best_rotation(matrix, simulation.truth.matrix)
-    fitted = (raw - offset) @ (rotation @ matrix).T
-    true = simulation.truth.apply(raw)
-    difference = np.degrees(np.arctan2(fitted[:, 1], fitted[:, 0]) - np.arctan2(true[:, 1], true[:, 0]))
-    return (difference + 180.0) % 360.0 - 180.0
-
-
-def heading_error_deg(
-    calibration: magfit.Calibration, simulation: magfit.Simulation, n_headings: int = N_HEADINGS
-) -> float:
-    """Calibration heading error: RMS over level headings of the heading difference, degrees (see module doc)."""
-    raw = level_readings(simulation, n_headings)
-    differences = heading_differences_deg(calibration.offset, calibration.matrix, simulation, raw)
-    return float(np.sqrt(np.mean(differences**2)))
+# The heading metric lives in _common.py (campaign.py and the tests score with it too); named here as before.
 
 
 def offset_error(calibration: magfit.Calibration, simulation: magfit.Simulation) -> float:
@@ -1485,7 +1447,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main_vehicle(args: argparse.Namespace, command: str, parser: argparse.ArgumentParser) -> int:
     """``--vehicle``: issue 14's scenarios (the sibling module ``accuracy_vehicle``), written to their own folder."""
-    import accuracy_vehicle as vehicle  # the sibling module; it imports this one
+    import accuracy_vehicle as vehicle  # the sibling module (both import _common.py, not each other)
 
     cases = vehicle.vehicle_smoke_grid() if args.smoke else vehicle.vehicle_grid(args.trials_scale)
     if args.cases:

@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 import magfit
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from accuracy import heading_error_deg
+from _common import heading_error_deg
 
 #: An accepted fit must be within this many stated one-sigmas of the true heading.
 COVER = 3.0

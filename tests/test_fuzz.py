@@ -130,7 +130,7 @@ def _recordings() -> st.SearchStrategy[np.ndarray]:
 
 def check_against_truth(calibration: magfit.Calibration, truth: tuple[magfit.Simulation, float, float]) -> None:
     """The calibration's level heading is within its stated uncertainty of the truth (accuracy benchmark metric)."""
-    from accuracy import heading_error_deg
+    from _common import heading_error_deg
 
     simulation, scale, shift = truth
     unbent = magfit.Calibration(

@@ -129,7 +129,7 @@ def test_few_samples_are_not_trimmed_to_a_fit_that_overstates_itself() -> None:
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from accuracy import heading_error_deg
+    from _common import heading_error_deg
 
     simulation = magfit.scenario("mpu9250", "none").simulate(400, seed=12)
     calibration = magfit.fit(simulation.samples[:16], method="robust")

@@ -18,7 +18,7 @@ import magfit
 from magfit.saturation import find_clipped
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from accuracy import heading_error_deg
+from _common import heading_error_deg
 
 FULL_SCALE = 1.4  # field strengths
 

@@ -397,7 +397,7 @@ def test_a_restricted_model_on_half_a_sphere_with_soft_iron_is_refused_or_says_w
     # The F test against the full ellipsoid on the same samples sees it: refused, or weak with the heading it
     # may cost counted in the stated one-sigma.
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from accuracy import heading_error_deg
+    from _common import heading_error_deg
     from campaign import hemisphere_attitudes
 
     matrix = np.asarray(soft_iron, dtype=float)
