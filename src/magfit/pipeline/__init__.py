@@ -35,7 +35,8 @@ from ..evaluate import Evaluation, evaluate
 from ..findings import Reason
 from ..fit import fit
 from ..methods import get_method
-from ..sources import Magnetometer, Source, log_kind, open_source
+from ..sources import Magnetometer, Position, Source, log_kind, open_source
+from ..statistics import Statistics
 from ..units import field_unit_reason, get_unit
 from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, turned, vehicle_advice
 from .streaming import (
@@ -133,6 +134,10 @@ class CompassCalibration:
     advice : tuple of Reason
         For a vehicle's recording fitted weakly: the methods that work for it, each with its remedy
         (:func:`magfit.pipeline.advice.vehicle_advice`).
+    statistics : Statistics or None
+        The sufficient statistics of the samples read, less those a robust fit rejected: what recordings of
+        one compass merge by (:func:`magfit.fleet`), without reading them again. None when the samples were
+        not held in memory (a samples file streamed or subsampled).
     """
 
     path: Path
@@ -154,6 +159,7 @@ class CompassCalibration:
     model_field: ModelField | None = None
     warnings: tuple[Reason, ...] = ()
     advice: tuple[Reason, ...] = ()
+    statistics: Statistics | None = None
 
     @property
     def sensor(self) -> str | None:
@@ -211,6 +217,9 @@ class FileCalibration:
         The World Magnetic Model's field at the recording, when asked for.
     sensors : tuple of str
         The ids of the compasses tried, in the log's order (empty for a samples file).
+    position, identity : Position or None, str or None
+        A log's GNSS position (with the time of its first fix) and the vehicle's own identity
+        (:attr:`magfit.sources.Source.identity`), read in the same pass; None for a samples file.
     """
 
     path: Path
@@ -218,6 +227,8 @@ class FileCalibration:
     failures: tuple[CompassFailure, ...] = ()
     model_field: ModelField | None = None
     sensors: tuple[str, ...] = ()
+    position: Position | None = None
+    identity: str | None = None
 
     @property
     def calibration(self) -> Calibration:
@@ -435,7 +446,7 @@ def calibrate_file(
     tried = tuple(compass.sensor or "" for compass in compasses) + tuple(f.sensor for f in failures)
     order = [m.id for m in source.magnetometers]
     sensors = tuple(sorted(tried, key=lambda sensor_id: order.index(sensor_id) if sensor_id in order else len(order)))
-    return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors)
+    return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors, source.position, source.identity)
 
 
 def _usable(source: Source) -> list[str | None]:
@@ -563,7 +574,16 @@ def _calibrate_compass(
         notes=notes,
         warnings=_unit_warnings(calibration.field_strength, label or None),
         advice=vehicle,
+        statistics=_kept_statistics(calibration, read.samples),
     )
+
+
+def _kept_statistics(calibration: Calibration, samples: np.ndarray) -> Statistics:
+    """The statistics of ``samples`` less those the robust fit rejected (its own rule: the diagnostics')."""
+    from ..diagnostics import _inlier_mask
+
+    mask, _ = _inlier_mask(calibration, samples)
+    return Statistics.from_samples(samples if mask is None else samples[mask])
 
 
 def _unit_warnings(field_strength: float, unit: str | None) -> tuple[Reason, ...]:
@@ -793,7 +813,7 @@ def _calibrate_samples(
     progress: Progress,
 ) -> CompassCalibration:
     """Fit a samples file (text, npy, npz) within bounded memory (:func:`.streaming.fit_samples_file`)."""
-    from ..io import ChunkReader
+    from ..io import ChunkReader, SampleTable
     from .streaming import how_read
 
     # The columns first (cheap: the file's head): every message, a refusal too, says which were used.
@@ -841,6 +861,7 @@ def _calibrate_samples(
         subsample=fitted.subsample,
         column_note=chosen.column_note,
         warnings=_unit_warnings(calibration.field_strength, unit),
+        statistics=_kept_statistics(calibration, read.samples) if isinstance(read, SampleTable) else None,
     )
 
 

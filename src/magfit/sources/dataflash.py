@@ -55,10 +55,11 @@ from .ardupilot import (
     untrimmed,
     without_damaged_changes,
 )
+from .identity import BOOT_MESSAGES, board_identity
 from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
 from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
-__all__ = ["DataFlashLog", "open_dataflash", "undo_calibration"]
+__all__ = ["DataFlashLog", "log_identity", "open_dataflash", "undo_calibration"]
 
 _HEAD = b"\xa3\x95"
 _FMT_TYPE = 0x80
@@ -92,7 +93,7 @@ _BLOCK = 1 << 23
 #: Most messages gathered at a time (the gather index is ``_GATHER x width`` int64).
 _GATHER = 1 << 14
 #: The types whose offsets the first walk keeps: what a fit reads (the compasses, their parameters, the GNSS).
-_INDEXED = frozenset(("MAG", "MAG2", "MAG3", "PARM", "GPS"))
+_INDEXED = frozenset(("MAG", "MAG2", "MAG3", "PARM", "GPS", "MSG"))
 #: Types walked for together when one of them is first asked for (``read_motion`` reads them in turn).
 _WALKED_TOGETHER = (frozenset(("ATT", "XKQ", "AHR2", "IMU")),)
 #: Most GNSS records the position's medians are taken over (a regular stride beyond).
@@ -445,6 +446,7 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
     if rest:
         other += (f"{len(rest)} other message types: {', '.join(rest)}",)
     position = _position(log)
+    identity = log_identity(log)
 
     def read(magnetometer: Magnetometer, max_samples: int | None = None) -> LogSamples:
         slot = int(magnetometer.id.split("/")[1])
@@ -456,6 +458,7 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
     return Source(
         path=path,
         position=position,
+        identity=identity,
         kind="dataflash",
         format=described,
         time_base=_time_base(streams),
@@ -466,6 +469,21 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
         _motion=motion,
         _bounded_reader=read,
     )
+
+
+def log_identity(log: Any) -> str | None:
+    """The board and unique id in the log's boot ``MSG`` messages (:func:`magfit.sources.identity.board_identity`),
+    or None: the first messages only are read."""
+    if not log.has("MSG"):
+        return None
+    count = min(log.count("MSG"), BOOT_MESSAGES)
+    try:
+        records = log.messages("MSG", np.arange(count, dtype=np.int64))
+    except DataFileError:
+        return None
+    if "Message" not in (records.dtype.names or ()) or records.dtype["Message"].kind != "S":
+        return None  # (the text of mavlogdump.py holds numbers only)
+    return board_identity(records["Message"])
 
 
 def _time_base(streams: list[_Stream]) -> str:

@@ -86,7 +86,7 @@ def read_power(path: str | os.PathLike[str]) -> Power:
         The log cannot be read.
     """
     from ..io.sources import data_file
-    from . import log_kind
+    from .detect import log_kind
 
     kind = log_kind(path)
     if kind == "dataflash":
