@@ -804,6 +804,7 @@ class _LocalEngine:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
+            context: Any
             if "forkserver" in multiprocessing.get_all_start_methods():
                 context = multiprocessing.get_context("forkserver")
                 context.set_forkserver_preload(list(PRELOAD))
