@@ -861,7 +861,7 @@ def _calibrate_samples(
         subsample=fitted.subsample,
         column_note=chosen.column_note,
         warnings=_unit_warnings(calibration.field_strength, unit),
-        statistics=_kept_statistics(calibration, read.samples) if isinstance(read, SampleTable) else None,
+        statistics=_kept_statistics(calibration, read.samples) if isinstance(read, SampleTable) else fitted.statistics,
     )
 
 

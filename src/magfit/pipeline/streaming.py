@@ -92,6 +92,7 @@ class FileFit:
     read: _ReadResult
     streamed: bool
     subsample: str | None
+    statistics: Statistics | None = None  # of every sample, when the fit was made from them alone (streamed)
 
 
 class _ReadResult(Protocol):
@@ -134,8 +135,8 @@ def fit_samples_file(
     limit = memory_sample_limit() if max_samples is None else max_samples
     subsample = "even=True" if even else None
     if spec.data == "statistics" and not even:
-        calibration, evaluation, read = _fit_streaming(path, method, columns, nonfinite, options, progress)
-        return FileFit(calibration, evaluation, read, True, subsample)
+        calibration, evaluation, read, statistics = _fit_streaming(path, method, columns, nonfinite, options, progress)
+        return FileFit(calibration, evaluation, read, True, subsample, statistics)
     if _estimated_rows(path) <= limit:
         calibration, evaluation, read = _fit_in_memory(path, method, columns, nonfinite, options, even, progress)
         return FileFit(calibration, evaluation, read, False, subsample)
@@ -462,7 +463,7 @@ def _fit_streaming(
     nonfinite: Nonfinite,
     options: Mapping[str, Any],
     progress: Progress,
-) -> tuple[Calibration, Evaluation, _ReadResult]:
+) -> tuple[Calibration, Evaluation, _ReadResult, Statistics]:
     from ..io import iter_sample_chunks
 
     def chunks() -> ChunkReader:
@@ -479,7 +480,7 @@ def _fit_streaming(
         with progress(f"scoring the fit on {path.name}", statistics.n) as advance:
             evaluation, subsample = first.score(calibration, advance)
     forced = bool(options.get("allow_undetermined", False))
-    return _with_diagnostics(calibration, subsample, statistics.n, forced), evaluation, reader
+    return _with_diagnostics(calibration, subsample, statistics.n, forced), evaluation, reader, statistics
 
 
 def _counted(chunks: Iterable[NDArray[np.float64]], advance: Advance) -> Iterator[NDArray[np.float64]]:

@@ -93,6 +93,8 @@ _BLOCK = 1 << 23
 #: Most messages gathered at a time (the gather index is ``_GATHER x width`` int64).
 _GATHER = 1 << 14
 #: The types whose offsets the first walk keeps: what a fit reads (the compasses, their parameters, the GNSS).
+#: PARM messages read at a time (the parameters' changes kept).
+_PARM_WINDOW = 1 << 18
 _INDEXED = frozenset(("MAG", "MAG2", "MAG3", "PARM", "GPS", "MSG"))
 #: Types walked for together when one of them is first asked for (``read_motion`` reads them in turn).
 _WALKED_TOGETHER = (frozenset(("ATT", "XKQ", "AHR2", "IMU")),)
@@ -369,21 +371,42 @@ class DataFlashLog:
         return values * factor if factor is not None else values
 
     def parameters(self) -> dict[str, list[tuple[float, float]]]:
-        """PARM messages: name -> [(time in s, value), ...] in log order."""
+        """PARM messages: name -> [(time in s, value), ...] in log order, each name's value where it changes
+        (a value logged again as it was says nothing new: a log that repeats its parameters is read in memory
+        that does not grow with them). Read :data:`_PARM_WINDOW` messages at a time."""
         if not self.has("PARM"):
             return {}
-        records = self.messages("PARM")
-        if not {"Name", "Value"} <= set(records.dtype.names or ()):
+        if not {"Name", "Value"} <= set(self._dtype("PARM").names or ()):
             raise DataFileError(
                 f"{self.path}: the PARM messages' format has no Name and Value fields: the log is damaged, so the "
                 "parameters its compasses were corrected with are unknown"
             )
-        times = _time_s(self, "PARM", records)
         table: dict[str, list[tuple[float, float]]] = {}
-        with np.errstate(invalid="ignore"):  # a damaged value is NaN or inf: refused where it is used
-            values = records["Value"].astype(np.float64)
-        for name, value, time in zip(records["Name"], values, times, strict=False):
-            table.setdefault(name.rstrip(b"\x00").decode("ascii", "replace"), []).append((float(time), float(value)))
+        last: dict[bytes, bytes] = {}
+        count = self.count("PARM")
+        for begin in range(0, count, _PARM_WINDOW):
+            records = self.messages("PARM", np.arange(begin, min(count, begin + _PARM_WINDOW), dtype=np.int64))
+            names, raw = records["Name"], records["Value"]
+            order = np.argsort(names, kind="stable")  # by name, each name's messages in log order
+            first = np.ones(len(order), dtype=bool)
+            first[1:] = names[order][1:] != names[order][:-1]
+            changed = first.copy()
+            bits = np.ascontiguousarray(raw[order]).view(np.uint8).reshape(len(order), -1)
+            changed[1:] |= np.any(bits[1:] != bits[:-1], axis=1)
+            starts = np.flatnonzero(first).tolist()
+            for at, end in zip(starts, [*starts[1:], len(order)], strict=True):
+                name = bytes(names[order[at]])
+                if last.get(name) == bits[at].tobytes():
+                    changed[at] = False  # the value in effect, logged again
+                last[name] = bits[end - 1].tobytes()
+            kept = np.sort(order[changed])
+            records = records[kept]
+            times = _time_s(self, "PARM", records)
+            with np.errstate(invalid="ignore"):  # a damaged value is NaN or inf: refused where it is used
+                values = records["Value"].astype(np.float64)
+            for name, value, time in zip(records["Name"], values, times, strict=False):
+                key = name.rstrip(b"\x00").decode("ascii", "replace")
+                table.setdefault(key, []).append((float(time), float(value)))
         return table
 
 
