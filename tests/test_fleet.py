@@ -268,3 +268,29 @@ def test_calibrate_file_carries_the_statistics_of_the_samples_fitted(tmp_path: P
         read = source.read(fitted.sensor).samples
         assert fitted.statistics is not None and fitted.statistics.n == len(read)
         np.testing.assert_allclose(fitted.statistics.scatter, magfit.Statistics.from_samples(read).scatter)
+
+
+def _pid_of(index: int) -> tuple[int, int]:
+    import os
+    import time
+
+    time.sleep(0.05)
+    return index, os.getpid()
+
+
+def test_the_local_engine_runs_every_task_once_here_and_in_a_worker() -> None:
+    """workers=2: this process fits tasks too, the other worker (forked from the preloading server) the rest;
+    every task's result comes back once, and the pool serves a second batch (the combined fits)."""
+    import os
+
+    from magfit.fleet import _LocalEngine
+
+    engine = _LocalEngine(2)
+    try:
+        first = list(engine.run(_pid_of, [(i,) for i in range(40)]))
+        second = list(engine.run(_pid_of, [(i,) for i in range(40, 60)]))
+    finally:
+        engine.close()
+    assert sorted(i for i, _ in first) == list(range(40)) and sorted(i for i, _ in second) == list(range(40, 60))
+    pids = {pid for _, pid in first + second}
+    assert os.getpid() in pids and len(pids) == 2
