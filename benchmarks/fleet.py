@@ -173,6 +173,7 @@ def cost(files: list[Path], root: Path, dask: bool, repeat: int) -> dict[str, fl
         start = time.perf_counter()
         run()
         runs.setdefault(name, []).append(time.perf_counter() - start)
+        print(f"  {name}: {runs[name][-1]:.1f} s", file=sys.stderr, flush=True)
 
     for _ in range(repeat):
         timed("fits_alone_s", lambda: _fits_alone(files))

@@ -136,8 +136,8 @@ class CompassCalibration:
         (:func:`magfit.pipeline.advice.vehicle_advice`).
     statistics : Statistics or None
         The sufficient statistics of the samples read, less those a robust fit rejected: what recordings of
-        one compass merge by (:func:`magfit.fleet`), without reading them again. None when the samples were
-        not held in memory (a samples file streamed or subsampled).
+        one compass merge by (:func:`magfit.fleet`), without reading them again. None for a samples file
+        fitted on a subsample of a file too large for memory, or by ``vector`` or ``gyro``.
     """
 
     path: Path
