@@ -29,9 +29,11 @@ distance to the calibration of the flights merged with it exceeds its distance t
 ellipsoid: the vehicle was magnetised, its hardware or payload changed, or it flew where the Earth's field
 differs. The flights from it on start a new part, named with its date and size.
 
-**Where it runs.** Local processes by default (the standard library's process pool: no set-up); a Dask
-cluster with ``scheduler="tcp://host:8786"`` (the ``fleet`` extra's ``distributed``). Each recording is one
-task; a recording that fails is one row with its reason and never stops the run.
+**Where it runs.** Local processes by default (this one, and the standard library's process pool for the
+others, forked from a server that imported the fitting modules once: no set-up); a Dask cluster with
+``scheduler="tcp://host:8786"`` (the ``fleet`` extra's ``distributed``). Each recording is one task, read
+once (:func:`magfit.calibrate_file` gives each compass's statistics, the log's date and its vehicle's
+identity); a recording that fails is one row with its reason and never stops the run.
 
 **Resumable.** Every finished recording is appended, with its compasses' statistics, to a journal beside the
 table (``TABLE.journal.jsonl``, one JSON line per recording, flushed); a run given the same table skips the
@@ -911,7 +913,7 @@ def fleet(
     field_strength, unit, location, date
         As :func:`magfit.calibrate_file`.
     workers : int, optional
-        Local processes (default: the machine's cores); 1 runs in this process.
+        Local processes (default: the machine's cores), this one among them: 1 runs in this process alone.
     scheduler : str or distributed.Client, optional
         A Dask scheduler's address (``"tcp://host:8786"``) or client: the recordings run on that cluster.
     resume : bool
