@@ -785,7 +785,8 @@ def _offset_move(before: _Part, flight: _Flight) -> str:
 PRELOAD = (
     "magfit.fleet", "magfit.pipeline", "magfit.pipeline.motor", "magfit.io.streams", "magfit.geomag",
     "magfit.sources.read", "magfit.sources.tlog", "magfit.sources.rosbag", "magfit.sources.power",
-    "magfit.sources.mavlogdump", "magfit.sources.dataflash", "scipy.special",
+    "magfit.sources.mavlogdump", "magfit.sources.dataflash", "magfit.sources.ulog", "scipy.special",
+    "pyulog", "pygeomag",  # (optional extras: one not installed is passed over)
 )  # fmt: skip
 
 
