@@ -795,8 +795,8 @@ class _LocalEngine:
 
     ``workers`` processes run the tasks: this process (its imports done, its caches warm) and ``workers − 1``
     others, forked from a server that imported :data:`PRELOAD` once (``forkserver``; ``spawn`` where there
-    is none). A task goes to a free worker as it comes: the others keep a few tasks queued ahead, this one
-    takes the next task whenever it has no result to hand on."""
+    is none). The others take the tasks from the front, keeping a few queued ahead; this one takes the last
+    whenever it has no result to hand on: given the largest tasks first, it is soon back to feed them."""
 
     def __init__(self, workers: int) -> None:
         self.workers = max(1, workers)
@@ -838,8 +838,8 @@ class _LocalEngine:
                 yield future.result()
             if done:
                 continue
-            if waiting:  # nothing to hand on: this process fits the next one itself
-                yield function(*waiting.popleft())
+            if waiting:  # nothing to hand on: this process fits one itself, the last (the least, tasks largest first)
+                yield function(*waiting.pop())
             elif running:
                 finished, _ = wait(running, return_when=FIRST_COMPLETED)
                 for future in finished:
@@ -956,6 +956,7 @@ def fleet(
     fresh = {str(p): _fingerprint(p, settings) for p in files}
     outcomes = {k: v for k, v in outcomes.items() if fresh.get(k) == v.fingerprint and not v.failed}
     tasks = [(path, vehicle_of(path, root), settings) for path in files if str(path) not in outcomes]
+    tasks.sort(key=lambda task: -_size(task[0]))  # the largest first: the workers end together
     skipped = len(files) - len(tasks)
     client = _dask_client(scheduler) if scheduler is not None else None
     local = _LocalEngine(workers if workers is not None else (os.cpu_count() or 1))
@@ -978,7 +979,8 @@ def fleet(
         events: list[str] = []
         if combine:
             parts, events = _combine(ordered)
-            found = {row.path: row for row in run(_fit_part, [(part, settings) for part in parts])}
+            largest = sorted(parts, key=lambda part: -sum(_size(Path(path)) for path, _ in part.recordings))
+            found = {row.path: row for row in run(_fit_part, [(part, settings) for part in largest])}
             combined = [found[";".join(p for p, _ in part.recordings)] for part in parts]
     finally:
         local.close()
@@ -990,6 +992,13 @@ def fleet(
     if table is not None:
         write_table(result.rows, table)
     return result
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
 
 
 def _common_root(files: Sequence[Path]) -> Path:
