@@ -218,3 +218,79 @@ def test_a_log_names_its_vehicle_wherever_its_file_lies(tmp_path: Path) -> None:
     assert {row.vehicle for row in result.rows} == {"PX4v2 004A002F 33345119 32383433"}
     # Every row dated by the log's GNSS time, refused compasses too (not by the copy's modification time).
     assert {row.date for row in result.rows} == {"2015-11-21 23:44 UTC"}
+
+
+def test_the_fleet_reads_a_recording_once(tmp_path: Path, vehicles: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """calibrate_file gives each compass's statistics, the log's date and its identity with its fits: the fleet
+    reads no file more often than calibrate_file alone does (the combined fit aside)."""
+    import magfit.io
+    import magfit.sources.dataflash as dataflash
+
+    reads: list[str] = []
+    read_samples = magfit.io.read_samples
+    monkeypatch.setattr(magfit.io, "read_samples", lambda path, *a, **k: reads.append(str(path)) or read_samples(
+        path, *a, **k))  # fmt: skip
+    walk = dataflash.DataFlashLog.__init__
+
+    def walked(self: object, path: Path, *args: object, **kwargs: object) -> None:
+        reads.append(str(path))
+        walk(self, path, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(dataflash.DataFlashLog, "__init__", walked)
+    result = fleet([vehicles / "steady"], workers=1, combine=False)
+    assert len(result.rows) == 4 and sorted(reads) == sorted(row.path for row in result.rows)  # one read each
+    log = tmp_path / "flight.bin"
+    shutil.copy(DATA / "ardupilot_real" / "copter462_head_80k.bin", log)  # both compasses fitted (weak) by sphere
+    reads.clear()
+    magfit.calibrate_file(log, "sphere")
+    alone = len(reads)
+    reads.clear()
+    rows = fleet([tmp_path], workers=1, method="sphere", combine=False).rows
+    assert [row.verdict for row in rows] == ["weak", "weak"] and len(reads) <= alone  # (the power streams: cached)
+
+
+def test_calibrate_file_carries_the_statistics_of_the_samples_fitted(tmp_path: Path) -> None:
+    """CompassCalibration.statistics is that of the samples read (a log's compass, a samples file's)."""
+    from magfit.sources import open_source
+
+    path = tmp_path / "flight.csv"
+    samples = bench.tumble(3000, 0.3, 11)
+    bench.write_flight(path, samples, 0)
+    compass = magfit.calibrate_file(path, "ellipsoid").compasses[0]
+    assert compass.statistics is not None and compass.statistics.n == 3000
+    expected = magfit.Statistics.from_samples(np.loadtxt(path, delimiter=",", skiprows=1))
+    np.testing.assert_allclose(compass.statistics.scatter, expected.scatter, rtol=1e-9, atol=1e-9)
+    log = DATA / "ardupilot_real" / "copter462_head_80k.bin"
+    result = magfit.calibrate_file(log, "sphere")
+    source = open_source(log)
+    assert result.identity == source.identity and result.position == source.position
+    for fitted in result.compasses:
+        read = source.read(fitted.sensor).samples
+        assert fitted.statistics is not None and fitted.statistics.n == len(read)
+        np.testing.assert_allclose(fitted.statistics.scatter, magfit.Statistics.from_samples(read).scatter)
+
+
+def _pid_of(index: int) -> tuple[int, int]:
+    import os
+    import time
+
+    time.sleep(0.05)
+    return index, os.getpid()
+
+
+def test_the_local_engine_runs_every_task_once_here_and_in_a_worker() -> None:
+    """workers=2: this process fits tasks too, the other worker (forked from the preloading server) the rest;
+    every task's result comes back once, and the pool serves a second batch (the combined fits)."""
+    import os
+
+    from magfit.fleet import _LocalEngine
+
+    engine = _LocalEngine(2)
+    try:
+        first = list(engine.run(_pid_of, [(i,) for i in range(40)]))
+        second = list(engine.run(_pid_of, [(i,) for i in range(40, 60)]))
+    finally:
+        engine.close()
+    assert sorted(i for i, _ in first) == list(range(40)) and sorted(i for i, _ in second) == list(range(40, 60))
+    pids = {pid for _, pid in first + second}
+    assert os.getpid() in pids and len(pids) == 2

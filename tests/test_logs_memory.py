@@ -223,19 +223,104 @@ def test_a_big_compressed_dataflash_log_is_read_in_bounded_memory(tmp_path: Path
     assert got["peak_mb"] < 250, got
 
 
-def test_a_tlog_too_big_for_the_memory_is_refused_with_the_reason(monkeypatch: pytest.MonkeyPatch) -> None:
-    # A tlog is scanned whole (about 8 bytes of memory per byte of it): beyond half the memory available it is
-    # refused before anything is read, with how to cut it, exit 2.
+TLOG = DATA / "ardupilot_real" / "fs_batt_2016.tlog"
+
+
+def _repeated_tlog(path: Path, copies: int) -> Path:
+    """``copies`` of the real tlog's records, each copy's record stamps moved on by the log's span."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from biglogs import build_big_tlog
+
+    build_big_tlog(TLOG, path, copies * TLOG.stat().st_size - 1)
+    return path
+
+
+def test_a_tlog_read_in_small_blocks_is_read_as_in_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A tlog built by concatenating a real one 4 times, then damaged (bytes overwritten, a piece cut out, the end
+    # cut short): read in blocks of 997 bytes (frames cut by every block's end) it is read as in one block,
+    # the damage counted alike, the parameters, the counts and the losses the same.
     from magfit.sources import tlog
 
-    path = DATA / "ardupilot_real" / "fs_batt_2016.tlog"
-    assert open_source(path).magnetometers  # read when the memory allows
-    monkeypatch.setattr(tlog, "_available_memory", lambda: 300_000)
-    with pytest.raises(magfit.DataFileError, match="scans a tlog whole") as refused:
-        open_source(path)
-    assert "mavlogdump.py --types RAW_IMU" in str(refused.value)
-    run = CliRunner().invoke(cli, ["calibrate", str(path)])
-    assert run.exit_code == 2 and "scans a tlog whole" in run.output
+    clean = _repeated_tlog(tmp_path / "four.tlog", 4)
+    data = bytearray(clean.read_bytes())
+    rng = np.random.default_rng(7)
+    for at in rng.integers(2_000, len(data), size=15):
+        data[int(at)] = int(rng.integers(256))
+    del data[90_000:90_313]
+    damaged = tmp_path / "damaged.tlog"
+    damaged.write_bytes(bytes(data[:-11]))
+    for path in (clean, damaged):
+        whole = open_source(path)
+        whole_log = tlog.TelemetryLog(path, path.read_bytes())
+        monkeypatch.setattr(tlog, "_BLOCK", 997)
+        blocks = open_source(path)
+        blocks_log = tlog.TelemetryLog(path, path)
+        monkeypatch.undo()
+        _same(_everything(whole), _everything(blocks))
+        assert whole.position == blocks.position
+        assert (whole_log.skipped_bytes, whole_log.truncated, whole_log.unchecked) == (
+            blocks_log.skipped_bytes, blocks_log.truncated, blocks_log.unchecked,
+        )  # fmt: skip
+        for source in whole_log.sources():
+            assert whole_log.counts(source) == blocks_log.counts(source)
+            assert whole_log.lost_share(source) == blocks_log.lost_share(source)
+            assert tlog._parameters(whole_log, source) == tlog._parameters(blocks_log, source)
+    assert _everything(open_source(clean))["read"]["RAW_IMU"][0].shape[0] == 4 * 27  # every copy's samples
+    assert any("skipped as damaged" in note for note in open_source(damaged).notes)
+    assert any("cut short" in note for note in open_source(damaged).notes)
+
+
+def test_a_tlog_keeps_a_regular_stride_of_a_long_compass_and_every_parameter(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Beyond _KEPT messages of a compass, one in every 2^k is kept (said in the notes); PARAM_VALUE is never
+    # thinned: its repeated values are kept once, so the parameters in effect are those of the whole read.
+    from magfit.sources import tlog
+
+    path = _repeated_tlog(tmp_path / "ten.tlog", 10)
+    full = open_source(path)
+    every_sample = full.read("RAW_IMU")
+    monkeypatch.setattr(tlog, "_KEPT", 40)
+    thinned = open_source(path).read("RAW_IMU")
+    assert thinned.every == 8 and any("one RAW_IMU message in every 8 kept" in n for n in thinned.notes)
+    assert 20 <= len(thinned.samples) <= 40
+    # Every 8th frame of the message is kept (before the reader drops repeated and all-zero ones): samples of
+    # the whole read, about one in 8 of them, spread over the whole log.
+    rows = {tuple(row) for row in every_sample.samples.tolist()}
+    assert all(tuple(row) in rows for row in thinned.samples.tolist())
+    assert abs(len(thinned.samples) - len(every_sample.samples) / 8) <= 3
+    assert thinned.time_s[-1] - thinned.time_s[0] > 0.8 * (every_sample.time_s[-1] - every_sample.time_s[0])
+    log = tlog.TelemetryLog(path, path)
+    table, complete = tlog._parameters(log, (1, 1))
+    assert complete and table["COMPASS_OFS_X"] == tlog._parameters(tlog.TelemetryLog(TLOG, TLOG), (1, 1))[0][
+        "COMPASS_OFS_X"
+    ]  # the ten copies' same value: once
+
+
+_TLOG_PEAK = """
+import json, sys
+from magfit.sources import open_source
+source = open_source(sys.argv[1], everything=False)
+n = [len(source.read(m.id, max_samples=500000).samples) for m in source.magnetometers if m.problem is None]
+with open("/proc/self/status") as status:
+    peak = next(int(line.split()[1]) for line in status if line.startswith("VmHWM:")) / 1024
+print(json.dumps({"peak_mb": peak, "samples": n}))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.external
+def test_a_big_tlog_is_read_in_bounded_memory(tmp_path: Path) -> None:
+    # 200 MB of a real tlog's records (it was refused beyond half the memory, scanned whole at 8 bytes a byte):
+    # read in a fresh interpreter within 200 MB at its peak, every copy's compass samples read.
+    path = _repeated_tlog(tmp_path / "big.tlog", 4200)
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    done = subprocess.run(
+        [sys.executable, "-c", _TLOG_PEAK, str(path)], env=env, capture_output=True, text=True, timeout=900, check=True
+    )
+    got = json.loads(done.stdout.splitlines()[-1])
+    assert got["samples"] == [27 * 4200, 27 * 4200], got  # 113 400 each, below the 2^17 kept: every one
+    assert got["peak_mb"] < 200, got
 
 
 def test_a_zstd_compressed_ulog_is_read_as_the_plain_one(tmp_path: Path) -> None:

@@ -37,7 +37,7 @@ def test_sensor_on_a_samples_file_is_a_usage_error(tmp_path: Path) -> None:
     path = tmp_path / "mag.csv"
     np.savetxt(path, np.random.default_rng(1).normal(size=(50, 3)), delimiter=",", header="mx,my,mz", comments="")
     result = CliRunner().invoke(cli, ["calibrate", str(path), "--sensor", "MAG/0"])
-    assert result.exit_code == 2 and "--sensor chooses a compass of a flight log" in result.stderr
+    assert result.exit_code == 2 and "--sensor ID chooses a compass of a flight log" in result.stderr
 
 
 def test_a_binary_file_that_is_no_log_is_refused_in_one_line(tmp_path: Path) -> None:

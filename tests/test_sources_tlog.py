@@ -188,7 +188,7 @@ def test_the_encoder_and_the_reader_agree_with_frames_pymavlink_wrote(tmp_path: 
     path = tmp_path / "two.tlog"
     path.write_bytes(struct.pack(">Q", T0_US) + PYMAVLINK_RAW_IMU + struct.pack(">Q", T0_US + 1) + PYMAVLINK_PARAM)
     log = TelemetryLog(path, path.read_bytes())
-    assert log.skipped_bytes == 0 and len(log.start) == 2
+    assert log.skipped_bytes == 0 and len(log.msgid) == 2
     records = log.messages("RAW_IMU", log.frames("RAW_IMU", (1, 1)))  # 26 bytes on the wire, 29 read
     assert records[["xmag", "ymag", "zmag"]].tolist() == [(215, -37, 402)]
     assert records["time_usec"].tolist() == [123456789] and records["zacc"].tolist() == [-1000]
@@ -374,10 +374,12 @@ def test_damaged_files_are_one_line_errors(tmp_path: Path) -> None:
     path = tmp_path / "clean.tlog"
     write_vehicle(path, 30)
     data = path.read_bytes()
-    log = TelemetryLog(path, data)
     garbled = bytearray(data)
-    for end in (log.start + log.size).tolist():
+    pos = 0
+    while pos < len(data):  # each record: its 8-byte stamp, then a frame (v1: 8 bytes beside the payload)
+        end = pos + 8 + (data[pos + 9] + (8 if data[pos + 8] == 0xFE else 12 + 13 * (data[pos + 10] & 1)))
         garbled[end - 1] ^= 0xFF  # every frame's checksum wrong, the records' layout kept
+        pos = end
     cases = {"short.tlog": data[:40], "garbled.tlog": bytes(garbled), "cut.tlog": data[:20]}
     runner = CliRunner()
     for name, content in cases.items():

@@ -29,9 +29,11 @@ distance to the calibration of the flights merged with it exceeds its distance t
 ellipsoid: the vehicle was magnetised, its hardware or payload changed, or it flew where the Earth's field
 differs. The flights from it on start a new part, named with its date and size.
 
-**Where it runs.** Local processes by default (the standard library's process pool: no set-up); a Dask
-cluster with ``scheduler="tcp://host:8786"`` (the ``fleet`` extra's ``distributed``). Each recording is one
-task; a recording that fails is one row with its reason and never stops the run.
+**Where it runs.** Local processes by default (this one, and the standard library's process pool for the
+others, forked from a server that imported the fitting modules once: no set-up); a Dask cluster with
+``scheduler="tcp://host:8786"`` (the ``fleet`` extra's ``distributed``). Each recording is one task, read
+once (:func:`magfit.calibrate_file` gives each compass's statistics, the log's date and its vehicle's
+identity); a recording that fails is one row with its reason and never stops the run.
 
 **Resumable.** Every finished recording is appended, with its compasses' statistics, to a journal beside the
 table (``TABLE.journal.jsonl``, one JSON line per recording, flushed); a run given the same table skips the
@@ -55,6 +57,7 @@ import numpy as np
 
 from .calibration import Calibration
 from .errors import MagfitError, OptionError
+from .sources.position import Position
 from .statistics import Statistics
 
 __all__ = [
@@ -340,18 +343,25 @@ class _Settings:
 
 
 def _fit_recording(path: Path, vehicle: str, settings: _Settings) -> _Outcome:
-    """Every compass of one recording: its row and its statistics; a failure is one row, never an exception."""
-    from .sources.identity import vehicle_identity
+    """Every compass of one recording: its row and its statistics; a failure is one row, never an exception.
 
+    The file is read once: :func:`magfit.calibrate_file` gives each compass's statistics, the log's GNSS time
+    and the vehicle's own identity with its fits. Only a compass whose samples were not held (a samples file
+    streamed), or that was refused for covering too little, is read again for its statistics.
+    """
     fingerprint = _fingerprint(path, settings)
-    vehicle = vehicle_identity(path) or vehicle  # the log's own board and id, wherever its file lies
     try:
         outcome = _fit_recording_or_raise(path, vehicle, settings)
     except MagfitError as error:
-        row = FleetRow("error", vehicle, str(path), date=_file_date(path), method=settings.method,
-                       verdict="refused" if error.codes else "error", codes=";".join(error.codes),
-                       reason=_one_line(str(error)))  # fmt: skip
-        outcome = _Outcome(str(path), (row,), _compasses_anyway(path, settings, error))
+        compasses, logged, identity = _compasses_anyway(path, settings, error)
+        if identity is None and not compasses:
+            from .sources import vehicle_identity
+
+            identity = vehicle_identity(path)
+        row = FleetRow("error", identity or vehicle, str(path), date=logged or _file_date(path),
+                       method=settings.method, verdict="refused" if error.codes else "error",
+                       codes=";".join(error.codes), reason=_one_line(str(error)))  # fmt: skip
+        outcome = _Outcome(str(path), (row,), compasses)
     except (OSError, MemoryError) as error:
         outcome = _Outcome(str(path), (FleetRow("error", vehicle, str(path), reason=_one_line(str(error))),))
     return _Outcome(outcome.path, outcome.rows, outcome.compasses, fingerprint)
@@ -374,12 +384,12 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
         path, settings.method, unit=settings.unit, field_strength=settings.field_strength,
         location=settings.location, date=settings.date,
     )  # fmt: skip
-    fitted = {_sensor_of(compass.calibration): compass.calibration for compass in result.compasses}
-    read_compasses, logged = _read_compasses(path, settings.unit, fitted)
-    reads = {c.sensor: c for c in read_compasses}
+    vehicle = result.identity or vehicle  # the log's own board and id, wherever its file lies
+    logged = _gnss_date(result.position)
     date = logged or _file_date(path)  # every row of a recording dated alike: its log's GNSS time where it has one
     rows: list[FleetRow] = []
     compasses: list[_Compass] = []
+    again: dict[str, bool] = {}  # compasses to read again for their statistics: sensor -> mergeable
     for compass in result.compasses:
         cal = compass.calibration
         sensor = _sensor_of(cal)
@@ -392,18 +402,33 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
             except MagfitError:
                 ratio = math.nan
         rows.append(_row("flight", vehicle, str(path), cal, sensor, device_id, date, ratio))
-        read = reads.get(sensor)
-        if read is not None:
-            compasses.append(read)
+        if compass.statistics is None or compass.statistics.n == 0:
+            again[sensor] = True
+            continue
+        magnetometer = compass.magnetometer
+        if magnetometer is None:
+            key = "columns " + ",".join(str(column) for column in compass.columns)
+            compasses.append(_Compass("", None, settings.unit or cal.unit or "", compass.statistics, True, key))
+        else:
+            key = f"device {magnetometer.device_id}" if magnetometer.device_id is not None else magnetometer.id
+            compasses.append(_Compass(magnetometer.id, magnetometer.device_id, settings.unit or magnetometer.unit,
+                                      compass.statistics, True, key))  # fmt: skip
+    failed = {failure.sensor for failure in result.failures}
     for failure in result.failures:
-        codes = failure.codes
-        read = reads.get(failure.sensor)
+        if failure.codes and set(failure.codes) <= PARTIAL_CODES:
+            again[failure.sensor] = True
+    read = _Read()
+    if again or failed:  # the statistics of what was not held; a refused compass's device id
+        read = _read_compasses(path, settings.unit, {}, set(again))
+    reads = {c.sensor: c for c in read.compasses}
+    compasses += [reads[sensor] for sensor in again if sensor not in failed and sensor in reads]
+    for failure in result.failures:
         rows.append(FleetRow("flight", vehicle, str(path), sensor=failure.sensor,
-                             device_id=read.device_id if read is not None else None, date=date,
-                             method=settings.method, verdict="refused", codes=";".join(codes),
+                             device_id=read.devices.get(failure.sensor), date=date, method=settings.method,
+                             verdict="refused", codes=";".join(failure.codes),
                              reason=_one_line(failure.reason)))  # fmt: skip
-        if read is not None:
-            compasses.append(_mergeable(read, bool(codes) and set(codes) <= PARTIAL_CODES))
+        if failure.sensor in reads:
+            compasses.append(reads[failure.sensor])
     return _Outcome(str(path), tuple(rows), tuple(compasses))
 
 
@@ -411,25 +436,37 @@ def _sensor_of(calibration: Calibration) -> str:
     return str((calibration.details.get("sensor") or {}).get("id") or "")
 
 
-def _mergeable(compass: _Compass, mergeable: bool) -> _Compass:
-    return _Compass(compass.sensor, compass.device_id, compass.unit, compass.statistics, mergeable, compass.key)
-
-
-def _compasses_anyway(path: Path, settings: _Settings, error: MagfitError) -> tuple[_Compass, ...]:
-    """A recording refused only for covering too little still gives its statistics to its vehicle's union."""
+def _compasses_anyway(
+    path: Path, settings: _Settings, error: MagfitError
+) -> tuple[tuple[_Compass, ...], str | None, str | None]:
+    """A recording refused only for covering too little still gives its statistics to its vehicle's union
+    (with the log's GNSS date and identity, read in the same pass)."""
     if not error.codes or not set(error.codes) <= PARTIAL_CODES:
-        return ()
+        return (), None, None
     try:
-        return tuple(_read_compasses(path, settings.unit, {})[0])
+        read = _read_compasses(path, settings.unit, {})
     except (MagfitError, OSError, MemoryError):
-        return ()
+        return (), None, None
+    return read.compasses, read.date, read.identity
+
+
+@dataclass(frozen=True)
+class _Read:
+    """What :func:`_read_compasses` found: the compasses' statistics, the log's GNSS date, the vehicle's
+    identity, and each compass's device id."""
+
+    compasses: tuple[_Compass, ...] = ()
+    date: str | None = None
+    identity: str | None = None
+    devices: dict[str, int | None] = field(default_factory=dict)
 
 
 def _read_compasses(
-    path: Path, unit: str | None, fitted: dict[str, Calibration]
-) -> tuple[list[_Compass], str | None]:
-    """The statistics of each compass of a recording (a log's every usable compass, or a samples file's), of the
-    samples its fit kept: a robust fit's rejected samples (spikes, a passing magnet) stay out of the union."""
+    path: Path, unit: str | None, fitted: dict[str, Calibration], sensors: set[str] | None = None
+) -> _Read:
+    """The statistics of each compass of a recording (a log's every usable compass, or those in ``sensors``;
+    a samples file's), of the samples its fit kept (a robust fit's rejected samples — spikes, a passing magnet —
+    stay out of the union); with the log's GNSS date, its vehicle's identity and its compasses' device ids."""
     from .outliers import inlier_mask  # the same rule the diagnostics leave those samples out by
     from .sources import log_kind, open_source
 
@@ -446,14 +483,14 @@ def _read_compasses(
 
         table = read_samples(path)
         key = "columns " + ",".join(str(column) for column in table.columns)
-        return [_Compass("", None, unit or "", kept(table.samples, ""), True, key)], None
+        return _Read((_Compass("", None, unit or "", kept(table.samples, ""), True, key),))
     source = open_source(path, everything=False)
-    date = None
-    if source.position is not None and math.isfinite(source.position.time_s):  # the log's GNSS time
-        date = _utc(source.position.time_s)
     compasses = []
+    devices = {magnetometer.id: magnetometer.device_id for magnetometer in source.magnetometers}
     for magnetometer in source.magnetometers:
         if magnetometer.problem is not None or magnetometer.n_samples == 0:
+            continue
+        if sensors is not None and magnetometer.id not in sensors:
             continue
         try:
             samples = source.read(magnetometer.id).samples
@@ -464,7 +501,14 @@ def _read_compasses(
         key = f"device {magnetometer.device_id}" if magnetometer.device_id is not None else magnetometer.id
         compasses.append(_Compass(magnetometer.id, magnetometer.device_id, unit or magnetometer.unit,
                                   kept(samples, magnetometer.id), True, key))  # fmt: skip
-    return compasses, date
+    return _Read(tuple(compasses), _gnss_date(source.position), source.identity, devices)
+
+
+def _gnss_date(position: Position | None) -> str | None:
+    """A log's date: its first GNSS fix's time (None without one)."""
+    if position is not None and math.isfinite(position.time_s):
+        return _utc(position.time_s)
+    return None
 
 
 def _row(
@@ -736,20 +780,75 @@ def _offset_move(before: _Part, flight: _Flight) -> str:
 # ---------------------------------------------------------------------------------------------- engines
 
 
-def _run_local(function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], workers: int) -> Iterator[Any]:
-    """``function(*task)`` for each task, on ``workers`` local processes (in this one for 1), as they finish."""
-    if workers <= 1 or len(tasks) <= 1:
-        for task in tasks:
-            yield function(*task)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+#: What a recording's fit imports: a local worker process forks from a server that imported them once, so
+#: that no worker pays them (about 1 s each, the first fit's own lazy imports as much again).
+PRELOAD = (
+    "magfit.fleet", "magfit.pipeline", "magfit.pipeline.motor", "magfit.io.streams", "magfit.geomag",
+    "magfit.sources.read", "magfit.sources.tlog", "magfit.sources.rosbag", "magfit.sources.power",
+    "magfit.sources.mavlogdump", "magfit.sources.dataflash", "magfit.sources.ulog", "scipy.special",
+    "pyulog", "pygeomag",  # (optional extras: one not installed is passed over)
+)  # fmt: skip
 
-    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method)) as pool:
-        futures = [pool.submit(function, *task) for task in tasks]
-        for future in as_completed(futures):
-            yield future.result()
+
+class _LocalEngine:
+    """Local processes for the whole run (the recordings, then the combined fits), this one among them.
+
+    ``workers`` processes run the tasks: this process (its imports done, its caches warm) and ``workers − 1``
+    others, forked from a server that imported :data:`PRELOAD` once (``forkserver``; ``spawn`` where there
+    is none). The others take the tasks from the front, keeping a few queued ahead; this one takes the last
+    whenever it has no result to hand on: given the largest tasks first, it is soon back to feed them."""
+
+    def __init__(self, workers: int) -> None:
+        self.workers = max(1, workers)
+        self._pool: Any = None
+
+    def _start(self) -> Any:
+        if self._pool is None:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            context: Any
+            if "forkserver" in multiprocessing.get_all_start_methods():
+                context = multiprocessing.get_context("forkserver")
+                context.set_forkserver_preload(list(PRELOAD))
+            else:
+                context = multiprocessing.get_context("spawn")
+            self._pool = ProcessPoolExecutor(max_workers=self.workers - 1, mp_context=context)
+        return self._pool
+
+    def run(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        """``function(*task)`` for each task, as they finish."""
+        if self.workers <= 1 or len(tasks) <= 1:
+            for task in tasks:
+                yield function(*task)
+            return
+        from collections import deque
+        from concurrent.futures import FIRST_COMPLETED, wait
+
+        pool = self._start()
+        waiting = deque(tasks)
+        running: set[Any] = set()
+        ahead = 2 * (self.workers - 1)  # queued beyond those running: no worker waits for the next task
+        while waiting or running:
+            while waiting and len(running) < ahead:
+                running.add(pool.submit(function, *waiting.popleft()))
+            done = {future for future in running if future.done()}
+            for future in done:
+                running.discard(future)
+                yield future.result()
+            if done:
+                continue
+            if waiting:  # nothing to hand on: this process fits one itself, the last (the least, tasks largest first)
+                yield function(*waiting.pop())
+            elif running:
+                finished, _ = wait(running, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    running.discard(future)
+                    yield future.result()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
 
 
 def _dask_client(scheduler: Any) -> Any:
@@ -815,7 +914,7 @@ def fleet(
     field_strength, unit, location, date
         As :func:`magfit.calibrate_file`.
     workers : int, optional
-        Local processes (default: the machine's cores); 1 runs in this process.
+        Local processes (default: the machine's cores), this one among them: 1 runs in this process alone.
     scheduler : str or distributed.Client, optional
         A Dask scheduler's address (``"tcp://host:8786"``) or client: the recordings run on that cluster.
     resume : bool
@@ -857,12 +956,13 @@ def fleet(
     fresh = {str(p): _fingerprint(p, settings) for p in files}
     outcomes = {k: v for k, v in outcomes.items() if fresh.get(k) == v.fingerprint and not v.failed}
     tasks = [(path, vehicle_of(path, root), settings) for path in files if str(path) not in outcomes]
+    tasks.sort(key=lambda task: -_size(task[0]))  # the largest first: the workers end together
     skipped = len(files) - len(tasks)
     client = _dask_client(scheduler) if scheduler is not None else None
-    count = workers if workers is not None else (os.cpu_count() or 1)
+    local = _LocalEngine(workers if workers is not None else (os.cpu_count() or 1))
 
     def run(function: Callable[..., Any], arguments: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
-        return _run_dask(function, arguments, client) if client is not None else _run_local(function, arguments, count)
+        return _run_dask(function, arguments, client) if client is not None else local.run(function, arguments)
 
     handle = journal.open("a", encoding="utf-8") if journal is not None else None
     try:
@@ -879,9 +979,11 @@ def fleet(
         events: list[str] = []
         if combine:
             parts, events = _combine(ordered)
-            found = {row.path: row for row in run(_fit_part, [(part, settings) for part in parts])}
+            largest = sorted(parts, key=lambda part: -sum(_size(Path(path)) for path, _ in part.recordings))
+            found = {row.path: row for row in run(_fit_part, [(part, settings) for part in largest])}
             combined = [found[";".join(p for p, _ in part.recordings)] for part in parts]
     finally:
+        local.close()
         if handle is not None:
             handle.close()
         if client is not None and client is not scheduler:
@@ -890,6 +992,13 @@ def fleet(
     if table is not None:
         write_table(result.rows, table)
     return result
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
 
 
 def _common_root(files: Sequence[Path]) -> Path:

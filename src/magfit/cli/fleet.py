@@ -21,7 +21,7 @@ from ._common import FitFailedError, console
               help="The known field strength in the samples' unit, or 'wmm' (the World Magnetic Model's at each "
               "log's own fixes).")  # fmt: skip
 @click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Local processes [default: the machine's cores].")  # fmt: skip
+              help="Local processes, this one among them [default: the machine's cores].")  # fmt: skip
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="A Dask scheduler (tcp://host:8786): run the recordings on that cluster (pip install "
               "'magfit[fleet]').")  # fmt: skip

@@ -19,8 +19,10 @@ from ..evaluate import evaluate
 from ..findings import Reason
 from ..fit import fit
 from ..methods import get_method
+from ..outliers import inlier_mask
 from ..remedy import option
 from ..sources import Magnetometer, Source, log_kind, open_source
+from ..statistics import Statistics
 from ..units import field_unit_reason, get_unit
 from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, turned, vehicle_advice
 from .results import CompassCalibration, CompassFailure, FileCalibration, ModelField
@@ -249,7 +251,7 @@ def calibrate_file(
     tried = tuple(compass.sensor or "" for compass in compasses) + tuple(f.sensor for f in failures)
     order = [m.id for m in source.magnetometers]
     sensors = tuple(sorted(tried, key=lambda sensor_id: order.index(sensor_id) if sensor_id in order else len(order)))
-    return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors)
+    return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors, source.position, source.identity)
 
 
 def _with_model_field(compass: CompassCalibration, model: ModelField | None) -> CompassCalibration:
@@ -392,7 +394,14 @@ def _calibrate_compass(
         notes=notes,
         warnings=_unit_warnings(calibration.field_strength, label or None),
         advice=vehicle,
+        statistics=_kept_statistics(calibration, read.samples),
     )
+
+
+def _kept_statistics(calibration: Calibration, samples: np.ndarray) -> Statistics:
+    """The statistics of ``samples`` less those the robust fit rejected (its own rule: the diagnostics')."""
+    mask, _ = inlier_mask(calibration, samples)
+    return Statistics.from_samples(samples if mask is None else samples[mask])
 
 
 def _unit_warnings(field_strength: float, unit: str | None) -> tuple[Reason, ...]:
@@ -622,7 +631,7 @@ def _calibrate_samples(
     progress: Progress,
 ) -> CompassCalibration:
     """Fit a samples file (text, npy, npz) within bounded memory (:func:`.streaming.fit_samples_file`)."""
-    from ..io import ChunkReader
+    from ..io import ChunkReader, SampleTable
     from .streaming import how_read
 
     # The columns first (cheap: the file's head): every message, a refusal too, says which were used.
@@ -663,6 +672,7 @@ def _calibrate_samples(
         subsample=fitted.subsample,
         column_note=chosen.column_note,
         warnings=_unit_warnings(calibration.field_strength, unit),
+        statistics=_kept_statistics(calibration, read.samples) if isinstance(read, SampleTable) else fitted.statistics,
     )
 
 

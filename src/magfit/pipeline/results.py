@@ -12,7 +12,8 @@ from ..calibration import Calibration
 from ..errors import MagfitError
 from ..evaluate import Evaluation
 from ..findings import Reason
-from ..sources import Magnetometer
+from ..sources import Magnetometer, Position
+from ..statistics import Statistics
 
 if TYPE_CHECKING:
     from ..geomag import Field  # (imported when used: the wmm extra)
@@ -89,6 +90,10 @@ class CompassCalibration:
     advice : tuple of Reason
         For a vehicle's recording fitted weakly: the methods that work for it, each with its remedy
         (:func:`magfit.pipeline.advice.vehicle_advice`).
+    statistics : Statistics or None
+        The sufficient statistics of the samples read, less those a robust fit rejected: what recordings of
+        one compass merge by (:func:`magfit.fleet`), without reading them again. None for a samples file
+        fitted on a subsample of a file too large for memory, or by ``vector`` or ``gyro``.
     """
 
     path: Path
@@ -110,6 +115,7 @@ class CompassCalibration:
     model_field: ModelField | None = None
     warnings: tuple[Reason, ...] = ()
     advice: tuple[Reason, ...] = ()
+    statistics: Statistics | None = None
 
     @property
     def sensor(self) -> str | None:
@@ -167,6 +173,9 @@ class FileCalibration:
         The World Magnetic Model's field at the recording, when asked for.
     sensors : tuple of str
         The ids of the compasses tried, in the log's order (empty for a samples file).
+    position, identity : Position or None, str or None
+        A log's GNSS position (with the time of its first fix) and the vehicle's own identity
+        (:attr:`magfit.sources.Source.identity`), read in the same pass; None for a samples file.
     """
 
     path: Path
@@ -174,6 +183,8 @@ class FileCalibration:
     failures: tuple[CompassFailure, ...] = ()
     model_field: ModelField | None = None
     sensors: tuple[str, ...] = ()
+    position: Position | None = None
+    identity: str | None = None
 
     @property
     def calibration(self) -> Calibration:

@@ -94,6 +94,7 @@ class FileFit:
     read: _ReadResult
     streamed: bool
     subsample: str | None
+    statistics: Statistics | None = None  # of every sample, when the fit was made from them alone (streamed)
 
 
 class _ReadResult(Protocol):
@@ -146,8 +147,8 @@ def fit_samples_file(request: SamplesFileFit) -> FileFit:
     limit = memory_sample_limit() if request.max_samples is None else request.max_samples
     subsample = option("even", True) if request.even else None
     if spec.data == "statistics" and not request.even:
-        calibration, evaluation, read = _fit_streaming(request)
-        return FileFit(calibration, evaluation, read, True, subsample)
+        calibration, evaluation, read, statistics = _fit_streaming(request)
+        return FileFit(calibration, evaluation, read, True, subsample, statistics)
     if _estimated_rows(request.path) <= limit:
         calibration, evaluation, read = _fit_in_memory(request)
         return FileFit(calibration, evaluation, read, False, subsample)
@@ -458,7 +459,7 @@ class _Spill:
             yield np.frombuffer(block, dtype=np.float64).reshape(-1, 3)
 
 
-def _fit_streaming(request: SamplesFileFit) -> tuple[Calibration, Evaluation, _ReadResult]:
+def _fit_streaming(request: SamplesFileFit) -> tuple[Calibration, Evaluation, _ReadResult, Statistics]:
     from ..io import iter_sample_chunks
 
     path, method, options, progress = request.path, request.method, request.options, request.progress
@@ -479,7 +480,7 @@ def _fit_streaming(request: SamplesFileFit) -> tuple[Calibration, Evaluation, _R
         with progress(f"scoring the fit on {path.name}", statistics.n) as advance:
             evaluation, subsample = first.score(calibration, advance)
     forced = bool(options.get("allow_undetermined", False))
-    return _with_diagnostics(calibration, subsample, statistics.n, forced), evaluation, reader
+    return _with_diagnostics(calibration, subsample, statistics.n, forced), evaluation, reader, statistics
 
 
 def _counted(chunks: Iterable[NDArray[np.float64]], advance: Advance) -> Iterator[NDArray[np.float64]]:

@@ -162,7 +162,7 @@ def read_calibration_messages(path: str | Path) -> CalibrationMessages:
     DataFileError
         The log cannot be read (as :func:`magfit.sources.open_source` would say).
     """
-    from . import log_kind
+    from .detect import log_kind
 
     target = Path(path)
     kind = log_kind(target)

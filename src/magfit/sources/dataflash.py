@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
+from ..remedy import option
 from .ardupilot import (
     compass_mounting,
     compass_parameters,
@@ -55,10 +56,11 @@ from .ardupilot import (
     untrimmed,
     without_damaged_changes,
 )
+from .identity import BOOT_MESSAGES, board_identity
 from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
 from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
-__all__ = ["DataFlashLog", "open_dataflash", "undo_calibration"]
+__all__ = ["DataFlashLog", "log_identity", "open_dataflash", "undo_calibration"]
 
 _HEAD = b"\xa3\x95"
 _FMT_TYPE = 0x80
@@ -92,7 +94,9 @@ _BLOCK = 1 << 23
 #: Most messages gathered at a time (the gather index is ``_GATHER x width`` int64).
 _GATHER = 1 << 14
 #: The types whose offsets the first walk keeps: what a fit reads (the compasses, their parameters, the GNSS).
-_INDEXED = frozenset(("MAG", "MAG2", "MAG3", "PARM", "GPS"))
+#: PARM messages read at a time (the parameters' changes kept).
+_PARM_WINDOW = 1 << 18
+_INDEXED = frozenset(("MAG", "MAG2", "MAG3", "PARM", "GPS", "MSG"))
 #: Types walked for together when one of them is first asked for (``read_motion`` reads them in turn).
 _WALKED_TOGETHER = (frozenset(("ATT", "XKQ", "AHR2", "IMU")),)
 #: Most GNSS records the position's medians are taken over (a regular stride beyond).
@@ -368,21 +372,42 @@ class DataFlashLog:
         return values * factor if factor is not None else values
 
     def parameters(self) -> dict[str, list[tuple[float, float]]]:
-        """PARM messages: name -> [(time in s, value), ...] in log order."""
+        """PARM messages: name -> [(time in s, value), ...] in log order, each name's value where it changes
+        (a value logged again as it was says nothing new: a log that repeats its parameters is read in memory
+        that does not grow with them). Read :data:`_PARM_WINDOW` messages at a time."""
         if not self.has("PARM"):
             return {}
-        records = self.messages("PARM")
-        if not {"Name", "Value"} <= set(records.dtype.names or ()):
+        if not {"Name", "Value"} <= set(self._dtype("PARM").names or ()):
             raise DataFileError(
                 f"{self.path}: the PARM messages' format has no Name and Value fields: the log is damaged, so the "
                 "parameters its compasses were corrected with are unknown"
             )
-        times = _time_s(self, "PARM", records)
         table: dict[str, list[tuple[float, float]]] = {}
-        with np.errstate(invalid="ignore"):  # a damaged value is NaN or inf: refused where it is used
-            values = records["Value"].astype(np.float64)
-        for name, value, time in zip(records["Name"], values, times, strict=False):
-            table.setdefault(name.rstrip(b"\x00").decode("ascii", "replace"), []).append((float(time), float(value)))
+        last: dict[bytes, bytes] = {}
+        count = self.count("PARM")
+        for begin in range(0, count, _PARM_WINDOW):
+            records = self.messages("PARM", np.arange(begin, min(count, begin + _PARM_WINDOW), dtype=np.int64))
+            names, raw = records["Name"], records["Value"]
+            order = np.argsort(names, kind="stable")  # by name, each name's messages in log order
+            first = np.ones(len(order), dtype=bool)
+            first[1:] = names[order][1:] != names[order][:-1]
+            changed = first.copy()
+            bits = np.ascontiguousarray(raw[order]).view(np.uint8).reshape(len(order), -1)
+            changed[1:] |= np.any(bits[1:] != bits[:-1], axis=1)
+            starts = np.flatnonzero(first).tolist()
+            for at, end in zip(starts, [*starts[1:], len(order)], strict=True):
+                name = bytes(names[order[at]])
+                if last.get(name) == bits[at].tobytes():
+                    changed[at] = False  # the value in effect, logged again
+                last[name] = bits[end - 1].tobytes()
+            kept = np.sort(order[changed])
+            records = records[kept]
+            times = _time_s(self, "PARM", records)
+            with np.errstate(invalid="ignore"):  # a damaged value is NaN or inf: refused where it is used
+                values = records["Value"].astype(np.float64)
+            for name, value, time in zip(records["Name"], values, times, strict=False):
+                key = name.rstrip(b"\x00").decode("ascii", "replace")
+                table.setdefault(key, []).append((float(time), float(value)))
         return table
 
 
@@ -445,6 +470,7 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
     if rest:
         other += (f"{len(rest)} other message types: {', '.join(rest)}",)
     position = _position(log)
+    identity = log_identity(log)
 
     def read(magnetometer: Magnetometer, max_samples: int | None = None) -> LogSamples:
         slot = int(magnetometer.id.split("/")[1])
@@ -456,6 +482,7 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
     return Source(
         path=path,
         position=position,
+        identity=identity,
         kind="dataflash",
         format=described,
         time_base=_time_base(streams),
@@ -466,6 +493,21 @@ def source_from_log(path: Path, log: Any, described: str, *, notes: tuple[str, .
         _motion=motion,
         _bounded_reader=read,
     )
+
+
+def log_identity(log: Any) -> str | None:
+    """The board and unique id in the log's boot ``MSG`` messages (:func:`magfit.sources.identity.board_identity`),
+    or None: the first messages only are read."""
+    if not log.has("MSG"):
+        return None
+    count = min(log.count("MSG"), BOOT_MESSAGES)
+    try:
+        records = log.messages("MSG", np.arange(count, dtype=np.int64))
+    except DataFileError:
+        return None
+    if "Message" not in (records.dtype.names or ()) or records.dtype["Message"].kind != "S":
+        return None  # (the text of mavlogdump.py holds numbers only)
+    return board_identity(records["Message"])
 
 
 def _time_base(streams: list[_Stream]) -> str:
@@ -737,7 +779,7 @@ def _read(
     if every > 1:
         notes.append(
             f"one record in every {every} read ({len(records)} of {stream.count}): the compass logged more than "
-            f"max_samples={max_samples}, so a regular stride over the whole log is fitted"
+            f"{option('max_samples', max_samples)}, so a regular stride over the whole log is fitted"
         )
     notes += undone.notes
     if "Health" in labels:  # AP_Compass's healthy(): an unhealthy compass logs its last field again, stale

@@ -6,60 +6,68 @@
 - PX4 ULog: the ``sys_uuid`` information message, with ``ver_hw`` (``CUBEPILOT_CUBEORANGE``).
 
 Other logs (a tlog's system id is 1 on most vehicles) and samples files have none: None.
+
+The readers find it in the pass that reads the compasses (:attr:`magfit.sources.Source.identity`):
+:func:`board_identity` and :func:`ulog_identity` take what they have already read. :func:`vehicle_identity`
+opens a log for it alone.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import Any
 
 from ..errors import MagfitError
 
-__all__ = ["vehicle_identity"]
+__all__ = ["board_identity", "ulog_identity", "vehicle_identity"]
 
 _BOARD_ID = re.compile(r"^(\S+) ([0-9A-Fa-f]{8} [0-9A-Fa-f]{8} [0-9A-Fa-f]{8})\s*$")
+#: The boot message is among a log's first MSG messages: so many are looked at.
+BOOT_MESSAGES = 64
 
 
-def vehicle_identity(path: str | Path) -> str | None:
-    """The board and unique id of the flight controller that wrote the log at ``path``, or None."""
-    from ..io.sources import data_file
-    from . import log_kind
-
-    target = Path(path)
-    kind = log_kind(target)
-    try:
-        if kind == "dataflash":
-            return _dataflash(target, data_file(target))
-        if kind == "ulog":
-            return _ulog(data_file(target))
-    except (MagfitError, OSError, ValueError, KeyError):
-        return None
-    return None
-
-
-def _dataflash(path: Path, file: Path) -> str | None:
-    from .dataflash import DataFlashLog
-
-    log = DataFlashLog(path, file)
-    if not log.has("MSG"):
-        return None
-    records = log.messages("MSG")
-    if "Message" not in (records.dtype.names or ()):
-        return None
-    for raw in records["Message"][:64]:  # logged at boot, among the first messages
-        text = bytes(raw).rstrip(b"\0").decode("ascii", errors="replace").strip()
-        match = _BOARD_ID.match(text)
+def board_identity(messages: Iterable[bytes | str]) -> str | None:
+    """The board and unique id in ArduPilot's boot ``MSG`` texts (the first :data:`BOOT_MESSAGES`), or None."""
+    for count, raw in enumerate(messages):
+        if count >= BOOT_MESSAGES:
+            break
+        text = raw if isinstance(raw, str) else bytes(raw).rstrip(b"\0").decode("ascii", errors="replace")
+        match = _BOARD_ID.match(text.strip())
         if match:
             return f"{match.group(1)} {match.group(2).upper()}"
     return None
 
 
-def _ulog(file: Path) -> str | None:
-    from pyulog import ULog
-
-    info = ULog(str(file), [], parse_header_only=True).msg_info_dict
+def ulog_identity(info: Mapping[str, Any]) -> str | None:
+    """The hardware and ``sys_uuid`` of a ULog's information messages (pyulog's ``msg_info_dict``), or None."""
     uuid = info.get("sys_uuid")
     if not uuid:
         return None
     hardware = info.get("ver_hw")
     return f"{hardware} {uuid}" if hardware else str(uuid)
+
+
+def vehicle_identity(path: str | Path) -> str | None:
+    """The board and unique id of the flight controller that wrote the log at ``path``, or None.
+
+    Reads the log for it alone; a log already opened has it as ``Source.identity``.
+    """
+    from ..io.sources import data_file
+    from .detect import log_kind
+
+    target = Path(path)
+    kind = log_kind(target)
+    try:
+        if kind == "dataflash":
+            from .dataflash import DataFlashLog, log_identity
+
+            return log_identity(DataFlashLog(target, data_file(target)))
+        if kind == "ulog":
+            from pyulog import ULog
+
+            return ulog_identity(ULog(str(data_file(target)), [], parse_header_only=True).msg_info_dict)
+    except (MagfitError, OSError, ValueError, KeyError, ImportError):
+        return None
+    return None

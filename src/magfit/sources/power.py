@@ -86,7 +86,7 @@ def read_power(path: str | os.PathLike[str]) -> Power:
         The log cannot be read.
     """
     from ..io.sources import data_file
-    from . import log_kind
+    from .detect import log_kind
 
     kind = log_kind(path)
     if kind == "dataflash":
@@ -177,10 +177,8 @@ _TLOG_LAYOUTS: dict[str, tuple[int, str]] = {
 def _tlog(path: Path, file: Path) -> Power:
     from . import tlog
 
-    try:
-        log = tlog.TelemetryLog(path, file.read_bytes())
-    except OSError as error:
-        raise DataFileError(f"{path}: cannot be read ({error.strerror})") from None
+    layouts = {msgid: np.dtype([tuple(f.split(":")) for f in text.split()]) for msgid, text in _TLOG_LAYOUTS.values()}
+    log = tlog.TelemetryLog(path, file, also={msgid: dtype.itemsize for msgid, dtype in layouts.items()})
     sources = log.sources()
     if not sources:
         return Power()
@@ -188,11 +186,11 @@ def _tlog(path: Path, file: Path) -> Power:
     source = max(sources, key=lambda s: sum(log.counts(s).values()))
     vehicle = tlog._vehicle(log, source)
     current = throttle = None
-    for name, (msgid, fields) in _TLOG_LAYOUTS.items():
-        frames = _frames(log, msgid, source)
+    for name, (msgid, _) in _TLOG_LAYOUTS.items():
+        frames = log.frames_of(msgid, source)
         if not len(frames):
             continue
-        records = _messages(log, frames, np.dtype([tuple(f.split(":")) for f in fields.split()]))
+        records = log.messages_of(frames, layouts[msgid])
         times = vehicle.clock[frames]
         if name == "BATTERY_STATUS":  # the first battery's (id 0), preferred to SYS_STATUS's when sent
             values = records["current_battery"].astype(np.float64)
@@ -206,21 +204,3 @@ def _tlog(path: Path, file: Path) -> Power:
         else:
             throttle = _signal("throttle", "VFR_HUD.throttle / 100", times, records["throttle"] / 100.0)
     return Power(current, throttle)
-
-
-def _frames(log: Any, msgid: int, source: tuple[int, int]) -> NDArray[np.int64]:
-    """The accepted frames of ``msgid`` from ``source`` (as ``TelemetryLog.frames``, by id)."""
-    mine = (log.msgid == msgid) & (log.sysid == source[0]) & (log.compid == source[1])
-    return np.flatnonzero(mine)
-
-
-def _messages(log: Any, frames: NDArray[np.int64], dtype: np.dtype[Any]) -> NDArray[Any]:
-    """The payloads of ``frames`` as ``dtype``, the zeros MAVLink 2 drops from a payload's end put back
-    (as ``TelemetryLog.messages``)."""
-    width = dtype.itemsize
-    rows = np.zeros((len(frames), width), dtype=np.uint8)
-    data = log._data
-    for i, (start, length) in enumerate(zip(log.payload[frames].tolist(), log.length[frames].tolist(), strict=True)):
-        n = min(length, width)
-        rows[i, :n] = data[start : start + n]
-    return rows.view(dtype).reshape(-1)

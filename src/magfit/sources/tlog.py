@@ -49,7 +49,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -259,15 +259,73 @@ def x25_checksums(
     return checksums
 
 
+#: Bytes read at a time: the scan's memory grows with this, not with the log.
+_BLOCK = 1 << 23
+#: The longest record: an 8-byte stamp, a MAVLink 2 header (10), a 255-byte payload, the checksum and a signature.
+_MAX_RECORD = 8 + 10 + 255 + 2 + 13
+#: Of each message (by system and component) at most this many frames are kept, a regular stride beyond (every
+#: k-th, k doubled each time the count passes it): 2^17 compass samples are half a day at 3 Hz, and the memory
+#: stays bounded (PARAM_VALUE is kept whole, its repeated values once: the parameters in effect never change).
+#: A 1 GB tlog peaked at 376 MB with 2^18 (docs/scaling.md).
+_KEPT = 1 << 17
+#: Bytes between two frames with a right checksum beyond which the gap is counted as damage at once, not carried
+#: over to be sorted (a file that is no tlog past its head, or a dialect this reader does not know).
+_LONG_GAP = 1 << 20
+
+
+class _Kept:
+    """The frames kept of one message from one sender: payload rows, receive stamps and file order."""
+
+    def __init__(self, width: int) -> None:
+        self.width = width
+        self.rows: list[NDArray[np.uint8]] = []
+        self.receipt: list[NDArray[np.float64]] = []
+        self.order: list[NDArray[np.int64]] = []
+        self.index: list[NDArray[np.int64]] = []  # each frame's number among this message's, for the stride
+        self.seen = 0
+        self.every = 1
+        self.kept = 0
+
+    def add(self, rows: NDArray[np.uint8], receipt: NDArray[np.float64], order: NDArray[np.int64], thin: bool) -> None:
+        index = np.arange(self.seen, self.seen + len(rows), dtype=np.int64)  # (int64: a log may hold > 2^31)
+        self.seen += len(rows)
+        chosen = index % self.every == 0 if thin else slice(None)
+        self.rows.append(rows[chosen])
+        self.receipt.append(receipt[chosen])
+        self.order.append(order[chosen])
+        self.index.append(index[chosen])
+        self.kept += len(self.index[-1])
+        while thin and self.kept > _KEPT:  # every second one of those kept, and so on from here
+            self.every *= 2
+            mask = [i % self.every == 0 for i in self.index]
+            for name in ("rows", "receipt", "order", "index"):
+                parts = getattr(self, name)
+                setattr(self, name, [part[m] for part, m in zip(parts, mask, strict=True)])
+            self.kept = sum(len(i) for i in self.index)
+
+    def arrays(self) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.int64]]:
+        if not self.rows:
+            return np.zeros((0, self.width), np.uint8), np.zeros(0), np.zeros(0, np.int64)
+        return np.concatenate(self.rows), np.concatenate(self.receipt), np.concatenate(self.order)
+
+
 class TelemetryLog:
-    """A tlog scanned once: every frame whose checksum is right, with its source, message id and time stamp.
+    """A tlog scanned once, in blocks: the frames whose checksum is right of the messages magfit reads, with
+    their source, message id and time stamp; of every other frame, its count and sequence number.
+
+    The file is read :data:`_BLOCK` bytes at a time (a block's last record, perhaps cut by the block's end,
+    is read again with the next), so the memory does not grow with the log: of each message read, at most
+    :data:`_KEPT` frames a sender are kept (a regular stride beyond, said in the compass's notes); of
+    PARAM_VALUE every change of a value.
 
     Parameters
     ----------
     path : Path
         The name messages give.
-    data : bytes
-        The file's bytes.
+    data : bytes or Path
+        The file's bytes, or the file to read them from (in blocks).
+    also : mapping of int to int, optional
+        Other messages to keep (message id: the payload's full length), read with :meth:`messages_of`.
 
     Raises
     ------
@@ -275,24 +333,73 @@ class TelemetryLog:
         Not one frame with a right checksum.
     """
 
-    def __init__(self, path: Path, data: bytes) -> None:
+    def __init__(self, path: Path, data: bytes | Path, *, also: dict[int, int] | None = None) -> None:
         self.path = path
-        self._data = np.frombuffer(data, dtype=np.uint8)
         self.skipped_bytes = 0  # bytes in no frame whose checksum is right
         #: (system, component, message id) -> (frames, bytes) of well-formed frames none of which passed its
         #: checksum: another definition of the message (a dialect or version this reader does not share)
         self.unchecked: dict[tuple[int, int, int], tuple[int, int]] = {}
         self.truncated = False
         self.bad_stamps = 0
-        self._scan()
-        if not len(self.start):
+        self.thinned: dict[tuple[int, int, int], int] = {}  # (system, component, message id) -> every k-th kept
+        self._widths = {msgid: dtype.itemsize for msgid, (_, dtype) in _LAYOUTS.items()}
+        self._widths.update(also or {})
+        self._kept: dict[tuple[int, int, int], _Kept] = {}
+        self._counts: dict[tuple[int, int, int], int] = {}
+        self._last_seq: dict[tuple[int, int], int] = {}
+        self._lost: dict[tuple[int, int], int] = {}
+        self._passed: set[int] = set()
+        self._parameters_seen: dict[tuple[int, int], dict[bytes, int]] = {}
+        self._listed: dict[tuple[int, int], set[int]] = {}
+        self._param_counts: dict[tuple[int, int], dict[int, int]] = {}
+        self._frames = 0
+        self._read(data)
+        self._assemble()
+        if not self._frames:
             raise DataFileError(
                 f"{path}: starts like a MAVLink telemetry log (.tlog) but holds no MAVLink frame whose checksum is "
                 "right: the file is damaged, or is not a tlog"
             )
 
-    def _scan(self) -> None:
-        data, n = self._data, len(self._data)
+    # -------------------------------------------------------------------------------------------- the scan
+
+    def _read(self, data: bytes | Path) -> None:
+        handle: BinaryIO
+        if isinstance(data, Path):
+            try:
+                handle = open(data, "rb")
+            except OSError as error:
+                raise DataFileError(
+                    f"{self.path}: cannot be read ({error.strerror}); check the file's permissions"
+                ) from None
+        else:
+            import io
+
+            handle = io.BytesIO(data)
+        with handle:
+            carry = b""
+            while True:
+                block = handle.read(_BLOCK)
+                eof = not block
+                buffer = carry + block
+                if not buffer:
+                    break
+                used = self._scan(np.frombuffer(buffer, dtype=np.uint8), eof)
+                carry = buffer[used:]
+                if eof:
+                    break
+        # Frames whose checksum failed while others of the same message from the same sender passed are damage;
+        # a message none of whose frames passes is sent with a definition this reader does not share.
+        for key, (_, size_sum) in list(self.unchecked.items()):
+            if (key[0] << 32) | (key[1] << 24) | key[2] in self._passed:
+                self.skipped_bytes += size_sum
+                del self.unchecked[key]
+
+    def _scan(self, data: NDArray[np.uint8], eof: bool) -> int:
+        """Scan ``data`` (the bytes carried over, then a block): keep the frames whose record starts where no
+        record can run past the end of ``data`` (all at the end of the file), sort the gaps between them, and
+        return where the next scan starts (the end of the last frame kept, or past a long gap)."""
+        n = len(data)
         candidate = _magic_bytes(data)
         candidate = candidate[(candidate >= 8) & (candidate + 10 <= n)]  # a stamp before, a v2 header after
         v2 = data[candidate] == 0xFD
@@ -321,114 +428,226 @@ class TelemetryLog:
         ends = candidate[index] + size[index]
         before = np.concatenate([[0], np.maximum.accumulate(ends)[:-1]]) if len(index) else ends
         index = index[candidate[index] - 8 >= before]
+        limit = n if eof else n - _MAX_RECORD  # a record starting later may run past the block: read it again
+        index = index[candidate[index] - 8 < limit]
+        used = int(candidate[index[-1]] + size[index[-1]]) if len(index) else 0
+        if not eof and limit - used > _LONG_GAP:
+            used = limit  # no frame for so long: damage (counted by _account), not carried over
+        c = candidate[index]
+        self._account(data, c - 8, c + size[index], n if eof else used, eof)
         stamps = np.zeros(len(index), dtype=np.uint64)
         for byte in range(8):  # big-endian
-            stamps = (stamps << np.uint64(8)) | data[candidate[index] - 8 + byte].astype(np.uint64)
+            stamps = (stamps << np.uint64(8)) | data[c - 8 + byte].astype(np.uint64)
         plausible = (stamps >= _STAMP_RANGE[0]) & (stamps <= _STAMP_RANGE[1])
-        self.bad_stamps = int(np.count_nonzero(~plausible))
-        index, stamps = index[plausible], stamps[plausible]
-        c = candidate[index]
-        self.start = c
-        self.size = size[index]
-        self.length = length[index]
-        self.payload = c + header[index]
-        self.msgid = msgid[index]
+        self.bad_stamps += int(np.count_nonzero(~plausible))
+        index, stamps, c = index[plausible], stamps[plausible], c[plausible]
         v2 = v2[index]
-        self.sysid = np.where(v2, data[c + 5], data[c + 3]).astype(np.int64)
-        self.compid = np.where(v2, data[c + 6], data[c + 4]).astype(np.int64)
-        self.seq = np.where(v2, data[c + 4], data[c + 2]).astype(np.int64)
-        self.receipt_s = stamps.astype(np.float64) / 1e6
-        self._account()
+        sysid = np.where(v2, data[c + 5], data[c + 3]).astype(np.int64)
+        compid = np.where(v2, data[c + 6], data[c + 4]).astype(np.int64)
+        seq = np.where(v2, data[c + 4], data[c + 2]).astype(np.int64)
+        ids = msgid[index]
+        self._tally(sysid, compid, ids, seq)
+        payload, lengths = c + header[index], length[index]
+        order = np.arange(self._frames, self._frames + len(index), dtype=np.int64)
+        self._frames += len(index)
+        receipt = stamps.astype(np.float64) / 1e6
+        for msgid_kept, width in self._widths.items():
+            mine = np.flatnonzero(ids == msgid_kept)
+            if not len(mine):
+                continue
+            rows = _payload_rows(data, payload[mine], lengths[mine], width)
+            for source in set(zip(sysid[mine].tolist(), compid[mine].tolist(), strict=True)):
+                who = mine[(sysid[mine] == source[0]) & (compid[mine] == source[1])]
+                at = np.searchsorted(mine, who)
+                chosen_rows = rows[at]
+                if msgid_kept == _ID_OF["PARAM_VALUE"]:
+                    keep = self._parameter_changes(source, chosen_rows)
+                    who, chosen_rows = who[keep], chosen_rows[keep]
+                key = (source[0], source[1], msgid_kept)
+                kept = self._kept.get(key)
+                if kept is None:
+                    kept = self._kept[key] = _Kept(width)
+                kept.add(chosen_rows, receipt[who], order[who], thin=msgid_kept != _ID_OF["PARAM_VALUE"])
+        return used
 
-    def _frame_at(self, pos: int, end: int) -> tuple[int, tuple[int, int, int]] | None:
-        """The size and (system, component, message id) of a well-formed frame header at ``pos`` whose frame
-        ends by ``end``, whatever its checksum; None when there is none."""
-        data = self._data
-        if pos + 10 > end or data[pos] not in (0xFE, 0xFD):
-            return None
-        if data[pos] == 0xFE:
-            key = (int(data[pos + 3]), int(data[pos + 4]), int(data[pos + 5]))
-            size = int(data[pos + 1]) + 8
-        elif data[pos + 2] <= 1:
-            key = (
-                int(data[pos + 5]),
-                int(data[pos + 6]),
-                int(data[pos + 7]) | int(data[pos + 8]) << 8 | int(data[pos + 9]) << 16,
-            )
-            size = int(data[pos + 1]) + 12 + (13 if data[pos + 2] & 1 else 0)
-        else:
-            return None
-        return (size, key) if pos + size <= end else None
+    def _tally(
+        self, sysid: NDArray[np.int64], compid: NDArray[np.int64], ids: NDArray[np.int64], seq: NDArray[np.int64]
+    ) -> None:
+        """Every frame's count by sender and message, the link's losses from the sequence numbers, and which
+        (sender, message) pairs passed a checksum."""
+        keys = (sysid << 32) | (compid << 24) | ids
+        unique, counts = np.unique(keys, return_counts=True)
+        self._passed.update(unique.tolist())
+        for key, count in zip(unique.tolist(), counts.tolist(), strict=True):
+            triple = (key >> 32, (key >> 24) & 0xFF, key & 0xFFFFFF)
+            self._counts[triple] = self._counts.get(triple, 0) + count
+        for source in set(zip(sysid.tolist(), compid.tolist(), strict=True)):
+            mine = seq[(sysid == source[0]) & (compid == source[1])]
+            last = self._last_seq.get(source)
+            if last is not None:
+                mine = np.concatenate([[last], mine])
+            step = np.diff(mine) % 256
+            self._lost[source] = self._lost.get(source, 0) + int(np.sum(step[step > 0] - 1))  # 0: recorded twice
+            self._last_seq[source] = int(mine[-1])
 
-    def _account(self) -> None:
-        """Sort the bytes between accepted records: a gap that well-formed frames fill exactly holds frames whose
-        checksum failed (damage, or ``unchecked`` when no frame of that message from that sender passed);
-        otherwise it is damage, or a last record cut short."""
-        data, n = self._data, len(self._data)
-        begins = np.concatenate([[0], self.start + self.size])
-        ends = np.concatenate([self.start - 8, [n]])
-        gaps = np.flatnonzero(ends > begins)
+    def _parameter_changes(self, source: tuple[int, int], rows: NDArray[np.uint8]) -> NDArray[np.bool_]:
+        """Which PARAM_VALUE frames say something new (a name's first value, or a changed one); the indices
+        and counts of every frame kept for :meth:`parameter_list_complete`."""
+        records = rows.view(_LAYOUTS[_ID_OF["PARAM_VALUE"]][1]).reshape(-1)
+        listed = records["param_index"] != 65535  # 65535 marks a value set, not listed
+        self._listed.setdefault(source, set()).update(np.unique(records["param_index"][listed]).tolist())
+        counts = self._param_counts.setdefault(source, {})
+        for count, times in zip(*np.unique(records["param_count"][listed], return_counts=True), strict=True):
+            counts[int(count)] = counts.get(int(count), 0) + int(times)
+        seen = self._parameters_seen.setdefault(source, {})
+        names, values = records["param_id"], records["param_value"].view(np.uint32)
+        order = np.argsort(names, kind="stable")  # by name, each name's frames in log order
+        names, values = names[order], values[order]
+        first = np.ones(len(names), dtype=bool)
+        first[1:] = names[1:] != names[:-1]
+        changed = first.copy()
+        changed[1:] |= values[1:] != values[:-1]
+        starts = np.flatnonzero(first)
+        for at, last in zip(starts.tolist(), [*(starts[1:] - 1).tolist(), len(names) - 1], strict=True):
+            name = bytes(names[at])
+            if seen.get(name) == int(values[at]):
+                changed[at] = False  # the value already in effect, sent again
+            seen[name] = int(values[last])
+        keep = np.zeros(len(records), dtype=bool)
+        keep[order[changed]] = True
+        return keep
+
+    def _account(
+        self, data: NDArray[np.uint8], starts: NDArray[np.int64], ends: NDArray[np.int64], stop: int, eof: bool
+    ) -> None:
+        """Sort the bytes between accepted records (up to ``stop``): a gap that well-formed frames fill exactly
+        holds frames whose checksum failed (damage, or ``unchecked`` when no frame of that message from that
+        sender passed); otherwise it is damage, or a last record cut short."""
+        n = len(data)
+        begins = np.concatenate([[0], ends])
+        finish = np.concatenate([starts, [stop]])
+        gaps = np.flatnonzero(finish > begins)
         for g in gaps.tolist():
-            pos, end = int(begins[g]), int(ends[g])
+            pos, end = int(begins[g]), int(finish[g])
+            if g == len(starts) and not eof:  # bytes up to a scan's stop that no frame starts in for _LONG_GAP
+                self.skipped_bytes += end - pos
+                continue
             found = []
-            while (header := self._frame_at(pos + 8, end)) is not None:
-                found.append(header)
-                pos += 8 + header[0]
+            while (frame := _frame_at(data, pos + 8, end)) is not None:
+                found.append(frame)
+                pos += 8 + frame[0]
             if pos == end:
                 for size, key in found:
                     frames, size_sum = self.unchecked.get(key, (0, 0))
                     self.unchecked[key] = (frames + 1, size_sum + size + 8)
                 continue
-            if end == n and n - pos < 8 + 12 + 255 + 13 and (pos + 8 >= n or data[pos + 8] in (0xFE, 0xFD)):
+            if eof and end == n and n - pos < _MAX_RECORD and (pos + 8 >= n or data[pos + 8] in (0xFE, 0xFD)):
                 self.truncated = True  # the log was not closed: its last record is cut short
                 continue
             self.skipped_bytes += int(end - begins[g])
-        # Frames whose checksum failed while others of the same message from the same sender passed are damage;
-        # a message none of whose frames passes is sent with a definition this reader does not share.
-        passed = set(np.unique((self.sysid << 32) | (self.compid << 24) | self.msgid).tolist())
-        for key, (_, size_sum) in list(self.unchecked.items()):
-            if (key[0] << 32) | (key[1] << 24) | key[2] in passed:
-                self.skipped_bytes += size_sum
-                del self.unchecked[key]
+
+    def _assemble(self) -> None:
+        """The frames kept, in file order: their sender, message, receive stamp, and where their payload is."""
+        empty = (np.int64, np.float64, np.uint8, np.uint8, np.int32, np.int32)
+        parts: list[tuple[NDArray[Any], ...]] = [tuple(np.zeros(0, dtype=kind) for kind in empty)]
+        self._rows: dict[tuple[int, int, int], NDArray[np.uint8]] = {}
+        for key, kept in self._kept.items():
+            rows, receipt, order = kept.arrays()
+            self._rows[key] = rows
+            if kept.every > 1:
+                self.thinned[key] = kept.every
+            parts.append((order, receipt, np.full(len(order), key[0], np.uint8), np.full(len(order), key[1], np.uint8),
+                          np.full(len(order), key[2], np.int32), np.arange(len(order), dtype=np.int32)))  # fmt: skip
+        order, receipt, sysid, compid, msgid, row = (np.concatenate(p) for p in zip(*parts, strict=True))
+        sort = np.argsort(order, kind="stable")
+        del order
+        self.receipt_s = receipt[sort]
+        self.sysid, self.compid, self.msgid = sysid[sort], compid[sort], msgid[sort]
+        self._row = row[sort]
+
+    # ------------------------------------------------------------------------------------------ the frames
 
     def sources(self) -> list[tuple[int, int]]:
         """The (system id, component id) pairs that sent frames, most frames first."""
-        counts = np.bincount(self.sysid * 256 + self.compid, minlength=65536)
-        present = np.flatnonzero(counts)
-        return [(int(k) // 256, int(k) % 256) for k in present[np.argsort(-counts[present], kind="stable")]]
+        totals: dict[tuple[int, int], int] = {}
+        for (system, component, _), count in self._counts.items():
+            totals[(system, component)] = totals.get((system, component), 0) + count
+        return sorted(totals, key=lambda source: (-totals[source], source))
 
     def counts(self, source: tuple[int, int]) -> dict[int, int]:
-        """Message id -> number of frames from ``source``."""
-        mine = (self.sysid == source[0]) & (self.compid == source[1])
-        ids, counts = np.unique(self.msgid[mine], return_counts=True)
-        return dict(zip(ids.tolist(), counts.tolist(), strict=True))
+        """Message id -> number of frames from ``source`` (every frame, kept or not)."""
+        return {msgid: count for (s, c, msgid), count in sorted(self._counts.items()) if (s, c) == source}
 
     def frames(self, name: str, source: tuple[int, int]) -> NDArray[np.int64]:
-        """Indices (into the accepted frames, in file order) of message ``name`` from ``source``."""
-        mine = (self.msgid == _ID_OF[name]) & (self.sysid == source[0]) & (self.compid == source[1])
+        """Indices (into the frames kept, in file order) of message ``name`` from ``source``."""
+        return self.frames_of(_ID_OF[name], source)
+
+    def frames_of(self, msgid: int, source: tuple[int, int]) -> NDArray[np.int64]:
+        """As :meth:`frames`, by message id."""
+        mine = (self.msgid == msgid) & (self.sysid == source[0]) & (self.compid == source[1])
         return np.flatnonzero(mine)
 
     def messages(self, name: str, frames: NDArray[np.int64]) -> NDArray[Any]:
         """The payloads of ``frames`` (all of message ``name``) as a structured array, the zeros MAVLink 2
         dropped from their ends put back."""
-        dtype = _LAYOUTS[_ID_OF[name]][1]
-        width = dtype.itemsize
-        rows = np.zeros((len(frames), width), dtype=np.uint8)
-        payload, length = self.payload[frames], np.minimum(self.length[frames], width)
-        for sent in np.unique(length).tolist():  # a few lengths per message: one gather of whole rows each
-            which = np.flatnonzero(length == sent)
-            windows = np.lib.stride_tricks.sliding_window_view(self._data, sent)
-            rows[which, :sent] = windows[payload[which]]
-        return rows.view(dtype).reshape(-1)
+        return self.messages_of(frames, _LAYOUTS[_ID_OF[name]][1])
+
+    def messages_of(self, frames: NDArray[np.int64], dtype: np.dtype[Any]) -> NDArray[Any]:
+        """As :meth:`messages`, for the frames of one message kept with ``also``, laid out as ``dtype``."""
+        if not len(frames):
+            return np.zeros(0, dtype=dtype)
+        key = (int(self.sysid[frames[0]]), int(self.compid[frames[0]]), int(self.msgid[frames[0]]))
+        rows = self._rows[key][self._row[frames], : dtype.itemsize]
+        return np.ascontiguousarray(rows).view(dtype).reshape(-1)
+
+    def parameter_list_complete(self, source: tuple[int, int]) -> bool:
+        """Whether every index below PARAM_VALUE's ``param_count`` came from ``source``."""
+        counts = self._param_counts.get(source, {})
+        if not counts:
+            return False
+        usual = max(counts, key=lambda count: (counts[count], -count))
+        return len(self._listed.get(source, ())) >= usual
 
     def lost_share(self, source: tuple[int, int]) -> float:
         """The share of ``source``'s frames the link lost, from the gaps in their sequence numbers."""
-        seq = self.seq[(self.sysid == source[0]) & (self.compid == source[1])]
-        if len(seq) < 2:
+        seen = sum(count for (s, c, _), count in self._counts.items() if (s, c) == source)
+        if seen < 2:
             return 0.0
-        step = np.diff(seq) % 256
-        lost = int(np.sum(step[step > 0] - 1))  # a step of 0 is a frame recorded twice, not a loss
-        return lost / (lost + len(seq))
+        lost = self._lost.get(source, 0)
+        return lost / (lost + seen)
+
+
+def _frame_at(data: NDArray[np.uint8], pos: int, end: int) -> tuple[int, tuple[int, int, int]] | None:
+    """The size and (system, component, message id) of a well-formed frame header at ``pos`` whose frame ends
+    by ``end``, whatever its checksum; None when there is none."""
+    if pos + 10 > end or data[pos] not in (0xFE, 0xFD):
+        return None
+    if data[pos] == 0xFE:
+        key = (int(data[pos + 3]), int(data[pos + 4]), int(data[pos + 5]))
+        size = int(data[pos + 1]) + 8
+    elif data[pos + 2] <= 1:
+        key = (
+            int(data[pos + 5]),
+            int(data[pos + 6]),
+            int(data[pos + 7]) | int(data[pos + 8]) << 8 | int(data[pos + 9]) << 16,
+        )
+        size = int(data[pos + 1]) + 12 + (13 if data[pos + 2] & 1 else 0)
+    else:
+        return None
+    return (size, key) if pos + size <= end else None
+
+
+def _payload_rows(
+    data: NDArray[np.uint8], payload: NDArray[np.int64], length: NDArray[np.int64], width: int
+) -> NDArray[np.uint8]:
+    """The payloads at ``payload`` (``length`` bytes each) as rows of ``width`` bytes, the zeros MAVLink 2
+    dropped from their ends put back."""
+    rows = np.zeros((len(payload), width), dtype=np.uint8)
+    length = np.minimum(length, width)
+    for sent in np.unique(length).tolist():  # a few lengths per message: one gather of whole rows each
+        which = np.flatnonzero(length == sent)
+        rows[which, :sent] = np.lib.stride_tricks.sliding_window_view(data, sent)[payload[which]]
+    return rows
 
 
 @dataclass(frozen=True)
@@ -510,10 +729,7 @@ def _parameters(log: TelemetryLog, source: tuple[int, int]) -> tuple[dict[str, l
         text = _NAME.match(name.decode("latin-1"))
         table.setdefault(text.group(0) if text else "", []).append((float(time), float(value)))
     # The whole list was downloaded when every index below param_count came (65535 marks a value set, not listed).
-    counts = records["param_count"][records["param_index"] != 65535]
-    listed = np.unique(records["param_index"][records["param_index"] != 65535])
-    complete = len(counts) > 0 and len(listed) >= int(np.bincount(counts).argmax())
-    return table, complete
+    return table, log.parameter_list_complete(source)
 
 
 def _vehicle(log: TelemetryLog, source: tuple[int, int]) -> _Vehicle:
@@ -527,48 +743,10 @@ def _vehicle(log: TelemetryLog, source: tuple[int, int]) -> _Vehicle:
     return _Vehicle(log, source, autopilot, clock, stretches, parameters, complete, armed)
 
 
-#: Memory the scan of a tlog takes per byte of it, at its peak (the bytes, the candidate frames' and the
-#: accepted frames' arrays; docs/file-formats.md has the measurement).
-MEMORY_PER_BYTE = 8
-
-
-def _available_memory() -> int:
-    """Bytes of memory available to this process (MemAvailable; 4 GiB when the system does not say)."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError):
-        pass
-    return 4 << 30
-
-
 def open_tlog(path: Path, file: Path) -> Source:
-    """Read a MAVLink telemetry log into a :class:`~magfit.sources.Source` (``file``: its bytes on disk).
-
-    The whole file is scanned at once (:class:`TelemetryLog`), in about :data:`MEMORY_PER_BYTE` times its size
-    of memory: a tlog that would take more than half the memory available is refused with that reason and how
-    to cut it, before anything is read.
-    """
-    try:
-        size = file.stat().st_size
-    except OSError as error:
-        raise DataFileError(f"{path}: cannot be read ({error.strerror}); check the file's permissions") from None
-    available = _available_memory()
-    if size * MEMORY_PER_BYTE > available // 2:
-        raise DataFileError(
-            f"{path}: this telemetry log is {size / 1e6:.0f} MB, and magfit scans a tlog whole, in about "
-            f"{MEMORY_PER_BYTE} times its size of memory: more than half the {available / 1e6:.0f} MB available; keep "
-            "the messages magfit reads (mavlogdump.py --types RAW_IMU,SCALED_IMU2,SCALED_IMU3,HIGHRES_IMU,"
-            "PARAM_VALUE,HEARTBEAT,ATTITUDE,GPS_RAW_INT,GLOBAL_POSITION_INT -o smaller.tlog LOG), or give the "
-            "vehicle's DataFlash log or ULog"
-        )
-    try:
-        data = file.read_bytes()
-    except OSError as error:
-        raise DataFileError(f"{path}: cannot be read ({error.strerror}); check the file's permissions") from None
-    return source_from_tlog(path, TelemetryLog(path, data))
+    """Read a MAVLink telemetry log into a :class:`~magfit.sources.Source` (``file``: its bytes on disk, read in
+    blocks by :class:`TelemetryLog`: the memory does not grow with the log)."""
+    return source_from_tlog(path, TelemetryLog(path, file))
 
 
 def _compass_messages(vehicle: _Vehicle) -> list[str]:
@@ -690,6 +868,7 @@ class _Compass:
     def __init__(self, vehicle: _Vehicle, name: str, sensor: str) -> None:
 
         self.vehicle, self.name, self.sensor = vehicle, name, sensor
+        self.every = vehicle.log.thinned.get((*vehicle.source, _ID_OF[name]), 1)
         frames = vehicle.log.frames(name, vehicle.source)
         records, time = vehicle.log.messages(name, frames), vehicle.clock[frames]
         _, first = np.unique(time, return_index=True)  # a frame recorded twice (two links): once
@@ -838,12 +1017,18 @@ class _Compass:
             undone = undo_records(samples, self.time, parameters=self.vehicle.parameters, compass=self.compass)
             samples, keep, notes = undone.samples, ~undone.damaged, (*notes, *undone.notes)
         finite = np.all(np.isfinite(samples), axis=1) & keep
+        if self.every > 1:
+            notes += (
+                f"one {self.name} message in every {self.every} kept while the log was read ({len(samples)} kept): "
+                f"the log holds more than {_KEPT} of them, so a regular stride over the whole log",
+            )
         return LogSamples(
             magnetometer=self.magnetometer,
             samples=samples[finite],
             time_s=self.time[finite],
             columns=("xmag", "ymag", "zmag"),
             notes=notes,
+            every=self.every,
         )
 
     def motion(self, position: Position | None) -> Motion:

@@ -144,6 +144,9 @@ class Source:
         What a user must know about the whole file (bytes skipped as damaged ...).
     position : Position or None
         Where and when, from the log's own 3-D GNSS fixes (flight logs), or None.
+    identity : str or None
+        The vehicle's own identity, read in the same pass: the flight controller's board and unique id
+        (:mod:`magfit.sources.identity`); None when the log does not say (a tlog, a bag, a samples file).
 
     :meth:`read` gives a magnetometer's samples; :meth:`read_motion` gives them with the attitude, gyroscope
     and accelerometer at their time stamps (:class:`magfit.sources.motion.Motion`).
@@ -157,6 +160,7 @@ class Source:
     other: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     position: Position | None = None
+    identity: str | None = None
     _reader: Callable[[Magnetometer], LogSamples] | None = field(default=None, repr=False, compare=False)
     _motion: Callable[[Magnetometer], Motion] | None = field(default=None, repr=False, compare=False)
     #: A reader that reads only a regular stride of a long stream's records (``max_samples``), when the

@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 
 from ..errors import DataFileError
 from ..rotations import standard_rotations
+from .identity import ulog_identity
 from .motion import Motion, Stream, align, quaternion_wxyz
 from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
@@ -322,6 +323,7 @@ def open_ulog(path: Path, file: Path, *, everything: bool = True) -> Source:
     return Source(
         path=path,
         position=position,
+        identity=ulog_identity(ulog.msg_info_dict),
         kind="ulog",
         format=described,
         time_base="seconds since boot (timestamp)",

@@ -1,0 +1,133 @@
+"""A recording opened once into a :class:`~magfit.sources.Source`: :func:`open_source` dispatches, by the
+file's kind (:func:`magfit.sources.detect.log_kind`), to its reader; a samples file is read by :mod:`magfit.io`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataFileError
+from .detect import log_kind
+from .types import LogSamples, Magnetometer, Source
+
+__all__ = ["open_source"]
+
+
+def open_source(path: str | os.PathLike[str], *, everything: bool = True) -> Source:
+    """Open a recording once and say what it holds.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A PX4 ULog, an ArduPilot DataFlash log, a MAVLink telemetry log (.tlog), a ROS bag, or a samples file
+        (text, ``.npy``, ``.npz``); compressed files and standard input (``-``) as :func:`magfit.io.read_samples`
+        takes them.
+    everything : bool
+        False reads only the magnetometer topics of a ULog (``Source.other`` stays empty): what a fit needs,
+        at the cost of pyulog reading those topics alone (a log busy with other topics is read in half the
+        time or less).
+
+    Raises
+    ------
+    DataFileError
+        An unreadable, truncated or damaged file (one line naming the file and the problem); a ULog without
+        the ``pyulog`` package (the install command).
+    """
+    from ..io.sources import data_file
+
+    kind = log_kind(path)
+    if kind == "ulog":
+        from .ulog import open_ulog
+
+        return open_ulog(Path(path), data_file(path), everything=everything)
+    if kind == "dataflash":
+        from .dataflash import open_dataflash
+
+        return open_dataflash(Path(path), data_file(path))
+    if kind == "tlog":
+        from .tlog import open_tlog
+
+        return open_tlog(Path(path), data_file(path))
+    if kind == "rosbag":
+        from .rosbag import open_rosbag
+
+        return open_rosbag(path)
+    if kind == "mavlogdump":
+        from .mavlogdump import open_mavlogdump
+
+        return open_mavlogdump(Path(path), data_file(path))
+    return _samples_source(Path(path))
+
+
+def _samples_source(path: Path) -> Source:
+    """A text, npy or npz file as a Source: the three columns :mod:`magfit.io` finds; one magnetometer per
+    value of a column that tells several apart (mavlogdump's ``I``, ``device_id``: :mod:`magfit.io.instances`),
+    each read with ``--sensor I=1``."""
+    from ..io import read_samples, sniff
+    from ..io.instances import sensor_listing, value_text
+
+    fmt = sniff(path)
+    try:
+        listing = sensor_listing(path)
+        table = read_samples(path) if listing is None or len(listing.counts) == 1 else None
+    except DataFileError as error:  # the layout is known, the magnetometer columns are not: say so
+        unknown = Magnetometer(
+            id="columns", description="no magnetometer columns", unit="", n_samples=0, problem=str(error)
+        )
+        return Source(
+            path=path, kind="samples", format=fmt.describe(), time_base="none (rows)", magnetometers=(unknown,)
+        )
+
+    def read(magnetometer: Magnetometer) -> LogSamples:
+        chosen = read_samples(path, sensor=None if magnetometer.id == "columns" else magnetometer.id)
+        notes = (chosen.column_note,) if chosen.column_note else ()
+        times = np.full(len(chosen.samples), np.nan)  # a samples file has no time base
+        return LogSamples(magnetometer, chosen.samples, times, chosen.columns, notes)
+
+    if table is None:  # several magnetometers interleaved: one each, never one cloud
+        assert listing is not None
+        converter = listing.converter
+        ardupilot = converter is not None and converter.name.startswith("ArduPilot") and listing.column == "I"
+        magnetometers = tuple(
+            Magnetometer(
+                id=sensor,
+                description=f"{', '.join(listing.columns)} where {listing.column} = {value_text(value)}"
+                + (f" ({converter.name})" if converter is not None else ""),
+                unit=listing.unit or "",
+                n_samples=listing.counts[sensor],
+                device_id=int(value) if listing.column.lower().endswith("device_id") else None,
+                notes=(converter.note,) if converter is not None and converter.note else (),
+                slot=int(value) if ardupilot else None,  # ArduPilot's I is its compass index
+            )
+            for sensor, value in listing.values.items()
+        )
+        return Source(
+            path=path,
+            kind="samples",
+            format=fmt.describe(),
+            time_base="none (rows)",
+            magnetometers=magnetometers,
+            _reader=read,
+        )
+    columns = ", ".join(str(c) for c in table.columns)
+    note = (f"{table.n_skipped} rows skipped (NaN or inf)",) if table.n_skipped else ()
+    one = next(iter(listing.values.values())) if listing is not None else None  # PX4 sensor_mag: its device_id
+    magnetometer = Magnetometer(
+        id="columns",
+        description=columns + (f" ({table.column_note})" if table.column_note else ""),
+        unit=table.unit or "",
+        n_samples=int(table.samples.shape[0]),
+        notes=note,
+        device_id=int(one) if one is not None and listing and listing.column.lower().endswith("device_id") else None,
+    )
+    return Source(
+        path=path,
+        kind="samples",
+        format=fmt.describe(),
+        time_base="none (rows)",
+        magnetometers=(magnetometer,),
+        _reader=read,
+    )
