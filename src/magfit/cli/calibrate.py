@@ -57,7 +57,6 @@ from ._common import (
     vector,
     warn,
 )
-from ._consistency import print_log_checks
 from ._extras import require
 
 #: Formats whose one file holds every compass of a vehicle (``magfit.export.export_several``). JSON is written
@@ -407,9 +406,9 @@ def calibrate_command(
     """
     from ..io import STDOUT, write_all
     from ..sources import log_kind
-    from .plot import check_figure_path
-
     if plot_path is not None:
+        from .plot import check_figure_path
+
         require("plot", "'magfit calibrate --plot'", ("matplotlib",))  # before the calibration is written
         check_figure_path(plot_path, "'--plot'")
     check_outputs(file, output, plot_path)
@@ -469,7 +468,10 @@ def calibrate_command(
         files.append((plot_path, figure))
     write_all(files)
     _print_all(result, stderr=to_stdout)
-    print_log_checks(result, stderr=to_stdout)
+    if any(compass.magnetometer is not None for compass in result.compasses):  # a log's (imported for logs only)
+        from ._consistency import print_log_checks
+
+        print_log_checks(result, stderr=to_stdout)
     summary = console(stderr=to_stdout)
     for line in [*written, plot_line]:
         if line is not None:

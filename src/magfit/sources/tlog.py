@@ -63,6 +63,8 @@ from .ardupilot import (
     undo_records,
     untrimmed,
 )
+from .detect import TLOG_STAMP_RANGE as _STAMP_RANGE  # (the format sniff: detect.is_tlog)
+from .detect import is_tlog as is_tlog
 from .motion import Motion, Stream, align, euler_quaternions
 from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
 
@@ -181,8 +183,6 @@ _ID_OF = {name: msgid for msgid, (name, _) in _LAYOUTS.items()}
 _ARDUPILOT, _PX4 = 3, 12
 #: MAV_MODE_FLAG_SAFETY_ARMED in HEARTBEAT.base_mode.
 _ARMED = 128
-#: Plausible tlog time stamps: 2000-01-01 to 2100-01-01, in microseconds since 1970.
-_STAMP_RANGE = (946_684_800_000_000, 4_102_444_800_000_000)
 #: A MAVLink time_usec above this (about 31 years) counts from 1970, not from boot (the MAVLink definition:
 #: "the receiving end can infer timestamp format ... by checking for the magnitude of the number").
 _EPOCH_USEC = 1_000_000_000_000_000
@@ -194,30 +194,6 @@ _GRAVITY_MSS = 9.80665
 #: Which priority slot each ArduPilot compass message carries (GCS_Common.cpp: get_field(0), (1), (2)).
 _ARDUPILOT_SLOTS = {"RAW_IMU": 0, "SCALED_IMU2": 1, "SCALED_IMU3": 2}
 _ALSO = ("ATTITUDE", "GPS_RAW_INT", "GLOBAL_POSITION_INT", "PARAM_VALUE", "HEARTBEAT", "HIGHRES_IMU", "SCALED_IMU")
-
-
-def is_tlog(head: bytes) -> bool:
-    """True when ``head`` (a file's first bytes) starts with tlog records: a plausible time stamp, then a
-    MAVLink frame's magic byte, three times in a row (or up to the end of ``head`` when the file is that short,
-    or cut short: the reader says what it finds)."""
-    if len(head) < 10:
-        return False
-    pos, records, first = 0, 0, None
-    while pos + 10 <= len(head) and records < 3:
-        stamp = int.from_bytes(head[pos : pos + 8], "big")
-        if not _STAMP_RANGE[0] <= stamp <= _STAMP_RANGE[1] or (first is not None and abs(stamp - first) > 86_400e6):
-            return False
-        first = stamp if first is None else first
-        magic, length = head[pos + 8], head[pos + 9]
-        if magic == 0xFE:
-            size = length + 8
-        elif magic == 0xFD and pos + 11 <= len(head) and head[pos + 10] <= 1:
-            size = length + 12 + (13 if head[pos + 10] & 1 else 0)
-        else:
-            return False
-        pos += 8 + size
-        records += 1
-    return records == 3 or pos + 10 > len(head)  # or the records run to the end: a short or cut-short file
 
 
 def _magic_bytes(data: NDArray[np.uint8]) -> NDArray[np.int64]:
