@@ -26,8 +26,7 @@ what the readers fill, :mod:`.identity` the vehicle's own identity. The readers,
 from __future__ import annotations
 
 from .detect import log_kind
-from .identity import vehicle_identity
-from .read import open_source
+from .read import open_source, vehicle_identity
 from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position, strided
 
 __all__ = [

@@ -8,20 +8,17 @@
 Other logs (a tlog's system id is 1 on most vehicles) and samples files have none: None.
 
 The readers find it in the pass that reads the compasses (:attr:`magfit.sources.Source.identity`):
-:func:`board_identity` and :func:`ulog_identity` take what they have already read. :func:`vehicle_identity`
-opens a log for it alone.
+:func:`board_identity` and :func:`ulog_identity` take what they have already read;
+:func:`magfit.sources.read.vehicle_identity` opens a log for it alone.
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Iterable, Mapping
-from pathlib import Path
 from typing import Any
 
-from ..errors import MagfitError
-
-__all__ = ["board_identity", "ulog_identity", "vehicle_identity"]
+__all__ = ["board_identity", "ulog_identity"]
 
 _BOARD_ID = re.compile(r"^(\S+) ([0-9A-Fa-f]{8} [0-9A-Fa-f]{8} [0-9A-Fa-f]{8})\s*$")
 #: The boot message is among a log's first MSG messages: so many are looked at.
@@ -47,27 +44,3 @@ def ulog_identity(info: Mapping[str, Any]) -> str | None:
         return None
     hardware = info.get("ver_hw")
     return f"{hardware} {uuid}" if hardware else str(uuid)
-
-
-def vehicle_identity(path: str | Path) -> str | None:
-    """The board and unique id of the flight controller that wrote the log at ``path``, or None.
-
-    Reads the log for it alone; a log already opened has it as ``Source.identity``.
-    """
-    from ..io.sources import data_file
-    from .detect import log_kind
-
-    target = Path(path)
-    kind = log_kind(target)
-    try:
-        if kind == "dataflash":
-            from .dataflash import DataFlashLog, log_identity
-
-            return log_identity(DataFlashLog(target, data_file(target)))
-        if kind == "ulog":
-            from pyulog import ULog
-
-            return ulog_identity(ULog(str(data_file(target)), [], parse_header_only=True).msg_info_dict)
-    except (MagfitError, OSError, ValueError, KeyError, ImportError):
-        return None
-    return None

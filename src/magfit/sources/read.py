@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataFileError
+from ..errors import DataFileError, MagfitError
 from .detect import log_kind
 from .types import LogSamples, Magnetometer, Source
 
-__all__ = ["open_source"]
+__all__ = ["open_source", "vehicle_identity"]
 
 
 def open_source(path: str | os.PathLike[str], *, everything: bool = True) -> Source:
@@ -131,3 +131,28 @@ def _samples_source(path: Path) -> Source:
         magnetometers=(magnetometer,),
         _reader=read,
     )
+
+
+def vehicle_identity(path: str | Path) -> str | None:
+    """The board and unique id of the flight controller that wrote the log at ``path``, or None.
+
+    Reads the log for it alone; a log already opened has it as ``Source.identity``.
+    """
+    from ..io.sources import data_file
+
+    target = Path(path)
+    kind = log_kind(target)
+    try:
+        if kind == "dataflash":
+            from .dataflash import DataFlashLog, log_identity
+
+            return log_identity(DataFlashLog(target, data_file(target)))
+        if kind == "ulog":
+            from pyulog import ULog
+
+            from .identity import ulog_identity
+
+            return ulog_identity(ULog(str(data_file(target)), [], parse_header_only=True).msg_info_dict)
+    except (MagfitError, OSError, ValueError, KeyError, ImportError):
+        return None
+    return None
