@@ -9,7 +9,7 @@ every method to the same samples and scores the fits against the truth; then it 
 in ``../shared/data/real`` and scores them on held-out samples. It writes ``benchmarks/results/accuracy.md``
 (the tables and the targets, PASS/FAIL) and ``accuracy.json`` (every number), headed by the command
 line and the versions. ``--smoke`` runs a tiny grid in seconds (what the test runs). ``--vehicle`` runs
-issue 14's vehicle scenarios instead (attitude-aided, alignment and gyro-aided fits: ``accuracy_vehicle.py``),
+the vehicle scenarios instead (attitude-aided, alignment and gyro-aided fits: ``accuracy_vehicle.py``),
 into ``results/vehicle``.
 
 Metrics (each per trial, then aggregated over the seeded trials of a case)
@@ -288,7 +288,7 @@ def full_grid(trials_scale: float = 1.0) -> list[Case]:
 
     Noise sweep 0.5, 2, 5, 10 % at N = 10 000; N sweep 100 … 100 000 at 10 % and at 2 % noise; the special
     scenarios (restricted attitude, 2 % spikes, the paper's steel and smartphone cases) at N = 1000, and
-    issue 10's level flight with a drifting field at N = 10 000 (:func:`flight_case`). Trial counts fall
+    the level flight with a drifting field at N = 10 000 (:func:`flight_case`). Trial counts fall
     with N so that each size costs about the same.
     """
     trials = {100: 100, 1000: 50, 10_000: 24, 100_000: 14}
@@ -332,7 +332,7 @@ def full_grid(trials_scale: float = 1.0) -> list[Case]:
 
 
 def flight_case(n: int = 10_000, trials: int = 12, heldout: int = HELDOUT_SAMPLES) -> Case:
-    """Issue 10's vehicle case: level flight with turns (roll, pitch ±15°), the field drifting ±0.5 %.
+    """The vehicle case: level flight with turns (roll, pitch ±15°), the field drifting ±0.5 %.
 
     A new mild sensor each trial (:func:`mild_distortion`), noise 0.5 % of the field. The drift is real
     model error: the BIC alone then prefers the full model, whose extra parameters fit the drift.
@@ -636,7 +636,7 @@ def run_case(
                 outcome.verdict, outcome.verdict_reason = verdict_of(calibration, error if name in NOT_FORCED else "")
             outcome.seconds = seconds
             outcomes[name].append(outcome)
-        # What the raw readings give, as the yardstick a calibration must beat (issue 10).
+        # What the raw readings give, as the yardstick a calibration must beat.
         uncalibrated = magfit.Calibration(UNCALIBRATED, np.zeros(3), np.eye(3), simulation.field_strength)
         baseline.append(Outcome(heading_deg=heading_error_deg(uncalibrated, simulation)))
     outcomes[UNCALIBRATED] = baseline
@@ -822,7 +822,7 @@ def check_targets(cases: Sequence[Case], results: Mapping[str, Mapping[str, Sequ
         detail = f"{comparison.detail}; weak direction named in {named_count}/{len(named)} fitted trials"
         detail += f" (e.g. {example})"
         targets.append(Target(what, _status(ok), detail, items=comparison.items))
-    # 6b. auto on level flight with a drifting field (issue 10, item 2).
+    # 6b. auto on level flight with a drifting field .
     for case in (c for c in cases if c.orientations == "flight"):
         what = f"{case.name}: auto ≤ 1.2 × best of sphere, diag, full (forced), and per trial ≤ no calibration"
         if not have(case.name, "auto", "sphere", "diag", UNCALIBRATED):
@@ -1404,7 +1404,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--vehicle",
         action="store_true",
-        help="issue 14's vehicle scenarios instead (attitude-aided, alignment, gyro-aided; accuracy_vehicle.py); "
+        help="the vehicle scenarios instead (attitude-aided, alignment, gyro-aided; accuracy_vehicle.py); "
         "--output defaults to results/vehicle",
     )
     parser.add_argument(
@@ -1446,7 +1446,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main_vehicle(args: argparse.Namespace, command: str, parser: argparse.ArgumentParser) -> int:
-    """``--vehicle``: issue 14's scenarios (the sibling module ``accuracy_vehicle``), written to their own folder."""
+    """``--vehicle``: the vehicle scenarios (the sibling module ``accuracy_vehicle``), written to their own folder."""
     import accuracy_vehicle as vehicle  # the sibling module (both import _common.py, not each other)
 
     cases = vehicle.vehicle_smoke_grid() if args.smoke else vehicle.vehicle_grid(args.trials_scale)

@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/biglogs.py                 # tlog, DataFlash and ULog of 1 GB, a few minutes
     .venv/bin/python benchmarks/biglogs.py --mb 200 --only tlog
 
-Issue 24's target: a 1 GB log read in at most about 300 MB. Each big log is built in a temporary folder by
+The target: a 1 GB log read in at most about 300 MB. Each big log is built in a temporary folder by
 repeating a real log's records (deleted after; never committed), then read in a fresh interpreter as
 ``calibrate`` reads it (``open_source(path, everything=False)`` and ``Source.read`` of every usable compass,
 at most 500 000 samples each: the default), its peak resident memory (``VmHWM``) and time beside a plain read
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         f"`python benchmarks/biglogs.py --mb {args.mb:g}`; {os.cpu_count()} cores, load average {load}; one run "
         "each, in a fresh interpreter.",
         "",
-        f"Target (issue 24): a 1 GB log read in at most about {TARGET_MB:.0f} MB. **{verdict}** (worst peak "
+        f"Target: a 1 GB log read in at most about {TARGET_MB:.0f} MB. **{verdict}** (worst peak "
         f"{worst:.0f} MB).",
         "",
         "| kind | file | MB | copies | samples read | s | × bytes' read | peak MB | import MB |",

@@ -169,7 +169,7 @@ def main() -> int:
         )
     out += [
         "",
-        "Targets (issue 15): fitting <= 0.10 at 100 Hz; at 1 kHz no sample dropped and >= 5 view refreshes a second.",
+        "Targets: fitting <= 0.10 at 100 Hz; at 1 kHz no sample dropped and >= 5 view refreshes a second.",
         "",
         "## One `auto` fit (with its diagnostics) against the size of the even subset",
         "",

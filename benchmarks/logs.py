@@ -11,7 +11,7 @@ script ``magfit.py`` that, once in ``.venv/bin``, shadows the magfit package for
     .venv/bin/pip install --target /tmp/pymavlink pymavlink
     PYTHONPATH=/tmp/pymavlink .venv/bin/python benchmarks/logs.py
 
-Issue 13's target: reading a log into samples costs at most 2x what its library alone needs to read the same
+The target: reading a log into samples costs at most 2x what its library alone needs to read the same
 topics. Both sides are timed in the same run, taking turns, best of ``--repeat`` (the least disturbed):
 
 - **ULog**: magfit (``magfit.sources.open_source(path, everything=False)``, then ``Source.read`` of every
@@ -28,7 +28,7 @@ and, without ``--small``, larger synthetic logs written here by the test suite's
 (``tests/test_sources_ulog.py``, ``tests/test_sources_dataflash.py``). Results:
 ``benchmarks/results/logs.md`` and ``logs.json``.
 
-``--big`` (issue 24's target: a 1 GB log read in about 300 MB at most): a DataFlash log and a ULog of 1 GB
+``--big`` (the target: a 1 GB log read in about 300 MB at most): a DataFlash log and a ULog of 1 GB
 built in a temporary folder by repeating a real log's data messages (time stamps moved on each copy), read in
 a fresh interpreter each as ``calibrate`` reads them, their peak resident memory and time beside a plain read
 of the file's bytes in the same run. Results: ``benchmarks/results/logs-big.md`` and ``.json``.
@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
 RESULTS = ROOT / "benchmarks" / "results"
-#: Issue 13: at most this many times the library's own reading.
+#: At most this many times the library's own reading.
 TARGET = 2.0
 
 
@@ -339,7 +339,7 @@ def write_big(rows: list[dict[str, Any]], output: Path) -> str:
         f"{_dt.date.today().isoformat()}, magfit {__version__}, Python {platform.python_version()}, "
         f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; one run each, in a fresh interpreter.",
         "",
-        f"Target (issue 24): a 1 GB log read in at most about {BIG_TARGET_MB:.0f} MB. **{verdict}** "
+        f"Target: a 1 GB log read in at most about {BIG_TARGET_MB:.0f} MB. **{verdict}** "
         f"(peaks {', '.join(str(round(r['peak_mb'])) + ' MB' for r in full)}).",
         "",
         "| file | MB | reader | max_samples | samples | s | × bytes' read | peak MB | import MB |",

@@ -26,7 +26,7 @@ SYMMETRY_TOLERANCE = 1e-9
 #: Largest angle (degrees) between a vehicle-frame calibration's rotation and a firmware's fixed rotation for
 #: the fixed one to stand in for it. The residual turns every corrected vector by that angle, so a heading
 #: by at most as much: 0.5 deg is below the heading error magfit's fits leave in its level-flight benchmark
-#: (auto: 0.85 deg RMS, benchmarks/README.md) and equals the alignment accuracy issue 14 asks of a vector fit
+#: (auto: 0.85 deg RMS, benchmarks/README.md) and equals the alignment accuracy asked of a vector fit
 #: at 1 deg of attitude noise, so a fixed rotation that close loses nothing the data could vouch for.
 ROTATION_TOLERANCE_DEG = 0.5
 

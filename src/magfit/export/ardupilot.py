@@ -37,7 +37,7 @@ in AP_Compass.cpp's parameter documentation. ArduPilot itself accepts it, but Mi
 the documented range when a value is loaded or edited (ConfigRawParams.cs) and asks "COMPASS_OFS_X
 value is out of range. Do you want to continue?"; answering No keeps the old value.
 
-**Several compasses** (issue 13). ArduPilot calibrates up to three: slot 0 is ``COMPASS_OFS_*``,
+**Several compasses.** ArduPilot calibrates up to three: slot 0 is ``COMPASS_OFS_*``,
 ``COMPASS_DIA_*``, ``COMPASS_ODI_*``, ``COMPASS_SCALE``, ``COMPASS_ORIENT``; slot 1 the same names with 2
 (``COMPASS_OFS2_X``, ``COMPASS_SCALE2``), slot 2 with 3. The slot and the device id come from the
 ``slot=`` / ``device_id=`` options or from ``details["sensor"]`` (filled from a flight log);

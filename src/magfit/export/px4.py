@@ -49,7 +49,7 @@ The file is QGroundControl's parameter file format: ``#`` comments, then tab-sep
 vehicle ``system_id`` (1 unless given: older QGroundControl refuses a file whose id differs from the
 vehicle's) and component 1.
 
-**Several magnetometers** (issue 13): PX4 keeps four calibration slots, ``CAL_MAG0_*`` .. ``CAL_MAG3_*``,
+**Several magnetometers**: PX4 keeps four calibration slots, ``CAL_MAG0_*`` .. ``CAL_MAG3_*``,
 and applies slot n to the sensor whose device id is ``CAL_MAGn_ID`` (``FindCalibrationIndex`` in
 src/lib/sensor_calibration/Utilities.cpp, called by ``Magnetometer::ParametersUpdate``). The slot and the
 device id come from the ``slot=`` / ``device_id=`` options or from ``details["sensor"]`` (filled from the

@@ -226,7 +226,7 @@ def export_several(
     expected_field: float | None = None,
     allow_unit_mismatch: bool = False,
 ) -> str:
-    """One file holding every compass of a vehicle (issue 13): ``ardupilot``, ``px4`` or ``json``.
+    """One file holding every compass of a vehicle: ``ardupilot``, ``px4`` or ``json``.
 
     Parameters
     ----------
