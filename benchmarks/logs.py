@@ -132,7 +132,7 @@ def synthetic_logs(folder: Path, n: int) -> list[Path]:
 
 # --- A 1 GB log: memory and time (``--big``) ---------------------------------------------------------------
 
-#: Issue 24's bound: a 1 GB log read in at most about this much memory (peak resident set, MB).
+#: The bound: a 1 GB log read in at most about this much memory (peak resident set, MB).
 BIG_TARGET_MB = 300.0
 #: The real logs repeated (tests/data: their READMEs give the origin and licence).
 BIG_DATAFLASH = DATA / "ardupilot_real" / "copter33_log171_trimmed.bin"
@@ -454,7 +454,7 @@ def write_results(rows: list[dict[str, Any]], args: argparse.Namespace, have_pym
         f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; best of {args.repeat}, both sides in the "
         "same run taking turns.",
         "",
-        f"Target (issue 13): magfit's reading at most {TARGET:g}x the library's own reading of the same topics. "
+        f"Target: magfit's reading at most {TARGET:g}x the library's own reading of the same topics. "
         f"**{verdict}** (worst ratio {worst:.2f}).",
         "",
         "| file | MB | samples | magfit (s) | reference | reference (s) | ratio |",

@@ -18,7 +18,7 @@ Four parts, each a ratio to a baseline timed in the same run (absolute times dep
    sizes, each size in its own process with a one-minute limit (run from ``benchmarks/.peers-venv``,
    see ``setup_peers.sh``); a size a peer cannot finish, or crashes on, is reported with the reason.
 
-5. Issue 10's two ratios, both sides timed in the same run, taking turns (best of ``--rounds``):
+5. The two headline ratios, both sides timed in the same run, taking turns (best of ``--rounds``):
    ``magfit.fit(samples, "auto")`` against ``magfit.fit(samples, "ellipsoid")`` on the same 10 000 samples,
    default diagnostics (target at most 3x: ``auto`` fast enough to refit live), and ``magfit calibrate``
    (default method) on a 300-row CSV against ``python -c "import magfit.cli"``, both as processes (target
@@ -83,8 +83,8 @@ TARGETS = {
 }
 #: The parts, in the order they run (``--parts``).
 PARTS = ("fit", "ml", "cli", "peers", "ratios", "memory")
-#: Sizes of issue 10's ratios: samples of the in-memory fits, rows of the small CSV; and the larger sizes at
-#: which ``auto`` is also timed against ``ellipsoid`` (issue 24).
+#: Sizes of the headline ratios: samples of the in-memory fits, rows of the small CSV; and the larger sizes at
+#: which ``auto`` is also timed against ``ellipsoid``.
 N_RATIO_FIT = 10_000
 N_RATIO_CSV = 300
 N_RATIO_LARGE = (100_000, 1_000_000)
@@ -413,7 +413,7 @@ def part_ml(n: int, repeat: int, samples: NDArray[np.float64]) -> dict[str, Any]
     }
 
 
-# ---------------------------------------------------------------------- part 5: issue 10's ratios
+# ---------------------------------------------------------------------- part 5: the headline ratios
 
 
 def part_ratios(rounds: int, workdir: Path) -> dict[str, Any]:
@@ -785,13 +785,13 @@ def report(results: dict[str, Any]) -> str:
 
 
 def _ratios_section(ratios: dict[str, Any] | None) -> list[str]:
-    """Part 5: issue 10's two ratios with their targets."""
+    """Part 5: the two headline ratios with their targets."""
     if not ratios:
         return []
     fit = ratios["fit_seconds"]
     auto_ok = ratios["auto_vs_ellipsoid"] <= TARGETS["auto_vs_ellipsoid"]
     lines = [
-        "## 5. Issue 10's ratios (fast enough to refit live)",
+        "## 5. The headline ratios (fast enough to refit live)",
         "",
         f"Both sides of each ratio take turns, {ratios['rounds']} rounds, best (min) of each: the machine is "
         "shared, and the least disturbed run is the one that measures the program.",
