@@ -68,7 +68,7 @@ def main() -> None:
             calibration = magfit.fit(x, "ellipsoid", allow_undetermined=True)
             errors.append(np.asarray(calibration.offset) - offset)
             sigmas.append(np.asarray(calibration.diagnostics.uncertainty.offset_sigma))
-            verdicts.append(calibration.details["support"]["verdict"])
+            verdicts.append(calibration.support.verdict if calibration.support is not None else "none")
         error, sigma = np.array(errors), np.array(sigmas)
         z = error / sigma
         spread = error.std(axis=0, ddof=1)

@@ -56,7 +56,8 @@ def measure(n: int, repeat: int) -> dict[str, float | str]:
             times["gyro"],
             _least(lambda: magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s), 1),
         )
-    return {**times, "ratio": times["gyro"] / times["ellipsoid"], "verdict": str(gyro.details["support"]["verdict"])}
+    verdict = gyro.support.verdict if gyro.support is not None else "none"
+    return {**times, "ratio": times["gyro"] / times["ellipsoid"], "verdict": verdict}
 
 
 def main(argv: list[str] | None = None) -> int:

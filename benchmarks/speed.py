@@ -281,8 +281,8 @@ def part_fit(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
         "fit_tracemalloc_mb": memory,
         "fit_rss_extra_mb": rss,
         "offset_error": float(np.linalg.norm(calibration.offset - truth.offset)),
-        "verdict": calibration.details["support"]["verdict"],
-        "verdict_no_diagnostics": outputs["fit_quiet"].details["support"]["verdict"],
+        "verdict": _verdict(calibration),
+        "verdict_no_diagnostics": _verdict(outputs["fit_quiet"]),
     }
 
 
@@ -955,6 +955,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.output.with_suffix(".json").write_text(json.dumps(results, indent=2, default=float) + "\n", encoding="utf-8")
     print(text)
     return 0
+
+
+def _verdict(calibration: magfit.Calibration) -> str:
+    return calibration.support.verdict if calibration.support is not None else "none"
 
 
 if __name__ == "__main__":

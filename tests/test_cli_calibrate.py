@@ -295,7 +295,7 @@ def test_system_id_goes_into_the_px4_file_and_nowhere_else(tmp_path: Path) -> No
 
 
 def test_a_self_judged_method_prints_its_weaknesses_as_warnings() -> None:
-    # gyro judges itself (details["support"], no report of its own): its diagnostics carry that verdict, and the
+    # gyro judges itself (calibration.support, no report of its own): its diagnostics carry that verdict, and the
     # summary's "weak: n weakness(es), in the warnings above" must have those warnings above it.
     from magfit.cli.calibrate import _fit_warnings, _verdict
     from magfit.vehicle import simulate_vehicle

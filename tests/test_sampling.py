@@ -154,6 +154,11 @@ def test_streaming_keeps_exactly_what_the_whole_array_keeps(chunk: int, budget: 
     sampler = EvenSampler(budget, centre=centre, cells=100, seed=9)
     for start in range(0, len(samples), chunk):
         sampler.update(samples[start : start + chunk])
+    filled = int(np.count_nonzero(sampler._counts))
+    if budget < filled:  # fewer than one per filled cell: refused, not an empty subsample
+        with pytest.raises(OptionError, match="fewer than the .* cells of directions the samples fill"):
+            even_subsample(samples, max_samples=budget, centre=centre, cells=100, seed=9)
+        return
     expected = even_subsample(samples, max_samples=budget, centre=centre, cells=100, seed=9)
     np.testing.assert_array_equal(sampler.indices, expected)
     np.testing.assert_array_equal(sampler.samples, samples[expected])

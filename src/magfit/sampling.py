@@ -32,6 +32,7 @@ from ._validation import as_samples, check_support
 from .errors import CalibrationError, OptionError, SampleError
 from .geometry.cells import partition
 from .geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
+from .remedy import option
 
 if TYPE_CHECKING:
     from .statistics import Statistics
@@ -302,7 +303,20 @@ def even_subsample(
         counts = np.bincount(cell, minlength=sampler.cells.count)
         median = math.ceil(float(np.median(counts[counts > 0])))
         sampler.max_samples = sampler._cap = int(np.minimum(counts, median).sum())
-    return sampler._offer(array, cell, np.asarray(sampler._rng.random(array.shape[0]))).indices
+    return _kept(sampler._offer(array, cell, np.asarray(sampler._rng.random(array.shape[0])))).indices
+
+
+def _kept(sampler: EvenSampler) -> EvenSampler:
+    """``sampler``, unless its budget was below the cells of directions the samples fill: an even subsample keeps
+    as many from every such cell, at least one, and with fewer it would keep none."""
+    filled = int(np.count_nonzero(sampler._counts))
+    if filled and sampler._cap < 1:
+        raise OptionError(
+            f"{option('max_samples', sampler.max_samples)} is fewer than the {filled} cells of directions the samples "
+            f"fill, from each of which an even subsample keeps at least one: give at least "
+            f"{option('max_samples', filled)}"
+        )
+    return sampler
 
 
 def even_subsample_chunks(
@@ -353,7 +367,7 @@ def even_subsample_chunks(
         sampler.max_samples = sampler._cap = budget if max_samples is None else min(budget, max_samples)
     for chunk in chunks():
         sampler.update(chunk)
-    return sampler
+    return _kept(sampler)
 
 
 def direction_frame(statistics: Statistics) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

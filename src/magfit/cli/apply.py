@@ -124,6 +124,7 @@ def apply_command(
         refuse_overwriting_input(output, [file, calibration_file])
     check_output(output)
     calibration = read_calibration(calibration_file)
+    _warn_verdict(calibration, calibration_file)
     calibration = _motor_choice(calibration, calibration_file, regressor, no_motor)
     if is_log(file):
         if regressor is not None:
@@ -147,8 +148,10 @@ def apply_command(
         ) from None
     values, motor_note = None, ""
     if calibration.motor is not None:
-        values, label = column_regressor(file, calibration.motor, _column(regressor), held_by=str(calibration_file),
-                                         cost=omission_text(calibration))  # fmt: skip
+        values, label = column_regressor(
+            file, calibration.motor, _column(regressor), held_by=str(calibration_file),
+            cost=omission_text(calibration), magnetometer=reader.column_indices,
+        )  # fmt: skip
         found = "--regressor" if regressor is not None else "found by name"
         motor_note = f"; the motors' field with the {calibration.motor.regressor} of {label} ({found})"
     written = write_calibrated(file, calibration, output, columns=chosen, normalized=normalized, regressor=values)
@@ -188,6 +191,18 @@ def _motor_choice(
              f"{omission_text(calibration)}")  # fmt: skip
         return replace(calibration, motor=None)
     return calibration
+
+
+def _warn_verdict(calibration: Calibration, calibration_file: Path) -> None:
+    """A calibration the samples did not support (returned forced) or supported with weaknesses is applied, but
+    not without a word: the verdict it was saved with, repeated where it is used."""
+    support = calibration.support
+    if support is None or support.verdict == "supported":
+        return
+    if support.forced or support.verdict == "refused":
+        warn(f"{calibration_file}: NOT SUPPORTED by its samples (returned with --force): {'; '.join(support.refusals)}")
+    for weakness in support.weaknesses:
+        warn(f"{calibration_file}: weak: {weakness}")
 
 
 def _column(regressor: str | None) -> str | int | None:

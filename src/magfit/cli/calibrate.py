@@ -279,7 +279,8 @@ def check_outputs(file: Path, output: Path | None, plot_path: Path | None) -> No
     default=None,
     help="Most samples an iterative method (ml, robust, auto) holds in memory; a larger file is fitted on an "
     "even subsample of this many; a flight log's compass with more records is read on a regular stride of "
-    "them (any method). Default: 500 000, fewer when memory is short.",
+    "them (any method). At least 400 for a samples file (one per cell of directions). Default: 500 000, fewer "
+    "when memory is short.",
 )
 @click.option(
     "--system-id",

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -84,7 +84,13 @@ def log_regressor(
 
 
 def column_regressor(
-    path: str | os.PathLike[str], term: MotorTerm, column: str | int | None, *, held_by: str, cost: str
+    path: str | os.PathLike[str],
+    term: MotorTerm,
+    column: str | int | None,
+    *,
+    held_by: str,
+    cost: str,
+    magnetometer: Sequence[int] = (),
 ) -> tuple[NDArray[np.float64], str]:
     """The regressor ``term`` needs from a samples file's column (named or 0-based, or found by its name in
     :data:`REGRESSOR_COLUMNS`), one value per data row in the file's order (NaN where a cell is empty), and
@@ -123,6 +129,14 @@ def column_regressor(
     else:
         index = _match_name(file, column, labels, fmt.header is not None)
     time = find_stream_columns(fmt.header).get("time") if fmt.header is not None else None
+    is_time = time is not None and index in time.indices
+    taken = "one of the magnetometer's" if index in magnetometer else "the time" if is_time else ""
+    if taken:  # the field or the clock taken for the current: a calibration silently wrong
+        raise DataFileError(
+            f"{path}: the {term.regressor} column {labels[index]!r} is {taken} column: name the {term.regressor}'s "
+            f"own column with --regressor COLUMN, or leave the term out (--no-motor: {cost})",
+            codes=("motor_no_regressor",),
+        )
     wanted = {"regressor": [index], **({"time": list(time.indices)} if time is not None else {})}
     read = read_stream_columns(file, fmt, wanted)
     values = read["regressor"][:, 0]
