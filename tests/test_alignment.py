@@ -342,7 +342,7 @@ def test_cli_says_how_to_give_a_calibration_when_its_own_fit_is_refused(tmp_path
     status, _, err = _run(capsys, path, "--inclination", "64")
     assert status == 1 and "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert "the magnitude-only calibration the alignment starts from could not be fitted" in err
-    assert err.strip().endswith("and give it with --calibration")
+    assert err.strip().endswith("and give it with --calibration cal.json")
 
 
 def _boat_csv(tmp_path, mounting):

@@ -268,7 +268,7 @@ def test_a_bag_as_a_source(bags: dict[str, Path], simulation: magfit.Simulation)
     np.testing.assert_allclose(read.samples, _tesla(simulation) * 1e6, rtol=1e-15)  # 100 µT per simulated unit
     np.testing.assert_allclose(read.time_s, _expected_times(), rtol=0, atol=1e-6)
     assert any("/imu/data (sensor_msgs/Imu, 600)" in line for line in source.other)
-    with pytest.raises(DataFileError, match="choose one with --sensor"):
+    with pytest.raises(DataFileError, match="choose one with sensor='ID'"):
         source.read()  # two compasses: the user chooses
 
 

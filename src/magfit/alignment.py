@@ -66,6 +66,7 @@ from ._validation import check_inclination
 from .errors import CalibrationError, OptionError, SampleError
 from .findings import Reason
 from .gravity import ACCEL_TOLERANCE, MAX_RATE_DPS, MAX_TILT_RATE_DPS, moving_mean, still_samples
+from .remedy import option
 from .rotations import (
     FIRMWARES,
     StandardRotation,
@@ -489,14 +490,15 @@ def align(
                 f"the inclination is not determined: fitted {inclination:.1f}° ± {inclination_sigma:.1f}°, but "
                 f"{math.degrees(unbiased):.1f}° with the residual taken as a dip angle (the samples leave the dip and "
                 "a tilt of the mount about magnetic east nearly interchangeable: a vehicle on one heading); give "
-                "the inclination (the World Magnetic Model at your place: --location)",
+                f"the inclination (the World Magnetic Model at your place: {option('location', 'LAT,LON')})",
                 "inclination",
                 (("inclination_deg", "the World Magnetic Model's"),),
             ))  # fmt: skip
         elif inclination_sigma > INCLINATION_UNDETERMINED_DEG:
             refusals.append(
                 f"the inclination is not determined (fitted {inclination:.1f}° ± {inclination_sigma:.0f}°): "
-                "record more tilt, or give the inclination (the World Magnetic Model at your place: --location)"
+                "record more tilt, or give the inclination (the World Magnetic Model at your place: "
+                f"{option('location', 'LAT,LON')})"
             )
     refusals += _judge_alternatives(down, mhat, solutions, residuals, inflation, direction_noise, search_mirrors)
     if not fit_s and inclination_deg is not None:

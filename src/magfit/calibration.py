@@ -51,6 +51,7 @@ from .facts import (
 )
 from .findings import Support
 from .motorterm import MotorTerm
+from .remedy import option
 
 if TYPE_CHECKING:
     from .findings import Diagnostics
@@ -270,7 +271,7 @@ class Calibration:
             raise SampleError(
                 f"this calibration holds the motors' field (the {self.motor.regressor}): correcting a sample needs the "
                 f"{self.motor.regressor} at that sample (Calibration.apply(raw, regressor=...) in Python); for a "
-                "calibration without the term, calibrate again with motor='none' (--motor none)",
+                f"calibration without the term, calibrate again with {option('motor', 'none')}",
                 remedy=(("motor", "none"),),
             )
         values = np.asarray(regressor, dtype=np.float64)

@@ -295,8 +295,9 @@ def compare_fitted(fitted: float, unit: str, field: Field, *, tolerance: float =
     )
     for other in ("T", "mT", "uT", "nT", "G", "mG"):
         if other != get_unit(unit).name and abs(fitted / field.total_in(other) - 1.0) <= tolerance:
-            return text + f"the samples look like {other}, not {unit} (check --unit)"
+            return text + f"the samples look like {other}, not {unit} (check {option('unit', unit)})"
     return text + (
         "likely causes: steel or magnets near the sensor while recording (indoors, a vehicle, a desk), a sensor range "
-        "or gain other than the one assumed, or a wrong --location or --date"
+        f"or gain other than the one assumed, or a wrong {option('location', 'LAT,LON')} or "
+        f"{option('date', 'YYYY-MM-DD')}"
     )

@@ -18,6 +18,7 @@ from dataclasses import replace
 from ..calibration import Calibration
 from ..errors import CalibrationError
 from ..findings import Diagnostics, Reason, Support
+from ..remedy import option
 
 __all__ = ["settle", "starting_weakness", "with_reasons"]
 
@@ -85,6 +86,6 @@ def starting_weakness(starting: Calibration) -> Reason | None:
         f"the calibration it starts from ({starting.method}) {said}"
         + (f" ({first[0]})" if first else "")
         + ": its error in the field's vertical part turns the dip angles, which the one-sigma above does not "
-        "count; calibrate with a tumble first and give it with --calibration",
+        f"count; calibrate with a tumble first and give it with {option('calibration', 'cal.json')}",
         first[0].code if first else "weakly_determined",
     )

@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..errors import ExportError
+from ..remedy import option
 from ._common import float32_text
 from ._heading import ASSUMPTION, heading_error_deg
 
@@ -71,7 +72,7 @@ def refuse_motor(calibration: Calibration, format: str) -> None:
     raise ExportError(
         f"the {format} format has no place for the motors' field ({term.regressor}): leaving it out costs a heading "
         f"error of up to {omission_deg(calibration):.1f} deg at {at} ({ASSUMPTION}); export to ardupilot, px4, c or "
-        "json, or calibrate with motor='none' to fit without the term",
+        f"json, or calibrate with {option('motor', 'none')} to fit without the term",
         codes=("motor_not_exportable",),
         remedy=(("motor", "none"),),
     )

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import OptionError
+from ..remedy import option
 from .columns import normalise_name
 from .layout import FileFormat, pandas_module, pandas_options
 from .selection import _match_name
@@ -129,7 +130,7 @@ def resolve_stream(path: Path, fmt: FileFormat, stream: str, given: Sequence[str
     if len(items) not in sizes:
         wanted = " or ".join(str(size) for size in sizes)
         raise OptionError(
-            f"{stream}=[...] takes {wanted} columns (names or 0-based numbers), got {len(items)}: {items}"
+            f"{option(stream, '...')} takes {wanted} columns (names or 0-based numbers), got {len(items)}: {items}"
         )
     labels = [fmt.column_label(i) for i in range(fmt.n_columns)]
     positions = []

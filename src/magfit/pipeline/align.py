@@ -28,6 +28,7 @@ from ..fit import fit
 from ..geomag import field_at
 from ..io.layout import sniff
 from ..io.readers import read_samples
+from ..remedy import option, options
 from ..rotations import euler_angles, polar_decomposition
 
 __all__ = ["ACCEL_COLUMNS", "SECONDS", "FileAlignment", "Recording", "align_file", "read_recording"]
@@ -136,8 +137,8 @@ def _read_samples_file(
     if accel_columns is None:
         raise DataFileError(
             f"{path}: no accelerometer columns found (ax/ay/az, accel_x ..., imu_ax ...); name them with "
-            "--accel-columns AX,AY,AZ, or give the vehicle's attitude and the reference field instead (--attitude "
-            "ROLL,PITCH,YAW --reference N,E,D: the rotation from the vector fit)"
+            f"{option('accel_columns', 'AX,AY,AZ')}, or give the vehicle's attitude and the reference field instead "
+            f"({options([('attitude', 'ROLL,PITCH,YAW'), ('reference', 'N,E,D')])}: the rotation from the vector fit)"
         )
     mag = read_samples(path, columns=columns, nonfinite="error")
     accel = read_samples(path, columns=accel_columns, nonfinite="error").samples
@@ -156,7 +157,7 @@ def _read_samples_file(
         if step >= 1.0:  # a 1 Hz magnetometer is rare; milliseconds read as seconds are not
             warnings.append(
                 f"{path}: the time column {time_column} steps by {step:g} s between samples: if it counts "
-                "milliseconds or microseconds, say so with --time-unit ms (or us); the rate gate uses it"
+                f"milliseconds or microseconds, say so with {option('time_unit', 'ms')} (or us); the rate gate uses it"
             )
     described = f"{path} (magnetometer {', '.join(mag.columns)}; accelerometer {', '.join(map(str, accel_columns))}"
     if gyro_columns is not None:
@@ -222,7 +223,8 @@ def starting_calibration(recording: Recording, inclination: float | None) -> Cal
     except CalibrationError as error:  # its advice names fit's options, which align does not take
         raise CalibrationError(
             f"the magnitude-only calibration the alignment starts from could not be fitted ({error}); "
-            "calibrate first (magfit calibrate FILE --method ... -o cal.json) and give it with --calibration"
+            f"calibrate first (magfit calibrate FILE --method ... -o cal.json) and give it with "
+            f"{option('calibration', 'cal.json')}"
         ) from None
 
 

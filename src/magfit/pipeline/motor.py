@@ -23,6 +23,7 @@ from ..errors import CalibrationError, DataFileError, OptionError
 from ..findings import Reason
 from ..motor import MOTOR_CHOICES, MotorFit, fit_motor, with_motor
 from ..motorterm import MotorTerm
+from ..remedy import option
 from ..sources import LogSamples, Source
 from ..sources.power import Power, Signal, read_power
 
@@ -221,7 +222,7 @@ def motor_stage(
         if motor != "auto":
             raise OptionError(
                 f"{where}: motor={motor!r}, but the log holds no {motor} magfit reads ({_WANTED[motor]}); "
-                "give motor='auto' or 'none'",
+                f"give {option('motor', 'auto')} or {option('motor', 'none')}",
                 codes=("motor_no_regressor",),
             )
         return unchanged

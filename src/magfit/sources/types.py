@@ -195,7 +195,7 @@ class Source:
         ids = ", ".join(m.id for m in usable)
         raise DataFileError(
             f"{self.path}: holds {len(usable)} magnetometers that can be fitted ({listing}); choose one with "
-            f"--sensor ID (one of {ids})"
+            f"{option('sensor', 'ID')} (one of {ids})"
         )
 
     def read(self, sensor: str | None = None, *, max_samples: int | None = None) -> LogSamples:
