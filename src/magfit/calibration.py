@@ -463,8 +463,8 @@ class Calibration:
                 f"calibration schema version 1 keeps its facts in 'details', not {', '.join(map(repr, typed))}; "
                 "re-run the calibration"
             )
+        facts = _read_facts(typed)
         try:
-            facts = _read_facts(typed)
             calibration = cls(
                 method=method,
                 offset=offset,
@@ -562,20 +562,29 @@ def _read_facts(typed: Mapping[str, Any]) -> dict[str, Any]:
     """The typed facts of a version-2 file (the inverse of :func:`_facts`); raises on a malformed entry."""
     facts: dict[str, Any] = {}
     for name, value in typed.items():
-        if name == "model":
-            if value not in MODEL_KINDS:
-                raise ValueError(f"'model' must be one of {', '.join(MODEL_KINDS)}, got {_shown(value)}")
-            facts[name] = value
-            continue
-        if not isinstance(value, Mapping):
-            raise TypeError(f"{name!r} must be an object, got {type(value).__name__}")
-        if name == "support":
-            facts[name] = Support.from_dict(dict(value))
-        elif name == "options":
-            facts[name] = dict(value)
-        else:
-            facts[name] = _TYPED[name].from_dict(value)
+        try:
+            facts[name] = _read_fact(name, value)
+        except (TypeError, ValueError, KeyError, AttributeError, IndexError, OverflowError) as error:
+            raise DataFileError(
+                f"calibration {name!r} is malformed ({type(error).__name__}: {error}); re-run the calibration, or "
+                f"delete the entry {name!r} from the file to read the rest without it"
+            ) from None
     return facts
+
+
+def _read_fact(name: str, value: Any) -> Any:
+    """One typed fact of a version-2 file, from its JSON form."""
+    if name == "model":
+        if value not in MODEL_KINDS:
+            raise ValueError(f"'model' must be one of {', '.join(MODEL_KINDS)}, got {_shown(value)}")
+        return value
+    if not isinstance(value, Mapping):
+        raise TypeError(f"{name!r} must be an object, got {type(value).__name__}")
+    if name == "support":
+        return Support.from_dict(dict(value))
+    if name == "options":
+        return dict(value)
+    return _TYPED[name].from_dict(value)
 
 
 def _check_finite_details(details: Any, root: str = "details") -> None:

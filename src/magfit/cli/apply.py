@@ -32,7 +32,8 @@ def read_calibration(path: Path) -> Calibration:
     try:
         return Calibration.from_json(text)
     except MagfitError as error:
-        raise DataFileError(f"{path}: {error}; write it with 'magfit calibrate FILE -o {path.name}'") from None
+        written_by = "a calibration is written by 'magfit calibrate FILE -o cal.json'"
+        raise DataFileError(f"{path}: {error} ({written_by})") from None
 
 
 def remembered_columns(calibration: Calibration, fmt: FileFormat) -> list[str | int] | None:
