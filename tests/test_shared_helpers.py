@@ -89,3 +89,20 @@ def test_align_and_gyro_refuse_a_vertical_field_alike() -> None:
     with pytest.raises(OptionError, match="within ±90") as by_gyro:
         magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel, inclination_deg=90.0)
     assert str(by_align.value) == str(by_gyro.value)
+
+
+def test_a_method_function_called_with_an_array_is_one_line() -> None:
+    """fit_gyro and fit_vector are exported by their packages; called directly with samples they say which call to
+    make (magfit.fit), instead of an AttributeError from the prepared input they expect."""
+    import numpy as np
+    import pytest
+
+    from magfit.errors import OptionError
+    from magfit.methods.gyro import fit_gyro
+    from magfit.methods.vector import fit_vector
+
+    samples = np.zeros((100, 3))
+    with pytest.raises(OptionError, match=r"magfit.fit\(samples, method='gyro'"):
+        fit_gyro(samples, gyro=samples, time_s=np.arange(100.0))  # type: ignore[arg-type]
+    with pytest.raises(OptionError, match=r"magfit.fit\(samples, method='vector'"):
+        fit_vector(samples, reference=samples)  # type: ignore[arg-type]

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from ..findings import Diagnostics, Reason
     from ..statistics import Statistics
 
-__all__ = ["METHODS", "FitInput", "Judging", "MethodSpec", "Undetermined", "get_method", "register"]
+__all__ = ["METHODS", "FitInput", "Judging", "MethodSpec", "Undetermined", "fit_input", "get_method", "register"]
 
 #: A function that fits a method (with fixed options) to (n, 3) samples: what the diagnostics receive.
 Refit = Callable[[NDArray[np.float64]], "Calibration"]
@@ -153,6 +153,17 @@ def register(
         return function
 
     return decorate
+
+
+def fit_input(data: object, method: str) -> FitInput:
+    """``data`` when it is what :func:`magfit.fit` hands a method; a method function called directly with an
+    array is refused in one line that names the call to make instead."""
+    if not isinstance(data, FitInput):
+        raise OptionError(
+            f"the {method} method is run by magfit.fit(samples, method={method!r}, ...), which validates the samples "
+            f"and judges the fit; its function takes the prepared input, not {type(data).__name__}"
+        )
+    return data
 
 
 def get_method(name: str) -> MethodSpec:

@@ -43,7 +43,7 @@ from ...errors import CalibrationError, OptionError
 from ...facts import GyroFacts, SolverStatus
 from ...findings import Reason, Support
 from ...rotations import angle_between_deg, axis_words, polar_decomposition
-from ..registry import FitInput, register
+from ..registry import FitInput, fit_input, register
 from .choice import LIKELIHOOD_RATIO, _choose
 from .gravity import _accel, _gravity
 from .inclination import _dip, _gravity_residual, _inclination_disagreement
@@ -172,7 +172,7 @@ def _inputs(data: FitInput, gyro: ArrayLike | None, time_s: ArrayLike | None, ac
             gyro_time_s: ArrayLike | None, mapping: str, segment_s: float,
             inclination_deg: float | None) -> _Inputs:  # fmt: skip
     """The samples, rates, times and accelerometer checked (:mod:`.rates`, :mod:`.gravity`), and the options."""
-    y = data.require_samples("gyro")
+    y = fit_input(data, "gyro").require_samples("gyro")
     n = y.shape[0]
     gap_notes: list[str] = []
     kept = np.ones(n, dtype=bool)

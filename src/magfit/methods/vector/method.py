@@ -78,7 +78,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..._validation import check_rows
 from ...calibration import Calibration
 from ...errors import OptionError
-from ..registry import FitInput, register
+from ..registry import FitInput, fit_input, register
 from .gravity import ACCEL_SIGMA, STANDARD_GRAVITY, _gravity_fit
 from .judge import _judged
 from .lag import _lag
@@ -130,7 +130,7 @@ def fit_vector(
         The accelerometer's calibration one-sigma in m/s² (each axis): its cost in the calibration (the gravity
         equations take the accelerometer's vertical as the truth) is added to the stated uncertainty. 0 for none.
     """
-    raw = data.require_samples("vector")
+    raw = fit_input(data, "vector").require_samples("vector")
     ref, field, acc, rates = _inputs(raw, reference, max_lag_s, accel, gyro, accel_sigma)
     details: dict[str, Any] = {}
     if rates is not None and acc is None:  # compare() and the pipeline pass every stream a method takes
