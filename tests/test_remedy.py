@@ -20,7 +20,7 @@ def test_one_remedy_in_each_audience() -> None:
     assert option("allow_undetermined", True) == "allow_undetermined=True"
     assert option("attitude", ["roll", "pitch", "yaw"]) == "attitude=['roll', 'pitch', 'yaw']"
     assert option("location", "52.1,4.3") == "location=(52.1, 4.3)"
-    assert option("location", "LAT,LON[,ALT]") == "location='LAT,LON[,ALT]'"
+    assert option("location", "LAT,LON[,ALT]") == "location=(LAT, LON[, ALT])"
     with for_command_line():
         assert audience() == "command line"
         assert option("unit", "uT") == "--unit uT"

@@ -83,9 +83,9 @@ def _python_value(name: str, value: str) -> str:
         if items == ["X", "Y", "Z"] or items == ["..."]:
             return "[...]"
         return "[" + ", ".join(item if item.isdigit() else repr(item) for item in items) + "]"
-    if name == "location":
-        numbers = [item.strip() for item in value.split(",")]
-        return "(" + ", ".join(numbers) + ")" if len(numbers) > 1 and all(map(_is_number, numbers)) else repr(value)
+    if name == "location":  # a tuple: (52.1, 4.3) or the placeholder (LAT, LON[, ALT])
+        parts = [item.strip() for item in value.split(",")]
+        return "(" + ", ".join(parts) + ")" if len(parts) > 1 else repr(value)
     if value in ("True", "False", "None") or _is_number(value):
         return value
     return repr(value)
