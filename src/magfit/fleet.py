@@ -467,16 +467,11 @@ def _read_compasses(
     """The statistics of each compass of a recording (a log's every usable compass, or those in ``sensors``;
     a samples file's), of the samples its fit kept (a robust fit's rejected samples — spikes, a passing magnet —
     stay out of the union); with the log's GNSS date, its vehicle's identity and its compasses' device ids."""
-    from .outliers import inlier_mask  # the same rule the diagnostics leave those samples out by
+    from .outliers import kept_statistics  # the same rule the diagnostics leave those samples out by
     from .sources import log_kind, open_source
 
     def kept(samples: np.ndarray, sensor: str) -> Statistics:
-        calibration = fitted.get(sensor)
-        if calibration is not None:
-            mask, _ = inlier_mask(calibration, samples)
-            if mask is not None:
-                samples = samples[mask]
-        return Statistics.from_samples(samples)
+        return kept_statistics(fitted.get(sensor), samples)
 
     if log_kind(path) is None:
         from .io import read_samples

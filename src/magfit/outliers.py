@@ -17,11 +17,12 @@ from numpy.typing import NDArray
 
 from ._scale import MAD_TO_SIGMA, robust_scale
 from .evaluate import unchecked_sphere_distances
+from .statistics import Statistics
 
 if TYPE_CHECKING:
     from .calibration import Calibration
 
-__all__ = ["DEFAULT_THRESHOLD", "MAD_TO_SIGMA", "inlier_mask", "robust_scale"]
+__all__ = ["DEFAULT_THRESHOLD", "MAD_TO_SIGMA", "inlier_mask", "kept_statistics", "robust_scale"]
 
 #: Cut-off c of the loss, in units of σ: a Gaussian inlier is rejected with probability 5e-4.
 DEFAULT_THRESHOLD = 3.5
@@ -46,3 +47,10 @@ def inlier_mask(calibration: Calibration, samples: NDArray[Any]) -> tuple[NDArra
     centre, sigma = robust_scale(residuals)
     threshold = DEFAULT_THRESHOLD if stored.threshold is None else stored.threshold
     return np.abs(residuals - centre) <= threshold * max(sigma, 1e-12), "lie beyond the robust fit's threshold"
+
+
+def kept_statistics(calibration: Calibration | None, samples: NDArray[Any]) -> Statistics:
+    """The statistics of ``samples`` less those ``calibration``'s robust fit rejected (:func:`inlier_mask`): what
+    recordings of one compass merge by. All of them without a calibration or a robust fit."""
+    mask = None if calibration is None else inlier_mask(calibration, samples)[0]
+    return Statistics.from_samples(samples if mask is None else samples[mask])

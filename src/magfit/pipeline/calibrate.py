@@ -19,10 +19,9 @@ from ..evaluate import evaluate
 from ..findings import Reason
 from ..fit import fit
 from ..methods import get_method
-from ..outliers import inlier_mask
+from ..outliers import kept_statistics
 from ..remedy import option
 from ..sources import Magnetometer, Source, log_kind, open_source
-from ..statistics import Statistics
 from ..units import field_unit_reason, get_unit
 from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, turned, vehicle_advice
 from .results import CompassCalibration, CompassFailure, FileCalibration, ModelField
@@ -394,14 +393,8 @@ def _calibrate_compass(
         notes=notes,
         warnings=_unit_warnings(calibration.field_strength, label or None),
         advice=vehicle,
-        statistics=_kept_statistics(calibration, read.samples),
+        statistics=kept_statistics(calibration, read.samples),
     )
-
-
-def _kept_statistics(calibration: Calibration, samples: np.ndarray) -> Statistics:
-    """The statistics of ``samples`` less those the robust fit rejected (its own rule: the diagnostics')."""
-    mask, _ = inlier_mask(calibration, samples)
-    return Statistics.from_samples(samples if mask is None else samples[mask])
 
 
 def _unit_warnings(field_strength: float, unit: str | None) -> tuple[Reason, ...]:
@@ -672,7 +665,7 @@ def _calibrate_samples(
         subsample=fitted.subsample,
         column_note=chosen.column_note,
         warnings=_unit_warnings(calibration.field_strength, unit),
-        statistics=_kept_statistics(calibration, read.samples) if isinstance(read, SampleTable) else fitted.statistics,
+        statistics=kept_statistics(calibration, read.samples) if isinstance(read, SampleTable) else fitted.statistics,
     )
 
 
