@@ -198,12 +198,8 @@ def _warn_verdict(calibration: Calibration, calibration_file: Path) -> None:
     """A calibration the samples did not support (returned forced) or supported with weaknesses is applied, but
     not without a word: the verdict it was saved with, repeated where it is used."""
     support = calibration.support
-    if support is None or support.verdict == "supported":
-        return
-    if support.forced or support.verdict == "refused":
-        warn(f"{calibration_file}: NOT SUPPORTED by its samples (returned with --force): {'; '.join(support.refusals)}")
-    for weakness in support.weaknesses:
-        warn(f"{calibration_file}: weak: {weakness}")
+    for warning in support.warnings if support is not None else ():  # the verdict's own lines, as calibrate said
+        warn(f"{calibration_file}: {warning}")
 
 
 def _column(regressor: str | None) -> str | int | None:
