@@ -236,7 +236,7 @@ def x25_checksums(
 
 
 #: Bytes read at a time: the scan's memory grows with this, not with the log.
-_BLOCK = 1 << 23
+_BLOCK = 1 << 22
 #: The longest record: an 8-byte stamp, a MAVLink 2 header (10), a 255-byte payload, the checksum and a signature.
 _MAX_RECORD = 8 + 10 + 255 + 2 + 13
 #: Of each message (by system and component) at most this many frames are kept, a regular stride beyond (every
@@ -280,9 +280,12 @@ class _Kept:
             self.kept = sum(len(i) for i in self.index)
 
     def arrays(self) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.int64]]:
+        """The frames kept, in one array each; the pieces are let go (read once: they held as much again)."""
         if not self.rows:
             return np.zeros((0, self.width), np.uint8), np.zeros(0), np.zeros(0, np.int64)
-        return np.concatenate(self.rows), np.concatenate(self.receipt), np.concatenate(self.order)
+        whole = np.concatenate(self.rows), np.concatenate(self.receipt), np.concatenate(self.order)
+        self.rows, self.receipt, self.order, self.index = [], [], [], []
+        return whole
 
 
 class TelemetryLog:
@@ -527,7 +530,8 @@ class TelemetryLog:
         empty = (np.int64, np.float64, np.uint8, np.uint8, np.int32, np.int32)
         parts: list[tuple[NDArray[Any], ...]] = [tuple(np.zeros(0, dtype=kind) for kind in empty)]
         self._rows: dict[tuple[int, int, int], NDArray[np.uint8]] = {}
-        for key, kept in self._kept.items():
+        while self._kept:  # each message's pieces let go as soon as they are joined
+            key, kept = self._kept.popitem()
             rows, receipt, order = kept.arrays()
             self._rows[key] = rows
             if kept.every > 1:
