@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -168,6 +169,19 @@ def test_broken_npz_and_npy(tmp_path: Path) -> None:
     assert "holds an array of dtype <U1, not numbers" in error_of(tmp_path / "words.npy")
     np.savez(tmp_path / "k.npz", t=np.arange(3.0), temp=np.ones(3))
     assert "no magnetometer arrays found among the keys: t (3,), temp (3,)" in error_of(tmp_path / "k.npz")
+
+
+def test_an_npy_header_with_a_negative_size_is_refused(tmp_path: Path) -> None:
+    # numpy reads a header announcing shape (-100, 3); its memory map then failed with an OverflowError.
+    np.save(tmp_path / "n.npy", np.zeros((100, 3)))
+    path = write(tmp_path, (tmp_path / "n.npy").read_bytes().replace(b"(100, 3)", b"(-100, 3)"), "neg.npy")
+    assert "the header's shape (-100, 3) has a negative size" in error_of(path)
+    np.savez(tmp_path / "k.npz", m=np.zeros((100, 3)))
+    with zipfile.ZipFile(tmp_path / "k.npz") as archive:
+        member = archive.read("m.npy").replace(b"(100, 3)", b"(-100, 3)")
+    with zipfile.ZipFile(tmp_path / "neg.npz", "w") as archive:
+        archive.writestr("m.npy", member)
+    assert "has a negative size" in error_of(tmp_path / "neg.npz")
 
 
 @pytest.mark.parametrize(

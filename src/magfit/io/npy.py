@@ -48,6 +48,8 @@ def read_npy_header(handle: Any) -> NpyInfo:
             shape, fortran, dtype = np.lib.format.read_array_header_1_0(handle)
         else:
             shape, fortran, dtype = np.lib.format.read_array_header_2_0(handle)
+    if any(not isinstance(size, int) or size < 0 for size in shape):  # numpy reads (-100, 3) and fails in its map
+        raise ValueError(f"the header's shape {tuple(shape)} has a negative size")
     return NpyInfo(tuple(shape), np.dtype(dtype), bool(fortran))
 
 
