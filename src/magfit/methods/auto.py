@@ -158,7 +158,7 @@ def omitted_weakness(calibration: Calibration, report: Diagnostics) -> tuple[Rea
         f"the {model} model may leave out a distortion the samples show but do not determine (the "
         f"{omitted.get('model')} model, fitted to the same samples, predicts held-out stretches of the recording as "
         f"well or better); {parts}the heading error it can cause is ±{heading:.2g}°{total}; a reference field "
-        "(method 'vector' with the attitude) or more tilt while recording would determine it",
+        f"({option('method', 'vector')} with the attitude) or more tilt while recording would determine it",
         "model_inadequate",
     ),)  # fmt: skip
 
@@ -306,7 +306,9 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
                 f"{standing[-1]} model is returned: it pins the heading near the attitudes recorded"
             )
             chosen = standing[-1]
-        elif bound <= USELESS_BOUND_DEG:
+        else:
+            # Returned or (beyond the useless bound) refused, the distortion left out is in the heading one-sigma
+            # the calibration states: a forced fit states the bound its refusal gives, not its model's own.
             omitted = {
                 "model": witness,
                 "heading_difference_deg": difference,
@@ -314,12 +316,13 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
                 "heading_deg": effect,
                 "gain": words,
             }
+        if omitted is not None and bound <= USELESS_BOUND_DEG:
             steps.append(
                 f"the {chosen} model {words}: it is returned (the samples determine no richer model that describes "
                 "them better on every stretch), the heading error of the distortion it leaves out in its stated "
                 "heading one-sigma (see the weaknesses)"
             )
-        else:
+        elif omitted is not None:
             # Refused; a forced fit still gets the model the unforced choice ranks best, with this refusal.
             why = "; ".join(verdicts[w].refusals[0] for w in witnesses if verdicts[w].refusals)
             refusal = (
