@@ -328,10 +328,10 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
             refusal = (
                 f"the samples determine no model that describes them within a useful heading bound: the {chosen} "
                 f"model, the richest they determine, {words}, and the heading error that distortion can cause "
-                f"(±{bound:.2g}°, beyond {USELESS_BOUND_DEG:g}°) leaves no usable calibration; that model is not "
-                "determined" + (f" ({why})" if why else "") + "; record again turning the sensor through more "
-                "attitudes (tilt it further: a full tumble is best), or fit against a reference field "
-                f"({option('method', 'vector')} with the attitude)"
+                f"(±{effect:.2g}°; with the {chosen} model's own one-sigma, beyond {USELESS_BOUND_DEG:g}°) leaves no "
+                "usable calibration; that model is not determined" + (f" ({why})" if why else "") + "; record "
+                "again turning the sensor through more attitudes (tilt it further: a full tumble is best), or fit "
+                f"against a reference field ({option('method', 'vector')} with the attitude)"
             )
     calibration = optima[chosen]
     if chosen == "full" or kept.shape[0] > 20_000:  # the optimum came from a stride of 20 000, or ml is due
