@@ -13,8 +13,9 @@ The rule, in words (docs/file-formats.md says the same for users):
    ``""``) is the name's *stem*; three names with the same stem and the three axis letters form a triple.
 3. The words of the stem decide what the triple is. Words of another sensor or quantity (``a``, ``acc``,
    ``g``, ``gyro``, ``w``, ``omega``, ``euler``, ``vel``, ``pos`` ...) reject it: an accelerometer or a gyro
-   is never taken for a magnetometer. A magnetometer word (``mag*``, ``compass``, ``field``, or a single
-   ``m`` / ``b`` / ``h`` glued before the axis: ``mx``, ``imu_mx``, ``Bx``, ``hx``, ``m_x``) scores 2; a stem
+   is never taken for a magnetometer. A magnetometer word (``mag*``, ``flux*``, ``compass``, ``field``, or a
+   single ``m`` / ``b`` / ``h`` glued before the axis: ``mx``, ``imu_mx``, ``Bx``, ``hx``, ``m_x``) scores 2;
+   a single letter after a magnetometer word labels one of several sensors (``flux_a_x``), no quantity; a stem
    made only of neutral words (``""`` as in bare ``x``, ``imu``, ``sensor``, ``axis``, units, digits) scores 1;
    any other word rejects the triple (magfit does not guess at names it does not know).
 4. ``raw`` / ``uncal`` add 0.5, ``cal`` / ``scaled`` / ``filtered`` / ``corrected`` ... subtract 0.5: the raw
@@ -182,6 +183,12 @@ def _axis_splits(normalised: str) -> list[tuple[str, str, str]]:
     return splits
 
 
+def _magnetic_word(word: str) -> bool:
+    """A word that marks a magnetometer: one of :data:`_MAG_WORDS`, or starting with "mag" or "flux" (a
+    fluxgate: ``FLUXA_X``)."""
+    return word in _MAG_WORDS or word.startswith(("mag", "flux"))
+
+
 def _stem_score(before: str, after: str) -> float | None:
     """Score of a stem (rules 3-4), or None when the triple is not a magnetometer."""
     before_words = name_words(before)
@@ -193,9 +200,11 @@ def _stem_score(before: str, after: str) -> float | None:
         # after it ("x_m") it is more likely a unit such as metres, and rejected as unknown below.
         if word in _MAG_LETTERS and position == len(before_words) - 1:
             magnetic = True
+        elif len(word) == 1 and position > 0 and _magnetic_word(words[position - 1]):
+            pass  # a sensor's label after a magnetometer word: MagNav's flux_a_x ... flux_d_x
         elif word in _OTHER_WORDS or word.startswith(("acc", "gyr")):
             return None
-        elif word in _MAG_WORDS or word.startswith("mag"):
+        elif _magnetic_word(word):
             magnetic = True
         elif word in _RAW_WORDS:
             score += 0.5

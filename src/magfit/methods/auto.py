@@ -158,7 +158,7 @@ def omitted_weakness(calibration: Calibration, report: Diagnostics) -> tuple[Rea
         f"the {model} model may leave out a distortion the samples show but do not determine (the "
         f"{omitted.get('model')} model, fitted to the same samples, predicts held-out stretches of the recording as "
         f"well or better); {parts}the heading error it can cause is ±{heading:.2g}°{total}; a reference field "
-        "(method 'vector' with the attitude) or more tilt while recording would determine it",
+        f"({option('method', 'vector')} with the attitude) or more tilt while recording would determine it",
         "model_inadequate",
     ),)  # fmt: skip
 
@@ -306,7 +306,9 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
                 f"{standing[-1]} model is returned: it pins the heading near the attitudes recorded"
             )
             chosen = standing[-1]
-        elif bound <= USELESS_BOUND_DEG:
+        else:
+            # Returned or (beyond the useless bound) refused, the distortion left out is in the heading one-sigma
+            # the calibration states: a forced fit states the bound its refusal gives, not its model's own.
             omitted = {
                 "model": witness,
                 "heading_difference_deg": difference,
@@ -314,21 +316,22 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
                 "heading_deg": effect,
                 "gain": words,
             }
+        if omitted is not None and bound <= USELESS_BOUND_DEG:
             steps.append(
                 f"the {chosen} model {words}: it is returned (the samples determine no richer model that describes "
                 "them better on every stretch), the heading error of the distortion it leaves out in its stated "
                 "heading one-sigma (see the weaknesses)"
             )
-        else:
+        elif omitted is not None:
             # Refused; a forced fit still gets the model the unforced choice ranks best, with this refusal.
             why = "; ".join(verdicts[w].refusals[0] for w in witnesses if verdicts[w].refusals)
             refusal = (
                 f"the samples determine no model that describes them within a useful heading bound: the {chosen} "
                 f"model, the richest they determine, {words}, and the heading error that distortion can cause "
-                f"(±{bound:.2g}°, beyond {USELESS_BOUND_DEG:g}°) leaves no usable calibration; that model is not "
-                "determined" + (f" ({why})" if why else "") + "; record again turning the sensor through more "
-                "attitudes (tilt it further: a full tumble is best), or fit against a reference field "
-                f"({option('method', 'vector')} with the attitude)"
+                f"(±{effect:.2g}°; with the {chosen} model's own one-sigma, beyond {USELESS_BOUND_DEG:g}°) leaves no "
+                "usable calibration; that model is not determined" + (f" ({why})" if why else "") + "; record "
+                "again turning the sensor through more attitudes (tilt it further: a full tumble is best), or fit "
+                f"against a reference field ({option('method', 'vector')} with the attitude)"
             )
     calibration = optima[chosen]
     if chosen == "full" or kept.shape[0] > 20_000:  # the optimum came from a stride of 20 000, or ml is due

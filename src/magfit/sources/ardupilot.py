@@ -248,10 +248,15 @@ def describe_parameters(compass: CompassParameters, where: str) -> list[str]:
     """The notes that say how a compass's calibration was undone: with which parameters (``where``: from the
     log's parameters, from PARAM_VALUE), which the firmware did not have, and which changed during the log."""
     s = parameter_suffix(compass.index)
-    notes = [f"undone with COMPASS_OFS{s}, DIA{s}, ODI{s} and SCALE{s} {where}"]
     lacked = [name for name in compass.defaults if not name.startswith("COMPASS_SCALE")]
+    groups = sorted({name.split("_")[1].rstrip("0123456789") for name in lacked})
+    # Only the parameters the log has (a firmware without DIA/ODI applied the identity: the next note says so).
+    absent = {name.split("_")[1].rstrip("0123456789") for name in compass.defaults}
+    used = [g for g in ("OFS", "DIA", "ODI", "SCALE") if g not in absent] or ["OFS"]
+    named = [f"COMPASS_{used[0]}{s}", *(f"{g}{s}" for g in used[1:])]
+    notes = [f"undone with {', '.join(named[:-1])} and {named[-1]} {where}" if len(named) > 1 else
+             f"undone with {named[0]} {where}"]  # fmt: skip
     if lacked:
-        groups = sorted({name.split("_")[1].rstrip("0123456789") for name in lacked})
         what = {"OFS": "no offsets", "DIA": "no soft-iron matrix", "ODI": "no soft-iron matrix"}
         default = {"OFS": "zero offsets", "DIA": "the identity matrix", "ODI": "the identity matrix"}
         applied = sorted({what[g] for g in groups if g in what})
