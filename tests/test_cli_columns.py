@@ -12,6 +12,7 @@ from click.testing import CliRunner
 
 import magfit
 from magfit.cli import cli
+from magfit.facts import SampleSource
 from magfit.io import read_samples
 from magfit.io.columns import choose_columns_by_content, ellipsoid_spread
 
@@ -95,8 +96,8 @@ def test_apply_corrects_the_columns_the_fit_used_and_keeps_the_time_column(tmp_p
     fitted = runner.invoke(cli, ["calibrate", str(path), "--columns", "1,2,3", "-o", str(tmp_path / "cal.json")])
     assert fitted.exit_code == 0, fitted.output
     document = json.loads((tmp_path / "cal.json").read_text())
-    assert document["details"]["source"]["columns"] == ["column 2", "column 3", "column 4"]
-    assert document["details"]["source"]["column_indices"] == [1, 2, 3]
+    assert document["source"]["columns"] == ["column 2", "column 3", "column 4"]
+    assert document["source"]["column_indices"] == [1, 2, 3]
     applied = runner.invoke(cli, ["apply", str(tmp_path / "cal.json"), str(path), "-o", str(tmp_path / "out.csv")])
     assert applied.exit_code == 0, applied.output
     assert "(columns column 2, column 3, column 4; as fitted" in applied.stdout
@@ -149,14 +150,9 @@ def test_the_source_survives_the_json_round_trip(tmp_path: Path) -> None:
     text = (tmp_path / "c.json").read_text()
     calibration = magfit.Calibration.from_json(text)
     assert magfit.Calibration.from_json(calibration.to_json()) == calibration
-    assert calibration.details["source"] == {
-        "file": "m.txt",
-        "columns": ["column 1", "column 2", "column 3"],
-        "column_indices": [0, 1, 2],
-        "header": False,
-        "n_columns": 3,
-        "unit": "uT",
-    }
+    assert calibration.source == SampleSource(
+        "m.txt", "uT", ("column 1", "column 2", "column 3"), (0, 1, 2), header=False, n_columns=3
+    )
 
 
 def test_content_rule_units() -> None:

@@ -272,7 +272,7 @@ def test_inspect_names_the_streams_and_missing_rows_are_counted_or_refused(tmp_p
     assert "reference: ref_n, ref_e, ref_d" in shown.stdout
     compass = magfit.calibrate_file(path, method="vector", unit="nT").compasses[0]
     assert (compass.n_rows, compass.n_skipped) == (len(values), 1)
-    assert compass.calibration.details["source"]["column_indices"] == [1, 2, 3]
+    assert compass.calibration.source is not None and compass.calibration.source.column_indices == (1, 2, 3)
     with pytest.raises(DataFileError, match="data row 11 holds a missing value"):
         magfit.calibrate_file(path, method="vector", unit="nT", nonfinite="error")
 

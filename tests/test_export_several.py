@@ -1,6 +1,6 @@
 """Every compass of a vehicle in one file (issue 13): ArduPilot COMPASS_*, *2, *3 and PX4 CAL_MAG0..3.
 
-The slot and the device id come from ``details["sensor"]`` (filled by the pipeline from a flight log's
+The slot and the device id come from ``Calibration.sensor`` (filled by the pipeline from a flight log's
 magnetometer) or from the explicit ``slot=`` / ``device_id=`` options, which win. Each compass's block is
 applied with the firmware's formula (AP_Compass_Backend::correct_field, PX4 Magnetometer::Correct,
 re-implemented in tests/test_export_vehicle.py) and must reproduce its own calibration.
@@ -19,14 +19,14 @@ from numpy.typing import NDArray
 import magfit
 from magfit.errors import ExportError, OptionError
 from magfit.export import FORMATS, SEVERAL, export, export_several
+from magfit.facts import LogCompass
 from test_export_vehicle import ardupilot_field, parse_ardupilot, parse_px4, px4_correct
 
 RTOL_FLOAT32 = 2e-6
 
 
 def _with_sensor(cal: magfit.Calibration, name: str, slot: int | None, device_id: int | None) -> magfit.Calibration:
-    details = {**cal.details, "sensor": {"id": name, "slot": slot, "device_id": device_id}}
-    return dataclasses.replace(cal, details=details)
+    return dataclasses.replace(cal, sensor=LogCompass(name, slot, device_id))
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def test_ardupilot_writes_each_compass_in_its_slot(
     text = export_several(cals, "ardupilot")
     params = parse_ardupilot(text)
     for cal, raw in zip(cals, samples, strict=True):
-        slot = cal.details["sensor"]["slot"]
+        slot = cal.sensor.slot
         corrected = ardupilot_field(params, 10 * raw, slot)
         np.testing.assert_allclose(corrected, 10 * cal.apply(raw), rtol=0, atol=RTOL_FLOAT32 * 10 * np.abs(raw).max())
     assert "COMPASS_OFS3_X" in params and "COMPASS_SCALE2" in params and "COMPASS_OFS_X" in params
@@ -78,7 +78,7 @@ def test_px4_writes_each_slot_with_its_device_id(
     assert params["CAL_MAG2_ID"] == 658953 and params["CAL_MAG0_ID"] == 97539 and "CAL_MAG1_ID" not in params
     for cal, raw in zip(cals, samples, strict=True):
         k = 0.01 if cal.unit == "uT" else 1.0
-        slot = cal.details["sensor"]["slot"]
+        slot = cal.sensor.slot
         np.testing.assert_allclose(
             px4_correct(params, k * raw, slot), k * cal.apply(raw), rtol=0, atol=RTOL_FLOAT32 * k * np.abs(raw).max()
         )
@@ -93,7 +93,7 @@ def test_explicit_slot_and_device_id_win(three: tuple[list[magfit.Calibration], 
     assert "COMPASS_OFS2_X" in params and "COMPASS_OFS3_X" not in params
     px4 = parse_px4(export(cal, "px4", slot=3, device_id=1234))
     assert px4["CAL_MAG3_ID"] == 1234 and "CAL_MAG3_XOFF" in px4
-    plain = dataclasses.replace(cal, details={})
+    plain = dataclasses.replace(cal, sensor=None)
     assert "COMPASS_OFS_X" in parse_ardupilot(export(plain, "ardupilot"))  # no sensor known: the first slot
 
 

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 import magfit
 from magfit.errors import ExportError
 from magfit.export import FORMATS, export
+from magfit.facts import LogCompass
 from magfit.rotations import angle_between_deg, euler_matrix, polar_decomposition, standard_rotations
 
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -425,11 +426,11 @@ def test_a_rotation_applied_before_logging_is_included(real_data_dir: Path) -> N
     assert "mounting rotation of 180.00 deg (applied_rotation)" in text
     # the firmware now turns the sensor's own readings by the written rotation alone
     _close(ardupilot_field(parse_ardupilot(text), 10 * sensor_raw), 10 * truth, 10 * sensor_raw, RTOL_FLOAT32)
-    # the same from details["sensor"], as the pipeline fills it
-    details = {"sensor": {"id": "MAG/0", "slot": 0, "device_id": None, "applied_rotation": r0.tolist()}}
+    # the same from Calibration.sensor, as the pipeline fills it
+    rotation = tuple(tuple(row) for row in r0.tolist())
     with_details = magfit.Calibration(
         "vector", on_logged.offset, on_logged.matrix, on_logged.field_strength, unit="uT", frame="vehicle",
-        details=details,
+        sensor=LogCompass("MAG/0", 0, None, rotation),
     )  # fmt: skip
     assert export(with_details, "ardupilot") == text.replace("compass 1:", "compass 1 (MAG/0):")
     # without it, the file would be for samples with COMPASS_ORIENT = 0, and says so

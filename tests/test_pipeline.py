@@ -15,6 +15,7 @@ from click.testing import CliRunner
 import magfit
 from magfit.cli import cli
 from magfit.errors import DataFileError, MagfitError, OptionError
+from magfit.facts import LogCompass
 from test_sources_dataflash import COMPASSES, DataFlashWriter, write_new_style
 from test_sources_ulog import DEVICE, write_log
 
@@ -51,11 +52,7 @@ def test_calibrate_file_fits_each_compass_of_a_dataflash_log(two_compasses) -> N
     for k, compass in enumerate(result.compasses):
         _assert_recovers(compass.calibration, simulations[k].truth)
         assert compass.calibration.unit == "mG"
-        assert compass.calibration.details["sensor"] == {
-            "id": f"MAG/{k}",
-            "slot": k,
-            "device_id": COMPASSES[k]["dev_id"],
-        }
+        assert compass.calibration.sensor == LogCompass(f"MAG/{k}", k, COMPASSES[k]["dev_id"])
         # 1500 samples at 20 Hz from 2 s after boot; the tumble reaches every direction.
         assert (compass.start_s, compass.end_s) == pytest.approx((2.0, 2.0 + 1499 * 0.05))
         assert compass.rate_hz == pytest.approx(20.0) and compass.coverage == 1.0
@@ -96,7 +93,7 @@ def test_a_log_refused_compass_is_a_failure_beside_the_others(tmp_path: Path) ->
     assert "identical" in result.failures[0].reason
     for compass in result.compasses:
         _assert_recovers(compass.calibration, simulation.truth)
-        assert compass.calibration.details["sensor"]["device_id"] == DEVICE and compass.calibration.unit == "G"
+        assert compass.calibration.sensor.device_id == DEVICE and compass.calibration.unit == "G"
     with pytest.raises(magfit.CalibrationError, match="identical"):  # chosen alone, the refusal raises
         magfit.calibrate_file(path, "ellipsoid", sensor="sensor_mag/1")
 
@@ -111,7 +108,7 @@ def test_several_compasses_go_to_one_file_each_never_over_an_existing_one(two_co
     for k, file in written.items():
         calibration = magfit.Calibration.from_json(file.read_text())
         _assert_recovers(calibration, simulations[k].truth)
-        assert calibration.details["sensor"]["id"] == f"MAG/{k}"
+        assert calibration.sensor is not None and calibration.sensor.id == f"MAG/{k}"
         assert f"wrote the calibration of MAG/{k} to {file}" in result.stdout
     assert not output.exists()
     before = {k: file.read_bytes() for k, file in written.items()}

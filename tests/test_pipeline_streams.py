@@ -66,7 +66,7 @@ def test_calibrate_file_fits_the_vector_method_on_a_log(tmp_path, monkeypatch) -
     # the field logged is the body frame's (after COMPASS_ORIENT): the fit undoes the soft and hard iron only
     np.testing.assert_allclose(calibration.offset, motion_log.HARD, atol=3.0)
     np.testing.assert_allclose(np.linalg.inv(calibration.matrix), motion_log.SOFT, atol=0.01)
-    assert calibration.details["sensor"]["applied_rotation"] is not None
+    assert calibration.sensor is not None and calibration.sensor.applied_rotation is not None
     # the log's stamps are given: the attitude's lag is fitted (the synthetic ATT is on time)
     assert calibration.vector.lag_s is not None and abs(calibration.vector.lag_s) < 0.02
     # and the accelerometer and gyro reached the fit (a tumble that never holds still: no gravity rows used)

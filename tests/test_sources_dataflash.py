@@ -420,7 +420,7 @@ def test_calibrate_on_a_log_fits_each_compass_or_the_chosen_one(tmp_path: Path) 
     result = runner.invoke(cli, ["calibrate", str(path), "--sensor", "658953", "-m", "ellipsoid", "-o", str(output)])
     assert result.exit_code == 0, result.output
     calibration = magfit.Calibration.from_json(output.read_text())
-    assert calibration.unit == "mG" and calibration.details["source"]["sensor"] == "MAG/1"
+    assert calibration.unit == "mG" and calibration.sensor.id == "MAG/1"
     _assert_recovers(calibration, simulations[1].truth)
     assert "ArduPilot DataFlash log; MAG/1" in result.stdout
     assert "after ArduPilot's calibration" in result.stderr  # the trap told in words

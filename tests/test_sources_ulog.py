@@ -243,7 +243,7 @@ def test_calibrate_by_device_id_and_inspect(tmp_path: Path) -> None:
     )
     assert result.exit_code == 0, result.output
     calibration = magfit.Calibration.from_json(output.read_text())
-    assert calibration.unit == "G" and calibration.details["source"]["device_id"] == DEVICE
+    assert calibration.unit == "G" and calibration.sensor.device_id == DEVICE
     _assert_recovers(calibration, simulation.truth)
     result = runner.invoke(cli, ["inspect", str(path)])
     assert result.exit_code == 0, result.output

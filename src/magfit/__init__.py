@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time each name is i
     from .compare import Comparison, MethodResult
     from .diagnostics import Diagnostics
     from .evaluate import Evaluation, evaluate, sphere_distances
-    from .facts import AutoChoice, GyroFacts, KnownField, Rejected, SolverStatus, VectorFacts
+    from .facts import AutoChoice, GyroFacts, KnownField, LogCompass, Rejected, SampleSource, SolverStatus, VectorFacts
     from .findings import REASON_CODES, Reason, Support
     from .fit import diagnose, fit, refit
     from .fleet import FleetResult, FleetRow, fleet
@@ -69,7 +69,9 @@ _LAZY = {
     "AutoChoice": "facts",
     "GyroFacts": "facts",
     "KnownField": "facts",
+    "LogCompass": "facts",
     "Rejected": "facts",
+    "SampleSource": "facts",
     "SolverStatus": "facts",
     "VectorFacts": "facts",
     "DISTURBANCES": "simulate",
@@ -154,6 +156,7 @@ __all__ = [
     "FleetRow",
     "GyroFacts",
     "KnownField",
+    "LogCompass",
     "MagfitError",
     "MethodResult",
     "MotorTerm",
@@ -161,6 +164,7 @@ __all__ = [
     "Reason",
     "Rejected",
     "SampleError",
+    "SampleSource",
     "Scenario",
     "Simulation",
     "SolverStatus",

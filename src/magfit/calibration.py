@@ -43,8 +43,10 @@ from .facts import (
     AutoChoice,
     GyroFacts,
     KnownField,
+    LogCompass,
     ModelKind,
     Rejected,
+    SampleSource,
     SolverStatus,
     VectorFacts,
     split_details,
@@ -75,7 +77,8 @@ Frame = Literal["sensor", "vehicle"]
 FRAMES: tuple[Frame, ...] = ("sensor", "vehicle")
 #: Version of the JSON layout written by :meth:`Calibration.to_dict`. Version 2 writes the typed facts
 #: (``support``, ``model``, ``options``, ``known_field``, ``rejected``, ``solver``, ``auto``, ``vector``,
-#: ``gyro``) beside ``details``; version 1 kept them in ``details`` and is still read (:func:`split_details`).
+#: ``gyro``, ``sensor``, ``source``) beside ``details``; version 1 kept them in ``details`` and is still read
+#: (:func:`split_details`), as are version-2 files that still keep ``sensor`` and ``source`` there.
 SCHEMA_VERSION = 2
 #: The versions :meth:`Calibration.from_dict` reads.
 READABLE_VERSIONS = (1, 2)
@@ -87,6 +90,8 @@ _TYPED: dict[str, Any] = {
     "auto": AutoChoice,
     "vector": VectorFacts,
     "gyro": GyroFacts,
+    "sensor": LogCompass,
+    "source": SampleSource,
 }
 _SCHEMA_NAME = "magfit.calibration"
 
@@ -146,6 +151,12 @@ class Calibration:
     auto, vector, gyro : AutoChoice, VectorFacts, GyroFacts or None
         The facts of that method family: auto's choice, the reference fit's lag and alignment, the gyro-aided
         fit's axis mapping and bias.
+    sensor : LogCompass or None
+        The compass of a flight log or bag it was fitted on: its id, the firmware's slot and device id (what
+        an export writes it for), a rotation already applied to the samples, a calibration they still carry.
+    source : SampleSource or None
+        Where the samples came from: the file and, for a samples file, the columns fitted (``magfit apply``
+        reads the same columns of another file).
     """
 
     method: str
@@ -166,6 +177,8 @@ class Calibration:
     auto: AutoChoice | None = None
     vector: VectorFacts | None = None
     gyro: GyroFacts | None = None
+    sensor: LogCompass | None = None
+    source: SampleSource | None = None
 
     def __post_init__(self) -> None:
         if self.motor is not None and not isinstance(self.motor, MotorTerm):
@@ -208,6 +221,10 @@ class Calibration:
             raise SampleError(f"Calibration.model must be one of {', '.join(MODEL_KINDS)} or None; got {self.model!r}")
         if self.support is not None and not isinstance(self.support, Support):
             raise SampleError(f"Calibration.support must be a Support or None, got {type(self.support).__name__}")
+        for name, kind in _TYPED.items():
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, kind):
+                raise SampleError(f"Calibration.{name} must be a {kind.__name__} or None, got {type(value).__name__}")
         # Stored as plain JSON types so that a JSON round trip gives back an equal calibration.
         object.__setattr__(self, "details", MappingProxyType(_jsonable(rest)))
         object.__setattr__(self, "options", MappingProxyType(_jsonable(dict(self.options))))

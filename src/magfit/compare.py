@@ -27,6 +27,7 @@ from .errors import CalibrationError, OptionError, SampleError
 from .evaluate import Evaluation, evaluate, sphere_distances
 from .fit import fit
 from .methods import get_method
+from .remedy import audience, command_line
 
 __all__ = ["PAPER_METHODS", "Comparison", "MethodResult", "compare", "evaluate_chunks"]
 
@@ -200,19 +201,30 @@ def compare(
     return Comparison(int(array.shape[0]), tuple(results))
 
 
-#: Where each stream a method may need comes from, for the words of a method not run.
+#: What each stream a method may need is, and where a recording holds it, for the words of a method not run.
 _STREAM_WORDS = {
     "reference": "the field expected at each sample in the vehicle frame (a flight log or bag with the attitude "
-    "and a position, or reference=)",
-    "gyro": "the gyroscope's rates beside each sample (a log or bag with the gyroscope, or gyro=)",
-    "time_s": "the samples' time stamps (a log or bag, or time_s=)",
+    "and a position)",
+    "gyro": "the gyroscope's rates beside each sample (a log or bag with the gyroscope)",
+    "time_s": "the samples' time stamps (a log or bag)",
 }
+#: The ``magfit calibrate`` option that reads each stream from a samples file's columns, with its placeholder.
+_STREAM_OPTIONS = {"reference": ("reference", "X,Y,Z"), "gyro": ("gyro", "X,Y,Z"), "time_s": ("time", "T")}
 
 
 def _not_run(method: str, missing: list[str]) -> str:
-    """Why a method that needs more than the samples was not run, in words."""
-    needs = "; ".join(_STREAM_WORDS.get(need, f"{need}=") for need in missing)
-    return f"not run: the {method} method needs {needs}"
+    """Why a method that needs more than the samples was not run, and how to give it, in the reader's words
+    (built when said: ``streams={...}`` in Python, the samples file's columns on the command line)."""
+    needs = "; ".join(_STREAM_WORDS.get(need, need) for need in missing)
+    if audience() == "command line":
+        chosen = [("method", method), *(_STREAM_OPTIONS[need] for need in missing if need in _STREAM_OPTIONS)]
+        how = (
+            "; a samples file gives them in columns named as docs/file-formats.md lists, or in any columns "
+            f"with {command_line('calibrate', 'FILE', chosen)}"
+        )
+    else:
+        how = "; or give them: streams={" + ", ".join(f"{need!r}: ..." for need in missing) + "}"
+    return f"not run: the {method} method needs {needs}{how}"
 
 
 #: Rows scored at a time: the temporaries of one slice stay at a few MB whatever the reader's chunk size.

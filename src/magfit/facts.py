@@ -1,18 +1,23 @@
 """What a calibration knows beyond its numbers: typed, frozen facts that other code reads.
 
 :class:`magfit.Calibration` carries these records as fields (schema version 2): the model family fitted,
-the samples rejected as outliers, the solver's status, the known field strength given and fitted, and one
+the samples rejected as outliers, the solver's status, the known field strength given and fitted, one
 record per method family (``auto``'s choice, ``vector``'s lag and alignment, ``gyro``'s axis mapping and
-bias). The verdict is :class:`magfit.findings.Support`. ``details`` keeps free-form extras that no other
+bias), and where the samples came from: the recording and its columns (:class:`SampleSource`, which
+``magfit apply`` reads the same columns by) and a log's compass (:class:`LogCompass`, the slot and device id
+an export writes for). The verdict is :class:`magfit.findings.Support`. ``details`` keeps free-form extras that no other
 code reads.
 
-Schema version 1 kept all of them in ``details`` under fixed keys; :func:`split_details` reads those keys
-into the records (a version-1 file, and a method that still writes them), so one reader serves both.
+Schema version 1 kept all of them in ``details`` under fixed keys (and files of schema version 2 written
+before :class:`LogCompass` and :class:`SampleSource` existed keep those two under ``details["sensor"]`` and
+``details["source"]``); :func:`split_details` reads those keys into the records (an older file, and code
+that still writes them), so one reader serves every file.
 Every record has ``to_dict`` / ``from_dict`` (plain JSON types; ``from_dict(to_dict(x)) == x``).
 """
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal, cast
@@ -24,8 +29,10 @@ __all__ = [
     "AutoChoice",
     "GyroFacts",
     "KnownField",
+    "LogCompass",
     "ModelKind",
     "Rejected",
+    "SampleSource",
     "SolverStatus",
     "VectorFacts",
     "split_details",
@@ -301,16 +308,134 @@ class GyroFacts:
         )
 
 
+@dataclass(frozen=True)
+class LogCompass:
+    """The compass of a flight log (or bag) a calibration was fitted on: what an export writes it for.
+
+    Attributes
+    ----------
+    id : str
+        The compass's id in the log (``"MAG/1"``, ``"sensor_mag/0"``, ``"RAW_IMU"``, a bag's topic), as
+        ``sensor=`` chooses it.
+    slot : int or None
+        The firmware's compass slot (0-based): where an export writes the calibration (``COMPASS_OFS2_*`` for
+        slot 1, ``CAL_MAG1_*``).
+    device_id : int or None
+        The firmware's device id of that compass (``COMPASS_DEV_ID``, ``CAL_MAGn_ID``), when the log says it.
+    applied_rotation : tuple of tuple of float or None
+        The rotation R0 the firmware had already applied to the samples logged (``board = R0 @ sensor``,
+        ArduPilot's MAG after ``COMPASS_ORIENT``), 3x3 rows; an export of a vehicle-frame calibration
+        includes it. None: the samples are the sensor's own readings.
+    calibration_in_use : str or None
+        The firmware's calibration that the samples still carry and that the log does not let magfit undo,
+        in words: the fit is a residual on top of it, which the firmware formats refuse to write. None: raw.
+    """
+
+    id: str
+    slot: int | None = None
+    device_id: int | None = None
+    applied_rotation: tuple[tuple[float, ...], ...] | None = None
+    calibration_in_use: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        rotation = None if self.applied_rotation is None else [list(row) for row in self.applied_rotation]
+        return {"id": self.id, "slot": self.slot, "device_id": self.device_id, "applied_rotation": rotation,
+                "calibration_in_use": self.calibration_in_use}  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> LogCompass:
+        rotation, in_use = data.get("applied_rotation"), data.get("calibration_in_use")
+        if rotation is not None:
+            rotation = tuple(tuple(float(v) for v in row) for row in rotation)
+            if len(rotation) != 3 or any(len(row) != 3 for row in rotation):
+                raise ValueError("'applied_rotation' must be a 3x3 matrix")
+        return cls(
+            id=_text(data["id"], "id"),
+            slot=_whole(data.get("slot"), "slot"),
+            device_id=_whole(data.get("device_id"), "device_id"),
+            applied_rotation=rotation,
+            calibration_in_use=None if in_use is None else _text(in_use, "calibration_in_use"),
+        )
+
+
+@dataclass(frozen=True)
+class SampleSource:
+    """Where a calibration's samples came from: the file and, for a samples file, the columns fitted.
+
+    ``magfit apply`` reads the same columns of another file by these: their names when the fitted file had a
+    header, else their positions in a file of as many columns.
+
+    Attributes
+    ----------
+    file : str
+        The file's name (without its folder).
+    unit : str or None
+        The samples' unit, as the calibration is labelled.
+    columns : tuple of str or None
+        A samples file's x, y, z columns, as named (``"mag_x"``, or ``"column 2"`` without a header); None
+        for a log (its compass: :class:`LogCompass`).
+    column_indices : tuple of int or None
+        Their 0-based positions in the file.
+    header : bool or None
+        Whether the file has a header line of column names.
+    n_columns : int or None
+        How many columns the file has.
+    streams : tuple of str
+        Where a method's other streams came from (reference, gyroscope, time ...), one line each.
+    """
+
+    file: str
+    unit: str | None = None
+    columns: tuple[str, ...] | None = None
+    column_indices: tuple[int, ...] | None = None
+    header: bool | None = None
+    n_columns: int | None = None
+    streams: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        data: dict[str, Any] = {"file": self.file, "unit": self.unit}
+        if self.columns is not None:
+            data["columns"] = list(self.columns)
+        if self.column_indices is not None:
+            data["column_indices"] = list(self.column_indices)
+        if self.header is not None:
+            data["header"] = self.header
+        if self.n_columns is not None:
+            data["n_columns"] = self.n_columns
+        if self.streams:
+            data["streams"] = list(self.streams)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SampleSource:
+        columns, indices, header, unit = (data.get(k) for k in ("columns", "column_indices", "header", "unit"))
+        if header is not None and not isinstance(header, bool):
+            raise TypeError(f"'header' must be true or false, got {type(header).__name__}")
+        return cls(
+            file=_text(data["file"], "file"),
+            unit=None if unit is None else _text(unit, "unit"),
+            columns=None if columns is None else tuple(_text(c, "columns") for c in columns),
+            column_indices=None if indices is None else tuple(_index(i) for i in indices),
+            header=header,
+            n_columns=_whole(data.get("n_columns"), "n_columns"),
+            streams=tuple(_text(line, "streams") for line in data.get("streams") or ()),
+        )
+
+
 #: The typed fields of a calibration read from ``details`` keys (schema version 1), each with its reader.
-FACT_FIELDS = ("support", "options", "known_field", "rejected", "solver", "auto", "vector", "gyro")
+FACT_FIELDS = (
+    "support", "options", "known_field", "rejected", "solver", "auto", "vector", "gyro", "sensor", "source"
+)  # fmt: skip
 
 
 def split_details(details: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """The typed facts that a version-1 ``details`` holds under its fixed keys, and the rest of ``details``.
 
     Returns ``(facts, rest)``: ``facts`` maps the names of :data:`FACT_FIELDS` found to their typed records
-    (``options`` to a dict), ``rest`` is ``details`` without the keys read. Raises what the records' readers
-    raise (``KeyError``, ``TypeError``, ``ValueError``) on a malformed entry.
+    (``options`` to a dict), ``rest`` is ``details`` without the keys read. ``details["sensor"]`` becomes
+    :class:`LogCompass`; ``details["source"]`` becomes :class:`SampleSource`, and the log compass it names
+    (its ``sensor`` and ``device_id``) a :class:`LogCompass` when ``details["sensor"]`` is absent. Raises
+    what the records' readers raise (``KeyError``, ``TypeError``, ``ValueError``) on a malformed entry.
     """
     rest = dict(details)
     facts: dict[str, Any] = {}
@@ -374,7 +499,40 @@ def split_details(details: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str,
                 "gravity": rest.pop("gravity", None),
             }
         )
+    if isinstance(rest.get("sensor"), Mapping) and "id" in rest["sensor"]:  # a log's compass
+        facts["sensor"] = LogCompass.from_dict(rest.pop("sensor"))
+    if isinstance(rest.get("source"), Mapping) and "file" in rest["source"]:
+        source = dict(rest.pop("source"))
+        compass, device_id = source.pop("sensor", None), source.pop("device_id", None)  # a log's: its compass's
+        if "sensor" not in facts and isinstance(compass, str):
+            facts["sensor"] = LogCompass(id=compass, device_id=_whole(device_id, "device_id"))
+        facts["source"] = SampleSource.from_dict(source)
     return facts, rest
+
+
+def _text(value: Any, name: str) -> str:
+    if not isinstance(value, str):
+        raise TypeError(f"{name!r} must be text, got {type(value).__name__}")
+    return value
+
+
+def _whole(value: Any, name: str) -> int | None:
+    """A JSON integer (not a boolean, not a float), or None."""
+    if value is None:
+        return None
+    if isinstance(value, bool):
+        raise TypeError(f"{name!r} must be an integer or null, got {value!r}")
+    try:
+        return operator.index(value)  # an int or a NumPy integer; a float or text is refused
+    except TypeError:
+        raise TypeError(f"{name!r} must be an integer or null, got {value!r}") from None
+
+
+def _index(value: Any) -> int:
+    index = _whole(value, "column_indices")
+    if index is None or index < 0:
+        raise ValueError(f"'column_indices' must be column numbers from 0, got {value!r}")
+    return index
 
 
 def _int_or_none(value: Any) -> int | None:

@@ -393,7 +393,7 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
     for compass in result.compasses:
         cal = compass.calibration
         sensor = _sensor_of(cal)
-        device_id = (cal.details.get("sensor") or {}).get("device_id")
+        device_id = cal.sensor.device_id if cal.sensor is not None else None
         model = compass.model_field or result.model_field
         ratio = math.nan
         if model is not None and cal.unit:
@@ -433,7 +433,7 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
 
 
 def _sensor_of(calibration: Calibration) -> str:
-    return str((calibration.details.get("sensor") or {}).get("id") or "")
+    return calibration.sensor.id if calibration.sensor is not None else ""
 
 
 def _compasses_anyway(

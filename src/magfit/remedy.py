@@ -16,12 +16,19 @@ The same pairs are the data a :class:`magfit.findings.Reason` or a :class:`magfi
 >>> with for_command_line():
 ...     option("method", "vector"), option("allow_undetermined", True), option("columns", ["mx", "my", "mz"])
 ('--method vector', '--force', '--columns mx,my,mz')
+
+A command that lacks an option says it through the command that has it (:func:`for_command`):
+
+>>> with for_command_line(), for_command("inspect", [], file="mag.csv"):
+...     option("method", "vector")
+'magfit calibrate mag.csv --method vector'
 """
 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -30,6 +37,7 @@ __all__ = [
     "Audience",
     "audience",
     "command_line",
+    "for_command",
     "for_command_line",
     "option",
     "options",
@@ -46,6 +54,22 @@ STREAM_ARGUMENTS = ("columns", "attitude", "reference", "gyro", "accel", "time",
 FLAGS = {"allow_undetermined": "--force", "force": "--force", "even": "--even"}
 
 
+@dataclass(frozen=True)
+class _Command:
+    """The ``magfit`` command running: its options' flags, those it takes under another name, and the command
+    (with the file) that a remedy it lacks is said through."""
+
+    name: str
+    flags: frozenset[str]
+    renamed: Mapping[str, str] = field(default_factory=dict)
+    elsewhere: str = "calibrate"
+    file: str = "FILE"
+
+
+#: The commands running (innermost last), when a command says which options it has.
+_commands: list[_Command] = []
+
+
 def audience() -> Audience:
     """Who reads the messages built now: ``"python"`` (the default) or ``"command line"``."""
     return _audience[-1]
@@ -59,6 +83,40 @@ def for_command_line() -> Iterator[None]:
         yield
     finally:
         _audience.pop()
+
+
+@contextlib.contextmanager
+def for_command(
+    name: str,
+    flags: Iterable[str],
+    *,
+    renamed: Mapping[str, str] | None = None,
+    elsewhere: str = "calibrate",
+    file: str | Path = "FILE",
+) -> Iterator[None]:
+    """Say the command line's remedies as the ``magfit NAME`` command can take them while inside.
+
+    ``flags`` are its options (``"--columns"``, ...): a remedy among them is said as that option; one it takes
+    under another name (``renamed``, e.g. ``{"--method": "--methods"}``) by that name; any other through the
+    command that has it, ``magfit calibrate FILE --method vector`` (``elsewhere``, ``file``). Only messages
+    for the command line (inside :func:`for_command_line`) change.
+    """
+    _commands.append(_Command(name, frozenset(flags), dict(renamed or {}), elsewhere, str(file)))
+    try:
+        yield
+    finally:
+        _commands.pop()
+
+
+def _running(flag: str) -> _Command | None:
+    """The command running when it lacks ``flag`` (its remedy is then said another way), else None."""
+    if not _commands or flag in _commands[-1].flags:
+        return None
+    return _commands[-1]
+
+
+def _flag_name(name: str) -> str:
+    return FLAGS.get(name) or f"--{name.replace('_', '-')}"
 
 
 def _as_text(value: object) -> str:
@@ -101,15 +159,27 @@ def _flag(name: str, value: str) -> str:
 
 
 def option(name: str, value: object) -> str:
-    """One remedy in the current audience's words: ``unit='uT'`` or ``--unit uT``."""
+    """One remedy in the current audience's words: ``unit='uT'`` or ``--unit uT`` (or, in a command without
+    that option, ``magfit calibrate FILE --unit uT``: :func:`for_command`)."""
     text = _as_text(value)
     if audience() == "command line":
-        return _flag(name, text)
+        said, flag = _flag(name, text), _flag_name(name)
+        command = _running(flag)
+        if command is None or not said:
+            return said
+        if flag in command.renamed:
+            return command.renamed[flag] + said[len(flag) :]
+        return f"magfit {command.elsewhere} {command.file} {said}"
     return f"{name}={_python_value(name, text)}"
 
 
 def options(pairs: Sequence[tuple[str, object]]) -> str:
     """Several remedies, space-separated on the command line, comma-separated in Python."""
+    if audience() == "command line":
+        for name, _ in pairs:  # one of them only another command takes: the whole call as that command
+            command = _running(_flag_name(name))
+            if command is not None and _flag_name(name) not in command.renamed:
+                return command_line(command.elsewhere, command.file, [(n, _as_text(v)) for n, v in pairs])
     said = [option(name, value) for name, value in pairs]
     return (" " if audience() == "command line" else ", ").join(word for word in said if word)
 

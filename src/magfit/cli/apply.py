@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -37,21 +36,19 @@ def read_calibration(path: Path) -> Calibration:
 
 
 def remembered_columns(calibration: Calibration, fmt: FileFormat) -> list[str | int] | None:
-    """The x, y, z columns ``magfit calibrate`` fitted (``details["source"]``) as they apply to a file of
+    """The x, y, z columns ``magfit calibrate`` fitted (``calibration.source``) as they apply to a file of
     layout ``fmt``: names when the fitted file had a header; positions only for a file without a header and
     with as many columns (a position means nothing in a file of another layout); else None (detected)."""
-    source = calibration.details.get("source")
-    if not isinstance(source, Mapping):
+    source = calibration.source
+    if source is None:
         return None
-    if source.get("header"):
-        names = source.get("columns")
-        if isinstance(names, list) and len(names) == 3 and all(isinstance(name, str) for name in names):
-            return list(names)
+    if source.header:
+        names = source.columns
+        return list(names) if names is not None and len(names) == 3 else None
+    indices = source.column_indices
+    if indices is None or len(indices) != 3:
         return None
-    indices = source.get("column_indices")
-    if not (isinstance(indices, list) and len(indices) == 3 and all(isinstance(i, int) for i in indices)):
-        return None
-    return list(indices) if fmt.header is None and source.get("n_columns") == fmt.n_columns else None
+    return list(indices) if fmt.header is None and source.n_columns == fmt.n_columns else None
 
 
 @click.command("apply")
@@ -135,7 +132,7 @@ def apply_command(
         return
     if sensor is not None:
         raise DataFileError(f"{file}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
-    # Without --columns, the columns the calibration was fitted on (details["source"], written by calibrate).
+    # Without --columns, the columns the calibration was fitted on (Calibration.source, written by calibrate).
     remembered = remembered_columns(calibration, sniff(file)) if columns is None else None
     chosen = columns if columns is not None else remembered
     try:
@@ -210,12 +207,8 @@ def _column(regressor: str | None) -> str | int | None:
 
 
 def fitted_sensor(calibration: Calibration) -> str | None:
-    """The log compass ``calibration`` was fitted on (``details["sensor"]["id"]``, written by calibrate), or None."""
-    for key, field in (("sensor", "id"), ("source", "sensor")):
-        entry = calibration.details.get(key)
-        if isinstance(entry, Mapping) and isinstance(entry.get(field), str):
-            return str(entry[field])
-    return None
+    """The log compass ``calibration`` was fitted on (``calibration.sensor.id``, written by calibrate), or None."""
+    return calibration.sensor.id if calibration.sensor is not None else None
 
 
 def _apply_to_log(

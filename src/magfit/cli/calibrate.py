@@ -138,8 +138,8 @@ def _export_options(
     model = compass.model_field
     if model is not None and "expected_field" in FORMATS[export_format].options and unit and get_unit(unit).is_physical:
         options["expected_field"] = model.field.total_in(unit)
-    sensor = compass.calibration.details.get("sensor")
-    known = isinstance(sensor, dict) and sensor.get("device_id") is not None
+    sensor = compass.calibration.sensor
+    known = sensor is not None and sensor.device_id is not None
     if export_format == "px4" and compass.sensor is not None and known:  # TC_Mn_* where the log determines it
         from ..temperature import compass_drift
 

@@ -17,6 +17,7 @@ from rich.table import Table
 from rich.text import Text
 
 from ..compare import PAPER_METHODS, Comparison, MethodResult, compare
+from ._advice import own_options
 from ._common import (
     EXIT_FIT_FAILED,
     Nonfinite,
@@ -155,6 +156,24 @@ def compare_command(
 
     A flight log or bag (ULog, DataFlash, ROS) is compared compass by compass, or for the one --sensor names.
     """
+    with own_options(ctx, renamed={"--method": "--methods"}, file=files[0] if len(files) == 1 else "FILE"):
+        results = _compared(files, methods, columns, unit, force, nonfinite, sensor)
+    render = {"table": _print_tables, "markdown": _print_markdown, "csv": _print_csv, "json": _print_json}
+    render[output_format](results)
+    if not all(result.comparison.any_succeeded for result in results):
+        ctx.exit(EXIT_FIT_FAILED)
+
+
+def _compared(
+    files: tuple[Path, ...],
+    methods: tuple[str, ...],
+    columns: list[str | int] | None,
+    unit: str | None,
+    force: bool,
+    nonfinite: Nonfinite,
+    sensor: str | None,
+) -> list[FileComparison]:
+    """Each recording's comparison (a log's compasses one by one)."""
     results = []
     for path in files:
         for recording in read_recordings(path, columns=columns, nonfinite=nonfinite, sensor=sensor):
@@ -172,10 +191,7 @@ def compare_command(
                     recording.column_note,
                 )
             )
-    render = {"table": _print_tables, "markdown": _print_markdown, "csv": _print_csv, "json": _print_json}
-    render[output_format](results)
-    if not all(result.comparison.any_succeeded for result in results):
-        ctx.exit(EXIT_FIT_FAILED)
+    return results
 
 
 def with_streams(
@@ -221,7 +237,7 @@ def with_streams(
 
 
 def _reason(result: MethodResult) -> str:
-    """Why a method failed, as the command line words it (``--method sphere``, each reason once)."""
+    """Why a method failed, as this command words it (``--methods sphere``, each reason once)."""
     return str(result.error)
 
 

@@ -8,7 +8,9 @@ from pathlib import Path
 
 import click
 
+from ..remedy import command_line
 from ..sources import Magnetometer, Source, open_source
+from ._advice import own_options
 from ._common import console, time_span
 from ._consistency import inspect_lines
 
@@ -59,7 +61,9 @@ def source_lines(source: Source) -> list[tuple[str, str]]:
     lines += [("note", note) for note in source.notes]
     usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
     if source.kind != "samples" and len(usable) > 1:
-        lines.append(("calibrate", f"fits each (-o writes every one); --sensor ID fits one ({', '.join(usable)})"))
+        each = command_line("calibrate", source.path, [])
+        which = ", ".join(usable)
+        lines.append(("calibrate", f"{each} fits each (-o writes every one), with --sensor ID one ({which})"))
     return lines
 
 
@@ -73,7 +77,7 @@ def column_lines(path: Path) -> list[tuple[str, str]]:
     try:
         fmt = sniff(path)
         if fmt.header is not None and fmt.kind in ("text", "npz"):
-            return _stream_lines(fmt.header)
+            return _stream_lines(fmt.header, path)
         if fmt.header is not None or fmt.kind == "npz" or fmt.n_columns <= 3:
             return []
         choice = text_content_choice(path, fmt) if fmt.kind == "text" else npy_content_choice(path, fmt)
@@ -85,31 +89,35 @@ def column_lines(path: Path) -> list[tuple[str, str]]:
     ]
 
 
-#: What each stream of a samples file is for.
-_USES = {
-    "attitude": "--method vector, magfit align",
-    "reference": "--method vector, magfit align",
-    "gyro": "--method gyro; vector's still-sample gate",
-    "accel": "vector, gyro, magfit align: gravity",
-    "time": "vector's lag, gyro's integration",
-    "place": "the World Magnetic Model's reference field",
-}
+def _uses(name: str, path: Path) -> str:
+    """What a stream of the samples file ``path`` is for, with the command that reads it."""
+    method = {"attitude": "vector", "reference": "vector", "gyro": "gyro"}.get(name)
+    uses = {
+        "attitude": "and magfit align",
+        "reference": "and magfit align",
+        "gyro": "and vector's still-sample gate",
+        "accel": "vector, gyro, magfit align: gravity",
+        "time": "vector's lag, gyro's integration",
+        "place": "the World Magnetic Model's reference field",
+    }[name]
+    return uses if method is None else f"{command_line('calibrate', path, [('method', method)])} {uses}"
 
 
-def _stream_lines(header: tuple[str, ...]) -> list[tuple[str, str]]:
+def _stream_lines(header: tuple[str, ...], path: Path) -> list[tuple[str, str]]:
     """The streams a header names beside the magnetometer (docs/file-formats.md, "The other streams")."""
     from ..io.streams import find_stream_columns
 
     found = find_stream_columns(header)
     return [
-        ("streams" if index == 0 else "", f"{name}: {columns.describe()} ({_USES[name]})")
+        ("streams" if index == 0 else "", f"{name}: {columns.describe()} ({_uses(name, path)})")
         for index, (name, columns) in enumerate(found.items())
     ]
 
 
 @click.command("inspect")
 @click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
-def inspect_command(file: Path) -> None:
+@click.pass_context
+def inspect_command(ctx: click.Context, file: Path) -> None:
     """List what a recording holds: its magnetometers and what else is logged.
 
     FILE is a PX4 ULog (.ulg, needs pip install 'magfit[ulog]'), an ArduPilot DataFlash log (.bin), a MAVLink
@@ -125,9 +133,11 @@ def inspect_command(file: Path) -> None:
       magfit inspect mag.csv
     """
     out = console()
-    source = open_source(file)
-    lines = source_lines(source)
-    if source.kind == "samples":
-        lines += column_lines(file)
-    for label, value in lines + inspect_lines(source):
+    with own_options(ctx, file=file):  # inspect takes no option: a remedy is said as magfit calibrate FILE ...
+        source = open_source(file)
+        lines = source_lines(source)
+        if source.kind == "samples":
+            lines += column_lines(file)
+        lines += inspect_lines(source)
+    for label, value in lines:
         out.print(f"{label:<16} {value}", soft_wrap=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import textwrap
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -358,10 +358,10 @@ class SensorSlot:
 def sensor_slot(
     calibration: Calibration, target: str, count: int, slot: int | None, device_id: int | None
 ) -> SensorSlot:
-    """The slot and device id to write: the explicit options first, else ``details["sensor"]``, else slot 0.
+    """The slot and device id to write: the explicit options first, else ``calibration.sensor``, else slot 0.
 
-    ``details["sensor"] = {"id": str, "slot": int | None, "device_id": int | None}`` is filled by the
-    pipeline from the log's magnetometer (:class:`magfit.sources.Magnetometer`).
+    ``calibration.sensor`` (:class:`magfit.facts.LogCompass`: id, slot, device id) is filled by the pipeline
+    from the log's magnetometer (:class:`magfit.sources.Magnetometer`).
 
     Raises
     ------
@@ -370,15 +370,15 @@ def sensor_slot(
     ExportError
         The calibration's own slot is beyond the ``count`` compasses ``target`` calibrates.
     """
-    sensor = calibration.details.get("sensor")
-    sensor = sensor if isinstance(sensor, Mapping) else {}
-    name = sensor.get("id")
+    sensor = calibration.sensor
+    name = sensor.id if sensor is not None else None
+    own_slot = sensor.slot if sensor is not None else None
     if slot is not None:
         if not _is_int(slot) or not 0 <= slot < count:
             raise OptionError(f"slot must be the {target} compass slot, an integer from 0 to {count - 1}; got {slot!r}")
         chosen = int(slot)
-    elif _is_int(sensor.get("slot")):
-        chosen = int(sensor["slot"])
+    elif own_slot is not None:
+        chosen = own_slot
         if not 0 <= chosen < count:
             raise ExportError(
                 f"{target} calibrates {count} compasses (slots 0-{count - 1}), but this calibration is for slot "
@@ -393,8 +393,8 @@ def sensor_slot(
             )
         chosen_id: int | None = int(device_id)
     else:
-        chosen_id = int(sensor["device_id"]) if _is_int(sensor.get("device_id")) else None
-    return SensorSlot(chosen, chosen_id, plain(name) if isinstance(name, str) else None)
+        chosen_id = sensor.device_id if sensor is not None else None
+    return SensorSlot(chosen, chosen_id, plain(name) if name is not None else None)
 
 
 def _is_int(value: object) -> bool:
@@ -408,17 +408,17 @@ def with_applied_rotation(calibration: Calibration, applied_rotation: object) ->
     COMPASS_ORIENT or AHRS_ORIENTATION): a vector fit on those samples gives ``M @ (R0 raw - o)``. The
     rotation an export writes replaces R0 in the firmware, so it must include it:
     ``M @ (R0 raw - o) = (M R0) @ (raw - R0ᵀ o)``. ``applied_rotation`` is R0 (``board = R0 @ sensor``), or
-    None; it comes from the option or from ``details["sensor"]["applied_rotation"]``. A sensor-frame
-    calibration is returned unchanged: its firmware keeps the rotation in force.
+    None; it comes from the option or from ``calibration.sensor.applied_rotation``. A sensor-frame
+    calibration is returned unchanged: its firmware keeps the rotation in force. The calibration returned
+    keeps its facts, its ``sensor`` without the rotation (which it now includes).
 
     Raises
     ------
     OptionError
         ``applied_rotation`` is not a proper rotation matrix.
     """
-    if applied_rotation is None:
-        sensor = calibration.details.get("sensor")
-        applied_rotation = sensor.get("applied_rotation") if isinstance(sensor, Mapping) else None
+    if applied_rotation is None and calibration.sensor is not None:
+        applied_rotation = calibration.sensor.applied_rotation
     if applied_rotation is None or calibration.frame != "vehicle":
         return calibration
     try:
@@ -427,18 +427,15 @@ def with_applied_rotation(calibration: Calibration, applied_rotation: object) ->
     except (ValueError, TypeError) as error:
         raise OptionError(f"applied_rotation must be the 3x3 rotation applied before logging: {error}") from None
     details = {**calibration.details, "applied_rotation": r0.tolist(), "applied_rotation_deg": angle}
-    return Calibration(
-        calibration.method,
-        r0.T @ calibration.offset,
-        calibration.matrix @ r0,
-        calibration.field_strength,
-        unit=calibration.unit,
-        n_samples=calibration.n_samples,
+    return replace(
+        calibration,
+        offset=r0.T @ calibration.offset,
+        matrix=calibration.matrix @ r0,
         details=details,
-        frame="vehicle",
         motor=None if calibration.motor is None else replace(  # the term lives in the raw axes too
             calibration.motor, coefficients=r0.T @ calibration.motor.coefficients
         ),
+        sensor=None if calibration.sensor is None else replace(calibration.sensor, applied_rotation=None),
     )
 
 

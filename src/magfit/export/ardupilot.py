@@ -40,7 +40,7 @@ value is out of range. Do you want to continue?"; answering No keeps the old val
 **Several compasses.** ArduPilot calibrates up to three: slot 0 is ``COMPASS_OFS_*``,
 ``COMPASS_DIA_*``, ``COMPASS_ODI_*``, ``COMPASS_SCALE``, ``COMPASS_ORIENT``; slot 1 the same names with 2
 (``COMPASS_OFS2_X``, ``COMPASS_SCALE2``), slot 2 with 3. The slot and the device id come from the
-``slot=`` / ``device_id=`` options or from ``details["sensor"]`` (filled from a flight log);
+``slot=`` / ``device_id=`` options or from ``calibration.sensor`` (filled from a flight log);
 :func:`magfit.export.export_several` writes several compasses in one file. ``COMPASS_DEV_ID*`` is written
 as a comment, not a parameter: ArduPilot sets it itself at boot (``@ReadOnly``) from the detected sensor,
 and ``Compass::configured`` (AP_Compass.cpp) treats a compass whose stored ``COMPASS_DEV_ID`` differs from
@@ -194,7 +194,7 @@ def ardupilot_parameters(
         The samples' unit, overriding ``calibration.unit``; must be physical (not counts).
     slot, device_id : int or None
         ArduPilot's compass slot (0-based: 0 writes COMPASS_OFS_*, 1 COMPASS_OFS2_*) and the sensor's
-        device id; default from ``calibration.details["sensor"]``, else slot 0.
+        device id; default from ``calibration.sensor``, else slot 0.
     expected_field : float or None
         The local field strength (World Magnetic Model) in the calibration's unit: fills COMPASS_SCALE.
 

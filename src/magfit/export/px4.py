@@ -52,7 +52,7 @@ vehicle's) and component 1.
 **Several magnetometers**: PX4 keeps four calibration slots, ``CAL_MAG0_*`` .. ``CAL_MAG3_*``,
 and applies slot n to the sensor whose device id is ``CAL_MAGn_ID`` (``FindCalibrationIndex`` in
 src/lib/sensor_calibration/Utilities.cpp, called by ``Magnetometer::ParametersUpdate``). The slot and the
-device id come from the ``slot=`` / ``device_id=`` options or from ``details["sensor"]`` (filled from the
+device id come from the ``slot=`` / ``device_id=`` options or from ``calibration.sensor`` (filled from the
 log's ``sensor_mag.device_id``); with a device id the file writes ``CAL_MAGn_ID`` (INT32), so PX4 finds the
 calibration; without one, PX4 applies the slot only if it already holds the sensor's id (calibrate once in
 QGroundControl first). :func:`magfit.export.export_several` writes several in one file.
@@ -142,7 +142,7 @@ def px4_parameters(
         The samples' unit, overriding ``calibration.unit``; must be physical (not counts).
     slot, device_id : int or None
         PX4's calibration slot n (0-3) and the sensor's device id (``CAL_MAGn_ID``); default from
-        ``calibration.details["sensor"]``, else slot 0 and no id.
+        ``calibration.sensor``, else slot 0 and no id.
 
     Returns
     -------

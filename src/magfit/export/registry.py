@@ -161,8 +161,8 @@ def export(
     slot, device_id : int or None
         ``ardupilot``, ``px4``: the firmware's 0-based compass slot (ArduPilot 0-2: ``COMPASS_OFS_*``,
         ``COMPASS_OFS2_*``, ``COMPASS_OFS3_*``; PX4 0-3: ``CAL_MAG0..3_*``) and the sensor's device id.
-        Default: ``calibration.details["sensor"]`` (``{"id", "slot", "device_id"}``, filled from a flight
-        log), else slot 0 and no id. The explicit option wins.
+        Default: ``calibration.sensor`` (:class:`magfit.facts.LogCompass`: id, slot, device id, filled from
+        a flight log), else slot 0 and no id. The explicit option wins.
     expected_field : float or None
         ``ardupilot``: the local field strength (World Magnetic Model) in the calibration's unit;
         ``COMPASS_SCALE`` becomes expected / fitted field, as ArduPilot's calibrator sets it.
@@ -170,7 +170,7 @@ def export(
         ``ardupilot``, ``px4``, ``betaflight``, ``inav``, vehicle frame only: the mounting rotation the
         firmware had applied to the samples before they were logged (``board = R0 @ sensor``; ArduPilot
         logs MAG after COMPASS_ORIENT). The rotation written replaces it, so it includes it. Default:
-        ``details["sensor"]["applied_rotation"]``, else none (the samples are the sensor's own readings).
+        ``calibration.sensor.applied_rotation``, else none (the samples are the sensor's own readings).
     allow_unit_mismatch : bool
         The formats of :data:`UNIT_CHECKED` write the field in a physical unit, and refuse a calibration
         whose field strength is no place's Earth field in the declared unit
@@ -240,7 +240,7 @@ def export_several(
         As for :func:`export`, applied to every calibration.
     slots, device_ids : sequence of (int or None), optional
         Per calibration, in the same order: the firmware slot and the device id; None (or an entry None)
-        takes the calibration's ``details["sensor"]``.
+        takes the calibration's ``sensor`` (its slot and device id).
 
     Raises
     ------
@@ -332,8 +332,7 @@ def _refuse_residual(calibration: Calibration, format: str) -> None:
     """A fit on samples that still carry the firmware's calibration is a residual: only json may hold it."""
     if format not in MOTOR_FORMATS:  # the motors' field: written by these, refused with its cost by the others
         refuse_motor(calibration, format)
-    sensor = calibration.details.get("sensor")
-    in_use = sensor.get("calibration_in_use") if isinstance(sensor, Mapping) else None
+    in_use = calibration.sensor.calibration_in_use if calibration.sensor is not None else None
     if in_use and format != "json":
         raise ExportError(
             f"this calibration was fitted on samples that already carry the firmware's calibration ({in_use}): it "

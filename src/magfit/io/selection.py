@@ -8,7 +8,7 @@ Errors name the file and the columns there are, and say how to choose (``columns
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataFileError, OptionError
-from ..remedy import option
+from ..remedy import audience, option
 from .columns import (
     CONTENT_ROWS,
     ContentChoice,
@@ -163,6 +163,20 @@ def columns_origin(labels: Sequence[str], header: Sequence[str] | None) -> tuple
     return stated or (converter.unit if converter is not None else None), converter
 
 
+def _three_columns_of(key: str, matrices: Mapping[str, NpyInfo]) -> str:
+    """How to choose three columns of the array ``key``, in the reader's words: Python names them
+    (``key[:, 0]``); the command line's ``--columns`` takes their numbers, which only a file with one 2-D
+    array makes unambiguous (a name there holds no comma)."""
+    keys = ["mag_x", "mag_y", "mag_z"]
+    if key not in matrices:  # not a 2-D array of three columns or more
+        return f"give an (N, 3) array, or three 1-D arrays x, y, z: {option('columns', keys)}"
+    if audience() == "python":
+        return f"give three columns, e.g. columns=['{key}[:, 0]', '{key}[:, 1]', '{key}[:, 2]']"
+    if len(matrices) == 1:
+        return f"give three of its columns by number, e.g. {option('columns', '0,1,2')}"
+    return f"save its x, y and z columns as three 1-D arrays and name them: {option('columns', keys)}"
+
+
 @dataclass(frozen=True)
 class NpzSelection:
     """Where the x, y, z values of an npz file are: three 1-D keys, or three columns of one 2-D key."""
@@ -231,9 +245,7 @@ def resolve_npz_columns(path: Path, members: dict[str, NpyInfo], columns: Sequen
             raise file_error(path, f"no array named {key!r}; the keys are: {listing}")
         if key not in matrices or members[key].shape[1] != 3:
             raise file_error(
-                path,
-                f"array {key!r} has shape {members[key].shape}, not (N, 3); give three columns, e.g. "
-                f"columns=['{key}[:, 0]', '{key}[:, 1]', '{key}[:, 2]']",
+                path, f"array {key!r} has shape {members[key].shape}, not (N, 3); {_three_columns_of(key, matrices)}"
             )
         return from_matrix(key, (0, 1, 2))
     if len(chosen) != 3:

@@ -16,6 +16,7 @@ import numpy as np
 from ..calibration import Calibration
 from ..errors import CalibrationError, DataFileError, MagfitError, OptionError
 from ..evaluate import evaluate
+from ..facts import LogCompass, SampleSource
 from ..findings import Reason
 from ..fit import fit
 from ..methods import get_method
@@ -362,17 +363,18 @@ def _calibrate_compass(
         say(note)
     notes += outcome.notes
     calibration = outcome.calibration
-    sensor = {"id": magnetometer.id, "slot": magnetometer.slot, "device_id": magnetometer.device_id, **frame_details}
+    rotation = frame_details.get("applied_rotation")  # the firmware's mounting, applied before logging
+    sensor = LogCompass(
+        magnetometer.id, magnetometer.slot, magnetometer.device_id,
+        None if rotation is None else tuple(tuple(map(float, row)) for row in rotation),
+        magnetometer.calibration_in_use,  # the exports refuse to write a residual in its place
+    )  # fmt: skip
     verdict = calibration.support.verdict if calibration.support is not None else None
     vehicle: tuple[Reason, ...] = ()
     if verdict in ("weak", "refused") and turned(fitted):  # a flight log is a vehicle's: what works for it
         chosen = magnetometer.id if several else None
         vehicle = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
-    if magnetometer.calibration_in_use is not None:  # the exports refuse to write a residual in its place
-        sensor["calibration_in_use"] = magnetometer.calibration_in_use
-    source_details = {"file": path.name, "sensor": magnetometer.id, "device_id": magnetometer.device_id}
-    source_details["unit"] = calibration.unit
-    calibration = replace(calibration, details={**calibration.details, "source": source_details, "sensor": sensor})
+    calibration = replace(calibration, sensor=sensor, source=SampleSource(path.name, calibration.unit))
     times = read.time_s[np.isfinite(read.time_s)]
     span = f"{magnetometer.span_s:.1f} s" if np.isfinite(magnetometer.span_s) else "no time stamps"
     return CompassCalibration(
@@ -458,7 +460,8 @@ def _vehicle_weak(
     support = compass.calibration.support
     if support is None or support.verdict not in ("weak", "refused"):
         return compass
-    chosen = columns if columns is not None else compass.calibration.details.get("source", {}).get("column_indices")
+    source = compass.calibration.source
+    chosen = columns if columns is not None or source is None else source.column_indices
     return replace(compass, advice=_samples_file_advice(compass.path, chosen, nonfinite, unit, method))
 
 
@@ -561,16 +564,11 @@ def _calibrate_samples_streams(
         raise _with_vehicle_advice(path, refusal, columns, label, method, nonfinite) from None
     calibration = calibration.with_unit(label) if label else calibration
     chosen = source.magnetometers[0]
-    details = {
-        "file": path.name,
-        "columns": list(read.columns),
-        "column_indices": list(read.column_indices),
-        "header": read.header,
-        "n_columns": read.n_columns,
-        "unit": calibration.unit,
-        "streams": [note.split(": ", 1)[1] for note in notes[1:]],
-    }
-    calibration = replace(calibration, details={**calibration.details, "source": details})
+    fitted_on = SampleSource(
+        path.name, calibration.unit, tuple(map(str, read.columns)), tuple(map(int, read.column_indices)),
+        read.header, read.n_columns, tuple(note.split(": ", 1)[1] for note in notes[1:]),
+    )  # fmt: skip
+    calibration = replace(calibration, source=fitted_on)
     return CompassCalibration(
         path=path,
         calibration=calibration,
@@ -641,16 +639,12 @@ def _calibrate_samples(
     unit = unit if unit is not None else chosen.unit  # the file's own when its column names say it (mag_x_uT)
     if unit is not None:
         calibration = calibration.with_unit(unit)
-    # Where the samples came from, so that `magfit apply` reads the same columns (details["source"]).
-    source = {
-        "file": path.name,
-        "columns": list(chosen.columns),
-        "column_indices": list(chosen.column_indices),
-        "header": chosen.format.header is not None,
-        "n_columns": chosen.format.n_columns,
-        "unit": unit if unit is not None else calibration.unit,
-    }
-    calibration = replace(calibration, details={**calibration.details, "source": source})
+    # Where the samples came from, so that `magfit apply` reads the same columns (Calibration.source).
+    source = SampleSource(
+        path.name, unit if unit is not None else calibration.unit, tuple(map(str, chosen.columns)),
+        tuple(map(int, chosen.column_indices)), chosen.format.header is not None, chosen.format.n_columns,
+    )  # fmt: skip
+    calibration = replace(calibration, source=source)
     read = fitted.read
     return CompassCalibration(
         path=path,

@@ -52,9 +52,9 @@ class CompassCalibration:
     path : Path
         The recording.
     calibration : Calibration
-        The fit, labelled with the samples' unit; ``details["source"]`` says what it was fitted on (the
-        columns, for ``magfit apply``; the log's compass) and, for a log, ``details["sensor"]`` is
-        ``{"id", "slot", "device_id"}``: the compass an export writes it for.
+        The fit, labelled with the samples' unit; ``calibration.source`` says what it was fitted on (the
+        file; a samples file's columns, for ``magfit apply``) and, for a log, ``calibration.sensor`` is the
+        compass (:class:`magfit.facts.LogCompass`: id, slot, device id) an export writes it for.
     evaluation : Evaluation
         The paper's sphere-distance metric over every sample read (dimensionless).
     columns : tuple
