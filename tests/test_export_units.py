@@ -63,6 +63,15 @@ def test_forced_writes_the_values_as_declared_and_says_so(counts_as_ut: magfit.C
         assert ("WARNING (written although)" in forced) == (name != "adafruit-json")  # JSON has no comments
 
 
+def test_the_way_to_write_it_all_the_same_is_said_in_the_readers_words(counts_as_ut: magfit.Calibration) -> None:
+    from magfit.remedy import for_command_line
+
+    with pytest.raises(ExportError, match=r"write it all the same \(allow_unit_mismatch=True\)"):
+        export(counts_as_ut, "adafruit")
+    with for_command_line(), pytest.raises(ExportError, match=r"write it all the same \(--force\)"):
+        export(counts_as_ut, "adafruit")
+
+
 @pytest.mark.parametrize("name", ["json", "magcal"])
 def test_formats_naming_no_unit_or_lossless_are_not_checked(name: str, counts_as_ut: magfit.Calibration) -> None:
     assert export(counts_as_ut, name)

@@ -51,7 +51,7 @@ _audience: list[Audience] = ["python"]
 #: The arguments whose value is a list of columns (``attitude=['roll', 'pitch', 'yaw']``; ``--attitude roll,...``).
 STREAM_ARGUMENTS = ("columns", "attitude", "reference", "gyro", "accel", "time", "accel_columns", "gyro_columns")
 #: Arguments whose command-line form is a flag: given when true, absent when false.
-FLAGS = {"allow_undetermined": "--force", "force": "--force", "even": "--even"}
+FLAGS = {"allow_undetermined": "--force", "allow_unit_mismatch": "--force", "force": "--force", "even": "--even"}
 
 
 @dataclass(frozen=True)

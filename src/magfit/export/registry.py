@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike
 from ..calibration import Calibration
 from ..errors import ExportError, MagfitError, OptionError
 from ..findings import Reason
+from ..remedy import option
 from ..temperature import TemperatureDrift
 from ..units import field_unit_reason, get_unit
 from ._common import comment_lines, with_applied_rotation
@@ -307,8 +308,8 @@ def _refuse_unit_mismatch(calibration: Calibration, format: str, unit: str | Non
         return reason
     if reason is not None:
         raise ExportError(
-            f"the {format} export writes the field in {declared}, and {reason}; or pass allow_unit_mismatch=True "
-            "to write it all the same",
+            f"the {format} export writes the field in {declared}, and {reason}; or write it all the same "
+            f"({option('allow_unit_mismatch', True)})",
             codes=(reason.code,),
             remedy=reason.remedy,
         )
