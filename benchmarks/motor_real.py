@@ -176,7 +176,7 @@ def magfit_rows(
             continue
         seconds = time.perf_counter() - start
         calibration = result.calibration
-        params = _params_ardupilot(export(calibration, "ardupilot"))
+        params = _params_ardupilot(export(calibration, "ardupilot", slot=0))
         corrected = ardupilot_correct(params, on.raw, on.current, on.current)
         term = calibration.motor
         if term is None:
@@ -447,8 +447,8 @@ def _fitted(path: Path, flight: Flight, methods: tuple[tuple[str, str], ...]) ->
             percent = 100 * term.at_full_scale() / calibration.field_strength
             note = f"k ({k[0]:.2f}, {k[1]:.2f}, {k[2]:.2f}) mG/A, {percent:.1f} % at {term.full_scale:.1f} A"
         codes = ", ".join(calibration.support.codes) if calibration.support.codes else ""
-        note += f"; {calibration.support.status}" + (f" ({codes})" if codes else "")
-        out.append((name, ("ardupilot", _params_ardupilot(export(calibration, "ardupilot"))), note))
+        note += f"; {calibration.support.verdict}" + (f" ({codes})" if codes else "")
+        out.append((name, ("ardupilot", _params_ardupilot(export(calibration, "ardupilot", slot=0))), note))
     return out
 
 
