@@ -15,6 +15,7 @@ from magfit.motor import MIN_PERCENT, MotorFit
 from magfit.motorsim import simulate_motor_flight
 from magfit.motorterm import MotorTerm
 from magfit.pipeline.motor import left_in
+from magfit.pipeline.motor import weakly_told as weakly_told_reason
 from test_motor_logs import write_flight
 
 
@@ -67,3 +68,11 @@ def test_a_clean_vehicle_gets_no_left_in_weakness(tmp_path: Path) -> None:
     log = write_flight(tmp_path / "clean.bin", simulate_motor_flight(240, driver="none", seed=11), ctun=False)
     result = magfit.calibrate_file(log, motor="auto")
     assert "motor_undetermined" not in result.calibration.support.codes
+
+
+def test_a_kept_term_weakly_told_from_the_attitude_is_a_weakness() -> None:
+    weak = replace(_fit(4.2, 1.0, fitted=True), independence=0.025)
+    reason = weakly_told_reason(weak)
+    assert reason is not None and reason.code == "motor_weak"
+    assert weakly_told_reason(replace(weak, independence=0.5)) is None  # well told: nothing to say
+    assert weakly_told_reason(replace(weak, fitted=False)) is None  # not kept: left_in's business

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..errors import CalibrationError, DataFileError, OptionError
 from ..findings import Reason
-from ..motor import MIN_PERCENT, MOTOR_CHOICES, MotorFit, fit_motor, with_motor
+from ..motor import MIN_PERCENT, MOTOR_CHOICES, WEAK_INDEPENDENCE, MotorFit, fit_motor, with_motor
 from ..motorterm import MotorTerm
 from ..remedy import option
 from ..sources import LogSamples, Source
@@ -251,12 +251,7 @@ def motor_stage(
     if best is None:
         codes = sorted({reason.code for result, _ in tried for reason in result.reasons})
         details = {**dict(calibration.details), "motor": _facts(tried, None, codes)}
-        kept = replace(calibration, details=details)
-        weakness = left_in([result for result, _ in tried])
-        support = kept.support
-        if weakness is not None and support is not None:
-            verdict: Literal["weak", "refused"] = "refused" if support.refusals else "weak"
-            kept = replace(kept, support=replace(support, verdict=verdict, weaknesses=(*support.weaknesses, weakness)))
+        kept = _weakened(replace(calibration, details=details), left_in([result for result, _ in tried]))
         return MotorOutcome(kept, read.samples, notes, tried[0][0])
     result, signal = best
     assert result.term is not None
@@ -276,9 +271,33 @@ def motor_stage(
             unchanged, notes=(*notes, f"{where}: with the motors' field removed the method refused: {error}")
         )
     details = {**dict(final.details), "motor": _facts(tried, signal.name, [])}
-    final = replace(final, details=details)
+    final = _weakened(replace(final, details=details), weakly_told(result))
     cleaned = read.samples - result.term.field(_clamped(times, signal, result.term.lag_s))
     return MotorOutcome(final, cleaned, notes, result)
+
+
+def _weakened(calibration: Calibration, weakness: Reason | None) -> Calibration:
+    """The calibration with ``weakness`` added to its verdict (supported becomes weak; refused stays refused)."""
+    support = calibration.support
+    if weakness is None or support is None:
+        return calibration
+    verdict: Literal["weak", "refused"] = "refused" if support.refusals else "weak"
+    return replace(calibration, support=replace(support, verdict=verdict, weaknesses=(*support.weaknesses, weakness)))
+
+
+def weakly_told(fit: MotorFit) -> Reason | None:
+    """The weakness of a kept term weakly told from the attitude (ρ of eq. M4 below
+    :data:`~magfit.motor.WEAK_INDEPENDENCE`): its one-sigma assumes the model exact, and a misfit the attitude
+    explains moves it by ρ^-½ times more; None for a term well told from the attitude."""
+    if not fit.fitted or fit.term is None or not fit.independence < WEAK_INDEPENDENCE:
+        return None
+    return Reason(
+        f"the motors' term kept is weakly told from the attitude (ρ = {fit.independence:.3f}): its size, "
+        f"{fit.percent:.1f} % ± {fit.percent_sigma:.1f} % of the field at full scale, may be off by more than its "
+        "one-sigma says (a misfit the attitude explains moves it); confirm it on a flight that turns and tilts at "
+        "low and at high throttle, or with compassmot",
+        "motor_weak",
+    )
 
 
 def left_in(tried: Sequence[MotorFit]) -> Reason | None:
