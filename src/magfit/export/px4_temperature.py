@@ -2,17 +2,17 @@
 
 PX4's convention, from its source (PX4-Autopilot, src/modules/temperature_compensation):
 
-- ``TemperatureCompensation::calc_thermal_offsets_3D`` (TemperatureCompensation.cpp): the temperature is
-  clipped to ``[TMIN, TMAX]``, ``dT = T − TREF``, and per axis i::
+- ``TemperatureCompensation::update_offsets_mag`` calls ``calc_thermal_offsets_3D`` (TemperatureCompensation.cpp):
+  the temperature is clipped to ``[TMIN, TMAX]``, ``dT = T − TREF``, and per axis i::
 
       thermal_offset_i = X0_i + X1_i dT + X2_i dT² + X3_i dT³                                        (P1)
 
-  with ``TC_Mn_X{0..3}_{0,1,2}``, applied to the sensor whose device id is ``TC_Mn_ID`` (``set_sensor_id``),
+  with ``TC_Mn_X{0..3}_{0,1,2}``, applied to the sensor whose device id is ``TC_Mn_ID`` (``set_sensor_id_mag``),
   when ``TC_M_ENABLE`` is 1 (``parameters_update``); published in ``sensor_correction.mag_offset_n``.
 - ``calibration::Magnetometer::SensorCorrectionsUpdate`` (Magnetometer.cpp, PX4's sensor calibration library)
   copies ``sensor_correction.mag_offset_n`` of the sensor whose device id matches into the magnetometer's
   ``_thermal_offset``, in the ``sensor_mag`` frame and unit (gauss). PX4 subtracts a thermal offset from the raw
-  reading beside the calibration's offset for every sensor whose ``Correct`` it applies in (the accelerometer's
+  reading beside the calibration's offset in every other sensor's ``Correct`` (the accelerometer's
   and the gyroscope's ``R · (data − _thermal_offset − _offset)``, the barometer's ``data − _thermal_offset −
   _offset``); for the magnetometer that would read::
 
