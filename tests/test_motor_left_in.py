@@ -62,6 +62,9 @@ def test_calibrate_file_says_the_motors_field_it_leaves_in(tmp_path: Path) -> No
     support = result.calibration.support
     assert result.calibration.motor is None
     assert "motor_undetermined" in support.codes and support.verdict != "supported"
+    said = next(w for w in support.weaknesses if w.code == "motor_undetermined")
+    printed = result.calibration.details.get("diagnostics", {}).get("warnings", [])
+    assert str(said) in printed  # the command line prints these with the verdict's count
 
 
 def test_a_clean_vehicle_gets_no_left_in_weakness(tmp_path: Path) -> None:

@@ -282,7 +282,12 @@ def _weakened(calibration: Calibration, weakness: Reason | None) -> Calibration:
     if weakness is None or support is None:
         return calibration
     verdict: Literal["weak", "refused"] = "refused" if support.refusals else "weak"
-    return replace(calibration, support=replace(support, verdict=verdict, weaknesses=(*support.weaknesses, weakness)))
+    details = dict(calibration.details)
+    diagnostics = details.get("diagnostics")
+    if isinstance(diagnostics, dict):  # the warnings the command line prints with the verdict's count
+        details["diagnostics"] = {**diagnostics, "warnings": [*(diagnostics.get("warnings") or []), str(weakness)]}
+    support = replace(support, verdict=verdict, weaknesses=(*support.weaknesses, weakness))
+    return replace(calibration, support=support, details=details)
 
 
 def weakly_told(fit: MotorFit) -> Reason | None:
