@@ -54,6 +54,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from motor import _params_ardupilot, ardupilot_correct
 
 RESULTS = Path(__file__).parent / "results" / "motor_real.md"
+#: magfit's rows of the held-out tests (method, motor): the default, no term, and the vector method.
+HELD_OUT_METHODS = (("auto", "none"), ("auto", "auto"), ("vector", "auto"))
 #: The DataFlash FMT message: header (3), type (1), length (1), name (4), format letters (16), labels (64).
 FMT_HEADER, FMT_SIZE = b"\xa3\x95\x80", 89
 
@@ -156,19 +158,25 @@ def magfit_rows(
     """magfit's calibrations of ``path`` (``--motor`` and ``--method`` per ``choices``) applied to ``on``."""
     on = flight if on is None else on
     rows: list[tuple[str, np.ndarray | None, str]] = []
-    choices = choices or (("auto", "none"), ("auto", "auto"), ("auto", "current"), ("sphere", "auto"))
+    choices = choices or (
+        ("auto", "none"),
+        ("auto", "auto"),
+        ("auto", "current"),
+        ("sphere", "auto"),
+        ("vector", "auto"),
+    )
     for method, motor in choices:
         name = f"magfit --motor {motor}" + (f" --method {method}" if method != "auto" else "")
         start = time.perf_counter()
         try:
-            result = magfit.calibrate_file(path, method, sensor=flight.sensor, field_strength="wmm", location="log",
-                                           motor=motor)  # fmt: skip
+            result = magfit.calibrate_file(path, method, sensor=flight.sensor, location="log", motor=motor,
+                                           field_strength=None if method == "vector" else "wmm")  # fmt: skip
         except MagfitError as error:
             rows.append((name, None, f"refused ({', '.join(error.codes) or 'no code'})"))
             continue
         seconds = time.perf_counter() - start
         calibration = result.calibration
-        params = _params_ardupilot(export(calibration, "ardupilot"))
+        params = _params_ardupilot(export(calibration, "ardupilot", slot=0))
         corrected = ardupilot_correct(params, on.raw, on.current, on.current)
         term = calibration.motor
         if term is None:
@@ -185,16 +193,8 @@ def magfit_rows(
 def plain_regression(flight: Flight, on: Flight | None = None) -> tuple[np.ndarray, str]:
     """``raw − Aᵀ B = V + k c`` per axis by least squares: the naive fit that takes the attitude as true
     (fitted on ``flight``, applied to ``on``, by default the same)."""
-    on = flight if on is None else on
-    expected = np.einsum("nji,j->ni", flight.attitude, flight.field_ned)
-    design = np.column_stack([np.ones(len(flight.raw)), flight.current])
-    coef, *_ = np.linalg.lstsq(design, flight.raw - expected, rcond=None)
-    offset, k = coef[0], coef[1]
-    corrected = on.raw - offset - np.outer(on.current, k)
-    return (
-        corrected,
-        f"offset ({offset[0]:.0f}, {offset[1]:.0f}, {offset[2]:.0f}) mG, k ({k[0]:.2f}, {k[1]:.2f}, {k[2]:.2f}) mG/A",
-    )
+    offset, k, note = _regression(flight)
+    return _apply(("regression", offset, k), flight if on is None else on), note
 
 
 def _wmm_tool(python: str) -> Path | None:
@@ -327,25 +327,149 @@ def truncated(path: Path, cut_s: float, into: Path) -> Path:
     raise SystemExit(f"{path}: no MAG record after {cut_s} s")
 
 
-def holdout(path: Path, flight: Flight, cut_s: float, python: str, saved: Path | None) -> list[str]:
-    """Each calibration fitted on the log up to ``cut_s`` and scored on the upright samples after it."""
+#: Messages kept from before the cut when a log's head is dropped: what every reader needs to parse the rest.
+KEPT_BEFORE = frozenset({"FMT", "FMTU", "UNIT", "MULT", "PARM", "MSG"})
+
+
+def _messages(data: bytes) -> list[tuple[int, int, str, float | None]]:
+    """Every DataFlash message: (start, length, name, time in s when its first field is a time stamp)."""
+    formats: dict[int, tuple[int, str, str]] = {}
+    out: list[tuple[int, int, str, float | None]] = []
+    i = 0
+    while i + 3 <= len(data):
+        if data[i : i + 2] != FMT_HEADER[:2]:
+            i += 1
+            continue
+        kind = data[i + 2]
+        if kind == FMT_HEADER[2]:
+            type_id, length = data[i + 3], data[i + 4]
+            name = data[i + 5 : i + 9].rstrip(b"\x00").decode()
+            letters = data[i + 9 : i + 25].rstrip(b"\x00").decode()
+            formats[type_id] = (length, name, letters)
+            out.append((i, FMT_SIZE, "FMT", None))
+            i += FMT_SIZE
+            continue
+        if kind not in formats:
+            i += 1
+            continue
+        length, name, letters = formats[kind]
+        stamp = None
+        if letters[:1] in ("I", "Q") and name not in KEPT_BEFORE:
+            size = 4 if letters[0] == "I" else 8
+            stamp = int.from_bytes(data[i + 3 : i + 3 + size], "little") * (1e-3 if size == 4 else 1e-6)
+        out.append((i, length, name, stamp))
+        i += length
+    return out
+
+
+def tail_from(path: Path, cut_s: float, into: Path) -> Path:
+    """The log from its first MAG record stamped after ``cut_s``, with the formats, units and parameters
+    logged before it (bytes unchanged): the reverse of :func:`truncated`."""
+    data = path.read_bytes()
+    messages = _messages(data)
+    start = next((i for i, _, name, t in messages if name == "MAG" and t is not None and t > cut_s), None)
+    if start is None:
+        raise SystemExit(f"{path}: no MAG record after {cut_s} s")
+    head = b"".join(data[i : i + n] for i, n, name, _ in messages if i < start and name in KEPT_BEFORE)
+    out = into / f"{path.stem}_from{cut_s:.0f}s.bin"
+    out.write_bytes(head + data[start:])
+    return out
+
+
+@dataclass(frozen=True)
+class Split:
+    """One held-out test: fit on one part of the log, score on the other (``head`` fits on the samples up to
+    ``fraction`` of the compass's time span; otherwise on the samples from ``1 − fraction`` on)."""
+
+    head: bool
+    fraction: float = 0.7
+
+    def cut_s(self, time_s: np.ndarray) -> float:
+        share = self.fraction if self.head else 1.0 - self.fraction
+        return float(time_s[0] + share * (time_s[-1] - time_s[0]))
+
+    def words(self, time_s: np.ndarray) -> str:
+        cut = self.cut_s(time_s)
+        percent = round(100 * self.fraction)
+        if self.head:
+            return f"fitted on the first {percent} % (to {cut:.0f} s), scored on the rest"
+        return f"fitted on the last {percent} % (from {cut:.0f} s), scored on the first {100 - percent} %"
+
+
+def holdout(
+    path: Path, flight: Flight, split: Split, python: str, saved: Path | None, methods: tuple[tuple[str, str], ...]
+) -> list[str]:
+    """Each calibration fitted on one part of the log (:class:`Split`) and scored on the upright samples of the
+    other part (held out) and of its own part (in sample)."""
     assert flight.time_s is not None
-    test = flight.subset((flight.time_s > cut_s) & (flight.attitude[:, 2, 2] > 0))
-    train = flight.subset(flight.time_s <= cut_s)
+    cut = split.cut_s(flight.time_s)
+    fitted = flight.time_s <= cut if split.head else flight.time_s >= cut
+    upright = flight.attitude[:, 2, 2] > 0
+    train, test, own = flight.subset(fitted), flight.subset(~fitted & upright), flight.subset(fitted & upright)
     with tempfile.TemporaryDirectory() as tmp:
-        cut = truncated(path, cut_s, Path(tmp))
-        rows = magfit_rows(cut, flight, test, (("auto", "none"), ("auto", "auto")))
-        rows.append(("plain regression (offset + k c)", *plain_regression(train, test)))
+        part = truncated(path, cut, Path(tmp)) if split.head else tail_from(path, cut, Path(tmp))
+        rows = [(name, fit, note) for name, fit, note in _fitted(part, flight, methods)]
+        offset, k, note = _regression(train)
+        rows.append(("plain regression (offset + k c)", ("regression", offset, k), note))
         for options in (("--cmot",), ("--cmot", "--elliptical")):
-            params, note = magfit_wmm(cut, flight, python, saved, options)
-            corrected = None if params is None else wmm_correct(params, test.raw, test.current)
-            rows.append((f"magfit_WMM {' '.join(options)}", corrected, note))
+            params, note = magfit_wmm(part, flight, python, saved, options)
+            rows.append((f"magfit_WMM {' '.join(options)}", None if params is None else ("wmm", params), note))
     lines = []
-    for name, corrected, note in rows:
-        figures = " | ".join(f"{v:.1f}" for v in _scores(corrected, test)) if corrected is not None else "- | - | -"
+    for name, fit, note in rows:
+        if fit is None:
+            figures = "- | - | - | - | -"
+        else:
+            inside = _scores(_apply(fit, own), own)[1:]
+            outside = _scores(_apply(fit, test), test)
+            figures = " | ".join(f"{v:.1f}" for v in (*inside, *outside))
         lines.append(f"| {flight.sensor} | {name} | {figures} | {note} |")
         print(lines[-1], flush=True)
     return lines
+
+
+def _fitted(path: Path, flight: Flight, methods: tuple[tuple[str, str], ...]) -> list[tuple[str, object, str]]:
+    """magfit's calibrations of ``path`` as ArduPilot parameters (to be applied to any samples), with notes."""
+    out: list[tuple[str, object, str]] = []
+    for method, motor in methods:
+        name = f"magfit --motor {motor}" + (f" --method {method}" if method != "auto" else "")
+        try:
+            result = magfit.calibrate_file(path, method, sensor=flight.sensor, location="log", motor=motor,
+                                           field_strength=None if method == "vector" else "wmm")  # fmt: skip
+        except MagfitError as error:
+            out.append((name, None, f"refused ({', '.join(error.codes) or 'no code'})"))
+            continue
+        calibration = result.calibration
+        term = calibration.motor
+        if term is None:
+            note = "no term"
+        else:
+            k = term.coefficients
+            percent = 100 * term.at_full_scale() / calibration.field_strength
+            note = f"k ({k[0]:.2f}, {k[1]:.2f}, {k[2]:.2f}) mG/A, {percent:.1f} % at {term.full_scale:.1f} A"
+        codes = ", ".join(calibration.support.codes) if calibration.support.codes else ""
+        note += f"; {calibration.support.verdict}" + (f" ({codes})" if codes else "")
+        out.append((name, ("ardupilot", _params_ardupilot(export(calibration, "ardupilot", slot=0))), note))
+    return out
+
+
+def _regression(flight: Flight) -> tuple[np.ndarray, np.ndarray, str]:
+    expected = np.einsum("nji,j->ni", flight.attitude, flight.field_ned)
+    design = np.column_stack([np.ones(len(flight.raw)), flight.current])
+    coef, *_ = np.linalg.lstsq(design, flight.raw - expected, rcond=None)
+    offset, k = coef[0], coef[1]
+    note = f"offset ({offset[0]:.0f}, {offset[1]:.0f}, {offset[2]:.0f}) mG, k ({k[0]:.2f}, {k[1]:.2f}, {k[2]:.2f}) mG/A"
+    return offset, k, note
+
+
+def _apply(fit: object, on: Flight) -> np.ndarray:
+    """A fitted calibration applied to ``on`` as its firmware (or magfit_WMM) would."""
+    kind, *values = fit  # type: ignore[misc]
+    if kind == "ardupilot":
+        return ardupilot_correct(values[0], on.raw, on.current, on.current)
+    if kind == "wmm":
+        return wmm_correct(values[0], on.raw, on.current)
+    offset, k = values
+    return on.raw - offset - np.outer(on.current, k)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -354,8 +478,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pymavlink-python", default=sys.executable)
     parser.add_argument("--wmm-params", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=RESULTS)
-    parser.add_argument("--holdout", type=float, default=None, metavar="SECONDS",
-                        help="also fit the first compass on the log up to SECONDS and score on the rest")  # fmt: skip
+    parser.add_argument("--holdout", action="store_true",
+                        help="also fit on the first 70 %% and score on the rest, and the reverse")  # fmt: skip
+    parser.add_argument("--holdout-compasses", type=int, default=2, metavar="N",
+                        help="the held-out tests for the first N compasses (default 2)")  # fmt: skip
     args = parser.parse_args(argv)
     lines = []
     for path in args.logs:
@@ -387,14 +513,16 @@ def main(argv: list[str] | None = None) -> int:
                 print(line, flush=True)
                 lines.append(line)
         lines.append("")
-        if args.holdout is not None and found:
-            first = found[0]
-            lines += [f"Held out: {first.sensor} fitted on the log up to {args.holdout:.0f} s, scored on the upright "
-                      "samples after it (RMS, mG).", "",
-                      "| compass | calibration | att | rp | \\|B\\| | term and notes |",
-                      "|---|---|---|---|---|---|"]  # fmt: skip
-            lines += holdout(path, first, args.holdout, args.pymavlink_python, args.wmm_params)
-            lines.append("")
+        if args.holdout and found:
+            for flight in found[: args.holdout_compasses]:
+                assert flight.time_s is not None
+                for split in (Split(head=True), Split(head=False)):
+                    lines += [f"Held out, {flight.sensor}: {split.words(flight.time_s)} (RMS, mG, upright samples).",
+                              "", "| compass | calibration | rp in sample | \\|B\\| in sample | att held out | "
+                              "rp held out | \\|B\\| held out | term and notes |",
+                              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+                    lines += holdout(path, flight, split, args.pymavlink_python, args.wmm_params, HELD_OUT_METHODS)
+                    lines.append("")
     _write(args.out, lines)
     return 0
 

@@ -67,3 +67,29 @@ def test_the_log_is_cut_before_its_first_mag_record_after_the_time(tmp_path: Pat
     log = tmp_path / "full.bin"
     log.write_bytes(_log(10))
     assert motor_real.truncated(log, 4.5, tmp_path).read_bytes() == _log(5)
+
+
+def test_the_logs_head_is_dropped_but_its_formats_and_parameters_are_kept(tmp_path: Path) -> None:
+    writer = DataFlashWriter()
+    writer.define(129, "PARM", "QNf", "TimeUS,Name,Value")
+    writer.define(130, "MAG", "QhhhI", "TimeUS,MagX,MagY,MagZ,S")
+    writer.define(131, "BAT", "Qf", "TimeUS,Curr")
+    writer.write("PARM", 0, "COMPASS_MOTCT", 0.0)
+    for j in range(10):
+        writer.write("MAG", 1_000_000 * j, 1, 2, 3, j)
+        writer.write("BAT", 1_000_000 * j + 10, float(j))
+    log = tmp_path / "full.bin"
+    log.write_bytes(writer.bytes())
+    tail = motor_real.tail_from(log, 6.5, tmp_path)
+    messages = motor_real._messages(tail.read_bytes())
+    names = [name for _, _, name, _ in messages]
+    assert names[:5] == ["FMT"] * 4 + ["PARM"]  # the formats and the parameter, from before the cut
+    stamps = [t for _, _, name, t in messages if name == "MAG"]
+    assert stamps == [7.0, 8.0, 9.0]  # every MAG record after the cut, none before
+    assert names.count("BAT") == 3
+
+
+def test_the_splits_cut_at_70_percent_of_the_compass_time_span() -> None:
+    time_s = np.linspace(10.0, 110.0, 101)
+    assert motor_real.Split(head=True).cut_s(time_s) == 80.0
+    assert motor_real.Split(head=False).cut_s(time_s) == 40.0

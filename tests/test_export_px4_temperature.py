@@ -2,7 +2,8 @@
 
 PX4 (TemperatureCompensation::calc_thermal_offsets_3D, calibration::Magnetometer): the temperature is clipped
 to [TMIN, TMAX], dT = T - TREF, thermal_offset_i = X0_i + X1_i dT + X2_i dT^2 + X3_i dT^3 (gauss, sensor
-frame), subtracted from the raw reading with CAL_MAGn_OFF before the scale matrix.
+frame), subtracted from the raw reading with CAL_MAGn_OFF before the scale matrix (eq. P2, the pattern of PX4's
+other sensors); and the magnetometer's Correct() as readable in PX4's source, which does not subtract it.
 """
 
 from __future__ import annotations
@@ -136,3 +137,34 @@ def test_calibrate_writes_tc_m_from_a_ulog_that_warms_up(tmp_path: Path) -> None
     slope = np.array([p[f"TC_M0_X1_{axis}"] for axis in range(3)])
     np.testing.assert_allclose(slope, truth / 1000.0, rtol=0.15)  # G per °C
     assert p["TC_M0_TMIN"] < p["TC_M0_TREF"] < p["TC_M0_TMAX"]
+
+
+def px4_correct_ignoring_tc(p: dict[str, float], raw_g: np.ndarray) -> np.ndarray:
+    """The magnetometer's Correct() as in the PX4 source readable: R (S ((raw + power COMP) - OFF)), the thermal
+    offset fetched but not subtracted (R = identity, no power term), slot 0."""
+    return px4_correct({**p, "TC_M_ENABLE": 0}, raw_g, np.zeros(len(raw_g)))
+
+
+def test_a_firmware_that_ignores_tc_m_is_right_at_tref_and_off_by_the_stated_amount(fitted: tuple) -> None:  # type: ignore[type-arg]
+    from magfit.export.px4_temperature import unapplied_offset
+
+    raw, temperature, directions, calibration = fitted
+    drift = offset_drift(raw, temperature, calibration)
+    text = export(calibration, "px4", device_id=466441, temperature=drift)
+    p = _parameters(text)
+    slope = np.array([p[f"TC_M0_X1_{axis}"] for axis in range(3)])  # G per °C
+    # the offset the firmware subtracts is OFF at every temperature: the true offset at T is off by X1 (T - TREF)
+    true_offset_g = 0.01 * (TRUE_OFFSET + np.outer(temperature - 30.0, TRUE_DRIFT))
+    off = np.array([p[f"CAL_MAG0_{a}OFF"] for a in "XYZ"])
+    near_tref = np.abs(temperature - p["TC_M0_TREF"]) < 0.5
+    # the whole log's offset is the offset at TREF (to the fit's noise, 0.3 mG)
+    np.testing.assert_allclose(true_offset_g[near_tref].mean(axis=0), off, atol=3e-4)
+    ends = np.array([p["TC_M0_TMIN"], p["TC_M0_TMAX"]])
+    error_at_ends = np.linalg.norm(np.outer(ends - p["TC_M0_TREF"], 0.01 * TRUE_DRIFT), axis=1).max()
+    stated = unapplied_offset(drift, slope)
+    assert stated == pytest.approx(error_at_ends, rel=0.1)
+    assert f"off by up to {1000 * stated:.1f} mG" in text
+    # and the direction error it costs over the warm-up, against the compensation applied as (P2)
+    ignored = _angle_rms_deg(px4_correct_ignoring_tc(p, raw * 0.01), directions)
+    applied = _angle_rms_deg(px4_correct(p, raw * 0.01, temperature), directions)
+    assert applied < 0.15 < 5 * applied < ignored

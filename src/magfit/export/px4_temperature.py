@@ -2,23 +2,30 @@
 
 PX4's convention, from its source (PX4-Autopilot, src/modules/temperature_compensation):
 
-- ``TemperatureCompensation::calc_thermal_offsets_3D`` (TemperatureCompensation.cpp): the temperature is
-  clipped to ``[TMIN, TMAX]``, ``dT = T − TREF``, and per axis i::
+- ``TemperatureCompensation::update_offsets_mag`` calls ``calc_thermal_offsets_3D`` (TemperatureCompensation.cpp):
+  the temperature is clipped to ``[TMIN, TMAX]``, ``dT = T − TREF``, and per axis i::
 
       thermal_offset_i = X0_i + X1_i dT + X2_i dT² + X3_i dT³                                        (P1)
 
-  with ``TC_Mn_X{0..3}_{0,1,2}``, applied to the sensor whose device id is ``TC_Mn_ID`` (``set_sensor_id``),
+  with ``TC_Mn_X{0..3}_{0,1,2}``, applied to the sensor whose device id is ``TC_Mn_ID`` (``set_sensor_id_mag``),
   when ``TC_M_ENABLE`` is 1 (``parameters_update``); published in ``sensor_correction.mag_offset_n``.
-- ``calibration::Magnetometer::SensorCorrectionsUpdate`` (src/lib/sensor_calibration/Magnetometer.cpp) takes
-  it as the magnetometer's ``_thermal_offset``, in the ``sensor_mag`` frame and unit (gauss), which PX4
-  subtracts from the raw reading with ``CAL_MAGn_OFF``, as for every sensor it compensates (the
-  accelerometer's ``Correct``: ``data − _thermal_offset − _offset``)::
+- ``calibration::Magnetometer::SensorCorrectionsUpdate`` (Magnetometer.cpp, PX4's sensor calibration library)
+  copies ``sensor_correction.mag_offset_n`` of the sensor whose device id matches into the magnetometer's
+  ``_thermal_offset``, in the ``sensor_mag`` frame and unit (gauss). PX4 subtracts a thermal offset from the raw
+  reading beside the calibration's offset in every other sensor's ``Correct`` (the accelerometer's
+  and the gyroscope's ``R · (data − _thermal_offset − _offset)``, the barometer's ``data − _thermal_offset −
+  _offset``); for the magnetometer that would read::
 
-      corrected = R · (S · ((raw + power · COMP) − thermal_offset(T) − OFF))                          (P2)
+      corrected = R · (S · ((raw + power · COMP) − thermal_offset(T) − OFF))                         (P2)
 
-- PX4's own onboard calibration (temperature_calibration/mag.cpp) fits the raw ``sensor_mag`` against
-  ``T − TREF`` and sets ``X0 = 0`` ("normalise the correction to be zero at the reference temperature"):
-  ``CAL_MAGn_OFF`` is the offset at ``TREF``.
+  **Not verified**: in the one magnetometer ``Correct`` readable that has ``_thermal_offset`` at all, it is
+  ``R · (S · ((raw + power · COMP) − OFF))``: the offset is fetched and printed but not subtracted there.
+  PX4's documentation says releases up to 1.14 do not compensate the magnetometer for temperature; PX4 pull
+  request 22701 (2024) made the module publish the magnetometer's offsets at all.
+- PX4's own onboard calibration (``TemperatureCalibrationMag``, temperature_calibration/mag.cpp) fits the raw
+  ``sensor_mag`` x, y, z against ``sensor_mag.temperature − TREF``, sets ``X0 = 0`` ("normalise the correction to
+  be zero at the reference temperature") and writes ``TC_Mn_X{3-j}_{axis}``, ``TC_Mn_TMAX/TMIN/TREF`` and
+  ``TC_Mn_ID``: ``CAL_MAGn_OFF`` is the offset at ``TREF``.
 
 magfit's drift (:mod:`magfit.temperature`, eq. T1) is the offset's change per °C, ``V(T) = V + d (T − T̄)``,
 with ``V`` the whole log's offset, in the sensor's axes. So, with ``k`` the factor to gauss::
@@ -29,6 +36,11 @@ A flight spans a few degrees: a straight line is all it determines, so the cubic
 written as zero (and said); PX4 clips the temperature to ``[TMIN, TMAX]``, so the line is never extrapolated
 beyond what the log saw. An axis whose drift is within two of its one-sigmas of zero is written as zero. An
 undetermined drift is refused (code ``undetermined``) with its reason.
+
+Because (P2) is not verified, the file says so, with what is at stake: ``OFF`` is the offset at ``TREF``, so a
+firmware that ignores ``TC_Mn_*`` is right at ``TREF`` and off by ``X1 (T − TREF)`` elsewhere, at most
+:func:`unapplied_offset` (the largest over ``[TMIN, TMAX]``): the block costs nothing where it is not applied,
+and corrects the drift where it is applied as (P2).
 """
 
 from __future__ import annotations
@@ -40,10 +52,17 @@ from ..temperature import TemperatureDrift
 from ..units import get_unit
 from ._common import SlotParameters, factor, float32_text
 
-__all__ = ["SIGNIFICANCE", "px4_temperature"]
+__all__ = ["SIGNIFICANCE", "px4_temperature", "unapplied_offset"]
 
 #: A drift within this many one-sigmas of zero is written as zero.
 SIGNIFICANCE = 2.0
+
+
+def unapplied_offset(drift: TemperatureDrift, slope: np.ndarray) -> float:
+    """The largest offset error over ``[TMIN, TMAX]`` = the log's range of a firmware that ignores ``TC_Mn_*``
+    while ``OFF`` is the offset at ``TREF``: ``max |slope (T − TREF)|``, in ``slope``'s unit."""
+    low, high = drift.range_c
+    return float(np.linalg.norm(slope) * max(abs(low - drift.reference_c), abs(high - drift.reference_c)))
 
 
 def px4_temperature(drift: TemperatureDrift, *, slot: int, device_id: int | None) -> SlotParameters:
@@ -79,8 +98,9 @@ def px4_temperature(drift: TemperatureDrift, *, slot: int, device_id: int | None
             parameters[f"{prefix}X{power}_{axis}"] = float(slope[axis]) if power == 1 else 0.0
     parameters |= {f"{prefix}TREF": drift.reference_c, f"{prefix}TMIN": low, f"{prefix}TMAX": high}
     values = ", ".join(float32_text(v) for v in slope)
+    at_stake = unapplied_offset(drift, slope)
     comments = [
-        f"# temperature compensation ({prefix}*): PX4 subtracts thermal_offset(T) with OFF from the raw reading,",
+        f"# temperature compensation ({prefix}*), to be subtracted with OFF from the raw reading (eq. P2),",
         "#   thermal_offset_i = X0_i + X1_i dT + X2_i dT^2 + X3_i dT^3, dT = clip(T, TMIN, TMAX) - TREF, in gauss",
         "#   (TemperatureCompensation::calc_thermal_offsets_3D; only while TC_M_ENABLE = 1, for the sensor TC_Mn_ID)",
         f"# fitted: X1 = ({values}) G/degC (x, y, z, sensor axes) about TREF = {drift.reference_c:.2f} degC, the log's",
@@ -90,4 +110,10 @@ def px4_temperature(drift: TemperatureDrift, *, slot: int, device_id: int | None
     if not np.all(significant):
         zeros = ", ".join("xyz"[i] for i in range(3) if not significant[i])
         comments.append(f"#   {zeros}: within {SIGNIFICANCE:g} one-sigmas of zero, written as 0")
+    comments += [
+        "# check it is applied: PX4 1.14 and older ignore TC_M*, and in the PX4 source magfit could read the",
+        "#   magnetometer's Correct() does not subtract the thermal offset; where it is ignored this calibration",
+        f"#   holds at TREF and is off by up to {1000 * at_stake:.1f} mG at TMIN/TMAX (compare sensor_mag with",
+        "#   vehicle_magnetometer at two temperatures)",
+    ]
     return SlotParameters(slot, parameters, comments)

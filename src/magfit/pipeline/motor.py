@@ -4,6 +4,11 @@ After the method's fit, the log's current and throttle (:mod:`magfit.sources.pow
 of the joint fit (:func:`magfit.motor.fit_motor`, docs/methods.md eq. M1-M4). When a term is kept, the method
 runs again on ``raw − k c`` (:func:`magfit.motor.with_motor`), so that its verdict and diagnostics speak of the
 calibration returned, and the calibration holds the term. Either way the user is told, in words.
+
+A term that is estimated large but cannot be fitted (``motor_undetermined``: the regressor follows the attitude)
+is left in the samples, and the calibration's verdict says so as a weakness with its size and the heading it can
+turn (:func:`left_in`): the method's own uncertainty does not include it, and on a held-out stretch at another
+current the calibration is off by about that much (benchmarks/results/motor_real.md).
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,13 +26,16 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..errors import CalibrationError, DataFileError, OptionError
 from ..findings import Reason
-from ..motor import MOTOR_CHOICES, MotorFit, fit_motor, with_motor
+from ..motor import MIN_PERCENT, MOTOR_CHOICES, WEAK_INDEPENDENCE, MotorFit, fit_motor, with_motor
 from ..motorterm import MotorTerm
 from ..remedy import option
 from ..sources import LogSamples, Source
 from ..sources.power import Power, Signal, read_power
 
-__all__ = ["REGRESSOR_COLUMNS", "MotorOutcome", "column_regressor", "log_regressor", "motor_stage"]
+__all__ = ["REGRESSOR_COLUMNS", "MotorOutcome", "column_regressor", "left_in", "log_regressor", "motor_stage"]
+
+#: One-sigmas below its estimate the motors' field must still exceed MIN_PERCENT to be said as left in.
+LEFT_IN_SIGMAS = 2.0
 
 #: The column names (normalised: lower case, units dropped) that hold each regressor in a samples file.
 REGRESSOR_COLUMNS = {
@@ -243,7 +251,8 @@ def motor_stage(
     if best is None:
         codes = sorted({reason.code for result, _ in tried for reason in result.reasons})
         details = {**dict(calibration.details), "motor": _facts(tried, None, codes)}
-        return MotorOutcome(replace(calibration, details=details), read.samples, notes, tried[0][0])
+        kept = _weakened(replace(calibration, details=details), left_in([result for result, _ in tried]))
+        return MotorOutcome(kept, read.samples, notes, tried[0][0])
     result, signal = best
     assert result.term is not None
     if refit_time_s is None:
@@ -262,9 +271,70 @@ def motor_stage(
             unchanged, notes=(*notes, f"{where}: with the motors' field removed the method refused: {error}")
         )
     details = {**dict(final.details), "motor": _facts(tried, signal.name, [])}
-    final = replace(final, details=details)
+    final = _weakened(replace(final, details=details), weakly_told(result))
     cleaned = read.samples - result.term.field(_clamped(times, signal, result.term.lag_s))
     return MotorOutcome(final, cleaned, notes, result)
+
+
+def _weakened(calibration: Calibration, weakness: Reason | None) -> Calibration:
+    """The calibration with ``weakness`` added to its verdict (supported becomes weak; refused stays refused)."""
+    support = calibration.support
+    if weakness is None or support is None:
+        return calibration
+    verdict: Literal["weak", "refused"] = "refused" if support.refusals else "weak"
+    details = dict(calibration.details)
+    diagnostics = details.get("diagnostics")
+    if isinstance(diagnostics, dict):  # the warnings the command line prints with the verdict's count
+        details["diagnostics"] = {**diagnostics, "warnings": [*(diagnostics.get("warnings") or []), str(weakness)]}
+    support = replace(support, verdict=verdict, weaknesses=(*support.weaknesses, weakness))
+    return replace(calibration, support=support, details=details)
+
+
+def weakly_told(fit: MotorFit) -> Reason | None:
+    """The weakness of a kept term weakly told from the attitude (ρ of eq. M4 below
+    :data:`~magfit.motor.WEAK_INDEPENDENCE`): its one-sigma assumes the model exact, and a misfit the attitude
+    explains moves it by ρ^-½ times more; None for a term well told from the attitude."""
+    if not fit.fitted or fit.term is None or not fit.independence < WEAK_INDEPENDENCE:
+        return None
+    return Reason(
+        f"the motors' term kept is weakly told from the attitude (ρ = {fit.independence:.3f}): its size, "
+        f"{fit.percent:.1f} % ± {fit.percent_sigma:.1f} % of the field at full scale, may be off by more than its "
+        "one-sigma says (a misfit the attitude explains moves it); confirm it on a flight that turns and tilts at "
+        "low and at high throttle, or with compassmot",
+        "motor_weak",
+    )
+
+
+def left_in(tried: Sequence[MotorFit]) -> Reason | None:
+    """The weakness of a calibration that leaves the motors' field in: the term estimated (of the regressor whose
+    term leaves the smaller residual) and not fitted because it is not told from the attitude
+    (``motor_undetermined``), whose interference at full scale exceeds :data:`~magfit.motor.MIN_PERCENT` by
+    :data:`LEFT_IN_SIGMAS` one-sigmas; None when there is none.
+
+    The heading it can turn is ``atan(p / 100)`` where the field is horizontal (``p`` the interference in % of the
+    field): an error of that size perpendicular to the horizontal field; more where the field dips.
+    """
+    undetermined = [
+        fit for fit in tried
+        if fit.term is not None and not fit.fitted and any(r.code == "motor_undetermined" for r in fit.reasons)
+        and np.isfinite(fit.percent) and fit.percent - LEFT_IN_SIGMAS * fit.percent_sigma > MIN_PERCENT
+    ]  # fmt: skip
+    if not undetermined:
+        return None
+    fit = min(undetermined, key=lambda f: f.residual_rms[1])  # the regressor that explains the field best
+    assert fit.term is not None
+    kind = fit.term.regressor
+    at = f"full current ({fit.term.full_scale:.3g} A)" if kind == "current" else "full throttle"
+    heading = float(np.degrees(np.arctan(fit.percent / 100.0)))
+    return Reason(
+        f"the motors' field is left in: the {kind} does not vary independently of the attitude (ρ = "
+        f"{fit.independence:.3f}), so its field cannot be fitted; a fit would put it at {fit.percent:.0f} % ± "
+        f"{fit.percent_sigma:.0f} % of the field at {at}, a figure the attitude explains as well; a field that size "
+        f"turns the heading by about {heading:.0f}° where the field is horizontal, more where it dips, beyond the "
+        "uncertainty stated; record a flight that turns and tilts at low and at high throttle, or calibrate with "
+        "the motors off",
+        "motor_undetermined",
+    )
 
 
 def _facts(tried: list[tuple[MotorFit, Signal]], chosen: str | None, codes: list[str]) -> dict[str, Any]:
