@@ -150,9 +150,10 @@ def calibrate_file(
     """
     path = Path(path)
     get_method(method)  # an unknown method, before the file is read
-    from .motor import check_motor
+    if motor not in ("auto", "none"):  # the default needs no check, nor the motors' modules imported for it
+        from .motor import check_motor
 
-    check_motor(motor)
+        check_motor(motor)
     location = _checked_location(location)
     options = dict(options or {})
     if force:  # fit's own keyword, passed with the method's options

@@ -13,7 +13,6 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -386,6 +385,8 @@ class _FirstPass:
             strided = _Strided(total, DIAGNOSE_SAMPLES)
             strided.seen = offset  # rows of the earlier pieces: the stride continues across pieces
             return evaluate_chunks(calibration, strided.collect(_counted(spill.chunks(), advance))), strided.samples()
+
+        from concurrent.futures import ThreadPoolExecutor  # (its import, with logging's, only for a big file)
 
         with ThreadPoolExecutor(len(spills)) as pool:
             parts = list(pool.map(one, spills, (int(offset) for offset in offsets)))
