@@ -620,6 +620,7 @@ REASON_CODES: dict[str, str] = {
     "time_unit": "the time stamps fit only in another unit (milliseconds, microseconds)",
     "gyro_axes": "the gyroscope's axes are of the other handedness than the magnetometer's (swapped or sign-flipped)",
     "field_drift": "the field strength changed along the recording and the fit follows the change",
+    "no_location": "the World Magnetic Model needs the place: no location given and the recording holds no GNSS fix",
     "unclassified": "a reason without a code of its own yet",
 }
 

@@ -709,7 +709,8 @@ def _model(
         what = "this file is no flight log or bag" if source is None else "this log holds no 3-D GNSS fix"
         raise OptionError(
             f"{path}: the World Magnetic Model needs the place of the recording and {what}: give "
-            f"{option('location', 'LAT,LON[,ALT]')}"
+            f"{option('location', 'LAT,LON[,ALT]')}",
+            codes=("no_location",),
         )
     when = ""
     if math.isfinite(position.time_s):
@@ -725,7 +726,8 @@ def _model_strength(model: ModelField | None, unit: str | None) -> float:
     if model is None:
         raise OptionError(
             f"{option('field_strength', 'wmm')} needs {option('location', 'LAT,LON[,ALT]')} (where the recording was "
-            "made), or a flight log or bag with its own GNSS fixes"
+            "made), or a flight log or bag with its own GNSS fixes",
+            codes=("no_location",),
         )
     if unit is None or not get_unit(unit).is_physical:
         raise OptionError(
