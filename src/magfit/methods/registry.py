@@ -131,6 +131,10 @@ class MethodSpec:
     model: ModelKind | None = None
     #: What the method adds to its verdict.
     judging: Judging = Judging()
+    #: The most samples the method's fit reads of those it is given (a regular stride beyond), None: all of them.
+    #: A file streamed to a subsample is subsampled to no more by default: more rows would not enter the fit,
+    #: only the uncertainty stated for it (as if they had).
+    fit_rows: int | None = None
 
     @property
     def options(self) -> tuple[str, ...]:
@@ -233,6 +237,7 @@ def register(
     needs: tuple[str, ...] = (),
     model: ModelKind | None = None,
     judging: Judging | None = None,
+    fit_rows: int | None = None,
 ) -> Callable[[Callable[..., Calibration]], Callable[..., Calibration]]:
     """Decorator that adds a method to :data:`METHODS` under ``name`` (see :class:`MethodSpec`)."""
 
@@ -241,7 +246,7 @@ def register(
         if METHODS.is_loaded(name) or (owner is None and name in METHODS) or owner not in (None, function.__module__):
             raise RuntimeError(f"method {name!r} registered twice")
         METHODS[name] = MethodSpec(
-            name, function, min_samples, data, summary, checks, needs, model, judging if judging else Judging()
+            name, function, min_samples, data, summary, checks, needs, model, judging or Judging(), fit_rows
         )
         return function
 
