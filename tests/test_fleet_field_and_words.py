@@ -109,3 +109,25 @@ def test_the_gyro_notes_name_a_samples_file_compass_by_its_columns(tmp_path: Pat
     assert "car.csv (columns mx, my, mz): accelerometer" in run.stderr
     fitted = magfit.Calibration.from_json((tmp_path / "c.json").read_text())
     np.testing.assert_allclose(fitted.offset, sim.hard_iron, atol=0.3)  # the truth
+
+
+def _sleep_then_pid(seconds: float) -> tuple[float, int]:
+    import os
+    import time
+
+    time.sleep(seconds)
+    return seconds, os.getpid()
+
+
+def test_a_long_task_holds_up_no_other_in_the_local_engine() -> None:
+    # Two long tasks first, then short ones: each worker takes the next task when it is free, so the two long
+    # ones run side by side, and the short ones go to whichever worker is free (none queued behind a long one).
+    from magfit.fleet import _LocalEngine
+
+    engine = _LocalEngine(2)
+    try:
+        done = list(engine.run(_sleep_then_pid, [(1.5,), (1.5,), *[(0.01,)] * 6]))
+    finally:
+        engine.close()
+    long_pids = {pid for seconds, pid in done if seconds == 1.5}
+    assert len(done) == 8 and len(long_pids) == 2  # the two long tasks on two workers, not queued on one
