@@ -170,10 +170,13 @@ def cost(files: list[Path], root: Path, dask: bool, repeat: int) -> dict[str, fl
     runs: dict[str, list[float]] = {}
 
     def timed(name: str, run: Callable[[], object]) -> None:
+        busy = _cpu_times()
         start = time.perf_counter()
         run()
         runs.setdefault(name, []).append(time.perf_counter() - start)
-        print(f"  {name}: {runs[name][-1]:.1f} s", file=sys.stderr, flush=True)
+        idle = _idle_share(busy, _cpu_times())
+        runs.setdefault(name.replace("_s", "_idle"), []).append(idle)
+        print(f"  {name}: {runs[name][-1]:.1f} s, machine idle {100 * idle:.0f} %", file=sys.stderr, flush=True)
 
     for _ in range(repeat):
         timed("fits_alone_s", lambda: _fits_alone(files))
@@ -188,17 +191,40 @@ def cost(files: list[Path], root: Path, dask: bool, repeat: int) -> dict[str, fl
             ) as client:
                 for _ in range(repeat):
                     timed(f"fleet_dask{workers}_s", lambda: fleet([root], scheduler=client))
-    return {name: min(seconds) for name, seconds in runs.items()}
+    # Each configuration's least time, and how idle the machine was during that run.
+    best = {name: min(seconds) for name, seconds in runs.items() if name.endswith("_s")}
+    idle = {f"{name}_idle": runs[name.replace("_s", "_idle")][runs[name].index(best[name])] for name in best}
+    return {**best, **idle}
+
+
+def _cpu_times() -> tuple[float, float]:
+    """The machine's (idle, total) CPU time so far, from /proc/stat (NaN where there is none)."""
+    try:
+        fields = [float(v) for v in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+    except (OSError, ValueError, IndexError):
+        return math.nan, math.nan
+    return fields[3] + fields[4], sum(fields[:8])  # idle + iowait; user ... steal
+
+
+def _idle_share(before: tuple[float, float], after: tuple[float, float]) -> float:
+    """The share of the machine's CPU time left idle between two readings: near 0, the cores were saturated
+    (by this run and others' work), and more processes can only share them, not add to them."""
+    total = after[1] - before[1]
+    return (after[0] - before[0]) / total if total > 0 else math.nan
 
 
 def _cost_lines(title: str, timings: dict[str, float]) -> list[str]:
     alone = timings["fits_alone_s"]
     ratio2 = timings["fleet_2_s"] / alone
-    lines = [title, "", "| run | seconds | / fits alone | speed-up over 1 worker |", "|---|---|---|---|"]
+    lines = [title, "", "| run | seconds | / fits alone | speed-up over 1 worker | machine idle during it |",
+             "|---|---|---|---|---|"]  # fmt: skip
     for name, seconds in timings.items():
+        if not name.endswith("_s"):
+            continue
         base = timings.get("fleet_dask1_s" if "dask" in name else "fleet_1_s", math.nan)
         speed = f"{base / seconds:.2f}" if name != "fits_alone_s" else ""
-        lines.append(f"| {name} | {seconds:.1f} | {seconds / alone:.2f} | {speed} |")
+        idle = timings.get(f"{name}_idle", math.nan)
+        lines.append(f"| {name} | {seconds:.1f} | {seconds / alone:.2f} | {speed} | {100 * idle:.0f} % |")
     lines += ["", f"fleet on 2 processes / the fits alone in one: {ratio2:.2f} (target ≤ 1.3): "
               f"{'PASS' if ratio2 <= 1.3 else 'FAIL'}.", ""]  # fmt: skip
     return lines
@@ -252,6 +278,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=3, help="runs of each cost configuration (the least kept)")
     parser.add_argument("--dask", action="store_true")
     parser.add_argument("--write", action="store_true")
+    parser.add_argument("--output", type=Path, default=None, help="with --write: the file (default results/fleet.md)")
     args = parser.parse_args(argv)
     lines = ["# Fleet benchmark", "", f"`python benchmarks/fleet.py --trials {args.trials} --recordings "
              f"{args.recordings} --logs {args.logs} --repeat {args.repeat}{' --dask' if args.dask else ''}`, "
@@ -275,7 +302,8 @@ def main(argv: list[str] | None = None) -> int:
     text = "\n".join(lines)
     print(text)
     if args.write:
-        Path(__file__).with_name("results").joinpath("fleet.md").write_text(text, encoding="utf-8")
+        output = args.output or Path(__file__).with_name("results").joinpath("fleet.md")
+        output.write_text(text, encoding="utf-8")
     return 0
 
 

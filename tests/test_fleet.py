@@ -279,8 +279,9 @@ def _pid_of(index: int) -> tuple[int, int]:
 
 
 def test_the_local_engine_runs_every_task_once_here_and_in_a_worker() -> None:
-    """workers=2: this process fits tasks too, the other worker (forked from the preloading server) the rest;
-    every task's result comes back once, and the pool serves a second batch (the combined fits)."""
+    """workers=2: two worker processes (forked from the preloading server) take the tasks from one queue, this
+    process hands them out; every task's result comes back once, and the pool serves a second batch (the
+    combined fits)."""
     import os
 
     from magfit.fleet import _LocalEngine
@@ -293,4 +294,4 @@ def test_the_local_engine_runs_every_task_once_here_and_in_a_worker() -> None:
         engine.close()
     assert sorted(i for i, _ in first) == list(range(40)) and sorted(i for i, _ in second) == list(range(40, 60))
     pids = {pid for _, pid in first + second}
-    assert os.getpid() in pids and len(pids) == 2
+    assert os.getpid() not in pids and len(pids) == 2

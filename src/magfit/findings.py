@@ -621,6 +621,7 @@ REASON_CODES: dict[str, str] = {
     "gyro_axes": "the gyroscope's axes are of the other handedness than the magnetometer's (swapped or sign-flipped)",
     "field_drift": "the field strength changed along the recording and the fit follows the change",
     "motor_weak": "the motors' term kept is weakly told from the attitude: it may be off by more than its one-sigma",
+    "no_location": "the World Magnetic Model needs the place: no location given and the recording holds no GNSS fix",
     "unclassified": "a reason without a code of its own yet",
 }
 

@@ -44,6 +44,7 @@ runs again those that failed, and rewrites the table (atomically) at the end.
 from __future__ import annotations
 
 import datetime
+import functools
 import glob
 import json
 import math
@@ -57,6 +58,7 @@ import numpy as np
 
 from .calibration import Calibration
 from .errors import MagfitError, OptionError
+from .remedy import Audience, audience, for_command_line, option
 from .sources.position import Position
 from .statistics import Statistics
 
@@ -340,8 +342,25 @@ class _Settings:
     unit: str | None
     location: tuple[float, float, float] | None
     date: str | None
+    #: Who reads the rows' reasons (:func:`magfit.remedy.audience`): a worker process says them as the run does.
+    audience: Audience = "python"
 
 
+def _in_the_run_words(function: Callable[..., Any]) -> Callable[..., Any]:
+    """``function(*task, settings)`` with its messages built for the run's reader (``settings.audience``), in
+    whichever process it runs: a remedy says ``--location`` in every row of a command-line run."""
+
+    @functools.wraps(function)
+    def run(*arguments: Any) -> Any:
+        if arguments[-1].audience == "command line" and audience() != "command line":
+            with for_command_line():
+                return function(*arguments)
+        return function(*arguments)
+
+    return run
+
+
+@_in_the_run_words
 def _fit_recording(path: Path, vehicle: str, settings: _Settings) -> _Outcome:
     """Every compass of one recording: its row and its statistics; a failure is one row, never an exception.
 
@@ -358,8 +377,10 @@ def _fit_recording(path: Path, vehicle: str, settings: _Settings) -> _Outcome:
             from .sources import vehicle_identity
 
             identity = vehicle_identity(path)
+        # A usage error (an option this file cannot serve: no place for the World Magnetic Model) is no verdict.
+        refused = bool(error.codes) and not isinstance(error, OptionError)
         row = FleetRow("error", identity or vehicle, str(path), date=logged or _file_date(path),
-                       method=settings.method, verdict="refused" if error.codes else "error",
+                       method=settings.method, verdict="refused" if refused else "error",
                        codes=";".join(error.codes), reason=_one_line(str(error)))  # fmt: skip
         outcome = _Outcome(str(path), (row,), compasses)
     except (OSError, MemoryError) as error:
@@ -672,6 +693,7 @@ class _PartTask:
 COMBINED_SAMPLES = 2_000_000
 
 
+@_in_the_run_words
 def _fit_part(task: _PartTask, settings: _Settings) -> FleetRow:
     """The combined row: the part's flights' samples (the compass's, read again), in time order, fitted with the
     run's method and judged like any recording (its verdict, the halves of the union, its heading one-sigma)."""
@@ -779,6 +801,7 @@ def _offset_move(before: _Part, flight: _Flight) -> str:
 #: that no worker pays them (about 1 s each, the first fit's own lazy imports as much again).
 PRELOAD = (
     "magfit.fleet", "magfit.pipeline", "magfit.pipeline.motor", "magfit.io.streams", "magfit.geomag",
+    "magfit.methods.auto", "magfit.methods.ml", "magfit.methods.als", "magfit.methods.ellipsoid",
     "magfit.sources.read", "magfit.sources.tlog", "magfit.sources.rosbag", "magfit.sources.power",
     "magfit.sources.mavlogdump", "magfit.sources.dataflash", "magfit.sources.ulog", "scipy.special",
     "pyulog", "pygeomag",  # (optional extras: one not installed is passed over)
@@ -786,12 +809,14 @@ PRELOAD = (
 
 
 class _LocalEngine:
-    """Local processes for the whole run (the recordings, then the combined fits), this one among them.
+    """Local processes for the whole run (the recordings, then the combined fits).
 
-    ``workers`` processes run the tasks: this process (its imports done, its caches warm) and ``workers − 1``
-    others, forked from a server that imported :data:`PRELOAD` once (``forkserver``; ``spawn`` where there
-    is none). The others take the tasks from the front, keeping a few queued ahead; this one takes the last
-    whenever it has no result to hand on: given the largest tasks first, it is soon back to feed them."""
+    ``workers`` processes, forked from a server that imported :data:`PRELOAD` once (``forkserver``; ``spawn``
+    where there is none), take the tasks from one queue, each the next as soon as it is free: a long task holds
+    up no other, whichever worker has it. (This process took tasks itself before, between handing results on,
+    and the pool's workers kept two tasks queued each: on 16 flight logs of which 4 took 2 s each and the rest
+    0.05 s, three of the four long ones sat queued behind one worker while this one waited, 16 s of 38.) With
+    ``workers=1`` the tasks run in this process, one after the other."""
 
     def __init__(self, workers: int) -> None:
         self.workers = max(1, workers)
@@ -808,38 +833,26 @@ class _LocalEngine:
                 context.set_forkserver_preload(list(PRELOAD))
             else:
                 context = multiprocessing.get_context("spawn")
-            self._pool = ProcessPoolExecutor(max_workers=self.workers - 1, mp_context=context)
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=context)
         return self._pool
 
     def run(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
-        """``function(*task)`` for each task, as they finish."""
+        """``function(*task)`` for each task, as they finish (given in the order the workers should take them)."""
         if self.workers <= 1 or len(tasks) <= 1:
             for task in tasks:
                 yield function(*task)
             return
-        from collections import deque
-        from concurrent.futures import FIRST_COMPLETED, wait
+        from concurrent.futures import as_completed
 
         pool = self._start()
-        waiting = deque(tasks)
-        running: set[Any] = set()
-        ahead = 2 * (self.workers - 1)  # queued beyond those running: no worker waits for the next task
-        while waiting or running:
-            while waiting and len(running) < ahead:
-                running.add(pool.submit(function, *waiting.popleft()))
-            done = {future for future in running if future.done()}
-            for future in done:
-                running.discard(future)
+        # The pool feeds its workers from one queue, in this order, one task ahead in all: the greedy schedule.
+        futures = [pool.submit(function, *task) for task in tasks]
+        try:
+            for future in as_completed(futures):
                 yield future.result()
-            if done:
-                continue
-            if waiting:  # nothing to hand on: this process fits one itself, the last (the least, tasks largest first)
-                yield function(*waiting.pop())
-            elif running:
-                finished, _ = wait(running, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    running.discard(future)
-                    yield future.result()
+        finally:
+            for future in futures:  # an interrupted run leaves no task to start
+                future.cancel()
 
     def close(self) -> None:
         if self._pool is not None:
@@ -932,7 +945,7 @@ def fleet(
     if table is not None:
         _check_table_format(table)
     journal = _journal_path(table) if table is not None else None
-    settings = _Settings(method, field_strength, unit, location, date)
+    settings = _Settings(method, field_strength, unit, location, date, audience())
     files = [path.resolve() for path in recordings(paths)]  # a cluster's workers do not share our directory
     if table is not None:
         files = [path for path in files if path != table and path != journal]
@@ -941,6 +954,8 @@ def fleet(
                 raise OptionError(f"-o {table} is one of the recordings: give the table another name")
         if not files:
             raise OptionError("no recording left to fit once the table itself is set aside")
+    if field_strength == "wmm" and location is None:
+        _require_a_place(files)
     root = _common_root(files)
     outcomes: dict[str, _Outcome] = {}
     if journal is not None and journal.exists() and resume:
@@ -987,6 +1002,22 @@ def fleet(
     if table is not None:
         write_table(result.rows, table)
     return result
+
+
+def _require_a_place(files: Sequence[Path]) -> None:
+    """``field_strength="wmm"`` without a location: a log's or bag's own GNSS fixes give its place, and a
+    recording that has none is a row with code ``no_location``; when no recording is a log or bag, no row
+    could have one, and the run is refused at once (one usage error, not a failed row per recording)."""
+    from .sources import log_kind
+
+    if any(log_kind(path) is not None for path in files):
+        return
+    raise OptionError(
+        f"{option('field_strength', 'wmm')} needs the place where the recordings were made: give "
+        f"{option('location', 'LAT,LON[,ALT]')}; none of the {len(files)} recordings is a flight log or bag with its "
+        "own GNSS fixes",
+        codes=("no_location",),
+    )
 
 
 def _size(path: Path) -> int:

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import datetime
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import click
 from rich.console import Console
 
 from ..fleet import FleetResult, fleet
-from ._common import FitFailedError, console
+from ..geomag import parse_date, parse_location
+from ._common import FitFailedError, console, geomag_option
 
 
 @click.command("fleet")
@@ -20,6 +25,11 @@ from ._common import FitFailedError, console
 @click.option("--field-strength", "field_strength", default=None,
               help="The known field strength in the samples' unit, or 'wmm' (the World Magnetic Model's at each "
               "log's own fixes).")  # fmt: skip
+@click.option("--location", callback=geomag_option(parse_location), metavar="LAT,LON[,ALT]",
+              help="Where the recordings were made (degrees; ALT in km, or 500m), for the World Magnetic Model: "
+              "with --field-strength wmm, and the field compared in the table. Default: each log's own GNSS fixes.")
+@click.option("--date", "model_date", callback=geomag_option(parse_date), metavar="YYYY-MM-DD",
+              help="When the recordings were made, for the World Magnetic Model (default: each log's GNSS time).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Local processes, this one among them [default: the machine's cores].")  # fmt: skip
 @click.option("--scheduler", default=None, metavar="ADDRESS",
@@ -36,6 +46,8 @@ def fleet_command(
     method: str,
     unit: str | None,
     field_strength: str | None,
+    location: tuple[float, float, float] | None,
+    model_date: datetime.date | None,
     workers: int | None,
     scheduler: str | None,
     no_resume: bool,
@@ -69,6 +81,30 @@ def fleet_command(
             strength = float(field_strength)
         except ValueError:
             raise click.BadParameter("a number in the samples' unit, or 'wmm'", param_hint="--field-strength") from None
+    with _progress_bar() as advance:
+        result = fleet(
+            paths, output, method=method, unit=unit, field_strength=strength,  # type: ignore[arg-type]
+            location=location, date=None if model_date is None else model_date.isoformat(), workers=workers,
+            scheduler=scheduler, resume=not no_resume, combine=not no_combine, progress=advance,
+        )  # fmt: skip
+    _summary(out, result, output)
+    if report is not None:
+        from ..report.fleet import write_fleet_report
+
+        out.print(f"wrote {write_fleet_report(report, result)}", soft_wrap=True)
+    if not any(row.verdict in ("supported", "weak") for row in result.rows):
+        raise FitFailedError(
+            f"none of the {len(result.flights())} compass fits gave a calibration (the table says why, row by row)"
+        )
+
+
+@contextmanager
+def _progress_bar() -> Iterator[Callable[[int, int, str], None]]:
+    """``advance(done, total, path)``: a bar on stderr when it is a terminal; nothing at all otherwise (a log or
+    a pipe gets no progress noise, not even the blank line a finished bar leaves)."""
+    if not sys.stderr.isatty():
+        yield lambda done, total, path: None
+        return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     with Progress(
@@ -80,19 +116,7 @@ def fleet_command(
         def advance(done: int, total: int, path: str) -> None:
             bar.update(task, completed=done, total=total, description=Path(path).name[:30])
 
-        result = fleet(
-            paths, output, method=method, unit=unit, field_strength=strength,  # type: ignore[arg-type]
-            workers=workers, scheduler=scheduler, resume=not no_resume, combine=not no_combine, progress=advance,
-        )  # fmt: skip
-    _summary(out, result, output)
-    if report is not None:
-        from ..report.fleet import write_fleet_report
-
-        out.print(f"wrote {write_fleet_report(report, result)}", soft_wrap=True)
-    if not any(row.verdict in ("supported", "weak") for row in result.rows):
-        raise FitFailedError(
-            f"none of the {len(result.flights())} compass fits gave a calibration (the table says why, row by row)"
-        )
+        yield advance
 
 
 def _summary(out: Console, result: FleetResult, table: Path) -> None:

@@ -15,10 +15,8 @@ import io
 import itertools
 import os
 import warnings
-import zipfile
 import zlib
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, Any, Literal, TypeVar
@@ -309,6 +307,8 @@ class ChunkReader:
         assert selection is not None
         if selection.n_rows == 0:
             raise file_error(self.path, f"the arrays {', '.join(selection.keys)} are empty; record some samples")
+        import zipfile
+
         with zipfile.ZipFile(self.path) as archive:
             streams: list[NpyStream] = []
             try:
@@ -760,6 +760,8 @@ def read_pieces(
         except BaseException:
             first_failed[0] = min(first_failed[0], index)
             raise
+
+    from concurrent.futures import ThreadPoolExecutor  # (with logging's import: only for a big file)
 
     with ThreadPoolExecutor(len(pieces)) as pool:
         futures = [pool.submit(run, index, piece) for index, piece in enumerate(pieces)]

@@ -56,7 +56,7 @@ from ..findings import Diagnostics, Reason, Support, said_once
 from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..outliers import DEFAULT_THRESHOLD
 from ..remedy import option
-from ..sampling import thin
+from ..sampling import MAX_ANALYSED, thin
 from ..statistics import Statistics
 from .core import estimate, first_order_refit
 from .registry import METHODS, FitInput, Judging, Refit, Undetermined, register
@@ -163,6 +163,11 @@ def omitted_weakness(calibration: Calibration, report: Diagnostics) -> tuple[Rea
     ),)  # fmt: skip
 
 
+#: The most samples auto's final fit (:func:`refine_chosen`, the maximum-likelihood refit) reads: a regular
+#: stride of its samples beyond (:func:`magfit.sampling.thin`'s bound); its model choice reads fewer.
+REFIT_ROWS = 10 * MAX_ANALYSED
+
+
 @register(
     "auto",
     min_samples=12,
@@ -173,6 +178,7 @@ def omitted_weakness(calibration: Calibration, report: Diagnostics) -> tuple[Rea
     judging=Judging(
         refit=_chosen_refit, model_error_deg=omitted_heading_deg, weaknesses=omitted_weakness, compare_ml=False
     ),
+    fit_rows=REFIT_ROWS,
 )
 def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float | None = None) -> Calibration:
     """Fit the simplest model the samples support, robustly when they hold outliers.
@@ -485,9 +491,8 @@ def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) 
     fit, from ``start``.
     """
     from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters
-    from ..sampling import MAX_ANALYSED as MAX_SAMPLES
 
-    rows = samples[thin(samples.shape[0], MAX_SAMPLES)]
+    rows = samples[thin(samples.shape[0], MAX_ANALYSED)]  # at most REFIT_ROWS
     if model == "full" and "ml" in METHODS:
         try:
             fitted = estimate(FitInput(Statistics.from_samples(rows), rows), "ml")

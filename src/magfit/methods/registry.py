@@ -8,12 +8,17 @@ also accept a :class:`~magfit.Statistics` built in chunks); ``data="samples"`` m
 What a method adds to its verdict travels in its entry too (:class:`Judging`): its own refit for the
 diagnostics, a quick stand-in for the repeated refits, a model error to add to the heading one-sigma and
 weaknesses of its own. :func:`magfit.fit` reads them from the entry and names no method.
+
+The built-in methods are known by name before their modules run (:data:`BUILT_IN`): :data:`METHODS` lists
+them at once and imports a method's module the first time its entry is read, so that a command fitting a
+recording with ``auto`` does not pay for ``gyro``'s or ``vector``'s imports.
 """
 
 from __future__ import annotations
 
+import importlib
 import inspect
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -28,7 +33,18 @@ if TYPE_CHECKING:
     from ..findings import Diagnostics, Reason
     from ..statistics import Statistics
 
-__all__ = ["METHODS", "FitInput", "Judging", "MethodSpec", "Undetermined", "fit_input", "get_method", "register"]
+__all__ = [
+    "BUILT_IN",
+    "METHODS",
+    "FitInput",
+    "Judging",
+    "MethodRegistry",
+    "MethodSpec",
+    "Undetermined",
+    "fit_input",
+    "get_method",
+    "register",
+]
 
 #: A function that fits a method (with fixed options) to (n, 3) samples: what the diagnostics receive.
 Refit = Callable[[NDArray[np.float64]], "Calibration"]
@@ -115,6 +131,10 @@ class MethodSpec:
     model: ModelKind | None = None
     #: What the method adds to its verdict.
     judging: Judging = Judging()
+    #: The most samples the method's fit reads of those it is given (a regular stride beyond), None: all of them.
+    #: A file streamed to a subsample is subsampled to no more by default: more rows would not enter the fit,
+    #: only the uncertainty stated for it (as if they had).
+    fit_rows: int | None = None
 
     @property
     def options(self) -> tuple[str, ...]:
@@ -128,7 +148,83 @@ class MethodSpec:
         return {p.name: p.default for p in parameters if p.kind is inspect.Parameter.KEYWORD_ONLY}
 
 
-METHODS: dict[str, MethodSpec] = {}
+#: The built-in methods, in the order they are listed (``magfit.METHODS``, ``--help``, error messages): each
+#: name and the module (below :mod:`magfit.methods`) whose :func:`register` adds it. To add a built-in
+#: method, add its module and a line here.
+BUILT_IN: dict[str, str] = {
+    "als": "als",
+    "robust": "robust",
+    "auto": "auto",
+    "diag": "diag",
+    "ellipsoid": "ellipsoid",
+    "gyro": "gyro.method",
+    "minmax": "minmax",
+    "ml": "ml",
+    "sphere": "sphere",
+    "vector": "vector.method",
+}
+
+
+class MethodRegistry(MutableMapping[str, MethodSpec]):
+    """The methods by name: the built-in ones known before their modules are imported, each imported the
+    first time its entry is read (``METHODS[name]``, :func:`get_method`, ``.values()``).
+
+    Listing the names (``list(METHODS)``, ``name in METHODS``, ``len``) imports nothing. A method registered
+    at run time (:func:`register`, or ``METHODS[name] = spec``) joins the end of the list.
+    """
+
+    def __init__(self, modules: Mapping[str, str]) -> None:
+        self._modules = {name: f"{__package__}.{module}" for name, module in modules.items()}
+        self._specs: dict[str, MethodSpec] = {}
+        self._names = list(modules)
+
+    def module(self, name: str) -> str | None:
+        """The module that registers the built-in method ``name`` (None for another method)."""
+        return self._modules.get(name)
+
+    def is_loaded(self, name: str) -> bool:
+        """Whether the entry of ``name`` exists yet (its module imported)."""
+        return name in self._specs
+
+    def __getitem__(self, name: str) -> MethodSpec:
+        spec = self._specs.get(name)
+        if spec is not None:
+            return spec
+        module = self._modules.get(name)
+        if module is None:
+            raise KeyError(name)
+        importlib.import_module(module)
+        spec = self._specs.get(name)
+        if spec is None:
+            raise RuntimeError(f"module {module} did not register the method {name!r}")
+        return spec
+
+    def __setitem__(self, name: str, spec: MethodSpec) -> None:
+        self._specs[name] = spec
+        if name not in self._names:
+            self._names.append(name)
+
+    def __delitem__(self, name: str) -> None:
+        if name not in self._names:
+            raise KeyError(name)
+        self._names.remove(name)
+        self._specs.pop(name, None)
+        self._modules.pop(name, None)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(list(self._names))
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __repr__(self) -> str:
+        return f"MethodRegistry({', '.join(self._names)})"
+
+
+METHODS = MethodRegistry(BUILT_IN)
 
 
 def register(
@@ -141,14 +237,16 @@ def register(
     needs: tuple[str, ...] = (),
     model: ModelKind | None = None,
     judging: Judging | None = None,
+    fit_rows: int | None = None,
 ) -> Callable[[Callable[..., Calibration]], Callable[..., Calibration]]:
     """Decorator that adds a method to :data:`METHODS` under ``name`` (see :class:`MethodSpec`)."""
 
     def decorate(function: Callable[..., Calibration]) -> Callable[..., Calibration]:
-        if name in METHODS:
+        owner = METHODS.module(name)
+        if METHODS.is_loaded(name) or (owner is None and name in METHODS) or owner not in (None, function.__module__):
             raise RuntimeError(f"method {name!r} registered twice")
         METHODS[name] = MethodSpec(
-            name, function, min_samples, data, summary, checks, needs, model, judging if judging else Judging()
+            name, function, min_samples, data, summary, checks, needs, model, judging or Judging(), fit_rows
         )
         return function
 

@@ -151,9 +151,10 @@ def calibrate_file(
     """
     path = Path(path)
     get_method(method)  # an unknown method, before the file is read
-    from .motor import check_motor
+    if motor not in ("auto", "none"):  # the default needs no check, nor the motors' modules imported for it
+        from .motor import check_motor
 
-    check_motor(motor)
+        check_motor(motor)
     location = _checked_location(location)
     options = dict(options or {})
     if force:  # fit's own keyword, passed with the method's options
@@ -702,7 +703,8 @@ def _model(
         what = "this file is no flight log or bag" if source is None else "this log holds no 3-D GNSS fix"
         raise OptionError(
             f"{path}: the World Magnetic Model needs the place of the recording and {what}: give "
-            f"{option('location', 'LAT,LON[,ALT]')}"
+            f"{option('location', 'LAT,LON[,ALT]')}",
+            codes=("no_location",),
         )
     when = ""
     if math.isfinite(position.time_s):
@@ -718,7 +720,8 @@ def _model_strength(model: ModelField | None, unit: str | None) -> float:
     if model is None:
         raise OptionError(
             f"{option('field_strength', 'wmm')} needs {option('location', 'LAT,LON[,ALT]')} (where the recording was "
-            "made), or a flight log or bag with its own GNSS fixes"
+            "made), or a flight log or bag with its own GNSS fixes",
+            codes=("no_location",),
         )
     if unit is None or not get_unit(unit).is_physical:
         raise OptionError(

@@ -13,7 +13,6 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -152,12 +151,17 @@ def fit_samples_file(request: SamplesFileFit) -> FileFit:
     if _estimated_rows(request.path) <= limit:
         calibration, evaluation, read = _fit_in_memory(request)
         return FileFit(calibration, evaluation, read, False, subsample)
-    calibration, evaluation, read, limited = _fit_subsample(request, limit)
+    # A method whose fit reads at most fit_rows samples (auto) gets no more by default: the rows beyond would
+    # not enter its fit, only the uncertainty stated for it, and they cost a longer pass to sample them.
+    rows = limit if request.max_samples is not None or spec.fit_rows is None else min(limit, spec.fit_rows)
+    calibration, evaluation, read, limited = _fit_subsample(request, rows)
     if limited:
         bound = f"the file has more rows than {option('max_samples', limit)}"
         if request.max_samples is None:
             default = f"{DEFAULT_FIT_SAMPLES:,}".replace(",", " ")
             bound += f", the default: {default} or half the available memory"
+            if rows < limit:
+                bound += f"; {request.method}'s fit reads at most {rows:,}".replace(",", " ")
         subsample = f"{option('even', True)}; {bound}" if request.even else bound
     return FileFit(calibration, evaluation, read, True, subsample)
 
@@ -386,6 +390,8 @@ class _FirstPass:
             strided = _Strided(total, DIAGNOSE_SAMPLES)
             strided.seen = offset  # rows of the earlier pieces: the stride continues across pieces
             return evaluate_chunks(calibration, strided.collect(_counted(spill.chunks(), advance))), strided.samples()
+
+        from concurrent.futures import ThreadPoolExecutor  # (its import, with logging's, only for a big file)
 
         with ThreadPoolExecutor(len(spills)) as pool:
             parts = list(pool.map(one, spills, (int(offset) for offset in offsets)))

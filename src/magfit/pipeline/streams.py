@@ -126,7 +126,9 @@ def method_streams(
         The samples' unit is not physical (raw counts): the model's field cannot be put in it.
     """
     motion = source.read_motion(sensor)
-    where = f"{source.path} ({sensor})"
+    # A samples file's compass is its three columns (its id "columns" alone would say nothing): named by them.
+    named = next((m.description for m in source.magnetometers if m.id == sensor and m.id == "columns"), None)
+    where = f"{source.path} ({sensor} {named})" if named else f"{source.path} ({sensor})"
     options: dict[str, Any] = {}
     notes = [f"{where}: {note}" for note in motion.notes]
     wanted = (*needs, *optional)
