@@ -80,3 +80,26 @@ def test_an_auto_fit_missing_soft_iron_is_not_told_to_use_auto(real_data_dir: Pa
         assert "auto method" not in reason
         assert "or auto" not in reason
     assert any("method='ml'" in reason for reason in named)
+
+
+def test_the_vehicle_benchmark_judges_auto_where_it_answers_and_counts_its_refusals() -> None:
+    """The vehicle benchmark's target: auto's stated one-sigma against its true-mounting error on the trials it
+    answers (a refusal states nothing and is counted beside)."""
+    import importlib
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    vehicle = importlib.import_module("accuracy_vehicle")
+    car = vehicle.VehicleCase("car", "car", 1.0, 3)
+    boat = vehicle.VehicleCase("boat", "boat", 1.0, 2)
+    answered = [
+        vehicle.VehicleOutcome(heading_mounted_deg=error, stated_heading_deg=stated)
+        for error, stated in ((1.0, 2.0), (0.5, 1.0), (3.0, 2.0))
+    ]
+    refused = [vehicle.VehicleOutcome(error="refused")] * 2
+    target = vehicle._auto_covered([car, boat], {"car": {"auto": answered}, "boat": {"auto": refused}})
+    assert target.status == "FAIL" and "covered on 2/3 answered trials" in target.detail
+    assert any("refused 2/2" in item for item in target.items)
+    answered[2] = vehicle.VehicleOutcome(heading_mounted_deg=1.5, stated_heading_deg=2.0)
+    target = vehicle._auto_covered([car, boat], {"car": {"auto": answered}, "boat": {"auto": refused}})
+    assert target.status == "PASS"
