@@ -206,7 +206,7 @@ def judge(evidence: Evidence) -> Support:
             f"{100 * evidence.residual_rms:.0f} % of the field (RMS) where a full ellipsoid leaves {100 * best:.1f} %: "
             "it misplaces the ellipsoid the samples lie on (a sphere ignores the soft iron; min/max centred on "
             "samples that do not cover every direction evenly misses the centre), and the heading would keep the "
-            f"error; {_richer_would(evidence, 'would not keep it')}"
+            f"error; {_richer_would(evidence, 'would not keep it', 'the auto method would not')}"
         )
     elif best > LARGE_RESIDUAL_RMS:
         weak.add("large_residual",
@@ -315,7 +315,7 @@ def judge(evidence: Evidence) -> Support:
         weak.add("model_inadequate",
             f"the {_fit_name(evidence)} leaves residuals of {100 * evidence.residual_rms:.1f} % of the field where a "
             f"full ellipsoid leaves {100 * evidence.ellipsoid_rms:.1f} %: there is soft iron this model cannot "
-            f"remove; {_richer_would(evidence, 'would remove it')}"
+            f"remove; {_richer_would(evidence, 'would remove it', 'the ellipsoid or auto method would')}"
         )
     if cover.share < 0.5:
         weak.add("low_coverage",
@@ -384,8 +384,9 @@ def judge(evidence: Evidence) -> Support:
     return Support.judged(refusals, weak, _RECORD_ADVICE)
 
 
-def _richer_would(evidence: Evidence, would: str) -> str:
-    """What would hold the soft iron a restricted fit misses: ``"the ellipsoid or auto method {would}"``.
+def _richer_would(evidence: Evidence, would: str, others: str | None = None) -> str:
+    """What would hold the soft iron a restricted fit misses: ``others`` (default ``"the ellipsoid or auto
+    method {would}"``) for a method other than ``auto``.
 
     Not for ``auto``'s own fit: it is the restricted model auto chose, the full ellipsoid passed over because
     it predicted held-out stretches of the recording no better, or because the samples did not determine it
@@ -394,7 +395,7 @@ def _richer_would(evidence: Evidence, would: str) -> str:
     over a few, only more tilt or a reference field determines it.
     """
     if evidence.method != "auto":
-        return f"the ellipsoid or auto method {would}"
+        return others if others is not None else f"the ellipsoid or auto method {would}"
     if evidence.coverage.share >= 0.5:
         return (
             f"auto kept the {evidence.kind} model because the full ellipsoid predicted held-out stretches of the "
