@@ -216,10 +216,15 @@ def test_verdicts_are_read_from_forced_fits_and_from_refusals() -> None:
     assert accuracy.verdict_of(None, "PeerFailure: NaN") == (None, None)
 
 
-def _outcomes(headings: list[float | None], verdict: str = "supported") -> list:
+def _outcomes(
+    headings: list[float | None], verdict: str = "supported", flown: list[float | None] | None = None
+) -> list:
+    """Outcomes of these level heading errors (and errors over the attitudes flown: the same by default)."""
     return [
-        accuracy.Outcome(heading_deg=h, verdict=verdict if h is not None else "refused", error=None if h else "no")
-        for h in headings
+        accuracy.Outcome(
+            heading_deg=h, flown_deg=f, verdict=verdict if h is not None else "refused", error=None if h else "no"
+        )
+        for h, f in zip(headings, headings if flown is None else flown, strict=True)
     ]
 
 
@@ -252,6 +257,20 @@ def test_the_flight_target_compares_auto_with_the_best_model_and_with_no_calibra
         {**models, "auto": _outcomes([0.8, 0.8, None]), accuracy.UNCALIBRATED: _outcomes([30.0] * 3)}
     )
     assert refused.status == "FAIL" and "auto refused 1/3" in refused.detail
+    # "No calibration" is judged over the attitudes flown (the aircraft benchmark's definition): above it at
+    # level only (the raw readings ignore the offset along z there) passes, and is listed.
+    level_only = _flight_target({
+        **models,
+        "auto": _outcomes([0.85, 0.9, 0.95], flown=[0.85, 0.9, 1.1]),
+        accuracy.UNCALIBRATED: _outcomes([30.0, 30.0, 0.9], flown=[30.0, 30.0, 2.9]),
+    })  # fmt: skip
+    assert level_only.status == "PASS" and "level only, listed, not the target: 1/3" in level_only.detail
+    flown_above = _flight_target({
+        **models,
+        "auto": _outcomes([0.85, 0.9, 0.88], flown=[0.85, 0.9, 3.0]),
+        accuracy.UNCALIBRATED: _outcomes([30.0, 30.0, 30.0], flown=[30.0, 30.0, 2.9]),
+    })  # fmt: skip
+    assert flown_above.status == "FAIL" and "on 1/3 trials over the attitudes flown" in flown_above.detail
 
 
 @pytest.mark.slow

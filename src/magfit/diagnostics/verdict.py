@@ -60,6 +60,7 @@ import math
 from dataclasses import dataclass
 
 from ..findings import Consistency, Coverage, Goodness, Observability, ReasonList, Support, Uncertainty
+from ..remedy import option
 from ..saturation import Clipping
 from .uncertainty import DriftComparison, ModelComparison
 
@@ -205,7 +206,7 @@ def judge(evidence: Evidence) -> Support:
             f"{100 * evidence.residual_rms:.0f} % of the field (RMS) where a full ellipsoid leaves {100 * best:.1f} %: "
             "it misplaces the ellipsoid the samples lie on (a sphere ignores the soft iron; min/max centred on "
             "samples that do not cover every direction evenly misses the centre), and the heading would keep the "
-            "error; the auto method would not"
+            f"error; {_richer_would(evidence, 'would not keep it', 'the auto method would not')}"
         )
     elif best > LARGE_RESIDUAL_RMS:
         weak.add("large_residual",
@@ -287,13 +288,13 @@ def judge(evidence: Evidence) -> Support:
         if comparison.measured and turn > MODEL_HEADING_DEG:
             refusals.add("model_inadequate",
                 f"{words}, and this fit's level heading is {turn:.2g}° from the full ellipsoid's (whose one-sigma "
-                f"is ±{comparison.full_heading_sigma_deg:.2g}°); the ellipsoid or auto method would not leave that"
+                f"is ±{comparison.full_heading_sigma_deg:.2g}°); {_richer_would(evidence, 'would not leave that')}"
             )
         else:
             weak.add("model_inadequate",
                 f"{words}, and this fit's level heading may be up to {comparison.heading_cost_deg:.2g}° from the "
-                f"full ellipsoid's, counted in the heading uncertainty of ±{heading:.2g}°; the ellipsoid or auto "
-                "method would remove it"
+                f"full ellipsoid's, counted in the heading uncertainty of ±{heading:.2g}°; "
+                f"{_richer_would(evidence, 'would remove it')}"
             )
     elif comparison is not None and comparison.significant and all(r.code != "model_inadequate" for r in refusals):
         # The full model fits better beyond chance but the samples do not determine it: what this model misses
@@ -314,7 +315,7 @@ def judge(evidence: Evidence) -> Support:
         weak.add("model_inadequate",
             f"the {_fit_name(evidence)} leaves residuals of {100 * evidence.residual_rms:.1f} % of the field where a "
             f"full ellipsoid leaves {100 * evidence.ellipsoid_rms:.1f} %: there is soft iron this model cannot "
-            "remove; the ellipsoid or auto method would"
+            f"remove; {_richer_would(evidence, 'would remove it', 'the ellipsoid or auto method would')}"
         )
     if cover.share < 0.5:
         weak.add("low_coverage",
@@ -381,6 +382,31 @@ def judge(evidence: Evidence) -> Support:
             "bound that wide is no calibration" + (f" (the samples hardly fix {weakest})" if weakest else "")
         )
     return Support.judged(refusals, weak, _RECORD_ADVICE)
+
+
+def _richer_would(evidence: Evidence, would: str, others: str | None = None) -> str:
+    """What would hold the soft iron a restricted fit misses: ``others`` (default ``"the ellipsoid or auto
+    method {would}"``) for a method other than ``auto``.
+
+    Not for ``auto``'s own fit: it is the restricted model auto chose, the full ellipsoid passed over because
+    it predicted held-out stretches of the recording no better, or because the samples did not determine it
+    (:mod:`magfit.methods.auto`). Advising auto there is circular. Over most directions (coverage of half the
+    sphere or more) the full ellipsoid fitted alone (``ml``, judged on its own) is what holds the distortion;
+    over a few, only more tilt or a reference field determines it.
+    """
+    if evidence.method != "auto":
+        return others if others is not None else f"the ellipsoid or auto method {would}"
+    if evidence.coverage.share >= 0.5:
+        return (
+            f"auto kept the {evidence.kind} model because the full ellipsoid predicted held-out stretches of the "
+            "recording no better (what it adds may change along the recording: motors, a moving part); fitted "
+            f"alone ({option('method', 'ml')}, judged on its own) the full ellipsoid {would}"
+        )
+    return (
+        f"auto kept the {evidence.kind} model because the samples do not determine the full ellipsoid or it "
+        "predicted held-out stretches of the recording no better; more tilt while recording, or a reference field "
+        f"({option('method', 'vector')} with the attitude), would determine it"
+    )
 
 
 def _fit_name(evidence: Evidence) -> str:

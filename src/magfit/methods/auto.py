@@ -258,13 +258,18 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
             "the samples determine no calibration model: "
             + said_once([(f"the {model} model", model, verdicts[model].refusals) for model in verdicts])
             + "; record again turning the sensor through more attitudes (a full tumble is best)"
+            + _on_a_vehicle()
         )
         # Forced (allow_undetermined), the simplest model that can describe the samples: the fewest numbers
         # the samples fail to fix.
         simplest = next((model for model in CANDIDATES if model in optima and model not in inadequate), None)
         if simplest is None:
-            raise CalibrationError(message, codes=("undetermined",))
-        raise UndeterminedChoice(message, _bare(simplest, optima[simplest], n, message, known_field), "undetermined")
+            raise CalibrationError(message, codes=("undetermined",), remedy=VEHICLE_REMEDY)
+        undetermined = UndeterminedChoice(
+            message, _bare(simplest, optima[simplest], n, message, known_field), "undetermined"
+        )
+        undetermined.remedy = VEHICLE_REMEDY
+        raise undetermined
     # Richer models the samples do not determine still witness what the chosen one misses (below).
     witnesses = [
         model
@@ -336,8 +341,8 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
                 f"model, the richest they determine, {words}, and the heading error that distortion can cause "
                 f"(±{effect:.2g}°; with the {chosen} model's own one-sigma, beyond {USELESS_BOUND_DEG:g}°) leaves no "
                 "usable calibration; that model is not determined" + (f" ({why})" if why else "") + "; record "
-                "again turning the sensor through more attitudes (tilt it further: a full tumble is best), or fit "
-                f"against a reference field ({option('method', 'vector')} with the attitude)"
+                "again turning the sensor through more attitudes (tilt it further: a full tumble is best)"
+                + _on_a_vehicle()
             )
     calibration = optima[chosen]
     if chosen == "full" or kept.shape[0] > 20_000:  # the optimum came from a stride of 20 000, or ml is due
@@ -394,8 +399,29 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     )
     chosen_fit = pin_field_strength(chosen_fit, known_field)
     if refusal is not None:
-        raise UndeterminedChoice(refusal, chosen_fit)
+        refused = UndeterminedChoice(refusal, chosen_fit)
+        refused.remedy = VEHICLE_REMEDY
+        raise refused
     return chosen_fit
+
+
+#: The refusals of restricted attitudes suggest, as data, the method that works best where the attitude is
+#: logged (a vehicle: it cannot be tumbled); their words name the others (:func:`_on_a_vehicle`).
+VEHICLE_REMEDY = (("method", "vector"),)
+
+
+def _on_a_vehicle() -> str:
+    """What works where the sensor cannot be tumbled (a vehicle), in the audience's words.
+
+    Magnitude alone cannot fix a distortion along directions the field never took; what the vehicle knows
+    can: its attitude with the reference field (``vector``), its gyroscope's rates (``gyro``), or the field
+    strength known at the place, which pins the sphere's scale so that its offsets are all that is fitted.
+    """
+    return (
+        f"; on a vehicle, what it knows determines the calibration: its attitude with the reference field "
+        f"({option('method', 'vector')}), its gyroscope ({option('method', 'gyro')}), or the field strength known "
+        f"at the place ({option('method', 'sphere')} given that field strength)"
+    )
 
 
 def _bare(model: str, optimum: Calibration, n: int, reason: str, known_field: float | None) -> Calibration:
