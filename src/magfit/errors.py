@@ -21,6 +21,16 @@ class MagfitError(ValueError):
         super().__init__(*args)
         self.codes = tuple(codes)
         self.remedy = tuple(remedy)
+        #: The message's closing words when they name remedies in general (``"; on a vehicle, ..."``): a caller
+        #: that knows better (the file's own columns) says its advice instead, with :meth:`without_general_advice`.
+        self.general_advice = ""
+
+    def without_general_advice(self) -> str:
+        """The message without its :attr:`general_advice`."""
+        message = str(self)
+        if self.general_advice and message.endswith(self.general_advice):
+            return message[: -len(self.general_advice)]
+        return message
 
 
 class SampleError(MagfitError):

@@ -264,12 +264,13 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
         # the samples fail to fix.
         simplest = next((model for model in CANDIDATES if model in optima and model not in inadequate), None)
         if simplest is None:
-            raise CalibrationError(message, codes=("undetermined",), remedy=VEHICLE_REMEDY)
-        undetermined = UndeterminedChoice(
-            message, _bare(simplest, optima[simplest], n, message, known_field), "undetermined"
-        )
-        undetermined.remedy = VEHICLE_REMEDY
-        raise undetermined
+            error = CalibrationError(message, codes=("undetermined",), remedy=VEHICLE_REMEDY)
+        else:
+            bare = _bare(simplest, optima[simplest], n, message, known_field)
+            error = UndeterminedChoice(message, bare, "undetermined")
+            error.remedy = VEHICLE_REMEDY
+        error.general_advice = _on_a_vehicle()
+        raise error
     # Richer models the samples do not determine still witness what the chosen one misses (below).
     witnesses = [
         model
@@ -400,7 +401,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     chosen_fit = pin_field_strength(chosen_fit, known_field)
     if refusal is not None:
         refused = UndeterminedChoice(refusal, chosen_fit)
-        refused.remedy = VEHICLE_REMEDY
+        refused.remedy, refused.general_advice = VEHICLE_REMEDY, _on_a_vehicle()
         raise refused
     return chosen_fit
 

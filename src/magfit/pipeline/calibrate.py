@@ -447,7 +447,10 @@ def _with_vehicle_advice(
 ) -> CalibrationError:
     """A samples file's refusal, with the methods that work for a vehicle when the samples look like one's."""
     advice = _samples_file_advice(path, columns, nonfinite, unit, method)
-    return RefusedWithAdvice(path, str(error), advice, codes=error.codes) if advice else error
+    if not advice:
+        return error
+    # The file's own advice (its columns named) replaces the method's words for vehicles in general.
+    return RefusedWithAdvice(path, error.without_general_advice(), advice, codes=error.codes)
 
 
 def _vehicle_weak(
@@ -635,7 +638,9 @@ def _calibrate_samples(
     except CalibrationError as error:
         used = "columns " + ", ".join(str(c) for c in chosen.columns)
         used += f"; {chosen.column_note}" if chosen.column_note else ""
-        raise CalibrationError(f"{path} ({used}): {error}", codes=error.codes, remedy=error.remedy) from None
+        named = CalibrationError(f"{path} ({used}): {error}", codes=error.codes, remedy=error.remedy)
+        named.general_advice = error.general_advice
+        raise named from None
     calibration = fitted.calibration
     unit = unit if unit is not None else chosen.unit  # the file's own when its column names say it (mag_x_uT)
     if unit is not None:
