@@ -264,13 +264,13 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
         # the samples fail to fix.
         simplest = next((model for model in CANDIDATES if model in optima and model not in inadequate), None)
         if simplest is None:
-            error = CalibrationError(message, codes=("undetermined",), remedy=VEHICLE_REMEDY)
+            undetermined = CalibrationError(message, codes=("undetermined",), remedy=VEHICLE_REMEDY)
         else:
             bare = _bare(simplest, optima[simplest], n, message, known_field)
-            error = UndeterminedChoice(message, bare, "undetermined")
-            error.remedy = VEHICLE_REMEDY
-        error.general_advice = _on_a_vehicle()
-        raise error
+            undetermined = UndeterminedChoice(message, bare, "undetermined")
+            undetermined.remedy = VEHICLE_REMEDY
+        undetermined.general_advice = _on_a_vehicle()
+        raise undetermined
     # Richer models the samples do not determine still witness what the chosen one misses (below).
     witnesses = [
         model
