@@ -29,6 +29,7 @@ holds no rows to find them in.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,7 +59,7 @@ class Clipping:
     n_samples : int
         Rows examined.
     clipped : ndarray of bool, shape (n_samples,)
-        The rows clipped on at least one axis.
+        The rows clipped on at least one axis (read-only when none is).
     ends : tuple of (axis, value, rows)
         Each clipped end: the axis ("x", "y", "z"), the value it is held at (input units) and how many
         rows hold it.
@@ -68,10 +69,10 @@ class Clipping:
     clipped: NDArray[np.bool_]
     ends: tuple[tuple[str, float, int], ...]
 
-    @property
+    @cached_property
     def n_clipped(self) -> int:
-        """Rows clipped on at least one axis."""
-        return int(self.clipped.sum())
+        """Rows clipped on at least one axis (counted once; the mask holds them only where an end is clipped)."""
+        return int(np.count_nonzero(self.clipped)) if self.ends else 0
 
     @property
     def n_kept(self) -> int:
@@ -90,11 +91,16 @@ class Clipping:
             "ends": [{"axis": axis, "value": value, "rows": rows} for axis, value, rows in self.ends],
         }
 
+    @classmethod
+    def none(cls, n_samples: int) -> Clipping:
+        """Nothing clipped among ``n_samples`` rows (its mask a read-only view: no memory)."""
+        return cls(n_samples, np.broadcast_to(np.False_, (n_samples,)), ())
+
 
 #: The threshold below each end is read off a regular stride of about this many rows (see :func:`find_clipped`).
 _PROBE_ROWS = 5_000
 #: Rows compared with the thresholds at a time (a block of three columns stays in the cache).
-_CHUNK_ROWS = 1 << 15
+_CHUNK_ROWS = 1 << 14
 
 
 def _clipped_end(held_count: int, value: float, integral: bool, neighbours: NDArray[np.int64], inner: int) -> bool:
@@ -141,28 +147,13 @@ def find_clipped(samples: NDArray[np.generic]) -> Clipping:
     of the test on the whole columns; the memory, a few rows per end instead of a copy of a column.
     """
     n = samples.shape[0]
-    clipped = np.zeros(n, dtype=bool)
     if n == 0:
-        return Clipping(0, clipped, ())
+        return Clipping.none(0)
     upper, lower = _thresholds(samples[:: max(1, n // _PROBE_ROWS)])
-    if np.isinf(upper).all():
-        candidates = np.arange(n)
-    else:
-        found = [np.zeros(0, dtype=np.int64)]
-        beyond, scratch = np.empty(min(n, _CHUNK_ROWS), dtype=bool), np.empty(min(n, _CHUNK_ROWS), dtype=bool)
-        for start in range(0, n, _CHUNK_ROWS):
-            block = samples[start : start + _CHUNK_ROWS]
-            hit, other = beyond[: block.shape[0]], scratch[: block.shape[0]]
-            # Column by column (a comparison broadcast along the rows' three values runs 3x slower).
-            np.greater_equal(block[:, 0], upper[0], out=hit)
-            for axis in range(3):
-                if axis:
-                    hit |= np.greater_equal(block[:, axis], upper[axis], out=other)
-                hit |= np.less_equal(block[:, axis], lower[axis], out=other)
-            found.append(np.flatnonzero(hit) + start)
-        candidates = np.concatenate(found)
+    candidates = np.arange(n) if np.isinf(upper).all() else _beyond(samples, upper, lower)
     rows = samples[candidates]
     ends: list[tuple[str, float, int]] = []
+    marked: list[NDArray[np.int64]] = []
     for axis in range(3):
         whole = bool(np.isinf(upper[axis]))  # few distinct values: the whole column is examined
         column = samples[:, axis] if whole else rows[:, axis]
@@ -171,16 +162,49 @@ def find_clipped(samples: NDArray[np.generic]) -> Clipping:
             continue  # a constant axis is a dead axis or no motion: the support checks name that
         for upper_end in (True, False):
             extreme = high if upper_end else low
-            held = column == extreme
-            count = int(held.sum())
+            # Beyond the threshold: every row there is a candidate, and the end's NEIGHBOURS values lie there.
+            tail = column if whole else column[column >= upper[axis]] if upper_end else column[column <= lower[axis]]
+            held = tail == extreme
+            count = int(np.count_nonzero(held))
             if count < 2:
                 continue
             # (the whole column is read for integers only where the end is a full-scale code)
             integral = float(extreme) in FULL_SCALE_CODES and bool(np.all(np.mod(samples[:, axis], 1) == 0))
-            inner = column[~held]
-            counts = np.unique(inner, return_counts=True)[1]
+            counts = np.unique(tail[~held], return_counts=True)[1]
             neighbours = (counts[::-1] if upper_end else counts)[:NEIGHBOURS]
             if _clipped_end(count, float(extreme), integral, neighbours, n - count):
-                clipped[np.flatnonzero(held) if whole else candidates[held]] = True
+                at_end = np.flatnonzero(column == extreme)
+                marked.append(at_end if whole else candidates[at_end])
                 ends.append((_AXES[axis], float(extreme), count))
+    if not ends:
+        return Clipping.none(n)
+    clipped = np.zeros(n, dtype=bool)
+    for at_end in marked:
+        clipped[at_end] = True
     return Clipping(n, clipped, tuple(ends))
+
+
+def _beyond(samples: NDArray[np.generic], upper: NDArray[np.float64], lower: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The rows with a value at or beyond its axis's threshold (``upper`` or ``lower``), in order.
+
+    The rows are compared in blocks as one flat run of values against the thresholds repeated for each
+    row (contiguous memory: measured 1.2-1.5x faster than three strided columns).
+    """
+    n = samples.shape[0]
+    block_rows = min(n, _CHUNK_ROWS)
+    highs, lows = np.tile(upper, block_rows), np.tile(lower, block_rows)
+    hit, other = np.empty(3 * block_rows, dtype=bool), np.empty(3 * block_rows, dtype=bool)
+    found = [np.zeros(0, dtype=np.int64)]
+    for start in range(0, n, block_rows):
+        values = samples[start : start + block_rows].reshape(-1)  # a view of C-ordered rows (else a copy)
+        size = values.shape[0]
+        np.greater_equal(values, highs[:size], out=hit[:size])
+        hit[:size] |= np.less_equal(values, lows[:size], out=other[:size])
+        positions = np.flatnonzero(hit[:size])
+        if positions.size:
+            row = positions // 3
+            first = np.empty(row.size, dtype=bool)  # a row beyond on two axes once
+            first[0] = True
+            np.not_equal(row[1:], row[:-1], out=first[1:])
+            found.append(row[first] + start)
+    return np.concatenate(found)

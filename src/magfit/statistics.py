@@ -20,9 +20,11 @@ vector in another (``d(a z + t) = T d(z)``), so the scatter transforms as ``T S 
 the scatter in the canonical frame (centre = mean, unit = RMS distance from it), which depends on the
 set of samples only: merged, chunked and whole-array statistics give the same fit to round-off.
 
-Speed: one pass, the ten design rows of a chunk built in place in a (10, n) buffer and reduced by one
-BLAS ``syrk``; the per-axis min/max doubles as the finiteness check. About 20 ns per sample on one
-core, faster than building the (n, 10) design matrix the obvious way.
+Speed: one pass, the ten design rows of a chunk built in place in a (10, n) buffer small enough to stay
+in a core's cache, and reduced by one general BLAS product of its first nine rows with all ten (the
+tenth row of the scatter, the constant monomial's, is the ninth column read again); the per-axis
+min/max doubles as the finiteness check. Faster than building the (n, 10) design matrix the obvious way
+(docs/scaling.md has the figures).
 """
 
 from __future__ import annotations
@@ -49,8 +51,9 @@ _SQRT2 = math.sqrt(2.0)
 #: Weight of each design monomial (√2 on the cross terms, see the module docstring).
 DESIGN_WEIGHTS = np.array([1, 1, 1, _SQRT2, _SQRT2, _SQRT2, 1, 1, 1, 1], dtype=np.float64)
 
-#: Samples per chunk: large enough for BLAS to run at full speed, small enough to bound memory (~5 MB).
-DEFAULT_CHUNK = 1 << 16
+#: Samples per chunk: enough that the per-chunk bookkeeping is small beside the arithmetic, few enough that
+#: the chunk's ten design rows (80 bytes a sample: 655 KB) stay in a core's L2 cache between the passes.
+DEFAULT_CHUNK = 1 << 13
 #: A chunk that reaches beyond this many frame units from the frame's centre makes the frame be checked.
 _FRAME_REACH = 4.0
 #: The frame moves when the samples spread this many times wider than its unit.
@@ -165,6 +168,9 @@ class Statistics:
         self._minimum = np.full(3, np.inf)
         self._maximum = np.full(3, -np.inf)
         self._canonical_cache: tuple[NDArray[np.float64], float, NDArray[np.float64]] | None = None
+        #: (lowest, highest) values per axis a chunk may hold and leave the frame as it is: set once the
+        #: samples have a spread, cleared when the frame moves.
+        self._window: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
     @classmethod
     def from_samples(cls, samples: ArrayLike, chunk_size: int = DEFAULT_CHUNK) -> Statistics:
@@ -199,6 +205,7 @@ class Statistics:
         # contiguous memory, which is 2-4x faster than the (n, 10) layout for the squares, the min/max and
         # the finiteness check.
         buffer = np.empty((10, min(self.chunk_size, total)))
+        buffer[9] = 1.0  # the constant monomial, written once
         for start in range(0, total, self.chunk_size):
             chunk = array[start : start + self.chunk_size]
             rows = buffer[:, : chunk.shape[0]]
@@ -211,11 +218,14 @@ class Statistics:
         z = rows[6:9]
         z[...] = chunk.T  # float64 from here on, whatever the input dtype
         low, high = z.min(axis=1), z.max(axis=1)
-        if not (np.isfinite(low).all() and np.isfinite(high).all()):  # NaN and inf reach the min or max
+        least, largest = float(low.min()), float(high.max())
+        if not (math.isfinite(least) and math.isfinite(largest)):  # NaN and inf reach the min or max
             check_finite(chunk, first_row=first_row)
-        if max(-float(low.min()), float(high.max())) > MAX_MAGNITUDE:  # whatever the chunking: refused here
+        if max(-least, largest) > MAX_MAGNITUDE:  # whatever the chunking: refused here
             check_magnitude(chunk, first_row=first_row)
-        self._adapt_frame(z, low, high, first_row)
+        window = self._window
+        if window is None or not ((low >= window[0]).all() and (high <= window[1]).all()):
+            self._adapt_frame(z, low, high, first_row)
         assert self._centre is not None
         z -= self._centre[:, None]
         z *= 1.0 / self._scale
@@ -225,14 +235,20 @@ class Statistics:
         np.multiply(z[0], z[2], out=rows[4])
         np.multiply(z[1], z[2], out=rows[5])
         rows[3:6] *= _SQRT2
-        rows[9] = 1.0
-        scatter = rows @ rows.T  # BLAS syrk: the one pass over the data that matters
-        if not np.isfinite(scatter).all():
+        # The one pass over the data that matters: nine rows of the scatter by a general BLAS product (gemm),
+        # the tenth (the constant monomial's: the sums of the others, and m) read off the ninth column. The
+        # symmetric product ``rows @ rows.T`` (syrk) computes fewer terms but ran 2-3x slower on these
+        # shapes (ten rows, thousands of columns) with OpenBLAS.
+        partial = rows[:9] @ rows.T
+        if not math.isfinite(float(partial.sum())) and not np.isfinite(partial).all():
             raise SampleError(
                 f"samples in rows {first_row}..{first_row + chunk.shape[0] - 1} overflow float64 once normalised "
                 "(a few values far larger than the rest?); remove the outliers or rescale the samples"
             )
-        self._scatter += scatter
+        scatter = self._scatter
+        scatter[:9] += partial
+        scatter[9, :9] += partial[:, 9]
+        scatter[9, 9] += chunk.shape[0]
         self._minimum = np.minimum(self._minimum, low)
         self._maximum = np.maximum(self._maximum, high)
         self._n += chunk.shape[0]
@@ -240,13 +256,18 @@ class Statistics:
     def _adapt_frame(
         self, chunk_t: NDArray[np.float64], low: NDArray[np.float64], high: NDArray[np.float64], first_row: int
     ) -> None:
-        """Set or widen the normalised frame for a chunk given as rows (3, m), before it is added."""
+        """Set or widen the normalised frame for a chunk given as rows (3, m), before it is added.
+
+        A chunk within :attr:`_window` (the frame's centre ± its reach, once the samples have a spread) is
+        not brought here: the usual case, nothing to compute.
+        """
         known = self._n > 0 and self._spread() > 0
         if known:
             assert self._centre is not None
             reach = _FRAME_REACH * self._scale
-            if np.all(low >= self._centre - reach) and np.all(high <= self._centre + reach):
-                return  # the usual case: the chunk lies well inside the frame, nothing to compute
+            self._window = (self._centre - reach, self._centre + reach)
+            if np.all(low >= self._window[0]) and np.all(high <= self._window[1]):
+                return
         m = chunk_t.shape[1]
         chunk_mean = chunk_t.mean(axis=1)
         # RMS values, each scaled by its largest term, never sums of squares: values up to MAX_MAGNITUDE do not
@@ -293,6 +314,7 @@ class Statistics:
         # A denormal unit would make 1 / scale infinite; such samples are refused by the fits anyway (SPREAD_RANGE).
         scale = max(scale, _MIN_SCALE)
         self._canonical_cache = None
+        self._window = None
         if self._n > 0:
             assert self._centre is not None
             transform = design_transform(self._scale / scale, (self._centre - centre) / scale)
@@ -303,6 +325,7 @@ class Statistics:
 
     def _adopt(self, other: Statistics) -> None:
         self._canonical_cache = None
+        self._window = other._window
         self._n = other._n
         self._centre = other._centre
         self._scale = other._scale
