@@ -50,6 +50,8 @@ DESIGN_EXPONENTS: tuple[tuple[int, int, int], ...] = (
 _SQRT2 = math.sqrt(2.0)
 #: Weight of each design monomial (√2 on the cross terms, see the module docstring).
 DESIGN_WEIGHTS = np.array([1, 1, 1, _SQRT2, _SQRT2, _SQRT2, 1, 1, 1, 1], dtype=np.float64)
+#: The weights of the scatter's first nine rows (the products of two monomials' weights).
+_PARTIAL_WEIGHTS = np.outer(DESIGN_WEIGHTS[:9], DESIGN_WEIGHTS)
 
 #: Samples per chunk: enough that the per-chunk bookkeeping is small beside the arithmetic, few enough that
 #: the chunk's ten design rows (80 bytes a sample: 655 KB) stay in a core's L2 cache between the passes.
@@ -170,7 +172,7 @@ class Statistics:
         self._canonical_cache: tuple[NDArray[np.float64], float, NDArray[np.float64]] | None = None
         #: (lowest, highest) values per axis a chunk may hold and leave the frame as it is: set once the
         #: samples have a spread, cleared when the frame moves.
-        self._window: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+        self._window: tuple[list[float], list[float]] | None = None
 
     @classmethod
     def from_samples(cls, samples: ArrayLike, chunk_size: int = DEFAULT_CHUNK) -> Statistics:
@@ -210,31 +212,36 @@ class Statistics:
             chunk = array[start : start + self.chunk_size]
             rows = buffer[:, : chunk.shape[0]]
             work._accumulate(chunk, rows, start)
+        work._complete()
         self._adopt(work)
         return self
 
     def _accumulate(self, chunk: NDArray[np.generic], rows: NDArray[np.float64], first_row: int) -> None:
-        """Add one chunk, using ``rows`` (10, len(chunk)) as scratch space."""
+        """Add one chunk, using ``rows`` (10, len(chunk)) as scratch space (its last row all ones).
+
+        The scatter's last row (the constant monomial's) is left to :meth:`_complete`.
+        """
         z = rows[6:9]
         z[...] = chunk.T  # float64 from here on, whatever the input dtype
         low, high = z.min(axis=1), z.max(axis=1)
-        least, largest = float(low.min()), float(high.max())
-        if not (math.isfinite(least) and math.isfinite(largest)):  # NaN and inf reach the min or max
+        lows, highs = low.tolist(), high.tolist()  # (three numbers each: compared in Python, no array calls)
+        if not all(math.isfinite(value) for value in lows + highs):  # NaN and inf reach the min or max
             check_finite(chunk, first_row=first_row)
-        if max(-least, largest) > MAX_MAGNITUDE:  # whatever the chunking: refused here
+        if max(-min(lows), max(highs)) > MAX_MAGNITUDE:  # whatever the chunking: refused here
             check_magnitude(chunk, first_row=first_row)
         window = self._window
-        if window is None or not ((low >= window[0]).all() and (high <= window[1]).all()):
+        if window is None or not all(a <= v for a, v in zip(window[0], lows)) or not all(
+            v <= b for b, v in zip(window[1], highs)
+        ):
             self._adapt_frame(z, low, high, first_row)
         assert self._centre is not None
         z -= self._centre[:, None]
         z *= 1.0 / self._scale
-        # d(z) of eq. (4) with the √2 weights, row by row.
+        # d(z) of eq. (4) row by row, without the √2 of the cross terms (applied to the sums below).
         np.multiply(z, z, out=rows[0:3])
         np.multiply(z[0], z[1], out=rows[3])
         np.multiply(z[0], z[2], out=rows[4])
         np.multiply(z[1], z[2], out=rows[5])
-        rows[3:6] *= _SQRT2
         # The one pass over the data that matters: nine rows of the scatter by a general BLAS product (gemm),
         # the tenth (the constant monomial's: the sums of the others, and m) read off the ninth column. The
         # symmetric product ``rows @ rows.T`` (syrk) computes fewer terms but ran 2-3x slower on these
@@ -245,13 +252,16 @@ class Statistics:
                 f"samples in rows {first_row}..{first_row + chunk.shape[0] - 1} overflow float64 once normalised "
                 "(a few values far larger than the rest?); remove the outliers or rescale the samples"
             )
-        scatter = self._scatter
-        scatter[:9] += partial
-        scatter[9, :9] += partial[:, 9]
-        scatter[9, 9] += chunk.shape[0]
-        self._minimum = np.minimum(self._minimum, low)
-        self._maximum = np.maximum(self._maximum, high)
+        partial *= _PARTIAL_WEIGHTS
+        self._scatter[:9] += partial
+        np.minimum(self._minimum, low, out=self._minimum)
+        np.maximum(self._maximum, high, out=self._maximum)
         self._n += chunk.shape[0]
+
+    def _complete(self) -> None:
+        """Fill the scatter's last row from its last column and the count (what :meth:`_accumulate` leaves)."""
+        self._scatter[9, :9] = self._scatter[:9, 9]
+        self._scatter[9, 9] = self._n
 
     def _adapt_frame(
         self, chunk_t: NDArray[np.float64], low: NDArray[np.float64], high: NDArray[np.float64], first_row: int
@@ -265,8 +275,8 @@ class Statistics:
         if known:
             assert self._centre is not None
             reach = _FRAME_REACH * self._scale
-            self._window = (self._centre - reach, self._centre + reach)
-            if np.all(low >= self._window[0]) and np.all(high <= self._window[1]):
+            self._window = ((self._centre - reach).tolist(), (self._centre + reach).tolist())
+            if np.all(low >= self._centre - reach) and np.all(high <= self._centre + reach):
                 return
         m = chunk_t.shape[1]
         chunk_mean = chunk_t.mean(axis=1)
@@ -317,6 +327,7 @@ class Statistics:
         self._window = None
         if self._n > 0:
             assert self._centre is not None
+            self._complete()  # (mid-update: the rows added so far)
             transform = design_transform(self._scale / scale, (self._centre - centre) / scale)
             moved = transform @ self._scatter @ transform.T
             self._scatter = 0.5 * (moved + moved.T)
