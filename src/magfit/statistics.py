@@ -230,9 +230,11 @@ class Statistics:
         if max(-min(lows), max(highs)) > MAX_MAGNITUDE:  # whatever the chunking: refused here
             check_magnitude(chunk, first_row=first_row)
         window = self._window
-        if window is None or not all(a <= v for a, v in zip(window[0], lows)) or not all(
-            v <= b for b, v in zip(window[1], highs)
-        ):
+        inside = window is not None and all(
+            a <= low_value and high_value <= b
+            for a, low_value, high_value, b in zip(window[0], lows, highs, window[1], strict=True)
+        )
+        if not inside:
             self._adapt_frame(z, low, high, first_row)
         assert self._centre is not None
         z -= self._centre[:, None]
