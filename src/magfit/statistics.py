@@ -159,6 +159,11 @@ class Statistics:
         Samples processed per BLAS call inside :meth:`update` (memory: 80 bytes per sample).
     """
 
+    #: (lowest, highest) values per axis a chunk may hold and leave the frame as it is: set once the samples
+    #: have a spread, cleared when the frame moves (a class default: a Statistics pickled before it existed
+    #: loads without it).
+    _window: tuple[list[float], list[float]] | None = None
+
     def __init__(self, chunk_size: int = DEFAULT_CHUNK) -> None:
         if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
             raise OptionError(f"chunk_size must be a positive integer, got {chunk_size!r}")
@@ -170,9 +175,7 @@ class Statistics:
         self._minimum = np.full(3, np.inf)
         self._maximum = np.full(3, -np.inf)
         self._canonical_cache: tuple[NDArray[np.float64], float, NDArray[np.float64]] | None = None
-        #: (lowest, highest) values per axis a chunk may hold and leave the frame as it is: set once the
-        #: samples have a spread, cleared when the frame moves.
-        self._window: tuple[list[float], list[float]] | None = None
+        self._window = None
 
     @classmethod
     def from_samples(cls, samples: ArrayLike, chunk_size: int = DEFAULT_CHUNK) -> Statistics:
