@@ -24,7 +24,6 @@ from .findings import Reason
 from .methods import METHODS, FitInput
 from .methods.core import estimate, is_recorded_array, method_spec, prepare, recorded_options, refitter
 from .methods.registry import MethodSpec, Undetermined
-from .saturation import Clipping
 from .statistics import Statistics
 
 __all__ = ["diagnose", "fit", "refit"]
@@ -102,13 +101,7 @@ def fit(
         chosen = replace(refused.calibration, options=recorded_options({**spec.defaults, **options}))
         refusal = Reason(str(refused), refused.codes[0] if refused.codes else "model_inadequate")
         return _judged(chosen, data, spec, options, diagnostics, True, refusal)
-    clipping = None
-    if data.samples is not None and not spec.needs and "saturation" not in calibration.details:
-        # estimate() searched these samples (checked finite on the way) and recorded no clipped row: the
-        # diagnostics need not search them again. (Rows it found clipped are searched again: the record
-        # holds the ends, not the rows.)
-        clipping = Clipping.none(data.samples.shape[0])
-    return _judged(calibration, data, spec, options, diagnostics, allow_undetermined, clipping=clipping)
+    return _judged(calibration, data, spec, options, diagnostics, allow_undetermined)
 
 
 def refit(
@@ -163,13 +156,13 @@ def _judged(
     diagnostics: bool | Literal["quick"],
     allow_undetermined: bool,
     refusal: Reason | None = None,
-    clipping: Clipping | None = None,
 ) -> Calibration:
     """``calibration`` with its verdict (and diagnostics) attached, or the refusal raised (:func:`settle`).
 
     ``refusal``: the method's own, when it was forced to return a calibration (``auto``: no model the samples
-    determine describes them within a useful heading bound). ``clipping``: what the fit found clipped among
-    ``data.samples``, which it checked finite (not searched again). The method's registry entry adds what it knows
+    determine describes them within a useful heading bound). The rows of ``data.samples`` clipped at full scale,
+    found in the statistics' pass that also checked them finite (``data.clipping``), are handed to the
+    diagnostics, which search them again only when that pass did not run. The method's registry entry adds what it knows
     (:class:`~magfit.methods.registry.Judging`): a model error joins the heading one-sigma before the verdict,
     and its own weaknesses join the verdict's.
     """
@@ -193,7 +186,7 @@ def _judged(
             compare_ml=judging.compare_ml,
             variation_refit=variation,
             model_error_heading_deg=model_error,
-            clipping=clipping,
+            clipping=data.clipping,
         )
     assert report.support is not None  # both diagnoses reach a verdict
     own = judging.weaknesses(calibration, report) if judging.weaknesses is not None else ()

@@ -34,7 +34,9 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["CLIP_RATIO", "MIN_CLIPPED", "Clipping", "find_clipped"]
+from .statistics import Statistics
+
+__all__ = ["CLIP_RATIO", "MIN_CLIPPED", "Clipping", "find_clipped", "statistics_and_clipping"]
 
 #: Rows at one extreme needed before it can be called clipped.
 MIN_CLIPPED = 4
@@ -151,6 +153,42 @@ def find_clipped(samples: NDArray[np.generic]) -> Clipping:
         return Clipping.none(0)
     upper, lower = _thresholds(samples[:: max(1, n // _PROBE_ROWS)])
     candidates = np.arange(n) if np.isinf(upper).all() else _beyond(samples, upper, lower)
+    return _clipping(samples, upper, lower, candidates)
+
+
+def statistics_and_clipping(samples: NDArray[np.generic]) -> tuple[Statistics, Clipping]:
+    """``Statistics.from_samples(samples)`` and ``find_clipped(samples)`` in one pass over the rows.
+
+    The thresholds come from the same probe; the rows beyond them are gathered from each chunk while the
+    statistics' pass holds it in the cache (float64 there, which holds every integer and float32 value
+    exactly, so the comparisons are those of :func:`find_clipped`), instead of a second pass over the
+    samples. Both results equal the separate calls'. Raises as :meth:`Statistics.update` does.
+    """
+    n = samples.shape[0]
+    if n == 0:
+        return Statistics.from_samples(samples), Clipping.none(0)
+    upper, lower = _thresholds(samples[:: max(1, n // _PROBE_ROWS)])
+    if np.isinf(upper).all():
+        return Statistics.from_samples(samples), _clipping(samples, upper, lower, np.arange(n))
+    found = [np.zeros(0, dtype=np.int64)]
+    highs, lows = upper[:, None], lower[:, None]
+
+    def gather(columns: NDArray[np.float64], first_row: int) -> None:
+        hit = columns >= highs
+        hit |= columns <= lows
+        rows = np.flatnonzero(hit.any(axis=0))
+        if rows.size:
+            found.append(rows + first_row)
+
+    statistics = Statistics()._update(samples, gather)
+    return statistics, _clipping(samples, upper, lower, np.concatenate(found))
+
+
+def _clipping(
+    samples: NDArray[np.generic], upper: NDArray[np.float64], lower: NDArray[np.float64], candidates: NDArray[np.int64]
+) -> Clipping:
+    """The ends test of :func:`find_clipped` on the ``candidates`` rows: every row at or beyond a threshold."""
+    n = samples.shape[0]
     rows = samples[candidates]
     ends: list[tuple[str, float, int]] = []
     marked: list[NDArray[np.int64]] = []

@@ -30,7 +30,7 @@ min/max doubles as the finiteness check. Faster than building the (n, 10) design
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -200,6 +200,13 @@ class Statistics:
         square float64 cannot hold), a :class:`SampleError` names it and the statistics are left as they were.
         Both are checked on every update, so whether a value is refused never depends on the chunking.
         """
+        return self._update(samples, None)
+
+    def _update(
+        self, samples: ArrayLike, scan: Callable[[NDArray[np.float64], int], None] | None
+    ) -> Statistics:
+        """:meth:`update`, handing each chunk's columns (3, m), float64 and checked, with its first row to
+        ``scan`` while they are in the cache (:func:`magfit.saturation.statistics_and_clipping`)."""
         array = check_shape(samples)
         total = array.shape[0]
         if total == 0:
@@ -214,12 +221,18 @@ class Statistics:
         for start in range(0, total, self.chunk_size):
             chunk = array[start : start + self.chunk_size]
             rows = buffer[:, : chunk.shape[0]]
-            work._accumulate(chunk, rows, start)
+            work._accumulate(chunk, rows, start, scan)
         work._complete()
         self._adopt(work)
         return self
 
-    def _accumulate(self, chunk: NDArray[np.generic], rows: NDArray[np.float64], first_row: int) -> None:
+    def _accumulate(
+        self,
+        chunk: NDArray[np.generic],
+        rows: NDArray[np.float64],
+        first_row: int,
+        scan: Callable[[NDArray[np.float64], int], None] | None = None,
+    ) -> None:
         """Add one chunk, using ``rows`` (10, len(chunk)) as scratch space (its last row all ones).
 
         The scatter's last row (the constant monomial's) is left to :meth:`_complete`.
@@ -232,6 +245,8 @@ class Statistics:
             check_finite(chunk, first_row=first_row)
         if max(-min(lows), max(highs)) > MAX_MAGNITUDE:  # whatever the chunking: refused here
             check_magnitude(chunk, first_row=first_row)
+        if scan is not None:
+            scan(z, first_row)
         window = self._window
         inside = window is not None and all(
             a <= low_value and high_value <= b
