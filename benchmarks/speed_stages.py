@@ -25,8 +25,8 @@ import magfit
 
 #: (module, function, label): the stages, in the order the fit runs them.
 STAGES = (
-    ("magfit.fit", "prepare", "Statistics (the one pass: scatter, min/max, finite check)"),
-    ("magfit.methods.core", "find_clipped", "clipped rows, searched by the fit's estimate"),
+    ("magfit.fit", "prepare", "Statistics (the one pass: scatter, min/max, finite check; the clipped rows too)"),
+    ("magfit.methods.core", "find_clipped", "clipped rows, searched by the fit's estimate in a pass of their own"),
     ("magfit.diagnostics.diagnose", "check_finite", "finite check, again in the diagnostics"),
     ("magfit.diagnostics.diagnose", "find_clipped", "clipped rows, searched again in the diagnostics"),
     ("magfit.diagnostics.diagnose", "weighted_even_subsample", "the diagnostics' even subsample"),
