@@ -281,8 +281,8 @@ def part_fit(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
         "fit_tracemalloc_mb": memory,
         "fit_rss_extra_mb": rss,
         "offset_error": float(np.linalg.norm(calibration.offset - truth.offset)),
-        "verdict": _verdict(calibration),
-        "verdict_no_diagnostics": _verdict(outputs["fit_quiet"]),
+        "verdict": _support(calibration),
+        "verdict_no_diagnostics": _support(outputs["fit_quiet"]),
     }
 
 
@@ -495,7 +495,7 @@ def _auto_vs_ellipsoid(n: int, rounds: int) -> dict[str, Any]:
             calibration = magfit.fit(samples, method)
             times[method].append(time.perf_counter() - start)
             chosen = calibration.details.get("chosen_model")
-            outcome[method] = f"verdict {calibration.details['support']['verdict']}" + (
+            outcome[method] = f"verdict {_support(calibration)}" + (
                 f", chose {chosen}" if chosen else ""
             )
     best = {method: min(values) for method, values in times.items()}
@@ -957,7 +957,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _verdict(calibration: magfit.Calibration) -> str:
+def _support(calibration: magfit.Calibration) -> str:
+    """The calibration's verdict in a word (``_verdict`` is the PASS/FAIL of a target)."""
     return calibration.support.verdict if calibration.support is not None else "none"
 
 

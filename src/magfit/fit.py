@@ -160,9 +160,11 @@ def _judged(
     """``calibration`` with its verdict (and diagnostics) attached, or the refusal raised (:func:`settle`).
 
     ``refusal``: the method's own, when it was forced to return a calibration (``auto``: no model the samples
-    determine describes them within a useful heading bound). The method's registry entry adds what it knows
-    (:class:`~magfit.methods.registry.Judging`): a model error joins the heading one-sigma before the verdict,
-    and its own weaknesses join the verdict's.
+    determine describes them within a useful heading bound). The rows of ``data.samples`` clipped at full
+    scale, found in the statistics' pass that also checked them finite (``data.clipping``), are handed to the
+    diagnostics, which search them again only when that pass did not run. The method's registry entry adds
+    what it knows (:class:`~magfit.methods.registry.Judging`): a model error joins the heading one-sigma before
+    the verdict, and its own weaknesses join the verdict's.
     """
     if calibration.frame == "vehicle":  # fitted against a reference field: judged there, not by its magnitude
         return judged_against_reference(calibration, spec.name, diagnostics, allow_undetermined)
@@ -184,6 +186,7 @@ def _judged(
             compare_ml=judging.compare_ml,
             variation_refit=variation,
             model_error_heading_deg=model_error,
+            clipping=data.clipping,
         )
     assert report.support is not None  # both diagnoses reach a verdict
     own = judging.weaknesses(calibration, report) if judging.weaknesses is not None else ()

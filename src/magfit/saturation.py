@@ -29,11 +29,14 @@ holds no rows to find them in.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["CLIP_RATIO", "MIN_CLIPPED", "Clipping", "find_clipped"]
+from .statistics import Statistics
+
+__all__ = ["CLIP_RATIO", "MIN_CLIPPED", "Clipping", "find_clipped", "statistics_and_clipping"]
 
 #: Rows at one extreme needed before it can be called clipped.
 MIN_CLIPPED = 4
@@ -58,7 +61,7 @@ class Clipping:
     n_samples : int
         Rows examined.
     clipped : ndarray of bool, shape (n_samples,)
-        The rows clipped on at least one axis.
+        The rows clipped on at least one axis (read-only when none is).
     ends : tuple of (axis, value, rows)
         Each clipped end: the axis ("x", "y", "z"), the value it is held at (input units) and how many
         rows hold it.
@@ -68,10 +71,10 @@ class Clipping:
     clipped: NDArray[np.bool_]
     ends: tuple[tuple[str, float, int], ...]
 
-    @property
+    @cached_property
     def n_clipped(self) -> int:
-        """Rows clipped on at least one axis."""
-        return int(self.clipped.sum())
+        """Rows clipped on at least one axis (counted once; the mask holds them only where an end is clipped)."""
+        return int(np.count_nonzero(self.clipped)) if self.ends else 0
 
     @property
     def n_kept(self) -> int:
@@ -90,11 +93,16 @@ class Clipping:
             "ends": [{"axis": axis, "value": value, "rows": rows} for axis, value, rows in self.ends],
         }
 
+    @classmethod
+    def none(cls, n_samples: int) -> Clipping:
+        """Nothing clipped among ``n_samples`` rows (its mask a read-only view: no memory)."""
+        return cls(n_samples, np.broadcast_to(np.False_, (n_samples,)), ())
+
 
 #: The threshold below each end is read off a regular stride of about this many rows (see :func:`find_clipped`).
 _PROBE_ROWS = 5_000
 #: Rows compared with the thresholds at a time (a block of three columns stays in the cache).
-_CHUNK_ROWS = 1 << 15
+_CHUNK_ROWS = 1 << 14
 
 
 def _clipped_end(held_count: int, value: float, integral: bool, neighbours: NDArray[np.int64], inner: int) -> bool:
@@ -141,28 +149,49 @@ def find_clipped(samples: NDArray[np.generic]) -> Clipping:
     of the test on the whole columns; the memory, a few rows per end instead of a copy of a column.
     """
     n = samples.shape[0]
-    clipped = np.zeros(n, dtype=bool)
     if n == 0:
-        return Clipping(0, clipped, ())
+        return Clipping.none(0)
+    upper, lower = _thresholds(samples[:: max(1, n // _PROBE_ROWS)])
+    candidates = np.arange(n) if np.isinf(upper).all() else _beyond(samples, upper, lower)
+    return _clipping(samples, upper, lower, candidates)
+
+
+def statistics_and_clipping(samples: NDArray[np.generic]) -> tuple[Statistics, Clipping]:
+    """``Statistics.from_samples(samples)`` and ``find_clipped(samples)`` in one pass over the rows.
+
+    The thresholds come from the same probe; the rows beyond them are gathered from each chunk while the
+    statistics' pass holds it in the cache (float64 there, which holds every integer and float32 value
+    exactly, so the comparisons are those of :func:`find_clipped`), instead of a second pass over the
+    samples. Both results equal the separate calls'. Raises as :meth:`Statistics.update` does.
+    """
+    n = samples.shape[0]
+    if n == 0:
+        return Statistics.from_samples(samples), Clipping.none(0)
     upper, lower = _thresholds(samples[:: max(1, n // _PROBE_ROWS)])
     if np.isinf(upper).all():
-        candidates = np.arange(n)
-    else:
-        found = [np.zeros(0, dtype=np.int64)]
-        beyond, scratch = np.empty(min(n, _CHUNK_ROWS), dtype=bool), np.empty(min(n, _CHUNK_ROWS), dtype=bool)
-        for start in range(0, n, _CHUNK_ROWS):
-            block = samples[start : start + _CHUNK_ROWS]
-            hit, other = beyond[: block.shape[0]], scratch[: block.shape[0]]
-            # Column by column (a comparison broadcast along the rows' three values runs 3x slower).
-            np.greater_equal(block[:, 0], upper[0], out=hit)
-            for axis in range(3):
-                if axis:
-                    hit |= np.greater_equal(block[:, axis], upper[axis], out=other)
-                hit |= np.less_equal(block[:, axis], lower[axis], out=other)
-            found.append(np.flatnonzero(hit) + start)
-        candidates = np.concatenate(found)
+        return Statistics.from_samples(samples), _clipping(samples, upper, lower, np.arange(n))
+    found = [np.zeros(0, dtype=np.int64)]
+    highs, lows = upper[:, None], lower[:, None]
+
+    def gather(columns: NDArray[np.float64], first_row: int) -> None:
+        hit = columns >= highs
+        hit |= columns <= lows
+        rows = np.flatnonzero(hit.any(axis=0))
+        if rows.size:
+            found.append(rows + first_row)
+
+    statistics = Statistics()._update(samples, gather)
+    return statistics, _clipping(samples, upper, lower, np.concatenate(found))
+
+
+def _clipping(
+    samples: NDArray[np.generic], upper: NDArray[np.float64], lower: NDArray[np.float64], candidates: NDArray[np.int64]
+) -> Clipping:
+    """The ends test of :func:`find_clipped` on the ``candidates`` rows: every row at or beyond a threshold."""
+    n = samples.shape[0]
     rows = samples[candidates]
     ends: list[tuple[str, float, int]] = []
+    marked: list[NDArray[np.int64]] = []
     for axis in range(3):
         whole = bool(np.isinf(upper[axis]))  # few distinct values: the whole column is examined
         column = samples[:, axis] if whole else rows[:, axis]
@@ -171,16 +200,49 @@ def find_clipped(samples: NDArray[np.generic]) -> Clipping:
             continue  # a constant axis is a dead axis or no motion: the support checks name that
         for upper_end in (True, False):
             extreme = high if upper_end else low
-            held = column == extreme
-            count = int(held.sum())
+            # Beyond the threshold: every row there is a candidate, and the end's NEIGHBOURS values lie there.
+            tail = column if whole else column[column >= upper[axis]] if upper_end else column[column <= lower[axis]]
+            held = tail == extreme
+            count = int(np.count_nonzero(held))
             if count < 2:
                 continue
             # (the whole column is read for integers only where the end is a full-scale code)
             integral = float(extreme) in FULL_SCALE_CODES and bool(np.all(np.mod(samples[:, axis], 1) == 0))
-            inner = column[~held]
-            counts = np.unique(inner, return_counts=True)[1]
+            counts = np.unique(tail[~held], return_counts=True)[1]
             neighbours = (counts[::-1] if upper_end else counts)[:NEIGHBOURS]
             if _clipped_end(count, float(extreme), integral, neighbours, n - count):
-                clipped[np.flatnonzero(held) if whole else candidates[held]] = True
+                at_end = np.flatnonzero(column == extreme)
+                marked.append(at_end if whole else candidates[at_end])
                 ends.append((_AXES[axis], float(extreme), count))
+    if not ends:
+        return Clipping.none(n)
+    clipped = np.zeros(n, dtype=bool)
+    for at_end in marked:
+        clipped[at_end] = True
     return Clipping(n, clipped, tuple(ends))
+
+
+def _beyond(samples: NDArray[np.generic], upper: NDArray[np.float64], lower: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The rows with a value at or beyond its axis's threshold (``upper`` or ``lower``), in order.
+
+    The rows are compared in blocks as one flat run of values against the thresholds repeated for each
+    row (contiguous memory: measured 1.2-1.5x faster than three strided columns).
+    """
+    n = samples.shape[0]
+    block_rows = min(n, _CHUNK_ROWS)
+    highs, lows = np.tile(upper, block_rows), np.tile(lower, block_rows)
+    hit, other = np.empty(3 * block_rows, dtype=bool), np.empty(3 * block_rows, dtype=bool)
+    found = [np.zeros(0, dtype=np.int64)]
+    for start in range(0, n, block_rows):
+        values = samples[start : start + block_rows].reshape(-1)  # a view of C-ordered rows (else a copy)
+        size = values.shape[0]
+        np.greater_equal(values, highs[:size], out=hit[:size])
+        hit[:size] |= np.less_equal(values, lows[:size], out=other[:size])
+        positions = np.flatnonzero(hit[:size])
+        if positions.size:
+            row = positions // 3
+            first = np.empty(row.size, dtype=bool)  # a row beyond on two axes once
+            first[0] = True
+            np.not_equal(row[1:], row[:-1], out=first[1:])
+            found.append(row[first] + start)
+    return np.concatenate(found)

@@ -20,15 +20,17 @@ vector in another (``d(a z + t) = T d(z)``), so the scatter transforms as ``T S 
 the scatter in the canonical frame (centre = mean, unit = RMS distance from it), which depends on the
 set of samples only: merged, chunked and whole-array statistics give the same fit to round-off.
 
-Speed: one pass, the ten design rows of a chunk built in place in a (10, n) buffer and reduced by one
-BLAS ``syrk``; the per-axis min/max doubles as the finiteness check. About 20 ns per sample on one
-core, faster than building the (n, 10) design matrix the obvious way.
+Speed: one pass, the ten design rows of a chunk built in place in a (10, n) buffer small enough to stay
+in a core's cache, and reduced by one general BLAS product of its first nine rows with all ten (the
+tenth row of the scatter, the constant monomial's, is the ninth column read again); the per-axis
+min/max doubles as the finiteness check. Faster than building the (n, 10) design matrix the obvious way
+(docs/scaling.md has the figures).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -48,9 +50,12 @@ DESIGN_EXPONENTS: tuple[tuple[int, int, int], ...] = (
 _SQRT2 = math.sqrt(2.0)
 #: Weight of each design monomial (√2 on the cross terms, see the module docstring).
 DESIGN_WEIGHTS = np.array([1, 1, 1, _SQRT2, _SQRT2, _SQRT2, 1, 1, 1, 1], dtype=np.float64)
+#: The weights of the scatter's first nine rows (the products of two monomials' weights).
+_PARTIAL_WEIGHTS = np.outer(DESIGN_WEIGHTS[:9], DESIGN_WEIGHTS)
 
-#: Samples per chunk: large enough for BLAS to run at full speed, small enough to bound memory (~5 MB).
-DEFAULT_CHUNK = 1 << 16
+#: Samples per chunk: enough that the per-chunk bookkeeping is small beside the arithmetic, few enough that
+#: the chunk's ten design rows (80 bytes a sample: 655 KB) stay in a core's L2 cache between the passes.
+DEFAULT_CHUNK = 1 << 13
 #: A chunk that reaches beyond this many frame units from the frame's centre makes the frame be checked.
 _FRAME_REACH = 4.0
 #: The frame moves when the samples spread this many times wider than its unit.
@@ -154,6 +159,11 @@ class Statistics:
         Samples processed per BLAS call inside :meth:`update` (memory: 80 bytes per sample).
     """
 
+    #: (lowest, highest) values per axis a chunk may hold and leave the frame as it is: set once the samples
+    #: have a spread, cleared when the frame moves (a class default: a Statistics pickled before it existed
+    #: loads without it).
+    _window: tuple[list[float], list[float]] | None = None
+
     def __init__(self, chunk_size: int = DEFAULT_CHUNK) -> None:
         if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
             raise OptionError(f"chunk_size must be a positive integer, got {chunk_size!r}")
@@ -165,6 +175,7 @@ class Statistics:
         self._minimum = np.full(3, np.inf)
         self._maximum = np.full(3, -np.inf)
         self._canonical_cache: tuple[NDArray[np.float64], float, NDArray[np.float64]] | None = None
+        self._window = None
 
     @classmethod
     def from_samples(cls, samples: ArrayLike, chunk_size: int = DEFAULT_CHUNK) -> Statistics:
@@ -189,6 +200,13 @@ class Statistics:
         square float64 cannot hold), a :class:`SampleError` names it and the statistics are left as they were.
         Both are checked on every update, so whether a value is refused never depends on the chunking.
         """
+        return self._update(samples, None)
+
+    def _update(
+        self, samples: ArrayLike, scan: Callable[[NDArray[np.float64], int], None] | None
+    ) -> Statistics:
+        """:meth:`update`, handing each chunk's columns (3, m), float64 and checked, with its first row to
+        ``scan`` while they are in the cache (:func:`magfit.saturation.statistics_and_clipping`)."""
         array = check_shape(samples)
         total = array.shape[0]
         if total == 0:
@@ -199,54 +217,87 @@ class Statistics:
         # contiguous memory, which is 2-4x faster than the (n, 10) layout for the squares, the min/max and
         # the finiteness check.
         buffer = np.empty((10, min(self.chunk_size, total)))
+        buffer[9] = 1.0  # the constant monomial, written once
         for start in range(0, total, self.chunk_size):
             chunk = array[start : start + self.chunk_size]
             rows = buffer[:, : chunk.shape[0]]
-            work._accumulate(chunk, rows, start)
+            work._accumulate(chunk, rows, start, scan)
+        work._complete()
         self._adopt(work)
         return self
 
-    def _accumulate(self, chunk: NDArray[np.generic], rows: NDArray[np.float64], first_row: int) -> None:
-        """Add one chunk, using ``rows`` (10, len(chunk)) as scratch space."""
+    def _accumulate(
+        self,
+        chunk: NDArray[np.generic],
+        rows: NDArray[np.float64],
+        first_row: int,
+        scan: Callable[[NDArray[np.float64], int], None] | None = None,
+    ) -> None:
+        """Add one chunk, using ``rows`` (10, len(chunk)) as scratch space (its last row all ones).
+
+        The scatter's last row (the constant monomial's) is left to :meth:`_complete`.
+        """
         z = rows[6:9]
         z[...] = chunk.T  # float64 from here on, whatever the input dtype
         low, high = z.min(axis=1), z.max(axis=1)
-        if not (np.isfinite(low).all() and np.isfinite(high).all()):  # NaN and inf reach the min or max
+        lows, highs = low.tolist(), high.tolist()  # (three numbers each: compared in Python, no array calls)
+        if not all(math.isfinite(value) for value in lows + highs):  # NaN and inf reach the min or max
             check_finite(chunk, first_row=first_row)
-        if max(-float(low.min()), float(high.max())) > MAX_MAGNITUDE:  # whatever the chunking: refused here
+        if max(-min(lows), max(highs)) > MAX_MAGNITUDE:  # whatever the chunking: refused here
             check_magnitude(chunk, first_row=first_row)
-        self._adapt_frame(z, low, high, first_row)
+        if scan is not None:
+            scan(z, first_row)
+        window = self._window
+        inside = window is not None and all(
+            a <= low_value and high_value <= b
+            for a, low_value, high_value, b in zip(window[0], lows, highs, window[1], strict=True)
+        )
+        if not inside:
+            self._adapt_frame(z, low, high, first_row)
         assert self._centre is not None
         z -= self._centre[:, None]
         z *= 1.0 / self._scale
-        # d(z) of eq. (4) with the √2 weights, row by row.
+        # d(z) of eq. (4) row by row, without the √2 of the cross terms (applied to the sums below).
         np.multiply(z, z, out=rows[0:3])
         np.multiply(z[0], z[1], out=rows[3])
         np.multiply(z[0], z[2], out=rows[4])
         np.multiply(z[1], z[2], out=rows[5])
-        rows[3:6] *= _SQRT2
-        rows[9] = 1.0
-        scatter = rows @ rows.T  # BLAS syrk: the one pass over the data that matters
-        if not np.isfinite(scatter).all():
+        # The one pass over the data that matters: nine rows of the scatter by a general BLAS product (gemm),
+        # the tenth (the constant monomial's: the sums of the others, and m) read off the ninth column. The
+        # symmetric product ``rows @ rows.T`` (syrk) computes fewer terms but ran 2-3x slower on these
+        # shapes (ten rows, thousands of columns) with OpenBLAS.
+        partial = rows[:9] @ rows.T
+        if not math.isfinite(float(partial.sum())) and not np.isfinite(partial).all():
             raise SampleError(
                 f"samples in rows {first_row}..{first_row + chunk.shape[0] - 1} overflow float64 once normalised "
                 "(a few values far larger than the rest?); remove the outliers or rescale the samples"
             )
-        self._scatter += scatter
-        self._minimum = np.minimum(self._minimum, low)
-        self._maximum = np.maximum(self._maximum, high)
+        partial *= _PARTIAL_WEIGHTS
+        self._scatter[:9] += partial
+        np.minimum(self._minimum, low, out=self._minimum)
+        np.maximum(self._maximum, high, out=self._maximum)
         self._n += chunk.shape[0]
+
+    def _complete(self) -> None:
+        """Fill the scatter's last row from its last column and the count (what :meth:`_accumulate` leaves)."""
+        self._scatter[9, :9] = self._scatter[:9, 9]
+        self._scatter[9, 9] = self._n
 
     def _adapt_frame(
         self, chunk_t: NDArray[np.float64], low: NDArray[np.float64], high: NDArray[np.float64], first_row: int
     ) -> None:
-        """Set or widen the normalised frame for a chunk given as rows (3, m), before it is added."""
+        """Set or widen the normalised frame for a chunk given as rows (3, m), before it is added.
+
+        A chunk within :attr:`_window` (the frame's centre ± its reach, once the samples have a spread) is
+        not brought here: the usual case, nothing to compute.
+        """
         known = self._n > 0 and self._spread() > 0
         if known:
             assert self._centre is not None
             reach = _FRAME_REACH * self._scale
+            self._window = ((self._centre - reach).tolist(), (self._centre + reach).tolist())
             if np.all(low >= self._centre - reach) and np.all(high <= self._centre + reach):
-                return  # the usual case: the chunk lies well inside the frame, nothing to compute
+                return
         m = chunk_t.shape[1]
         chunk_mean = chunk_t.mean(axis=1)
         # RMS values, each scaled by its largest term, never sums of squares: values up to MAX_MAGNITUDE do not
@@ -293,8 +344,10 @@ class Statistics:
         # A denormal unit would make 1 / scale infinite; such samples are refused by the fits anyway (SPREAD_RANGE).
         scale = max(scale, _MIN_SCALE)
         self._canonical_cache = None
+        self._window = None
         if self._n > 0:
             assert self._centre is not None
+            self._complete()  # (mid-update: the rows added so far)
             transform = design_transform(self._scale / scale, (self._centre - centre) / scale)
             moved = transform @ self._scatter @ transform.T
             self._scatter = 0.5 * (moved + moved.T)
@@ -303,6 +356,7 @@ class Statistics:
 
     def _adopt(self, other: Statistics) -> None:
         self._canonical_cache = None
+        self._window = other._window
         self._n = other._n
         self._centre = other._centre
         self._scale = other._scale

@@ -19,7 +19,7 @@ from ..geometry.frame import Frame
 from ..geometry.quadric import algebraic_ellipsoid, calibration_from_ellipsoid
 from ..outliers import inlier_mask
 from ..sampling import MAX_ANALYSED, thin, weighted_even_subsample
-from ..saturation import find_clipped
+from ..saturation import Clipping, find_clipped
 from ..statistics import Statistics
 from .coverage import coverage
 from .uncertainty import (
@@ -85,6 +85,7 @@ def diagnose(
     compare_ml: bool = True,
     variation_refit: Refit | None = None,
     model_error_heading_deg: float = 0.0,
+    clipping: Clipping | None = None,
 ) -> Diagnostics:
     """Diagnose a calibration on the samples it was fitted to (or on a subsample of them), with its verdict.
 
@@ -123,6 +124,10 @@ def diagnose(
         A heading error the calibration's model is known to leave out (``auto``: the distortion of a richer
         model the samples do not determine), degrees: added in quadrature to the heading one-sigma before
         the verdict, so that every figure stated is the one uncertainty.
+    clipping : Clipping, optional
+        The rows of ``samples`` clipped at the sensor's full scale, as the fit found them on these samples,
+        which it has also checked finite (:func:`magfit.fit` passes it): neither pass over the samples is
+        made again. None: both are made here.
 
     Returns
     -------
@@ -130,11 +135,12 @@ def diagnose(
         With ``support``, the verdict of :mod:`magfit.diagnostics.verdict`.
     """
     array = check_shape(samples)  # in the caller's dtype: only the rows analysed become float64
-    check_finite(array)
+    if clipping is None or clipping.n_samples != array.shape[0]:
+        check_finite(array)
+        clipping = find_clipped(array)  # the rows every fit left out (methods.core.estimate): so do the diagnostics
     if represents is not None and represents < array.shape[0]:
         raise SampleError(f"represents={represents} is fewer than the {array.shape[0]} samples given")
     notes: list[str] = []
-    clipping = find_clipped(array)  # the rows every fit left out (methods.core.estimate): so do the diagnostics
     if clipping.n_clipped:
         notes.append(f"{clipping.n_clipped} samples clipped at the sensor's full scale are left out of these figures.")
         array = array[~clipping.clipped]

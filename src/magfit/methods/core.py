@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._validation import check_finite, check_shape, check_support
 from ..calibration import Calibration
 from ..errors import CalibrationError, OptionError
-from ..saturation import Clipping, find_clipped
+from ..saturation import Clipping, find_clipped, statistics_and_clipping
 from ..statistics import Statistics
 from .registry import METHODS, FitInput, MethodSpec, Refit, get_method
 
@@ -65,7 +65,10 @@ def prepare(samples: ArrayLike | Statistics, spec: MethodSpec) -> FitInput:
         array = np.asarray(array, dtype=np.float64)
     # (A method that reads the statistics: Statistics.update checks each chunk as it reads it and names the
     # row, without a whole-array temporary: 30 MB and a pass over 1e7 samples.)
-    return FitInput(Statistics.from_samples(array), array)
+    if spec.needs:  # vector's and gyro's samples are not searched for clipped rows (estimate)
+        return FitInput(Statistics.from_samples(array), array)
+    statistics, clipping = statistics_and_clipping(array)  # one pass for both
+    return FitInput(statistics, array, clipping)
 
 
 def estimate(data: FitInput, method: str, options: Mapping[str, Any] | None = None) -> Calibration:
@@ -110,7 +113,7 @@ def without_clipped(data: FitInput, spec: MethodSpec) -> tuple[FitInput, Clippin
     rows, or all but fewer than the method needs, are clipped.
     """
     assert data.samples is not None
-    clipping = find_clipped(data.samples)
+    clipping = data.clipping if data.clipping is not None else find_clipped(data.samples)
     if not clipping.n_clipped:
         return data, None
     kept = data.samples[~clipping.clipped]

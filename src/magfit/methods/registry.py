@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from ..calibration import Calibration
     from ..facts import ModelKind
     from ..findings import Diagnostics, Reason
+    from ..saturation import Clipping
     from ..statistics import Statistics
 
 __all__ = [
@@ -104,6 +105,8 @@ class FitInput:
 
     statistics: Statistics
     samples: NDArray[Any] | None
+    #: The rows of ``samples`` clipped at full scale, when the statistics' pass found them (None: not searched).
+    clipping: Clipping | None = None
 
     def require_samples(self, method: str) -> NDArray[np.float64]:
         if self.samples is None:

@@ -37,38 +37,60 @@ def _quaternion_product(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArr
     ], axis=-1)  # fmt: skip
 
 
+def _product(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`_quaternion_product` on components first, (4, ...): every term a contiguous array (the same
+    arithmetic, term for term, so the same numbers to the last bit)."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    out = np.empty((4, *np.broadcast_shapes(w1.shape, w2.shape)))
+    out[0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    out[1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    out[2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    out[3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+    return out
+
+
 def _segmented_scan(q: NDArray[np.float64], start: NDArray[np.bool_]) -> NDArray[np.float64]:
     """Inclusive products ``q_s ⊗ … ⊗ q_k`` (n, 4) from the last ``start`` at or before each k (K2).
 
-    ``start[0]`` is taken as True. Blocks of :data:`_BLOCK` rows: (a) each block scanned in row order, all
-    blocks at once; (b) the blocks' last rows, scanned the same way (recursively) with a reset where a block
-    holds a start, give the product that runs into each block; (c) that product is put in front of each row
-    whose chain reaches back to its block's first row.
+    ``start[0]`` is taken as True. See :func:`_scan`, which this runs on the components.
     """
-    n = q.shape[0]
+    return _scan(np.ascontiguousarray(q.T), start).T
+
+
+def _scan(q: NDArray[np.float64], start: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """:func:`_segmented_scan` on components first: ``q`` (4, n), the products (4, n).
+
+    Blocks of :data:`_BLOCK` rows: (a) each block scanned in row order, all blocks at once; (b) the blocks' last
+    rows, scanned the same way (recursively) with a reset where a block holds a start, give the product that
+    runs into each block; (c) that product is put in front of each row whose chain reaches back to its block's
+    first row. The blocks are laid out (4, row in block, block), so that each step of (a) reads and writes
+    contiguous runs over the blocks.
+    """
+    n = q.shape[1]
     if n <= _BLOCK:
         out = q.copy()
         for k in range(1, n):
             if not start[k]:
-                out[k] = _quaternion_product(out[k - 1], out[k])
+                out[:, k] = _product(out[:, k - 1], out[:, k])
         return out
     blocks = -(-n // _BLOCK)
-    padded = np.zeros((blocks * _BLOCK, 4))
-    padded[:, 0] = 1.0
-    padded[:n] = q
+    padded = np.zeros((4, blocks * _BLOCK))
+    padded[0] = 1.0
+    padded[:, :n] = q
     flags = np.zeros(blocks * _BLOCK, dtype=bool)
     flags[:n] = start
     flags[0] = True
-    rows = padded.reshape(blocks, _BLOCK, 4)
-    resets = flags.reshape(blocks, _BLOCK)
+    rows = np.ascontiguousarray(padded.reshape(4, blocks, _BLOCK).transpose(0, 2, 1))  # (4, _BLOCK, blocks)
+    resets = np.ascontiguousarray(flags.reshape(blocks, _BLOCK).T)  # (_BLOCK, blocks)
     for j in range(1, _BLOCK):  # (a)
-        product = _quaternion_product(rows[:, j - 1], rows[:, j])
-        rows[:, j] = np.where(resets[:, j, None], rows[:, j], product) if resets[:, j].any() else product
-    reaches = ~np.logical_or.accumulate(resets, axis=1)  # the row's chain runs back into the block before
-    totals = _segmented_scan(rows[:, -1], ~reaches[:, -1])  # (b): the product up to each block's last row
-    inbound = np.broadcast_to(totals[:-1, None, :], (blocks - 1, _BLOCK, 4))
-    rows[1:] = np.where(reaches[1:, :, None], _quaternion_product(inbound, rows[1:]), rows[1:])  # (c)
-    return padded[:n]
+        product = _product(rows[:, j - 1], rows[:, j])
+        rows[:, j] = np.where(resets[j], rows[:, j], product) if resets[j].any() else product
+    reaches = ~np.logical_or.accumulate(resets, axis=0)  # the row's chain runs back into the block before
+    totals = _scan(rows[:, -1], ~reaches[-1])  # (b): the product up to each block's last row
+    inbound = totals[:, None, :-1]
+    rows[:, :, 1:] = np.where(reaches[None, :, 1:], _product(inbound, rows[:, :, 1:]), rows[:, :, 1:])  # (c)
+    return rows.transpose(0, 2, 1).reshape(4, blocks * _BLOCK)[:, :n]
 
 
 def _turns(w: NDArray[np.float64], t: NDArray[np.float64], beta: NDArray[np.float64],
@@ -84,24 +106,30 @@ def _rotations(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: N
                start: NDArray[np.bool_]) -> NDArray[np.float64]:  # fmt: skip
     """:func:`_turns` from the steps' mean rates (n − 1, 3) and lengths (n − 1,) and the stretches' first samples
     (n,): what a trajectory keeps, so that each new bias costs only the integration."""
-    phi = (mean_rates - beta) * dt[:, None]
-    angle = np.linalg.norm(phi, axis=1)
+    n = start.size
+    return _rotation_entries(mean_rates, dt, beta, start).T.reshape(n, 3, 3)
+
+
+def _rotation_entries(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: NDArray[np.float64],
+                      start: NDArray[np.bool_]) -> NDArray[np.float64]:  # fmt: skip
+    """:func:`_rotations` entry by entry, (9, n), each row contiguous over the samples (row-major R_k)."""
+    # Component by component (contiguous runs over the steps; the same arithmetic as on the (n − 1, 3) rows).
+    phi = (np.ascontiguousarray(mean_rates.T) - np.asarray(beta, dtype=np.float64)[:, None]) * dt
+    angle = np.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
     sinc = np.where(angle > 1e-12, np.sin(0.5 * angle) / np.maximum(angle, 1e-300), 0.5)
     n = start.size
-    q = np.empty((n, 4))
-    q[0] = (1.0, 0.0, 0.0, 0.0)
-    q[1:, 0] = np.cos(0.5 * angle)
-    q[1:, 1:] = phi * sinc[:, None]
-    q[start] = (1.0, 0.0, 0.0, 0.0)  # a stretch starts from itself
-    s, x, y, z = np.ascontiguousarray(_segmented_scan(q, start).T)
+    q = np.empty((4, n))
+    q[:, 0] = (1.0, 0.0, 0.0, 0.0)
+    q[0, 1:] = np.cos(0.5 * angle)
+    np.multiply(phi, sinc, out=q[1:, 1:])
+    q[:, start] = np.array([[1.0], [0.0], [0.0], [0.0]])  # a stretch starts from itself
+    s, x, y, z = _scan(q, start)
     xx, yy, zz, xy, xz, yz, sx, sy, sz = x * x, y * y, z * z, x * y, x * z, y * z, s * x, s * y, s * z
-    # Entry by entry, each contiguous over the samples: the (n, 3, 3) view's running sums over the samples (the
-    # caller's) then walk memory in order.
     r = np.empty((9, n))
     r[0], r[1], r[2] = 1 - 2 * (yy + zz), 2 * (xy - sz), 2 * (xz + sy)
     r[3], r[4], r[5] = 2 * (xy + sz), 1 - 2 * (xx + zz), 2 * (yz - sx)
     r[6], r[7], r[8] = 2 * (xz - sy), 2 * (yz + sx), 1 - 2 * (xx + yy)
-    return r.T.reshape(n, 3, 3)
+    return r
 
 
 def _unit(angles: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from ..._optimize import Evaluation, Solution, levenberg_marquardt
 from ...rotations import skew
 from .gravity import ACCEL_BIAS_PRIOR, _cos, _Gravity, _gravity_angle
-from .kinematics import _rotations, _unit
+from .kinematics import _rotation_entries, _unit
 from .mapping import MAPPINGS
 from .windows import _gaps, _symmetric
 
@@ -266,8 +266,12 @@ def _integrated(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[n
                     and (last.segment is traj.segment or np.array_equal(last.segment, traj.segment))):  # fmt: skip
                 return last.turns, last.running
     mean_rates, dt, start, weights = traj.steps
-    turns = _rotations(mean_rates, dt, beta, start)
-    running = np.cumsum(turns * weights[:, None, None], axis=0)  # Σ dt_j R_{j+1} (none across a start)
+    entries = _rotation_entries(mean_rates, dt, beta, start)  # (9, n): each entry's run over the samples
+    n = start.size
+    turns = entries.T.reshape(n, 3, 3)
+    # Σ dt_j R_{j+1} (none across a start), summed along each entry's contiguous run: the same sums, in the
+    # same order, as over the (n, 3, 3) view, in a third of the time.
+    running = np.cumsum(entries * weights, axis=1).T.reshape(n, 3, 3)
     with _LOCK:
         _LAST[:] = [_Integration(traj.w, traj.t, traj.segment, key, turns, running)]
     return turns, running
