@@ -96,6 +96,7 @@ def test_gravity_with_the_wrong_sign_shows_as_a_mirror():
     assert any("specific force" in w for w in result.warnings)
 
 
+@pytest.mark.slow
 def test_level_yaw_turns_leave_the_mount_yaw_undetermined():
     sim, calibrated = _vehicle("yaw", euler_matrix(10.0, -20.0, 30.0), 6000, seed=7)
     with pytest.raises(CalibrationError, match=r"body z \(down; the mount's yaw\) is not determined"):
@@ -109,6 +110,7 @@ def test_level_yaw_turns_leave_the_mount_yaw_undetermined():
     assert np.degrees(np.arccos(np.clip(down_fitted @ down_true, -1, 1))) < 0.5
 
 
+@pytest.mark.slow
 def test_level_flight_within_half_a_degree():
     mounting = euler_matrix(-15.0, 25.0, 35.0)
     sim, calibrated = _vehicle("flight", mounting, 20000, seed=8)
@@ -321,6 +323,7 @@ def test_cli_reads_a_magnitude_only_calibration_and_refuses_an_aligned_one(roll_
     assert status == 2 and "vehicle-frame calibration, already aligned" in err
 
 
+@pytest.mark.slow
 def test_cli_time_in_milliseconds(roll_180_csv, tmp_path, capsys):
     table = np.loadtxt(roll_180_csv, delimiter=",", skiprows=1)
     table[:, 0] *= 1000.0
@@ -372,6 +375,7 @@ def test_cli_starts_from_the_gyro_aided_calibration_where_it_has_a_gyroscope(tmp
     assert angle_between_deg(found, mounting) < 0.5
 
 
+@pytest.mark.slow
 def test_an_alignment_is_no_better_supported_than_its_calibration(tmp_path, capsys):
     import magfit
 
@@ -400,6 +404,7 @@ def test_an_alignment_is_no_better_supported_than_its_calibration(tmp_path, caps
     assert re.search(r"verdict\s+weak", out) and "was refused by its samples (forced) (too few)" in out
 
 
+@pytest.mark.slow
 def test_a_wrong_inclination_is_refused_not_absorbed_by_a_tilted_mount():
     # A boat rolling on one heading, given 30° for a dip of 64°: the mount came out 34° off at a stated ±0.3°.
     from scipy.spatial.transform import Rotation

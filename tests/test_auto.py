@@ -87,6 +87,7 @@ def test_restricted_attitude_with_strong_soft_iron_names_what_it_holds_for() -> 
 
 
 @pytest.mark.parametrize(("sensor", "disturbance"), [("mpu9250", "none")])
+@pytest.mark.slow
 def test_restricted_attitude_names_the_weak_direction_and_stays_near_the_best(sensor: str, disturbance: str) -> None:
     scenario = magfit.scenario(sensor, disturbance)
     rng = np.random.default_rng(4)
@@ -199,6 +200,7 @@ def test_an_aircraft_gets_the_model_the_samples_determine_with_a_heading_bound_t
     assert again.support.forced is False
 
 
+@pytest.mark.slow
 def test_forced_auto_returns_what_the_unforced_choice_ranks_best_with_the_refusal_first() -> None:
     sim = magfit.scenario("mpu9250", "none").simulate(2000, seed=1, orientations="yaw")
     with pytest.raises(magfit.CalibrationError) as refused:

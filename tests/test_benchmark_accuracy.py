@@ -300,6 +300,7 @@ def test_smoke_run_of_the_harness_on_magfit_methods(tmp_path: Path) -> None:
     assert data["outcomes"]["tumble σ=0.5% N=1000"]["ellipsoid"][0]["verdict"] == "supported"
 
 
+@pytest.mark.slow
 def test_the_command_line_writes_both_files(tmp_path: Path) -> None:
     assert accuracy.main(["--smoke", "--no-peers", "--methods", "ellipsoid,sphere", "--output", str(tmp_path)]) == 0
     assert "benchmarks/accuracy.py --smoke --no-peers" in (tmp_path / "accuracy.md").read_text()

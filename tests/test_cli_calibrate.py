@@ -117,6 +117,7 @@ def test_statistics_methods_stream_the_file_in_bounded_chunks(
     assert "(streamed)" in result.stdout
 
 
+@pytest.mark.slow
 def test_samples_methods_read_the_whole_file(
     steel: tuple[Path, magfit.Simulation], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -254,6 +255,7 @@ def test_streamed_fits_are_diagnosed_on_a_bounded_subsample(
     assert capped.coverage == reference.coverage
 
 
+@pytest.mark.slow
 def test_no_method_imports_scipy_optimize(steel: tuple[Path, magfit.Simulation]) -> None:
     # Importing scipy.optimize costs 0.4-0.6 s of CPU: a fifth of a 10-million-row calibrate
     # (benchmarks/speed.py), a third of auto on a million rows. magfit._optimize has the solvers instead.
@@ -294,6 +296,7 @@ def test_system_id_goes_into_the_px4_file_and_nowhere_else(tmp_path: Path) -> No
     assert not (tmp_path / "cal.json").exists()
 
 
+@pytest.mark.slow
 def test_a_self_judged_method_prints_its_weaknesses_as_warnings() -> None:
     # gyro judges itself (calibration.support, no report of its own): its diagnostics carry that verdict, and the
     # summary's "weak: n weakness(es), in the warnings above" must have those warnings above it.

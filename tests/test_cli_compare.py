@@ -171,6 +171,7 @@ def test_unknown_method_lists_the_valid_ones(steel_file: tuple[Path, np.ndarray]
 
 
 @pytest.mark.parametrize("case", GOLDEN.CASES, ids=lambda case: case.name)
+@pytest.mark.slow
 def test_compare_on_real_recordings_matches_the_golden_output(case, real_data_dir: Path) -> None:  # type: ignore[no-untyped-def]
     output, status = GOLDEN.run_case(case, real_data_dir)
     expected = case.golden_file.read_text(encoding="utf-8")

@@ -39,6 +39,7 @@ def _distance_rows(output: str) -> dict[tuple[str, str], list[float]]:
     return rows
 
 
+@pytest.mark.slow
 def test_demo_prints_the_papers_distance_tables(demo_output: str) -> None:
     for label in (*DISTURBANCE_LABELS.values(), *METHOD_LABELS.values(), *SENSOR_LABELS.values()):
         assert label in demo_output
@@ -87,6 +88,7 @@ def test_demo_checks_the_papers_findings(demo_output: str) -> None:
     assert "[DIFFERS]" not in section
 
 
+@pytest.mark.slow
 def test_demo_is_repeatable_and_seeded() -> None:
     runner = CliRunner()
     first = runner.invoke(cli, ["demo", "-n", "500", "--seed", "3"])

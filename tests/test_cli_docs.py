@@ -11,6 +11,8 @@ import shlex
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -34,6 +36,7 @@ def test_the_documentation_has_examples_of_every_command() -> None:
     assert any(example.status == 1 for example in EXAMPLES) and any(example.status == 2 for example in EXAMPLES)
 
 
+@pytest.mark.slow
 def test_the_documented_session_runs_as_documented(tmp_path: Path) -> None:
     for example in EXAMPLES:
         status, produced = GOLDEN.run_cli_doc_example(example, tmp_path)

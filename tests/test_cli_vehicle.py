@@ -162,6 +162,7 @@ def test_align_from_the_attitude_and_reference_columns(tmp_path: Path) -> None:
     assert "COMPASS_ORIENT 8 " in result.stdout or "ROTATION_ROLL_180" in result.stdout
 
 
+@pytest.mark.slow
 def test_a_flight_log_s_refusal_or_weak_fit_names_the_log_s_methods(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -191,6 +192,7 @@ def test_a_flight_log_s_refusal_or_weak_fit_names_the_log_s_methods(
     assert f"(magfit calibrate {path} --method sphere --field-strength wmm" in run.stderr
 
 
+@pytest.mark.slow
 def test_gyro_from_a_samples_file_matches_python_and_the_truth(tmp_path: Path) -> None:
     sim = simulate_vehicle(
         6000, "car", rate_hz=20.0, field_strength=50.0, noise=0.05, hard_iron=[8.0, -5.0, 3.0],
@@ -332,6 +334,7 @@ def test_stream_columns_for_a_method_that_does_not_read_them_are_refused(tmp_pat
     assert run.exit_code == 2 and "--gyro" in run.stderr
 
 
+@pytest.mark.slow
 def test_a_real_imu_npz_through_gyro_with_its_rates_in_degrees(real_data_dir: Path) -> None:
     """ensta_tlefloch_imu/raw_data.npz (time, accel, gyro in °/s, mag keys; ../shared/data/real): the gyro
     method reads its keys by name; rates in °/s are refused as rad/s with the option that says so, and with it

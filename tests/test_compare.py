@@ -151,6 +151,7 @@ def experiment() -> magfit.experiment.Experiment:
     return run_experiment(3000, seed=5)
 
 
+@pytest.mark.slow
 def test_experiment_fits_match_each_scenario_truth(experiment: magfit.experiment.Experiment) -> None:
     assert len(experiment.cases) == len(magfit.SENSORS) * len(magfit.DISTURBANCES)
     for case in experiment.cases:
@@ -211,6 +212,7 @@ def test_paper_table_is_complete() -> None:
     assert PAPER_DISTANCES["none", "ellipsoid", "mpu9250"] == (0.0028, 0.0236)
 
 
+@pytest.mark.slow
 def test_methods_that_need_more_than_the_samples_run_where_it_is_given_and_say_why_not_otherwise() -> None:
     from scipy.spatial.transform import Rotation
 

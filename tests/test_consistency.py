@@ -348,6 +348,7 @@ def test_three_compasses_all_apart_name_none_but_say_so() -> None:
     assert comparison.misoriented is None and "compass_misoriented" in comparison.codes
 
 
+@pytest.mark.slow
 def test_a_compass_not_used_for_yaw_is_not_checked_by_ardupilots_prearm(tmp_path: Path) -> None:
     log = tmp_path / "unused.bin"
     write_two_compass_log(log, euler_matrix(0.0, 0.0, 90.0), parameters={"COMPASS_USE2": 0.0})

@@ -56,6 +56,7 @@ def test_statistics_round_trip_through_numbers() -> None:
         magfit.Statistics.from_dict({"n": 3})
 
 
+@pytest.mark.slow
 def test_partial_flights_merge_into_a_determined_calibration(vehicles: Path) -> None:
     result = fleet([vehicles / "partial"], workers=1, unit="uT")
     assert len(result.flights()) == 5
@@ -68,6 +69,7 @@ def test_partial_flights_merge_into_a_determined_calibration(vehicles: Path) -> 
     assert not result.events
 
 
+@pytest.mark.slow
 def test_a_magnetisation_is_named_with_its_date_and_size(vehicles: Path) -> None:
     result = fleet([vehicles / "magnetised", vehicles / "steady"], workers=1, unit="uT")
     (event,) = result.events  # the steady vehicle has none
@@ -179,6 +181,7 @@ def test_the_command(tmp_path: Path, vehicles: Path, capsys: pytest.CaptureFixtu
     assert flight.read_text(encoding="utf-8").startswith("mx,my,mz")
 
 
+@pytest.mark.slow
 def test_vehicles_are_folders_below_the_common_root(tmp_path: Path) -> None:
     """droneA/logs and droneB/logs are two vehicles (a folder's own name would merge them)."""
     for vehicle, move in (("droneA", 0.0), ("droneB", 30.0)):
@@ -192,6 +195,7 @@ def test_vehicles_are_folders_below_the_common_root(tmp_path: Path) -> None:
     assert not result.events and len(result.combined()) == 2
 
 
+@pytest.mark.slow
 def test_a_changed_recording_is_fitted_again_on_resume(tmp_path: Path, vehicles: Path) -> None:
     shutil.copytree(vehicles / "steady", tmp_path / "v")
     table = tmp_path / "fleet.csv"
@@ -208,6 +212,7 @@ def test_a_changed_recording_is_fitted_again_on_resume(tmp_path: Path, vehicles:
     assert fleet([tmp_path / "v"], table, workers=1, method="ellipsoid").skipped == 0
 
 
+@pytest.mark.slow
 def test_a_log_names_its_vehicle_wherever_its_file_lies(tmp_path: Path) -> None:
     """The board and unique id ArduPilot logs at boot group a vehicle's logs kept in different folders."""
     log = DATA / "ardupilot_real" / "copter33_log171_trimmed.bin"
@@ -278,6 +283,7 @@ def _pid_of(index: int) -> tuple[int, int]:
     return index, os.getpid()
 
 
+@pytest.mark.slow
 def test_the_local_engine_runs_every_task_once_here_and_in_a_worker() -> None:
     """workers=2: two worker processes (forked from the preloading server) take the tasks from one queue, this
     process hands them out; every task's result comes back once, and the pool serves a second batch (the

@@ -185,6 +185,7 @@ def test_fit_gives_a_checked_calibration_or_a_magfit_error(method: str, samples:
     scale_exponent=st.integers(-40, 40),
     shift=st.floats(-1e5, 1e5),
 )
+@pytest.mark.slow
 def test_a_fit_of_a_scaled_recording_is_within_its_stated_uncertainty_or_refused(
     method: str, steel: bool, cut: int, scale_exponent: int, shift: float
 ) -> None:
@@ -526,6 +527,7 @@ REAL_FILES = (
 @pytest.mark.parametrize("name", REAL_FILES)
 @budget(10)
 @given(data=st.data())
+@pytest.mark.slow
 def test_cli_on_damaged_real_recordings(real_data_dir: Path, name: str, data: st.DataObject) -> None:
     from magfit.cli import cli
 

@@ -97,6 +97,7 @@ def test_turning_about_one_axis_only_is_refused_naming_it() -> None:
     assert "offset and the scale along it" in str(error.value) and "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 def test_a_short_flight_is_refused_not_guessed() -> None:
     # One minute of level flight at ±3° of bank: the field turns too little in the sensor's frame.
     sim = simulate_vehicle(3000, "flight", soft_iron=SOFT_IRON, hard_iron=HARD_IRON, max_tilt_deg=3.0,
@@ -127,6 +128,7 @@ def test_bad_gyro_and_time_inputs_are_one_line_option_errors() -> None:
         magfit.fit(sim.samples[:200], method="gyro", gyro=sim.gyro[:200], time_s=sim.time_s[:200])
 
 
+@pytest.mark.slow
 def test_a_magnetometer_late_behind_the_gyro_is_found_and_undone() -> None:
     sim = _simulate(1500, "tumble", np.eye(3))
     late = np.column_stack([np.interp(sim.time_s - 0.04, sim.time_s, sim.samples[:, i]) for i in range(3)])
@@ -144,6 +146,7 @@ def test_an_imposed_mapping_the_samples_contradict_is_refused() -> None:
     assert _fit(sim, mapping="+x-y-z").gyro.mapping == "+x-y-z"
 
 
+@pytest.mark.slow
 def test_real_betaflight_quadcopter_and_ensta_imu(real_data_dir: Path) -> None:
     # pichim/dev_mag_calib's bf_mag_calibration.m resamples the blackbox to fs_mag = 200 Hz and writes the gyro in
     # rad/s before these text files: mx, my, mz, gx, gy, gz.
@@ -375,6 +378,7 @@ def _late(rates: np.ndarray, time_s: np.ndarray, lag_s: float) -> np.ndarray:
         ("2 s late", "lag_at_edge", CalibrationError),
     ],
 )
+@pytest.mark.slow
 def test_each_wrong_gyro_input_is_diagnosed_with_its_own_code_and_remedy(name: str, code: str, error: type) -> None:
     sim = _simulate(3000, "car", ROLL_180, seed=1)
     gyro, time_s = sim.gyro, sim.time_s
@@ -407,6 +411,7 @@ def test_a_gyro_that_reads_zero_or_one_constant_rate_is_a_calibration_error_with
         assert caught.value.codes == ("gyro",) and "\n" not in str(caught.value)
 
 
+@pytest.mark.slow
 def test_halves_that_disagree_beyond_their_one_sigma_are_named_and_a_consistent_drive_is_not() -> None:
     # simulate_vehicle car, tumble and boat, 2 seeds each: the halves differ by 0.4-2.1 combined one-sigmas.
     # The field stepping by 5 % half-way (a magnet, a motor): 21 of them, named.

@@ -83,6 +83,7 @@ def _reset(port: int, data: bytes) -> None:
     connection.close()
 
 
+@pytest.mark.slow
 def test_clients_that_reset_their_connection_print_nothing(page: WebView, capfd: pytest.CaptureFixture[str]) -> None:
     for _ in range(30):
         _reset(page.port, b"GET /state")  # reset while the server reads the request line

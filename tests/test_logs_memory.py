@@ -236,6 +236,7 @@ def _repeated_tlog(path: Path, copies: int) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_a_tlog_read_in_small_blocks_is_read_as_in_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # A tlog built by concatenating a real one 4 times, then damaged (bytes overwritten, a piece cut out, the end
     # cut short): read in blocks of 997 bytes (frames cut by every block's end) it is read as in one block,

@@ -27,6 +27,7 @@ def _heading(calibration: Calibration, flight, regressor) -> float:
 
 
 @pytest.mark.parametrize("driver", ["current", "throttle"])
+@pytest.mark.slow
 def test_joint_fit_recovers_the_term_and_the_heading(driver: str) -> None:
     flight = simulate_motor_flight(200, driver=driver, per_unit=4.0 if driver == "current" else 150.0, seed=3)
     signal = flight.current if driver == "current" else flight.throttle
@@ -76,6 +77,7 @@ def test_constant_current_is_refused() -> None:
     assert [reason.code for reason in result.reasons] == ["motor_undetermined"]
 
 
+@pytest.mark.slow
 def test_motor_none_reports_but_keeps_nothing() -> None:
     flight = simulate_motor_flight(120, driver="current", seed=7)
     result = fit_motor(flight.samples, _base(flight.samples), flight.current, motor="none")

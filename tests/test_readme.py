@@ -89,6 +89,7 @@ def test_calibrate_file_returns_a_file_calibration_that_iterates_over_compass_ca
 
 
 @pytest.mark.parametrize("method", ["sphere", "auto"])
+@pytest.mark.slow
 def test_allow_undetermined_returns_it_all_the_same_refusal_first(method: str) -> None:
     import magfit
 
@@ -102,6 +103,7 @@ def test_allow_undetermined_returns_it_all_the_same_refusal_first(method: str) -
 
 
 @pytest.mark.parametrize("method", ["sphere", "auto"])
+@pytest.mark.slow
 def test_force_on_the_command_line_exits_0_and_writes_it_marked(tmp_path: Path, method: str) -> None:
     from click.testing import CliRunner
 

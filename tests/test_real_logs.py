@@ -157,6 +157,7 @@ def test_a_real_copter33_flight_undoes_every_compass_to_what_the_firmware_logged
         np.testing.assert_allclose(again, logged, atol=1e-3)
 
 
+@pytest.mark.slow
 def test_the_real_flight_calibrates_end_to_end(original: dict[str, np.ndarray]) -> None:
     result = CliRunner().invoke(cli, ["calibrate", str(COPTER33)])
     # From the field's magnitude alone, a flight's few directions leave a distortion that a richer model sees on
@@ -177,6 +178,7 @@ def test_the_refused_compass_of_the_real_flight_says_why_with_a_code(original: d
     assert refused.value.codes and "unclassified" not in refused.value.codes
 
 
+@pytest.mark.slow
 def test_as_copter32_logged_it_the_missing_soft_iron_parameters_are_the_identity(
     tmp_path: Path, original: dict[str, np.ndarray]
 ) -> None:
@@ -208,6 +210,7 @@ def test_as_copter32_logged_it_the_missing_soft_iron_parameters_are_the_identity
 SHIFT = np.array([37.0, -52.0, 24.0])
 
 
+@pytest.mark.slow
 def test_offsets_changed_half_way_are_undone_record_by_record(tmp_path: Path, original: dict[str, np.ndarray]) -> None:
     # From the middle on, compass 1 is corrected with offsets SHIFT mG larger: its records log the field
     # M · (raw + ofs + SHIFT) and OfsX/Y/Z + SHIFT, and PARM messages (without a time, as 3.3 writes them) say
@@ -247,6 +250,7 @@ def test_offsets_changed_half_way_are_undone_record_by_record(tmp_path: Path, or
     assert np.linalg.norm(SHIFT) > 30
 
 
+@pytest.mark.slow
 def test_damaged_records_in_the_real_flight_are_skipped_and_counted(
     tmp_path: Path, original: dict[str, np.ndarray]
 ) -> None:

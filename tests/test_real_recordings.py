@@ -119,6 +119,7 @@ def test_failure_cases_get_a_diagnosis_not_numbers(real_data_dir: Path, name: st
 
 @pytest.mark.parametrize("name", FAILURES)
 @pytest.mark.parametrize("method", sorted(name for name, spec in magfit.METHODS.items() if not spec.needs))
+@pytest.mark.slow
 def test_failure_cases_get_a_diagnosis_from_every_method(real_data_dir: Path, name: str, method: str) -> None:
     with pytest.raises(CalibrationError) as caught:
         magfit.fit(load(real_data_dir, name), method=method)

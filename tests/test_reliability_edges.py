@@ -90,6 +90,7 @@ SIX_COMMANDS = {
 
 @needs_fifo
 @pytest.mark.parametrize("command", list(SIX_COMMANDS))
+@pytest.mark.slow
 def test_a_fifo_with_a_writer_is_read_once_by_every_command(
     command: str, tmp_path: Path, calibrated: tuple[Path, Path, magfit.Calibration]
 ) -> None:
@@ -227,6 +228,7 @@ def test_from_json_still_reads_every_calibration_magfit_writes() -> None:
 MAIN = "import sys; from magfit.cli import main; sys.exit(main())"
 
 
+@pytest.mark.slow
 def test_apply_to_stdout_whose_reader_stops_ends_quietly(tmp_path: Path) -> None:
     import subprocess
     import sys
@@ -408,6 +410,7 @@ def _peak_bytes(call: Callable[[], Any]) -> tuple[Any, int]:
         tracemalloc.stop()
 
 
+@pytest.mark.slow
 def test_a_gzip_bomb_is_refused_within_bounded_memory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # The campaign's bomb was 350 KB expanding to 40 million rows (85 s, 2.1 GB); this one is 2 million rows
     # (12 MB from 17 KB), against a floor lowered from 64 MB to 1 MB.
@@ -458,6 +461,7 @@ def test_an_npz_bomb_is_refused_before_a_member_is_inflated(
 
 
 @pytest.mark.parametrize("layout", ["matrix", "vectors"])
+@pytest.mark.slow
 def test_apply_to_an_npz_streams_it(layout: str, tmp_path: Path) -> None:
     # apply loaded every array of an .npz whole (and copied them): 529 MB traced for 96 MB of arrays.
     samples = np.tile(_samples(500), (6000, 1))  # 3 million rows

@@ -127,6 +127,7 @@ def test_report_is_self_contained_and_forbids_network_access(steel_page) -> None
     assert len(html.encode()) < 6.5e6
 
 
+@pytest.mark.slow
 def test_comparison_table_holds_the_papers_metric_and_the_error_to_the_truth(steel_section, steel_page) -> None:
     simulation, section = steel_section
     _, page = steel_page

@@ -448,6 +448,7 @@ def test_a_slow_compass_says_how_to_log_more(tmp_path: Path) -> None:
     assert any("LOG_BITMASK" in note for note in magnetometer.notes)
 
 
+@pytest.mark.slow
 def test_damaged_and_truncated_logs_fail_in_one_line(tmp_path: Path) -> None:
     path = tmp_path / "good.bin"
     write_new_style(path, n=300)

@@ -343,6 +343,7 @@ def test_px4_sample_log_tells_that_sensor_mag_is_logged_at_1_hz(tmp_path: Path) 
     assert "needs at least" in result.stderr and "SDLOG_PROFILE" in result.stderr.splitlines()[-1]
 
 
+@pytest.mark.slow
 def test_damaged_and_truncated_logs_fail_in_one_line(tmp_path: Path) -> None:
     path = tmp_path / "good.ulg"
     write_log(path, n=300, second=False)

@@ -34,6 +34,7 @@ def _oracle(samples: np.ndarray) -> tuple[np.ndarray, tuple[tuple[str, float, in
 
 
 @pytest.mark.parametrize("seed", range(60))
+@pytest.mark.slow
 def test_find_clipped_matches_the_whole_column_test(seed: int) -> None:
     rng = np.random.default_rng(seed)
     n = int(rng.choice([5, 40, 300, 5_000, 70_000, 150_000]))

@@ -59,6 +59,7 @@ def test_correlation_rows_are_bounded_windows_of_the_recording() -> None:
 
 
 @pytest.mark.parametrize("correlation", [30.0, 300.0])
+@pytest.mark.slow
 def test_windows_read_the_correlation_the_whole_recording_shows(correlation: float) -> None:
     z = _turning_sphere(1_000_000, correlation, seed=1)
     whole, independent = _excess_trace(z, windowed=False)
@@ -69,6 +70,7 @@ def test_windows_read_the_correlation_the_whole_recording_shows(correlation: flo
     assert 0.5 < windowed / whole < 2.0, (windowed, whole)
 
 
+@pytest.mark.slow
 def test_windows_add_little_on_independent_noise() -> None:
     z = _turning_sphere(1_000_000, 1.0, seed=2)
     windowed, independent = _excess_trace(z, windowed=True)

@@ -28,6 +28,7 @@ def _warm_up(drift, *, rise=25.0, seed=1):
     return raw, temperature
 
 
+@pytest.mark.slow
 def test_a_known_drift_is_recovered_within_its_stated_sigma() -> None:
     truth = np.array([0.8, -0.5, 1.2])  # mG per °C
     raw, temperature = _warm_up(truth)
@@ -66,6 +67,7 @@ def test_the_ulog_temperature_is_read(tmp_path: Path) -> None:
     assert read_mag_temperature(log, "sensor_mag/1") is None
 
 
+@pytest.mark.slow
 def test_log_drifts_reads_a_ulog_warm_up(tmp_path: Path) -> None:
     from magfit.temperature import log_drifts
 

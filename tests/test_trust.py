@@ -64,6 +64,7 @@ NAMED = {
 
 @pytest.mark.parametrize("case", sorted(CASES))
 @pytest.mark.parametrize("method", METHODS)
+@pytest.mark.slow
 def test_unsupported_data_are_refused_or_named(method: str, case: str) -> None:
     samples = CASES[case](np.random.default_rng(7))
     try:
@@ -112,6 +113,7 @@ def test_the_verdict_without_diagnostics_still_refuses() -> None:
             magfit.fit(samples, method, diagnostics=False)
 
 
+@pytest.mark.slow
 def test_a_supported_tumble_says_so() -> None:
     sim = magfit.scenario("mpu9250", "smartphone").simulate(3000, seed=3)
     for method in ("ellipsoid", "als", "ml", "auto", "robust"):
@@ -238,6 +240,7 @@ def _imports(path: Path, module: str) -> set[str]:
     return found
 
 
+@pytest.mark.slow
 def test_the_package_imports_in_one_direction() -> None:
     modules: dict[str, Path] = {}
     for path in SRC.rglob("*.py"):

@@ -48,6 +48,7 @@ def test_the_campaign_reproducers_are_refused_or_covered(kind: str, seed: int) -
 
 
 @pytest.mark.parametrize(("kind", "seed"), [("drifting flight", 5), ("level turns", 0), ("shallow tilt", 1)])
+@pytest.mark.slow
 def test_the_new_campaign_kinds_are_refused_or_covered_by_auto_and_sphere(kind: str, seed: int) -> None:
     # Before: on a flight whose field drifts 1.8 % the sphere (and auto's sphere) came back weak 1.9° off stating
     # ±0.39°: the F test against the full model had some hundred effective samples and did not reject it.
@@ -55,6 +56,7 @@ def test_the_new_campaign_kinds_are_refused_or_covered_by_auto_and_sphere(kind: 
 
 
 @pytest.mark.parametrize("seed", [1])
+@pytest.mark.slow
 def test_a_full_fit_that_follows_a_drifting_field_is_refused_or_covered(seed: int) -> None:
     # Before: als, ml and robust on a flight whose field drifted came back weak (restricted_attitude) 9.3-9.9° off
     # stating ±2.7-2.9°: the combination the samples do not determine followed the drift.

@@ -408,6 +408,7 @@ def test_a_gyro_in_degrees_per_second_is_a_one_line_option_error() -> None:
     assert "degrees per second" not in again.vector.gravity["note"]
 
 
+@pytest.mark.slow
 def test_a_lag_beyond_max_lag_s_is_found_by_widening_the_search_and_one_beyond_every_search_refused() -> None:
     # The attitude 2 s late, max_lag_s 1 s: the search widens until the lag lies inside it (at the edge it
     # was a 57° error stated as ±4.7°). 20 s late (beyond 8 times max_lag_s) is refused, never returned.
