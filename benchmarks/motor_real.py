@@ -299,32 +299,18 @@ def wmm_correct(params: dict[str, float], raw: np.ndarray, current: np.ndarray) 
 def truncated(path: Path, cut_s: float, into: Path) -> Path:
     """The log up to its first MAG record stamped after ``cut_s`` (every message before it, bytes unchanged)."""
     data = path.read_bytes()
-    formats: dict[int, tuple[int, str, str]] = {}
-    i = 0
-    while i + 3 <= len(data):
-        if data[i : i + 2] != FMT_HEADER[:2]:
-            i += 1
-            continue
-        kind = data[i + 2]
-        if kind == FMT_HEADER[2]:
-            type_id, length = data[i + 3], data[i + 4]
-            name = data[i + 5 : i + 9].rstrip(b"\x00").decode()
-            letters = data[i + 9 : i + 25].rstrip(b"\x00").decode()
-            formats[type_id] = (length, name, letters)
-            i += FMT_SIZE
-            continue
-        if kind not in formats:
-            i += 1
-            continue
-        length, name, letters = formats[kind]
-        if name == "MAG" and letters[:1] in "IQ":
-            stamp = int.from_bytes(data[i + 3 : i + 3 + (4 if letters[0] == "I" else 8)], "little")
-            if stamp * (1e-3 if letters[0] == "I" else 1e-6) > cut_s:
-                out = into / f"{path.stem}_to{cut_s:.0f}s.bin"
-                out.write_bytes(data[:i])
-                return out
-        i += length
-    raise SystemExit(f"{path}: no MAG record after {cut_s} s")
+    start = _first_mag_after(_messages(data), cut_s, path)
+    out = into / f"{path.stem}_to{cut_s:.0f}s.bin"
+    out.write_bytes(data[:start])
+    return out
+
+
+def _first_mag_after(messages: list[tuple[int, int, str, float | None]], cut_s: float, path: Path) -> int:
+    """Where the first MAG record stamped after ``cut_s`` starts."""
+    start = next((i for i, _, name, t in messages if name == "MAG" and t is not None and t > cut_s), None)
+    if start is None:
+        raise SystemExit(f"{path}: no MAG record after {cut_s} s")
+    return start
 
 
 #: Messages kept from before the cut when a log's head is dropped: what every reader needs to parse the rest.
@@ -367,9 +353,7 @@ def tail_from(path: Path, cut_s: float, into: Path) -> Path:
     logged before it (bytes unchanged): the reverse of :func:`truncated`."""
     data = path.read_bytes()
     messages = _messages(data)
-    start = next((i for i, _, name, t in messages if name == "MAG" and t is not None and t > cut_s), None)
-    if start is None:
-        raise SystemExit(f"{path}: no MAG record after {cut_s} s")
+    start = _first_mag_after(messages, cut_s, path)
     head = b"".join(data[i : i + n] for i, n, name, _ in messages if i < start and name in KEPT_BEFORE)
     out = into / f"{path.stem}_from{cut_s:.0f}s.bin"
     out.write_bytes(head + data[start:])
