@@ -33,26 +33,31 @@ def _oracle(samples: np.ndarray) -> tuple[np.ndarray, tuple[tuple[str, float, in
     return clipped, tuple(ends)
 
 
-@pytest.mark.parametrize("seed", range(60))
-@pytest.mark.slow
-def test_find_clipped_matches_the_whole_column_test(seed: int) -> None:
+def sensor_samples(seed: int, sizes: tuple[int, ...]) -> np.ndarray:
+    """A sensor's samples of a size drawn from ``sizes``, by ``seed % 5``: integer counts in floats, an int16
+    sensor, clipped at a range of its own, clipped at a 16-bit full-scale code, or coarse float32 steps."""
     rng = np.random.default_rng(seed)
-    n = int(rng.choice([5, 40, 300, 5_000, 70_000, 150_000]))
+    n = int(rng.choice(sizes))
     directions = rng.normal(size=(n, 3))
     directions /= np.linalg.norm(directions, axis=1)[:, None]
     samples = directions * rng.uniform(50, 500) + rng.normal(0, 40, 3)
     kind = seed % 5
-    if kind == 0:  # integer counts in floats
-        samples = np.round(samples)
-    elif kind == 1:  # an int16 sensor
-        samples = np.round(samples).astype(np.int16)
-    elif kind == 2:  # clipped at a range of its own
+    if kind == 0:
+        return np.round(samples)
+    if kind == 1:
+        return np.round(samples).astype(np.int16)
+    if kind == 2:
         limit = np.round(rng.uniform(0.3, 1.0) * np.abs(samples).max(axis=0))
-        samples = np.clip(np.round(samples), -limit, limit)
-    elif kind == 3:  # clipped at a 16-bit full-scale code
-        samples = np.clip(np.round(samples * 60), -32768, 32767).astype(np.int32)
-    else:  # coarse float32 steps
-        samples = np.round(samples / rng.uniform(5, 200)).astype(np.float32)
+        return np.clip(np.round(samples), -limit, limit)
+    if kind == 3:
+        return np.clip(np.round(samples * 60), -32768, 32767).astype(np.int32)
+    return np.round(samples / rng.uniform(5, 200)).astype(np.float32)
+
+
+@pytest.mark.parametrize("seed", range(60))
+@pytest.mark.slow
+def test_find_clipped_matches_the_whole_column_test(seed: int) -> None:
+    samples = sensor_samples(seed, (5, 40, 300, 5_000, 70_000, 150_000))
     if seed % 7 == 0:
         samples[:, seed % 3] = 7  # a dead axis
     found = find_clipped(samples)

@@ -10,6 +10,7 @@ from magfit.diagnostics import diagnose as diagnose_samples
 from magfit.methods.core import refitter
 from magfit.saturation import Clipping, find_clipped, statistics_and_clipping
 from magfit.statistics import Statistics, design_matrix
+from test_speed_clipping import sensor_samples
 
 
 @pytest.mark.parametrize("chunk", [1, 7, 1000, 8192, 1 << 16])
@@ -68,23 +69,7 @@ def test_clipped_rows_are_still_left_out_of_the_diagnostics() -> None:
 @pytest.mark.parametrize("seed", range(30))
 def test_one_pass_gives_the_statistics_and_the_clipping_of_the_two_passes(seed: int) -> None:
     """statistics_and_clipping against Statistics.from_samples and find_clipped, on clipped and clean sensors."""
-    rng = np.random.default_rng(seed)
-    n = int(rng.choice([5, 300, 5_000, 20_000, 70_000]))
-    directions = rng.normal(size=(n, 3))
-    directions /= np.linalg.norm(directions, axis=1)[:, None]
-    samples = directions * rng.uniform(50, 500) + rng.normal(0, 40, 3)
-    kind = seed % 5
-    if kind == 0:
-        samples = np.round(samples)
-    elif kind == 1:
-        samples = np.round(samples).astype(np.int16)
-    elif kind == 2:  # clipped at a range of its own
-        limit = np.round(rng.uniform(0.3, 1.0) * np.abs(samples).max(axis=0))
-        samples = np.clip(np.round(samples), -limit, limit)
-    elif kind == 3:  # clipped at a 16-bit full-scale code
-        samples = np.clip(np.round(samples * 60), -32768, 32767).astype(np.int32)
-    else:
-        samples = np.round(samples / rng.uniform(5, 200)).astype(np.float32)
+    samples = sensor_samples(seed, (5, 300, 5_000, 20_000, 70_000))
     statistics, clipping = statistics_and_clipping(samples)
     separate = find_clipped(samples)
     assert clipping.ends == separate.ends and clipping.n_clipped == separate.n_clipped
