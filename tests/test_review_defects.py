@@ -42,17 +42,38 @@ def _vehicle_csv(path: Path, motion: str, seed: int, *, with_accel: bool = True)
     v = rng.normal(0, 0.3, 3) * 50
     mount = Rotation.from_euler("xyz", rng.normal(0, 3, 3), degrees=True).as_matrix()
     sim = simulate_vehicle(
-        3000, motion, soft_iron=w, hard_iron=v, mounting=mount, field_strength=50.0, inclination_deg=60,
-        declination_deg=5, noise=0.3, attitude_noise_deg=0.5, gyro_noise=0.002, gyro_bias=[0.01, -0.005, 0.003],
-        accel_noise=0.05, lag_s=0.02, seed=seed,
+        3000,
+        motion,
+        soft_iron=w,
+        hard_iron=v,
+        mounting=mount,
+        field_strength=50.0,
+        inclination_deg=60,
+        declination_deg=5,
+        noise=0.3,
+        attitude_noise_deg=0.5,
+        gyro_noise=0.002,
+        gyro_bias=[0.01, -0.005, 0.003],
+        accel_noise=0.05,
+        lag_s=0.02,
+        seed=seed,
     )
     ypr = Rotation.from_matrix(sim.attitude_measured).as_euler("ZYX", degrees=True)
     ref = np.tile(sim.field_world, (len(sim.samples), 1))
     columns = {
-        "time": sim.time_s, "mx": sim.samples[:, 0], "my": sim.samples[:, 1], "mz": sim.samples[:, 2],
-        "roll": ypr[:, 2], "pitch": ypr[:, 1], "yaw": ypr[:, 0],
-        "ref_n": ref[:, 0], "ref_e": ref[:, 1], "ref_d": ref[:, 2],
-        "gx": sim.gyro[:, 0], "gy": sim.gyro[:, 1], "gz": sim.gyro[:, 2],
+        "time": sim.time_s,
+        "mx": sim.samples[:, 0],
+        "my": sim.samples[:, 1],
+        "mz": sim.samples[:, 2],
+        "roll": ypr[:, 2],
+        "pitch": ypr[:, 1],
+        "yaw": ypr[:, 0],
+        "ref_n": ref[:, 0],
+        "ref_e": ref[:, 1],
+        "ref_d": ref[:, 2],
+        "gx": sim.gyro[:, 0],
+        "gy": sim.gyro[:, 1],
+        "gz": sim.gyro[:, 2],
     }
     if with_accel:
         columns |= {"ax": sim.accel[:, 0], "ay": sim.accel[:, 1], "az": sim.accel[:, 2]}
@@ -168,16 +189,27 @@ def _imu_text(path: Path, order: str) -> None:
     """A headerless IMU recording of a hand tumble: accelerometer (m/s²), gyro (rad/s) and magnetometer (µT,
     field 50, offset (12, -7, 20)), the columns in ``order`` ('am': accel then mag; 'agm': accel, gyro, mag)."""
     sim = simulate_vehicle(
-        3000, "tumble", field_strength=50.0, inclination_deg=60, noise=0.3, hard_iron=[12, -7, 20],
-        soft_iron=np.diag([1.05, 0.97, 1.0]), accel_noise=0.03, gyro_noise=0.05, seed=3,
+        3000,
+        "tumble",
+        field_strength=50.0,
+        inclination_deg=60,
+        noise=0.3,
+        hard_iron=[12, -7, 20],
+        soft_iron=np.diag([1.05, 0.97, 1.0]),
+        accel_noise=0.03,
+        gyro_noise=0.05,
+        seed=3,
     )
     blocks = {"a": sim.accel, "g": sim.gyro, "m": sim.samples}
     np.savetxt(path, np.column_stack([blocks[c] for c in order]), fmt="%.5f", delimiter=" ")
 
 
 @pytest.mark.parametrize("order", ["am", "agm"])
-@pytest.mark.xfail(strict=True, reason="a headerless IMU file: the µT magnetometer columns are taken for attitude "
-                   "angles and the accelerometer (or a mix of columns) is calibrated instead, verdict given, exit 0")
+@pytest.mark.xfail(
+    strict=True,
+    reason="a headerless IMU file: the µT magnetometer columns are taken for attitude "
+    "angles and the accelerometer (or a mix of columns) is calibrated instead, verdict given, exit 0",
+)
 def test_headerless_imu_file_calibrates_the_magnetometer_or_asks_for_columns(order: str, tmp_path: Path) -> None:
     path = tmp_path / "imu.txt"
     _imu_text(path, order)
