@@ -288,3 +288,19 @@ def test_forced_export_is_marked_not_supported_in_the_file(fmt: str, tmp_path: P
     result = CliRunner().invoke(cli, args)
     assert result.exit_code == 0, result.output
     assert "NOT SUPPORTED" in out.read_text().upper(), out.read_text()[:400]
+
+
+@pytest.mark.xfail(strict=True, reason="simulate --matrix of zeros answers in Python list syntax: '[0.0, 0.0, ...]'")
+def test_simulate_singular_matrix_message_is_not_python_syntax(tmp_path: Path) -> None:
+    args = ["simulate", "-n", "100", "--matrix", "0,0,0,0,0,0,0,0,0", "-o", str(tmp_path / "s.csv")]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 2
+    assert "[0.0" not in result.stderr, result.stderr
+
+
+@pytest.mark.xfail(strict=True, reason="--motor current on a samples file without a current column is ignored silently")
+def test_motor_current_without_a_current_column_is_said(tmp_path: Path) -> None:
+    path = tmp_path / "mag.csv"
+    _sphere_csv(path)
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--motor", "current"])
+    assert result.exit_code == 2 or "motor" in result.stderr.lower(), result.output
