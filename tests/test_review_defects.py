@@ -205,11 +205,6 @@ def _imu_text(path: Path, order: str) -> None:
 
 
 @pytest.mark.parametrize("order", ["am", "agm"])
-@pytest.mark.xfail(
-    strict=True,
-    reason="a headerless IMU file: the µT magnetometer columns are taken for attitude "
-    "angles and the accelerometer (or a mix of columns) is calibrated instead, verdict given, exit 0",
-)
 def test_headerless_imu_file_calibrates_the_magnetometer_or_asks_for_columns(order: str, tmp_path: Path) -> None:
     path = tmp_path / "imu.txt"
     _imu_text(path, order)
@@ -225,11 +220,6 @@ def test_headerless_imu_file_calibrates_the_magnetometer_or_asks_for_columns(ord
     np.testing.assert_allclose(fitted.offset, [12, -7, 20], atol=2.0)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="headerless time, mx, my, mz, temperature: time is fitted as a field axis and mz, temperature called "
-    "angles; the good recording is refused as 'on no ellipsoid' (exit 1), not a column problem",
-)
 def test_headerless_time_mag_temperature_passes_the_time_column_over(tmp_path: Path) -> None:
     sim = simulate_vehicle(
         3000,

@@ -502,19 +502,29 @@ def _angle_seed(column: NDArray[np.float64]) -> tuple[float, bool] | None:
 
 
 def _angle_group(
-    values: NDArray[np.float64], numeric: Sequence[int], candidates: Sequence[int], seed: int, turn: float, wraps: bool
+    values: NDArray[np.float64],
+    numeric: Sequence[int],
+    candidates: Sequence[int],
+    seed: int,
+    turn: float,
+    wraps: bool,
+    fieldlike: frozenset[int] = frozenset(),
 ) -> tuple[int, ...]:
     """The heading-like column with the two neighbours written beside it that are a vehicle's tilts (roll
     and pitch: within a quarter turn, averaging within a tenth of it, smooth; and, unless the heading wraps,
     no near-constant norm as a field's axes keep: :data:`FIELD_MAX_SPREAD`): of the windows of three neighbouring
     columns holding it, the one whose tilts stay closest to zero. None such: the seed alone when it wraps
-    (an angle all the same), else nothing (a field's axis that happens to stay within a turn)."""
+    (an angle all the same), else nothing (a field's axis that happens to stay within a turn). Unless the
+    heading wraps, no window takes a column of ``fieldlike`` (three neighbouring columns that keep a
+    near-constant norm: a sensor's axes, whose µT values stay within a turn as angles do)."""
+    if not wraps and seed in fieldlike:
+        return ()
     order = list(numeric)
     position = order.index(seed)
     best: tuple[float, tuple[int, ...]] | None = None
     for first in range(max(position - 2, 0), position + 1):
         window = order[first : first + 3]
-        if len(window) != 3 or not set(window) <= set(candidates):
+        if len(window) != 3 or not set(window) <= set(candidates) or (not wraps and set(window) & fieldlike):
             continue
         tilts = [values[:, j][np.isfinite(values[:, j])] for j in window if j != seed]
         largest = max(float(np.abs(tilt).max()) if tilt.size else np.inf for tilt in tilts)
@@ -566,6 +576,21 @@ def _world_field(points: NDArray[np.float64]) -> str | None:
     return None
 
 
+#: Gravity in m/s² and in g: a triple whose norm stays this close (:data:`GRAVITY_TOLERANCE`) is likelier an
+#: accelerometer's than a magnetometer's (no Earth field is 9.8 µT, 9.8 G or about 1 G).
+GRAVITY_NORMS = (9.80665, 1.0)
+GRAVITY_TOLERANCE = 0.05
+
+
+def _gravity_like(points: NDArray[np.float64]) -> bool:
+    """Whether the median norm of ``points`` is gravity's in m/s² or g (:data:`GRAVITY_NORMS`)."""
+    finite = points[np.isfinite(points).all(axis=1)]
+    if not len(finite):
+        return False
+    norm = float(np.median(np.linalg.norm(finite, axis=1)))
+    return any(abs(norm - g) <= GRAVITY_TOLERANCE * g for g in GRAVITY_NORMS)
+
+
 def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int]) -> ContentChoice:
     """Choose the magnetometer's three columns of a file without a header from the values of its first rows.
 
@@ -585,8 +610,10 @@ def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int])
        (:data:`MODEL_NORM_SPREAD`) is a model or reference field, and one whose columns' sizes differ by
        more than :data:`SIZE_RATIO` holds different quantities: both passed over. Each candidate left is fitted
        with an ellipsoid (:func:`ellipsoid_spread`) and the one whose norm is most constant wins. Another
-       triple, disjoint from it, within :data:`AMBIGUITY_FACTOR` of its spread is a rival (``rivals``): the
-       caller refuses to guess.
+       triple, disjoint from it, within :data:`AMBIGUITY_FACTOR` of its spread, is a rival (``rivals``): the
+       caller refuses to guess. So is any other triple within :data:`FIELD_MAX_SPREAD` when the best one's
+       norm is gravity's (:func:`_gravity_like`): an accelerometer turned about keeps its norm as a
+       magnetometer does, and may keep it better.
     4. Fewer than three left, or no triple outlining an ellipsoid: the first three of the varying columns,
        then the constant ones, then time and counters, as a last resort (in file order).
 
@@ -607,10 +634,21 @@ def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int])
     # The last resort prefers columns that vary, then constant ones (a flat recording), time and counters last.
     fallback = [*left, *constant, *monotonic]
     if len(left) > 3:
+        # Three neighbouring columns that keep a near-constant norm are a sensor's axes (a magnetometer's, or an
+        # accelerometer's turned about): none of them is taken for an attitude angle (:func:`_angle_group`).
+        fieldlike = frozenset(
+            j
+            for k in range(len(numeric) - 2)
+            if set(numeric[k : k + 3]) <= set(left)
+            and (norm_spread := ellipsoid_spread(values[:, numeric[k : k + 3]])) is not None
+            and norm_spread <= FIELD_MAX_SPREAD
+            for j in numeric[k : k + 3]
+        )
         angles: list[int] = []
         for j in left:
             if j not in angles and (seed := _angle_seed(values[:, j])) is not None:
-                angles += [k for k in _angle_group(values, numeric, left, j, *seed) if k not in angles and k in left]
+                group = _angle_group(values, numeric, left, j, *seed, fieldlike=fieldlike)
+                angles += [k for k in group if k not in angles and k in left]
         angles.sort()
         windows = [tuple(numeric[k : k + 3]) for k in range(len(numeric) - 2)]
         passed: list[tuple[tuple[int, int, int], str]] = []
@@ -637,7 +675,11 @@ def choose_columns_by_content(head: NDArray[np.float64], numeric: Sequence[int])
             rivals = tuple(
                 triple
                 for spread, triple in sorted(scored)
-                if not set(triple) & set(best) and spread <= AMBIGUITY_FACTOR * best_spread
+                if not set(triple) & set(best)
+                and (
+                    spread <= AMBIGUITY_FACTOR * best_spread
+                    or (_gravity_like(values[:, best]) and spread <= FIELD_MAX_SPREAD)
+                )
             )
             return ContentChoice(
                 best, tuple(monotonic), tuple(constant), best_spread, rivals, tuple(angles), tuple(passed),

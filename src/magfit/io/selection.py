@@ -126,7 +126,8 @@ def resolve_table_columns(
                     path,
                     f"has no header and several column triples look like a magnetometer: {found}"
                     + (f" ({note})" if (note := choice.describe(labels)) else "")
-                    + f"; choose one with {option('columns', list(choice.indices))} (0-based)",
+                    + f"; an accelerometer turned about keeps its norm as a magnetometer does: name the "
+                    f"magnetometer's three with {option('columns', 'X,Y,Z')} (0-based)",
                 )
             indices = choice.indices
     else:
