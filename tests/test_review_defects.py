@@ -81,7 +81,6 @@ def _vehicle_csv(path: Path, motion: str, seed: int, *, with_accel: bool = True)
     np.savetxt(path, table, fmt="%.6f", delimiter=",", header=",".join(columns), comments="")
 
 
-@pytest.mark.xfail(strict=True, reason="magfit live FILE -o FILE overwrites the recording it reads with the JSON")
 def test_live_never_writes_its_calibration_over_the_recording_it_reads(tmp_path: Path) -> None:
     recording = tmp_path / "raw.csv"
     _sphere_csv(recording)

@@ -27,6 +27,7 @@ from ._common import (
     fail,
     fixed,
     parse_columns,
+    refuse_overwriting_input,
     same_file,
     vector,
     warn,
@@ -111,6 +112,11 @@ def live_command(
         fail("give a PORT or --simulate (not both)")
     if record is not None and output is not None and same_file(record, output):
         fail(f"--record and -o are the same file {record}; choose two paths")
+    if port is not None and port != "-" and "://" not in port and Path(port).is_file():
+        # A recording read as the port: neither the calibration nor a new recording may be written over it.
+        for written in (output, record):
+            if written is not None:
+                refuse_overwriting_input(written, [Path(port)])
     for path in (output, record):
         # Checked now, not after the session: a typo must not cost the user a whole calibration run.
         if path is not None and (path.is_dir() or not (path.parent if str(path.parent) else Path(".")).is_dir()):
