@@ -260,12 +260,7 @@ def test_gyro_on_a_real_log_is_refused_when_its_halves_disagree_beyond_its_one_s
     assert apart is None or sigma >= float(apart.group(1)) / 3, (sigma, apart and apart.group(0))
 
 
-@pytest.mark.parametrize("fmt", ["ardupilot", "c", "yaml"])
-@pytest.mark.xfail(
-    strict=True,
-    reason="--force --export writes a firmware file with no mark that the calibration is NOT SUPPORTED: "
-    "the refusal lives only in the terminal, the file loads like any other",
-)
+@pytest.mark.parametrize("fmt", ["ardupilot", "c", "yaml", "magcal"])
 def test_forced_export_is_marked_not_supported_in_the_file(fmt: str, tmp_path: Path) -> None:
     sim = magfit.scenario("mpu9250", "none").simulate(600, seed=4, orientations="yaw")  # level turns only
     path = tmp_path / "yaw.csv"

@@ -209,6 +209,7 @@ def export(
     if "applied_rotation" in spec.options:
         calibration = with_applied_rotation(calibration, applied_rotation)
     text: str = spec.writer(calibration, unit, **given)
+    text = _marked_if_forced(text, calibration, format)
     return text if mismatch is None else _with_warning(text, format, f"WARNING (written although): {mismatch}")
 
 
@@ -275,15 +276,18 @@ def export_several(
                 "the json export keeps each calibration's details; slots and device_ids apply to: ardupilot, px4"
             )
         return json.dumps([write_json_dict(c, unit) for c in calibrations], indent=2) + "\n"
+    _options(spec, {"system_id": system_id, "expected_field": expected_field})
     if format == "ardupilot":
-        _options(spec, {"system_id": system_id, "expected_field": expected_field})
-        return write_ardupilot_several(
+        text = write_ardupilot_several(
             calibrations, unit, slots=slots, device_ids=device_ids, expected_field=expected_field
         )
-    _options(spec, {"system_id": system_id, "expected_field": expected_field})
-    return write_px4_several(
-        calibrations, unit, system_id=1 if system_id is None else system_id, slots=slots, device_ids=device_ids
-    )
+    else:
+        text = write_px4_several(
+            calibrations, unit, system_id=1 if system_id is None else system_id, slots=slots, device_ids=device_ids
+        )
+    for calibration in calibrations:
+        text = _marked_if_forced(text, calibration, format)
+    return text
 
 
 #: The formats that write the field in a physical unit and refuse a calibration whose field strength is not the
@@ -317,12 +321,25 @@ def _refuse_unit_mismatch(calibration: Calibration, format: str, unit: str | Non
 
 
 def _with_warning(text: str, format: str, warning: str) -> str:
-    """``text`` with ``warning`` as comment lines after its first line (C block comments or ``#``; JSON has none)."""
-    if format == "adafruit-json":
+    """``text`` with ``warning`` as comment lines after its first line (C block comments, MATLAB's ``%`` or
+    ``#``; JSON has none: magfit's own holds the verdict, Adafruit's cannot say it)."""
+    if format in ("adafruit-json", "json"):
         return text
     first, rest = text.split("\n", 1)
-    prefix = " * " if first.startswith("/*") else "# "
+    prefix = " * " if first.startswith("/*") else "% " if first.startswith("%") else "# "
     return "\n".join([first, *comment_lines(warning, prefix=prefix), rest])
+
+
+def _marked_if_forced(text: str, calibration: Calibration, format: str) -> str:
+    """A calibration the samples do not support, written all the same (``allow_undetermined``, ``--force``),
+    says so in the file: the refusal must not stay behind in a terminal while the file loads like any other."""
+    support = calibration.support
+    if support is None or support.verdict != "refused":
+        return text
+    why = support.refusals[0] if support.refusals else "the samples do not determine it"
+    return _with_warning(
+        text, format, f"NOT SUPPORTED by the samples, written because forced: do not use these numbers ({why})"
+    )
 
 
 #: The formats that hold the motors' field (export/_motor.py).
