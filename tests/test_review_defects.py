@@ -241,11 +241,6 @@ def test_headerless_time_mag_temperature_passes_the_time_column_over(tmp_path: P
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="gyro on a real ArduCopter log returns a 'weak' calibration (exit 0, exported) whose own halves give "
-    "headings 61° apart where its heading one-sigma is 7.2°: its stated uncertainty does not cover its error",
-)
 def test_gyro_on_a_real_log_is_refused_when_its_halves_disagree_beyond_its_one_sigma(tmp_path: Path) -> None:
     log = DATA / "ardupilot_real" / "copter33_log171_trimmed.bin"
     cal = tmp_path / "cal.json"

@@ -39,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..._validation import check_inclination
 from ...calibration import Calibration
+from ...diagnostics.verdict import USELESS_BOUND_DEG
 from ...errors import CalibrationError, OptionError
 from ...facts import GyroFacts, SolverStatus
 from ...findings import Reason, Support
@@ -405,11 +406,22 @@ def _verdict(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg: NDA
                        lag_searched=lag_s == "search")  # fmt: skip
     halves = _halves(model, segment_s) if support.verdict != "refused" else None
     if halves is not None and halves[0] > HALVES_SIGMAS * halves[1]:
-        support = replace(support, verdict="weak", weaknesses=(*support.weaknesses, Reason(
+        # Two halves apart by d beyond their noise: the whole lies between them, up to d/2 from either, and the
+        # one-sigma stated must hold that (the model's own, from the scatter, does not); beyond the useless bound
+        # it is no calibration.
+        heading_sigma = max(heading_sigma, halves[0] / 2.0)
+        apart = Reason(
             f"the two halves of the recording give headings {halves[0]:.2g}° apart (RMS over level headings), "
             f"{halves[0] / max(halves[1], 1e-12):.1f} times their combined one-sigma (±{halves[1]:.2g}°): the field, "
-            "the gyro's bias or the clocks changed between them, and the stated one-sigma does not cover that; "
-            "expect heading errors of the order of their difference", "inconsistent_halves")))  # fmt: skip
+            "the gyro's bias or the clocks changed between them; the heading one-sigma stated holds half their "
+            f"difference, ±{heading_sigma:.2g}°", "inconsistent_halves")  # fmt: skip
+        if heading_sigma > USELESS_BOUND_DEG:
+            support = replace(support, verdict="refused", refusals=(*support.refusals, Reason(
+                f"{apart}: beyond {USELESS_BOUND_DEG:g}°, a bound that wide is no calibration; record a flight whose "
+                "field and gyro stay steady (no magnet, payload or power change between its halves)",
+                "inconsistent_halves")))  # fmt: skip
+        else:
+            support = replace(support, verdict="weak", weaknesses=(*support.weaknesses, apart))
     if mapping in MAPPINGS and excess.get(mapping, 0.0) > LIKELIHOOD_RATIO:
         support = replace(support, verdict="weak" if support.verdict == "supported" else support.verdict,
                           weaknesses=(*support.weaknesses, Reason(
