@@ -38,7 +38,7 @@ from ..rotations import polar_decomposition
 from .coverage import coverage
 from .settle import settle
 from .uncertainty import DEFAULT_INCLINATION_DEG, UNDETERMINED_SIGMA, WEAK_INFORMATION
-from .verdict import BIASED_HEADING_DEG, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, unit_mixup
+from .verdict import BIASED_HEADING_DEG, LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, USELESS_BOUND_DEG, unit_mixup
 
 __all__ = [
     "BLOCKS",
@@ -530,12 +530,22 @@ def judge_reference_fit(
         )
     halves = halves_disagreement(raw, reference, g, offset, inclination) if n >= 2 * MIN_HALF else None
     if halves is not None and halves[0] > HALVES_SIGMAS * halves[1]:
-        weaknesses.add("inconsistent_halves",
+        # Apart by d beyond their noise: the whole lies between the halves, up to d/2 from either; the one-sigma
+        # stated holds that (the covariance's does not), and beyond the useless bound it is no calibration.
+        stated = max(uncertainty.heading_sigma_deg or 0.0, halves[0] / 2.0)
+        uncertainty = replace(uncertainty, heading_sigma_deg=stated,
+                              heading_sigma_max_deg=max(uncertainty.heading_sigma_max_deg or 0.0, stated))
+        apart = (
             f"the two halves of the recording give headings {halves[0]:.2g}° apart (RMS over level headings), "
             f"{halves[0] / max(halves[1], 1e-12):.1f} times their combined one-sigma (±{halves[1]:.2g}°): the "
-            "attitude's error, the field or the time bases changed between them, and the stated one-sigma does not "
-            "cover that; expect heading errors of the order of their difference"
+            "attitude's error, the field or the time bases changed between them; the heading one-sigma stated "
+            f"holds half their difference, ±{stated:.2g}°"
         )
+        if stated > USELESS_BOUND_DEG:
+            refusals.add("inconsistent_halves",
+                         f"{apart}: beyond {USELESS_BOUND_DEG:g}°, a bound that wide is no calibration")
+        else:
+            weaknesses.add("inconsistent_halves", apart)
     support = Support.judged(refusals, weaknesses, ADVICE)
     directions = reference / np.linalg.norm(reference, axis=1, keepdims=True)
     return ReferenceReport(
