@@ -352,7 +352,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
             )
     calibration = optima[chosen]
     if chosen == "full" or kept.shape[0] > 20_000:  # the optimum came from a stride of 20 000, or ml is due
-        calibration = refine_chosen(chosen, calibration, kept, data.statistics if kept is samples else None)
+        calibration = refine_chosen(chosen, calibration, kept, shared if kept is samples else None)
     prefix = "robust " if robust else ""
     passed_over = [
         f"the {model} model was passed over: {'; '.join(verdicts[model].refusals)}"
@@ -514,7 +514,7 @@ def _cost(p: NDArray[np.float64], z: NDArray[np.float64], model: str) -> float:
 
 
 def refine_chosen(
-    model: str, start: Calibration, samples: NDArray[np.float64], statistics: Statistics | None = None
+    model: str, start: Calibration, samples: NDArray[np.float64], given: FitInput | None = None
 ) -> Calibration:
     """What ``auto`` returns for ``model``, fitted to (a stride of at most 200 000 of) ``samples``.
 
@@ -522,8 +522,8 @@ def refine_chosen(
     the first-order maximum-likelihood fit of :func:`_optimal_rss` grows the ellipsoid by about σ²/B and
     skews it at high noise (measured at σ = 10 % of the field, N = 100 000: 1.45 % error in the
     ellipsoid matrix against 0.25 % for ``ml``). Sphere and diag, or when ``ml`` fails: that first-order
-    fit, from ``start``. ``statistics``: those of ``samples``, when the caller has them (used when the
-    stride takes every sample: one pass saved).
+    fit, from ``start``. ``given``: ``samples`` with their statistics and clipped rows, when the caller has
+    them (used when the stride takes every sample: two passes over them saved).
     """
     from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters
 
@@ -531,8 +531,8 @@ def refine_chosen(
     rows = samples[::step]  # at most REFIT_ROWS, the rows of sampling.thin (a view: no copy)
     if model == "full" and "ml" in METHODS:
         try:
-            known = statistics if step == 1 and statistics is not None else Statistics.from_samples(rows)
-            fitted = estimate(FitInput(known, rows), "ml")
+            data = given if step == 1 and given is not None else FitInput(Statistics.from_samples(rows), rows)
+            fitted = estimate(data, "ml")
             if fitted.solver is None or fitted.solver.converged is not False:
                 return fitted
         except (MagfitError, np.linalg.LinAlgError):
