@@ -27,7 +27,8 @@ Four parts, each a ratio to a baseline timed in the same run (absolute times dep
 6. ``magfit calibrate`` (default method) on the CSV of part 2 (10 million rows): its peak RSS (target
    < 300 MB), alone, so that it can be measured without the readers of part 2.
 
-``--parts ratios,memory`` runs only some parts (the ratios take about a minute on an idle machine).
+``--parts ratios,memory`` runs only some parts (the ratios take about a minute on an idle machine);
+``--parts auto`` runs only the ``auto`` rows of part 5 (10 000, 100 000 and 1 million samples).
 Times are the best of ``--repeat`` runs (the least disturbed by other processes); the machine's load
 average is recorded with the results, since other work on the machine slows every row alike. The
 pyarrow readers of part 2 need ``pip install pyarrow`` (a row says so when it is missing); the peak RSS
@@ -82,7 +83,7 @@ TARGETS = {
     "default_vs_reader": 1.5,
 }
 #: The parts, in the order they run (``--parts``).
-PARTS = ("fit", "ml", "cli", "peers", "ratios", "memory")
+PARTS = ("fit", "ml", "cli", "peers", "ratios", "auto", "memory")
 #: Sizes of the headline ratios: samples of the in-memory fits, rows of the small CSV; and the larger sizes at
 #: which ``auto`` is also timed against ``ellipsoid``.
 N_RATIO_FIT = 10_000
@@ -422,9 +423,17 @@ def part_ratios(rounds: int, workdir: Path) -> dict[str, Any]:
     Each pair takes turns for ``rounds`` rounds and the best time of each side counts: a slow spell of
     the shared machine then slows both sides of a round alike, and the best is the least disturbed.
     """
+    results = part_auto(rounds)
+    results["n_csv"] = N_RATIO_CSV
+    results.update(_calibrate_vs_import(rounds, workdir))
+    return results
+
+
+def part_auto(rounds: int) -> dict[str, Any]:
+    """``auto`` / ``ellipsoid`` in memory on 10 000 samples (``rounds`` rounds) and on the larger sizes."""
     samples = make_samples(N_RATIO_FIT, seed=10)
     print(f"[ratios] auto vs ellipsoid on {N_RATIO_FIT:,} samples, {rounds} rounds", flush=True)
-    results: dict[str, Any] = {"n_fit": N_RATIO_FIT, "n_csv": N_RATIO_CSV, "rounds": rounds}
+    results: dict[str, Any] = {"n_fit": N_RATIO_FIT, "rounds": rounds}
     fits: dict[str, list[float]] = {"ellipsoid": [], "auto": []}
     outcome: dict[str, Any] = {}
     for method in fits:  # imports and caches outside the timing
@@ -449,7 +458,12 @@ def part_ratios(rounds: int, workdir: Path) -> dict[str, Any]:
     results["fit_outcome"] = outcome
     results["auto_vs_ellipsoid"] = results["fit_seconds"]["auto"] / results["fit_seconds"]["ellipsoid"]
     results["large"] = {str(n): _auto_vs_ellipsoid(n, max(3, rounds // 3)) for n in N_RATIO_LARGE}
+    return results
 
+
+def _calibrate_vs_import(rounds: int, workdir: Path) -> dict[str, Any]:
+    """``magfit calibrate`` on a 300-row CSV against ``import magfit.cli`` (and ``import numpy``), as processes."""
+    results: dict[str, Any] = {}
     csv = workdir / f"samples_{N_RATIO_CSV}.csv"
     write_csv(make_samples(N_RATIO_CSV, seed=11), csv)
     print(f"[ratios] magfit calibrate on {N_RATIO_CSV} rows vs import magfit.cli, {rounds} rounds", flush=True)
@@ -494,12 +508,16 @@ def _auto_vs_ellipsoid(n: int, rounds: int) -> dict[str, Any]:
             start = time.perf_counter()
             calibration = magfit.fit(samples, method)
             times[method].append(time.perf_counter() - start)
-            chosen = calibration.details.get("chosen_model")
-            outcome[method] = f"verdict {_support(calibration)}" + (
-                f", chose {chosen}" if chosen else ""
-            )
+            chosen = calibration.auto.chosen if calibration.auto is not None else None
+            outcome[method] = f"verdict {_support(calibration)}" + (f", chose {chosen}" if chosen else "")
     best = {method: min(values) for method, values in times.items()}
-    return {"seconds": best, "all_seconds": times, "outcome": outcome, "ratio": best["auto"] / best["ellipsoid"]}
+    return {
+        "seconds": best,
+        "all_seconds": times,
+        "outcome": outcome,
+        "ratio": best["auto"] / best["ellipsoid"],
+        "load_average_after": os.getloadavg(),
+    }
 
 
 # ---------------------------------------------------------------------- part 6: the default method's memory
@@ -813,8 +831,8 @@ def _ratios_section(ratios: dict[str, Any] | None) -> list[str]:
             f"{large['ratio']:.2f} x ellipsoid | <= {TARGETS['auto_vs_ellipsoid']:g} x: "
             f"{_verdict(large['ratio'] <= TARGETS['auto_vs_ellipsoid'])} |",
         ]
-    processes = ratios["processes"]
-    base, calibrate = processes["import"], processes["calibrate"]
+    processes = ratios.get("processes", {})  # absent when only the auto part ran
+    base, calibrate = processes.get("import", {}), processes.get("calibrate", {})
     if "seconds" in base and "seconds" in calibrate:
         cli_ok = ratios["calibrate_vs_import"] <= TARGETS["calibrate_vs_import"]
         chose = f"; chose the {calibrate['chose']} model" if "chose" in calibrate else ""
@@ -837,9 +855,11 @@ def _ratios_section(ratios: dict[str, Any] | None) -> list[str]:
             f"{_fmt(calibrate['seconds'])} | {ratios['calibrate_vs_import']:.2f} x import | <= "
             f"{TARGETS['calibrate_vs_import']:g} x: {_verdict(cli_ok)} |",
         ]
-    else:
+    elif processes:
         failed = calibrate.get("error") or base.get("error")
         lines.append(f"| `magfit calibrate` on {ratios['n_csv']} rows vs the import | failed: {failed} | | |")
+    if not processes:  # --parts auto: the auto rows alone
+        return [*lines, ""]
     lines += [
         "",
         "CPU time (user + system) of the processes: "
@@ -945,6 +965,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         results["peers"] = part_peers(options.peer_sizes, args.workdir, samples, args.peers_python)
     if "ratios" in parts:
         results["ratios"] = part_ratios(args.rounds, args.workdir)
+    elif "auto" in parts:  # the auto rows of part 5 alone
+        results["ratios"] = part_auto(args.rounds)
     if "memory" in parts:
         results["memory"] = part_memory(options.n_cli, args.workdir, samples)
     results["runtime_s"] = time.perf_counter() - start

@@ -187,6 +187,7 @@ def _judged(
             variation_refit=variation,
             model_error_heading_deg=model_error,
             clipping=data.clipping,
+            fitted_rows=spec.fit_rows,  # auto's refit reads a stride: its uncertainty is for those rows
         )
     assert report.support is not None  # both diagnoses reach a verdict
     own = judging.weaknesses(calibration, report) if judging.weaknesses is not None else ()
@@ -256,6 +257,7 @@ def diagnose(
         represents=represents,
         refit=refit,
         model_error_heading_deg=model_error,
+        fitted_rows=spec.fit_rows if spec is not None else None,
     )
     own = judging.weaknesses(calibration, report) if judging and judging.weaknesses else ()
     if not own or report.support is None:

@@ -86,6 +86,7 @@ def diagnose(
     variation_refit: Refit | None = None,
     model_error_heading_deg: float = 0.0,
     clipping: Clipping | None = None,
+    fitted_rows: int | None = None,
 ) -> Diagnostics:
     """Diagnose a calibration on the samples it was fitted to (or on a subsample of them), with its verdict.
 
@@ -128,6 +129,12 @@ def diagnose(
         The rows of ``samples`` clipped at the sensor's full scale, as the fit found them on these samples,
         which it has also checked finite (:func:`magfit.fit` passes it): neither pass over the samples is
         made again. None: both are made here.
+    fitted_rows : int, optional
+        The fit read a regular stride of at most this many of the samples (``auto``'s maximum-likelihood refit:
+        :attr:`~magfit.methods.registry.MethodSpec.fit_rows`). On more samples the uncertainty is stated for the
+        ``m = ⌈n / ⌈n / fitted_rows⌉⌉`` rows it read: a fit on m of n samples varies n / m times more than a fit
+        on all of them, less when neighbouring samples are correlated: the diagnostics read those rows, as the
+        recording (the correlation in time of the stride, not of the neighbours).
 
     Returns
     -------
@@ -152,10 +159,18 @@ def diagnose(
     total = n if represents is None else max(1, round(represents * n / max(len(mask) if mask is not None else n, 1)))
     if represents is not None:
         notes.append(f"The {n} samples analysed stand for {total} samples: the uncertainty is scaled to those.")
+    stated = total  # the samples the fit's uncertainty is for
+    if fitted_rows is not None and n > fitted_rows and represents is None:
+        # The rows the fit read are the recording its uncertainty is for, their correlation in time too.
+        array = array[:: math.ceil(n / fitted_rows)]
+        notes.append(
+            f"The fit read a regular stride of {array.shape[0]} of the {n} samples: the uncertainty is for those."
+        )
+        n = stated = array.shape[0]
     candidates = thin(n, max_samples)
     rows = np.asarray(array[candidates], dtype=np.float64)  # a regular stride, in recording order
     z_candidates = Frame.corrected(calibration).normalise(rows)
-    chosen, weights = weighted_even_subsample(z_candidates, max_samples, total=total)
+    chosen, weights = weighted_even_subsample(z_candidates, max_samples, total=stated)
     indices = candidates[chosen]
     raw, z = rows[chosen], z_candidates[chosen]
     if indices.size < n:
@@ -179,10 +194,10 @@ def diagnose(
         vary = variation_refit or refit
         # A biased method's halves differ anyway; auto (no check: its choice is a maximum-likelihood fit) is not.
         if vary is not None and (check.consistent if check is not None else uncertainty.offset_sigma is not None):
-            halves = _halves(rows, vary, uncertainty, total)
+            halves = _halves(rows, vary, uncertainty, stated)
         if vary is not None and uncertainty.offset_sigma is not None:
             # After the halves: a change between them is named as such, not hidden in a wider one-sigma.
-            uncertainty = _with_block_jackknife(uncertainty, rows, vary, calibration, total)
+            uncertainty = _with_block_jackknife(uncertainty, rows, vary, calibration, stated)
     comparison = None
     if uncertainty.offset_sigma is not None:  # a restricted model against the full one on the same samples
         comparison = compare_with_full(raw, weights, kind, calibration, uncertainty, inclination_deg, array)

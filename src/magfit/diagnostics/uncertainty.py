@@ -788,7 +788,8 @@ def _drift_fits(
             if projected:  # (I − Q Qᵀ) d and its Jacobian: the drift's c at their optimum for this p
                 residual = residual - basis @ (basis.T @ residual)
                 jac = jac - basis @ (basis.T @ jac)
-            return Evaluation(0.5 * float(residual @ residual), jac.T @ jac, jac.T @ residual)
+            # (Σ d² by einsum: a threaded BLAS dot waits for its thread on a busy machine; geometry.frame)
+            return Evaluation(0.5 * float(np.einsum("n,n->", residual, residual)), jac.T @ jac, jac.T @ residual)
 
         start = _identity_parameters(kind)
         solution = levenberg_marquardt(evaluate, start, n_residuals=m, max_iterations=20 * k, cost_tolerance=1e-8)

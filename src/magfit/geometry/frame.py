@@ -245,8 +245,12 @@ def maximum_likelihood(
     def evaluate(p: NDArray[np.float64], _: object) -> Evaluation:
         with np.errstate(all="ignore"):  # a degenerate trial may overflow; its non-finite cost is refused
             residual, jacobian_matrix = distances_and_jacobian(p, z, model)
+        # Σ d² by einsum, not a BLAS dot: OpenBLAS threads a dot of 10⁴ values, and on a busy machine each call
+        # waits for the woken thread (median 14 ms on 20 000 rows against 0.02 ms, measured on 2 shared cores).
         return Evaluation(
-            0.5 * float(residual @ residual), jacobian_matrix.T @ jacobian_matrix, jacobian_matrix.T @ residual
+            0.5 * float(np.einsum("n,n->", residual, residual)),
+            jacobian_matrix.T @ jacobian_matrix,
+            jacobian_matrix.T @ residual,
         )
 
     best: tuple[float, NDArray[np.float64]] | None = None

@@ -56,7 +56,8 @@ from ..findings import Diagnostics, Reason, Support, said_once
 from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..outliers import DEFAULT_THRESHOLD
 from ..remedy import option
-from ..sampling import MAX_ANALYSED, thin
+from ..sampling import MAX_ANALYSED
+from ..saturation import find_clipped
 from ..statistics import Statistics
 from .core import estimate, first_order_refit
 from .registry import METHODS, FitInput, Judging, Refit, Undetermined, register
@@ -207,11 +208,15 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
     samples = data.require_samples("auto")
     n = samples.shape[0]
     robust, inliers, screen_note = _screen(samples, outliers)
+    # The candidates share one search for clipped rows (the fit's own, when its statistics' pass made it): each
+    # would otherwise read every sample again (methods.core.without_clipped), a pass over a long log per model.
+    clipping = data.clipping if data.clipping is not None and data.clipping.n_samples == n else find_clipped(samples)
+    shared = FitInput(data.statistics, samples, clipping)
     failed: dict[str, str] = {}
     fits: dict[str, Calibration] = {}
     for model in CANDIDATES:
         try:
-            fits[model] = _fit_candidate(model, samples, robust, data.statistics)
+            fits[model] = _fit_candidate(model, shared, robust)
         except MagfitError as error:
             failed[model] = str(error)
     if not fits:
@@ -347,7 +352,7 @@ def fit_auto(data: FitInput, *, outliers: str = "detect", field_strength: float 
             )
     calibration = optima[chosen]
     if chosen == "full" or kept.shape[0] > 20_000:  # the optimum came from a stride of 20 000, or ml is due
-        calibration = refine_chosen(chosen, calibration, kept)
+        calibration = refine_chosen(chosen, calibration, kept, shared if kept is samples else None)
     prefix = "robust " if robust else ""
     passed_over = [
         f"the {model} model was passed over: {'; '.join(verdicts[model].refusals)}"
@@ -508,21 +513,26 @@ def _cost(p: NDArray[np.float64], z: NDArray[np.float64], model: str) -> float:
     return value if np.isfinite(value) else math.inf
 
 
-def refine_chosen(model: str, start: Calibration, samples: NDArray[np.float64]) -> Calibration:
+def refine_chosen(
+    model: str, start: Calibration, samples: NDArray[np.float64], given: FitInput | None = None
+) -> Calibration:
     """What ``auto`` returns for ``model``, fitted to (a stride of at most 200 000 of) ``samples``.
 
     The full ellipsoid: the ``ml`` fit (orthogonal distances with the mean-curvature bias correction);
     the first-order maximum-likelihood fit of :func:`_optimal_rss` grows the ellipsoid by about σ²/B and
     skews it at high noise (measured at σ = 10 % of the field, N = 100 000: 1.45 % error in the
     ellipsoid matrix against 0.25 % for ``ml``). Sphere and diag, or when ``ml`` fails: that first-order
-    fit, from ``start``.
+    fit, from ``start``. ``given``: ``samples`` with their statistics and clipped rows, when the caller has
+    them (used when the stride takes every sample: two passes over them saved).
     """
     from ..geometry.frame import Frame, calibration_from_parameters, maximum_likelihood, parameters
 
-    rows = samples[thin(samples.shape[0], MAX_ANALYSED)]  # at most REFIT_ROWS
+    step = max(1, math.ceil(samples.shape[0] / REFIT_ROWS))
+    rows = samples[::step]  # at most REFIT_ROWS, the rows of sampling.thin (a view: no copy)
     if model == "full" and "ml" in METHODS:
         try:
-            fitted = estimate(FitInput(Statistics.from_samples(rows), rows), "ml")
+            data = given if step == 1 and given is not None else FitInput(Statistics.from_samples(rows), rows)
+            fitted = estimate(data, "ml")
             if fitted.solver is None or fitted.solver.converged is not False:
                 return fitted
         except (MagfitError, np.linalg.LinAlgError):
@@ -637,14 +647,15 @@ def _kept(calibration: Calibration, n: int) -> NDArray[np.bool_]:
     return mask
 
 
-def _fit_candidate(model: str, samples: NDArray[np.float64], robust: bool, statistics: Statistics) -> Calibration:
-    """``model`` fitted to the samples, robustly or not; ``statistics`` are the samples' (one pass saved).
+def _fit_candidate(model: str, data: FitInput, robust: bool) -> Calibration:
+    """``model`` fitted to the samples, robustly or not; ``data`` carries their statistics and clipped rows
+    (one pass over the samples saved for each).
 
-    Through :func:`~magfit.methods.core.estimate`, like every method: a candidate refuses what the method
-    refuses for any caller."""
+    Through :func:`~magfit.methods.core.estimate`, like every method (:func:`~magfit.methods.robust.fit_model`
+    runs ``resolve_model``'s method the same way): a candidate refuses what the method refuses for any caller."""
     if robust:
-        return estimate(FitInput(statistics, samples), "robust", {"model": model})
-    return fit_model(model, samples, statistics)
+        return estimate(data, "robust", {"model": model})
+    return estimate(data, resolve_model(model)[0])
 
 
 def _support(report: Diagnostics) -> Support:
