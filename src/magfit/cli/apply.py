@@ -144,6 +144,7 @@ def apply_command(
             f"{error} ({calibration_file} was fitted on the columns {columns_text(remembered)}; choose the columns "
             f"of {file} with --columns)"
         ) from None
+    _warn_far_from_the_sphere(calibration, calibration_file, file, chosen)
     values, motor_note = None, ""
     if calibration.motor is not None:
         values, label = column_regressor(
@@ -162,6 +163,39 @@ def apply_command(
         soft_wrap=True,
     )
     out.print(f"convention: {CONVENTION}")
+
+
+#: Corrected samples whose median norm is beyond this factor of the calibration's field strength were not
+#: recorded by the sensor (or in the unit) the calibration was fitted on.
+FAR_FROM_THE_SPHERE = 2.0
+
+
+def _warn_far_from_the_sphere(
+    calibration: Calibration, calibration_file: Path, file: Path, columns: list[str | int] | None
+) -> None:
+    """Say when the samples, corrected, lie far from the calibration's sphere (their first chunk's median norm
+    against its field strength): another unit (gauss for µT is a factor 100) or another sensor."""
+    import numpy as np
+
+    from ..diagnostics.verdict import unit_mixup
+    from ..io import iter_sample_chunks
+
+    if not Path(file).is_file():  # a pipe is read once, by the writer
+        return
+    first = next(iter(iter_sample_chunks(file, columns=columns, chunk_rows=10_000)), None)
+    if first is None or not len(first) or not calibration.field_strength > 0:
+        return
+    # The motors' term left out: a fraction of the field, well within the factor.
+    without_motor = replace(calibration, motor=None) if calibration.motor is not None else calibration
+    ratio = float(np.median(np.linalg.norm(without_motor.apply(first), axis=1))) / calibration.field_strength
+    if 1 / FAR_FROM_THE_SPHERE <= ratio <= FAR_FROM_THE_SPHERE:
+        return
+    why = unit_mixup(ratio) or "another sensor, or samples in another unit"
+    warn(
+        f"{file}, corrected with {calibration_file}, lies at {ratio:.3g} times its field strength "
+        f"({calibration.field_strength:.6g}{f' {calibration.unit}' if calibration.unit else ''}): {why}; check that "
+        "the file holds the sensor the calibration was fitted on, in the unit it was fitted in"
+    )
 
 
 def omission_text(calibration: Calibration) -> str:
