@@ -204,18 +204,26 @@ class _Trajectory:
         return out
 
     def information(self, dense: NDArray[np.float64], angular: NDArray[np.float64]) -> NDArray[np.float64]:
-        """JᵀJ (p.size, p.size) from the blocks of :meth:`blocks`: a stretch's angles meet only its own rows."""
+        """JᵀJ (p.size, p.size) from the blocks of :meth:`blocks`: a stretch's angles meet only its own rows.
+
+        The head block is one product of the (rows · C, head) Jacobian with itself, and each stretch's columns
+        one product of its own rows: matrix products on few columns, a tenth of einsum's time even on shared
+        cores (einsum adds the rows in another order: the sums agree to rounding, not bit for bit).
+        """
         head = self.head
         size = head + 2 * self.count
         normal = np.zeros((size, size))
-        normal[:head, :head] = np.einsum("kip,kiq->pq", dense, dense)
-        cross = self._by_stretch(np.matmul(dense.transpose(0, 2, 1), angular))  # (count, head, 2)
-        own = self._by_stretch(np.matmul(angular.transpose(0, 2, 1), angular))  # (count, 2, 2)
+        flat = dense.reshape(-1, head)
+        normal[:head, :head] = flat.T @ flat
+        angles = angular.reshape(-1, 2)
+        bounds = self.components * np.append(self.starts, self.rows.size)
         for s in range(self.count):
+            rows = slice(bounds[s], bounds[s + 1])
             columns = slice(head + 2 * s, head + 2 * s + 2)
-            normal[:head, columns] = cross[s]
-            normal[columns, :head] = cross[s].T
-            normal[columns, columns] = own[s]
+            cross = flat[rows].T @ angles[rows]  # (head, 2); zeros for a stretch with no rows
+            normal[:head, columns] = cross
+            normal[columns, :head] = cross.T
+            normal[columns, columns] = angles[rows].T @ angles[rows]
         return normal
 
     def score(self, dense: NDArray[np.float64], angular: NDArray[np.float64],
