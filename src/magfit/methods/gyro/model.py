@@ -126,7 +126,7 @@ class _Trajectory:
         start = _unit(p[self.head :].reshape(self.count, 2))[self.segment[self.rows]]
         # (M2), R_kᵀ [b₀]× C_k: stacked 3×3 products (numpy's own loop, no threaded BLAS, far quicker than einsum)
         d_beta = -np.matmul(np.matmul(turns.transpose(0, 2, 1), skew(start)), running)
-        return np.einsum("kji,kj->ki", turns, start), turns, d_beta
+        return np.matmul(turns.transpose(0, 2, 1), start[:, :, None])[:, :, 0], turns, d_beta
 
     def _gravity_rows(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """d_k (rows, 3) and each row's weight (rows,): 0 where the accelerometer is not still."""
@@ -135,7 +135,7 @@ class _Trajectory:
         return down, self.gravity.weight * self.gravity.still[self.rows].astype(np.float64)
 
     def _residual_of(self, p: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-        magnetometer = np.einsum("ij,kj->ki", self.distortion(p), b) + p[self.k : self.k + 3] - self.y[self.rows]
+        magnetometer = b @ self.distortion(p).T + p[self.k : self.k + 3] - self.y[self.rows]
         if self.gravity is None:
             return magnetometer
         down, weight = self._gravity_rows()
@@ -160,7 +160,7 @@ class _Trajectory:
         dense = np.zeros((rows, self.components, self.head))
         for i in range(3):
             # ∂(G b)_i / ∂G_ij = b_j, through the basis
-            dense[:, i, :k] = np.einsum("kj,jq->kq", b, self.basis[3 * i : 3 * i + 3])
+            dense[:, i, :k] = b @ self.basis[3 * i : 3 * i + 3]
         dense[:, :3, k : k + 3] = np.eye(3)
         dense[:, :3, k + 3 : k + 6] = np.matmul(g, d_beta)
         angles = p[self.head :].reshape(self.count, 2)[self.segment[self.rows]]

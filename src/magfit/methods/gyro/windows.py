@@ -166,14 +166,15 @@ def _constrained(
 
     c is eliminated (the Schur complement of the normal equations) and h is the eigenvector of the smallest
     eigenvalue of what is left, so the residuals of different models of H (general, or ``P S`` for each
-    mapping) are on one scale (|H|_F = 1). Normal equations through einsum, not an SVD or QR of the tall
-    design: LAPACK's threads on a shared machine made those most of a long recording's fit.
+    mapping) are on one scale (|H|_F = 1). Normal equations from one product of the tall design with itself,
+    not an SVD or QR of it: LAPACK's threads on a shared machine made those most of a long recording's fit.
     """
-    d_h = np.einsum("rj,jk->rk", design[:, :9], basis)
-    d_c = design[:, 9:]
-    n_hh = np.einsum("rj,rk->jk", d_h, d_h)
-    n_hc = np.einsum("rj,rk->jk", d_h, d_c)
-    n_cc = np.einsum("rj,rk->jk", d_c, d_c)
+    k = basis.shape[1]
+    reduced = np.empty((design.shape[0], k + 3))
+    np.matmul(design[:, :9], basis, out=reduced[:, :k])
+    reduced[:, k:] = design[:, 9:]
+    normal = reduced.T @ reduced
+    n_hh, n_hc, n_cc = normal[:k, :k], normal[:k, k:], normal[k:, k:]
     eliminate = np.linalg.solve(n_cc, n_hc.T)  # c = −N_cc⁻¹ N_chᵀ h
     values, vectors = np.linalg.eigh(n_hh - n_hc @ eliminate)
     h = vectors[:, 0]
@@ -190,16 +191,18 @@ def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.floa
     m = win.T.size
     for _ in range(iterations):
         h, c = theta[:9].reshape(3, 3), theta[9:]
-        residual = np.einsum("rj,j->r", _design(win, beta), theta)
+        jac_theta = _design(win, beta)
         # H ∫y − T c: the residual is linear in β through −β × u
         u = np.einsum("ij,mj->mi", h, win.Sy) - win.T[:, None] * c
-        jac_theta = _design(win, beta)
-        jac_beta = skew(u).reshape(3 * m, 3)
         q, _ = np.linalg.qr(np.column_stack([theta, np.eye(12)]))
         tangent = q[:, 1:12]
-        jac = np.column_stack([np.einsum("rj,jk->rk", jac_theta, tangent), jac_beta])
-        normal = np.einsum("rp,rq->pq", jac, jac)
-        step, *_ = np.linalg.lstsq(normal, -np.einsum("rp,r->p", jac, residual), rcond=None)
+        # [J r], J in (θ's tangent, β): the normal equations and the gradient from one product with itself
+        extended = np.empty((3 * m, 15))
+        np.matmul(jac_theta, tangent, out=extended[:, :11])
+        extended[:, 11:14] = skew(u).reshape(3 * m, 3)
+        extended[:, 14] = jac_theta @ theta
+        normal = extended.T @ extended
+        step, *_ = np.linalg.lstsq(normal[:14, :14], -normal[:14, 14], rcond=None)
         theta = theta + tangent @ step[:11]
         theta = theta / np.linalg.norm(theta)
         beta = beta + step[11:]
