@@ -113,6 +113,12 @@ def _rotations(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: N
 def _rotation_entries(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: NDArray[np.float64],
                       start: NDArray[np.bool_]) -> NDArray[np.float64]:  # fmt: skip
     """:func:`_rotations` entry by entry, (9, n), each row contiguous over the samples (row-major R_k)."""
+    return _entries(_rotation_quaternions(mean_rates, dt, beta, start))
+
+
+def _rotation_quaternions(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: NDArray[np.float64],
+                          start: NDArray[np.bool_]) -> NDArray[np.float64]:  # fmt: skip
+    """The quaternions of :func:`_rotations`, (4, n) components first: (K1), then the scan (K2)."""
     # Component by component (contiguous runs over the steps; the same arithmetic as on the (n − 1, 3) rows).
     phi = (np.ascontiguousarray(mean_rates.T) - np.asarray(beta, dtype=np.float64)[:, None]) * dt
     angle = np.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
@@ -123,7 +129,13 @@ def _rotation_entries(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], 
     q[0, 1:] = np.cos(0.5 * angle)
     np.multiply(phi, sinc, out=q[1:, 1:])
     q[:, start] = np.array([[1.0], [0.0], [0.0], [0.0]])  # a stretch starts from itself
-    s, x, y, z = _scan(q, start)
+    return _scan(q, start)
+
+
+def _entries(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The rotation matrices of unit quaternions ``q`` (4, m), entry by entry (9, m) (row-major R)."""
+    s, x, y, z = q
+    n = q.shape[1]
     xx, yy, zz, xy, xz, yz, sx, sy, sz = x * x, y * y, z * z, x * y, x * z, y * z, s * x, s * y, s * z
     r = np.empty((9, n))
     r[0], r[1], r[2] = 1 - 2 * (yy + zz), 2 * (xy - sz), 2 * (xz + sy)
