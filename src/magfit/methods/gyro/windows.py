@@ -74,10 +74,11 @@ class _Frame:
         return int(self.left.shape[0] * self.length)
 
     def integral(self, f: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``∫ f dt`` over every window (kept or not), (windows, k), trapezoid by trapezoid."""
+        """``∫ f dt`` over every window (kept or not), (windows, k), trapezoid by trapezoid (each window's sum a
+        row-by-column product: a strided sum over the middle axis takes ten times as long)."""
         used, shape = self.used, (self.left.shape[0], self.length, -1)
-        return np.asarray(np.sum(self.left * (f[:used].reshape(shape) + f[1 : used + 1].reshape(shape)), axis=1),
-                          dtype=np.float64)  # fmt: skip
+        ends = f[:used].reshape(shape) + f[1 : used + 1].reshape(shape)
+        return np.asarray(np.matmul(self.left.transpose(0, 2, 1), ends)[:, 0], dtype=np.float64)
 
     def windows(self, w: NDArray[np.float64]) -> _Windows:
         """The integrals of (W1) with the rates ``w`` (n, 3): only ``M`` and ``Sw`` depend on them."""
@@ -85,7 +86,8 @@ class _Frame:
         wl = (w[:used] * self.left.reshape(-1, 1)).reshape(windows, length, 3)
         wr = (w[1 : used + 1] * self.left.reshape(-1, 1)).reshape(windows, length, 3)
         moment = np.matmul(wl.transpose(0, 2, 1), self.yl) + np.matmul(wr.transpose(0, 2, 1), self.yr)  # ∫ ω yᵀ dt
-        return _Windows(self.dy, moment[self.whole], self.Sy, self.integral(w)[self.whole], self.T)
+        turn = np.matmul(np.ones((1, length)), wl + wr)[:, 0]  # ∫ ω dt, from the same weighted rates
+        return _Windows(self.dy, moment[self.whole], self.Sy, turn[self.whole], self.T)
 
 
 def _frame(y: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Frame:
