@@ -186,13 +186,13 @@ class _Trajectory:
             dense[:, i, :k] = b @ self.basis[3 * i : 3 * i + 3]
         dense[:, :3, k : k + 3] = np.eye(3)
         dense[:, :3, k + 3 : k + 6] = np.matmul(g, d_beta)
-        angles = p[self.head :].reshape(self.count, 2)[self.segment[self.rows]]
+        angles = p[self.head :].reshape(self.count, 2)  # ∂b₀ per stretch, then each row's stretch's
         elevation, azimuth = angles[:, 0], angles[:, 1]
         up, across = np.sin(elevation), np.cos(elevation)
         d_start = np.stack([
             np.column_stack([-up * np.cos(azimuth), -up * np.sin(azimuth), across]),
-            np.column_stack([-across * np.sin(azimuth), across * np.cos(azimuth), np.zeros(rows)]),
-        ], axis=2)  # fmt: skip
+            np.column_stack([-across * np.sin(azimuth), across * np.cos(azimuth), np.zeros(self.count)]),
+        ], axis=2)[self.segment[self.rows]]  # fmt: skip
         angular = np.zeros((rows, self.components, 2))
         turned = np.matmul(turns.transpose(0, 2, 1), d_start)  # R_kᵀ ∂b₀
         angular[:, :3] = np.matmul(g, turned)  # G R_kᵀ ∂b₀
