@@ -209,7 +209,7 @@ class _Trajectory:
     def normal_equations(self, p: NDArray[np.float64]) -> Evaluation:
         """½ Σ r², JᵀJ and Jᵀr from the blocks: the angle columns of a stretch only meet its own rows.
 
-        einsum, not BLAS: a threaded gemm on a tall, narrow Jacobian is far slower when cores are shared.
+        JᵀJ by :meth:`information`; the gradient by einsum (a matrix-vector product through BLAS was slower).
         """
         residual, dense, angular = self.blocks(p)
         gradient = np.concatenate([
