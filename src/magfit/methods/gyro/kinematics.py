@@ -144,6 +144,36 @@ def _entries(q: NDArray[np.float64]) -> NDArray[np.float64]:
     return r
 
 
+def _jacobian_steps(entries: NDArray[np.float64], mean_rates: NDArray[np.float64], dt: NDArray[np.float64],
+                    beta: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+    """``R_k J_r(φ_{k−1})`` entry by entry (9, n) (row-major; k = 0 carries R_0): the terms of the bias's exact
+    Jacobian, ``δR_k = −[Σ_{j<k} dt_j R_{j+1} J_r(φ_j) δβ]× R_k``, with the right Jacobian of (K1)::
+
+        exp([φ + δφ]×) = exp([φ]×) exp([J_r(φ) δφ]×),   J_r(φ) = I − a [φ]× + b [φ]×²,
+        a = (1 − cos θ) / θ²,  b = (θ − sin θ) / θ³,  θ = |φ|                                     (K3)
+
+    Row by row, ``r [φ]× = r × φ``.
+    """
+    phi = np.zeros((3, entries.shape[1]))
+    phi[:, 1:] = (np.ascontiguousarray(mean_rates.T) - np.asarray(beta, dtype=np.float64)[:, None]) * dt
+    theta2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    theta = np.sqrt(theta2)
+    small = theta < 1e-3  # the series, where the closed forms lose digits: a and b to θ⁴
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
+    b = np.where(small, 1.0 / 6.0 - theta2 / 120.0, (safe - np.sin(safe)) / (safe * safe * safe))
+    out = np.empty_like(entries)
+    px, py, pz = phi
+    for row in range(3):
+        rx, ry, rz = entries[3 * row], entries[3 * row + 1], entries[3 * row + 2]
+        cx, cy, cz = ry * pz - rz * py, rz * px - rx * pz, rx * py - ry * px  # r × φ
+        dx, dy, dz = cy * pz - cz * py, cz * px - cx * pz, cx * py - cy * px  # (r × φ) × φ
+        out[3 * row] = rx - a * cx + b * dx
+        out[3 * row + 1] = ry - a * cy + b * dy
+        out[3 * row + 2] = rz - a * cz + b * dz
+    return out
+
+
 def _unit(angles: NDArray[np.float64]) -> NDArray[np.float64]:
     """Unit vectors (m, 3) from (elevation, azimuth) pairs (m, 2), radians."""
     elevation, azimuth = angles[:, 0], angles[:, 1]

@@ -11,8 +11,9 @@ Levenberg-Marquardt on the residuals ``G b_k + V − y_k`` (and, with the accele
 :mod:`.gravity`). This uses that the field is one vector for many seconds, which the windows of stage 1
 forget; longer stretches add fewer unknowns but let the gyro's noise walk the integrated rotation away.
 
-The Jacobian in β follows from ``R_k = D_0 … D_{k−1}``: to first order in each step
-``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1}`` (a running sum over the stretch), so::
+The Jacobian in β follows from ``R_k = D_0 … D_{k−1}``: each step turns by ``J_r(φ_j) δφ_j`` more
+(eq. K3 of :mod:`.kinematics`, ``δφ_j = −dt_j δβ``), which carried to the stretch's start is
+``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1} J_r(φ_j)`` (a running sum over the stretch), so::
 
     ∂b_k/∂β = −R_kᵀ [b₀]× C_k                                                     (M2)
 
@@ -20,11 +21,11 @@ The screening fits (a stride of the recording's rows, :data:`SCREEN_ROWS`) integ
 carry each row's turn from the row before it (or from its stretch's start), ``ΔR_i = R_aᵀ R_r``, to a nearby
 β by the same first-order rule over that interval, with ``ΔC_i = R_aᵀ (C_r − C_a)``::
 
-    ΔR_i(β) ≈ exp([−ΔC_i (β − β̄)]×) ΔR_i(β̄),    R_r = R_a ΔR_i,    C_r ≈ C_a + R_a ΔC_i(β̄)              (M4)
+    ΔR_i(β) = exp([−ΔC_i (β − β̄)]×) ΔR_i(β̄) + O((|β − β̄| T_i)²),    R_r = R_a ΔR_i,
+    C_r ≈ C_a + R_a ΔC_i(β̄)                                                                          (M4)
 
-(the rows' chain a scan over the rows, reset at each stretch). Its error grows with ``|β − β̄|`` (the rule
-(M2) holds to first order in each step's turn too), so the gyro is integrated again at β once
-``|β − β̄| max T_i`` exceeds :data:`LINEAR_TURN` (T_i an interval's length): an evaluation then costs a scan
+(the rows' chain a scan over the rows, reset at each stretch; T_i an interval's length). The gyro is
+integrated again at β once ``|β − β̄| max T_i`` exceeds :data:`LINEAR_TURN`: an evaluation then costs a scan
 over the rows instead of over every sample. C enters only the Jacobian, which moves the steps, not the
 minimum. The fit that is kept, the halves and the covariance integrate every sample at every β, so the
 screening's small error only moves where the kept fit starts.
@@ -48,7 +49,7 @@ from numpy.typing import NDArray
 from ..._optimize import Evaluation, Solution, levenberg_marquardt
 from ...rotations import skew
 from .gravity import ACCEL_BIAS_PRIOR, _cos, _Gravity, _gravity_angle
-from .kinematics import _entries, _product, _rotation_entries, _rotation_quaternions, _scan, _unit
+from .kinematics import _entries, _jacobian_steps, _product, _rotation_entries, _rotation_quaternions, _scan, _unit
 from .mapping import MAPPINGS
 from .windows import _gaps, _symmetric
 
@@ -65,8 +66,8 @@ MAX_SEGMENTS = 60
 #: order in the bias (M4); closer rows integrate every sample (the saving would be small).
 LINEAR_STRIDE = 4
 #: ... integrating again when the bias has moved by more than this turn (radians) over the longest interval
-#: between rows (docs/scaling.md, "gyro": the rotations' error that leaves).
-LINEAR_TURN = 1e-4
+#: between rows: (M4)'s error is of its square (docs/scaling.md, "gyro": the error measured).
+LINEAR_TURN = 1e-3
 
 
 @dataclass(frozen=True)
@@ -136,8 +137,8 @@ class _Trajectory:
     def field(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """b_k = R_kᵀ b₀ at ``rows``, the (rows, 3, 3) rotations, and ∂b_k/∂β (rows, 3, 3).
 
-        ``R_k = D_0 … D_{k−1}`` with ``D_j = exp([(ω̄_j − β) dt_j]×)``, so to first order in each step
-        ``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1}`` (a running sum over the stretch), and
+        ``R_k = D_0 … D_{k−1}`` with ``D_j = exp([(ω̄_j − β) dt_j]×)``, so ``δR_k = −[C_k δβ]× R_k`` with
+        ``C_k = Σ_{j<k} dt_j R_{j+1} J_r(φ_j)`` (a running sum over the stretch; module docstring), and
         ``∂b_k/∂β = −R_kᵀ [b₀]× C_k``.
         """
         if self.linear:
@@ -270,7 +271,7 @@ class _Trajectory:
 
 @dataclass(frozen=True)
 class _Integration:
-    """The rotations R_k (n, 3, 3) and running sums Σ dt_j R_{j+1} (n, 3, 3) of one recording at one bias."""
+    """The rotations R_k (n, 3, 3) and running sums Σ dt_j R_{j+1} J_r(φ_j) (n, 3, 3) of one recording at one bias."""
 
     w: NDArray[np.float64]
     t: NDArray[np.float64]
@@ -300,9 +301,9 @@ def _integrated(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[n
     entries = _rotation_entries(mean_rates, dt, beta, start)  # (9, n): each entry's run over the samples
     n = start.size
     turns = entries.T.reshape(n, 3, 3)
-    # Σ dt_j R_{j+1} (none across a start), summed along each entry's contiguous run: the same sums, in the
-    # same order, as over the (n, 3, 3) view, in a third of the time.
-    running = np.cumsum(entries * weights, axis=1).T.reshape(n, 3, 3)
+    # Σ dt_j R_{j+1} J_r(φ_j) (none across a start), summed along each entry's contiguous run: a third of the
+    # time of the same sums over the (n, 3, 3) view.
+    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
     with _LOCK:
         _LAST[:] = [_Integration(traj.w, traj.t, traj.segment, key, turns, running)]
     return turns, running
@@ -348,7 +349,7 @@ def _linearization(traj: _Trajectory, beta: NDArray[np.float64]) -> _Linearizati
     q = _rotation_quaternions(mean_rates, dt, beta, start)
     entries = _entries(q)
     n, rows = start.size, traj.rows
-    running = np.cumsum(entries * weights, axis=1).T.reshape(n, 3, 3)
+    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
     restart = np.ones(rows.size, dtype=bool)
     restart[1:] = traj.segment[rows[1:]] != traj.segment[rows[:-1]]
     anchor = np.where(restart, traj.first[rows], np.concatenate([[0], rows[:-1]]))
