@@ -80,14 +80,15 @@ def _choose(
     # every row (up to MAX_RESIDUAL_SAMPLES) from there.
     offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
     inverse = np.asarray(np.linalg.inv(h), dtype=np.float64)
-    general = _fit_model(y, w, t, segment_s, "general", inverse, offset, beta, SCREEN_ROWS)
+    general = _fit_model(y, w, t, segment_s, "general", inverse, offset, beta, SCREEN_ROWS, linear=True)
     _check_handedness(y, w, t, win, segment_s, general)
     if gravity is not None:
         # The weight from the kinematic fit's residuals, then once more from the fit with the gravity rows:
         # the first residuals carry the fit's own error in the direction the gravity rows pin.
         for _ in range(2):
             gravity = _weighted(general, gravity)
-            general = _fit_model(y, w, t, segment_s, "general", *_parts(general), SCREEN_ROWS, gravity=gravity)
+            general = _fit_model(y, w, t, segment_s, "general", *_parts(general), SCREEN_ROWS, gravity=gravity,
+                                     linear=True)  # fmt: skip
     chosen, excess, ambiguous = general, {}, None
     if mapping != "general":
         if mapping in MAPPINGS:
@@ -97,7 +98,8 @@ def _choose(
             rotation, _ = polar_decomposition(np.linalg.inv(g) * np.sign(np.linalg.det(g)))
             names = list(dict.fromkeys([mapping_name(rotation), *_windowed_ranking(design)[:2]]))
         start = _parts(general)
-        fitted = [_fit_model(y, w, t, segment_s, name, *start, SCREEN_ROWS, SCREEN_ITER, gravity) for name in names]
+        fitted = [_fit_model(y, w, t, segment_s, name, *start, SCREEN_ROWS, SCREEN_ITER, gravity, linear=True)
+                  for name in names]  # fmt: skip
         # W = G P must be definite (a soft iron; negative for a mirrored sensor): an indefinite W is P times a
         # half turn about W's eigenvectors, another mounting that this label does not stand for.
         screened = sorted((m for m in fitted if _definite(m)), key=lambda m: m.rss)

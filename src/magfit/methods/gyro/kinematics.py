@@ -113,6 +113,12 @@ def _rotations(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: N
 def _rotation_entries(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: NDArray[np.float64],
                       start: NDArray[np.bool_]) -> NDArray[np.float64]:  # fmt: skip
     """:func:`_rotations` entry by entry, (9, n), each row contiguous over the samples (row-major R_k)."""
+    return _entries(_rotation_quaternions(mean_rates, dt, beta, start))
+
+
+def _rotation_quaternions(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], beta: NDArray[np.float64],
+                          start: NDArray[np.bool_]) -> NDArray[np.float64]:  # fmt: skip
+    """The quaternions of :func:`_rotations`, (4, n) components first: (K1), then the scan (K2)."""
     # Component by component (contiguous runs over the steps; the same arithmetic as on the (n − 1, 3) rows).
     phi = (np.ascontiguousarray(mean_rates.T) - np.asarray(beta, dtype=np.float64)[:, None]) * dt
     angle = np.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
@@ -123,13 +129,49 @@ def _rotation_entries(mean_rates: NDArray[np.float64], dt: NDArray[np.float64], 
     q[0, 1:] = np.cos(0.5 * angle)
     np.multiply(phi, sinc, out=q[1:, 1:])
     q[:, start] = np.array([[1.0], [0.0], [0.0], [0.0]])  # a stretch starts from itself
-    s, x, y, z = _scan(q, start)
+    return _scan(q, start)
+
+
+def _entries(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The rotation matrices of unit quaternions ``q`` (4, m), entry by entry (9, m) (row-major R)."""
+    s, x, y, z = q
+    n = q.shape[1]
     xx, yy, zz, xy, xz, yz, sx, sy, sz = x * x, y * y, z * z, x * y, x * z, y * z, s * x, s * y, s * z
     r = np.empty((9, n))
     r[0], r[1], r[2] = 1 - 2 * (yy + zz), 2 * (xy - sz), 2 * (xz + sy)
     r[3], r[4], r[5] = 2 * (xy + sz), 1 - 2 * (xx + zz), 2 * (yz - sx)
     r[6], r[7], r[8] = 2 * (xz - sy), 2 * (yz + sx), 1 - 2 * (xx + yy)
     return r
+
+
+def _jacobian_steps(entries: NDArray[np.float64], mean_rates: NDArray[np.float64], dt: NDArray[np.float64],
+                    beta: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
+    """``R_k J_r(φ_{k−1})`` entry by entry (9, n) (row-major; k = 0 carries R_0): the terms of the bias's exact
+    Jacobian, ``δR_k = −[Σ_{j<k} dt_j R_{j+1} J_r(φ_j) δβ]× R_k``, with the right Jacobian of (K1)::
+
+        exp([φ + δφ]×) = exp([φ]×) exp([J_r(φ) δφ]×),   J_r(φ) = I − a [φ]× + b [φ]×²,
+        a = (1 − cos θ) / θ²,  b = (θ − sin θ) / θ³,  θ = |φ|                                     (K3)
+
+    Row by row, ``r [φ]× = r × φ``.
+    """
+    phi = np.zeros((3, entries.shape[1]))
+    phi[:, 1:] = (np.ascontiguousarray(mean_rates.T) - np.asarray(beta, dtype=np.float64)[:, None]) * dt
+    theta2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    theta = np.sqrt(theta2)
+    small = theta < 1e-3  # the series, where the closed forms lose digits: a and b to θ⁴
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
+    b = np.where(small, 1.0 / 6.0 - theta2 / 120.0, (safe - np.sin(safe)) / (safe * safe * safe))
+    out = np.empty_like(entries)
+    px, py, pz = phi
+    for row in range(3):
+        rx, ry, rz = entries[3 * row], entries[3 * row + 1], entries[3 * row + 2]
+        cx, cy, cz = ry * pz - rz * py, rz * px - rx * pz, rx * py - ry * px  # r × φ
+        dx, dy, dz = cy * pz - cz * py, cz * px - cx * pz, cx * py - cy * px  # (r × φ) × φ
+        out[3 * row] = rx - a * cx + b * dx
+        out[3 * row + 1] = ry - a * cy + b * dy
+        out[3 * row + 2] = rz - a * cz + b * dz
+    return out
 
 
 def _unit(angles: NDArray[np.float64]) -> NDArray[np.float64]:

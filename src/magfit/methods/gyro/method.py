@@ -53,7 +53,7 @@ from .lag import _delayed, _search_lag
 from .mapping import MAPPINGS, mapping_name
 from .model import _covariance, _Model, forget_integration
 from .rates import _check_gyro, _check_readings, _check_readings_by_fit, _motion, _own_rate, _Reading
-from .windows import WINDOW_S, _turn_axes, _windowed_bias, _Windows, _windows, window_length
+from .windows import WINDOW_S, _turn_axes, _windowed_bias, _Windows, _windows, forget_frame, window_length
 
 
 @register(
@@ -143,6 +143,7 @@ def fit_gyro(
         ) from None
     finally:
         forget_integration()
+        forget_frame()
 
 
 def _fit_gyro(data: FitInput, *, gyro: ArrayLike | None, time_s: ArrayLike | None, mapping: str, segment_s: float,

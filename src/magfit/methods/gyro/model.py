@@ -11,10 +11,24 @@ Levenberg-Marquardt on the residuals ``G b_k + V − y_k`` (and, with the accele
 :mod:`.gravity`). This uses that the field is one vector for many seconds, which the windows of stage 1
 forget; longer stretches add fewer unknowns but let the gyro's noise walk the integrated rotation away.
 
-The Jacobian in β follows from ``R_k = D_0 … D_{k−1}``: to first order in each step
-``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1}`` (a running sum over the stretch), so::
+The Jacobian in β follows from ``R_k = D_0 … D_{k−1}``: each step turns by ``J_r(φ_j) δφ_j`` more
+(eq. K3 of :mod:`.kinematics`, ``δφ_j = −dt_j δβ``), which carried to the stretch's start is
+``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1} J_r(φ_j)`` (a running sum over the stretch), so::
 
     ∂b_k/∂β = −R_kᵀ [b₀]× C_k                                                     (M2)
+
+The screening fits (a stride of the recording's rows, :data:`SCREEN_ROWS`) integrate the gyro at one bias β̄ and
+carry each row's turn from the row before it (or from its stretch's start), ``ΔR_i = R_aᵀ R_r``, to a nearby
+β by the same first-order rule over that interval, with ``ΔC_i = R_aᵀ (C_r − C_a)``::
+
+    ΔR_i(β) = exp([−ΔC_i (β − β̄)]×) ΔR_i(β̄) + O((|β − β̄| T_i)²),    R_r = R_a ΔR_i,
+    C_r ≈ C_a + R_a ΔC_i(β̄)                                                                          (M4)
+
+(the rows' chain a scan over the rows, reset at each stretch; T_i an interval's length). The gyro is
+integrated again at β once ``|β − β̄| max T_i`` exceeds :data:`LINEAR_TURN`: an evaluation then costs a scan
+over the rows instead of over every sample. C enters only the Jacobian, which moves the steps, not the
+minimum. The fit that is kept, the halves and the covariance integrate every sample at every β, so the
+screening's small error only moves where the kept fit starts.
 
 The covariance is the sandwich ``I⁻¹ (Σ_batches s sᵀ) I⁻¹`` of the score summed over contiguous batches of the
 recording (the gyro's noise walks, so neighbouring residuals are correlated), never below the independent
@@ -35,7 +49,7 @@ from numpy.typing import NDArray
 from ..._optimize import Evaluation, Solution, levenberg_marquardt
 from ...rotations import skew
 from .gravity import ACCEL_BIAS_PRIOR, _cos, _Gravity, _gravity_angle
-from .kinematics import _rotation_entries, _unit
+from .kinematics import _entries, _jacobian_steps, _product, _rotation_entries, _rotation_quaternions, _scan, _unit
 from .mapping import MAPPINGS
 from .windows import _gaps, _symmetric
 
@@ -48,6 +62,12 @@ SCREEN_ROWS = 3_000
 SCREEN_ITER = 40
 #: At most this many stretches (each adds two unknowns); longer recordings get longer stretches.
 MAX_SEGMENTS = 60
+#: Screening fits whose rows are at least this many samples apart carry the rotations between rows to first
+#: order in the bias (M4); closer rows integrate every sample (the saving would be small).
+LINEAR_STRIDE = 4
+#: ... integrating again when the bias has moved by more than this turn (radians) over the longest interval
+#: between rows: (M4)'s error is of its square (docs/scaling.md, "gyro": the error measured).
+LINEAR_TURN = 1e-3
 
 
 @dataclass(frozen=True)
@@ -68,6 +88,7 @@ class _Trajectory:
     count: int
     basis: NDArray[np.float64]
     gravity: _Gravity | None = None
+    linear: bool = False
 
     @cached_property
     def steps(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
@@ -116,17 +137,20 @@ class _Trajectory:
     def field(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """b_k = R_kᵀ b₀ at ``rows``, the (rows, 3, 3) rotations, and ∂b_k/∂β (rows, 3, 3).
 
-        ``R_k = D_0 … D_{k−1}`` with ``D_j = exp([(ω̄_j − β) dt_j]×)``, so to first order in each step
-        ``δR_k = −[C_k δβ]× R_k`` with ``C_k = Σ_{j<k} dt_j R_{j+1}`` (a running sum over the stretch), and
+        ``R_k = D_0 … D_{k−1}`` with ``D_j = exp([(ω̄_j − β) dt_j]×)``, so ``δR_k = −[C_k δβ]× R_k`` with
+        ``C_k = Σ_{j<k} dt_j R_{j+1} J_r(φ_j)`` (a running sum over the stretch; module docstring), and
         ``∂b_k/∂β = −R_kᵀ [b₀]× C_k``.
         """
-        turns, running = _integrated(self, p[self.k + 3 : self.k + 6])
-        running = running[self.rows] - running[self.first[self.rows]]
-        turns = turns[self.rows]
+        if self.linear:
+            turns, running = _linearized(self, p[self.k + 3 : self.k + 6])
+        else:
+            turns, running = _integrated(self, p[self.k + 3 : self.k + 6])
+            running = running[self.rows] - running[self.first[self.rows]]
+            turns = turns[self.rows]
         start = _unit(p[self.head :].reshape(self.count, 2))[self.segment[self.rows]]
         # (M2), R_kᵀ [b₀]× C_k: stacked 3×3 products (numpy's own loop, no threaded BLAS, far quicker than einsum)
         d_beta = -np.matmul(np.matmul(turns.transpose(0, 2, 1), skew(start)), running)
-        return np.einsum("kji,kj->ki", turns, start), turns, d_beta
+        return np.matmul(turns.transpose(0, 2, 1), start[:, :, None])[:, :, 0], turns, d_beta
 
     def _gravity_rows(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """d_k (rows, 3) and each row's weight (rows,): 0 where the accelerometer is not still."""
@@ -135,7 +159,7 @@ class _Trajectory:
         return down, self.gravity.weight * self.gravity.still[self.rows].astype(np.float64)
 
     def _residual_of(self, p: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-        magnetometer = np.einsum("ij,kj->ki", self.distortion(p), b) + p[self.k : self.k + 3] - self.y[self.rows]
+        magnetometer = b @ self.distortion(p).T + p[self.k : self.k + 3] - self.y[self.rows]
         if self.gravity is None:
             return magnetometer
         down, weight = self._gravity_rows()
@@ -160,16 +184,16 @@ class _Trajectory:
         dense = np.zeros((rows, self.components, self.head))
         for i in range(3):
             # ∂(G b)_i / ∂G_ij = b_j, through the basis
-            dense[:, i, :k] = np.einsum("kj,jq->kq", b, self.basis[3 * i : 3 * i + 3])
+            dense[:, i, :k] = b @ self.basis[3 * i : 3 * i + 3]
         dense[:, :3, k : k + 3] = np.eye(3)
         dense[:, :3, k + 3 : k + 6] = np.matmul(g, d_beta)
-        angles = p[self.head :].reshape(self.count, 2)[self.segment[self.rows]]
+        angles = p[self.head :].reshape(self.count, 2)  # ∂b₀ per stretch, then each row's stretch's
         elevation, azimuth = angles[:, 0], angles[:, 1]
         up, across = np.sin(elevation), np.cos(elevation)
         d_start = np.stack([
             np.column_stack([-up * np.cos(azimuth), -up * np.sin(azimuth), across]),
-            np.column_stack([-across * np.sin(azimuth), across * np.cos(azimuth), np.zeros(rows)]),
-        ], axis=2)  # fmt: skip
+            np.column_stack([-across * np.sin(azimuth), across * np.cos(azimuth), np.zeros(self.count)]),
+        ], axis=2)[self.segment[self.rows]]  # fmt: skip
         angular = np.zeros((rows, self.components, 2))
         turned = np.matmul(turns.transpose(0, 2, 1), d_start)  # R_kᵀ ∂b₀
         angular[:, :3] = np.matmul(g, turned)  # G R_kᵀ ∂b₀
@@ -186,7 +210,7 @@ class _Trajectory:
     def normal_equations(self, p: NDArray[np.float64]) -> Evaluation:
         """½ Σ r², JᵀJ and Jᵀr from the blocks: the angle columns of a stretch only meet its own rows.
 
-        einsum, not BLAS: a threaded gemm on a tall, narrow Jacobian is far slower when cores are shared.
+        JᵀJ by :meth:`information`; the gradient by einsum (a matrix-vector product through BLAS was slower).
         """
         residual, dense, angular = self.blocks(p)
         gradient = np.concatenate([
@@ -204,18 +228,26 @@ class _Trajectory:
         return out
 
     def information(self, dense: NDArray[np.float64], angular: NDArray[np.float64]) -> NDArray[np.float64]:
-        """JᵀJ (p.size, p.size) from the blocks of :meth:`blocks`: a stretch's angles meet only its own rows."""
+        """JᵀJ (p.size, p.size) from the blocks of :meth:`blocks`: a stretch's angles meet only its own rows.
+
+        The head block is one product of the (rows · C, head) Jacobian with itself, and each stretch's columns
+        one product of its own rows: matrix products on few columns, a tenth of einsum's time even on shared
+        cores (einsum adds the rows in another order: the sums agree to rounding, not bit for bit).
+        """
         head = self.head
         size = head + 2 * self.count
         normal = np.zeros((size, size))
-        normal[:head, :head] = np.einsum("kip,kiq->pq", dense, dense)
-        cross = self._by_stretch(np.matmul(dense.transpose(0, 2, 1), angular))  # (count, head, 2)
-        own = self._by_stretch(np.matmul(angular.transpose(0, 2, 1), angular))  # (count, 2, 2)
+        flat = dense.reshape(-1, head)
+        normal[:head, :head] = flat.T @ flat
+        angles = angular.reshape(-1, 2)
+        bounds = self.components * np.append(self.starts, self.rows.size)
         for s in range(self.count):
+            rows = slice(bounds[s], bounds[s + 1])
             columns = slice(head + 2 * s, head + 2 * s + 2)
-            normal[:head, columns] = cross[s]
-            normal[columns, :head] = cross[s].T
-            normal[columns, columns] = own[s]
+            cross = flat[rows].T @ angles[rows]  # (head, 2); zeros for a stretch with no rows
+            normal[:head, columns] = cross
+            normal[columns, :head] = cross.T
+            normal[columns, columns] = angles[rows].T @ angles[rows]
         return normal
 
     def score(self, dense: NDArray[np.float64], angular: NDArray[np.float64],
@@ -239,7 +271,7 @@ class _Trajectory:
 
 @dataclass(frozen=True)
 class _Integration:
-    """The rotations R_k (n, 3, 3) and running sums Σ dt_j R_{j+1} (n, 3, 3) of one recording at one bias."""
+    """The rotations R_k (n, 3, 3) and running sums Σ dt_j R_{j+1} J_r(φ_j) (n, 3, 3) of one recording at one bias."""
 
     w: NDArray[np.float64]
     t: NDArray[np.float64]
@@ -269,23 +301,95 @@ def _integrated(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[n
     entries = _rotation_entries(mean_rates, dt, beta, start)  # (9, n): each entry's run over the samples
     n = start.size
     turns = entries.T.reshape(n, 3, 3)
-    # Σ dt_j R_{j+1} (none across a start), summed along each entry's contiguous run: the same sums, in the
-    # same order, as over the (n, 3, 3) view, in a third of the time.
-    running = np.cumsum(entries * weights, axis=1).T.reshape(n, 3, 3)
+    # Σ dt_j R_{j+1} J_r(φ_j) (none across a start), summed along each entry's contiguous run: a third of the
+    # time of the same sums over the (n, 3, 3) view.
+    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
     with _LOCK:
         _LAST[:] = [_Integration(traj.w, traj.t, traj.segment, key, turns, running)]
     return turns, running
 
 
 def forget_integration() -> None:
-    """Drop the kept integration (its arrays are the size of the recording)."""
+    """Drop the kept integrations (their arrays are the size of the recording)."""
     with _LOCK:
         _LAST.clear()
+        _LINEAR.clear()
+
+
+@dataclass(frozen=True)
+class _Linearization:
+    """(M4) of one recording's rows at the bias ``beta``: each row's turn from its anchor (the row before in its
+    stretch, or the stretch's first sample) as a quaternion ``local`` (4, m), ``ΔC_i`` (m, 3, 3), the rows that
+    start a stretch's chain ``restart`` (m,), and the longest interval ``reach`` (s)."""
+
+    w: NDArray[np.float64]
+    t: NDArray[np.float64]
+    segment: NDArray[np.int64]
+    rows: NDArray[np.int64]
+    beta: NDArray[np.float64]
+    local: NDArray[np.float64]
+    sums: NDArray[np.float64]
+    restart: NDArray[np.bool_]
+    reach: float
+
+    def holds(self, traj: _Trajectory, beta: NDArray[np.float64]) -> bool:
+        """True for ``traj``'s recording and rows, with ``beta`` within :data:`LINEAR_TURN` of its own."""
+        return (self.w is traj.w and self.t is traj.t and np.array_equal(self.segment, traj.segment)
+                and np.array_equal(self.rows, traj.rows)
+                and float(np.max(np.abs(beta - self.beta))) * self.reach <= LINEAR_TURN)  # fmt: skip
+
+
+#: The screening fits' linearizations: the general fit's and the negated rates' (:mod:`.rates`), the last two.
+_LINEAR: list[_Linearization] = []
+
+
+def _linearization(traj: _Trajectory, beta: NDArray[np.float64]) -> _Linearization:
+    """(M4)'s terms at ``beta`` from one integration over every sample."""
+    mean_rates, dt, start, weights = traj.steps
+    q = _rotation_quaternions(mean_rates, dt, beta, start)
+    entries = _entries(q)
+    n, rows = start.size, traj.rows
+    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
+    restart = np.ones(rows.size, dtype=bool)
+    restart[1:] = traj.segment[rows[1:]] != traj.segment[rows[:-1]]
+    anchor = np.where(restart, traj.first[rows], np.concatenate([[0], rows[:-1]]))
+    conjugate = q[:, anchor] * np.array([[1.0], [-1.0], [-1.0], [-1.0]])
+    local = _product(conjugate, q[:, rows])  # ΔR_i = R_aᵀ R_r
+    turned = entries[:, anchor].T.reshape(-1, 3, 3)
+    sums = np.matmul(turned.transpose(0, 2, 1), running[rows] - running[anchor])  # ΔC_i = R_aᵀ (C_r − C_a)
+    reach = float(np.max(traj.t[rows] - traj.t[anchor]))
+    return _Linearization(traj.w, traj.t, traj.segment, rows, np.array(beta, dtype=np.float64), local, sums,
+                          restart, reach)  # fmt: skip
+
+
+def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """R_k and ``C_k`` at ``traj``'s rows (rows, 3, 3) at bias ``beta`` by (M4), from the linearization that holds
+    (or a new one)."""
+    with _LOCK:
+        found = next((kept for kept in _LINEAR if kept.holds(traj, beta)), None)
+    if found is None:
+        found = _linearization(traj, beta)
+        with _LOCK:
+            _LINEAR[:] = [*_LINEAR[-1:], found]
+    v = -np.matmul(found.sums, beta - found.beta)  # (rows, 3): exp([v]×) carries ΔR_i to β
+    angle = np.sqrt(np.einsum("ki,ki->k", v, v))
+    sinc = np.where(angle > 1e-12, np.sin(0.5 * angle) / np.maximum(angle, 1e-300), 0.5)
+    correction = np.concatenate([np.cos(0.5 * angle)[None], (v * sinc[:, None]).T])
+    chained = _scan(_product(correction, found.local), found.restart)  # R_r = R_a ΔR_i along each stretch
+    m = traj.rows.size
+    turns = _entries(chained).T.reshape(m, 3, 3)
+    before = np.empty_like(turns)  # R_a: the row before's, or I at a stretch's first row
+    before[1:] = turns[:-1]
+    before[found.restart] = np.eye(3)
+    steps = np.matmul(before, found.sums)  # R_a ΔC_i
+    total = np.cumsum(steps, axis=0)
+    first = traj.starts[traj.segment[traj.rows]]  # each row's stretch's first row
+    return turns, total - total[first] + steps[first]
 
 
 def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
                 basis: NDArray[np.float64], max_rows: int = MAX_RESIDUAL_SAMPLES,
-                gravity: _Gravity | None = None) -> _Trajectory:  # fmt: skip
+                gravity: _Gravity | None = None, linear: bool = False) -> _Trajectory:  # fmt: skip
     span = float(t[-1] - t[0])
     length = max(segment_s, span / MAX_SEGMENTS)
     segment = np.minimum(((t - t[0]) // length).astype(np.int64), max(int(span // length) - 1, 0))
@@ -293,7 +397,8 @@ def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.fl
     segment = np.concatenate([[0], np.cumsum((np.diff(segment) != 0) | _gaps(t))]).astype(np.int64)
     stride = max(1, math.ceil(y.shape[0] / max_rows))
     rows = np.arange(0, y.shape[0], stride)
-    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity)
+    linear = linear and stride >= LINEAR_STRIDE
+    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity, linear)
 
 
 def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64],
@@ -463,9 +568,11 @@ class _Model:
 def _fit_model(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
                name: str, g: NDArray[np.float64], offset: NDArray[np.float64], beta: NDArray[np.float64],
                max_rows: int = MAX_RESIDUAL_SAMPLES, iterations: int = 60,
-               gravity: _Gravity | None = None) -> _Model:  # fmt: skip
+               gravity: _Gravity | None = None, linear: bool = False) -> _Model:  # fmt: skip
+    """One model of G fitted from G, V and β; ``linear``: a screening fit, whose rotations between its rows may
+    follow the bias to first order (M4)."""
     basis = np.eye(9) if name == "general" else _symmetric(np.eye(3), MAPPINGS[name].T)  # G = W Pᵀ = (P S)⁻¹
-    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity)
+    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity, linear)
     return _Model(name, traj, _maximum_likelihood(traj, _start(traj, g, offset, beta), iterations))
 
 

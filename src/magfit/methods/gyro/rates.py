@@ -272,7 +272,8 @@ def _check_readings_by_fit(y: NDArray[np.float64], t: NDArray[np.float64], readi
             h, c, _ = _constrained(_design(win, beta), np.eye(9))
             offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
             start = np.asarray(np.linalg.inv(h), dtype=np.float64)
-            model = _fit_model(y, reading.w, reading.t, segment_s, "general", start, offset, beta, SCREEN_ROWS)
+            model = _fit_model(y, reading.w, reading.t, segment_s, "general", start, offset, beta, SCREEN_ROWS,
+                               linear=True)  # fmt: skip
         except np.linalg.LinAlgError:
             continue
         g = model.traj.distortion(model.solution.params)
@@ -297,7 +298,7 @@ def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray
         h, c, _ = _constrained(_design(negated, beta), np.eye(9))
         offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
         start = np.asarray(np.linalg.inv(h), dtype=np.float64)
-        mirrored = _fit_model(y, -w, t, segment_s, "general", start, offset, beta, SCREEN_ROWS)
+        mirrored = _fit_model(y, -w, t, segment_s, "general", start, offset, beta, SCREEN_ROWS, linear=True)
     except np.linalg.LinAlgError:
         return
     g = mirrored.traj.distortion(mirrored.solution.params)

@@ -18,7 +18,8 @@ across it was not measured.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import threading
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,36 +52,88 @@ def _gaps(t: NDArray[np.float64]) -> NDArray[np.bool_]:
     return np.asarray(steps > max(GAP_STEPS * float(np.median(steps)), GAP_MIN_S), dtype=bool)
 
 
-def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Windows:
-    """The integrals of (W1) over consecutive windows of ``length`` samples, those across a gap left out.
+@dataclass(frozen=True)
+class _Frame:
+    """What the windows of one recording share whatever rates are read against it (the lag searched, the
+    readings of the inputs tried): the trapezoids' half-steps, the samples cut into windows, ``∫ y dt``, ``dy``,
+    ``T`` and the windows kept (none across a gap). :func:`_windows` is :meth:`windows` of this."""
 
-    Trapezoids: over a window ``[s, s + L]``, ``∫ f dt = Σ_{k=s}^{s+L−1} ½ dt_k (f_k + f_{k+1})``, summed window
-    by window (each sample weighted by the half-steps beside it), not as differences of running sums.
-    """
+    y: NDArray[np.float64]
+    t: NDArray[np.float64]
+    length: int
+    left: NDArray[np.float64]
+    yl: NDArray[np.float64]
+    yr: NDArray[np.float64]
+    whole: NDArray[np.bool_]
+    dy: NDArray[np.float64]
+    Sy: NDArray[np.float64]
+    T: NDArray[np.float64]
+
+    @property
+    def used(self) -> int:
+        return int(self.left.shape[0] * self.length)
+
+    def integral(self, f: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``∫ f dt`` over every window (kept or not), (windows, k), trapezoid by trapezoid (each window's sum a
+        row-by-column product: a strided sum over the middle axis takes ten times as long)."""
+        used, shape = self.used, (self.left.shape[0], self.length, -1)
+        ends = f[:used].reshape(shape) + f[1 : used + 1].reshape(shape)
+        return np.asarray(np.matmul(self.left.transpose(0, 2, 1), ends)[:, 0], dtype=np.float64)
+
+    def windows(self, w: NDArray[np.float64]) -> _Windows:
+        """The integrals of (W1) with the rates ``w`` (n, 3): only ``M`` and ``Sw`` depend on them."""
+        used, windows, length = self.used, self.left.shape[0], self.length
+        wl = (w[:used] * self.left.reshape(-1, 1)).reshape(windows, length, 3)
+        wr = (w[1 : used + 1] * self.left.reshape(-1, 1)).reshape(windows, length, 3)
+        moment = np.matmul(wl.transpose(0, 2, 1), self.yl) + np.matmul(wr.transpose(0, 2, 1), self.yr)  # ∫ ω yᵀ dt
+        turn = np.matmul(np.ones((1, length)), wl + wr)[:, 0]  # ∫ ω dt, from the same weighted rates
+        return _Windows(self.dy, moment[self.whole], self.Sy, turn[self.whole], self.T)
+
+
+def _frame(y: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Frame:
+    """The :class:`_Frame` of ``y`` and ``t`` in windows of ``length`` samples (the last one kept while the
+    same arrays are asked for again, until :func:`forget_frame`)."""
+    with _LOCK:
+        for last in _LAST:
+            if last.y is y and last.t is t and last.length == length:
+                return last
     dt = np.diff(t)
     starts = np.arange(0, len(y) - length, length)
     windows = starts.size
     used = windows * length  # the pieces k = 0 … used − 1 (every window's), samples 0 … used
-    half = 0.5 * dt[:used]
     # ½ dt_k weighs sample k (the piece's left end) and sample k + 1 (its right end), window by window
-    left = half.reshape(windows, length, 1)
-
-    def integral(f: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.asarray(
-            np.sum(left * (f[:used].reshape(windows, length, -1) + f[1 : used + 1].reshape(windows, length, -1)),
-                   axis=1),
-            dtype=np.float64,
-        )  # fmt: skip
-
-    wl, yl = (w[:used] * left.reshape(-1, 1)).reshape(windows, length, 3), y[:used].reshape(windows, length, 3)
-    wr = (w[1 : used + 1] * left.reshape(-1, 1)).reshape(windows, length, 3)
-    yr = y[1 : used + 1].reshape(windows, length, 3)
-    moment = np.matmul(wl.transpose(0, 2, 1), yl) + np.matmul(wr.transpose(0, 2, 1), yr)  # ∫ ω yᵀ dt
+    left = (0.5 * dt[:used]).reshape(windows, length, 1)
+    yl, yr = y[:used].reshape(windows, length, 3), y[1 : used + 1].reshape(windows, length, 3)
     ends = starts + length
     crossed = np.concatenate([[0], np.cumsum(_gaps(t))])  # gaps among the steps before each sample
     whole = crossed[ends] == crossed[starts]  # a window across a gap would integrate a turn nobody measured
-    return _Windows(y[ends[whole]] - y[starts[whole]], moment[whole], integral(y)[whole], integral(w)[whole],
-                    t[ends[whole]] - t[starts[whole]])  # fmt: skip
+    frame = _Frame(y, t, length, left, yl, yr, whole, y[ends[whole]] - y[starts[whole]], np.zeros((0, 3)),
+                   t[ends[whole]] - t[starts[whole]])  # fmt: skip
+    frame = replace(frame, Sy=frame.integral(y)[whole])
+    with _LOCK:
+        _LAST[:] = [frame]
+    return frame
+
+
+#: The last frame, kept while a fit reads other rates against the same samples; emptied when a gyro fit ends.
+_LAST: list[_Frame] = []
+_LOCK = threading.Lock()
+
+
+def forget_frame() -> None:
+    """Drop the kept frame (its arrays are the size of the recording)."""
+    with _LOCK:
+        _LAST.clear()
+
+
+def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Windows:
+    """The integrals of (W1) over consecutive windows of ``length`` samples, those across a gap left out.
+
+    Trapezoids: over a window ``[s, s + L]``, ``∫ f dt = Σ_{k=s}^{s+L−1} ½ dt_k (f_k + f_{k+1})``, summed window
+    by window (each sample weighted by the half-steps beside it), not as differences of running sums. What does
+    not depend on the rates is computed once per samples and times (:func:`_frame`).
+    """
+    return _frame(y, t, length).windows(w)
 
 
 def _design(win: _Windows, beta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -115,14 +168,15 @@ def _constrained(
 
     c is eliminated (the Schur complement of the normal equations) and h is the eigenvector of the smallest
     eigenvalue of what is left, so the residuals of different models of H (general, or ``P S`` for each
-    mapping) are on one scale (|H|_F = 1). Normal equations through einsum, not an SVD or QR of the tall
-    design: LAPACK's threads on a shared machine made those most of a long recording's fit.
+    mapping) are on one scale (|H|_F = 1). Normal equations from one product of the tall design with itself,
+    not an SVD or QR of it: LAPACK's threads on a shared machine made those most of a long recording's fit.
     """
-    d_h = np.einsum("rj,jk->rk", design[:, :9], basis)
-    d_c = design[:, 9:]
-    n_hh = np.einsum("rj,rk->jk", d_h, d_h)
-    n_hc = np.einsum("rj,rk->jk", d_h, d_c)
-    n_cc = np.einsum("rj,rk->jk", d_c, d_c)
+    k = basis.shape[1]
+    reduced = np.empty((design.shape[0], k + 3))
+    np.matmul(design[:, :9], basis, out=reduced[:, :k])
+    reduced[:, k:] = design[:, 9:]
+    normal = reduced.T @ reduced
+    n_hh, n_hc, n_cc = normal[:k, :k], normal[:k, k:], normal[k:, k:]
     eliminate = np.linalg.solve(n_cc, n_hc.T)  # c = −N_cc⁻¹ N_chᵀ h
     values, vectors = np.linalg.eigh(n_hh - n_hc @ eliminate)
     h = vectors[:, 0]
@@ -139,16 +193,18 @@ def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.floa
     m = win.T.size
     for _ in range(iterations):
         h, c = theta[:9].reshape(3, 3), theta[9:]
-        residual = np.einsum("rj,j->r", _design(win, beta), theta)
+        jac_theta = _design(win, beta)
         # H ∫y − T c: the residual is linear in β through −β × u
         u = np.einsum("ij,mj->mi", h, win.Sy) - win.T[:, None] * c
-        jac_theta = _design(win, beta)
-        jac_beta = skew(u).reshape(3 * m, 3)
         q, _ = np.linalg.qr(np.column_stack([theta, np.eye(12)]))
         tangent = q[:, 1:12]
-        jac = np.column_stack([np.einsum("rj,jk->rk", jac_theta, tangent), jac_beta])
-        normal = np.einsum("rp,rq->pq", jac, jac)
-        step, *_ = np.linalg.lstsq(normal, -np.einsum("rp,r->p", jac, residual), rcond=None)
+        # [J r], J in (θ's tangent, β): the normal equations and the gradient from one product with itself
+        extended = np.empty((3 * m, 15))
+        np.matmul(jac_theta, tangent, out=extended[:, :11])
+        extended[:, 11:14] = skew(u).reshape(3 * m, 3)
+        extended[:, 14] = jac_theta @ theta
+        normal = extended.T @ extended
+        step, *_ = np.linalg.lstsq(normal[:14, :14], -normal[:14, 14], rcond=None)
         theta = theta + tangent @ step[:11]
         theta = theta / np.linalg.norm(theta)
         beta = beta + step[11:]
