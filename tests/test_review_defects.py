@@ -137,7 +137,6 @@ def test_plot_gyro_reads_the_gyro_columns_calibrate_finds(tmp_path: Path) -> Non
     assert result.exit_code == 0, result.output
 
 
-@pytest.mark.xfail(strict=True, reason="a gyro calibration prints no heading one-sigma (its uncertainty is unstated)")
 def test_gyro_calibration_states_its_heading_one_sigma(tmp_path: Path) -> None:
     path = tmp_path / "car.csv"
     _vehicle_csv(path, "car", 1)

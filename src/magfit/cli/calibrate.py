@@ -662,6 +662,10 @@ def _uncertainty(run: CompassCalibration) -> list[tuple[str, str]]:
         text += f", worst ± {worst:.2g}°" if isinstance(worst, (int, float)) else ""
         text += f"; inclination {inclination:.0f}°)" if isinstance(inclination, (int, float)) else ")"
         lines.append(("heading", text))
+    elif (gyro := run.calibration.gyro) is not None and gyro.heading_sigma_deg is not None:
+        # gyro's one-sigma is its own (the kinematic fit's covariance, the halves' difference joined): no
+        # magnitude-only diagnosis is run on its samples.
+        lines.append(("heading", f"± {gyro.heading_sigma_deg:.2g}° one-sigma at level (the gyro fit's)"))
     return lines
 
 
