@@ -81,7 +81,7 @@ def test_simulate_refuses_to_overwrite_without_force(tmp_path: Path) -> None:
     [
         (["-o", "x.dat"], "cannot tell the format of x.dat: use a .csv, .txt or .npy extension"),
         (["-o", "x.csv", "--offset", "1,2"], "Invalid value for '--offset': expected 3 comma-separated numbers, got 2"),
-        (["-o", "x.csv", "--matrix", "1,0,0,0,1,0,0,0,0"], "is singular: W must be invertible"),
+        (["-o", "x.csv", "--matrix", "1,0,0,0,1,0,0,0,0"], "is singular: the soft iron W must be invertible"),
         (["-o", "x.csv", "--sensor", "bmm150"], "Invalid value for '--sensor'"),
         (["-o", "x.csv", "--noise", "-1"], "Invalid value for '--noise'"),
     ],

@@ -267,7 +267,6 @@ def test_forced_export_is_marked_not_supported_in_the_file(fmt: str, tmp_path: P
     assert "NOT SUPPORTED" in out.read_text().upper(), out.read_text()[:400]
 
 
-@pytest.mark.xfail(strict=True, reason="simulate --matrix of zeros answers in Python list syntax: '[0.0, 0.0, ...]'")
 def test_simulate_singular_matrix_message_is_not_python_syntax(tmp_path: Path) -> None:
     args = ["simulate", "-n", "100", "--matrix", "0,0,0,0,0,0,0,0,0", "-o", str(tmp_path / "s.csv")]
     result = CliRunner().invoke(cli, args)

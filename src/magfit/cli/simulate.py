@@ -150,8 +150,13 @@ def _simulate(
     """The scenario of ``sensor`` and ``disturbance``, with each given parameter overriding its own."""
     base = scenario(sensor, disturbance)
     soft_iron = base.soft_iron if matrix is None else np.reshape(matrix, (3, 3))
+    given = ",".join(f"{value:g}" for value in matrix) if matrix is not None else ""
     if matrix is not None and abs(np.linalg.det(soft_iron)) < 1e-12:
-        raise OptionError(f"--matrix {matrix} is singular: W must be invertible")
+        raise OptionError(f"--matrix {given} is singular: the soft iron W must be invertible; give nine numbers "
+                          "row by row whose determinant is not zero")  # fmt: skip
+    if matrix is not None and np.linalg.det(soft_iron) < 0:
+        raise OptionError(f"--matrix {given} is a mirror (negative determinant): soft iron never turns a sensor's "
+                          "axes left-handed; negate a row to simulate a sensor wired so")  # fmt: skip
     return simulate(
         n_samples,
         soft_iron=soft_iron,
