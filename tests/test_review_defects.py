@@ -274,7 +274,6 @@ def test_simulate_singular_matrix_message_is_not_python_syntax(tmp_path: Path) -
     assert "[0.0" not in result.stderr, result.stderr
 
 
-@pytest.mark.xfail(strict=True, reason="--motor current on a samples file without a current column is ignored silently")
 def test_motor_current_without_a_current_column_is_said(tmp_path: Path) -> None:
     path = tmp_path / "mag.csv"
     _sphere_csv(path)

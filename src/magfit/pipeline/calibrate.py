@@ -155,6 +155,11 @@ def calibrate_file(
         from .motor import check_motor
 
         check_motor(motor)
+    if motor not in ("auto", "none") and path.is_file() and log_kind(path) is None:
+        raise OptionError(
+            f"{path}: {option('motor', motor)} fits the motors' field from a flight log's own {motor} (DataFlash, "
+            f"ULog, tlog); a samples file's is not read for it: calibrate the log, or drop {option('motor', motor)}"
+        )
     location = _checked_location(location)
     options = dict(options or {})
     if force:  # fit's own keyword, passed with the method's options
