@@ -150,7 +150,8 @@ def test_fewer_than_three_columns(tmp_path: Path, content: str, count: int) -> N
 
 def test_every_row_nonfinite(tmp_path: Path) -> None:
     message = error_of(write(tmp_path, "mx,my,mz\nnan,1,2\n1,,2\n"))
-    assert "all 2 rows have a NaN, infinite or empty value in mx, my, mz (first at line 2)" in message
+    assert "all 2 rows have no usable value in mx, my, mz: NaN, infinite, empty, or beyond" in message
+    assert "(first at line 2)" in message
 
 
 def test_binary_and_utf16_files(tmp_path: Path) -> None:

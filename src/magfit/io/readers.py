@@ -24,6 +24,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import MAX_MAGNITUDE
 from ..remedy import option
 from .chunks import ChunkReader, PiecesRead, read_pieces
 from .layout import FileFormat, sniff
@@ -186,7 +187,8 @@ def read_samples(
     if len(samples) == 0:
         raise file_error(
             reader.path,
-            f"all {read.n_rows} rows have a NaN, infinite or empty value in {', '.join(reader.columns)} "
+            f"all {read.n_rows} rows have no usable value in {', '.join(reader.columns)}: NaN, infinite, empty, or "
+            f"beyond ±{MAX_MAGNITUDE:g} (more than float64 can square) "
             f"(first at line {read.skipped_lines[0]}); check the columns ({option('columns', '...')})",
         )
     return SampleTable(
