@@ -128,7 +128,6 @@ def test_max_samples_advice_is_accepted_when_followed(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="magfit plot -m gyro says the file has no gyro columns when it has gx,gy,gz")
 def test_plot_gyro_reads_the_gyro_columns_calibrate_finds(tmp_path: Path) -> None:
     path = tmp_path / "car.csv"
     _vehicle_csv(path, "car", 1)

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import click
 from numpy.typing import ArrayLike
@@ -26,7 +26,7 @@ from ._common import (
 from ._extras import require
 from ._logs import read_recordings, sensor_option
 from ._wording import columns_used
-from .compare import parse_methods
+from .compare import parse_methods, with_streams
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -40,14 +40,21 @@ def methods_in_order(main: str, others: Sequence[str]) -> tuple[str, ...]:
     return (main, *(name for name in others if name != main))
 
 
-def fit_for_plot(samples: ArrayLike, methods: Sequence[str], path: Path, columns: str = "") -> Comparison:
-    """Compare ``methods`` on ``samples``; warn about each failed method, raise when the main one failed.
+def fit_for_plot(
+    samples: ArrayLike,
+    methods: Sequence[str],
+    path: Path,
+    columns: str = "",
+    streams: Mapping[str, Any] | None = None,
+) -> Comparison:
+    """Compare ``methods`` on ``samples`` (with the ``streams`` vector and gyro need); warn about each failed
+    method, raise when the main one failed.
 
     ``columns`` (``"columns mx, my, mz"``) is named in the refusal: which columns could not be fitted.
     """
     # The other methods are drawn even when the samples do not support them (the paper's figures compare
     # all three), labelled so; the main one must be supported.
-    comparison = compare(samples, methods, allow_undetermined=True)
+    comparison = compare(samples, methods, allow_undetermined=True, streams=streams)
     main = comparison.results[0]
     where = f"{path} ({columns})" if columns else str(path)
     if not main.ok:
@@ -148,12 +155,13 @@ def plot_command(
     check_output(output)
     (recording,) = read_recordings(file, columns=columns, nonfinite=nonfinite, sensor=sensor, every=False)
     used = columns_used(recording.columns, recording.column_note)
-    comparison = fit_for_plot(
-        recording.samples, methods_in_order(method or default_method(), methods or PAPER_METHODS), file, used
-    )
+    drawn = methods_in_order(method or default_method(), methods or PAPER_METHODS)
+    # vector and gyro take the file's own streams (found by name, as calibrate and compare find them)
+    samples, streams = with_streams(recording, drawn, unit, path=file, columns=columns, nonfinite=nonfinite)
+    comparison = fit_for_plot(samples, drawn, file, used, streams)
     calibrations = [result.calibration for result in comparison if result.calibration is not None]
     figure = calibration_figure(
-        recording.samples,
+        samples,
         calibrations,
         unit=unit or recording.unit,
         title=title or recording.name,
