@@ -106,7 +106,6 @@ def test_apply_says_when_the_corrected_samples_are_far_from_the_calibrations_sph
     assert result.exit_code != 0 or "warning" in result.stderr, result.output
 
 
-@pytest.mark.xfail(strict=True, reason="--field-strength wmm refuses a ROS CSV whose unit (T) magfit itself detected")
 def test_field_strength_wmm_uses_the_unit_the_file_states(tmp_path: Path) -> None:
     path = DATA / "converters" / "ros_magnetic_field.csv"
     plain = CliRunner().invoke(cli, ["calibrate", str(path)])

@@ -209,7 +209,7 @@ def calibrate_file(
             )
             return FileCalibration(path, (_with_model_field(compass, model),), model_field=model)
         if field_strength == "wmm":
-            options["field_strength"] = _model_strength(model, unit)
+            options["field_strength"] = _model_strength(model, unit or _file_unit(path, columns, nonfinite))
         elif field_strength is not None:
             options["field_strength"] = field_strength
         try:
@@ -723,6 +723,14 @@ def _model(
         date = date or first.date()
     origin = f"the log's GNSS fixes (median of {position.n_fixes} 3-D fixes{when})"
     return ModelField(field_at(position.lat_deg, position.lon_deg, position.alt_km, date=date), origin)
+
+
+def _file_unit(path: Path, columns: Sequence[str | int] | None, nonfinite: Nonfinite) -> str | None:
+    """The unit a samples file states for its magnetometer (its columns' names, ``mag_x_uT``; a converter's
+    file), read from its head; None when it states none."""
+    from ..io import ChunkReader
+
+    return ChunkReader(path, columns=columns, nonfinite=nonfinite).unit  # not iterated: the head only
 
 
 def _model_strength(model: ModelField | None, unit: str | None) -> float:
