@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 import magfit
+from magfit.calibration import Calibration
 from magfit.errors import MagfitError
 from magfit.export import export
 from magfit.geomag import field_at
@@ -166,28 +167,40 @@ def magfit_rows(
         ("vector", "auto"),
     )
     for method, motor in choices:
-        name = f"magfit --motor {motor}" + (f" --method {method}" if method != "auto" else "")
         start = time.perf_counter()
-        try:
-            result = magfit.calibrate_file(path, method, sensor=flight.sensor, location="log", motor=motor,
-                                           field_strength=None if method == "vector" else "wmm")  # fmt: skip
-        except MagfitError as error:
-            rows.append((name, None, f"refused ({', '.join(error.codes) or 'no code'})"))
+        name, calibration, refused = _calibrated(path, flight, method, motor)
+        if calibration is None:
+            rows.append((name, None, refused))
             continue
         seconds = time.perf_counter() - start
-        calibration = result.calibration
         params = _params_ardupilot(export(calibration, "ardupilot", slot=0))
         corrected = ardupilot_correct(params, on.raw, on.current, on.current)
         term = calibration.motor
-        if term is None:
-            note = f"no term; {seconds:.0f} s"
-        else:
-            k = term.coefficients
-            percent = 100 * term.at_full_scale() / calibration.field_strength
-            note = (f"k ({k[0]:.2f}, {k[1]:.2f}, {k[2]:.2f}) mG/A, {percent:.1f} % of the field at "
-                    f"{term.full_scale:.1f} A, lag {1000 * term.lag_s:.0f} ms; {seconds:.0f} s")  # fmt: skip
-        rows.append((name, corrected, note))
+        lag = f", lag {1000 * term.lag_s:.0f} ms" if term is not None else ""
+        rows.append((name, corrected, f"{_term_words(calibration, ' of the field')}{lag}; {seconds:.0f} s"))
     return rows
+
+
+def _calibrated(path: Path, flight: Flight, method: str, motor: str) -> tuple[str, Calibration | None, str]:
+    """magfit's calibration of ``flight``'s compass in ``path`` with ``method`` and ``--motor motor``, as the
+    command line would run it: (its row's name, the calibration or None, the refusal's codes)."""
+    name = f"magfit --motor {motor}" + (f" --method {method}" if method != "auto" else "")
+    try:
+        result = magfit.calibrate_file(path, method, sensor=flight.sensor, location="log", motor=motor,
+                                       field_strength=None if method == "vector" else "wmm")  # fmt: skip
+    except MagfitError as error:
+        return name, None, f"refused ({', '.join(error.codes) or 'no code'})"
+    return name, result.calibration, ""
+
+
+def _term_words(calibration: Calibration, share: str = "") -> str:
+    """The motors' term a calibration keeps, in words: k, and its share of the field at full scale."""
+    term = calibration.motor
+    if term is None:
+        return "no term"
+    k = term.coefficients
+    percent = 100 * term.at_full_scale() / calibration.field_strength
+    return f"k ({k[0]:.2f}, {k[1]:.2f}, {k[2]:.2f}) mG/A, {percent:.1f} %{share} at {term.full_scale:.1f} A"
 
 
 def plain_regression(flight: Flight, on: Flight | None = None) -> tuple[np.ndarray, str]:
@@ -415,21 +428,11 @@ def _fitted(path: Path, flight: Flight, methods: tuple[tuple[str, str], ...]) ->
     """magfit's calibrations of ``path`` as ArduPilot parameters (to be applied to any samples), with notes."""
     out: list[tuple[str, object, str]] = []
     for method, motor in methods:
-        name = f"magfit --motor {motor}" + (f" --method {method}" if method != "auto" else "")
-        try:
-            result = magfit.calibrate_file(path, method, sensor=flight.sensor, location="log", motor=motor,
-                                           field_strength=None if method == "vector" else "wmm")  # fmt: skip
-        except MagfitError as error:
-            out.append((name, None, f"refused ({', '.join(error.codes) or 'no code'})"))
+        name, calibration, refused = _calibrated(path, flight, method, motor)
+        if calibration is None:
+            out.append((name, None, refused))
             continue
-        calibration = result.calibration
-        term = calibration.motor
-        if term is None:
-            note = "no term"
-        else:
-            k = term.coefficients
-            percent = 100 * term.at_full_scale() / calibration.field_strength
-            note = f"k ({k[0]:.2f}, {k[1]:.2f}, {k[2]:.2f}) mG/A, {percent:.1f} % at {term.full_scale:.1f} A"
+        note = _term_words(calibration)
         codes = ", ".join(calibration.support.codes) if calibration.support.codes else ""
         note += f"; {calibration.support.verdict}" + (f" ({codes})" if codes else "")
         out.append((name, ("ardupilot", _params_ardupilot(export(calibration, "ardupilot", slot=0))), note))
