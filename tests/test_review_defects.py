@@ -16,7 +16,7 @@ from click.testing import CliRunner
 
 import magfit
 from magfit.cli import cli
-from magfit.vehicle import simulate_vehicle
+from magfit.vehicle import VehicleSimulation, simulate_vehicle
 
 DATA = Path(__file__).parent / "data"
 
@@ -179,10 +179,10 @@ def test_ulog_low_rate_advice_is_said_once_per_compass() -> None:
     assert result.stderr.count("logged at only 1.0 Hz") <= 2, result.stderr
 
 
-def _imu_text(path: Path, order: str) -> None:
-    """A headerless IMU recording of a hand tumble: accelerometer (m/s²), gyro (rad/s) and magnetometer (µT,
-    field 50, offset (12, -7, 20)), the columns in ``order`` ('am': accel then mag; 'agm': accel, gyro, mag)."""
-    sim = simulate_vehicle(
+def _hand_tumble() -> VehicleSimulation:
+    """A hand tumble of an IMU: magnetometer in µT (field 50, offset (12, -7, 20)), gyro (rad/s), accelerometer
+    (m/s²) and time."""
+    return simulate_vehicle(
         3000,
         "tumble",
         field_strength=50.0,
@@ -194,6 +194,12 @@ def _imu_text(path: Path, order: str) -> None:
         gyro_noise=0.05,
         seed=3,
     )
+
+
+def _imu_text(path: Path, order: str) -> None:
+    """A headerless IMU recording of :func:`_hand_tumble`, the columns in ``order`` ('am': accel then mag;
+    'agm': accel, gyro, mag)."""
+    sim = _hand_tumble()
     blocks = {"a": sim.accel, "g": sim.gyro, "m": sim.samples}
     np.savetxt(path, np.column_stack([blocks[c] for c in order]), fmt="%.5f", delimiter=" ")
 
@@ -215,16 +221,7 @@ def test_headerless_imu_file_calibrates_the_magnetometer_or_asks_for_columns(ord
 
 
 def test_headerless_time_mag_temperature_passes_the_time_column_over(tmp_path: Path) -> None:
-    sim = simulate_vehicle(
-        3000,
-        "tumble",
-        field_strength=50.0,
-        inclination_deg=60,
-        noise=0.3,
-        hard_iron=[12, -7, 20],
-        soft_iron=np.diag([1.05, 0.97, 1.0]),
-        seed=3,
-    )
+    sim = _hand_tumble()
     temperature = 25 + 0.1 * np.random.default_rng(0).normal(size=3000)
     path = tmp_path / "log.txt"
     np.savetxt(path, np.column_stack([sim.time_s, sim.samples, temperature]), fmt="%.4f")
