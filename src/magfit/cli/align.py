@@ -37,9 +37,12 @@ _OPTIONS = {
 }
 
 
-def _by_reference(path: Path, attitude: list[str | int] | None) -> bool:
-    """Whether a samples file is aligned by the vector fit: attitude columns (given or found by name) and no
+def _by_reference(path: Path, attitude: list[str | int] | None, reference: list[str | int] | None) -> bool:
+    """Whether a samples file is aligned by the vector fit: attitude or reference columns given (what the user
+    asks for wins over accelerometer columns found by name), or attitude columns found by name and no
     accelerometer columns found by name."""
+    if attitude is not None or reference is not None:
+        return True
     header = sniff(path).header
     if header is not None and columns_by_name(header, ACCEL_COLUMNS) is not None:
         return False
@@ -215,7 +218,10 @@ def align_command(
             fail(f"--max-rate takes a number of °/s or 'none', got {max_rate!r}")
     if inclination is not None and location is not None:
         fail("give --inclination or --location, not both")
-    if log_kind(file) is None and accel_columns is None and _by_reference(file, attitude):
+    if accel_columns is not None and (attitude is not None or reference is not None):
+        fail("give --accel-columns (the rotation from gravity) or --attitude/--reference (from the vector fit), "
+             "not both")  # fmt: skip
+    if log_kind(file) is None and accel_columns is None and _by_reference(file, attitude, reference):
         spec = StreamSpec(attitude, reference, gyro_columns, None, [time_column] if time_column else None,
                           attitude_convention, angle_unit, gyro_unit)  # type: ignore[arg-type]  # fmt: skip
         _align_by_reference(file, columns, spec, unit, location, date, force)
