@@ -152,7 +152,6 @@ def test_gyro_on_a_boat_does_not_accuse_correct_axes(tmp_path: Path) -> None:
     assert "handedness" not in result.output, result.output
 
 
-@pytest.mark.xfail(strict=True, reason="magfit align ignores --attitude/--reference given explicitly when accel exists")
 def test_align_uses_the_attitude_and_reference_it_is_given(tmp_path: Path) -> None:
     without_accel = tmp_path / "car_noacc.csv"
     _vehicle_csv(without_accel, "car", 1, with_accel=False)
@@ -172,7 +171,6 @@ def test_huge_finite_values_are_not_called_nan(tmp_path: Path) -> None:
     assert "NaN, infinite or empty" not in result.stderr, result.stderr
 
 
-@pytest.mark.xfail(strict=True, reason="the PX4 low logging rate sentence is printed twice per compass")
 def test_ulog_low_rate_advice_is_said_once_per_compass() -> None:
     result = CliRunner().invoke(cli, ["calibrate", str(DATA / "px4_pyulog" / "sample_log_small.ulg")])
     assert result.exit_code == 1

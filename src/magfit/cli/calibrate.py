@@ -484,8 +484,28 @@ def calibrate_command(
 
 
 def _calibrate(file: Path, method: str, *, model_date: datetime.date | None, **options: Any) -> FileCalibration:
-    """:func:`calibrate_file` with the progress bar and the notes as warnings."""
-    return calibrate_file(file, method, date=model_date, progress=progress_bar, notify=warn, **options)
+    """:func:`calibrate_file` with the progress bar and the notes as warnings, each said once: a note the
+    refusal of its compass repeats (a log's low-rate note, which the library appends for callers not told the
+    notes) is left to the refusal, which names the remedy where the failure is."""
+    said: list[str] = []
+    try:
+        result = calibrate_file(file, method, date=model_date, progress=progress_bar, notify=said.append, **options)
+    except Exception as error:  # the notes first, as before: they often say why
+        refusal = error.text if isinstance(error, RefusedWithAdvice) else str(error)
+        for note in said:
+            if _bare(note) not in refusal:
+                warn(note)
+        raise
+    for note in said:
+        compass = next((f for f in result.failures if f"{file} ({f.sensor}): " in note), None)
+        if compass is None or _bare(note) not in compass.reason:
+            warn(note)
+    return result
+
+
+def _bare(note: str) -> str:
+    """A note as the library appends it to a refusal: without its ``<file> (<compass>): `` (as said)."""
+    return note.split("): ", 1)[-1]
 
 
 def _wrote_line(path: Path, result: FileCalibration, export_format: str | None) -> str:
