@@ -2,7 +2,8 @@
 
 ``plot``, ``compare``, ``report`` and ``apply`` take a log as ``calibrate`` does: ``--sensor ID`` chooses a
 compass (:meth:`magfit.sources.Source.read`), and what the log says about it (a compass logged too slowly, a
-calibration undone with the log's parameters) is printed as a warning.
+calibration undone with the log's parameters) is printed as a warning. :func:`with_streams` gives ``plot``,
+``compare`` and ``report`` the streams the vector and gyro methods need, as ``calibrate`` finds them.
 """
 
 from __future__ import annotations
@@ -134,3 +135,45 @@ def read_recordings(
             )
         )
     return recordings
+
+
+def with_streams(
+    recording: Recording,
+    methods: tuple[str, ...],
+    unit: str | None,
+    *,
+    path: Path | None = None,
+    columns: list[str | int] | None = None,
+    nonfinite: Nonfinite = "skip",
+) -> tuple[NDArray[np.float64], dict[str, Any]]:
+    """The samples and the log's streams for the methods that need them (vector, gyro), where the log has them;
+    for a samples file (``path``), the streams its columns hold, found by name (docs/file-formats.md).
+
+    All the methods are then compared on the samples those streams cover.
+    """
+    from ..pipeline.streams import method_streams, stream_names
+
+    names = stream_names(methods)  # what they need, and the optional streams they take (the accelerometer)
+    if not names.needed:
+        return recording.samples, {}
+    source, sensor, reference_ned = recording.source, recording.sensor, None
+    if (source is None or sensor is None) and path is not None and recording.sensor is None:
+        from ..pipeline.table import StreamSpec, samples_source
+
+        wanted = ["attitude", "reference", "place", "gyro", "accel", "time"]
+        read = samples_source(path, columns, StreamSpec(), wanted, None, nonfinite)
+        source, sensor, reference_ned = read.source, "columns", read.reference_ned
+    if source is None or sensor is None:
+        return recording.samples, {}
+    found = method_streams(
+        source,
+        sensor,
+        names.needed,
+        optional=[name for name in names.optional if name != "inclination_deg" or source.position is not None],
+        unit=unit or recording.unit,
+        available=True,
+        reference_ned=reference_ned,
+    )
+    for note in found.notes:
+        warn(note)
+    return found.samples, found.options

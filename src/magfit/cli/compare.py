@@ -11,8 +11,6 @@ from pathlib import Path
 from typing import Any
 
 import click
-import numpy as np
-from numpy.typing import NDArray
 from rich.table import Table
 from rich.text import Text
 
@@ -29,9 +27,8 @@ from ._common import (
     parse_columns,
     significant,
     vector,
-    warn,
 )
-from ._logs import Recording, read_recordings, sensor_option
+from ._logs import read_recordings, sensor_option, with_streams
 
 OUTPUT_FORMATS = ("table", "markdown", "csv", "json")
 _CSV_FIELDS = (
@@ -192,48 +189,6 @@ def _compared(
                 )
             )
     return results
-
-
-def with_streams(
-    recording: Recording,
-    methods: tuple[str, ...],
-    unit: str | None,
-    *,
-    path: Path | None = None,
-    columns: list[str | int] | None = None,
-    nonfinite: Nonfinite = "skip",
-) -> tuple[NDArray[np.float64], dict[str, Any]]:
-    """The samples and the log's streams for the methods that need them (vector, gyro), where the log has them;
-    for a samples file (``path``), the streams its columns hold, found by name (docs/file-formats.md).
-
-    All the methods are then compared on the samples those streams cover.
-    """
-    from ..pipeline.streams import method_streams, stream_names
-
-    names = stream_names(methods)  # what they need, and the optional streams they take (the accelerometer)
-    if not names.needed:
-        return recording.samples, {}
-    source, sensor, reference_ned = recording.source, recording.sensor, None
-    if (source is None or sensor is None) and path is not None and recording.sensor is None:
-        from ..pipeline.table import StreamSpec, samples_source
-
-        wanted = ["attitude", "reference", "place", "gyro", "accel", "time"]
-        read = samples_source(path, columns, StreamSpec(), wanted, None, nonfinite)
-        source, sensor, reference_ned = read.source, "columns", read.reference_ned
-    if source is None or sensor is None:
-        return recording.samples, {}
-    found = method_streams(
-        source,
-        sensor,
-        names.needed,
-        optional=[name for name in names.optional if name != "inclination_deg" or source.position is not None],
-        unit=unit or recording.unit,
-        available=True,
-        reference_ned=reference_ned,
-    )
-    for note in found.notes:
-        warn(note)
-    return found.samples, found.options
 
 
 def _reason(result: MethodResult) -> str:

@@ -24,9 +24,9 @@ from ._common import (
     warn,
 )
 from ._extras import require
-from ._logs import read_recordings, sensor_option
+from ._logs import read_recordings, sensor_option, with_streams
 from ._wording import columns_used
-from .compare import parse_methods, with_streams
+from .compare import parse_methods
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

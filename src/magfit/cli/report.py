@@ -20,8 +20,8 @@ from ._common import (
     warn,
 )
 from ._extras import require
-from ._logs import read_recordings, sensor_option
-from .compare import parse_methods, with_streams
+from ._logs import read_recordings, sensor_option, with_streams
+from .compare import parse_methods
 from .plot import methods_in_order
 
 if TYPE_CHECKING:
@@ -138,7 +138,8 @@ def report_command(
             if recording.n_skipped:
                 notes.append(f"{recording.n_skipped:,} rows with NaN or inf values were skipped.")
             # A method that fails is listed in the report with its reason; the first that succeeds is the main one.
-            samples, streams = with_streams(recording, compared, unit)  # vector, gyro: the log's streams
+            # vector, gyro: the log's streams, or the samples file's columns found by name (as calibrate finds them)
+            samples, streams = with_streams(recording, compared, unit, path=path, columns=columns, nonfinite=nonfinite)
             comparison = compare(samples, compared, streams=streams)
             for result in comparison:
                 if not result.ok:
