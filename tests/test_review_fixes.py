@@ -40,3 +40,16 @@ def test_report_gyro_reads_the_gyro_columns_calibrate_finds(tmp_path: Path, monk
     assert gyro.ok, gyro.error
     # Ground truth: the simulated hard iron (about 4.4, 0.4, 8.2 in the samples' unit; field 50).
     np.testing.assert_allclose(gyro.calibration.offset, _vehicle_hard_iron(1), atol=1.5)
+
+
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.mark.parametrize("command", ["calibrate", "compare"])
+def test_a_cut_log_says_it_is_cut_short_once(command: str, tmp_path: Path) -> None:
+    whole = (DATA / "ardupilot_real" / "copter33_log171_trimmed.bin").read_bytes()  # three compasses
+    cut = tmp_path / "cut.bin"
+    cut.write_bytes(whole[:-7])  # the last message cut short: a log that was not closed
+    result = CliRunner().invoke(cli, [command, str(cut)])
+    assert result.exit_code in (0, 1), result.output
+    assert result.stderr.count("cut short") == 1, result.stderr

@@ -115,10 +115,12 @@ def read_recordings(
     usable = [m.id for m in source.magnetometers if m.problem is None and m.n_samples > 0]
     chosen: list[str | None] = [sensor] if sensor is not None or not every or len(usable) < 2 else list(usable)
     recordings = []
+    for note in source.notes:  # the whole log's (a last message cut short): once, not with each compass
+        warn(f"{path}: {note}")
     for sensor_id in chosen:
         read = source.read(sensor_id)
         magnetometer = read.magnetometer
-        for note in (*source.notes, *read.notes):
+        for note in read.notes:
             warn(f"{path} ({magnetometer.id}): {note}")
         if len(read.samples) == 0:
             raise DataFileError(f"{path} ({magnetometer.id}): holds no finite samples")

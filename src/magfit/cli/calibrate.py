@@ -486,26 +486,47 @@ def calibrate_command(
 def _calibrate(file: Path, method: str, *, model_date: datetime.date | None, **options: Any) -> FileCalibration:
     """:func:`calibrate_file` with the progress bar and the notes as warnings, each said once: a note the
     refusal of its compass repeats (a log's low-rate note, which the library appends for callers not told the
-    notes) is left to the refusal, which names the remedy where the failure is."""
+    notes) is left to the refusal, which names the remedy where the failure is; a note of the whole log (a
+    last message cut short), which the library tells with each compass, is said once for the file."""
     said: list[str] = []
     try:
         result = calibrate_file(file, method, date=model_date, progress=progress_bar, notify=said.append, **options)
     except Exception as error:  # the notes first, as before: they often say why
         refusal = error.text if isinstance(error, RefusedWithAdvice) else str(error)
-        for note in said:
-            if _bare(note) not in refusal:
-                warn(note)
+        for note in _once(file, [note for note in said if _bare(note) not in refusal], 1):
+            warn(note)
         raise
+    kept = []
     for note in said:
         compass = next((f for f in result.failures if f"{file} ({f.sensor}): " in note), None)
         if compass is None or _bare(note) not in compass.reason:
-            warn(note)
+            kept.append(note)
+    for note in _once(file, kept, len(result.compasses) + len(result.failures)):
+        warn(note)
     return result
 
 
 def _bare(note: str) -> str:
     """A note as the library appends it to a refusal: without its ``<file> (<compass>): `` (as said)."""
     return note.split("): ", 1)[-1]
+
+
+def _once(file: Path, notes: Sequence[str], n_compasses: int) -> list[str]:
+    """``notes`` (each ``<file> (<compass>): <note>``) with a note said of several compasses said once, where
+    it is first said: of the file when it was said of every compass, else naming the compasses."""
+    compasses: dict[str, list[str]] = {}
+    for note in notes:
+        compass = note[len(f"{file} (") :].split("): ", 1)[0] if note.startswith(f"{file} (") else ""
+        compasses.setdefault(_bare(note), []).append(compass)
+    once, seen = [], set()
+    for note in notes:
+        bare, ids = _bare(note), compasses[_bare(note)]
+        if len(ids) < 2:
+            once.append(note)
+        elif bare not in seen:
+            seen.add(bare)
+            once.append(f"{file}: {bare}" if len(ids) >= n_compasses else f"{file} ({', '.join(ids)}): {bare}")
+    return once
 
 
 def _wrote_line(path: Path, result: FileCalibration, export_format: str | None) -> str:
