@@ -53,3 +53,13 @@ def test_a_cut_log_says_it_is_cut_short_once(command: str, tmp_path: Path) -> No
     result = CliRunner().invoke(cli, [command, str(cut)])
     assert result.exit_code in (0, 1), result.output
     assert result.stderr.count("cut short") == 1, result.stderr
+
+
+@pytest.mark.parametrize("size", [100, 20_000])
+@pytest.mark.parametrize("command", ["calibrate", "inspect"])
+def test_a_ulog_cut_inside_its_header_is_said_cut_short(command: str, size: int, tmp_path: Path) -> None:
+    cut = tmp_path / "cut.ulg"
+    cut.write_bytes((DATA / "px4_pyulog" / "sample_log_small.ulg").read_bytes()[:size])  # before any logged data
+    result = CliRunner().invoke(cli, [command, str(cut)])
+    assert result.exit_code == 2, result.output
+    assert "cut short" in result.stderr and "no magnetometer" not in result.stderr, result.stderr

@@ -187,6 +187,7 @@ def _parse(path: Path, file: Path, topics: list[str] | None, caps: dict[str, int
     """
     pyulog = _pyulog()
     buffers: dict[int, _Thinned] = {}
+    subscribed: list[str] = []
     limits = dict(caps or {})
     try:
         size = file.stat().st_size
@@ -196,6 +197,7 @@ def _parse(path: Path, file: Path, topics: list[str] | None, caps: dict[str, int
     class _AddLogged(pyulog.ULog._MessageAddLogged):  # type: ignore[name-defined]
         def __init__(self, *args: Any) -> None:
             super().__init__(*args)
+            subscribed.append(self.message_name)  # (every subscription, the topics filtered out too)
             cap = limits.get(self.message_name, _LISTED if topics is None else None)
             # A file too small to hold more than ``cap`` of its messages (5 bytes of header each) needs no
             # thinning: pyulog's own buffer then, without a Python call per message.
@@ -216,6 +218,12 @@ def _parse(path: Path, file: Path, topics: list[str] | None, caps: dict[str, int
             f"{path}: is a PX4 ULog that cannot be read ({reason}); the file is damaged or cut short: download the "
             "log again"
         ) from None
+    if not subscribed:  # no topic subscribed: the file ends before its data section
+        raise DataFileError(
+            f"{path}: is a PX4 ULog cut short inside its header (it ends after {size} bytes, in the formats and "
+            "parameters written before any logged data: the logger stopped or the copy broke off); download the "
+            "log again"
+        )
     ulog.magfit_said = said.getvalue()
     for data in ulog.data_list:
         kept = buffers.get(data.msg_id)
