@@ -63,3 +63,12 @@ def test_a_ulog_cut_inside_its_header_is_said_cut_short(command: str, size: int,
     result = CliRunner().invoke(cli, [command, str(cut)])
     assert result.exit_code == 2, result.output
     assert "cut short" in result.stderr and "no magnetometer" not in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("place", [[], ["--location", "47,8"]])
+def test_field_strength_wmm_on_an_empty_file_says_the_file_is_empty(place: list[str], tmp_path: Path) -> None:
+    empty = tmp_path / "mag.csv"
+    empty.write_bytes(b"")
+    result = CliRunner().invoke(cli, ["calibrate", str(empty), "--field-strength", "wmm", *place])
+    assert result.exit_code == 2, result.output
+    assert "is empty" in result.stderr and "unit" not in result.stderr and "--location" not in result.stderr

@@ -18,7 +18,7 @@ import click
 from rich.console import Console
 
 from ..calibration import CONVENTION, Calibration
-from ..errors import CalibrationError
+from ..errors import CalibrationError, DataFileError
 from ..geomag import parse_date, parse_location
 from ..methods import get_method
 from ..pipeline import (
@@ -415,6 +415,8 @@ def calibrate_command(
     check_outputs(file, output, plot_path)
     if system_id is not None and export_format != "px4":
         raise click.UsageError("--system-id goes with --export px4: it is the vehicle id a PX4 parameter file names")
+    if file.is_file() and file.stat().st_size == 0:  # said before the options that need what a file holds
+        raise DataFileError(f"{file}: is empty (0 bytes); record some samples or give another file")
     is_log = log_kind(file) is not None
     needs_streams = bool(get_method(method or default_method()).needs)  # vector: a file's own lat/lon columns
     if location is None and model_date is not None and field_strength != "wmm" and not needs_streams:
