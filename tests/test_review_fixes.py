@@ -72,3 +72,23 @@ def test_field_strength_wmm_on_an_empty_file_says_the_file_is_empty(place: list[
     result = CliRunner().invoke(cli, ["calibrate", str(empty), "--field-strength", "wmm", *place])
     assert result.exit_code == 2, result.output
     assert "is empty" in result.stderr and "unit" not in result.stderr and "--location" not in result.stderr
+
+
+def test_every_fleet_error_row_carries_the_code_of_its_error(tmp_path: Path) -> None:
+    import csv
+
+    import magfit
+
+    (tmp_path / "empty.csv").write_bytes(b"")
+    (tmp_path / "words.csv").write_text("hello\nworld\n", encoding="utf-8")
+    rng = np.random.default_rng(0)
+    np.savetxt(tmp_path / "few.csv", rng.normal(size=(5, 3)), delimiter=",", header="mx,my,mz", comments="")
+    table = tmp_path / "fleet.csv"
+    files = [str(tmp_path / name) for name in ("empty.csv", "words.csv", "few.csv")]
+    result = CliRunner().invoke(cli, ["fleet", *files, "-o", str(table)])
+    assert result.exit_code == 1, result.output
+    with table.open(encoding="utf-8") as handle:
+        rows = {Path(row["path"]).name: row for row in csv.DictReader(handle)}
+    assert rows["empty.csv"]["codes"] == "unreadable_file" and rows["words.csv"]["codes"] == "unreadable_file"
+    assert rows["few.csv"]["codes"] == "too_few_samples"
+    assert all(set(row["codes"].split(";")) <= set(magfit.REASON_CODES) for row in rows.values())

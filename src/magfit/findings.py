@@ -622,6 +622,9 @@ REASON_CODES: dict[str, str] = {
     "field_drift": "the field strength changed along the recording and the fit follows the change",
     "motor_weak": "the motors' term kept is weakly told from the attitude: it may be off by more than its one-sigma",
     "no_location": "the World Magnetic Model needs the place: no location given and the recording holds no GNSS fix",
+    "unreadable_file": "the recording cannot be read: missing, empty, damaged, cut short or in no format magfit reads",
+    "bad_option": "an option the recording cannot serve (a column, unit or method it does not hold)",
+    "bad_samples": "the samples are malformed (NaN or infinite values, another shape than N rows of 3)",
     "unclassified": "a reason without a code of its own yet",
 }
 

@@ -57,7 +57,7 @@ from typing import Any, Literal
 import numpy as np
 
 from .calibration import Calibration
-from .errors import MagfitError, OptionError
+from .errors import DataFileError, MagfitError, OptionError, SampleError
 from .remedy import Audience, audience, for_command_line, option
 from .sources.position import Position
 from .statistics import Statistics
@@ -116,7 +116,9 @@ class FleetRow:
     method, verdict : str
         The method and its verdict: ``supported``, ``weak`` or ``refused`` (``error`` for kind ``error``).
     codes, reason : str
-        The verdict's reason codes (``;``-separated, :data:`magfit.REASON_CODES`) and its words.
+        The verdict's reason codes (``;``-separated, :data:`magfit.REASON_CODES`) and its words; an error row's
+        are its error's (an input error without a code of its own: ``unreadable_file``, ``bad_option``,
+        ``bad_samples``).
     offset_x … matrix_zz, field_strength, unit
         The calibration (``corrected = matrix @ (raw − offset)``); NaN when refused.
     n_samples, flights : int
@@ -381,11 +383,26 @@ def _fit_recording(path: Path, vehicle: str, settings: _Settings) -> _Outcome:
         refused = bool(error.codes) and not isinstance(error, OptionError)
         row = FleetRow("error", identity or vehicle, str(path), date=logged or _file_date(path),
                        method=settings.method, verdict="refused" if refused else "error",
-                       codes=";".join(error.codes), reason=_one_line(str(error)))  # fmt: skip
+                       codes=_codes_of(error), reason=_one_line(str(error)))  # fmt: skip
         outcome = _Outcome(str(path), (row,), compasses)
     except (OSError, MemoryError) as error:
-        outcome = _Outcome(str(path), (FleetRow("error", vehicle, str(path), reason=_one_line(str(error))),))
+        row = FleetRow("error", vehicle, str(path), codes=_codes_of(error), reason=_one_line(str(error)))
+        outcome = _Outcome(str(path), (row,))
     return _Outcome(outcome.path, outcome.rows, outcome.compasses, fingerprint)
+
+
+def _codes_of(error: BaseException) -> str:
+    """A failing row's reason codes (``;``-separated): the error's own; else that of its kind, an input error's
+    (``unreadable_file``, ``bad_option``, ``bad_samples``) or ``unclassified``."""
+    if isinstance(error, MagfitError) and error.codes:
+        return ";".join(error.codes)
+    if isinstance(error, (DataFileError, OSError, MemoryError)):  # (MemoryError: too big to read here)
+        return "unreadable_file"
+    if isinstance(error, OptionError):
+        return "bad_option"
+    if isinstance(error, SampleError):
+        return "bad_samples"
+    return "unclassified"
 
 
 def _fingerprint(path: Path, settings: _Settings) -> str:
@@ -446,7 +463,7 @@ def _fit_recording_or_raise(path: Path, vehicle: str, settings: _Settings) -> _O
     for failure in result.failures:
         rows.append(FleetRow("flight", vehicle, str(path), sensor=failure.sensor,
                              device_id=read.devices.get(failure.sensor), date=date, method=settings.method,
-                             verdict="refused", codes=";".join(failure.codes),
+                             verdict="refused", codes=";".join(failure.codes) or "unclassified",
                              reason=_one_line(failure.reason)))  # fmt: skip
         if failure.sensor in reads:
             compasses.append(reads[failure.sensor])
@@ -721,12 +738,12 @@ def _fit_part(task: _PartTask, settings: _Settings) -> FleetRow:
         cal = fit(samples, method=method, **options)
     except MagfitError as error:
         return FleetRow("combined", task.vehicle, paths, sensor=task.sensor, device_id=task.device_id,
-                        date=task.dates, method=settings.method, verdict="refused", codes=";".join(error.codes),
+                        date=task.dates, method=settings.method, verdict="refused", codes=_codes_of(error),
                         reason=_one_line(str(error)), unit=task.unit, flights=len(task.recordings))  # fmt: skip
     except (OSError, MemoryError) as error:
         return FleetRow("combined", task.vehicle, paths, sensor=task.sensor, device_id=task.device_id,
-                        date=task.dates, verdict="error", reason=_one_line(str(error)), unit=task.unit,
-                        flights=len(task.recordings))  # fmt: skip
+                        date=task.dates, verdict="error", codes=_codes_of(error), reason=_one_line(str(error)),
+                        unit=task.unit, flights=len(task.recordings))  # fmt: skip
     cal = cal.with_unit(task.unit) if task.unit else cal
     ratio = cal.field_strength / task.model_total if math.isfinite(task.model_total) else math.nan
     return _row("combined", task.vehicle, paths, cal, task.sensor, task.device_id, task.dates, ratio,
