@@ -92,3 +92,19 @@ def test_every_fleet_error_row_carries_the_code_of_its_error(tmp_path: Path) -> 
     assert rows["empty.csv"]["codes"] == "unreadable_file" and rows["words.csv"]["codes"] == "unreadable_file"
     assert rows["few.csv"]["codes"] == "too_few_samples"
     assert all(set(row["codes"].split(";")) <= set(magfit.REASON_CODES) for row in rows.values())
+
+
+@pytest.mark.parametrize(("given", "factor"), [(0.5, 100), (5000.0, 100), (0.05, 1000)])
+def test_a_field_strength_in_another_unit_is_an_input_error_naming_the_mixup(
+    given: float, factor: int, tmp_path: Path
+) -> None:
+    from test_review_defects import _sphere_csv
+
+    path = tmp_path / "uT.csv"
+    _sphere_csv(path)  # simulated: a field of 50 (µT) on a sphere around (10, -5, 3)
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--field-strength", str(given)])
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.splitlines()
+    assert "unit mix-up" in line and f"a factor of {factor}" in line, line
+    # The value in the samples' unit, as the truth has it: 50.
+    assert "--field-strength 50)" in line, line

@@ -7,6 +7,7 @@ progress bar, prints the summaries and writes the files.
 from __future__ import annotations
 
 import datetime
+import math
 import re
 import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -18,7 +19,7 @@ import click
 from rich.console import Console
 
 from ..calibration import CONVENTION, Calibration
-from ..errors import CalibrationError, DataFileError
+from ..errors import CalibrationError, DataFileError, MagfitError
 from ..geomag import parse_date, parse_location
 from ..methods import get_method
 from ..pipeline import (
@@ -426,18 +427,23 @@ def calibrate_command(
     method = method or default_method()
     if output is not None and export_format is not None and str(output) != STDOUT:
         _check_extension(output, export_format)
+    asked: dict[str, Any] = dict(
+        sensor=sensor, columns=columns, unit=unit, field_strength=field_strength, location=location, force=force,
+        nonfinite=nonfinite, even=even, max_samples=max_samples, attitude=attitude, reference=reference, gyro=gyro,
+        accel=accel, time=time_column, attitude_convention=attitude_convention, angle_unit=angle_unit,
+        gyro_unit=gyro_unit, motor=motor,
+    )  # fmt: skip
     try:
-        result = _calibrate(
-            file, method, sensor=sensor, columns=columns, unit=unit, field_strength=field_strength, location=location,
-            model_date=model_date, force=force, nonfinite=nonfinite, even=even, max_samples=max_samples,
-            attitude=attitude, reference=reference, gyro=gyro, accel=accel, time=time_column,
-            attitude_convention=attitude_convention, angle_unit=angle_unit, gyro_unit=gyro_unit, motor=motor,
-        )  # fmt: skip
+        result = _calibrate(file, method, model_date=model_date, **asked)
     except StreamsMissing as error:
         raise CommandError(
             f"{one_line(error.text)}; on the command line: {command_line('calibrate', file, error.remedy)}"
         ) from None
-    except RefusedWithAdvice as error:
+    except CalibrationError as error:
+        if isinstance(field_strength, float) and "unit_mismatch" in error.codes:
+            raise _field_in_another_unit(file, method, model_date, asked, field_strength) from None
+        if not isinstance(error, RefusedWithAdvice):
+            raise
         said = "; ".join(f"{reason} ({command_line('calibrate', file, reason.remedy)})" for reason in error.advice)
         works = f"; what works for a vehicle: {said}" if said else ""
         raise FitFailedError(f"{one_line(error.text)}{works}") from None
@@ -506,6 +512,43 @@ def _calibrate(file: Path, method: str, *, model_date: datetime.date | None, **o
     for note in _once(file, kept, len(result.compasses) + len(result.failures)):
         warn(note)
     return result
+
+
+def _field_in_another_unit(
+    file: Path, method: str, model_date: datetime.date | None, asked: dict[str, Any], given: float
+) -> CommandError:
+    """The usage error of a ``--field-strength`` a power of ten away from the samples' own radius (the verdict's
+    ``unit_mismatch``): the value, the likely mix-up and the value in the samples' unit (the radius the samples
+    alone give, :attr:`magfit.facts.KnownField.fitted`, from the same fit forced)."""
+    from ..diagnostics.verdict import unit_mixup
+
+    fitted = None
+    try:
+        forced = calibrate_file(file, method, date=model_date, notify=None, **{**asked, "force": True})
+        known = forced.compasses[0].calibration.known_field if forced.compasses else None
+        fitted = known.fitted if known is not None else None
+    except MagfitError:
+        pass
+    if fitted is None or not fitted > 0:  # (the refusal said the mix-up: its numbers are not at hand)
+        return CommandError(
+            f"{file}: --field-strength {given:g} is a power of ten away from the field the samples show: likely a "
+            "unit mix-up; give the field strength in the samples' unit, or leave --field-strength out"
+        )
+    ratio = fitted / given
+    size = max(ratio, 1 / ratio)
+    times = f"{size:,.0f}" if size >= 100 else f"{size:.3g}"
+    how = f"{times} times {'smaller' if ratio > 1 else 'larger'}"
+    mixup = unit_mixup(ratio) or "likely a unit mix-up"
+    return CommandError(
+        f"{file}: --field-strength {given:g} is {how} than the field the samples show ({significant(fitted, 4)}): "
+        f"{mixup}; give it in the samples' unit (--field-strength {significant(given * _power_of_ten(ratio), 4)}), "
+        "or leave --field-strength out"
+    )
+
+
+def _power_of_ten(ratio: float) -> float:
+    """The power of ten nearest ``ratio``: the unit factor of a mix-up."""
+    return float(10.0 ** round(math.log10(ratio)))
 
 
 def _bare(note: str) -> str:
