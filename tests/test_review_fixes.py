@@ -108,3 +108,31 @@ def test_a_field_strength_in_another_unit_is_an_input_error_naming_the_mixup(
     assert "unit mix-up" in line and f"a factor of {factor}" in line, line
     # The value in the samples' unit, as the truth has it: 50.
     assert "--field-strength 50)" in line, line
+
+
+@pytest.mark.slow
+def test_attitude_angles_read_as_radians_by_their_size_are_said_with_the_option(tmp_path: Path) -> None:
+    import magfit
+
+    degrees = tmp_path / "car_deg.csv"
+    _vehicle_csv(degrees, "car", 1)
+    in_degrees = tmp_path / "deg.json"
+    assert CliRunner().invoke(cli, ["calibrate", str(degrees), "-m", "vector", "-o", str(in_degrees)]).exit_code == 0
+    path = tmp_path / "car.csv"
+    _vehicle_csv(path, "car", 1)
+    table = np.loadtxt(path, delimiter=",", skiprows=1)
+    table[:, 4:7] = np.radians(table[:, 4:7])  # roll, pitch, yaw in radians: all within ±2.5
+    header = path.read_text(encoding="utf-8").splitlines()[0]
+    np.savetxt(path, table, fmt="%.6f", delimiter=",", header=header, comments="")
+    cal = tmp_path / "cal.json"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "vector", "-o", str(cal)])
+    assert result.exit_code == 0, result.output
+    (said,) = [line for line in result.stderr.splitlines() if "assumed" in line]
+    assert "roll, pitch, yaw" in said and "--angle-unit deg" in said, said
+    # Radians was right here: the same calibration as from the angles in degrees, near the simulated hard iron
+    # (the car's weak verdict: its x offset is 2.3 off, within the worst heading error it states, 4.6°).
+    offset = magfit.Calibration.from_json(cal.read_text()).offset
+    np.testing.assert_allclose(offset, magfit.Calibration.from_json(in_degrees.read_text()).offset, atol=1e-3)
+    np.testing.assert_allclose(offset, _vehicle_hard_iron(1), atol=3.0)
+    given = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "vector", "--angle-unit", "rad"])
+    assert given.exit_code == 0 and "assumed" not in given.stderr, given.output

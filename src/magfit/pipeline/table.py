@@ -204,6 +204,13 @@ def samples_source(
                 "3-2-1 (yaw, pitch, roll), body to "
                 + ("NED" if spec.convention == "ned" else "ENU (ROS), turned into NED")
             )
+            if spec.angle_unit == "auto" and unit_used == "rad":  # an assumption: said with the option that undoes it
+                largest = float(np.nanmax(np.abs(values)))
+                notes.append(
+                    f"{path}: the attitude's angles ({found['attitude'].describe()}) all lie within ±{largest:.3g}: "
+                    f"read as radians, assumed (in degrees the vehicle would hardly have turned); if they are "
+                    f"degrees, give {option('angle_unit', 'deg')}"
+                )
         else:
             unit_used = "rad"
             notes.append(f"{path}: attitude as a quaternion (w, x, y, z), body to {spec.convention.upper()}")
