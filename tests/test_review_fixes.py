@@ -136,3 +136,20 @@ def test_attitude_angles_read_as_radians_by_their_size_are_said_with_the_option(
     np.testing.assert_allclose(offset, _vehicle_hard_iron(1), atol=3.0)
     given = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "vector", "--angle-unit", "rad"])
     assert given.exit_code == 0 and "assumed" not in given.stderr, given.output
+
+
+def test_forced_auto_says_its_refusal_once(tmp_path: Path) -> None:
+    import magfit
+
+    sim = magfit.scenario("mpu9250", "none").simulate(600, seed=4, orientations="yaw")  # level turns only
+    path = tmp_path / "yaw.csv"
+    np.savetxt(path, sim.samples, fmt="%.4f", delimiter=",", header="mx,my,mz", comments="")
+    cal = tmp_path / "cal.json"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "mG", "--force", "-o", str(cal)])
+    assert result.exit_code == 0, result.output
+    assert result.output.count("the field was never seen near +z") == 1, result.output
+    forced = magfit.Calibration.from_json(cal.read_text())
+    assert forced.support is not None and forced.support.verdict == "refused" and "single_axis" in forced.support.codes
+    # What level turns do determine, the horizontal offset, is near the simulated one (within 2 % of the field:
+    # the sphere forced through an undetermined z offset, 800 for 270, pulls it by 3).
+    np.testing.assert_allclose(forced.offset[:2], sim.truth.offset[:2], atol=0.02 * sim.truth.field_strength)

@@ -690,11 +690,19 @@ def _print_model_field(out: Console, calibration: Calibration, model: ModelField
 
 
 def _fit_warnings(calibration: Calibration) -> list[str]:
-    """The warnings the fit's diagnostics attached (poor coverage, weak directions ...), if any."""
+    """The warnings the fit's diagnostics attached (poor coverage, weak directions ...), if any; each said once
+    (a forced auto's refusal quotes its model's own, which is not said again)."""
     diagnostics = calibration.details.get("diagnostics")
     if not isinstance(diagnostics, Mapping):
         return []
-    return [str(message) for message in diagnostics.get("warnings") or []]
+    warnings = [str(message) for message in diagnostics.get("warnings") or []]
+    forced = "NOT SUPPORTED (forced): "
+    return [
+        warning
+        for warning in warnings
+        if not warning.startswith(forced)
+        or not any(other != warning and warning.removeprefix(forced) in other for other in warnings)
+    ]
 
 
 def _check_extension(output: Path, export_format: str) -> None:
@@ -713,6 +721,9 @@ def _choice(calibration: Calibration) -> list[tuple[str, str]]:
         return []
     used, reason = choice.method_used, choice.reason
     model = f"{choice.chosen} model" + (f", maximum-likelihood fit started from {used}" if used else "")
+    support = calibration.support
+    if support is not None and support.forced and reason in support.refusals:  # said as a warning already
+        reason = "forced: the samples determine no model, as the warning above says"
     return [("chose", model + (f" ({reason})" if reason else ""))]
 
 
