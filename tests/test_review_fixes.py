@@ -153,3 +153,25 @@ def test_forced_auto_says_its_refusal_once(tmp_path: Path) -> None:
     # What level turns do determine, the horizontal offset, is near the simulated one (within 2 % of the field:
     # the sphere forced through an undetermined z offset, 800 for 270, pulls it by 3).
     np.testing.assert_allclose(forced.offset[:2], sim.truth.offset[:2], atol=0.02 * sim.truth.field_strength)
+
+
+@pytest.mark.slow
+def test_the_summary_reads_the_typed_diagnostics_and_gyro_facts(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from magfit.cli.calibrate import _uncertainty
+    from magfit.pipeline import calibrate_file
+
+    path = tmp_path / "car.csv"
+    _vehicle_csv(path, "car", 1)
+    compass = calibrate_file(path, "gyro").compasses[0]
+    np.testing.assert_allclose(compass.calibration.offset, _vehicle_hard_iron(1), atol=1.5)  # the simulated one
+    gyro = compass.calibration.gyro
+    assert gyro is not None and gyro.heading_sigma_deg is not None
+    spread = compass.calibration.diagnostics.uncertainty if compass.calibration.diagnostics else None
+    lines = dict(_uncertainty(compass))
+    if spread is not None and spread.heading_sigma_deg is not None:  # the diagnostics' one-sigma, as they state it
+        assert lines["heading"].startswith(f"± {spread.heading_sigma_deg:.2g}°"), lines
+    # Without the diagnostics (a calibration stored without them) the gyro fit's own one-sigma is still said.
+    bare = replace(compass, calibration=replace(compass.calibration, details={}))
+    assert dict(_uncertainty(bare))["heading"].startswith(f"± {gyro.heading_sigma_deg:.2g}°")

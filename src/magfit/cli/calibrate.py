@@ -692,10 +692,10 @@ def _print_model_field(out: Console, calibration: Calibration, model: ModelField
 def _fit_warnings(calibration: Calibration) -> list[str]:
     """The warnings the fit's diagnostics attached (poor coverage, weak directions ...), if any; each said once
     (a forced auto's refusal quotes its model's own, which is not said again)."""
-    diagnostics = calibration.details.get("diagnostics")
-    if not isinstance(diagnostics, Mapping):
+    diagnostics = calibration.diagnostics
+    if diagnostics is None:
         return []
-    warnings = [str(message) for message in diagnostics.get("warnings") or []]
+    warnings = [str(message) for message in diagnostics.warnings]
     forced = "NOT SUPPORTED (forced): "
     return [
         warning
@@ -742,22 +742,20 @@ def _verdict(calibration: Calibration) -> list[tuple[str, str]]:
 
 
 def _uncertainty(run: CompassCalibration) -> list[tuple[str, str]]:
-    """The share of directions covered and the heading one-sigma, as the saved diagnostics hold them (the one
-    uncertainty the warnings quote); a log's coverage is already on its ``directions`` line."""
-    diagnostics = run.calibration.details.get("diagnostics")
-    if not isinstance(diagnostics, Mapping):
-        return []
+    """The share of directions covered and the heading one-sigma, as the fit's diagnostics state them (the one
+    uncertainty the warnings quote; :attr:`magfit.Calibration.diagnostics`); a log's coverage is already on its
+    ``directions`` line."""
+    diagnostics = run.calibration.diagnostics
     lines = []
-    cover = diagnostics.get("coverage")
-    if run.magnetometer is None and isinstance(cover, Mapping) and isinstance(cover.get("share"), (int, float)):
-        lines.append(("coverage", f"{100 * cover['share']:.0f} % of the sphere of field directions reached"))
-    spread = diagnostics.get("uncertainty")
-    heading = spread.get("heading_sigma_deg") if isinstance(spread, Mapping) else None
-    if isinstance(heading, (int, float)) and isinstance(spread, Mapping):
-        worst, inclination = spread.get("heading_sigma_max_deg"), spread.get("inclination_deg")
-        text = f"± {heading:.2g}° one-sigma at level (RMS over headings"
-        text += f", worst ± {worst:.2g}°" if isinstance(worst, (int, float)) else ""
-        text += f"; inclination {inclination:.0f}°)" if isinstance(inclination, (int, float)) else ")"
+    cover = diagnostics.coverage if diagnostics is not None else None
+    if run.magnetometer is None and cover is not None:
+        lines.append(("coverage", f"{100 * cover.share:.0f} % of the sphere of field directions reached"))
+    spread = diagnostics.uncertainty if diagnostics is not None else None
+    if spread is not None and spread.heading_sigma_deg is not None:
+        worst, inclination = spread.heading_sigma_max_deg, spread.inclination_deg
+        text = f"± {spread.heading_sigma_deg:.2g}° one-sigma at level (RMS over headings"
+        text += f", worst ± {worst:.2g}°" if worst is not None else ""
+        text += f"; inclination {inclination:.0f}°)" if math.isfinite(inclination) else ")"
         lines.append(("heading", text))
     elif (gyro := run.calibration.gyro) is not None and gyro.heading_sigma_deg is not None:
         # gyro's one-sigma is its own (the kinematic fit's covariance, the halves' difference joined): no
