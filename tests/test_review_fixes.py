@@ -175,3 +175,29 @@ def test_the_summary_reads_the_typed_diagnostics_and_gyro_facts(tmp_path: Path) 
     # Without the diagnostics (a calibration stored without them) the gyro fit's own one-sigma is still said.
     bare = replace(compass, calibration=replace(compass.calibration, details={}))
     assert dict(_uncertainty(bare))["heading"].startswith(f"± {gyro.heading_sigma_deg:.2g}°")
+
+
+def test_apply_reads_the_head_of_the_samples_once_before_writing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import magfit
+    import magfit.io.layout as layout
+    from test_review_defects import _sphere_csv
+
+    fitted_on = tmp_path / "uT.csv"
+    _sphere_csv(fitted_on, seed=1)
+    cal = tmp_path / "cal.json"
+    assert CliRunner().invoke(cli, ["calibrate", str(fitted_on), "--unit", "uT", "-o", str(cal)]).exit_code == 0
+    heads: list[Path] = []
+    read_head = layout.read_head
+    monkeypatch.setattr(layout, "read_head", lambda path, *a, **k: heads.append(Path(path)) or read_head(path, *a, **k))
+    out = tmp_path / "out.csv"
+    gauss = tmp_path / "gauss.csv"
+    _sphere_csv(gauss, seed=2, scale=0.01)  # the same sensor in gauss: the far-from-the-sphere check speaks
+    result = CliRunner().invoke(cli, ["apply", str(cal), str(gauss), "-o", str(out)])
+    assert result.exit_code == 0 and "lies at 0.2" in result.stderr, result.output  # the check read the first chunk
+    # One head for the columns and the check, one for the writer (which reads the file through).
+    assert heads.count(gauss) == 2, heads
+    corrected = np.loadtxt(out, delimiter=",", skiprows=1)
+    expected = magfit.Calibration.from_json(cal.read_text()).apply(np.loadtxt(gauss, delimiter=",", skiprows=1))
+    np.testing.assert_allclose(corrected, expected, atol=1e-4)

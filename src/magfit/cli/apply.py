@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
+import numpy as np
+from numpy.typing import NDArray
 
 from ..calibration import CONVENTION, Calibration
 from ..errors import DataFileError, MagfitError, OptionError
@@ -35,10 +38,13 @@ def read_calibration(path: Path) -> Calibration:
         raise DataFileError(f"{path}: {error} ({written_by})") from None
 
 
-def remembered_columns(calibration: Calibration, fmt: FileFormat) -> list[str | int] | None:
+def remembered_columns(
+    calibration: Calibration, fmt: FileFormat | Callable[[], FileFormat]
+) -> list[str | int] | None:
     """The x, y, z columns ``magfit calibrate`` fitted (``calibration.source``) as they apply to a file of
     layout ``fmt``: names when the fitted file had a header; positions only for a file without a header and
-    with as many columns (a position means nothing in a file of another layout); else None (detected)."""
+    with as many columns (a position means nothing in a file of another layout); else None (detected).
+    ``fmt`` may be a function that reads the layout: called only for positions, which need it."""
     source = calibration.source
     if source is None:
         return None
@@ -48,7 +54,8 @@ def remembered_columns(calibration: Calibration, fmt: FileFormat) -> list[str | 
     indices = source.column_indices
     if indices is None or len(indices) != 3:
         return None
-    return list(indices) if fmt.header is None and source.n_columns == fmt.n_columns else None
+    layout = fmt() if callable(fmt) else fmt
+    return list(indices) if layout.header is None and source.n_columns == layout.n_columns else None
 
 
 @click.command("apply")
@@ -133,10 +140,10 @@ def apply_command(
     if sensor is not None:
         raise DataFileError(f"{file}: --sensor chooses a compass of a flight log or bag (ULog, DataFlash, ROS)")
     # Without --columns, the columns the calibration was fitted on (Calibration.source, written by calibrate).
-    remembered = remembered_columns(calibration, sniff(file)) if columns is None else None
+    remembered = remembered_columns(calibration, lambda: sniff(file)) if columns is None else None
     chosen = columns if columns is not None else remembered
-    try:
-        reader = iter_sample_chunks(file, columns=chosen)
+    try:  # the one reader of the columns: its first chunk is the check below (the writer reads the file again)
+        reader = iter_sample_chunks(file, columns=chosen, chunk_rows=FIRST_ROWS)
     except DataFileError as error:
         if remembered is None:
             raise
@@ -144,7 +151,7 @@ def apply_command(
             f"{error} ({calibration_file} was fitted on the columns {columns_text(remembered)}; choose the columns "
             f"of {file} with --columns)"
         ) from None
-    _warn_far_from_the_sphere(calibration, calibration_file, file, chosen)
+    _warn_far_from_the_sphere(calibration, calibration_file, file, reader)
     values, motor_note = None, ""
     if calibration.motor is not None:
         values, label = column_regressor(
@@ -168,21 +175,20 @@ def apply_command(
 #: Corrected samples whose median norm is beyond this factor of the calibration's field strength were not
 #: recorded by the sensor (or in the unit) the calibration was fitted on.
 FAR_FROM_THE_SPHERE = 2.0
+#: The rows of the first chunk, which that check reads.
+FIRST_ROWS = 10_000
 
 
 def _warn_far_from_the_sphere(
-    calibration: Calibration, calibration_file: Path, file: Path, columns: list[str | int] | None
+    calibration: Calibration, calibration_file: Path, file: Path, reader: Iterable[NDArray[np.float64]]
 ) -> None:
-    """Say when the samples, corrected, lie far from the calibration's sphere (their first chunk's median norm
-    against its field strength): another unit (gauss for µT is a factor 100) or another sensor."""
-    import numpy as np
-
+    """Say when the samples, corrected, lie far from the calibration's sphere (the median norm of ``reader``'s
+    first chunk against its field strength): another unit (gauss for µT is a factor 100) or another sensor."""
     from ..diagnostics.verdict import unit_mixup
-    from ..io import iter_sample_chunks
 
     if not Path(file).is_file():  # a pipe is read once, by the writer
         return
-    first = next(iter(iter_sample_chunks(file, columns=columns, chunk_rows=10_000)), None)
+    first = next(iter(reader), None)
     if first is None or not len(first) or not calibration.field_strength > 0:
         return
     # The motors' term left out: a fraction of the field, well within the factor.
