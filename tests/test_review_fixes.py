@@ -201,3 +201,13 @@ def test_apply_reads_the_head_of_the_samples_once_before_writing(
     corrected = np.loadtxt(out, delimiter=",", skiprows=1)
     expected = magfit.Calibration.from_json(cal.read_text()).apply(np.loadtxt(gauss, delimiter=",", skiprows=1))
     np.testing.assert_allclose(corrected, expected, atol=1e-4)
+
+
+def test_a_field_strength_in_another_unit_for_every_compass_of_a_log_is_an_input_error(tmp_path: Path) -> None:
+    from test_sources_ulog import write_log
+
+    path = tmp_path / "flight.ulg"
+    write_log(path)  # in gauss, a field of 0.5 G; its second compass never turned (refused for that)
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--field-strength", "50"])  # 50 µT given
+    assert result.exit_code == 2, result.output
+    assert "a factor of 100" in result.stderr and "--field-strength 0.5)" in result.stderr, result.stderr

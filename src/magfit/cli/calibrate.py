@@ -440,13 +440,21 @@ def calibrate_command(
             f"{one_line(error.text)}; on the command line: {command_line('calibrate', file, error.remedy)}"
         ) from None
     except CalibrationError as error:
-        if isinstance(field_strength, float) and "unit_mismatch" in error.codes:
-            raise _field_in_another_unit(file, method, model_date, asked, field_strength) from None
+        mixup = _field_in_another_unit(file, method, model_date, asked, error.codes)
+        if mixup is not None:
+            raise mixup from None
         if not isinstance(error, RefusedWithAdvice):
             raise
         said = "; ".join(f"{reason} ({command_line('calibrate', file, reason.remedy)})" for reason in error.advice)
         works = f"; what works for a vehicle: {said}" if said else ""
         raise FitFailedError(f"{one_line(error.text)}{works}") from None
+    if not result.compasses:  # a log's compasses, none fitted: a field strength given in another unit is said
+        for failure in result.failures:  # (a log's compasses share its unit: the first compass refused for it)
+            if {"unit_mismatch", "field_mismatch"} & set(failure.codes):
+                one = {**asked, "sensor": failure.sensor}
+                if (mixup := _field_in_another_unit(file, method, model_date, one, failure.codes)) is not None:
+                    raise mixup
+                break
     several = len(result.compasses) + len(result.failures) > 1
     # Everything is computed before anything is written: a failure leaves every existing file as it was.
     files: list[tuple[Path, bytes]] = []
@@ -515,30 +523,40 @@ def _calibrate(file: Path, method: str, *, model_date: datetime.date | None, **o
 
 
 def _field_in_another_unit(
-    file: Path, method: str, model_date: datetime.date | None, asked: dict[str, Any], given: float
-) -> CommandError:
-    """The usage error of a ``--field-strength`` a power of ten away from the samples' own radius (the verdict's
-    ``unit_mismatch``): the value, the likely mix-up and the value in the samples' unit (the radius the samples
-    alone give, :attr:`magfit.facts.KnownField.fitted`, from the same fit forced)."""
+    file: Path, method: str, model_date: datetime.date | None, asked: dict[str, Any], codes: Sequence[str]
+) -> CommandError | None:
+    """The usage error of a ``--field-strength`` a power of ten away from the samples' own field (a refusal
+    with code ``unit_mismatch`` or ``field_mismatch`` whose ratio is a unit's factor): the value, the likely
+    mix-up and the value in the samples' unit; None for any other refusal.
+
+    The samples' own field is the same fit's without the field strength (forced: only its radius is read).
+    """
     from ..diagnostics.verdict import unit_mixup
 
+    given = asked.get("field_strength")
+    if not isinstance(given, float) or not given > 0 or not {"unit_mismatch", "field_mismatch"} & set(codes):
+        return None
     fitted = None
     try:
-        forced = calibrate_file(file, method, date=model_date, notify=None, **{**asked, "force": True})
-        known = forced.compasses[0].calibration.known_field if forced.compasses else None
-        fitted = known.fitted if known is not None else None
+        free = calibrate_file(file, method, date=model_date, notify=None, **{**asked, "field_strength": None,
+                                                                             "force": True})  # fmt: skip
+        fitted = free.compasses[0].calibration.field_strength if free.compasses else None
     except MagfitError:
         pass
-    if fitted is None or not fitted > 0:  # (the refusal said the mix-up: its numbers are not at hand)
+    if fitted is None or not fitted > 0:
+        if "unit_mismatch" not in codes:
+            return None
         return CommandError(
             f"{file}: --field-strength {given:g} is a power of ten away from the field the samples show: likely a "
             "unit mix-up; give the field strength in the samples' unit, or leave --field-strength out"
         )
     ratio = fitted / given
+    mixup = unit_mixup(ratio)
+    if mixup is None:  # a field strength the samples contradict, not by a unit's factor: the refusal stands
+        return None
     size = max(ratio, 1 / ratio)
     times = f"{size:,.0f}" if size >= 100 else f"{size:.3g}"
     how = f"{times} times {'smaller' if ratio > 1 else 'larger'}"
-    mixup = unit_mixup(ratio) or "likely a unit mix-up"
     return CommandError(
         f"{file}: --field-strength {given:g} is {how} than the field the samples show ({significant(fitted, 4)}): "
         f"{mixup}; give it in the samples' unit (--field-strength {significant(given * _power_of_ten(ratio), 4)}), "
