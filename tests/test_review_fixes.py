@@ -211,3 +211,13 @@ def test_a_field_strength_in_another_unit_for_every_compass_of_a_log_is_an_input
     result = CliRunner().invoke(cli, ["calibrate", str(path), "--field-strength", "50"])  # 50 µT given
     assert result.exit_code == 2, result.output
     assert "a factor of 100" in result.stderr and "--field-strength 0.5)" in result.stderr, result.stderr
+
+
+def test_align_refuses_attitude_columns_it_would_not_use(tmp_path: Path) -> None:
+    path = tmp_path / "car.csv"
+    _vehicle_csv(path, "car", 1)
+    both = ["--accel-columns", "ax,ay,az", "--attitude", "roll,pitch,yaw"]
+    assert CliRunner().invoke(cli, ["align", str(path), *both]).exit_code == 2
+    log = DATA / "px4_pyulog" / "sample_log_small.ulg"
+    result = CliRunner().invoke(cli, ["align", str(log), "--attitude", "roll,pitch,yaw"])
+    assert result.exit_code == 2 and "--attitude" in result.stderr, result.output

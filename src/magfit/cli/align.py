@@ -221,6 +221,8 @@ def align_command(
     if accel_columns is not None and (attitude is not None or reference is not None):
         fail("give --accel-columns (the rotation from gravity) or --attitude/--reference (from the vector fit), "
              "not both")  # fmt: skip
+    if log_kind(file) is not None and (attitude is not None or reference is not None):
+        fail(f"{file}: --attitude and --reference name a samples file's columns; a flight log's streams are its own")
     if log_kind(file) is None and accel_columns is None and _by_reference(file, attitude, reference):
         spec = StreamSpec(attitude, reference, gyro_columns, None, [time_column] if time_column else None,
                           attitude_convention, angle_unit, gyro_unit)  # type: ignore[arg-type]  # fmt: skip
