@@ -26,9 +26,10 @@ clearly better on stretches of the recording it did not see (docs/diagnostics.md
    returns weak is taken instead; beyond :data:`USELESS_BOUND_DEG` without one, auto refuses
    (:class:`UndeterminedChoice`, which carries the model the choice ranks best for a forced fit).
 
-The calibration returned is the chosen model's maximum-likelihood fit on a stride of at most 200 000
-samples: for the full ellipsoid the ``ml`` method's fit (exact orthogonal distances, corrected for the
-σ²-bias of curved surfaces); for the sphere and diag models, the first-order fit of the model choice.
+The calibration returned is the chosen model's maximum-likelihood fit on a stride of at most
+:data:`REFIT_ROWS` samples (its stated uncertainty is for the rows read): for the full ellipsoid the ``ml``
+method's fit (exact orthogonal distances, corrected for the σ²-bias of curved surfaces); for the sphere and
+diag models, the first-order fit of the model choice.
 
 Outliers: when the plain algebraic fit leaves far samples, a robust algebraic fit screens a stride of at
 most :data:`SCREEN_ROWS` samples; when more than 0.2 % of them (and at least 5) lie beyond 6 robust
@@ -56,7 +57,6 @@ from ..findings import Diagnostics, Reason, Support, said_once
 from ..geometry.quadric import check_field_strength, pin_field_strength
 from ..outliers import DEFAULT_THRESHOLD
 from ..remedy import option
-from ..sampling import MAX_ANALYSED
 from ..saturation import find_clipped
 from ..statistics import Statistics
 from .core import estimate, first_order_refit
@@ -165,8 +165,12 @@ def omitted_weakness(calibration: Calibration, report: Diagnostics) -> tuple[Rea
 
 
 #: The most samples auto's final fit (:func:`refine_chosen`, the maximum-likelihood refit) reads: a regular
-#: stride of its samples beyond (:func:`magfit.sampling.thin`'s bound); its model choice reads fewer.
-REFIT_ROWS = 10 * MAX_ANALYSED
+#: stride of its samples beyond; its model choice reads fewer. The diagnostics read the same stride, so the
+#: one-sigma stated is that of a fit to these rows (it shrinks as 1/√rows where the noise dominates): the
+#: bound trades that one-sigma on long recordings against the refit's time, linear in the rows (four
+#: evaluations of the exact orthogonal distances). It also bounds the rows ``magfit calibrate`` streams for
+#: ``auto`` (:attr:`~magfit.methods.registry.MethodSpec.fit_rows`).
+REFIT_ROWS = 50_000
 
 
 @register(
@@ -516,7 +520,7 @@ def _cost(p: NDArray[np.float64], z: NDArray[np.float64], model: str) -> float:
 def refine_chosen(
     model: str, start: Calibration, samples: NDArray[np.float64], given: FitInput | None = None
 ) -> Calibration:
-    """What ``auto`` returns for ``model``, fitted to (a stride of at most 200 000 of) ``samples``.
+    """What ``auto`` returns for ``model``, fitted to (a stride of at most :data:`REFIT_ROWS` of) ``samples``.
 
     The full ellipsoid: the ``ml`` fit (orthogonal distances with the mean-curvature bias correction);
     the first-order maximum-likelihood fit of :func:`_optimal_rss` grows the ellipsoid by about σ²/B and
