@@ -229,8 +229,8 @@ def report(results: dict[str, Any], before: dict[str, Any] | None) -> str:
         "model leaves out); the offset one-sigma holds the noise and that left-out distortion only (a weak sphere on "
         "tilts was 10-42 one-sigmas off before it did). What is left beyond 3 one-sigmas of offset is on flights with "
         "a drifting field, widened in heading only. On full tumbles beyond 1e5 samples the heading one-sigma is "
-        f"conservative ({median}): the diag model chosen for an undisturbed sensor states the full "
-        "model's heading difference as well.",
+        f"conservative ({median}; the offset one-sigma is not): which of its widenings does it is not established "
+        "here.",
     ]
     worst = sorted(
         (t for t in results["trials"] if t["heading_error_deg"] is not None and t["heading_sigma_deg"]),
