@@ -88,6 +88,10 @@ def main(argv: list[str] | None = None) -> int:
     verdict = calibration.support.verdict if calibration.support is not None else "none"
     chosen = calibration.auto.chosen if calibration.auto is not None else "?"
     print(f"{int(args.n):,} samples; load average {', '.join(f'{v:.1f}' for v in os.getloadavg())}")
+    refit = importlib.import_module("magfit.methods.auto").REFIT_ROWS
+    step = -(-samples.shape[0] // refit)
+    print(f"the ml refit and the final diagnostics read every {step} sample(s): {len(samples[::step]):,} rows "
+          f"(REFIT_ROWS {refit:,})")  # fmt: skip
     print(f"ellipsoid (least of {args.repeat}): {1000 * min(ellipsoid):.1f} ms")
     print(f"auto (least of {args.repeat}): {1000 * best[0]:.1f} ms = {best[0] / min(ellipsoid):.2f} x ellipsoid "
           f"({verdict}, chose {chosen})")  # fmt: skip

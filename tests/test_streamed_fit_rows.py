@@ -1,5 +1,5 @@
 """A file too big for memory is fitted on an even subsample; by default no larger than the method's fit reads
-(``MethodSpec.fit_rows``: auto's final fit reads a stride of at most 200 000 samples), and the summary says so.
+(``MethodSpec.fit_rows``: auto's final fit reads a stride of at most 50 000 samples), and the summary says so.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def _calibrate(path: Path, *options: str, tmp_path: Path) -> tuple[str, magfit.C
 
 
 def test_auto_declares_the_rows_its_final_fit_reads() -> None:
-    assert METHODS["auto"].fit_rows == REFIT_ROWS == 200_000
+    assert METHODS["auto"].fit_rows == REFIT_ROWS == 50_000
     assert METHODS["ml"].fit_rows is None  # ml fits every sample it is given
 
 

@@ -170,6 +170,7 @@ def _judged(
         return judged_against_reference(calibration, spec.name, diagnostics, allow_undetermined)
     judging = spec.judging
     model_error = judging.model_error_deg(calibration) if judging.model_error_deg is not None else 0.0
+    offset_error = judging.model_error_offset(calibration) if judging.model_error_offset is not None else None
     if data.samples is None:
         report = diagnose_statistics(calibration, data.statistics)
     else:
@@ -186,6 +187,7 @@ def _judged(
             compare_ml=judging.compare_ml,
             variation_refit=variation,
             model_error_heading_deg=model_error,
+            model_error_offset=offset_error,
             clipping=data.clipping,
             fitted_rows=spec.fit_rows,  # auto's refit reads a stride: its uncertainty is for those rows
         )
@@ -248,6 +250,7 @@ def diagnose(
         refit = None
     judging = spec.judging if spec is not None else None
     model_error = judging.model_error_deg(calibration) if judging and judging.model_error_deg else 0.0
+    offset_error = judging.model_error_offset(calibration) if judging and judging.model_error_offset else None
     report = diagnose_samples(
         calibration,
         samples,
@@ -257,6 +260,7 @@ def diagnose(
         represents=represents,
         refit=refit,
         model_error_heading_deg=model_error,
+        model_error_offset=offset_error,
         fitted_rows=spec.fit_rows if spec is not None else None,
     )
     own = judging.weaknesses(calibration, report) if judging and judging.weaknesses else ()

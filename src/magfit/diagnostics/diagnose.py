@@ -85,6 +85,7 @@ def diagnose(
     compare_ml: bool = True,
     variation_refit: Refit | None = None,
     model_error_heading_deg: float = 0.0,
+    model_error_offset: tuple[float, float, float] | None = None,
     clipping: Clipping | None = None,
     fitted_rows: int | None = None,
 ) -> Diagnostics:
@@ -125,6 +126,9 @@ def diagnose(
         A heading error the calibration's model is known to leave out (``auto``: the distortion of a richer
         model the samples do not determine), degrees: added in quadrature to the heading one-sigma before
         the verdict, so that every figure stated is the one uncertainty.
+    model_error_offset : tuple of 3 float, optional
+        The offset error (input units, per axis) that distortion can cause: added in quadrature to the offset
+        one-sigma, as the heading error is to the heading one-sigma.
     clipping : Clipping, optional
         The rows of ``samples`` clipped at the sensor's full scale, as the fit found them on these samples,
         which it has also checked finite (:func:`magfit.fit` passes it): neither pass over the samples is
@@ -211,6 +215,9 @@ def diagnose(
             heading_sigma_deg=math.hypot(uncertainty.heading_sigma_deg, model_error_heading_deg),
             heading_sigma_max_deg=math.hypot(uncertainty.heading_sigma_max_deg or 0.0, model_error_heading_deg),
         )
+    if model_error_offset is not None and uncertainty.offset_sigma is not None:
+        widened = np.hypot(np.asarray(uncertainty.offset_sigma), np.asarray(model_error_offset, dtype=np.float64))
+        uncertainty = replace(uncertainty, offset_sigma=(float(widened[0]), float(widened[1]), float(widened[2])))
     evidence = Evidence(
         kind=kind,
         residual_rms=fitted.rms,

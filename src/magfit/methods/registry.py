@@ -81,6 +81,9 @@ class Judging:
     model_error_deg : callable or None
         ``model_error_deg(calibration) -> float``: a heading error (degrees) the method knows its model may
         make, added to the heading one-sigma before the verdict.
+    model_error_offset : callable or None
+        ``model_error_offset(calibration) -> (3,) or None``: the offset error (input units, per axis) the same
+        model error may cause, added to the offset one-sigma.
     weaknesses : callable or None
         ``weaknesses(calibration, report) -> tuple of Reason``: weaknesses the method names from its own facts.
     compare_ml : bool
@@ -91,6 +94,7 @@ class Judging:
     refit: RefitFactory | None = None
     stand_in: RefitFactory | None = None
     model_error_deg: Callable[[Calibration], float] | None = None
+    model_error_offset: Callable[[Calibration], tuple[float, float, float] | None] | None = None
     weaknesses: Callable[[Calibration, Diagnostics], tuple[Reason, ...]] | None = None
     compare_ml: bool = True
 
