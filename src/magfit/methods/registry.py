@@ -164,6 +164,7 @@ BUILT_IN: dict[str, str] = {
     "minmax": "minmax",
     "ml": "ml",
     "sphere": "sphere",
+    "tilt": "vector.tilt",
     "vector": "vector.method",
 }
 
