@@ -84,6 +84,15 @@ FIT_ROWS = 20_000
 #: stretch on the ground has residuals of a few tenths of a percent, its flight of a few percent (the attitude's
 #: error, vibration): the robust scale of the whole would cut the flight away.
 OUTLIER_FLOOR = 2.0 * LARGE_RESIDUAL_RMS
+#: Roll and pitch spread (RMS about their mean, degrees) below which S's response to the vertical field and V's
+#: z component are not told apart (a level flight): refused whatever the linearised one-sigma says.
+MIN_TILT_DEG = 3.0
+#: Largest ratio of S's eigenvalues for a fitted soft iron (real ones stay within 1.5).
+MAX_AXIS_RATIO = 3.0
+#: Relative eigenvalue of the scaled information below which a direction is not determined at all, and the
+#: variance (normalised units) it is given then.
+SINGULAR_INFORMATION = 1e-10
+UNDETERMINED_VARIANCE = 1e6
 #: The share of samples left out as outliers beyond which the verdict names it.
 MAX_REJECTED = 0.05
 #: The heading one-sigma beyond which a weak direction is named (half the refusal's limit).
@@ -212,7 +221,7 @@ def _covariance(p: NDArray[np.float64], data: _Data) -> tuple[NDArray[np.float64
     n, _, count = jac.shape
     hessian = np.einsum("kap,kaq->pq", jac, jac)
     variance = float(np.sum(res**2)) / max(2 * n - count, 1)
-    independent = variance * np.linalg.pinv(hessian)
+    independent = variance * _inverse(hessian)
     blocks = min(BLOCKS, n // 20)
     if blocks < 4:
         return independent, independent
@@ -226,6 +235,17 @@ def _covariance(p: NDArray[np.float64], data: _Data) -> tuple[NDArray[np.float64
         except np.linalg.LinAlgError:
             return independent, independent * 1e12
     return independent, widened(independent, jackknife_covariance(np.asarray(moves)))
+
+
+def _inverse(hessian: NDArray[np.float64]) -> NDArray[np.float64]:
+    """H⁻¹, with a direction the samples do not determine (an eigenvalue of the scaled H below
+    :data:`SINGULAR_INFORMATION` of the largest) given :data:`UNDETERMINED_VARIANCE` instead of the zero a
+    pseudo-inverse would give it."""
+    norms = np.sqrt(np.maximum(np.diag(hessian), 1e-300))
+    values, vectors = np.linalg.eigh(hessian / np.outer(norms, norms))
+    floor = SINGULAR_INFORMATION * max(float(values[-1]), 1e-300)
+    inverse_values = np.where(values > floor, 1.0 / np.maximum(values, floor), UNDETERMINED_VARIANCE)
+    return np.asarray((vectors * inverse_values) @ vectors.T / np.outer(norms, norms), dtype=np.float64)
 
 
 def _body_fields(inclination_deg: float, tilt_deg: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -576,6 +596,19 @@ def _judged(p: NDArray[np.float64], data: _Data, field: float, term: MotorTerm |
                        "the vertical field trades with the vertical offset")  # fmt: skip
     why = "; ".join(lacking) if lacking else "the attitudes recorded do not pin the calibration"
     weak: list[WeakDirection] = []
+    axes = np.linalg.eigvalsh(_matrix(p))
+    ratio = float(axes[-1] / axes[0]) if axes[0] > 0 else float("inf")
+    if tilt_spread < MIN_TILT_DEG and not refusals:
+        refusals.add("undetermined",
+            f"roll and pitch varied by only {tilt_spread:.2g}° (RMS about their mean): the response to the vertical "
+            "field trades with the vertical offset, which a fit through level attitudes cannot tell apart (the "
+            f"linearised one-sigma, {effect}, does not hold so far from the samples)")  # fmt: skip
+    elif not ratio < MAX_AXIS_RATIO and not refusals:
+        refusals.add(
+            "undetermined",
+            f"the fitted soft iron stretches one axis {ratio:.2g} times another (more than {MAX_AXIS_RATIO:g}): no "
+            f"compass's soft iron does; the attitudes recorded leave a direction free and the fit ran along it: {why}",
+        )
     if max(heading, tilted) > HEADING_LIMIT_DEG and not refusals:
         refusals.add("undetermined", f"the roll and pitch recorded do not determine the calibration: {why}; {effect}")
     elif max(heading, tilted) > WEAK_HEADING_DEG:
