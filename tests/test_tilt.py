@@ -161,7 +161,7 @@ def test_json_round_trip_and_apply(flight: MotorFlight) -> None:
     assert calibration.motor is not None
     corrected = calibration.apply(flight.samples, regressor=flight.current)
     # corrected = S (raw − V − k c): the one formula, here by hand.
-    by_hand = (flight.samples - calibration.offset - np.outer(flight.current, calibration.motor.coefficients))
+    by_hand = flight.samples - calibration.offset - np.outer(flight.current, calibration.motor.coefficients)
     np.testing.assert_allclose(corrected, by_hand @ calibration.matrix.T, rtol=1e-12, atol=1e-9)
 
 
