@@ -620,7 +620,9 @@ def _with_motor_term(
         outcome = stage(start)
     except CalibrationError:
         return None
-    return outcome if outcome.calibration.motor is not None else None
+    kept = outcome.calibration
+    refused = kept.support is not None and bool(kept.support.refusals)  # a method that fits the term itself, forced
+    return outcome if kept.motor is not None and not refused else None
 
 
 def _calibrate_samples(

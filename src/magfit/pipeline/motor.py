@@ -309,9 +309,6 @@ def method_regressor(source: Source, motor: str, where: str) -> dict[str, Any]:
 def _method_term(source: Source, read: LogSamples, calibration: Calibration, where: str) -> MotorOutcome:
     """A calibration whose method fitted the motors' field itself: the samples with its term removed (to evaluate
     it) and the words."""
-    support = calibration.support
-    if support is not None and support.refusals:  # a forced fit (the rescue of a refusal): the refusal stands
-        raise CalibrationError(support.message(calibration.method), codes=support.codes)
     facts = calibration.details.get("motor") or {}
     term = calibration.motor
     if term is None:
@@ -327,7 +324,8 @@ def _method_term(source: Source, read: LogSamples, calibration: Calibration, whe
     note = (
         f"{where}: the motors' field ({term.regressor}, from {signal.name}): {np.linalg.norm(term.coefficients):.3g} "
         f"{calibration.unit or 'units'} per {term.unit}, {percent:.1f} % ± {sigma:.1f} % of the field at full scale, "
-        f"lag {1000 * term.lag_s:.0f} ms, ρ = {rho:.3f}, fitted with the calibration"
+        f"lag {1000 * term.lag_s:.0f} ms{' (at the edge of its search)' if facts.get('at_lag_edge') else ''}, "
+        f"ρ = {rho:.3f}, fitted with the calibration"
     )
     return MotorOutcome(calibration, cleaned, (note,))
 
