@@ -206,5 +206,27 @@ def test_calibrate_file_with_method_tilt_fits_the_current_jointly(tmp_path: Path
         truth.coefficients
     )
     assert any("fitted with the calibration" in note for note in result.compasses[0].notes)
+    assert calibration.details["motor"]["chosen"] == "BAT.Curr"
     plain = magfit.calibrate_file(path, "tilt", motor="none", options={"allow_undetermined": True}).calibration
     assert plain.motor is None
+
+
+def test_the_exports_reproduce_a_tilt_calibration_with_its_term(flight: MotorFlight) -> None:
+    """The ArduPilot and PX4 parameters of a tilt calibration (vehicle frame, symmetric, with the current's term),
+    applied by the firmwares' own formulas (re-implemented in tests/test_motor_export.py), give what apply gives."""
+    from magfit.export import export
+    from test_motor_export import ardupilot_correct, parse_ardupilot, px4_correct
+
+    calibration = magfit.fit(flight.samples, method="tilt", **_inputs(flight, flight.attitude),
+                             regressor=flight.current).with_unit("mG")  # fmt: skip
+    assert calibration.motor is not None
+    raw, current = flight.samples[::50], flight.current[::50]
+    expected = calibration.apply(raw, regressor=current)
+    params = parse_ardupilot(export(calibration, "ardupilot"))
+    assert params["COMPASS_MOTCT"] == 2
+    np.testing.assert_allclose(ardupilot_correct(params, raw, current), expected, rtol=0, atol=0.05)
+    rows = [line.split("\t") for line in export(calibration, "px4").splitlines() if line and not line.startswith("#")]
+    px4 = {row[2]: float(row[3]) for row in rows}
+    assert px4["CAL_MAG_COMP_TYP"] == 2 and px4.get("CAL_MAG0_ROT", 0.0) == 0.0  # symmetric: no rotation written
+    firmware = px4_correct(px4, 1e-3 * raw, current * 0.001)  # mG -> G; PX4's power is the current in kA
+    np.testing.assert_allclose(firmware, 1e-3 * expected, rtol=0, atol=1e-4)

@@ -308,26 +308,42 @@ def method_regressor(source: Source, motor: str, where: str) -> dict[str, Any]:
 
 def _method_term(source: Source, read: LogSamples, calibration: Calibration, where: str) -> MotorOutcome:
     """A calibration whose method fitted the motors' field itself: the samples with its term removed (to evaluate
-    it) and the words."""
-    facts = calibration.details.get("motor") or {}
+    it), the words, and ``details["motor"]`` in the form the summary reads (:func:`_facts`)."""
+    facts = dict(calibration.details.get("motor") or {})
     term = calibration.motor
-    if term is None:
-        said = "; ".join(str(r.get("text", "")) for r in facts.get("reasons", []) if isinstance(r, dict))
-        return MotorOutcome(calibration, read.samples, (f"{where}: the motors' field not fitted: {said}",) * bool(said))
-    signal = _power_of(str(source.path), *_stamp(source.path)).get(term.regressor)
-    assert signal is not None
+    kind = str(facts.get("regressor", "current"))
+    signal = _power_of(str(source.path), *_stamp(source.path)).get(term.regressor if term is not None else kind)
+    name = signal.name if signal is not None else kind
+    reasons = [r for r in facts.get("reasons", []) if isinstance(r, dict)]
+    if term is None or signal is None:
+        said = "; ".join(str(r.get("text", "")) for r in reasons) or "not estimated"
+        summary = f"the motors' field ({kind}): not fitted with the calibration: {said}"
+        details = {**dict(calibration.details), "motor": _method_facts(facts, name, None, summary, reasons)}
+        return MotorOutcome(replace(calibration, details=details), read.samples, (f"{where}: {summary}",))
     times = np.asarray(read.time_s, dtype=np.float64)
     cleaned = read.samples - term.field(_clamped(times, signal, term.lag_s))
     percent = float(facts.get("percent", float("nan")))
     sigma = float(facts.get("percent_sigma", float("nan")))
     rho = float(facts.get("independence", float("nan")))
-    note = (
-        f"{where}: the motors' field ({term.regressor}, from {signal.name}): {np.linalg.norm(term.coefficients):.3g} "
-        f"{calibration.unit or 'units'} per {term.unit}, {percent:.1f} % ± {sigma:.1f} % of the field at full scale, "
-        f"lag {1000 * term.lag_s:.0f} ms{' (at the edge of its search)' if facts.get('at_lag_edge') else ''}, "
-        f"ρ = {rho:.3f}, fitted with the calibration"
+    at = f"full current ({term.full_scale:.3g} A)" if term.regressor == "current" else "full throttle"
+    edge = " (the lag at the edge of its search)" if facts.get("at_lag_edge") else ""
+    weak = f", weakly told from the attitude (ρ = {rho:.2f})" if rho < WEAK_INDEPENDENCE else ""
+    summary = (
+        f"the motors' field ({term.regressor}): {np.linalg.norm(term.coefficients):.3g} {calibration.unit or 'units'} "
+        f"per {'A' if term.regressor == 'current' else 'full throttle'}, {percent:.1f} % ± {sigma:.1f} % of the field "
+        f"at {at}, lag {1000 * term.lag_s:.0f} ms{edge}{weak}, fitted with the calibration"
     )
-    return MotorOutcome(calibration, cleaned, (note,))
+    details = {**dict(calibration.details), "motor": _method_facts(facts, name, name, summary, reasons)}
+    return MotorOutcome(replace(calibration, details=details), cleaned, (f"{where}: {summary} (from {name})",))
+
+
+def _method_facts(facts: dict[str, Any], source: str, chosen: str | None, summary: str,
+                  reasons: list[dict[str, Any]]) -> dict[str, Any]:  # fmt: skip
+    """The method's own motor facts with the pipeline's keys (:func:`_facts`): what was tried, and the one kept."""
+    percent, rho = facts.get("percent"), facts.get("independence")
+    tried = {"regressor": facts.get("regressor"), "source": source, "summary": summary, "percent": percent,
+             "independence": rho, "reasons": reasons}  # fmt: skip
+    return {**facts, "chosen": chosen, "codes": sorted({str(r.get("code")) for r in reasons}), "tried": [tried]}
 
 
 def _weakened(calibration: Calibration, weakness: Reason | None) -> Calibration:
