@@ -137,6 +137,9 @@ def test_a_level_flight_through_few_headings_is_refused_with_the_reason() -> Non
         magfit.fit(samples, method="tilt", **inputs)
     assert "undetermined" in refused.value.codes
     assert "headings" in str(refused.value) or "roll and pitch" in str(refused.value)
+    forced = magfit.fit(samples, method="tilt", **inputs, allow_undetermined=True)
+    assert forced.support is not None and "undetermined" in forced.support.codes
+    assert magfit.Calibration.from_json(forced.to_json()) == forced  # every figure of a refused fit is JSON
 
 
 def test_bad_inputs_are_option_errors(flight: MotorFlight) -> None:

@@ -61,7 +61,7 @@ from ...diagnostics.reference import (
 )
 from ...diagnostics.verdict import LARGE_RESIDUAL_RMS, NO_ELLIPSOID_RMS, USELESS_BOUND_DEG
 from ...errors import CalibrationError, OptionError, SampleError
-from ...findings import Diagnostics, Observability, Reason, ReasonList, Support, Uncertainty, WeakDirection
+from ...findings import Diagnostics, Observability, Reason, ReasonList, Support, Uncertainty
 from ...motor import (
     CHI2_3_999,
     MAX_LAG_S,
@@ -97,13 +97,6 @@ UNDETERMINED_VARIANCE = 1e6
 MAX_REJECTED = 0.05
 #: The heading one-sigma beyond which a weak direction is named (half the refusal's limit).
 WEAK_HEADING_DEG = HEADING_LIMIT_DEG / 2.0
-#: The parameters' names, in order (S's six entries, V, k).
-_NAMES = ("S_xx", "S_xy", "S_xz", "S_yy", "S_yz", "S_zz", "V_x", "V_y", "V_z", "k_x", "k_y", "k_z")
-_WORDS = {
-    "S": "the soft iron's response",
-    "V": "the offset",
-    "k": "the motors' field",
-}
 ADVICE = (
     "record while the vehicle turns through every heading and also rolls and pitches (15° or more, both ways), or "
     "calibrate the magnetometer first with a tumble (method auto)"
@@ -595,7 +588,6 @@ def _judged(p: NDArray[np.float64], data: _Data, field: float, term: MotorTerm |
         lacking.append(f"roll and pitch varied by only {tilt_spread:.1f}° (RMS about their mean), so the response to "
                        "the vertical field trades with the vertical offset")  # fmt: skip
     why = "; ".join(lacking) if lacking else "the attitudes recorded do not pin the calibration"
-    weak: list[WeakDirection] = []
     axes = np.linalg.eigvalsh(_matrix(p))
     ratio = float(axes[-1] / axes[0]) if axes[0] > 0 else float("inf")
     if tilt_spread < MIN_TILT_DEG and not refusals:
@@ -617,10 +609,6 @@ def _judged(p: NDArray[np.float64], data: _Data, field: float, term: MotorTerm |
             f"the calibration is weakly determined: {why}; {effect}: it holds near the attitudes recorded",
         )
     sigmas = np.sqrt(np.maximum(np.diag(covariance), 0.0))
-    for i in np.argsort(-sigmas[:9])[:2]:
-        if sigmas[i] > 0.02:
-            weak.append(WeakDirection(f"{_WORDS[_NAMES[i][0]]} ({_NAMES[i]})", float("nan"), float(sigmas[i]),
-                                      bool(sigmas[i] <= 0.1), tuple(float(j == i) for j in range(p.size))))  # fmt: skip
     if motor_fit is not None:
         for reason in motor_fit.reasons:
             if reason.code == "motor_undetermined" and "beyond the uncertainty" in reason:
@@ -670,8 +658,8 @@ def _judged(p: NDArray[np.float64], data: _Data, field: float, term: MotorTerm |
         effective_samples=float(min(effective, count)),
     )
     information = np.linalg.eigvalsh(np.linalg.pinv(covariance[:9, :9]))
-    condition = float(information[-1] / information[0]) if information[0] > 0 else float("inf")
-    observability = Observability(model="vector", condition=condition, weak=tuple(weak), turn_axis=None)
+    condition = float(information[-1] / information[0]) if information[0] > 0 else None  # (JSON holds no inf)
+    observability = Observability(model="vector", condition=condition, weak=(), turn_axis=None)  # (named in words)
     centred = data.x - v
     reached = coverage(centred / np.linalg.norm(centred, axis=1, keepdims=True))
     notes = (
