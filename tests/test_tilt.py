@@ -186,20 +186,27 @@ def test_the_stated_one_sigma_covers_the_heading_error() -> None:
     assert 0.4 < rms < 1.6, ratios
 
 
-@pytest.mark.slow
-def test_calibrate_file_with_method_tilt_fits_the_current_jointly(tmp_path: Path) -> None:
+def _log_with_fixes(path: Path, seed: int = 21) -> tuple[Path, MotorFlight]:
+    """A simulated quad's DataFlash log (MAG, ATT, BAT, CTUN) with three 3-D fixes near Zurich in GPS week 2300
+    (2024-02-04), its field the World Magnetic Model's there."""
     from magfit.geomag import field_at
     from test_motor_logs import write_flight
     from test_sources_dataflash import DataFlashWriter
 
-    field = field_at(47.2, 8.5, 0.4885, date="2024-02-04").vector_in("mG")  # where and when the fixes put it
-    sim = simulate_motor_flight(200, driver="current", per_unit=3.0, seed=21, field_ned=field)
-    path = write_flight(tmp_path / "quad.bin", sim, att=True)
-    writer = DataFlashWriter()  # three 3-D fixes near Zurich in GPS week 2300 (2024-02-04)
+    field = field_at(47.2, 8.5, 0.4885, date="2024-02-04").vector_in("mG")
+    sim = simulate_motor_flight(200, driver="current", per_unit=3.0, seed=seed, field_ned=field)
+    write_flight(path, sim, att=True)
+    writer = DataFlashWriter()
     writer.define(140, "GPS", "QBBIHLLe", "TimeUS,I,Status,GMS,GWk,Lat,Lng,Alt")
     for j in range(3):
         writer.write("GPS", 2_000_000 + j, 0, 3, 100_000 + j * 200, 2300, 472000000, 85000000, 48850)
     path.write_bytes(path.read_bytes() + writer.bytes())
+    return path, sim
+
+
+@pytest.mark.slow
+def test_calibrate_file_with_method_tilt_fits_the_current_jointly(tmp_path: Path) -> None:
+    path, sim = _log_with_fixes(tmp_path / "quad.bin")
     result = magfit.calibrate_file(path, "tilt", motor="current")
     calibration = result.calibration
     assert calibration.method == "tilt" and calibration.motor is not None
@@ -233,3 +240,20 @@ def test_the_exports_reproduce_a_tilt_calibration_with_its_term(flight: MotorFli
     assert px4["CAL_MAG_COMP_TYP"] == 2 and px4.get("CAL_MAG0_ROT", 0.0) == 0.0  # symmetric: no rotation written
     firmware = px4_correct(px4, 1e-3 * raw, current * 0.001)  # mG -> G; PX4's power is the current in kA
     np.testing.assert_allclose(firmware, 1e-3 * expected, rtol=0, atol=1e-4)
+
+
+@pytest.mark.slow
+def test_the_command_line_fits_it_says_the_term_and_exports_it(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    path, _ = _log_with_fixes(tmp_path / "quad.bin", seed=22)
+    out = tmp_path / "m.param"
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "tilt", "--motor", "current", "--export",
+                                      "ardupilot", "-o", str(out)])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "motors           the motors' field (current)" in result.output
+    assert "fitted with the calibration" in result.output
+    written = out.read_text()
+    assert "COMPASS_MOTCT,2" in written and "COMPASS_MOT_Y," in written
