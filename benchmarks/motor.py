@@ -7,7 +7,10 @@ lag searched, then ``auto`` again on ``raw − k c``), exported to ArduPilot and
 each firmware's own correction (re-implemented from ``AP_Compass_Backend::correct_field`` and
 ``calibration::Magnetometer::Correct``, with the regressor the firmware sees at the sample's time). The score is
 the RMS tilt-compensated heading error against the true attitude, compared with the true calibration's. Also:
-the ``vector`` method (against the reference field turned by the true attitude) with and without the term.
+the ``vector`` method (against the reference field turned by the true attitude) with and without the term; and,
+against an attitude whose yaw is wrong by 30° ± 20° drifting (an EKF steered by the bad compass), ``vector`` and
+``tilt`` (roll and pitch only, the yaw free, the term fitted with the calibration), ``tilt`` exported to ArduPilot
+and applied by its formula.
 
 Run: ``PYTHONPATH=src python benchmarks/motor.py`` (writes benchmarks/results/motor.md).
 """
@@ -90,6 +93,35 @@ def _fit(
     ), result.percent
 
 
+def wrong_yaw(flight: MotorFlight) -> np.ndarray:
+    """The flight's attitude with its yaw wrong by 30° plus a slow ±20° drift, roll and pitch kept."""
+    from scipy.spatial.transform import Rotation
+
+    error = np.radians(30.0 + 20.0 * np.sin(flight.time_s / 60.0))
+    return np.einsum("nij,njk->nik", Rotation.from_euler("z", error[:, None]).as_matrix(), flight.attitude)
+
+
+def _wrong_yaw_fits(flight: MotorFlight, driver: str) -> tuple[float, float, bool]:
+    """(vector's and tilt's heading error against the attitude with the wrong yaw, whether tilt kept a term):
+    tilt through its ArduPilot parameters applied by correct_field."""
+    attitude = wrong_yaw(flight)
+    reference = np.einsum("nji,j->ni", attitude, flight.field_ned)
+    vector = magfit.fit(flight.samples, method="vector", reference=reference, allow_undetermined=True)
+    kind = "throttle" if driver == "throttle" else "current"
+    signal = flight.throttle if kind == "throttle" else flight.current
+    tilt = magfit.fit(
+        flight.samples, method="tilt", reference=reference, down=attitude[:, 2, :], regressor=signal,
+        regressor_kind=kind, regressor_time_s=flight.time_s, time_s=flight.time_s, allow_undetermined=True,
+    ).with_unit("mG")  # fmt: skip
+    ap = ardupilot_correct(_params_ardupilot(export(tilt, "ardupilot")), flight.samples, flight.current,
+                           flight.throttle)  # fmt: skip
+    return (
+        heading_error_deg(vector.apply(flight.samples), flight.attitude, flight.field_ned),
+        heading_error_deg(ap, flight.attitude, flight.field_ned),
+        tilt.motor is not None,
+    )
+
+
 def run() -> list[dict[str, object]]:
     rows = []
     for driver in ("current", "throttle", "none"):
@@ -114,6 +146,7 @@ def run() -> list[dict[str, object]]:
             vector, _ = _fit(flight, driver, method="vector")
             vlag = vector.motor.lag_s if vector.motor else 0.0
             vreg = np.interp(flight.time_s - vlag, flight.time_s, signal)
+            vector_wrong, tilt_wrong, tilt_kept = _wrong_yaw_fits(flight, driver)
             term = fitted.motor
             percent = 100 * term.at_full_scale() / fitted.field_strength if term is not None else 0.0
             rows.append({
@@ -127,6 +160,7 @@ def run() -> list[dict[str, object]]:
                     vector.apply(flight.samples, regressor=vreg) if vector.motor else vector.apply(flight.samples),
                     flight.attitude, flight.field_ned,
                 ),
+                "vector_wrong": vector_wrong, "tilt_wrong": tilt_wrong, "tilt_kept": tilt_kept,
                 "fitted": term is not None, "percent": percent,
                 "estimated": estimated,
                 "seconds": seconds,
@@ -148,9 +182,13 @@ def report(rows: list[dict[str, object]]) -> str:
         "`vector`: the attitude-aided method without / with the term. Ratio: the worse firmware / truth",
         "(target <= 1.5).",
         "`% of field`: the interference at full scale, kept or (when not kept) as estimated.",
+        "`yaw wrong`: against an attitude whose yaw is 30° ± 20° (drifting) off, roll and pitch kept: `vector`",
+        "without the term, and `tilt` (roll and pitch only, the term fitted with it: `kept`) through its ArduPilot",
+        "parameters.",
         "",
-        "| driver | seed | truth | plain | ArduPilot | PX4 | ratio | vector plain | vector + term | kept | % field |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| driver | seed | truth | plain | ArduPilot | PX4 | ratio | vector plain | vector + term | kept | % field "
+        "| yaw wrong: vector | yaw wrong: tilt (ArduPilot) | tilt kept |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         ratio = max(float(r["ardupilot"]), float(r["px4"])) / float(r["truth"])  # type: ignore[arg-type]
@@ -158,12 +196,18 @@ def report(rows: list[dict[str, object]]) -> str:
         lines.append(
             f"| {r['driver']} | {r['seed']} | {r['truth']:.2f} | {r['plain']:.2f} | {r['ardupilot']:.2f} | "
             f"{r['px4']:.2f} | {ratio:.2f} | {r['vector_plain']:.2f} | {r['vector']:.2f} | "
-            f"{'yes' if r['fitted'] else 'no'} | {float(pct):.1f} |"  # type: ignore[arg-type]
+            f"{'yes' if r['fitted'] else 'no'} | {float(pct):.1f} | {r['vector_wrong']:.2f} | {r['tilt_wrong']:.2f} | "  # type: ignore[arg-type]
+            f"{'yes' if r['tilt_kept'] else 'no'} |"
         )
     worst = max(max(float(r["ardupilot"]), float(r["px4"])) / float(r["truth"]) for r in rows)  # type: ignore[arg-type]
     invented = max((float(r["percent"]) for r in rows if r["driver"] == "none"), default=0.0)  # type: ignore[arg-type]
     seconds = np.mean([float(r["seconds"]) for r in rows])  # type: ignore[arg-type]
+    tilt_worst = max(float(r["tilt_wrong"]) / float(r["truth"]) for r in rows)  # type: ignore[arg-type]
+    vector_worst = max(float(r["vector_wrong"]) / float(r["truth"]) for r in rows)  # type: ignore[arg-type]
     lines += [
+        "",
+        f"With the yaw wrong: tilt through ArduPilot's formula at most {tilt_worst:.2f} times the truth's heading "
+        f"error, vector up to {vector_worst:.1f} times.",
         "",
         f"Worst firmware / truth ratio: {worst:.2f} (target 1.5). Largest term kept on a clean vehicle: "
         f"{invented:.1f} % of the field (target < 2 %). Mean time of the joint fit with its lag search and the "

@@ -56,7 +56,14 @@ from motor import _params_ardupilot, ardupilot_correct
 
 RESULTS = Path(__file__).parent / "results" / "motor_real.md"
 #: magfit's rows of the held-out tests (method, motor): the default, no term, and the vector method.
-HELD_OUT_METHODS = (("auto", "none"), ("auto", "auto"), ("vector", "auto"))
+HELD_OUT_METHODS = (
+    ("auto", "none"),
+    ("auto", "auto"),
+    ("vector", "auto"),
+    ("tilt", "none"),
+    ("tilt", "current"),
+    ("tilt!", "current"),
+)
 #: The DataFlash FMT message: header (3), type (1), length (1), name (4), format letters (16), labels (64).
 FMT_HEADER, FMT_SIZE = b"\xa3\x95\x80", 89
 
@@ -165,6 +172,10 @@ def magfit_rows(
         ("auto", "current"),
         ("sphere", "auto"),
         ("vector", "auto"),
+        ("tilt", "none"),
+        ("tilt", "current"),
+        ("tilt!", "none"),
+        ("tilt!", "current"),
     )
     for method, motor in choices:
         start = time.perf_counter()
@@ -177,20 +188,38 @@ def magfit_rows(
         corrected = ardupilot_correct(params, on.raw, on.current, on.current)
         term = calibration.motor
         lag = f", lag {1000 * term.lag_s:.0f} ms" if term is not None else ""
-        rows.append((name, corrected, f"{_term_words(calibration, ' of the field')}{lag}; {seconds:.0f} s"))
+        verdict = _verdict_words(calibration)
+        rows.append((name, corrected, f"{_term_words(calibration, ' of the field')}{lag}; {verdict}; {seconds:.0f} s"))
     return rows
 
 
 def _calibrated(path: Path, flight: Flight, method: str, motor: str) -> tuple[str, Calibration | None, str]:
     """magfit's calibration of ``flight``'s compass in ``path`` with ``method`` and ``--motor motor``, as the
     command line would run it: (its row's name, the calibration or None, the refusal's codes)."""
+    forced = method.endswith("!")  # the method's answer when it refuses (allow_undetermined): what it would say
+    method = method.rstrip("!")
     name = f"magfit --motor {motor}" + (f" --method {method}" if method != "auto" else "")
+    name += " (forced)" if forced else ""
+    options = {"allow_undetermined": True} if forced else None
     try:
-        result = magfit.calibrate_file(path, method, sensor=flight.sensor, location="log", motor=motor,
-                                       field_strength=None if method == "vector" else "wmm")  # fmt: skip
+        result = magfit.calibrate_file(path, method, sensor=flight.sensor, location="log", motor=motor, options=options,
+                                       field_strength=None if method in ("vector", "tilt") else "wmm")  # fmt: skip
     except MagfitError as error:
         return name, None, f"refused ({', '.join(error.codes) or 'no code'})"
     return name, result.calibration, ""
+
+
+def _verdict_words(calibration: Calibration) -> str:
+    """The verdict, its codes and the heading one-sigma stated."""
+    support = calibration.support
+    if support is None:
+        return "no verdict"
+    codes = ", ".join(support.codes)
+    diagnostics = calibration.diagnostics
+    uncertainty = diagnostics.uncertainty if diagnostics is not None else None
+    sigma = uncertainty.heading_sigma_deg if uncertainty is not None else None
+    said = f"{support.verdict}" + (f" ({codes})" if codes else "")
+    return said + (f", ±{sigma:.1f}°" if sigma is not None else "")
 
 
 def _term_words(calibration: Calibration, share: str = "") -> str:
@@ -432,9 +461,7 @@ def _fitted(path: Path, flight: Flight, methods: tuple[tuple[str, str], ...]) ->
         if calibration is None:
             out.append((name, None, refused))
             continue
-        note = _term_words(calibration)
-        codes = ", ".join(calibration.support.codes) if calibration.support.codes else ""
-        note += f"; {calibration.support.verdict}" + (f" ({codes})" if codes else "")
+        note = f"{_term_words(calibration)}; {_verdict_words(calibration)}"
         out.append((name, ("ardupilot", _params_ardupilot(export(calibration, "ardupilot", slot=0))), note))
     return out
 

@@ -207,6 +207,7 @@ _STREAM_WORDS = {
     "and a position)",
     "gyro": "the gyroscope's rates beside each sample (a log or bag with the gyroscope)",
     "time_s": "the samples' time stamps (a log or bag)",
+    "down": "the vertical in the vehicle frame from the roll and pitch (a flight log or bag with the attitude)",
 }
 #: The ``magfit calibrate`` option that reads each stream from a samples file's columns, with its placeholder.
 _STREAM_OPTIONS = {"reference": ("reference", "X,Y,Z"), "gyro": ("gyro", "X,Y,Z"), "time_s": ("time", "T")}

@@ -18,10 +18,15 @@ PX4's convention, from its source (PX4-Autopilot, src/modules/temperature_compen
 
       corrected = R · (S · ((raw + power · COMP) − thermal_offset(T) − OFF))                         (P2)
 
-  **Not verified**: in the one magnetometer ``Correct`` readable that has ``_thermal_offset`` at all, it is
-  ``R · (S · ((raw + power · COMP) − OFF))``: the offset is fetched and printed but not subtracted there.
-  PX4's documentation says releases up to 1.14 do not compensate the magnetometer for temperature; PX4 pull
-  request 22701 (2024) made the module publish the magnetometer's offsets at all.
+  **What the source shows: computed, published, not subtracted.** In every version of PX4's source that magfit
+  could read (the index holds 33 versions of src/lib/sensor_calibration/Magnetometer.hpp and 51 of
+  Magnetometer.cpp, the newest with ``sensor::configuration``), ``calibration::Magnetometer::Correct``
+  (Magnetometer.hpp) is ``R · (S · ((raw + power · COMP) − OFF))``: ``SensorCorrectionsUpdate`` (Magnetometer.cpp)
+  stores ``sensor_correction.mag_offset_n`` in ``_thermal_offset`` and nothing subtracts it;
+  ``VehicleMagnetometer::Run`` (src/modules/sensors/vehicle_magnetometer/VehicleMagnetometer.cpp) publishes
+  ``Correct`` of each ``sensor_mag`` report; no magnetometer code calls ``thermal_offset()`` (the accelerometer's
+  and the gyroscope's calibration routines do). PX4's documentation says releases up to 1.14 do not compensate
+  the magnetometer for temperature; pull request 22701 (2024) made the module publish the magnetometer's offsets.
 - PX4's own onboard calibration (``TemperatureCalibrationMag``, temperature_calibration/mag.cpp) fits the raw
   ``sensor_mag`` x, y, z against ``sensor_mag.temperature − TREF``, sets ``X0 = 0`` ("normalise the correction to
   be zero at the reference temperature") and writes ``TC_Mn_X{3-j}_{axis}``, ``TC_Mn_TMAX/TMIN/TREF`` and
@@ -37,8 +42,8 @@ written as zero (and said); PX4 clips the temperature to ``[TMIN, TMAX]``, so th
 beyond what the log saw. An axis whose drift is within two of its one-sigmas of zero is written as zero. An
 undetermined drift is refused (code ``undetermined``) with its reason.
 
-Because (P2) is not verified, the file says so, with what is at stake: ``OFF`` is the offset at ``TREF``, so a
-firmware that ignores ``TC_Mn_*`` is right at ``TREF`` and off by ``X1 (T − TREF)`` elsewhere, at most
+Because (P2) is not what the source read applies, the file says so, with what is at stake: ``OFF`` is the offset
+at ``TREF``, so a firmware that ignores ``TC_Mn_*`` is right at ``TREF`` and off by ``X1 (T − TREF)`` elsewhere, at most
 :func:`unapplied_offset` (the largest over ``[TMIN, TMAX]``): the block costs nothing where it is not applied,
 and corrects the drift where it is applied as (P2).
 """
@@ -111,9 +116,10 @@ def px4_temperature(drift: TemperatureDrift, *, slot: int, device_id: int | None
         zeros = ", ".join("xyz"[i] for i in range(3) if not significant[i])
         comments.append(f"#   {zeros}: within {SIGNIFICANCE:g} one-sigmas of zero, written as 0")
     comments += [
-        "# check it is applied: PX4 1.14 and older ignore TC_M*, and in the PX4 source magfit could read the",
-        "#   magnetometer's Correct() does not subtract the thermal offset; where it is ignored this calibration",
-        f"#   holds at TREF and is off by up to {1000 * at_stake:.1f} mG at TMIN/TMAX (compare sensor_mag with",
-        "#   vehicle_magnetometer at two temperatures)",
+        "# check it is applied: PX4 1.14 and older ignore TC_M*; in every PX4 source magfit could read,",
+        "#   TemperatureCompensation::update_offsets_mag computes and publishes the offset (sensor_correction) but",
+        "#   calibration::Magnetometer::Correct (src/lib/sensor_calibration/Magnetometer.hpp) does not subtract it;",
+        f"#   where it is ignored this calibration holds at TREF and is off by up to {1000 * at_stake:.1f} mG at",
+        "#   TMIN/TMAX (compare sensor_mag with vehicle_magnetometer at two temperatures)",
     ]
     return SlotParameters(slot, parameters, comments)

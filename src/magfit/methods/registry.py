@@ -168,6 +168,7 @@ BUILT_IN: dict[str, str] = {
     "minmax": "minmax",
     "ml": "ml",
     "sphere": "sphere",
+    "tilt": "vector.tilt",
     "vector": "vector.method",
 }
 

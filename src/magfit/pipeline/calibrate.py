@@ -335,6 +335,10 @@ def _calibrate_compass(
         notes += streams.notes
         fitted, frame_details = streams.samples, streams.sensor_details
         options = {**options, **streams.options}
+        if motor != "none" and "regressor" in get_method(method).options:  # tilt fits the motors' field itself
+            from .motor import method_regressor
+
+            options = {**options, **method_regressor(source, motor, where)}
     elif even:
         fitted = samples_for_fit(read.samples, even)
     several = len([m for m in source.magnetometers if m.problem is None and m.n_samples > 0]) > 1
@@ -616,7 +620,9 @@ def _with_motor_term(
         outcome = stage(start)
     except CalibrationError:
         return None
-    return outcome if outcome.calibration.motor is not None else None
+    kept = outcome.calibration
+    refused = kept.support is not None and bool(kept.support.refusals)  # a method that fits the term itself, forced
+    return outcome if kept.motor is not None and not refused else None
 
 
 def _calibrate_samples(

@@ -32,7 +32,15 @@ from ..remedy import option
 from ..sources import LogSamples, Source
 from ..sources.power import Power, Signal, read_power
 
-__all__ = ["REGRESSOR_COLUMNS", "MotorOutcome", "column_regressor", "left_in", "log_regressor", "motor_stage"]
+__all__ = [
+    "REGRESSOR_COLUMNS",
+    "MotorOutcome",
+    "column_regressor",
+    "left_in",
+    "log_regressor",
+    "method_regressor",
+    "motor_stage",
+]
 
 #: One-sigmas below its estimate the motors' field must still exceed MIN_PERCENT to be said as left in.
 LEFT_IN_SIGMAS = 2.0
@@ -220,6 +228,8 @@ def motor_stage(
     unchanged = MotorOutcome(calibration, read.samples)
     if motor == "none" or len(read.samples) == 0:
         return unchanged
+    if calibration.options.get("regressor") is not None:  # the method fitted the term with the calibration (tilt)
+        return _method_term(source, read, calibration, where)
     try:
         power = power if power is not None else _power_of(str(source.path), *_stamp(source.path))
     except DataFileError as error:
@@ -274,6 +284,66 @@ def motor_stage(
     final = _weakened(replace(final, details=details), weakly_told(result))
     cleaned = read.samples - result.term.field(_clamped(times, signal, result.term.lag_s))
     return MotorOutcome(final, cleaned, notes, result)
+
+
+def method_regressor(source: Source, motor: str, where: str) -> dict[str, Any]:
+    """The options of a method that fits the motors' field itself (``regressor``, its kind, its own clock and
+    ``motor``): the log's current (or throttle: ``motor="throttle"``, or ``"auto"`` without a current); none
+    when the log holds neither and ``motor="auto"``."""
+    check_motor(motor)
+    power = _power_of(str(source.path), *_stamp(source.path))
+    kinds = ("current", "throttle") if motor == "auto" else (motor,)
+    signal = next((s for s in (power.get(kind) for kind in kinds) if s is not None), None)
+    if signal is None:
+        if motor != "auto":
+            raise OptionError(
+                f"{where}: motor={motor!r}, but the log holds no {motor} magfit reads ({_WANTED[motor]}); "
+                f"give {option('motor', 'auto')} or {option('motor', 'none')}",
+                codes=("motor_no_regressor",),
+            )
+        return {}
+    return {"regressor": signal.values, "regressor_kind": signal.kind, "regressor_time_s": signal.time_s,
+            "motor": motor}  # fmt: skip
+
+
+def _method_term(source: Source, read: LogSamples, calibration: Calibration, where: str) -> MotorOutcome:
+    """A calibration whose method fitted the motors' field itself: the samples with its term removed (to evaluate
+    it), the words, and ``details["motor"]`` in the form the summary reads (:func:`_facts`)."""
+    facts = dict(calibration.details.get("motor") or {})
+    term = calibration.motor
+    kind = str(facts.get("regressor", "current"))
+    signal = _power_of(str(source.path), *_stamp(source.path)).get(term.regressor if term is not None else kind)
+    name = signal.name if signal is not None else kind
+    reasons = [r for r in facts.get("reasons", []) if isinstance(r, dict)]
+    if term is None or signal is None:
+        said = "; ".join(str(r.get("text", "")) for r in reasons) or "not estimated"
+        summary = f"the motors' field ({kind}): not fitted with the calibration: {said}"
+        details = {**dict(calibration.details), "motor": _method_facts(facts, name, None, summary, reasons)}
+        return MotorOutcome(replace(calibration, details=details), read.samples, (f"{where}: {summary}",))
+    times = np.asarray(read.time_s, dtype=np.float64)
+    cleaned = read.samples - term.field(_clamped(times, signal, term.lag_s))
+    percent = float(facts.get("percent", float("nan")))
+    sigma = float(facts.get("percent_sigma", float("nan")))
+    rho = float(facts.get("independence", float("nan")))
+    at = f"full current ({term.full_scale:.3g} A)" if term.regressor == "current" else "full throttle"
+    edge = " (the lag at the edge of its search)" if facts.get("at_lag_edge") else ""
+    weak = f", weakly told from the attitude (ρ = {rho:.2f})" if rho < WEAK_INDEPENDENCE else ""
+    summary = (
+        f"the motors' field ({term.regressor}): {np.linalg.norm(term.coefficients):.3g} {calibration.unit or 'units'} "
+        f"per {'A' if term.regressor == 'current' else 'full throttle'}, {percent:.1f} % ± {sigma:.1f} % of the field "
+        f"at {at}, lag {1000 * term.lag_s:.0f} ms{edge}{weak}, fitted with the calibration"
+    )
+    details = {**dict(calibration.details), "motor": _method_facts(facts, name, name, summary, reasons)}
+    return MotorOutcome(replace(calibration, details=details), cleaned, (f"{where}: {summary} (from {name})",))
+
+
+def _method_facts(facts: dict[str, Any], source: str, chosen: str | None, summary: str,
+                  reasons: list[dict[str, Any]]) -> dict[str, Any]:  # fmt: skip
+    """The method's own motor facts with the pipeline's keys (:func:`_facts`): what was tried, and the one kept."""
+    percent, rho = facts.get("percent"), facts.get("independence")
+    tried = {"regressor": facts.get("regressor"), "source": source, "summary": summary, "percent": percent,
+             "independence": rho, "reasons": reasons}  # fmt: skip
+    return {**facts, "chosen": chosen, "codes": sorted({str(r.get("code")) for r in reasons}), "tried": [tried]}
 
 
 def _weakened(calibration: Calibration, weakness: Reason | None) -> Calibration:

@@ -158,6 +158,8 @@ def method_streams(
         if not available:
             raise
         notes.append(str(error))
+    if "down" in needs and motion.attitude is not None:  # tilt: the vertical from roll and pitch (yaw unused)
+        options["down"] = np.asarray(motion.attitude)[:, 2, :]
     if "accel" in wanted:
         accel, said = _accel(motion, wanted)
         if source.kind == "samples" and accel is None:
