@@ -56,7 +56,6 @@ def test_the_true_field_strength_is_not_called_a_contradiction(tmp_path: Path) -
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="fleet: combined rows keyed by the flights' paths: three compasses, one row x3")
 def test_fleet_combines_each_compass_of_a_vehicle_apart(tmp_path: Path) -> None:
     log = (Path(__file__).parent / "data" / "ardupilot_real" / "copter33_log171_trimmed.bin").read_bytes()
     vehicle = tmp_path / "copter"
