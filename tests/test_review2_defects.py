@@ -167,7 +167,6 @@ def test_vector_on_a_ros_recording_without_its_convention_is_not_confidently_mir
     assert error <= 3 * fitted.diagnostics.uncertainty.heading_sigma_deg, error
 
 
-@pytest.mark.xfail(strict=True, reason="align, vehicle CSV with accel, attitude and reference found by name: exit 1")
 def test_align_uses_the_attitude_and_reference_it_finds_by_name(tmp_path: Path) -> None:
     from scipy.spatial.transform import Rotation
 

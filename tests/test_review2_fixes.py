@@ -7,6 +7,7 @@ import csv
 import json
 from pathlib import Path
 
+import click
 import numpy as np
 import pandas as pd
 import pytest
@@ -102,3 +103,86 @@ def test_the_fleet_report_shows_each_compass_combined_with_its_device_id(
     for device in truths:
         assert combined.count(f"<td>{device}</td>") == 1, device
 
+
+# ---------------------------------------------------------------------------------------------- align
+
+
+@pytest.fixture(scope="module")
+def car(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Path, Path]:
+    """A car's recording (simulated; mount a few degrees off the body axes): its truth, the file with accel,
+    attitude and reference N/E/D columns, and the same file without the reference columns."""
+    from test_review2_defects import _car, _save
+
+    sim, columns = _car()
+    folder = tmp_path_factory.mktemp("align_car")
+    _save(folder / "car.csv", columns)
+    _save(folder / "car_no_reference.csv", {k: v for k, v in columns.items() if not k.startswith("ref_")})
+    return sim, folder / "car.csv", folder / "car_no_reference.csv"
+
+
+def _rotation(output: str) -> tuple[np.ndarray, float]:
+    """The rotation ``magfit align`` prints (body = rotation @ sensor) and its one-sigma (RMS angle, degrees)."""
+    lines = output.splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("rotation "))
+    rows = [line[line.index("(") + 1 : line.index(")")] for line in lines[first : first + 3]]
+    sigma = next(line for line in lines if line.startswith("roll pitch yaw")).split("±")[1].split("°")[0]
+    return np.array([[float(value) for value in row.split(",")] for row in rows]), float(sigma)
+
+
+def test_align_finds_the_mount_from_the_attitude_and_reference_it_finds_by_name(
+    car: tuple[object, Path, Path],
+) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    sim, path, _ = car
+    found = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT"])
+    assert found.exit_code == 0, found.output
+    told = CliRunner().invoke(
+        cli, ["align", str(path), "--unit", "uT", "--attitude", "roll,pitch,yaw", "--reference", "ref_n,ref_e,ref_d"]
+    )
+    assert told.exit_code == 0, told.output
+    rotation, sigma = _rotation(found.output)
+    np.testing.assert_allclose(rotation, _rotation(told.output)[0], atol=1e-12)  # the columns found = those named
+    # Ground truth: the simulated mount (body = mounting @ sensor), within three of the one-sigma stated.
+    mounting = np.asarray(sim.mounting)  # type: ignore[attr-defined]
+    error = np.degrees(np.arccos(np.clip((np.trace(rotation.T @ mounting) - 1) / 2, -1.0, 1.0)))
+    assert error <= 3 * sigma, (error, sigma)
+    assert np.degrees(np.arccos((np.trace(mounting) - 1) / 2)) > 3 * error  # the mount found, not the identity
+
+
+def _foreign_flags(stderr: str) -> list[str]:
+    """The options a message names that ``magfit align`` lacks, outside a ``magfit COMMAND ...`` of another."""
+    import re
+
+    from magfit.cli import cli
+    from magfit.cli._advice import flags_of
+
+    align = cli.get_command(click.Context(cli), "align")
+    assert align is not None
+    flags = flags_of(align)
+    return [
+        match.group()
+        for line in stderr.splitlines()
+        for match in re.finditer(r"(?<![\w-])--[a-z][a-z-]*", line)
+        if "magfit " not in line[: match.start()] and match.group() not in flags
+    ]
+
+
+def test_align_refusal_names_its_own_options_and_other_commands_in_full(car: tuple[object, Path, Path]) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    _, full, path = car
+    # No reference columns: the gravity path, whose starting calibration a car's level turns do not determine.
+    result = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT"])
+    assert result.exit_code == 1, result.output
+    assert _foreign_flags(result.stderr) == [], result.stderr
+    assert f"magfit calibrate {path} --method vector" in result.stderr  # the other command, with the file
+    # --accel-columns chooses the gravity path even where the vector fit's columns are found: the same refusal.
+    chosen = CliRunner().invoke(cli, ["align", str(full), "--unit", "uT", "--accel-columns", "ax,ay,az"])
+    assert chosen.exit_code == 1, chosen.output
+    assert _foreign_flags(chosen.stderr) == [], chosen.stderr
+    assert f"magfit calibrate {full} --method vector" in chosen.stderr
