@@ -153,21 +153,28 @@ def test_align_finds_the_mount_from_the_attitude_and_reference_it_finds_by_name(
 
 
 def _foreign_flags(stderr: str) -> list[str]:
-    """The options a message names that ``magfit align`` lacks, outside a ``magfit COMMAND ...`` of another."""
+    """The options a message names that the command they belong to lacks: ``magfit align``'s own words, or
+    those after a ``magfit COMMAND FILE`` (up to the next bracket or semicolon) that COMMAND lacks."""
     import re
 
     from magfit.cli import cli
     from magfit.cli._advice import flags_of
 
-    align = cli.get_command(click.Context(cli), "align")
-    assert align is not None
-    flags = flags_of(align)
-    return [
-        match.group()
-        for line in stderr.splitlines()
-        for match in re.finditer(r"(?<![\w-])--[a-z][a-z-]*", line)
-        if "magfit " not in line[: match.start()] and match.group() not in flags
-    ]
+    def flags(name: str) -> frozenset[str]:
+        command = cli.get_command(click.Context(cli), name)
+        assert command is not None, name
+        return flags_of(command)
+
+    foreign = []
+    for line in stderr.splitlines():
+        pieces = re.split(r"(magfit [a-z]+ )", line)  # [align's words, 'magfit X ', its words, ...]
+        owners = ["align"] + [piece.split()[1] for piece in pieces[1::2]]
+        for owner, words in zip(owners, pieces[::2], strict=True):
+            said, rest = re.split(r"[);]", words, maxsplit=1) if owner != "align" else (words, "")
+            for text, command in ((said, owner), (rest, "align")):
+                foreign += [f"{command}: {m.group()}" for m in re.finditer(r"(?<![\w-])--[a-z][a-z-]*", text)
+                            if m.group() not in flags(command)]  # fmt: skip
+    return foreign
 
 
 def test_align_refusal_names_its_own_options_and_other_commands_in_full(car: tuple[object, Path, Path]) -> None:
@@ -186,3 +193,18 @@ def test_align_refusal_names_its_own_options_and_other_commands_in_full(car: tup
     assert chosen.exit_code == 1, chosen.output
     assert _foreign_flags(chosen.stderr) == [], chosen.stderr
     assert f"magfit calibrate {full} --method vector" in chosen.stderr
+
+
+def test_align_says_the_call_that_would_run_as_align(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+    from test_review2_defects import _car, _save
+
+    _, columns = _car()
+    path = tmp_path / "attitude_only.csv"  # the attitude by name, no accelerometer, no reference field
+    _save(path, {k: v for k, v in columns.items() if not k.startswith(("ref_", "a"))})
+    result = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT"])
+    assert result.exit_code == 2, result.output
+    assert f"magfit align {path} --unit uT --reference N,E,D" in result.stderr
+    assert _foreign_flags(result.stderr) == [], result.stderr  # no --method: align has none

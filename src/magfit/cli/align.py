@@ -77,8 +77,9 @@ def _align_by_reference(
             attitude=spec.attitude, reference=spec.reference, gyro=spec.gyro, time=spec.time,
             attitude_convention=spec.convention, angle_unit=spec.angle_unit, gyro_unit=spec.gyro_unit, notify=None,
         )  # fmt: skip
-    except StreamsMissing as error:
-        fail(f"{one_line(error.text)}; on the command line: {command_line('align', path, error.remedy)}")
+    except StreamsMissing as error:  # the call that would run, as this command: align is the vector fit here
+        remedy = [(name, value) for name, value in error.remedy if name != "method"]
+        fail(f"{one_line(error.text)}; on the command line: {command_line('align', path, remedy)}")
     except RefusedWithAdvice as error:  # the methods that work, as commands (not the library's Python calls)
         said = "; ".join(f"{reason} ({command_line('calibrate', path, reason.remedy)})" for reason in error.advice)
         raise CalibrationError(f"{one_line(error.text)}; what works for a vehicle: {said}") from None
