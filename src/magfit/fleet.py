@@ -750,6 +750,11 @@ def _fit_part(task: _PartTask, settings: _Settings) -> FleetRow:
                 flights=len(task.recordings))  # fmt: skip
 
 
+def _fit_part_at(index: int, task: _PartTask, settings: _Settings) -> tuple[int, FleetRow]:
+    """``(index, _fit_part(task, settings))``: the row with the place of its task, whichever order the tasks end in."""
+    return index, _fit_part(task, settings)
+
+
 #: The methods a combined fit can run (the magnitude-only ones); another (vector, gyro) is combined with als.
 _SAMPLES_METHODS = frozenset({"auto", "ellipsoid", "sphere", "minmax", "als", "ml", "diag", "robust"})
 
@@ -1006,9 +1011,11 @@ def fleet(
         events: list[str] = []
         if combine:
             parts, events = _combine(ordered)
-            largest = sorted(parts, key=lambda part: -sum(_size(Path(path)) for path, _ in part.recordings))
-            found = {row.path: row for row in run(_fit_part, [(part, settings) for part in largest])}
-            combined = [found[";".join(p for p, _ in part.recordings)] for part in parts]
+            # Each part (a vehicle's compass over some of its flights) is its own task, matched to its row by its
+            # place in ``parts``: the compasses of one vehicle share their flights' paths, never their row.
+            largest = sorted(range(len(parts)), key=lambda i: -sum(_size(Path(p)) for p, _ in parts[i].recordings))
+            found = dict(run(_fit_part_at, [(index, parts[index], settings) for index in largest]))
+            combined = [found[index] for index in range(len(parts))]
     finally:
         local.close()
         if handle is not None:

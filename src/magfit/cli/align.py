@@ -2,8 +2,10 @@
 
 The work is :func:`magfit.pipeline.align.align_file` (reading the recording, the starting calibration, the
 alignment and its cap); this module parses the options, reads a calibration given, and prints the rotation,
-its one-sigma, the nearest rotation of each firmware and the parameter lines to set. A samples file without an
-accelerometer but with the attitude is aligned by the vector fit (:func:`magfit.calibrate_file`).
+its one-sigma, the nearest rotation of each firmware and the parameter lines to set. A samples file with the
+attitude and no accelerometer, or with the attitude and the reference field (given, or both found by name), is
+aligned by the vector fit (:func:`magfit.calibrate_file`). Advice names this command's options, and a remedy
+only another command has as that command (``magfit calibrate FILE --method vector``).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from ..pipeline.align import ACCEL_COLUMNS, SECONDS, FileAlignment, align_file, 
 from ..pipeline.table import StreamSpec
 from ..rotations import CUSTOM, custom_angles
 from ..sources import log_kind
+from ._advice import own_options
 from ._common import command_line, fail, geomag_option, one_line, parse_columns, parse_stream, vector, warn
 
 #: The library's keywords in its messages, and the options that set them here.
@@ -39,14 +42,22 @@ _OPTIONS = {
 
 def _by_reference(path: Path, attitude: list[str | int] | None, reference: list[str | int] | None) -> bool:
     """Whether a samples file is aligned by the vector fit: attitude or reference columns given (what the user
-    asks for wins over accelerometer columns found by name), or attitude columns found by name and no
-    accelerometer columns found by name."""
+    asks for wins over accelerometer columns found by name); else attitude columns found by name, with the
+    reference field's N/E/D columns found by name too, or with no accelerometer columns found by name.
+
+    A file that names its attitude and its reference field holds all the vector fit needs, as ``magfit calibrate
+    --method vector`` finds them: the field expected at each sample pins the rotation, where the gravity path
+    first needs a magnitude-only calibration that a vehicle's turns seldom determine (level driving leaves the
+    offset along z open). ``--accel-columns`` chooses the gravity path all the same."""
     if attitude is not None or reference is not None:
         return True
     header = sniff(path).header
-    if header is not None and columns_by_name(header, ACCEL_COLUMNS) is not None:
+    if header is None:
         return False
-    return attitude is not None or (header is not None and "attitude" in find_stream_columns(header))
+    found = find_stream_columns(header)
+    if "attitude" not in found:
+        return False
+    return "reference" in found or columns_by_name(header, ACCEL_COLUMNS) is None
 
 
 def _align_by_reference(
@@ -66,8 +77,9 @@ def _align_by_reference(
             attitude=spec.attitude, reference=spec.reference, gyro=spec.gyro, time=spec.time,
             attitude_convention=spec.convention, angle_unit=spec.angle_unit, gyro_unit=spec.gyro_unit, notify=None,
         )  # fmt: skip
-    except StreamsMissing as error:
-        fail(f"{one_line(error.text)}; on the command line: {command_line('align', path, error.remedy)}")
+    except StreamsMissing as error:  # the call that would run, as this command: align is the vector fit here
+        remedy = [(name, value) for name, value in error.remedy if name != "method"]
+        fail(f"{one_line(error.text)}; on the command line: {command_line('align', path, remedy)}")
     except RefusedWithAdvice as error:  # the methods that work, as commands (not the library's Python calls)
         said = "; ".join(f"{reason} ({command_line('calibrate', path, reason.remedy)})" for reason in error.advice)
         raise CalibrationError(f"{one_line(error.text)}; what works for a vehicle: {said}") from None
@@ -196,8 +208,9 @@ def align_command(
 
     FILE is a samples file with magnetometer and accelerometer columns (and optionally gyroscope and time),
     or a flight log (PX4 ULog, ArduPilot DataFlash, ROS bag). A samples file without an accelerometer but
-    with the vehicle's attitude and the reference field (or a place for the World Magnetic Model) is
-    aligned by the vector fit instead: the rotation is the polar factor of its matrix. The accelerometer
+    with the vehicle's attitude and the reference field (or a place for the World Magnetic Model), or one
+    whose attitude and reference N/E/D columns are both found by name, is aligned by the vector fit instead
+    (--accel-columns chooses gravity): the rotation is the polar factor of its matrix. The accelerometer
     gives gravity while the vehicle is still or slow; the angle between gravity and the field is the same
     everywhere, so the rotation follows without any attitude. Prints the rotation, its one-sigma, the
     nearest rotation of ArduPilot, PX4, Betaflight and INAV and the parameters to set. Exit status 1 when the samples do
@@ -209,43 +222,47 @@ def align_command(
       magfit align flight.ulg --location 47.4,8.5 --no-mirror
       magfit align survey.csv --attitude roll,pitch,yaw --reference ref_n,ref_e,ref_d
     """
-    if max_rate.strip().lower() == "none":
-        max_rate_dps: float | None = None
-    else:
+    # The library's remedies in this command's options, or as the command that has them (magfit calibrate FILE
+    # --method vector): align has no --method.
+    with own_options(click.get_current_context(), file=file):
+        if max_rate.strip().lower() == "none":
+            max_rate_dps: float | None = None
+        else:
+            try:
+                max_rate_dps = float(max_rate)
+            except ValueError:
+                fail(f"--max-rate takes a number of °/s or 'none', got {max_rate!r}")
+        if inclination is not None and location is not None:
+            fail("give --inclination or --location, not both")
+        if accel_columns is not None and (attitude is not None or reference is not None):
+            fail("give --accel-columns (the rotation from gravity) or --attitude/--reference (from the vector fit), "
+                 "not both")  # fmt: skip
+        if log_kind(file) is not None and (attitude is not None or reference is not None):
+            fail(f"{file}: --attitude and --reference name a samples file's columns; a flight log's streams are its "
+                 "own")  # fmt: skip
+        if log_kind(file) is None and accel_columns is None and _by_reference(file, attitude, reference):
+            spec = StreamSpec(attitude, reference, gyro_columns, None, [time_column] if time_column else None,
+                              attitude_convention, angle_unit, gyro_unit)  # type: ignore[arg-type]  # fmt: skip
+            _align_by_reference(file, columns, spec, unit, location, date, force)
+            return
+        calibration = None
+        if calibration_path is not None:
+            calibration = Calibration.from_json(calibration_path.read_text(encoding="utf-8"))
+            if calibration.frame != "sensor":
+                fail(f"{calibration_path}: is a vehicle-frame calibration, already aligned; give a magnitude-only one")
         try:
-            max_rate_dps = float(max_rate)
-        except ValueError:
-            fail(f"--max-rate takes a number of °/s or 'none', got {max_rate!r}")
-    if inclination is not None and location is not None:
-        fail("give --inclination or --location, not both")
-    if accel_columns is not None and (attitude is not None or reference is not None):
-        fail("give --accel-columns (the rotation from gravity) or --attitude/--reference (from the vector fit), "
-             "not both")  # fmt: skip
-    if log_kind(file) is not None and (attitude is not None or reference is not None):
-        fail(f"{file}: --attitude and --reference name a samples file's columns; a flight log's streams are its own")
-    if log_kind(file) is None and accel_columns is None and _by_reference(file, attitude, reference):
-        spec = StreamSpec(attitude, reference, gyro_columns, None, [time_column] if time_column else None,
-                          attitude_convention, angle_unit, gyro_unit)  # type: ignore[arg-type]  # fmt: skip
-        _align_by_reference(file, columns, spec, unit, location, date, force)
-        return
-    calibration = None
-    if calibration_path is not None:
-        calibration = Calibration.from_json(calibration_path.read_text(encoding="utf-8"))
-        if calibration.frame != "sensor":
-            fail(f"{calibration_path}: is a vehicle-frame calibration, already aligned; give a magnitude-only one")
-    try:
-        found = align_file(
-            file, sensor=sensor, columns=columns, accel_columns=accel_columns, gyro_columns=gyro_columns,
-            gyro_unit=gyro_unit, time_column=time_column, time_unit=time_unit, calibration=calibration,
-            inclination_deg=inclination, location=location, date=date, max_rate_dps=max_rate_dps,
-            max_tilt_rate_dps=max_tilt_rate, allow_mirror=False if no_mirror else None, allow_undetermined=force,
-        )  # fmt: skip
-    except CalibrationError as error:  # the library's keywords as this command's options
-        message = str(error)
-        for keyword, option in _OPTIONS.items():
-            message = message.replace(keyword, option)
-        raise CalibrationError(message) from None
-    _print_alignment(found, calibration_path)
+            found = align_file(
+                file, sensor=sensor, columns=columns, accel_columns=accel_columns, gyro_columns=gyro_columns,
+                gyro_unit=gyro_unit, time_column=time_column, time_unit=time_unit, calibration=calibration,
+                inclination_deg=inclination, location=location, date=date, max_rate_dps=max_rate_dps,
+                max_tilt_rate_dps=max_tilt_rate, allow_mirror=False if no_mirror else None, allow_undetermined=force,
+            )  # fmt: skip
+        except CalibrationError as error:  # the library's keywords as this command's options
+            message = str(error)
+            for keyword, option in _OPTIONS.items():
+                message = message.replace(keyword, option)
+            raise CalibrationError(message, codes=error.codes, remedy=error.remedy) from None
+        _print_alignment(found, calibration_path)
 
 
 def _print_alignment(found: FileAlignment, calibration_path: Path | None) -> None:

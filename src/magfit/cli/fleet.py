@@ -132,6 +132,7 @@ def _summary(out: Console, result: FleetResult, table: Path) -> None:
     for row in result.combined():
         unit = f" {row.unit}" if row.unit else ""
         where = f" {row.sensor}" if row.sensor else ""
+        where += f" (device {row.device_id})" if row.device_id is not None else ""
         if row.verdict == "refused":
             print_(f"{row.vehicle}{where}: {row.flights} flights combined: refused: {row.reason}", soft_wrap=True)
             continue

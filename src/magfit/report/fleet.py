@@ -87,19 +87,32 @@ def _combined_table(rows: Sequence[FleetRow]) -> str:
             f"{row.matrix_yz:.4f}; {row.matrix_zx:.4f} {row.matrix_zy:.4f} {row.matrix_zz:.4f}]"
         )
         body.append(
-            f"<tr><td>{_e(row.vehicle)}</td><td>{_e(row.sensor or '–')}</td><td>{row.flights}</td>"
+            f"<tr><td>{_e(row.vehicle)}</td><td>{_e(row.sensor or '–')}</td><td>{_device(row)}</td>"
+            f"<td>{row.flights}</td>"
             f"<td>{_e(row.date)}</td>{_verdict_cell(row)}"
             f"{_cell(row.offset_x)}{_cell(row.offset_y)}{_cell(row.offset_z)}"
             f"<td class='matrix'>{_e(matrix)}</td>{_cell(row.field_strength)}<td>{_e(row.unit)}</td></tr>"
         )
-    head = ["vehicle", "compass", "flights", "dates", "verdict", "offset x", "offset y", "offset z", "matrix",
-            "field", "unit"]  # fmt: skip
+    head = ["vehicle", "compass", "device id", "flights", "dates", "verdict", "offset x", "offset y", "offset z",
+            "matrix", "field", "unit"]  # fmt: skip
     header = "".join(f"<th>{name}</th>" for name in head)
     return (
         "<h2>Combined calibrations</h2><table><thead><tr>" + header + "</tr></thead><tbody>" + "".join(body)
-        + "</tbody></table><p class='note'>Each vehicle's agreeing flights of one compass, merged through their "
-        "statistics and fitted once (the verdict is on the union).</p>"
+        + "</tbody></table><p class='note'>Each vehicle's agreeing flights of one compass (one device id, whichever "
+        "slot the log gave it), merged through their statistics and fitted once (the verdict is on the union).</p>"
     )
+
+
+def _device(row: FleetRow) -> str:
+    return "–" if row.device_id is None else str(row.device_id)
+
+
+def _compass(row: FleetRow) -> str:
+    """A compass in a figure's legend: its device id where the log gives one (a slot such as ``MAG/0`` may hold
+    another compass in another flight), else its id in the log."""
+    if row.device_id is None:
+        return row.sensor or "compass"
+    return f"{row.sensor} ({row.device_id})" if row.sensor else str(row.device_id)
 
 
 def _all_rows_table(rows: Sequence[FleetRow]) -> str:
@@ -107,12 +120,13 @@ def _all_rows_table(rows: Sequence[FleetRow]) -> str:
     for row in rows:
         body.append(
             f"<tr><td>{_e(row.kind)}</td><td>{_e(row.vehicle)}</td><td>{_e(Path(row.path).name if row.kind != 'combined' else row.path)}</td>"  # noqa: E501
-            f"<td>{_e(row.sensor or '–')}</td><td>{_e(row.date)}</td><td>{_e(row.method)}</td>{_verdict_cell(row)}"
+            f"<td>{_e(row.sensor or '–')}</td><td>{_device(row)}</td><td>{_e(row.date)}</td><td>{_e(row.method)}</td>"
+            f"{_verdict_cell(row)}"
             f"{_cell(row.offset_x)}{_cell(row.offset_y)}{_cell(row.offset_z)}{_cell(row.field_vs_model, 3)}"
             f"{_cell(row.heading_sigma_deg, 2)}<td class='note'>{_e(row.reason[:400])}</td></tr>"
         )
-    head = ["kind", "vehicle", "recording", "compass", "date", "method", "verdict", "offset x", "offset y",
-            "offset z", "field / model", "heading ±°", "reason"]  # fmt: skip
+    head = ["kind", "vehicle", "recording", "compass", "device id", "date", "method", "verdict", "offset x",
+            "offset y", "offset z", "field / model", "heading ±°", "reason"]  # fmt: skip
     header = "".join(f"<th>{name}</th>" for name in head)
     return (
         "<h2>Every row</h2><details><summary>the table</summary><table><thead><tr>" + header + "</tr></thead><tbody>"
@@ -130,10 +144,13 @@ def _history_png(vehicle: str, rows: Sequence[FleetRow]) -> str | None:
     fitted = [row for row in rows if math.isfinite(row.offset_x)]
     if not fitted:
         return None
-    compasses = sorted({row.sensor for row in fitted})
+    def key(row: FleetRow) -> str:  # one compass across flights: its device id where known, as the fleet combines
+        return f"device {row.device_id}" if row.device_id is not None else row.sensor
+
+    compasses = sorted({key(row) for row in fitted})
     figure, axes = plt.subplots(1, 3, figsize=(13, 3.4), sharex=True)
-    for index, sensor in enumerate(compasses):
-        mine = sorted((row for row in fitted if row.sensor == sensor), key=lambda row: row.date)
+    for index, compass in enumerate(compasses):
+        mine = sorted((row for row in fitted if key(row) == compass), key=lambda row: row.date)
         labels = [row.date[:16] for row in mine]
         for axis, name, values in zip(axes, "xyz", zip(*(row.offset for row in mine), strict=True), strict=True):
             colour = f"C{index % 10}"
@@ -141,7 +158,7 @@ def _history_png(vehicle: str, rows: Sequence[FleetRow]) -> str | None:
             for label, value, row in zip(labels, values, mine, strict=True):
                 hollow = row.verdict != "supported"
                 axis.plot([label], [value], "o", color=colour, markerfacecolor="white" if hollow else colour,
-                          label=sensor or "compass")  # fmt: skip
+                          label=_compass(mine[0]))  # fmt: skip
             axis.set_title(f"offset {name}" + (f" ({mine[0].unit})" if mine[0].unit else ""))
     for axis in axes:
         axis.tick_params(axis="x", labelrotation=30, labelsize=7)
