@@ -166,3 +166,39 @@ def test_vector_on_a_ros_recording_without_its_convention_is_not_confidently_mir
     fitted = magfit.Calibration.from_json(cal.read_text())
     error = _heading_error_on_recording(fitted, sim, sim.clean)  # type: ignore[attr-defined]
     assert error <= 3 * fitted.diagnostics.uncertainty.heading_sigma_deg, error
+
+
+@pytest.mark.xfail(strict=True, reason="align, vehicle CSV with accel, attitude and reference found by name: exit 1")
+def test_align_uses_the_attitude_and_reference_it_finds_by_name(tmp_path: Path) -> None:
+    from scipy.spatial.transform import Rotation
+
+    sim, columns = _car()
+    path = tmp_path / "car.csv"
+    _save(path, columns)
+    given = ["--attitude", "roll,pitch,yaw", "--reference", "ref_n,ref_e,ref_d"]
+    told = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT", *given])
+    assert told.exit_code == 0, told.output  # the same columns named: the vector fit gives the mount
+    angles = Rotation.from_matrix(sim.mounting).as_euler("xyz", degrees=True)  # type: ignore[attr-defined]
+    assert np.abs(angles).max() > 2.0  # the truth: a mount a few degrees off the body axes
+    result = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT"])
+    assert result.exit_code == 0, result.output
+
+
+@pytest.mark.xfail(strict=True, reason="align's refusal advises --method vector/gyro/sphere, options align lacks")
+def test_align_refusal_names_only_options_align_or_the_named_command_has(tmp_path: Path) -> None:
+    import re
+
+    import click
+
+    _, columns = _car()
+    path = tmp_path / "car.csv"
+    _save(path, columns)
+    result = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT"])
+    assert result.exit_code == 1, result.output
+    align = cli.get_command(click.Context(cli), "align")
+    assert align is not None
+    flags = {name for p in align.params for name in (*p.opts, *p.secondary_opts)}
+    for line in result.stderr.splitlines():
+        for match in re.finditer(r"(?<![\w-])--[a-z][a-z-]*", line):
+            if "magfit " not in line[: match.start()]:  # not inside a 'magfit COMMAND ...' of another command
+                assert match.group() in flags, f"{match.group()} is no option of magfit align"
