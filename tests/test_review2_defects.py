@@ -16,6 +16,7 @@ from click.testing import CliRunner
 
 import magfit
 from magfit.cli import cli
+from magfit.vehicle import VehicleSimulation, simulate_vehicle
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from _common import heading_error_deg
@@ -76,12 +77,10 @@ def test_fleet_combines_each_compass_of_a_vehicle_apart(tmp_path: Path) -> None:
     assert sorted(combined) == sorted(flights), combined
 
 
-def _car(seed: int = 1) -> tuple[object, dict[str, np.ndarray]]:
+def _car(seed: int = 1) -> tuple[VehicleSimulation, dict[str, np.ndarray]]:
     """A car's recording (simulated, field 50 µT, inclination 60°): its truth and its columns (time s, mx..mz µT,
     roll/pitch/yaw degrees body to NED, reference N/E/D, gyro rad/s, accel m/s²)."""
     from scipy.spatial.transform import Rotation
-
-    from magfit.vehicle import simulate_vehicle
 
     rng = np.random.default_rng(seed)
     w = np.eye(3) + rng.normal(0, 0.08, (3, 3))
@@ -103,10 +102,12 @@ def _save(path: Path, columns: dict[str, np.ndarray]) -> None:
                comments="")  # fmt: skip
 
 
-def _heading_error_on_recording(cal: magfit.Calibration, sim: object, raw: np.ndarray) -> float:
-    """RMS heading error (degrees) of a vehicle-frame calibration over the recording, with the TRUE attitude."""
-    world = np.einsum("kij,kj->ki", sim.attitude, cal.apply(raw))  # type: ignore[attr-defined]
-    truth = np.arctan2(sim.field_world[1], sim.field_world[0])  # type: ignore[attr-defined]
+def _heading_error_on_recording(cal: magfit.Calibration, sim: VehicleSimulation, raw: np.ndarray) -> float:
+    """RMS heading error (degrees) of a calibration over the recording, with the TRUE attitude (a sensor-frame
+    calibration is given the true mounting)."""
+    body = cal.apply(raw) if cal.frame == "vehicle" else cal.apply(raw) @ sim.mounting.T
+    world = np.einsum("kij,kj->ki", sim.attitude, body)
+    truth = np.arctan2(sim.field_world[1], sim.field_world[0])
     wrapped = (np.degrees(np.arctan2(world[:, 1], world[:, 0]) - truth) + 180.0) % 360.0 - 180.0
     return float(np.sqrt(np.mean(wrapped**2)))
 
@@ -122,7 +123,7 @@ def test_gyro_with_a_left_handed_magnetometer_is_not_a_confident_reversed_field(
         return
     assert result.exit_code == 0, result.output
     fitted = magfit.Calibration.from_json(cal.read_text())
-    error = _heading_error_on_recording(fitted, sim, sim.clean[:, [1, 0, 2]])  # type: ignore[attr-defined]
+    error = _heading_error_on_recording(fitted, sim, sim.clean[:, [1, 0, 2]])
     assert error <= 3 * fitted.gyro.heading_sigma_deg, (error, fitted.gyro.heading_sigma_deg)
 
 
@@ -164,7 +165,7 @@ def test_vector_on_a_ros_recording_without_its_convention_is_not_confidently_mir
     if result.exit_code in (1, 2):  # the accelerometer's gravity points up in the NED reading: refused or told
         return
     fitted = magfit.Calibration.from_json(cal.read_text())
-    error = _heading_error_on_recording(fitted, sim, sim.clean)  # type: ignore[attr-defined]
+    error = _heading_error_on_recording(fitted, sim, sim.clean)
     assert error <= 3 * fitted.diagnostics.uncertainty.heading_sigma_deg, error
 
 
@@ -178,7 +179,7 @@ def test_align_uses_the_attitude_and_reference_it_finds_by_name(tmp_path: Path) 
     given = ["--attitude", "roll,pitch,yaw", "--reference", "ref_n,ref_e,ref_d"]
     told = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT", *given])
     assert told.exit_code == 0, told.output  # the same columns named: the vector fit gives the mount
-    angles = Rotation.from_matrix(sim.mounting).as_euler("xyz", degrees=True)  # type: ignore[attr-defined]
+    angles = Rotation.from_matrix(sim.mounting).as_euler("xyz", degrees=True)
     assert np.abs(angles).max() > 2.0  # the truth: a mount a few degrees off the body axes
     result = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT"])
     assert result.exit_code == 0, result.output
@@ -202,3 +203,17 @@ def test_align_refusal_names_only_options_align_or_the_named_command_has(tmp_pat
         for match in re.finditer(r"(?<![\w-])--[a-z][a-z-]*", line):
             if "magfit " not in line[: match.start()]:  # not inside a 'magfit COMMAND ...' of another command
                 assert match.group() in flags, f"{match.group()} is no option of magfit align"
+
+
+@pytest.mark.xfail(strict=True, reason="calibrate (auto) ignores a car CSV's attitude, reference and gyro: exit 1")
+def test_default_calibrate_of_a_car_uses_the_attitude_and_gyro_it_holds(tmp_path: Path) -> None:
+    sim, columns = _car()
+    path, cal = tmp_path / "car.csv", tmp_path / "cal.json"
+    _save(path, columns)
+    vector = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "--method", "vector"])
+    assert vector.exit_code == 0, vector.output  # the data hold an answer
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "-o", str(cal)])
+    assert result.exit_code == 0, result.output
+    fitted = magfit.Calibration.from_json(cal.read_text())
+    error = _heading_error_on_recording(fitted, sim, sim.clean)
+    assert error <= 3 * fitted.diagnostics.uncertainty.heading_sigma_deg, error
