@@ -133,15 +133,15 @@ def _hold(samples: np.ndarray, every: int) -> np.ndarray:
 
 #: (motion, seed, what is done to the recording: magnetometer samples, the raw the truth is scored on, gyro)
 _IMPERFECT = {
-    "car, mx/my swapped (left-handed), 180° off, ±1.1° weak": (
+    "car, mx/my swapped (left-handed), 180 deg off, +-1.1 deg weak": (
         "car", 1, lambda s: (s.samples[:, [1, 0, 2]], s.clean[:, [1, 0, 2]], s.gyro)),
-    "tumble, mz negated (left-handed), 180° off, ±0.03° supported": (
+    "tumble, mz negated (left-handed), 180 deg off, +-0.03 deg supported": (
         "tumble", 1, lambda s: (s.samples * [1, 1, -1], s.clean * [1, 1, -1], s.gyro)),
-    "tumble, compass held 5 samples (10 Hz in 50 Hz), 2.0° for ±0.43° supported": (
+    "tumble, compass held 5 samples (10 Hz in 50 Hz), 2.0 deg for +-0.43 deg supported": (
         "tumble", 1, lambda s: (_hold(s.samples, 5), s.clean, s.gyro)),
-    "tumble, compass 40 ms late on the gyro, 2.0° for ±0.42° supported": (
+    "tumble, compass 40 ms late on the gyro, 2.0 deg for +-0.42 deg supported": (
         "tumble", 1, lambda s: (np.roll(s.samples, 2, axis=0), s.clean, s.gyro)),
-    "car, gyro scale 2 % off, 0.89° for ±0.20° supported": (
+    "car, gyro scale 2 % off, 0.89 deg for +-0.20 deg supported": (
         "car", 2, lambda s: (s.samples, s.clean, s.gyro * 1.02)),
 }  # fmt: skip
 
