@@ -295,3 +295,22 @@ def test_vector_on_a_log_without_gnss_takes_the_location_given() -> None:
         cli, ["calibrate", str(_TLOG), "--sensor", "RAW_IMU", "-m", "vector", "--location", "37.24,-115.8"]
     )
     assert result.exit_code == 1, result.output  # 27 samples cannot support the fit: exit 1, not a usage error
+
+
+@pytest.mark.xfail(strict=True, reason="level turns: the advised 'sphere pinned to the field strength' is refused too")
+def test_the_advised_pinned_sphere_works_on_level_turns(tmp_path: Path) -> None:
+    import re
+
+    sim = magfit.simulate(
+        1500, hard_iron=[10, -5, 20], field_strength=50.0, inclination_deg=60, noise=0.3, orientations="yaw", seed=1
+    )
+    path = tmp_path / "level.csv"
+    _write(path, sim.samples)
+    refused = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT"])
+    assert refused.exit_code == 1, refused.output
+    assert re.search(r"--method sphere --field-strength", refused.stderr), refused.stderr  # the advice
+    # Followed with the true field strength (the World Magnetic Model's would be the same number here).
+    followed = CliRunner().invoke(
+        cli, ["calibrate", str(path), "--unit", "uT", "-m", "sphere", "--field-strength", "50"]
+    )
+    assert followed.exit_code == 0, followed.output
