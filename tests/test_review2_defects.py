@@ -314,3 +314,26 @@ def test_the_advised_pinned_sphere_works_on_level_turns(tmp_path: Path) -> None:
         cli, ["calibrate", str(path), "--unit", "uT", "-m", "sphere", "--field-strength", "50"]
     )
     assert followed.exit_code == 0, followed.output
+
+
+@pytest.mark.xfail(
+    strict=True, reason="offset drifting 3 % of the field over the recording: 'supported', 1.75 deg/±0.33"
+)
+def test_a_drifting_offset_is_not_a_supported_calibration_short_of_its_error(tmp_path: Path) -> None:
+    import dataclasses
+
+    sim = magfit.scenario("mpu9250", "none").simulate(1500, seed=1)
+    drift = np.array([0.03, -0.02, 0.0]) * sim.truth.field_strength  # a warming sensor: offset creeps linearly
+    path, cal = tmp_path / "warming.csv", tmp_path / "cal.json"
+    _write(path, sim.samples + np.linspace(0, 1, len(sim.samples))[:, None] * drift)
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "-o", str(cal)])
+    if result.exit_code == 1:
+        return
+    assert result.exit_code == 0, result.output
+    fitted = magfit.Calibration.from_json(cal.read_text())
+    if fitted.support.verdict != "supported":  # the drift (or the halves' disagreement) is said
+        return
+    # Ground truth: after the recording the sensor's offset is the truth's plus the whole drift.
+    at_the_end = dataclasses.replace(fitted, offset=np.asarray(fitted.offset) - drift)
+    stated = fitted.diagnostics.uncertainty.heading_sigma_deg
+    assert heading_error_deg(at_the_end, sim) <= 3 * stated, (heading_error_deg(at_the_end, sim), stated)
