@@ -389,27 +389,27 @@ class ChunkReader:
 
         workers = max(1, min(os.cpu_count() or 1, MAX_PIECES))
         rest: int | None = None  # byte offset from which the pandas path reads the file
+        end = self.path.stat().st_size
         with open(self.path, "rb") as handle, ThreadPoolExecutor(workers) as executor:
-            handle.seek(fmt.data_offset)
             offset = fmt.data_offset  # of the first byte not yet handed to a block
-            tail = b""
             pending: list[tuple[int, Future[NDArray[np.float64] | None]]] = []
             try:
                 while True:
+                    size = BLOCK_BYTES
                     while len(pending) <= workers:
-                        data = handle.read(BLOCK_BYTES)
-                        if not data:
-                            break
-                        data = tail + data
+                        handle.seek(offset)
+                        data = handle.read(size)
                         cut = data.rfind(b"\n") + 1
-                        if cut == 0:  # no line end yet: a very long line
-                            tail = data
-                            continue
-                        block, tail = data[:cut], data[cut:]
-                        pending.append((offset, executor.submit(parse, block)))
-                        offset += cut
+                        if cut == 0:  # no line end: a line longer than the block, or the last line's end
+                            if len(data) == size:
+                                size *= 2
+                                continue
+                            break
+                        pending.append((offset, executor.submit(parse, data, cut)))
+                        offset += cut  # the bytes after the last line end are read again with the next block
+                        size = BLOCK_BYTES
                     if not pending:
-                        if tail:  # the last line has no line end: pandas' path says whether it is cut short
+                        if offset < end:  # the last line has no line end: pandas' path says if it is cut short
                             rest = offset
                         break
                     start, future = pending.pop(0)
@@ -427,7 +427,7 @@ class ChunkReader:
         if rest is None:
             return
         piece = copy.copy(self)
-        piece._byte_range = (rest, self.path.stat().st_size)
+        piece._byte_range = (rest, end)
         yield from piece
         self.n_rows += piece.n_rows
         self.n_skipped += piece.n_skipped

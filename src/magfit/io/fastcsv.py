@@ -22,8 +22,9 @@ from .layout import NA_VALUES, FileFormat
 
 __all__ = ["READERS", "READER_VARIABLE", "BlockParser", "block_parser", "reader_name"]
 
-#: Parses the bytes of whole data lines into an (n_lines, k) float64 array, or returns None (see above).
-BlockParser = Callable[[bytes], "NDArray[np.float64] | None"]
+#: Parses the first ``end`` bytes of ``data`` (whole data lines) into an (n_lines, k) float64 array, or
+#: returns None (see above): ``parse(data, end)``. (A prefix, not a slice: slicing would copy the block.)
+BlockParser = Callable[[bytes, int], "NDArray[np.float64] | None"]
 #: The block readers, in the order they are tried. (polars parsed the same blocks in about the same CPU time,
 #: without the field-count check: docs/scaling.md, "Reading a large CSV".)
 READERS = ("pyarrow",)
@@ -58,16 +59,30 @@ def block_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser | None:
     return _arrow_parser(fmt, used) if reader_name() == "pyarrow" else None
 
 
-def _line_ends_agree(block: bytes, n_lines: int) -> bool:
-    """Whether a block's carriage returns are none or one per line (``\\r\\n``), as the pandas path requires:
-    pyarrow would end a line at a lone ``\\r`` where that path names it."""
-    return b"\r" not in block or block.count(b"\r") == n_lines
+def _lone_carriage_return(data: bytes, end: int) -> bool:
+    """Whether a block holds a carriage return that does not end a line (``\\r`` not before ``\\n``): pyarrow
+    would end a line there, where the pandas path names it. (NumPy counts; ``bytes.count`` of a two-byte
+    pattern is several times slower.)"""
+    if data.find(b"\r", 0, end) < 0:  # memchr: the usual block costs nothing more
+        return False
+    codes = np.frombuffer(data, dtype=np.uint8, count=end)
+    returns = codes == 13
+    return int(np.count_nonzero(returns)) != int(np.count_nonzero(returns[:-1] & (codes[1:] == 10)))
 
 
-def _blank_line(block: bytes) -> bool:
-    """Whether a block of whole lines holds an empty line (pyarrow would read it as a row of missing values,
-    where pandas skips it; a line of blanks is another field count, which pyarrow refuses)."""
-    return block.startswith((b"\n", b"\r\n")) or b"\n\n" in block or b"\n\r\n" in block
+def _n_lines(data: bytes, end: int) -> int:
+    return int(np.count_nonzero(np.frombuffer(data, dtype=np.uint8, count=end) == 10))
+
+
+def _blank_line(data: bytes, end: int) -> bool:
+    """Whether a block of whole lines holds an empty line (pyarrow reads it as a row of missing values, where
+    pandas skips it; a line of blanks is another field count, which pyarrow refuses). Asked only of a block
+    with a row whose values are all missing."""
+    codes = np.frombuffer(data, dtype=np.uint8, count=end)
+    ends = np.flatnonzero(codes == 10)
+    starts = np.concatenate(([0], ends[:-1] + 1))
+    length = ends - starts
+    return bool(np.any((length == 0) | ((length == 1) & (codes[np.maximum(ends - 1, 0)] == 13))))
 
 
 def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
@@ -88,17 +103,14 @@ def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
     )
     pool = pyarrow.system_memory_pool()  # a block's memory goes back to the system (jemalloc's would stay)
 
-    def parse(block: bytes) -> NDArray[np.float64] | None:
-        if _blank_line(block):
+    def parse(data: bytes, end: int) -> NDArray[np.float64] | None:
+        if _lone_carriage_return(data, end):
             return None
-        quoted = b'"' in block
-        n_lines = block.count(b"\n") if quoted or b"\r" in block else -1
-        if n_lines >= 0 and not _line_ends_agree(block, n_lines):
-            return None
-        read_options = pyarrow.csv.ReadOptions(column_names=names, use_threads=False, block_size=len(block) + 1)
+        quoted = data.find(b'"', 0, end) >= 0
+        read_options = pyarrow.csv.ReadOptions(column_names=names, use_threads=False, block_size=end + 1)
         try:
             table = pyarrow.csv.read_csv(
-                pyarrow.py_buffer(block),
+                pyarrow.py_buffer(memoryview(data)[:end]),
                 read_options=read_options,
                 parse_options=parse_options,
                 convert_options=convert_options,
@@ -106,11 +118,14 @@ def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
             )
         except (pyarrow.ArrowInvalid, pyarrow.ArrowNotImplementedError):
             return None
-        if quoted and table.num_rows != n_lines:  # a quoted cell held a line end
+        if quoted and table.num_rows != _n_lines(data, end):  # a quoted cell held a line end
             return None
         values = np.empty((table.num_rows, len(used)))
         for column in range(len(used)):
             values[:, column] = table.column(column).to_numpy(zero_copy_only=False)
+        if all(table.column(column).null_count for column in range(len(used))):  # a row may be a blank line
+            if np.isnan(values).all(axis=1).any() and _blank_line(data, end):
+                return None
         return values
 
     return parse
