@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..diagnostics.settle import settle
-from ..errors import DataFileError, MagfitError
+from ..errors import DataFileError, MagfitError, OptionError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
 from ..methods import get_method
@@ -302,13 +302,20 @@ def _fit_subsample(request: SamplesFileFit, limit: int) -> tuple[Calibration, Ev
         pool_step = 1 if even else max(1, statistics.n // (SAMPLE_POOL * limit))
         with progress(f"sampling {path.name} evenly") as advance:
             for step in dict.fromkeys((pool_step, 1)):  # the pool, then every row if the pool will not do
-                sampler = even_subsample_chunks(
-                    functools.partial(_pooled_rows, source, advance, step),
-                    centre=centre,
-                    shape=shape,
-                    max_samples=limit,
-                    cap_at_median=even,
-                )
+                try:
+                    sampler = even_subsample_chunks(
+                        functools.partial(_pooled_rows, source, advance, step),
+                        centre=centre,
+                        shape=shape,
+                        max_samples=limit,
+                        cap_at_median=even,
+                    )
+                except OptionError:
+                    # A budget below the cells of directions filled: the pool fills fewer cells than the whole
+                    # file, so the least budget to advise is counted on every row (with it, any pool fits).
+                    if step == 1:
+                        raise
+                    continue
                 if step == 1 or _pool_deficit(sampler, step) <= POOL_DEFICIT * limit:
                     break
         samples = sampler.samples
