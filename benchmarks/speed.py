@@ -752,6 +752,8 @@ def report(results: dict[str, Any]) -> str:
                 lines.append(f"| reader alone: {name} | failed: {value['error']} | | |")
         for label, value in cli["calibrate"].items():
             name = "`magfit calibrate`, the default method" if label.startswith("(") else f"`magfit calibrate {label}`"
+            if label == PANDAS_LABEL:
+                name = "`MAGFIT_CSV_READER=pandas magfit calibrate`, the default method, parsed by pandas alone"
             if "seconds" in value:
                 how = "streamed in chunks" if value["streamed"] else "whole file in memory"
                 chose = f"; chose the {value['chose']} model" if "chose" in value else ""
