@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import bz2
 import gzip
+import lzma
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -95,6 +97,10 @@ CASES = {
     )
     + "\n",
     "headerless": "\n".join(lines()) + "\n",
+    "units in the header": "time_ms,mag_x_uT,mag_y_uT,mag_z_uT\n" + "\n".join(lines()) + "\n",
+    "columns among others": "t,ax,ay,az,mx,my,mz,temp\n"
+    + "\n".join(f"{i},0.1,0.2,9.8,{x},{y},{z},21.5" for i, (x, y, z) in enumerate(VALUES.tolist()))
+    + "\n",
     "semicolons": "t;mx;my;mz\n" + "\n".join(line.replace(",", ";") for line in lines()) + "\n",
     "text column": "t,mx,my,mz,note\n" + "\n".join(f"{line},ok" for line in lines()) + "\n",
     "a comment line": "t,mx,my,mz\n"
@@ -140,11 +146,21 @@ def test_nonfinite_error_names_the_line(tmp_path: Path, monkeypatch: pytest.Monk
         assert "line 335, column 'my'" in str(arrow_read)
 
 
-@pytest.mark.parametrize("opener", [gzip.open, bz2.open])
-def test_compressed_inputs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, opener: object) -> None:
-    path = tmp_path / ("data.csv.gz" if opener is gzip.open else "data.csv.bz2")
-    with opener(path, "wt") as handle:  # type: ignore[operator]
-        handle.write(CASES["missing values"])
+def _zstd_write(path: Path, text: str) -> None:
+    zstandard = pytest.importorskip("zstandard")
+    path.write_bytes(zstandard.ZstdCompressor().compress(text.encode()))
+
+
+@pytest.mark.parametrize("suffix", [".gz", ".bz2", ".xz", ".zst"])
+def test_compressed_inputs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, suffix: str) -> None:
+    path = tmp_path / f"data.csv{suffix}"
+    text = CASES["missing values"]
+    if suffix == ".zst":
+        _zstd_write(path, text)
+    else:
+        opener = {".gz": gzip.open, ".bz2": bz2.open, ".xz": lzma.open}[suffix]
+        with opener(path, "wt") as handle:
+            handle.write(text)
     pandas_read, arrow_read, _ = both_ways(path, monkeypatch, 777)
     assert_same(pandas_read, arrow_read)
     assert arrow_read.n_skipped == 4  # type: ignore[union-attr]
@@ -195,3 +211,45 @@ def test_big_files_parse_in_blocks_not_pieces(tmp_path: Path, monkeypatch: pytes
     assert len(ChunkReader(path).parallel_pieces()) == 1
     monkeypatch.setenv(READER_VARIABLE, "pandas")
     assert len(ChunkReader(path).parallel_pieces()) > 1
+
+
+def test_the_command_names_a_bad_row_and_exits_2(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    path = write(tmp_path, CASES["bad cell late"])
+    monkeypatch.setenv(READER_VARIABLE, "pyarrow")
+    monkeypatch.setattr(chunks, "BLOCK_READER_BYTES", 0)
+    monkeypatch.setattr(chunks, "BLOCK_BYTES", 600)
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "-m", "ellipsoid"])
+    assert result.exit_code == 2
+    assert "line 302, column 'my'" in result.stderr and "'oops' is not a number" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_the_command_fits_the_same_subsample_either_way(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # --max-samples below the file's rows: the even subsample, its fit and the score are those of the pandas
+    # path (the stride, the pool and the spill see the same rows in the same order). Ground truth: a known sphere.
+    import json
+
+    from click.testing import CliRunner
+
+    from magfit.cli import cli
+
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(3000, 3))
+    v = v / np.linalg.norm(v, axis=1)[:, None] * 50.0 + [10.0, -5.0, 3.0] + rng.normal(0.0, 0.2, (3000, 3))
+    path = write(tmp_path, "mx,my,mz\n" + "\n".join(f"{x:.4f},{y:.4f},{z:.4f}" for x, y, z in v.tolist()) + "\n")
+    monkeypatch.setattr(chunks, "BLOCK_READER_BYTES", 0)
+    monkeypatch.setattr(chunks, "BLOCK_BYTES", 5000)
+    offsets = []
+    for reader in ("pandas", "pyarrow"):
+        monkeypatch.setenv(READER_VARIABLE, reader)
+        output = tmp_path / f"{reader}.json"
+        result = CliRunner().invoke(cli, ["calibrate", str(path), "--max-samples", "1500", "-o", str(output)])
+        assert result.exit_code == 0, result.stderr
+        assert re.search(r"an even subsample: \d+ of 3000 samples", result.stdout), result.stdout
+        offsets.append(np.array(json.loads(output.read_text())["offset"]))
+    np.testing.assert_allclose(offsets[1], offsets[0], rtol=0, atol=1e-9)
+    assert np.linalg.norm(offsets[1] - [10.0, -5.0, 3.0]) < 0.5

@@ -122,7 +122,10 @@ def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
             return None
         values = np.empty((table.num_rows, len(used)))
         for column in range(len(used)):
-            values[:, column] = table.column(column).to_numpy(zero_copy_only=False)
+            row = 0
+            for chunk in table.column(column).chunks:  # (a ChunkedArray's own to_numpy copies once more)
+                values[row : row + len(chunk), column] = chunk.to_numpy(zero_copy_only=False)
+                row += len(chunk)
         if all(table.column(column).null_count for column in range(len(used))):  # a row may be a blank line
             if np.isnan(values).all(axis=1).any() and _blank_line(data, end):
                 return None
