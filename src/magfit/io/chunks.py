@@ -3,12 +3,12 @@
 The rows of a text file are parsed by pandas' C reader, three columns at a time, in blocks whose size
 bounds the memory whatever the file's length. Every block is also checked for rows with a different
 number of fields (:class:`_CheckedSource`): pandas accepts those silently when it reads only some of the
-columns. A large plain file is parsed by polars or pyarrow when one is installed
-(:mod:`magfit.io.fastcsv`, :meth:`ChunkReader._iter_blocks`): blocks of whole lines on one thread per
-core; a block that reader does not read as one row of numbers per line (a bad cell, a blank line, a cut
-last line), and the rest of the file after it, are read by the pandas path, which names the problem and
-the line. ``.npy`` files are memory-mapped and ``.npz`` members inflated a chunk at a time. Rows with a
-NaN or an infinite magnetometer value are counted and dropped (or refused), by line number.
+columns. A large plain file is parsed by pyarrow when it is installed (:mod:`magfit.io.fastcsv`,
+:meth:`ChunkReader._iter_blocks`): blocks of whole lines on one thread per core; a block pyarrow does not
+read as one row of numbers per line (a bad cell, a blank line, a cut last line), and the rest of the file
+after it, are read by the pandas path, which names the problem and the line. ``.npy`` files are
+memory-mapped and ``.npz`` members inflated a chunk at a time. Rows with a NaN or an infinite
+magnetometer value are counted and dropped (or refused), by line number.
 """
 
 from __future__ import annotations
@@ -85,8 +85,8 @@ MAX_PIECES = 4
 #: Text files (or pieces) up to this size are parsed here, line by line, rather than by pandas: importing
 #: pandas takes several times longer than parsing this much in Python (docs/scaling.md, "Measured speed").
 SMALL_TEXT_BYTES = 256 * 1024
-#: Text files from this size are parsed by polars or pyarrow when one is installed (:mod:`magfit.io.fastcsv`):
-#: importing it costs more than it saves on smaller files.
+#: Text files from this size are parsed by pyarrow when it is installed (:mod:`magfit.io.fastcsv`): importing
+#: it costs more than it saves on smaller files.
 BLOCK_READER_BYTES = 32 << 20
 #: Bytes of whole lines per block of that reader: each is parsed on one thread, and the blocks in flight (one
 #: per thread, and one more) bound the memory (docs/scaling.md, "Reading a large CSV").
@@ -349,7 +349,7 @@ class ChunkReader:
                 for stream in streams:
                     stream.close()
 
-    # .................................................................. text, in blocks (polars, pyarrow)
+    # .................................................................. text, in blocks (pyarrow)
 
     def _block_parser(self) -> BlockParser | None:
         """The block reader of :mod:`magfit.io.fastcsv` for this reader's rows, or None: pandas parses them.
