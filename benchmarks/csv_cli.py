@@ -95,13 +95,15 @@ def report(results: dict[str, Any]) -> str:
     rss = memory.get("rss_mb", float("nan"))
     default_s = cli["calibrate"]["(default: auto)"].get("seconds", float("nan"))
     pandas_s = cli["calibrate"].get(PANDAS_LABEL, {}).get("seconds", float("nan"))
+    default_cpu = cli["calibrate"]["(default: auto)"].get("cpu_seconds", float("nan"))
+    pyarrow_cpu = cli["readers"].get("pyarrow.csv", {}).get("cpu_seconds", float("nan"))
     lines += [
         "",
         f"- The default command (`auto`): **{cli['default_vs_reader']:.2f}x** the fastest reader alone "
         f"({cli.get('fastest_reader', '')}, {cli['fastest_reader_s']:.2f} s), CPU {cli['default_cpu_vs_reader']:.2f}x "
         f"the least reader's; target <= {TARGET_RATIO:g}x: {'met' if default_ok else 'NOT met'}.",
         f"- Against pyarrow.csv alone ({cli.get('pyarrow_reader_s', float('nan')):.2f} s): "
-        f"{default_s / cli.get('pyarrow_reader_s', float('nan')):.2f}x.",
+        f"{default_s / cli.get('pyarrow_reader_s', float('nan')):.2f}x, CPU {default_cpu / pyarrow_cpu:.2f}x.",
         f"- The same command with the text parsed by pandas alone (`MAGFIT_CSV_READER=pandas`, the reader before "
         f"pyarrow's blocks): {pandas_s / cli['fastest_reader_s']:.2f}x the fastest reader.",
         f"- `-m ellipsoid`: {cli['cli_vs_reader']:.2f}x (CPU {cli['cli_cpu_vs_reader']:.2f}x).",
