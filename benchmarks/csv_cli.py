@@ -106,8 +106,8 @@ def report(results: dict[str, Any]) -> str:
         *(
             [
                 f"- Caution: in its best run the fastest reader took {fastest_row['seconds']:.2f} s of wall time for "
-                f"{fastest_row['cpu_seconds']:.2f} s of CPU, so it had no second core to itself (a loaded machine); "
-                "it loses more to the load than the command does, and the wall ratio flatters the command. "
+                f"{fastest_row['cpu_seconds']:.2f} s of CPU, so it had no second core to itself (a loaded machine): "
+                "the wall ratio then measures how the load fell on each run as much as the programs. "
                 "The CPU ratios are the steadier figures."
             ]
             if fastest_row.get("seconds", 0.0) >= 0.9 * fastest_row.get("cpu_seconds", float("inf"))
