@@ -65,7 +65,9 @@ def npz_members(path: Path) -> dict[str, NpyInfo]:
                     continue
                 key = info.filename[: -len(".npy")]
                 if info.compress_type != zipfile.ZIP_STORED and info.file_size > expansion_limit(info.compress_size):
-                    raise expansion_error(display_name(path), info.compress_size, f"its member {key!r}", info.file_size)
+                    raise expansion_error(
+                        display_name(path), info.compress_size, f"its member {key!r}", info.file_size
+                    )
                 with archive.open(info) as handle:
                     members[key] = read_npy_header(handle)
     except DataFileError:

@@ -407,10 +407,9 @@ def _write_npz(reader: ChunkReader, calibration: Calibration, out: Path, normali
             compressed = any(info.compress_type != zipfile.ZIP_STORED for info in infos)
             method = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
             selected = {f"{key}.npy": axis for axis, key in enumerate(selection.keys)}
-            with (
-                atomic_open(out, "wb") as target,
-                zipfile.ZipFile(target, "w", compression=method, allowZip64=True) as zipped,
-            ):
+            with atomic_open(out, "wb") as target, zipfile.ZipFile(
+                target, "w", compression=method, allowZip64=True
+            ) as zipped:
                 for info in infos:
                     with zipped.open(info.filename, "w", force_zip64=True) as member:
                         if info.filename not in selected:
