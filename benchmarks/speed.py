@@ -289,14 +289,23 @@ def part_fit(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
 
 # ---------------------------------------------------------------------- part 2: the command line on a CSV
 
+#: ``magfit calibrate`` (default method) with its text parsed by pandas alone (``MAGFIT_CSV_READER=pandas``).
+PANDAS_LABEL = "(default: auto), pandas parse"
+
 _READERS = {
     "pandas (C engine)": "import pandas as pd, sys; "
     "a = pd.read_csv(sys.argv[1], usecols=['mx', 'my', 'mz'], engine='c', dtype='float64').to_numpy()",
     "pandas (pyarrow engine)": "import pandas as pd, sys; "
     "a = pd.read_csv(sys.argv[1], usecols=['mx', 'my', 'mz'], engine='pyarrow', dtype='float64').to_numpy()",
-    "pyarrow.csv": "import pyarrow.csv as c, numpy as np, sys; "
-    "t = c.read_csv(sys.argv[1], convert_options=c.ConvertOptions(include_columns=['mx', 'my', 'mz'])); "
+    "pyarrow.csv": "import pyarrow as pa, pyarrow.csv as c, numpy as np, sys; "
+    "t = c.read_csv(sys.argv[1], convert_options=c.ConvertOptions(include_columns=['mx', 'my', 'mz'], "
+    "column_types={k: pa.float64() for k in ('mx', 'my', 'mz')})); "
     "a = np.column_stack([t.column(k).to_numpy() for k in ('mx', 'my', 'mz')])",
+    # polars, when installed (it is no dependency of magfit): the fastest whole-file reader of three float
+    # columns measured here; a row that says it is not installed otherwise.
+    "polars": "import polars as pl, sys; "
+    "a = pl.read_csv(sys.argv[1], columns=['mx', 'my', 'mz'], "
+    "schema_overrides={k: pl.Float64 for k in ('mx', 'my', 'mz')}).to_numpy()",
     # The bounded-memory form of the same reader: record batches of block_size bytes, parsed on threads.
     "pyarrow.csv, streamed (open_csv, 4 MB blocks)": "import pyarrow as pa, pyarrow.csv as c, numpy as np, sys; "
     "r = c.open_csv(sys.argv[1], read_options=c.ReadOptions(block_size=4 << 20), "
@@ -346,6 +355,8 @@ def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
     commands = {name: [sys.executable, "-c", code, str(csv)] for name, code in _READERS.items()}
     commands["-m ellipsoid"] = target
     commands["(default: auto)"] = magfit_command
+    # The same command with the text parsed by pandas alone (the reader before pyarrow's blocks).
+    commands[PANDAS_LABEL] = ["env", "MAGFIT_CSV_READER=pandas", *magfit_command]
     best = _interleaved(commands, repeat)
     readers: dict[str, dict[str, Any]] = {}
     for name in _READERS:
@@ -355,7 +366,7 @@ def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
         else:
             readers[name] = {"seconds": run.seconds, "rss_mb": run.rss_mb, "cpu_seconds": run.cpu_seconds}
     runs: dict[str, dict[str, Any]] = {}
-    for label in ("(default: auto)", "-m ellipsoid"):
+    for label in ("(default: auto)", "-m ellipsoid", PANDAS_LABEL):
         run = best[label]
         runs[label] = {"error": str(run)[-300:]} if isinstance(run, RuntimeError) else _calibrate_row(run)
     # Once each: ml, whole and on an even subsample (no targets).
@@ -367,8 +378,9 @@ def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
             runs[label] = _calibrate_row(_best_of([run_process(command)], command))
         except RuntimeError as error:
             runs[label] = {"error": str(error)[-300:]}
-    timed = [value["seconds"] for value in readers.values() if "seconds" in value]
-    fastest = min(timed) if timed else float("nan")
+    timed = {name: value["seconds"] for name, value in readers.items() if "seconds" in value}
+    fastest_name = min(timed, key=timed.__getitem__) if timed else ""
+    fastest = timed[fastest_name] if timed else float("nan")
     ellipsoid = runs["-m ellipsoid"]
     default = runs["(default: auto)"]
     return {
@@ -376,6 +388,8 @@ def part_cli(n: int, repeat: int, workdir: Path, samples: NDArray[np.float64]) -
         "csv_mb": csv.stat().st_size / 1e6,
         "readers": readers,
         "fastest_reader_s": fastest,
+        "fastest_reader": fastest_name,
+        "pyarrow_reader_s": readers.get("pyarrow.csv", {}).get("seconds", float("nan")),
         "calibrate": runs,
         "command": shlex.join(target),
         "cli_vs_reader": ellipsoid.get("seconds", float("nan")) / fastest,
@@ -461,20 +475,44 @@ def part_auto(rounds: int) -> dict[str, Any]:
     return results
 
 
-def _calibrate_vs_import(rounds: int, workdir: Path) -> dict[str, Any]:
-    """``magfit calibrate`` on a 300-row CSV against ``import magfit.cli`` (and ``import numpy``), as processes."""
-    results: dict[str, Any] = {}
-    csv = workdir / f"samples_{N_RATIO_CSV}.csv"
-    write_csv(make_samples(N_RATIO_CSV, seed=11), csv)
-    print(f"[ratios] magfit calibrate on {N_RATIO_CSV} rows vs import magfit.cli, {rounds} rounds", flush=True)
+def startup_processes(rounds: int, csv: Path) -> dict[str, ProcessRun | RuntimeError]:
+    """The start-up processes, one definition for part 5 here and for benchmarks/startup.py.
+
+    ``python -c "import numpy"``, ``"import magfit"``, ``"import magfit.cli"`` and ``magfit calibrate CSV``
+    (keys ``numpy``, ``package``, ``import``, ``calibrate``) take turns for ``rounds`` rounds, the best of each
+    counts, after one run of the command that compiles its modules' bytecode. The bytecode is kept as an
+    installed package keeps it: ``PYTHONDONTWRITEBYTECODE`` is dropped from the environment, else every run of
+    the command compiled the modules beyond the CLI's import again (0.1 s of CPU: the command measured 3.00x
+    the import here against 1.91x in startup.py, which already dropped it).
+    """
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
     commands = {
         "numpy": [sys.executable, "-c", "import numpy"],
         "package": [sys.executable, "-c", "import magfit"],
         "import": [sys.executable, "-c", "import magfit.cli"],
         "calibrate": [str(Path(sys.executable).parent / "magfit"), "calibrate", str(csv)],
     }
-    run_process(commands["calibrate"])  # the first run compiles bytecode and warms the file cache
-    best = _interleaved(commands, rounds)
+    run_process(commands["calibrate"])  # the first run compiles the bytecode (kept) and warms the file cache
+    return _interleaved(commands, rounds)
+
+
+def startup_commands(csv: Path) -> dict[str, str]:
+    """The commands of :func:`startup_processes`, as shell lines (for the results)."""
+    return {
+        "numpy": shlex.join([sys.executable, "-c", "import numpy"]),
+        "package": shlex.join([sys.executable, "-c", "import magfit"]),
+        "import": shlex.join([sys.executable, "-c", "import magfit.cli"]),
+        "calibrate": shlex.join([str(Path(sys.executable).parent / "magfit"), "calibrate", str(csv)]),
+    }
+
+
+def _calibrate_vs_import(rounds: int, workdir: Path) -> dict[str, Any]:
+    """``magfit calibrate`` on a 300-row CSV against ``import magfit.cli`` (and ``import numpy``), as processes."""
+    results: dict[str, Any] = {}
+    csv = workdir / f"samples_{N_RATIO_CSV}.csv"
+    write_csv(make_samples(N_RATIO_CSV, seed=11), csv)
+    print(f"[ratios] magfit calibrate on {N_RATIO_CSV} rows vs import magfit.cli, {rounds} rounds", flush=True)
+    best = startup_processes(rounds, csv)
     processes: dict[str, Any] = {}
     for name, run in best.items():
         if isinstance(run, RuntimeError):
@@ -484,7 +522,7 @@ def _calibrate_vs_import(rounds: int, workdir: Path) -> dict[str, Any]:
             if name == "calibrate":
                 processes[name].update(_calibrate_row(run))
     results["processes"] = processes
-    results["commands"] = {name: shlex.join(command) for name, command in commands.items()}
+    results["commands"] = startup_commands(csv)
     results["calibrate_vs_import"] = processes["calibrate"].get("seconds", float("nan")) / processes["import"].get(
         "seconds", float("nan")
     )
@@ -714,6 +752,8 @@ def report(results: dict[str, Any]) -> str:
                 lines.append(f"| reader alone: {name} | failed: {value['error']} | | |")
         for label, value in cli["calibrate"].items():
             name = "`magfit calibrate`, the default method" if label.startswith("(") else f"`magfit calibrate {label}`"
+            if label == PANDAS_LABEL:
+                name = "`MAGFIT_CSV_READER=pandas magfit calibrate`, the default method, parsed by pandas alone"
             if "seconds" in value:
                 how = "streamed in chunks" if value["streamed"] else "whole file in memory"
                 chose = f"; chose the {value['chose']} model" if "chose" in value else ""
@@ -935,6 +975,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.peer_sizes:
         options.peer_sizes = [int(float(size)) for size in args.peer_sizes.split(",")]
     args.workdir.mkdir(parents=True, exist_ok=True)
+    # The processes run as an installed package does, with their bytecode compiled once and kept.
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
     start = time.perf_counter()
     results: dict[str, Any] = {
         "command": shlex.join(["python", "benchmarks/speed.py", *(argv if argv is not None else sys.argv[1:])]),

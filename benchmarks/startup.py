@@ -5,8 +5,10 @@
 1. Four processes taking turns for ``--rounds`` rounds (the best of each counts; a slow spell of the shared
    machine slows a whole round): ``python -c "import numpy"``, ``python -c "import magfit"``,
    ``python -c "import magfit.cli"`` and ``magfit calibrate small.csv`` (the default method, 300 rows of
-   benchmarks/speed.py's scenario). Targets: the command within 2x the CLI's import (issue 24); the import
-   against ``import numpy`` is reported (no target). Wall time and CPU time (the launcher's
+   benchmarks/speed.py's scenario), as part 5 of benchmarks/speed.py measures them (one definition:
+   ``speed.startup_processes``, with the bytecode compiled once and kept, as installed). Targets: the
+   command within 2x the CLI's import (issue 24); the import against ``import numpy`` is reported (no
+   target). Wall time and CPU time (the launcher's
    ``RUSAGE_CHILDREN``), since CPU time moves less with the machine's load.
 2. ``python -X importtime`` of both, ``--importtime`` runs each: the modules the command imports beyond the
    CLI's own, each its least self time over the runs, the largest first (what is left to make lazy).
@@ -30,7 +32,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from speed import N_RATIO_CSV, _interleaved, machine, make_samples, run_process, write_csv
+from speed import N_RATIO_CSV, machine, make_samples, startup_processes, write_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = 2.0
@@ -69,15 +71,13 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as folder:
         csv = Path(folder) / "small.csv"
         write_csv(make_samples(N_RATIO_CSV, seed=11), csv)
-        magfit_exe = str(Path(sys.executable).parent / "magfit")
-        commands = {
-            "import numpy": [sys.executable, "-c", "import numpy"],
-            "import magfit": [sys.executable, "-c", "import magfit"],
-            "import magfit.cli": [sys.executable, "-c", "import magfit.cli"],
-            "magfit calibrate (300 rows)": [magfit_exe, "calibrate", str(csv)],
+        labels = {
+            "numpy": "import numpy",
+            "package": "import magfit",
+            "import": "import magfit.cli",
+            "calibrate": "magfit calibrate (300 rows)",
         }
-        run_process(commands["magfit calibrate (300 rows)"])  # bytecode compiled, file cache warm
-        best = _interleaved(commands, args.rounds)
+        best = {labels[key]: run for key, run in startup_processes(args.rounds, csv).items()}
         times: dict[str, dict[str, float]] = {}
         for name, run in best.items():
             if isinstance(run, RuntimeError):

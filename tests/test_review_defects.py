@@ -114,7 +114,6 @@ def test_field_strength_wmm_uses_the_unit_the_file_states(tmp_path: Path) -> Non
     assert result.exit_code == 0, result.output
 
 
-@pytest.mark.xfail(strict=True, reason="--max-samples advice is a moving target: the minimum it names is refused")
 def test_max_samples_advice_is_accepted_when_followed(tmp_path: Path) -> None:
     path = tmp_path / "mag.csv"
     _sphere_csv(path)

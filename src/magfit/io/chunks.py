@@ -3,8 +3,12 @@
 The rows of a text file are parsed by pandas' C reader, three columns at a time, in blocks whose size
 bounds the memory whatever the file's length. Every block is also checked for rows with a different
 number of fields (:class:`_CheckedSource`): pandas accepts those silently when it reads only some of the
-columns. ``.npy`` files are memory-mapped and ``.npz`` members inflated a chunk at a time. Rows with a
-NaN or an infinite magnetometer value are counted and dropped (or refused), by line number.
+columns. A large plain file is parsed by pyarrow when it is installed (:mod:`magfit.io.fastcsv`,
+:meth:`ChunkReader._iter_blocks`): blocks of whole lines on one thread per core; a block pyarrow does not
+read as one row of numbers per line (a bad cell, a blank line, a cut last line), and the rest of the file
+after it, are read by the pandas path, which names the problem and the line. ``.npy`` files are
+memory-mapped and ``.npz`` members inflated a chunk at a time. Rows with a NaN or an infinite
+magnetometer value are counted and dropped (or refused), by line number.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from numpy.typing import NDArray
 from .._validation import MAX_MAGNITUDE
 from ..errors import DataFileError, OptionError
 from ..remedy import option
+from .fastcsv import BlockParser, block_parser
 from .instances import (
     SensorColumn,
     choose,
@@ -59,6 +64,8 @@ from .selection import (
 from .sources import check_file, file_error
 
 __all__ = [
+    "BLOCK_BYTES",
+    "BLOCK_READER_BYTES",
     "MAX_PIECES",
     "MAX_REPORTED_LINES",
     "PARALLEL_BYTES",
@@ -78,6 +85,12 @@ MAX_PIECES = 4
 #: Text files (or pieces) up to this size are parsed here, line by line, rather than by pandas: importing
 #: pandas takes several times longer than parsing this much in Python (docs/scaling.md, "Measured speed").
 SMALL_TEXT_BYTES = 256 * 1024
+#: Text files from this size are parsed by pyarrow when it is installed (:mod:`magfit.io.fastcsv`): importing
+#: it costs more than it saves on smaller files.
+BLOCK_READER_BYTES = 32 << 20
+#: Bytes of whole lines per block of that reader: each is parsed on one thread, and the blocks in flight (one
+#: per thread, and one more) bound the memory (docs/scaling.md, "Reading a large CSV").
+BLOCK_BYTES = 4 << 20
 
 
 # ---------------------------------------------------------------------------------------------- reading
@@ -227,6 +240,8 @@ class ChunkReader:
         workers = min(os.cpu_count() or 1, MAX_PIECES)
         if self.format.kind != "text" or workers < 2 or self.path.stat().st_size < PARALLEL_BYTES:
             return [self]
+        if self._block_parser() is not None:  # the blocks are parsed on one thread per core
+            return [self]
         return self.split(workers)
 
     # .................................................................. shared bookkeeping
@@ -274,7 +289,8 @@ class ChunkReader:
         self._skipped = []
         self.skipped_lines = ()
         if self.format.kind == "text":
-            chunks = self._iter_text()
+            parse = self._block_parser()
+            chunks = self._iter_text() if parse is None else self._iter_blocks(parse)
         elif self.format.kind == "npy":
             chunks = self._iter_npy()
         else:
@@ -332,6 +348,90 @@ class ChunkReader:
             finally:
                 for stream in streams:
                     stream.close()
+
+    # .................................................................. text, in blocks (pyarrow)
+
+    def _block_parser(self) -> BlockParser | None:
+        """The block reader of :mod:`magfit.io.fastcsv` for this reader's rows, or None: pandas parses them.
+
+        Only for a whole plain text file of at least :data:`BLOCK_READER_BYTES` whose rows come from one
+        magnetometer (and not when ``block_bytes`` sets pandas' reads, as tests do).
+        """
+        fmt = self.format
+        if (
+            fmt.kind != "text"
+            or self._byte_range is not None
+            or self._block_bytes is not None
+            or self._sensor_column is not None
+            or self.path.stat().st_size < BLOCK_READER_BYTES
+        ):
+            return None
+        return block_parser(fmt, sorted(set(self._indices)))
+
+    def _iter_blocks(self, parse: BlockParser) -> Iterator[NDArray[np.float64]]:
+        """The rows of a large plain text file, parsed in blocks of whole lines on one thread per core.
+
+        The blocks are read in order; at most one per thread and one more are in flight, which bounds the
+        memory. The first block that ``parse`` refuses (None: see :mod:`magfit.io.fastcsv`), and the rest of
+        the file after it, are read as one piece by the pandas path (:meth:`_iter_text`): it names the problem
+        and its line, or reads what pandas accepts. Before that block every row is one line, so the line of
+        row ``i`` is ``data_line + 1 + i``.
+        """
+        fmt = self.format
+        used = sorted(set(self._indices))
+        order = [used.index(index) for index in self._indices]
+        first_line = fmt.data_line + 1
+
+        def to_line(rows: NDArray[np.int64]) -> NDArray[np.int64]:
+            return rows + first_line
+
+        from concurrent.futures import Future, ThreadPoolExecutor
+
+        workers = max(1, min(os.cpu_count() or 1, MAX_PIECES))
+        rest: int | None = None  # byte offset from which the pandas path reads the file
+        end = self.path.stat().st_size
+        with open(self.path, "rb") as handle, ThreadPoolExecutor(workers) as executor:
+            offset = fmt.data_offset  # of the first byte not yet handed to a block
+            pending: list[tuple[int, Future[NDArray[np.float64] | None]]] = []
+            try:
+                while True:
+                    size = BLOCK_BYTES
+                    while len(pending) <= workers:
+                        handle.seek(offset)
+                        data = handle.read(size)
+                        cut = data.rfind(b"\n") + 1
+                        if cut == 0:  # no line end: a line longer than the block, or the last line's end
+                            if len(data) == size:
+                                size *= 2
+                                continue
+                            break
+                        pending.append((offset, executor.submit(parse, data, cut)))
+                        offset += cut  # the bytes after the last line end are read again with the next block
+                        size = BLOCK_BYTES
+                    if not pending:
+                        if offset < end:  # the last line has no line end: pandas' path says if it is cut short
+                            rest = offset
+                        break
+                    start, future = pending.pop(0)
+                    values = future.result()
+                    if values is None:
+                        rest = start
+                        break
+                    if order != list(range(len(order))):
+                        values = values[:, order]
+                    for first in range(0, len(values), self.chunk_rows):
+                        yield self._filter(values[first : first + self.chunk_rows], to_line)
+            finally:
+                for _, future in pending:
+                    future.cancel()
+        if rest is None:
+            return
+        piece = copy.copy(self)
+        piece._byte_range = (rest, end)
+        yield from piece
+        self.n_rows += piece.n_rows
+        self.n_skipped += piece.n_skipped
+        self._skipped.extend(piece.skipped_lines[: max(MAX_REPORTED_LINES - len(self._skipped), 0)])
 
     # .................................................................. text
 

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..diagnostics.settle import settle
-from ..errors import DataFileError, MagfitError
+from ..errors import DataFileError, MagfitError, OptionError
 from ..evaluate import Evaluation, evaluate
 from ..fit import fit
 from ..methods import get_method
@@ -302,13 +302,20 @@ def _fit_subsample(request: SamplesFileFit, limit: int) -> tuple[Calibration, Ev
         pool_step = 1 if even else max(1, statistics.n // (SAMPLE_POOL * limit))
         with progress(f"sampling {path.name} evenly") as advance:
             for step in dict.fromkeys((pool_step, 1)):  # the pool, then every row if the pool will not do
-                sampler = even_subsample_chunks(
-                    functools.partial(_pooled_rows, source, advance, step),
-                    centre=centre,
-                    shape=shape,
-                    max_samples=limit,
-                    cap_at_median=even,
-                )
+                try:
+                    sampler = even_subsample_chunks(
+                        functools.partial(_pooled_rows, source, advance, step),
+                        centre=centre,
+                        shape=shape,
+                        max_samples=limit,
+                        cap_at_median=even,
+                    )
+                except OptionError:
+                    # A budget below the cells of directions filled: the pool fills fewer cells than the whole
+                    # file, so the least budget to advise is counted on every row (with it, any pool fits).
+                    if step == 1:
+                        raise
+                    continue
                 if step == 1 or _pool_deficit(sampler, step) <= POOL_DEFICIT * limit:
                     break
         samples = sampler.samples
@@ -375,26 +382,37 @@ class _FirstPass:
     def score(self, calibration: Calibration, advance: Advance) -> tuple[Evaluation, NDArray[np.float64]]:
         """The paper's metric over every sample, and at most :data:`DIAGNOSE_SAMPLES` rows evenly strided.
 
-        Spilled pieces are scored on threads (NumPy computes without the GIL) and their metrics pooled.
+        The spilled samples are cut into one run of rows per core (a file parsed in blocks has one spill,
+        a file parsed in pieces one per piece), scored on threads (NumPy computes without the GIL, the rows
+        are read with ``os.pread``), and their metrics pooled; the stride continues across the runs.
         """
         from ..compare import evaluate_chunks
 
         total = self.statistics.n
         spills = [spill for spill in self._spills if spill.rows]
-        if len(spills) < 2 or not all(spill.complete for spill in self._spills):
+        workers = min(os.cpu_count() or 1, 4)
+        if not spills or not all(spill.complete for spill in self._spills) or (workers < 2 and len(spills) < 2):
             strided = _Strided(total, DIAGNOSE_SAMPLES)
             return evaluate_chunks(calibration, strided.collect(_counted(self.source(), advance))), strided.samples()
-        offsets = np.cumsum([0] + [spill.rows for spill in spills[:-1]])
+        runs: list[tuple[_Spill, int, int, int]] = []  # (spill, first row, end row, rows before it in the file)
+        before = 0
+        for spill in spills:
+            runs_per_spill = max(1, -(-workers // len(spills)))
+            cuts = [spill.rows * k // runs_per_spill for k in range(runs_per_spill + 1)]
+            runs += [(spill, low, high, before + low) for low, high in itertools.pairwise(cuts) if high > low]
+            before += spill.rows
 
-        def one(spill: _Spill, offset: int) -> tuple[Evaluation, NDArray[np.float64]]:
+        def one(run: tuple[_Spill, int, int, int]) -> tuple[Evaluation, NDArray[np.float64]]:
+            spill, low, high, offset = run
             strided = _Strided(total, DIAGNOSE_SAMPLES)
-            strided.seen = offset  # rows of the earlier pieces: the stride continues across pieces
-            return evaluate_chunks(calibration, strided.collect(_counted(spill.chunks(), advance))), strided.samples()
+            strided.seen = offset  # rows before this run: the stride continues across runs
+            chunks = _counted(spill.chunks(low, high), advance)
+            return evaluate_chunks(calibration, strided.collect(chunks)), strided.samples()
 
         from concurrent.futures import ThreadPoolExecutor  # (its import, with logging's, only for a big file)
 
-        with ThreadPoolExecutor(len(spills)) as pool:
-            parts = list(pool.map(one, spills, (int(offset) for offset in offsets)))
+        with ThreadPoolExecutor(len(runs)) as pool:
+            parts = list(pool.map(one, runs))
         return _pooled([part[0] for part in parts]), np.concatenate([part[1] for part in parts])
 
     def source(self) -> Iterator[NDArray[np.float64]]:
@@ -458,10 +476,16 @@ class _Spill:
         except OSError:  # the disk filled up: the later passes read the file again
             self.complete = False
 
-    def chunks(self) -> Iterator[NDArray[np.float64]]:
+    def chunks(self, first: int = 0, end: int | None = None) -> Iterator[NDArray[np.float64]]:
+        """Rows ``first`` to ``end`` (default: all) in chunks of :data:`STREAM_CHUNK_ROWS`; several threads may
+        read one spill at once (``os.pread``: no shared file position)."""
         assert self._file is not None
-        self._file.seek(0)
-        while block := self._file.read(STREAM_CHUNK_ROWS * 24):
+        self._file.flush()
+        descriptor = self._file.fileno()
+        end = self.rows if end is None else end
+        for start in range(first, end, STREAM_CHUNK_ROWS):
+            size = min(STREAM_CHUNK_ROWS, end - start) * 24
+            block = os.pread(descriptor, size, start * 24)
             yield np.frombuffer(block, dtype=np.float64).reshape(-1, 3)
 
 
