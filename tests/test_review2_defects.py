@@ -141,7 +141,6 @@ def test_vector_with_time_in_milliseconds_names_the_time_column(tmp_path: Path) 
     assert "time_unit" in refused.value.codes, (refused.value.codes, str(refused.value)[:200])
 
 
-@pytest.mark.xfail(strict=True, reason="a ROS (ENU/FLU) recording read as NED: exit 0, heading 145° off, ±2.3° stated")
 def test_vector_on_a_ros_recording_without_its_convention_is_not_confidently_mirrored(tmp_path: Path) -> None:
     from scipy.spatial.transform import Rotation
 
