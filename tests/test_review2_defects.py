@@ -126,7 +126,6 @@ def test_gyro_with_a_left_handed_magnetometer_is_not_a_confident_reversed_field(
     assert error <= 3 * fitted.gyro.heading_sigma_deg, (error, fitted.gyro.heading_sigma_deg)
 
 
-@pytest.mark.xfail(strict=True, reason="vector method, time in ms: blamed on the gyro's unit (no time_unit code)")
 def test_vector_with_time_in_milliseconds_names_the_time_column(tmp_path: Path) -> None:
     _, columns = _car()
     columns["time"] = columns["time"] * 1000.0  # the logger's milliseconds in a column named 'time'

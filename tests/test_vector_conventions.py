@@ -123,3 +123,19 @@ def test_the_earths_field_is_never_unearthly_and_its_ros_reading_is() -> None:
     for lat, lon in ((1.3, 103.8), (-1.3, 36.8), (19.4, -99.1), (30.0, 31.2), (19.1, 72.9), (-12.0, -77.0)):
         assert _unearthly(field(lat, lon)) == "", (lat, lon)
         assert "East, North, Up" in _unearthly(field(lat, lon) @ SWAP.T), (lat, lon)
+
+
+def test_time_in_milliseconds_is_named_not_the_gyro(car: object) -> None:
+    reference = np.einsum("kji,j->ki", car.attitude_measured, car.field_world)  # type: ignore[attr-defined]
+    samples, time_s, gyro = car.samples, car.time_s, car.gyro  # type: ignore[attr-defined]
+    common = {"method": "vector", "reference": reference, "accel": car.accel}  # type: ignore[attr-defined]
+    with pytest.raises(magfit.OptionError) as refused:
+        magfit.fit(samples, time_s=time_s * 1000.0, gyro=gyro, **common)
+    assert refused.value.codes == ("time_unit",)
+    assert refused.value.remedy == (("time_s", "time_s / 1000"),)
+    with pytest.raises(magfit.OptionError) as refused:
+        magfit.fit(samples, time_s=time_s, gyro=np.degrees(gyro), **common)
+    assert refused.value.codes == ("gyro_unit",)
+    # In seconds and rad/s: fitted, its heading error against the truth within 3 sigma.
+    fitted = magfit.fit(samples, time_s=time_s, gyro=gyro, **common)
+    assert _heading_error(fitted, car) < 3 * fitted.diagnostics.uncertainty.heading_sigma_deg
