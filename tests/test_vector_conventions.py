@@ -139,3 +139,32 @@ def test_time_in_milliseconds_is_named_not_the_gyro(car: object) -> None:
     # In seconds and rad/s: fitted, its heading error against the truth within 3 sigma.
     fitted = magfit.fit(samples, time_s=time_s, gyro=gyro, **common)
     assert _heading_error(fitted, car) < 3 * fitted.diagnostics.uncertainty.heading_sigma_deg
+
+
+def test_real_logs_read_gravity_up_and_their_mirror_is_refused() -> None:
+    """A real ArduPilot log (tests/data/ardupilot_real, README there): its attitude and accelerometer agree (the
+    mean specific force −1.00 of |a| along down); its attitude in ROS's convention with the IMU in its axes (the
+    reading of a ROS driver that breaks REP-145) is refused with the code."""
+    import dataclasses
+
+    from magfit.pipeline.streams import _check_attitude_up
+    from magfit.sources import open_source
+
+    source = open_source(Path(__file__).parent / "data" / "ardupilot_real" / "copter462_head_80k.bin")
+    motion = source.read_motion(source.magnetometers[0].id)
+    _check_attitude_up(source, motion, "log")  # no refusal
+    mirrored = dataclasses.replace(
+        motion, attitude=np.einsum("ij,njk,kl->nil", SWAP, motion.attitude, FLIP), accel=motion.accel @ FLIP
+    )
+    with pytest.raises(magfit.DataFileError) as refused:
+        _check_attitude_up(source, mirrored, "log")
+    assert refused.value.codes == ("attitude_convention",)
+
+
+def test_a_comparison_of_a_ros_file_read_as_ned_runs_the_methods_without_the_attitude(tmp_path: Path,
+                                                                                      car: object) -> None:  # fmt: skip
+    path = _save(tmp_path / "ros.csv", _columns(car, ros=True))
+    result = CliRunner().invoke(cli, ["compare", str(path), "--unit", "uT", "--methods", "vector,gyro"])
+    assert result.exit_code in (0, 1), result.output
+    assert "vector failed" in result.output and "--attitude-convention enu" in result.output, result.output
+    assert "gyro failed" not in result.output, result.output

@@ -146,8 +146,15 @@ def method_streams(
     options: dict[str, Any] = {}
     notes = [f"{where}: {note}" for note in motion.notes]
     wanted = (*needs, *optional)
+    upside_down = False
     if "reference" in needs or "down" in needs:  # the attitude's world must be the accelerometer's
-        _check_attitude_up(source, motion, where)
+        try:
+            _check_attitude_up(source, motion, where)
+        except (DataFileError, OptionError) as error:
+            if not available:
+                raise
+            notes.append(str(error))
+            upside_down = True  # a comparison runs the methods that do not read the attitude
     if "time_s" in wanted:
         options["time_s"] = motion.time_s
     try:
@@ -168,13 +175,13 @@ def method_streams(
             raise
         notes.append(str(error))
     try:
-        if "reference" in needs:
+        if "reference" in needs and not upside_down:
             options["reference"] = _reference(source, motion, where, unit, date, notes, reference_ned)
     except (DataFileError, OptionError) as error:
         if not available:
             raise
         notes.append(str(error))
-    if "down" in needs and motion.attitude is not None:  # tilt: the vertical from roll and pitch (yaw unused)
+    if "down" in needs and motion.attitude is not None and not upside_down:  # tilt: the vertical, roll and pitch
         options["down"] = np.asarray(motion.attitude)[:, 2, :]
     if "accel" in wanted:
         accel, said = _accel(motion, wanted)
