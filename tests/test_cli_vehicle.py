@@ -185,7 +185,7 @@ def test_a_flight_log_s_refusal_or_weak_fit_names_the_log_s_methods(
     except magfit.CalibrationError as error:
         advice = error.advice  # type: ignore[attr-defined]
     remedies = [dict(reason.remedy) for reason in advice]
-    assert [remedy["method"] for remedy in remedies] == ["vector", "gyro", "sphere"]
+    assert [remedy["method"] for remedy in remedies] == ["vector", "tilt", "gyro", "sphere"]
     assert all(set(remedy) <= {"method", "field_strength", "unit", "sensor"} for remedy in remedies)
     run = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "ellipsoid"])
     assert f"(magfit calibrate {path} --method vector)" in run.stderr

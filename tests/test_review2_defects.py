@@ -166,7 +166,6 @@ def test_gyro_one_sigma_covers_its_error_on_an_imperfect_recording(case: str, tm
     assert error <= 3 * fitted.gyro.heading_sigma_deg, (error, fitted.gyro.heading_sigma_deg)
 
 
-@pytest.mark.xfail(strict=True, reason="vector method, time in ms: blamed on the gyro's unit (no time_unit code)")
 def test_vector_with_time_in_milliseconds_names_the_time_column(tmp_path: Path) -> None:
     _, columns = _car()
     columns["time"] = columns["time"] * 1000.0  # the logger's milliseconds in a column named 'time'
@@ -181,7 +180,6 @@ def test_vector_with_time_in_milliseconds_names_the_time_column(tmp_path: Path) 
     assert "time_unit" in refused.value.codes, (refused.value.codes, str(refused.value)[:200])
 
 
-@pytest.mark.xfail(strict=True, reason="a ROS (ENU/FLU) recording read as NED: exit 0, heading 145° off, ±2.3° stated")
 def test_vector_on_a_ros_recording_without_its_convention_is_not_confidently_mirrored(tmp_path: Path) -> None:
     from scipy.spatial.transform import Rotation
 

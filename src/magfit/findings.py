@@ -625,6 +625,7 @@ REASON_CODES: dict[str, str] = {
     "unreadable_file": "the recording cannot be read: missing, empty, damaged, cut short or in no format magfit reads",
     "bad_option": "an option the recording cannot serve (a column, unit or method it does not hold)",
     "bad_samples": "the samples are malformed (NaN or infinite values, another shape than N rows of 3)",
+    "attitude_convention": "the attitude's world is upside down against the accelerometer's gravity (ENU read as NED)",
     "unclassified": "a reason without a code of its own yet",
 }
 

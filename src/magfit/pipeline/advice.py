@@ -3,7 +3,8 @@
 
 :func:`vehicle_advice`: for a recording that looks like a vehicle's (a flight log, or samples that turn
 about one axis more than they tilt: level with turns), the methods that work for it: ``vector`` with the
-file's or log's attitude and reference field, ``gyro`` with its gyroscope, and the sphere pinned to the
+file's or log's attitude and reference field, ``tilt`` with its roll and pitch where it has an attitude (its
+yaw may be steered by the compass being calibrated), ``gyro`` with its gyroscope, and the sphere pinned to the
 known field. Never only "tumble it": a vehicle cannot.
 """
 
@@ -126,6 +127,16 @@ def _advice(*, is_log: bool, streams: Sequence[str], unit: str | None, method: s
                 "the place) gives the field expected at each sample (the vector method)",
                 "vehicle_methods", (*remedy, *unit_pair),
             ))  # fmt: skip
+    if method != "tilt" and "attitude" in streams:  # roll and pitch logged: the yaw need not be trusted
+        remedy = [("method", "tilt")]
+        if not is_log and "reference" not in streams and "place" not in streams:
+            remedy.append(("reference", "N,E,D"))
+        advice.append(Reason(
+            "the logged roll and pitch with the reference field's horizontal strength and vertical component, the "
+            "yaw left free (the tilt method): for a recording whose logged heading is suspect (an estimator that "
+            "steers it by this compass)",
+            "vehicle_methods", (*remedy, *(unit_pair if not is_log else ())),
+        ))  # fmt: skip
     if method != "gyro":
         remedy = [("method", "gyro")]
         if not is_log and "gyro" not in streams:

@@ -563,13 +563,21 @@ def _calibrate_samples_streams(
         fitted_options.pop("time_s", None)  # row numbers are no time: no lag searched
     try:
         calibration = fit(streams.samples, method=method, **fitted_options)
-    except OptionError as error:  # (the gyroscope's unit: said where its columns are)
-        if "gyro" not in fitted_options or spec.gyro_unit != "rad/s":
+    except OptionError as error:  # (the gyroscope's or the time's unit: said where its columns are)
+        if "time_unit" in error.codes and "time" in source.time_base:
+            time_column = next((note.split(": time ", 1)[1] for note in notes if ": time " in note), "time")
+            raise OptionError(
+                f"{path}: {error} (the file's time column {time_column}: if it counts milliseconds, name it time_ms; "
+                "microseconds, time_us)",
+                codes=error.codes,
+            ) from None
+        if "gyro" not in fitted_options or spec.gyro_unit != "rad/s" or "gyro_unit" not in error.codes:
             raise
         gyro_columns = next((note.split(": gyro ", 1)[1] for note in notes if ": gyro " in note), "gyro")
         raise OptionError(
             f"{path}: {error} (the file's gyroscope columns {gyro_columns}; if they hold degrees per second, say so "
-            f"with {option('gyro_unit', 'deg/s')})"
+            f"with {option('gyro_unit', 'deg/s')})",
+            codes=error.codes,
         ) from None
     except CalibrationError as error:
         used = f"columns {source.magnetometers[0].description}"

@@ -22,6 +22,7 @@ without an accelerometer is no error: the methods run without it, and the notes 
 from __future__ import annotations
 
 import datetime
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -41,6 +42,19 @@ __all__ = ["OPTIONAL_STREAMS", "MethodStreams", "StreamNames", "method_streams",
 #: and never a reason to refuse (a log without them is fitted without them). ``time_s``: vector estimates the
 #: attitude's lag behind the samples from the stamps; ``gyro``: vector's still-sample gate.
 OPTIONAL_STREAMS = ("time_s", "gyro", "accel", "inclination_deg")
+#: The accelerometer's mean vertical component in the attitude's world (north-east-down), as a share of its
+#: mean magnitude, from which the world is upside down (:func:`_check_attitude_up`): at rest it is −1, a ROS
+#: attitude read as NED +1; a vehicle's own accelerations average out over a recording.
+UPSIDE_DOWN = 0.5
+#: The widest declination (degrees, absolute) of the Earth's field where its inclination is shallower than the
+#: first figure (degrees, absolute): the World Magnetic Model 2025 on a 2° x 4° grid at sea level (the figures:
+#: docs/methods.md, "vector"); steeper than 70° any declination occurs (near the magnetic poles).
+EARTH_DECLINATION = ((50.0, 24.3), (55.0, 27.2), (60.0, 47.1), (65.0, 61.0), (70.0, 79.2))
+#: Degrees added to those for the years the model drifts and the grid's coarseness.
+DECLINATION_MARGIN = 10.0
+#: What a samples file's attitude read in ROS's convention says of its frame (``Motion.frames``), by which the
+#: check names the other convention.
+ENU_MARK = "from ENU"
 
 
 class StreamNames(NamedTuple):
@@ -132,6 +146,15 @@ def method_streams(
     options: dict[str, Any] = {}
     notes = [f"{where}: {note}" for note in motion.notes]
     wanted = (*needs, *optional)
+    upside_down = False
+    if "reference" in needs or "down" in needs:  # the attitude's world must be the accelerometer's
+        try:
+            _check_attitude_up(source, motion, where)
+        except (DataFileError, OptionError) as error:
+            if not available:
+                raise
+            notes.append(str(error))
+            upside_down = True  # a comparison runs the methods that do not read the attitude
     if "time_s" in wanted:
         options["time_s"] = motion.time_s
     try:
@@ -152,13 +175,13 @@ def method_streams(
             raise
         notes.append(str(error))
     try:
-        if "reference" in needs:
+        if "reference" in needs and not upside_down:
             options["reference"] = _reference(source, motion, where, unit, date, notes, reference_ned)
     except (DataFileError, OptionError) as error:
         if not available:
             raise
         notes.append(str(error))
-    if "down" in needs and motion.attitude is not None:  # tilt: the vertical from roll and pitch (yaw unused)
+    if "down" in needs and motion.attitude is not None and not upside_down:  # tilt: the vertical, roll and pitch
         options["down"] = np.asarray(motion.attitude)[:, 2, :]
     if "accel" in wanted:
         accel, said = _accel(motion, wanted)
@@ -189,6 +212,109 @@ def method_streams(
     if motion.magnetometer_frame == "body" and motion.mounting is not None:
         details["applied_rotation"] = np.asarray(motion.mounting).tolist()
     return MethodStreams(np.asarray(motion.samples), options, details, tuple(notes))
+
+
+def _check_attitude_up(source: Source, motion: Any, where: str) -> None:
+    """Refuses an attitude whose world is upside down against the accelerometer's gravity.
+
+    At rest the accelerometer reads the specific force ``−g``, up; turned into the world frame by the
+    attitude, ``f = R a`` (:math:`R` body to NED), its mean over the recording is ``(0, 0, −g)``: the
+    vehicle's own accelerations average out, gravity does not. A ROS attitude (body forward-left-up to
+    East-North-Up) read as NED is ``T R F`` with the world turned 180° about the north-east diagonal (``T``),
+    which turns that mean to ``(0, 0, +g)``: the reference is turned with it when it comes from the same
+    file, so the fit against it is exact, but into the forward-left-up body frame, its heading mirrored in
+    the north-east-down frames of the exports and the firmwares (docs/methods.md, "vector", the attitude's
+    convention). The same mean, the other way round, betrays NED data read as ENU, and an accelerometer that
+    logs gravity instead of the specific force; the check cannot tell these apart and names them all. It is
+    made only where the accelerometer is in the attitude's body frame, and decides only a mean at least
+    :data:`UPSIDE_DOWN` of the mean ``|a|`` along the vertical: a mean between (an accelerometer in another
+    frame, a vehicle that never settles) is left to the fit.
+    """
+    if motion.attitude is None or motion.accel is None:
+        return
+    frames = motion.frames or {}
+    if "attitude" in frames and "accel" in frames and _frame_name(frames["attitude"]) != _frame_name(frames["accel"]):
+        return
+    attitude, accel = np.asarray(motion.attitude), np.asarray(motion.accel)
+    good = np.all(np.isfinite(accel), axis=1) & np.all(np.isfinite(attitude), axis=(1, 2))
+    if not np.any(good):
+        return
+    world = np.einsum("kij,kj->i", attitude[good], accel[good]) / int(good.sum())
+    size = float(np.mean(np.linalg.norm(accel[good], axis=1)))
+    if not (size > 0 and world[2] >= UPSIDE_DOWN * size):
+        return
+    ratio = world[2] / size
+    said = (
+        f"{where}: the accelerometer, turned into the world frame by the attitude, reads gravity's specific force "
+        f"pointing down (its mean vertical component {ratio:+.2f} of |a| in the north-east-down frame; at rest "
+        "it points up, −1): the attitude's world is upside down"
+    )
+    if source.kind == "samples":
+        given = _convention_of(motion)
+        other = "ned" if given == "enu" else "enu"
+        words = {
+            "enu": "ROS's, body forward-left-up to East-North-Up",
+            "ned": "body forward-right-down to North-East-Down",
+        }
+        raise OptionError(
+            f"{said}: the attitude and the IMU columns are of the other convention ({words[other]}); give "
+            f"{option('attitude_convention', other)} (or, if the accelerometer logs gravity rather than the specific "
+            "force, negate its columns)",
+            codes=("attitude_convention",),
+            remedy=(("attitude_convention", other),),
+        )
+    raise DataFileError(
+        f"{said}: the log's attitude and its accelerometer disagree on up and down (an attitude in another "
+        "convention than the reader's, or an accelerometer that logs gravity rather than the specific force); the "
+        "attitude-aided methods cannot use it: fit a magnitude-only method, or fix the attitude's convention",
+        codes=("attitude_convention",),
+    )
+
+
+def _declination_limit(inclination_deg: float) -> float:
+    """The widest declination (degrees) the Earth's field has where its inclination is as steep as
+    ``inclination_deg`` or less (:data:`EARTH_DECLINATION`, with :data:`DECLINATION_MARGIN`); 180 beyond."""
+    for steepest, widest in EARTH_DECLINATION:
+        if abs(inclination_deg) < steepest:
+            return widest + DECLINATION_MARGIN
+    return 180.0
+
+
+def _convention_of(motion: Any) -> str:
+    """``"enu"`` for a samples file read in ROS's convention (:data:`ENU_MARK`), else ``"ned"``."""
+    return "enu" if ENU_MARK in (motion.frames or {}).get("attitude", "") else "ned"
+
+
+def _unearthly(reference_ned: NDArray[np.float64], given: str = "ned") -> str:
+    """A note when the file's reference points where the Earth's field points nowhere: a declination wider than
+    any where the inclination is as shallow (:func:`_declination_limit`); with the reading of the columns as
+    East-North-Up (a ROS file, the attitude's convention not given) when that one is the Earth's.
+
+    Without an accelerometer nothing else betrays a ROS file read as NED: its reference turns with its attitude,
+    and the fit is exact, into the forward-left-up body frame (:func:`_check_attitude_up`)."""
+    north, east, down = np.median(reference_ned, axis=0)
+    horizontal = float(np.hypot(north, east))
+    if not horizontal > 0:
+        return ""
+    declination = math.degrees(math.atan2(east, north))
+    inclination = math.degrees(math.atan2(down, horizontal))
+    if abs(declination) <= _declination_limit(inclination):
+        return ""
+    said = (
+        f"the reference field's columns give a declination of {declination:.0f}° at an inclination of "
+        f"{inclination:.0f}°: the Earth's field has none wider than {_declination_limit(inclination):.0f}° where it "
+        "dips so little (a local world frame, or columns in another order)"
+    )
+    # The other convention swaps the first two columns and negates the third, both ways round.
+    other_declination = (90.0 - declination + 180.0) % 360.0 - 180.0
+    if abs(other_declination) <= _declination_limit(-inclination):
+        other, words = ("ned", "North, East, Down") if given == "enu" else ("enu", "East, North, Up (ROS's convention)")
+        said += (
+            f"; read as {words} they give {other_declination:.0f}° and {-inclination:.0f}°: if the file is so, "
+            f"give {option('attitude_convention', other)}, or the calibration comes out in a body frame turned 180° "
+            "about its forward axis, its heading mirrored"
+        )
+    return said
 
 
 def _inclination(source: Source, motion: Any, date: datetime.date | str | None) -> tuple[float | None, str]:
@@ -235,6 +361,9 @@ def _reference(
         notes.append(
             f"{where}: reference field from the file's N/E/D columns{said}, turned into the body frame by the attitude"
         )
+        doubt = _unearthly(reference_ned, _convention_of(motion))
+        if doubt:
+            notes.append(f"{where}: {doubt}")
         return np.einsum("kji,kj->ki", motion.attitude, reference_ned)
     label = unit or motion.unit
     if not label or not get_unit(label).is_physical:

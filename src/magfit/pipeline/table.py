@@ -29,6 +29,7 @@ from ..io.layout import FileFormat
 from ..remedy import option
 from ..sources import LogSamples, Magnetometer, Position, Source, median_position
 from ..sources.motion import Motion
+from .streams import ENU_MARK
 
 __all__ = ["ANGLE_UNITS", "CONVENTIONS", "SamplesStreams", "StreamSpec", "angle_unit", "samples_source"]
 
@@ -131,7 +132,9 @@ def samples_source(
     fmt = chosen.format
     named = find_stream_columns(fmt.header) if fmt.header is not None else {}
     found = {}
-    for stream in wanted:
+    # The accelerometer is read beside an attitude even for a method that does not take it: the attitude's
+    # convention is checked against its gravity (magfit.pipeline.streams, _check_attitude_up).
+    for stream in (*wanted, *(("accel",) if "attitude" in wanted and "accel" not in wanted else ())):
         given = getattr(spec, stream, None)
         if given is not None:
             found[stream] = resolve_stream(path, fmt, stream, given)
@@ -168,6 +171,10 @@ def samples_source(
     rows = {name: values[good] for name, values in read.items()}
     if "gyro" in rows and spec.gyro_unit == "deg/s":
         rows["gyro"] = np.radians(rows["gyro"])
+    if spec.convention == "enu":  # the IMU's forward-left-up axes into the attitude's forward-right-down ones
+        for stream in ("gyro", "accel"):
+            if stream in rows:
+                rows[stream] = rows[stream] @ _F
     samples = rows["mag"]
     unit = chosen.unit or ""
     notes = [f"{path}: magnetometer {', '.join(map(str, chosen.columns))}"]
@@ -232,7 +239,8 @@ def samples_source(
         attitude=attitude, gyro=rows.get("gyro"), accel=rows.get("accel"),
         imu_frame="body" if "gyro" in rows or "accel" in rows else "",
         sources={k: f"columns {found[k].describe()}" for k in ("attitude", "gyro", "accel") if k in found},
-        frames={k: "body" for k in ("attitude", "gyro", "accel") if k in found},
+        frames={k: "body" if spec.convention == "ned" else f"body (FRD, {ENU_MARK} FLU)"
+                for k in ("attitude", "gyro", "accel") if k in found},
         position=position, notes=(),
     )  # fmt: skip
 

@@ -181,7 +181,7 @@ def _still_rows(raw: NDArray[np.float64], kept: NDArray[np.int64], accel: NDArra
             f"fewer than the {MIN_GRAVITY_ROWS} its equations need: the fit is the regression on the reference alone."
         )
         if gyro is not None and times is None and float(np.median(np.linalg.norm(gyro, axis=1))) > 1.0:
-            # With time_s the reference tells the unit (_check_gyro_unit); without it, only the size does: no
+            # With time_s the reference tells the unit (reference._check_rate_units); without it, only the size does: no
             # vehicle turns at a median 1 rad/s (57°/s).
             note += " gyro= turns at a median rate over 1 rad/s: if it is in degrees per second, give it in rad/s."
 

@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..._validation import check_times
 from ...errors import CalibrationError
-from .reference import _check_gyro_unit, _design, _shifted
+from .reference import _check_rate_units, _design, _shifted
 
 #: The lag search widens, doubling, to at most this many times max_lag_s when the best lag is at its edge.
 WIDEST_LAG = 8.0
@@ -165,7 +165,7 @@ def _lag(raw: NDArray[np.float64], ref: NDArray[np.float64], time_s: ArrayLike |
         return _Lagged(raw, ref, np.arange(n))
     times = check_times(time_s, "time_s", n)
     if rates is not None and acc is not None:
-        _check_gyro_unit(ref, times, rates)
+        _check_rate_units(ref, times, rates)
     # A lag at the edge of the search is not an estimate: the search widens (doubling, up to
     # WIDEST_LAG times max_lag_s and a quarter of the recording) until the best lag lies inside it.
     limit = float(max_lag_s)
