@@ -554,7 +554,7 @@ def _every(chunks: Iterable[NDArray[np.float64]], step: int) -> Iterator[NDArray
         first = (-seen) % step  # index in this chunk of the next row to keep
         seen += len(chunk)
         if first < len(chunk):
-            kept.append(chunk[first::step])
+            kept.append(chunk[first::step].copy())  # a view would keep the whole chunk read until the block is out
             n_kept += len(kept[-1])
         if n_kept >= POOL_BLOCK_ROWS:
             yield np.concatenate(kept)
