@@ -25,7 +25,6 @@ def _write(path: Path, samples: np.ndarray) -> None:
     np.savetxt(path, samples, fmt="%.6f", delimiter=",", header="mx,my,mz", comments="")
 
 
-@pytest.mark.xfail(strict=True, reason="robust on 30 level-flight samples: exit 0, heading error 10° for ±1.9° stated")
 def test_robust_on_a_short_flight_states_a_one_sigma_that_covers_its_error(tmp_path: Path) -> None:
     sim = magfit.scenario("mpu9250", "steel").simulate(30, seed=1, orientations="flight")
     path, cal = tmp_path / "flight.csv", tmp_path / "cal.json"
