@@ -26,7 +26,6 @@ def _write(path: Path, samples: np.ndarray) -> None:
     np.savetxt(path, samples, fmt="%.6f", delimiter=",", header="mx,my,mz", comments="")
 
 
-@pytest.mark.xfail(strict=True, reason="robust on 30 level-flight samples: exit 0, heading error 10° for ±1.9° stated")
 def test_robust_on_a_short_flight_states_a_one_sigma_that_covers_its_error(tmp_path: Path) -> None:
     sim = magfit.scenario("mpu9250", "steel").simulate(30, seed=1, orientations="flight")
     path, cal = tmp_path / "flight.csv", tmp_path / "cal.json"
@@ -40,7 +39,6 @@ def test_robust_on_a_short_flight_states_a_one_sigma_that_covers_its_error(tmp_p
     assert heading_error_deg(fitted, sim) <= 3 * stated, (heading_error_deg(fitted, sim), stated)
 
 
-@pytest.mark.xfail(strict=True, reason="level turns with the TRUE field strength pinned are refused as field_mismatch")
 def test_the_true_field_strength_is_not_called_a_contradiction(tmp_path: Path) -> None:
     sim = magfit.simulate(
         1500, hard_iron=[10, -5, 20], field_strength=50.0, inclination_deg=60, noise=0.3, orientations="yaw", seed=3

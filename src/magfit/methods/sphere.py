@@ -68,10 +68,13 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
         centre_z, iterations = _pinned_centre(statistics, centre_z, known_field / statistics.scale)
         fitted = statistics.scale * float(np.sqrt(max(radius_squared_z, 0.0)))
         _check_radius(statistics, centre_z, known_field)
-        shift = statistics.scale * float(np.linalg.norm(centre_z - free_centre_z))
+        shift = statistics.scale * float(
+            np.linalg.norm(_spanned(statistics, free_centre_z, radius_squared_z, centre_z - free_centre_z))
+        )
         free_fit_holds = ellipsoid_outline_problem(statistics) is None  # else its centre is no reference
         if free_fit_holds and shift > RADIUS_TOLERANCE * known_field:
-            # A far centre on a big sphere also passes the radius test: the samples then sit on a small cap.
+            # A far centre on a big sphere also passes the radius test: the samples then sit on a small cap. Only
+            # along the directions the samples spread over does the free fit place its centre (_spanned).
             raise CalibrationError(
                 f"the given field strength {known_field:.4g} moves the centre {shift:.4g} away from the free "
                 f"fit's (radius {fitted:.4g}): the samples contradict it; check that it is in the samples' unit, "
@@ -100,6 +103,37 @@ def fit_sphere(data: FitInput, *, field_strength: float | None = None) -> Calibr
         field_strength=statistics.scale * np.sqrt(radius_squared_z),
         n_samples=statistics.n,
     )
+
+
+#: The samples spread along a direction when their standard deviation along it is at least this many times the
+#: noise (the free sphere's residual): below, what spread there is along it is the noise itself.
+SPANNED_NOISE = 3.0
+
+
+def _spanned(
+    statistics: Statistics, centre_z: NDArray[np.float64], radius_squared_z: float, shift: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``shift`` (normalised frame) without its part along directions the samples do not spread along.
+
+    Samples on a circle (level turns) lie on every sphere through it: centre ``c₀ + t n`` (n the circle's
+    axis) with radius ``√(ρ² + t²)``. The free fit of eq. (7) (centre ``centre_z``, radius² ``radius_squared_z``)
+    picks one of them by the noise (at zero noise its normal equations are singular), so its centre along n is
+    no reference a pinned radius could contradict: pinning B chooses ``t = ±√(B² − ρ²)``, which is what the
+    given field strength is for. Along a direction u the free fit places its centre when the samples spread
+    along u beyond their noise: the curvature the fit reads there is then the sphere's, not the noise's. The
+    noise σ is the free sphere's algebraic residual, ``|y|² − ρ² ≈ 2ρ d`` for a distance d, so
+    ``σ ≈ √(Σ (|y|² − ρ²)² / n) / (2ρ)``. Directions whose standard deviation is below :data:`SPANNED_NOISE` σ
+    are left out of the shift (a cap of 30° about u spreads 6 σ along u at 1 % noise: kept). The pinned
+    radius is still checked against the samples' distances (:func:`_check_radius`), and whether the offset
+    along such a direction is determined is the verdict's (a single turning axis is refused as ``single_axis``).
+    """
+    radius = float(np.sqrt(max(radius_squared_z, 1e-300)))
+    algebraic, _, _ = _pinned_objective(statistics, centre_z, radius)
+    noise = float(np.sqrt(max(algebraic, 0.0) / statistics.n)) / (2.0 * radius)
+    spreads, directions = np.linalg.eigh(statistics.covariance / statistics.scale**2)
+    deviations = np.sqrt(np.clip(spreads, 0.0, None))
+    spanned = directions[:, deviations >= SPANNED_NOISE * noise]
+    return np.asarray(spanned @ (spanned.T @ shift), dtype=np.float64)
 
 
 #: How far the samples' RMS distance from the pinned centre may stray from the given field strength, and
