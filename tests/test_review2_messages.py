@@ -31,3 +31,21 @@ def test_apply_to_a_log_names_the_ratio_to_the_calibrations_sphere(tmp_path: Pat
     assert ratio > 5
     assert f"lies at {ratio:.3g} times its field strength" in result.stderr, result.stderr
     assert "RAW_IMU" in result.stderr
+
+
+def test_fleet_leaves_out_the_tables_journals_and_reports_of_earlier_runs(tmp_path: Path) -> None:
+    vehicle = tmp_path / "rover"
+    vehicle.mkdir()
+    sim = magfit.simulate(400, hard_iron=[10, -5, 3], field_strength=50.0, noise=0.3, seed=3)
+    _write(vehicle / "bench.csv", sim.samples)
+    first = CliRunner().invoke(cli, ["fleet", str(tmp_path), "-o", str(tmp_path / "fleet.csv"), "--workers", "1",
+                                     "--report", str(tmp_path / "fleet.html")])  # fmt: skip
+    assert first.exit_code == 0, first.output
+    for run, paths in (("again.csv", [str(tmp_path)]), ("glob.csv", [f"{tmp_path}/**/*"])):
+        result = magfit.fleet(paths, tmp_path / run, workers=1)
+        # Ground truth: one recording, its offset the simulated one; no row for the earlier table, journal, report.
+        assert {row.path for row in result.rows} == {str((vehicle / "bench.csv").resolve())}, result.rows
+        (row,) = result.flights()
+        assert np.allclose(row.offset, [10, -5, 3], atol=1.0), row
+    named = CliRunner().invoke(cli, ["fleet", str(tmp_path / "fleet.csv"), str(vehicle), "-o", str(tmp_path / "x.csv")])
+    assert named.exit_code == 2 and "written by 'magfit fleet'" in named.output, named.output
