@@ -49,3 +49,20 @@ def test_fleet_leaves_out_the_tables_journals_and_reports_of_earlier_runs(tmp_pa
         assert np.allclose(row.offset, [10, -5, 3], atol=1.0), row
     named = CliRunner().invoke(cli, ["fleet", str(tmp_path / "fleet.csv"), str(vehicle), "-o", str(tmp_path / "x.csv")])
     assert named.exit_code == 2 and "written by 'magfit fleet'" in named.output, named.output
+
+
+def test_a_dataflash_log_without_its_beginning_is_named_so(tmp_path: Path) -> None:
+    from magfit.sources.detect import log_kind
+
+    log = (_REAL / "copter462_head_80k.bin").read_bytes()
+    tail = tmp_path / "part2.bin"
+    tail.write_bytes(log[len(log) // 2 + 7 :])  # the second half, cut inside a message: no FMT at its start
+    assert log_kind(tail) == "dataflash"
+    for command in ("inspect", "calibrate"):
+        result = CliRunner().invoke(cli, [command, str(tail)])
+        assert result.exit_code == 2, result.output
+        assert "DataFlash" in result.output and "FMT" in result.output and "binary file" not in result.output
+    # Random bytes are not taken for a log.
+    noise = tmp_path / "noise.bin"
+    noise.write_bytes(np.random.default_rng(0).integers(0, 256, 40_000, dtype=np.uint8).tobytes())
+    assert log_kind(noise) is None

@@ -56,6 +56,7 @@ from .ardupilot import (
     untrimmed,
     without_damaged_changes,
 )
+from .detect import is_headless_dataflash
 from .identity import BOOT_MESSAGES, board_identity
 from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
 from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
@@ -170,6 +171,13 @@ class DataFlashLog:
         # Bytes already in memory: every type's offsets kept (tests rewrite logs by them); a file: the wanted ones.
         self._everything = not isinstance(data, Path)
         self._indexed: set[str] = set(_INDEXED)
+        with self._open() as handle:
+            if is_headless_dataflash(handle.read(4096)):
+                raise DataFileError(
+                    f"{path}: is an ArduPilot DataFlash log whose beginning is missing (its FMT messages, which give "
+                    "every message its fields): a part of a log cut from its middle; use the whole log as the "
+                    "flight controller wrote it (download it again, or join the parts in order: cat part1 part2)"
+                )
         self._walk(None if self._everything else self._indexed, first=True)
         self._by_name = {fmt.name: type_id for type_id, fmt in self.formats.items()}
 
