@@ -66,3 +66,28 @@ def test_a_dataflash_log_without_its_beginning_is_named_so(tmp_path: Path) -> No
     noise = tmp_path / "noise.bin"
     noise.write_bytes(np.random.default_rng(0).integers(0, 256, 40_000, dtype=np.uint8).tobytes())
     assert log_kind(noise) is None
+
+
+def test_inspect_lists_each_of_two_magnetometer_column_groups(tmp_path: Path) -> None:
+    from magfit.sources import open_source
+
+    # Two sensors on one rig (as mxl_umich_mpu9250_rm3100/preflight_data_original.csv): imu_m* and mag_*.
+    imu = magfit.simulate(500, hard_iron=[10, -5, 3], field_strength=50.0, noise=0.2, seed=4)
+    pni = magfit.simulate(500, hard_iron=[-20, 7, 1], field_strength=50.0, noise=0.2, seed=5)
+    path = tmp_path / "rig.csv"
+    table = np.column_stack([np.arange(500) * 0.1, imu.samples, pni.samples])
+    np.savetxt(path, table, fmt="%.5f", delimiter=",", header="t,imu_mx,imu_my,imu_mz,mag_x,mag_y,mag_z", comments="")
+    source = open_source(path)
+    assert [(m.id, m.n_samples, m.problem) for m in source.magnetometers] == [
+        ("imu_mx,imu_my,imu_mz", 500, None),
+        ("mag_x,mag_y,mag_z", 500, None),
+    ]
+    # Ground truth: each one read is its own sensor's samples.
+    assert np.allclose(source.read("mag_x,mag_y,mag_z").samples, pni.samples, atol=1e-4)
+    result = CliRunner().invoke(cli, ["inspect", str(path)])
+    assert result.exit_code == 0 and "no magnetometer columns" not in result.output, result.output
+    assert "--columns imu_mx,imu_my,imu_mz" in result.output and "--columns mag_x,mag_y,mag_z" in result.output
+    refused = CliRunner().invoke(cli, ["calibrate", str(path)])
+    assert refused.exit_code == 2 and "--columns imu_mx,imu_my,imu_mz" in refused.output, refused.output
+    fitted = magfit.calibrate_file(path, columns=["mag_x", "mag_y", "mag_z"])
+    assert np.allclose(fitted.calibration.offset, [-20, 7, 1], atol=1.0)

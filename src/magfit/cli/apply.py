@@ -191,9 +191,7 @@ def _warn_far_from_the_sphere(
         _warn_far_off(calibration, calibration_file, file, first)
 
 
-def _warn_far_off(
-    calibration: Calibration, calibration_file: Path, file: Path | str, raw: NDArray[np.float64]
-) -> None:
+def _warn_far_off(calibration: Calibration, calibration_file: Path, file: Path | str, raw: NDArray[np.float64]) -> None:
     """Say when the samples ``raw`` (N, 3), corrected, lie far from the calibration's sphere (their median norm
     against its field strength): another unit (gauss for µT is a factor 100) or another sensor."""
     from ..diagnostics.verdict import unit_mixup

@@ -6,12 +6,16 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import DataFileError, MagfitError
 from .detect import log_kind
 from .types import LogSamples, Magnetometer, Source
+
+if TYPE_CHECKING:
+    from ..io import FileFormat
 
 __all__ = ["open_source", "vehicle_identity"]
 
@@ -74,6 +78,9 @@ def _samples_source(path: Path) -> Source:
         listing = sensor_listing(path)
         table = read_samples(path) if listing is None or len(listing.counts) == 1 else None
     except DataFileError as error:  # the layout is known, the magnetometer columns are not: say so
+        rivals = _rival_sources(path, fmt)
+        if rivals is not None:
+            return rivals
         unknown = Magnetometer(
             id="columns", description="no magnetometer columns", unit="", n_samples=0, problem=str(error)
         )
@@ -131,6 +138,48 @@ def _samples_source(path: Path) -> Source:
         magnetometers=(magnetometer,),
         _reader=read,
     )
+
+
+def _rival_sources(path: Path, fmt: FileFormat) -> Source | None:
+    """A samples file whose header names several magnetometer triples equally well (``imu_mx..mz`` beside
+    ``mag_x..z``: two sensors on one rig): each triple a magnetometer of its own, its id its columns, read and
+    fitted one at a time with ``--columns``. None when the header does not name several."""
+    from ..io import read_samples
+    from ..io.columns import find_magnetometer_columns
+    from ..remedy import command_line
+
+    if fmt.header is None:
+        return None
+    candidates = find_magnetometer_columns(fmt.header)
+    best = [triple.names for triple in candidates if triple.score == candidates[0].score] if candidates else []
+    if len(best) < 2:
+        return None
+    by_id = {",".join(names): names for names in best}
+    magnetometers = []
+    for sensor, names in by_id.items():
+        try:
+            table = read_samples(path, columns=list(names))
+        except DataFileError as error:
+            magnetometers.append(Magnetometer(id=sensor, description=f"columns {', '.join(names)}", unit="",
+                                              n_samples=0, problem=str(error)))  # fmt: skip
+            continue
+        fit = command_line("calibrate", path, [("columns", sensor)])
+        notes: tuple[str, ...] = (f"one of {len(by_id)} magnetometer column triples: fit it with {fit}",)
+        if table.n_skipped:
+            notes += (f"{table.n_skipped} rows skipped (NaN or inf)",)
+        magnetometers.append(
+            Magnetometer(id=sensor, description=f"columns {', '.join(names)}", unit=table.unit or "",
+                         n_samples=int(table.samples.shape[0]), notes=notes)
+        )  # fmt: skip
+
+    def read(magnetometer: Magnetometer) -> LogSamples:
+        names = by_id[magnetometer.id]
+        chosen = read_samples(path, columns=list(names))
+        times = np.full(len(chosen.samples), np.nan)  # a samples file has no time base
+        return LogSamples(magnetometer, chosen.samples, times, chosen.columns, ())
+
+    return Source(path=path, kind="samples", format=fmt.describe(), time_base="none (rows)",
+                  magnetometers=tuple(magnetometers), _reader=read)  # fmt: skip
 
 
 def vehicle_identity(path: str | Path) -> str | None:
