@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 import magfit
@@ -91,3 +92,36 @@ def test_inspect_lists_each_of_two_magnetometer_column_groups(tmp_path: Path) ->
     assert refused.exit_code == 2 and "--columns imu_mx,imu_my,imu_mz" in refused.output, refused.output
     fitted = magfit.calibrate_file(path, columns=["mag_x", "mag_y", "mag_z"])
     assert np.allclose(fitted.calibration.offset, [-20, 7, 1], atol=1.0)
+
+
+@pytest.mark.parametrize(
+    ("name", "per_second"),
+    [
+        ("GPS_Time_s", 1.0),
+        ("unix_time", 1.0),
+        ("timestamp_s", 1.0),
+        ("gps_time", 1.0),
+        ("time_unix", 1.0),
+        ("TimeUS", 1e6),
+        ("unix_time_ms", 1e3),
+        ("timestamp", 1e6),
+    ],
+)
+def test_a_time_column_named_after_its_clock_is_the_time_base(tmp_path: Path, name: str, per_second: float) -> None:
+    from magfit.pipeline.table import StreamSpec, samples_source
+    from magfit.sources import open_source
+
+    sim = magfit.simulate(200, hard_iron=[10, -5, 3], field_strength=50.0, noise=0.2, seed=6)
+    # Ground truth: 20 Hz from a UNIX time (or boot time for the microsecond stamps), in the column's unit.
+    start = 1.7e9 if per_second < 1e6 else 12.5
+    seconds = start + np.arange(200) / 20.0
+    path = tmp_path / "timed.csv"
+    np.savetxt(path, np.column_stack([seconds * per_second, sim.samples]), fmt="%.6f", delimiter=",",
+               header=f"{name},mx,my,mz", comments="")  # fmt: skip
+    source = open_source(path)
+    assert name in source.time_base, source.time_base
+    (magnetometer,) = source.magnetometers
+    assert magnetometer.rate_hz == pytest.approx(20.0, rel=1e-6) and magnetometer.start_s == pytest.approx(start)
+    read = samples_source(path, None, StreamSpec(), ["time"])  # as vector's lag and gyro's integration read it
+    stamps = read.source.read_motion("columns").time_s
+    assert np.allclose(stamps, seconds, atol=1e-5), stamps[:3]
