@@ -125,3 +125,34 @@ def test_a_time_column_named_after_its_clock_is_the_time_base(tmp_path: Path, na
     read = samples_source(path, None, StreamSpec(), ["time"])  # as vector's lag and gyro's integration read it
     stamps = read.source.read_motion("columns").time_s
     assert np.allclose(stamps, seconds, atol=1e-5), stamps[:3]
+
+
+def test_a_log_joined_to_itself_is_read_once_and_said(tmp_path: Path) -> None:
+    from magfit.sources import open_source
+
+    log = (_REAL / "copter33_log171_trimmed.bin").read_bytes()
+    twice = tmp_path / "twice.bin"
+    twice.write_bytes(log + log)
+    single, joined = open_source(_REAL / "copter33_log171_trimmed.bin"), open_source(twice)
+    for alone, doubled in zip(single.magnetometers, joined.magnetometers, strict=True):
+        # Ground truth: the same recording; its samples, count and rate as the log alone gives them.
+        assert doubled.n_samples == alone.n_samples and doubled.rate_hz == pytest.approx(alone.rate_hz)
+        assert np.array_equal(joined.read(doubled.id).samples, single.read(alone.id).samples)
+        said = [note for note in doubled.notes if "go back" in note]
+        assert len(said) == 1 and f"at {alone.end_s:.1f} s after boot (to {alone.start_s:.1f} s)" in said[0], said
+        assert not any("go back" in note for note in alone.notes)
+    result = CliRunner().invoke(cli, ["calibrate", str(twice), "--sensor", "MAG/0", "--method", "sphere"])
+    warned = [line for line in result.stderr.splitlines() if "go back" in line]
+    assert len(warned) == 1 and "MAG/0" in warned[0], result.stderr
+
+
+def test_a_log_of_two_boots_says_its_stamps_go_back() -> None:
+    from magfit.sources.dataflash import _time_jumps
+
+    first, second = np.arange(100) * 0.1 + 5.0, np.arange(80) * 0.1 + 2.0  # a reboot: the clock starts again
+    stamps = np.concatenate([first, second])
+    jumps = _time_jumps(stamps, np.random.default_rng(1).normal(0, 300, (len(stamps), 3)))
+    assert jumps is not None and jumps.backs == 1 and jumps.repeated == 0
+    assert (jumps.at_s, jumps.to_s) == pytest.approx((14.9, 2.0))
+    assert "more than one recording" in jumps.describe()
+    assert _time_jumps(first, np.zeros((100, 3))) is None
