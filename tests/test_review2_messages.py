@@ -156,3 +156,12 @@ def test_a_log_of_two_boots_says_its_stamps_go_back() -> None:
     assert (jumps.at_s, jumps.to_s) == pytest.approx((14.9, 2.0))
     assert "more than one recording" in jumps.describe()
     assert _time_jumps(first, np.zeros((100, 3))) is None
+
+
+def test_inspect_on_the_two_sensor_rig_recording(real_data_dir: Path) -> None:
+    path = real_data_dir / "mxl_umich_mpu9250_rm3100" / "preflight_data_original.csv"
+    rows = len(path.read_text(encoding="utf-8").splitlines()) - 1  # every row holds both sensors
+    result = CliRunner().invoke(cli, ["inspect", str(path)])
+    assert result.exit_code == 0, result.output
+    assert result.output.count(f": {rows} samples") == 2, result.output
+    assert "unix_time" in result.output and "does not increase" in result.output  # whole seconds at ~10 Hz
