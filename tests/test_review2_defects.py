@@ -255,7 +255,6 @@ def test_default_calibrate_of_a_car_uses_the_attitude_and_gyro_it_holds(tmp_path
 _TLOG = Path(__file__).parent / "data" / "ardupilot_real" / "fs_batt_2016.tlog"
 
 
-@pytest.mark.xfail(strict=True, reason="apply to a log: corrected samples 10x off the calibration's sphere, no word")
 def test_apply_to_a_log_says_when_the_corrected_samples_are_far_from_the_calibrations_sphere(tmp_path: Path) -> None:
     sim = magfit.simulate(600, hard_iron=[10, -5, 3], field_strength=50.0, noise=0.3, seed=2)
     samples, cal = tmp_path / "bench.csv", tmp_path / "cal.json"

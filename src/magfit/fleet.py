@@ -289,7 +289,7 @@ def recordings(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
             matches = sorted(glob.glob(text, recursive=True))
             if not matches:
                 raise OptionError(f"{text}: the pattern matches no file")
-            found.update((p, None) for p in recordings(matches))
+            found.update((p, None) for p in recordings(m for m in matches if not _written_by_fleet(Path(m))))
             continue
         path = Path(text)
         if path.is_dir() and not (path / "metadata.yaml").exists():
@@ -300,6 +300,8 @@ def recordings(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
                     "compressed or not)"
                 )
             found.update((p, None) for p in walked)
+        elif path.is_file() and is_fleet_table(path):
+            raise OptionError(f"{path} is a table written by 'magfit fleet', not a recording: leave it out")
         elif path.exists():
             found[path] = None
         else:
@@ -316,7 +318,34 @@ def _is_recording(path: Path) -> bool:
     for suffix in _COMPRESSED:
         if name.endswith(suffix):
             name = name[: -len(suffix)]
-    return name.endswith(RECORDING_SUFFIXES)
+    return name.endswith(RECORDING_SUFFIXES) and not is_fleet_table(path)
+
+
+def is_fleet_table(path: Path) -> bool:
+    """Whether ``path`` is a table this module wrote (:func:`write_table`): a text file whose first line is the
+    table's header (CSV) or a record with its first columns (JSON lines). A folder walked, a glob matched, finds
+    the tables of earlier runs beside the recordings: never a recording."""
+    head = _head(path)
+    first = head.split(b"\n", 1)[0].decode("utf-8", "replace")
+    return first.startswith(",".join(FleetRow.columns()[:4])) or (
+        first.startswith('{"kind": ') and '"vehicle": ' in first
+    )
+
+
+def _written_by_fleet(path: Path) -> bool:
+    """A table, a journal (``TABLE.journal.jsonl``) or an HTML report of an earlier run: what a glob such as
+    ``logs/**/*`` matches beside the recordings, and never one of them."""
+    if path.name.lower().endswith(".journal.jsonl"):
+        return True
+    return _head(path).lstrip().lower().startswith(b"<!doctype html") or is_fleet_table(path)
+
+
+def _head(path: Path) -> bytes:
+    try:
+        with path.open("rb") as handle:
+            return handle.read(200)
+    except OSError:
+        return b""
 
 
 def vehicle_of(path: Path, root: Path | None = None) -> str:

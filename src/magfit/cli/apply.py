@@ -182,18 +182,25 @@ FIRST_ROWS = 10_000
 def _warn_far_from_the_sphere(
     calibration: Calibration, calibration_file: Path, file: Path, reader: Iterable[NDArray[np.float64]]
 ) -> None:
-    """Say when the samples, corrected, lie far from the calibration's sphere (the median norm of ``reader``'s
-    first chunk against its field strength): another unit (gauss for µT is a factor 100) or another sensor."""
-    from ..diagnostics.verdict import unit_mixup
-
-    if not Path(file).is_file():  # a pipe is read once, by the writer
+    """Say when a samples file, corrected, lies far from the calibration's sphere: :func:`_warn_far_off` on
+    ``reader``'s first chunk (a pipe is read once, by the writer: not checked)."""
+    if not Path(file).is_file():
         return
     first = next(iter(reader), None)
-    if first is None or not len(first) or not calibration.field_strength > 0:
+    if first is not None:
+        _warn_far_off(calibration, calibration_file, file, first)
+
+
+def _warn_far_off(calibration: Calibration, calibration_file: Path, file: Path | str, raw: NDArray[np.float64]) -> None:
+    """Say when the samples ``raw`` (N, 3), corrected, lie far from the calibration's sphere (their median norm
+    against its field strength): another unit (gauss for µT is a factor 100) or another sensor."""
+    from ..diagnostics.verdict import unit_mixup
+
+    if not len(raw) or not calibration.field_strength > 0:
         return
     # The motors' term left out: a fraction of the field, well within the factor.
     without_motor = replace(calibration, motor=None) if calibration.motor is not None else calibration
-    ratio = float(np.median(np.linalg.norm(without_motor.apply(first), axis=1))) / calibration.field_strength
+    ratio = float(np.median(np.linalg.norm(without_motor.apply(raw), axis=1))) / calibration.field_strength
     if 1 / FAR_FROM_THE_SPHERE <= ratio <= FAR_FROM_THE_SPHERE:
         return
     why = unit_mixup(ratio) or "another sensor, or samples in another unit"
@@ -279,6 +286,7 @@ def _apply_to_log(
             f"fit the calibration on this log ('magfit calibrate {file} --sensor {recording.sensor}')"
         )
     assert recording.time_s is not None
+    _warn_far_off(calibration, calibration_file, f"{file} ({recording.sensor})", recording.samples)
     motor_note = ""
     if calibration.motor is not None:
         values, name = log_regressor(file, calibration.motor, recording.time_s, held_by=str(calibration_file),

@@ -57,7 +57,8 @@ def fleet_command(
     """Calibrate every compass of every recording given, and each vehicle's compasses over all its flights.
 
     PATHS are recordings (logs, bags, samples files), folders (walked for recordings), globs ('logs/**/*.bin')
-    and @LIST files naming one recording a line. Each recording is fitted as 'magfit calibrate' fits it, in
+    and @LIST files naming one recording a line (the tables, journals and HTML reports of earlier runs that a
+    folder or glob finds are left out). Each recording is fitted as 'magfit calibrate' fits it, in
     parallel; its rows (one per compass: verdict and reason codes, offset, matrix, field against the World
     Magnetic Model, heading one-sigma) go into one table. A recording that fails is a row with its reason.
 

@@ -11,7 +11,9 @@ camelCase split), each group complete or not at all:
 - gyroscope: ``gx, gy, gz``, ``gyro_x``..., ``wx``...: rad/s (the methods refuse what looks like °/s);
 - accelerometer: ``ax, ay, az``, ``acc_x``, ``accel_x``...: any unit (gravity's direction is what counts);
 - time: ``t``, ``time``, ``time_s``, ``timestamp``, ``seconds`` (seconds), ``time_ms`` (ms), ``time_us``,
-  ``timeus`` (µs);
+  ``timeus`` (µs); a clock's name before or after (``gps_time``, ``GPS_Time_s``, ``unix_time``, ``time_unix``,
+  ``timestamp_s``, ``utc_time``, ``epoch_ms``, ``time_boot_ms``) with the unit its last word says (``s``,
+  ``ms``, ``us``, ``ns``), seconds when it says none (the caller reads microseconds from the rows' spacing);
 - place: ``lat``/``latitude``, ``lon``/``lng``/``longitude`` (degrees), optionally ``alt`` (metres).
 
 Columns are given as names or 0-based numbers, as ``columns=`` takes the magnetometer's.
@@ -53,6 +55,15 @@ _GYRO = re.compile(r"^(?:imu_)?(?:g|gyr|gyro|gyroscope|w|omega|rate)_?([xyz])$")
 _ACCEL = re.compile(r"^(?:imu_)?(?:a|acc|accel|accl|accelerometer)_?([xyz])$")
 _TIME = {"t": 1.0, "time": 1.0, "time_s": 1.0, "timestamp": 1.0, "seconds": 1.0, "sec": 1.0, "time_ms": 1e-3,
          "timems": 1e-3, "time_us": 1e-6, "timeus": 1e-6, "time_u_s": 1e-6}  # fmt: skip
+#: A time column named after its clock (``gps_time``, ``unix_time_ms``, ``time_boot_ms``, ``timestamp_s``): the
+#: clock before or after the word, the unit last (:data:`_TIME_UNITS`).
+_CLOCK = r"(?:gps|unix|utc|epoch|posix|system|sys|boot|log|sample|rtc)"
+_TIMED = re.compile(
+    rf"^(?:(?:{_CLOCK}_)?(?:t|time|timestamp|time_stamp|stamp|seconds|sec)(?:_{_CLOCK})?|epoch|unix|posix)"
+    r"(?:_(?P<unit>[a-z_]+))?$"
+)
+_TIME_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3, "us": 1e-6,
+               "usec": 1e-6, "u_s": 1e-6, "ns": 1e-9, "nsec": 1e-9}  # fmt: skip
 _LAT = ("lat", "latitude", "lat_deg")
 _LON = ("lon", "lng", "long", "longitude", "lon_deg")
 _ALT = ("alt", "altitude", "alt_m", "height")
@@ -111,6 +122,8 @@ def find_stream_columns(header: Sequence[str]) -> dict[str, StreamColumns]:
     raw = [name.strip().lower().replace(" ", "_").replace("[", "_").replace("]", "").rstrip("_") for name in header]
     for i, name in enumerate(raw):
         unit = {"time_(s)": 1.0, "time_(ms)": 1e-3, "time_(us)": 1e-6}.get(name, _TIME.get(name, _TIME.get(keys[i])))
+        if unit is None:
+            unit = _clock_time_unit(name) if _TIMED.match(name) else _clock_time_unit(keys[i])
         if unit is not None:
             add("time", [i], unit)
             break
@@ -120,6 +133,16 @@ def find_stream_columns(header: Sequence[str]) -> dict[str, StreamColumns]:
         alt = next((i for i, key in enumerate(keys) if key in _ALT), None)
         add("place", [lat, lon] + ([alt] if alt is not None else []))
     return found
+
+
+def _clock_time_unit(name: str) -> float | None:
+    """Seconds per unit of a time column named after its clock (:data:`_TIMED`), 1.0 when the name says no
+    unit; None when the name is no time column's."""
+    match = _TIMED.match(name)
+    if match is None:
+        return None
+    unit = match.group("unit")
+    return 1.0 if unit is None else _TIME_UNITS.get(unit)
 
 
 def resolve_stream(path: Path, fmt: FileFormat, stream: str, given: Sequence[str | int]) -> StreamColumns:

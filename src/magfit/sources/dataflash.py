@@ -56,6 +56,7 @@ from .ardupilot import (
     untrimmed,
     without_damaged_changes,
 )
+from .detect import is_headless_dataflash
 from .identity import BOOT_MESSAGES, board_identity
 from .motion import Motion, Stream, align, euler_quaternions, quaternion_wxyz
 from .types import SLOW_RATE_HZ, LogSamples, Magnetometer, Position, Source, median_position
@@ -170,6 +171,13 @@ class DataFlashLog:
         # Bytes already in memory: every type's offsets kept (tests rewrite logs by them); a file: the wanted ones.
         self._everything = not isinstance(data, Path)
         self._indexed: set[str] = set(_INDEXED)
+        with self._open() as handle:
+            if is_headless_dataflash(handle.read(4096)):
+                raise DataFileError(
+                    f"{path}: is an ArduPilot DataFlash log whose beginning is missing (its FMT messages, which give "
+                    "every message its fields): a part of a log cut from its middle; use the whole log as the "
+                    "flight controller wrote it (download it again, or join the parts in order: cat part1 part2)"
+                )
         self._walk(None if self._everything else self._indexed, first=True)
         self._by_name = {fmt.name: type_id for type_id, fmt in self.formats.items()}
 
@@ -684,9 +692,16 @@ def _describe(
     rows = _rows(stream, instances)
     ends = rows[[0, -1]] if rows is not None and len(rows) else np.array([0, stream.count - 1], dtype=np.int64)
     times = _time_s(log, name, log.messages(name, ends)) if stream.count else np.empty(0)
+    clock = _clock_label(labels)
+    jumps = None
+    if clock is not None and stream.count and {"MagX", "MagY", "MagZ"} <= set(labels):
+        fields = np.column_stack([log.column(name, axis, rows) for axis in ("MagX", "MagY", "MagZ")])
+        jumps = _time_jumps(log.column(name, clock[0], rows) * clock[1], fields)
+    if jumps is not None:  # the span and the rate over the stamps as they are, each once
+        times = np.array([jumps.start_s, jumps.end_s])
     first = float(times[0]) if len(times) else float("nan")
     compass, problem = compass_parameters(parameters, slot, first)
-    notes: list[str] = []
+    notes: list[str] = [] if jumps is None else [jumps.describe()]
     if compass is not None:
         notes.extend(
             ("MagX/Y/Z are logged after ArduPilot's calibration; " + note if i == 0 else note)
@@ -724,7 +739,7 @@ def _describe(
         + (f", I={slot})" if name == "MAG" and "I" in labels else ")")
         + device,
         unit="mG",
-        n_samples=stream.count,
+        n_samples=stream.count - (jumps.repeated if jumps is not None else 0),
         start_s=first,
         end_s=float(times[-1]) if len(times) else float("nan"),
         device_id=compass.device_id if compass else None,
@@ -770,6 +785,11 @@ def _read(
         if _has_offsets(labels):  # the offsets each record was corrected with (whole mG)
             used = np.column_stack([log.value(records, name, axis) for axis in ("OfsX", "OfsY", "OfsZ")])
     times = _time_s(log, name, records)
+    once = _first_copies(times, logged)
+    if once is not None:  # a log joined to a copy of itself: each record once (_describe's note says so)
+        records, logged, times = records[once], logged[once], times[once]
+        motor = motor[once] if motor is not None else None
+        used = used[once] if used is not None else None
     undone = undo_records(
         logged, times, parameters=parameters, compass=compass, motor_offsets=motor, logged_offsets=used
     )
@@ -798,6 +818,68 @@ def _read(
         notes=tuple(notes),
         every=every,
     )
+
+
+def _clock_label(labels: tuple[str, ...]) -> tuple[str, float] | None:
+    """The time stamp field of a message and its seconds per unit: TimeUS, or TimeMS in older logs."""
+    if "TimeUS" in labels:
+        return "TimeUS", 1e-6
+    if "TimeMS" in labels:
+        return "TimeMS", 1e-3
+    return None
+
+
+@dataclass(frozen=True)
+class _TimeJumps:
+    """A compass's time stamps that go back: how often, the first place (seconds after boot, before and after
+    the jump), the stamps that repeat an earlier one, and the span of the stamps once each."""
+
+    backs: int
+    at_s: float
+    to_s: float
+    repeated: int
+    start_s: float
+    end_s: float
+
+    def describe(self) -> str:
+        where = f"its time stamps go back at {self.at_s:.1f} s after boot (to {self.to_s:.1f} s)"
+        where += f", {self.backs} times" if self.backs > 1 else ""
+        if self.repeated:
+            return (
+                f"{where}, and {self.repeated} records repeat earlier ones: the log holds the same recording more "
+                "than once (files joined); each record is read once. Fit the log as the flight controller wrote it"
+            )
+        return (
+            f"{where}: the file holds more than one recording (logs joined, or the board rebooted); their samples "
+            "are fitted together, but their stamps are not one clock (vector's lag, the motors' current): give "
+            "each recording apart (a log per boot)"
+        )
+
+
+def _time_jumps(times: NDArray[np.float64], fields: NDArray[Any]) -> _TimeJumps | None:
+    """Where ``times`` (seconds, in log order) go back, or None when they never do (a log of one boot); a record
+    repeats an earlier one when its stamp and its ``fields`` (N, 3) are the same."""
+    steps = np.diff(times)
+    backs = np.flatnonzero(steps < 0)
+    if not len(backs):
+        return None
+    once = _first_copies(times, np.asarray(fields, dtype=np.float64))
+    kept = times if once is None else times[once]
+    first = int(backs[0])
+    return _TimeJumps(
+        len(backs), float(times[first]), float(times[first + 1]), len(times) - len(kept),
+        float(np.min(kept)), float(np.max(kept)),
+    )  # fmt: skip
+
+
+def _first_copies(times: NDArray[np.float64], logged: NDArray[np.float64]) -> NDArray[np.int64] | None:
+    """The records to keep when the stamps go back: each (stamp, field) once, in log order; None when they do
+    not go back (every record kept)."""
+    if len(times) < 2 or np.all(np.diff(times) >= 0):
+        return None
+    keys = np.column_stack([times, logged])
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return np.sort(first) if len(first) < len(times) else None
 
 
 def _has_offsets(labels: tuple[str, ...]) -> bool:

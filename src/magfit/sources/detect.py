@@ -1,7 +1,9 @@
 """Which kind of recording a file is, by its first bytes, not by its name: :func:`log_kind`.
 
 - PX4 ULog (``ULog\\x01\\x12\\x35``);
-- ArduPilot DataFlash ``.bin`` (``0xA3 0x95``, then a FMT message);
+- ArduPilot DataFlash ``.bin`` (``0xA3 0x95``, then a FMT message); a DataFlash log without its beginning (the
+  second half of a log: message headers ``0xA3 0x95`` from the first bytes on, no FMT first) is one too, which
+  its reader refuses with what is missing (:func:`is_headless_dataflash`);
 - MAVLink telemetry logs (``.tlog``: each record an 8-byte big-endian UNIX time in microseconds and a MAVLink
   frame, :func:`is_tlog`);
 - the text ``mavlogdump.py log.bin`` prints (:func:`magfit.sources.mavlogdump.is_mavlogdump`);
@@ -13,7 +15,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["DATAFLASH_MAGIC", "TLOG_STAMP_RANGE", "ULOG_MAGIC", "is_tlog", "log_kind"]
+__all__ = ["DATAFLASH_MAGIC", "TLOG_STAMP_RANGE", "ULOG_MAGIC", "is_headless_dataflash", "is_tlog", "log_kind"]
 
 #: First bytes of a PX4 ULog file (the version byte and the timestamp follow).
 ULOG_MAGIC = b"ULog\x01\x12\x35"
@@ -40,7 +42,7 @@ def log_kind(path: str | os.PathLike[str]) -> str | None:
         return None
     if head.startswith(ULOG_MAGIC):
         return "ulog"
-    if head.startswith(DATAFLASH_MAGIC):
+    if head.startswith(DATAFLASH_MAGIC) or is_headless_dataflash(head):
         return "dataflash"
     if is_tlog(head):
         return "tlog"
@@ -53,6 +55,26 @@ def log_kind(path: str | os.PathLike[str]) -> str | None:
     if str(path) != "-" and bag_kind(path) is not None:
         return "rosbag"
     return None
+
+
+#: A head of DataFlash messages without its FMT: this many message headers at least in the first 4096 bytes (a
+#: log holds one every 20-90 bytes; random bytes hold 0xA3 0x95 once in 65 536), the first within this many bytes.
+HEADLESS_HEADERS = 8
+HEADLESS_FIRST = 512
+
+
+def is_headless_dataflash(head: bytes) -> bool:
+    """True when ``head`` (a file's first bytes, 4096 or all of them) is DataFlash messages whose log does not
+    start here: ``0xA3 0x95`` message headers from the first bytes on, and the first message is not a FMT.
+
+    The start of a log is its FMT messages (type 128), which give every other message its length and fields;
+    a file cut out of a log's middle (a log split in two, the second part) starts with data messages."""
+    if head.startswith(DATAFLASH_MAGIC):
+        return False
+    first = head.find(DATAFLASH_MAGIC[:2])
+    if first < 0 or first > HEADLESS_FIRST or head.count(DATAFLASH_MAGIC[:2]) < HEADLESS_HEADERS:
+        return False
+    return head[first + 2 : first + 3] != DATAFLASH_MAGIC[2:]
 
 
 #: Plausible tlog time stamps: 2000-01-01 to 2100-01-01, in microseconds since 1970.
