@@ -59,10 +59,16 @@ def test_auto_beats_no_calibration_once_the_aircraft_banks(flight: magfit.Simula
 
 
 def test_the_identity_is_not_what_the_samples_hold(flight: magfit.Simulation) -> None:
-    """The offset along z is determined far beyond its one-sigma: no test on the fit's covariance would
-    return the identity ("no calibration needed") for this aircraft."""
+    """The offset along z is the aircraft's, not noise: the fit is near the truth and no calibration is not.
+
+    The stated offset one-sigma also carries the distance to the richer model that auto left out (the known
+    biases of ``diagnostics.uncertainty.covering``, eq. C), so it is no noise-only figure to test the identity
+    against: it is asked to cover the fit's own error, and the identity's error to be well beyond the fit's.
+    """
     fitted = magfit.fit(flight.samples, method="auto")
     report = fitted.diagnostics
     assert report is not None and report.uncertainty is not None and report.uncertainty.offset_sigma is not None
-    assert abs(fitted.offset[2]) > 10.0 * report.uncertainty.offset_sigma[2]
-    assert abs(fitted.offset[2] - HARD_IRON[2]) < 0.1  # of the field: it is the aircraft's, not noise
+    error = abs(fitted.offset[2] - HARD_IRON[2])
+    assert error < 0.1  # of the field: it is the aircraft's, not noise
+    assert error <= report.uncertainty.offset_sigma[2]  # the stated one-sigma covers it
+    assert abs(HARD_IRON[2]) > 4.0 * error  # no calibration is several times further off
