@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .windows import _constrained, _design, _windowed_bias, _windows
+from .windows import _constrained, _design, _frame, _windowed_bias, _windows
 
 #: The magnetometer's delay behind the gyroscope is searched within ± this (seconds).
 MAX_LAG_S = 0.25
@@ -38,7 +38,8 @@ def _search_lag(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.fl
     step = max(float(np.median(np.diff(t))), 0.005)
     grid = np.arange(-MAX_LAG_S, MAX_LAG_S + step / 2, step)
     _, beta = _windowed_bias(_windows(y, w, t, length))
-    residual = np.array([_constrained(_design(_windows(y, _delayed(w, t, lag), t, length), beta), np.eye(9))[2]
+    frame = _frame(y, t, length)  # (the delayed rates' windows are not kept: each is asked for once)
+    residual = np.array([_constrained(_design(frame.windows(_delayed(w, t, lag)), beta), np.eye(9))[2]
                          for lag in grid])  # fmt: skip
     best = int(np.argmin(residual))
     if residual[best] > LAG_GAIN * residual[int(np.argmin(np.abs(grid)))]:

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from ..._optimize import Evaluation, Solution, levenberg_marquardt
 from ...rotations import skew
 from .gravity import ACCEL_BIAS_PRIOR, _cos, _Gravity, _gravity_angle
-from .kinematics import _entries, _jacobian_steps, _product, _rotation_entries, _rotation_quaternions, _scan, _unit
+from .kinematics import _entries, _jacobian_steps, _product, _rotation_quaternions, _scan, _unit
 from .mapping import MAPPINGS
 from .windows import _gaps, _symmetric
 
@@ -62,12 +62,18 @@ SCREEN_ROWS = 3_000
 SCREEN_ITER = 40
 #: At most this many stretches (each adds two unknowns); longer recordings get longer stretches.
 MAX_SEGMENTS = 60
-#: Screening fits whose rows are at least this many samples apart carry the rotations between rows to first
-#: order in the bias (M4); closer rows integrate every sample (the saving would be small).
-LINEAR_STRIDE = 4
+#: Fits whose rows are at least this many samples apart carry the rotations between rows to first order in the
+#: bias (M4); closer rows integrate every sample (the saving would be small).
+LINEAR_STRIDE = 3
 #: ... integrating again when the bias has moved by more than this turn (radians) over the longest interval
-#: between rows: (M4)'s error is of its square (docs/scaling.md, "gyro": the error measured).
+#: between rows, in the screening fits: (M4)'s error is of its square, up to 1e-6 rad (docs/methods.md, "gyro").
 LINEAR_TURN = 1e-3
+#: ... carried this far on the way to the minimum, before the fit is finished with the turn above (an error of up
+#: to 1e-4 rad moves the steps, not where they end).
+LOOSE_TURN = 1e-2
+#: ... and in the fit kept and the halves: an error of at most 1e-8 rad, a thousandth of a standard error at
+#: 20 000 rows of a magnetometer whose noise is 0.5 % of the field (docs/methods.md, "gyro").
+FINAL_TURN = 1e-4
 
 
 @dataclass(frozen=True)
@@ -89,6 +95,7 @@ class _Trajectory:
     basis: NDArray[np.float64]
     gravity: _Gravity | None = None
     linear: bool = False
+    turn: float = LINEAR_TURN
 
     @cached_property
     def steps(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
@@ -144,9 +151,7 @@ class _Trajectory:
         if self.linear:
             turns, running = _linearized(self, p[self.k + 3 : self.k + 6])
         else:
-            turns, running = _integrated(self, p[self.k + 3 : self.k + 6])
-            running = running[self.rows] - running[self.first[self.rows]]
-            turns = turns[self.rows]
+            turns, running = _integrated_rows(self, p[self.k + 3 : self.k + 6])
         start = _unit(p[self.head :].reshape(self.count, 2))[self.segment[self.rows]]
         # (M2), R_kᵀ [b₀]× C_k: stacked 3×3 products (numpy's own loop, no threaded BLAS, far quicker than einsum)
         d_beta = -np.matmul(np.matmul(turns.transpose(0, 2, 1), skew(start)), running)
@@ -167,7 +172,7 @@ class _Trajectory:
 
     def residual(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
         """All residuals, (rows · components,): row by row, the magnetometer's three then the gravity row."""
-        return self._residual_of(p, self.field(p)[0]).ravel()
+        return self.blocks(p)[0].ravel()  # (the last evaluations' are kept)
 
     def magnetometer_residual(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
         """The samples' own residuals ``G b_k + V − y_k``, (rows, 3), in the samples' unit."""
@@ -175,7 +180,20 @@ class _Trajectory:
 
     def blocks(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """The residual (rows, C), its Jacobian in (q, V, β[, s]) (rows, C, head), and in the row's own
-        stretch's two angles (rows, C, 2): every other angle column of a row is zero. C = :attr:`components`."""
+        stretch's two angles (rows, C, 2): every other angle column of a row is zero. C = :attr:`components`.
+        The last two are kept (the solver's last evaluation is the covariance's)."""
+        key = p.tobytes()
+        with _LOCK:
+            for traj, at, kept in _BLOCKS:
+                if traj is self and at == key:
+                    return kept
+        computed = self._blocks(p)
+        with _LOCK:
+            _BLOCKS[:] = [*_BLOCKS[-1:], (self, key, computed)]
+        return computed
+
+    def _blocks(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`blocks`, computed."""
         k = self.k
         g = self.distortion(p)
         b, turns, d_beta = self.field(p)
@@ -271,42 +289,64 @@ class _Trajectory:
 
 @dataclass(frozen=True)
 class _Integration:
-    """The rotations R_k (n, 3, 3) and running sums Σ dt_j R_{j+1} J_r(φ_j) (n, 3, 3) of one recording at one bias."""
+    """One recording integrated at one bias: the quaternions of R_k (4, n), R_k entry by entry (9, n) and the
+    running sums Σ dt_j R_{j+1} J_r(φ_j) (n, 3, 3)."""
 
     w: NDArray[np.float64]
     t: NDArray[np.float64]
     segment: NDArray[np.int64]
-    beta: bytes
-    turns: NDArray[np.float64]
+    beta: NDArray[np.float64]
+    quaternions: NDArray[np.float64]
+    entries: NDArray[np.float64]
     running: NDArray[np.float64]
 
+    def of(self, traj: _Trajectory) -> bool:
+        """True for ``traj``'s recording (the same arrays) and stretches."""
+        return (self.w is traj.w and self.t is traj.t
+                and (self.segment is traj.segment or np.array_equal(self.segment, traj.segment)))  # fmt: skip
 
-#: The last integration, reused while the next fit starts at the same bias on the same recording (the candidate
-#: mappings start from the general fit, the covariance and the residuals at the solution the fit last
-#: integrated): one entry, emptied when a gyro fit ends (:func:`forget_integration`).
+    @property
+    def turns(self) -> NDArray[np.float64]:
+        """R_k (n, 3, 3)."""
+        return self.entries.T.reshape(-1, 3, 3)
+
+
+#: The last integration of each recording (the rates as given and, for the handedness check, negated), at most
+#: :data:`_KEEP_INTEGRATIONS`: reused while a fit evaluates at the same bias (the candidate mappings start from
+#: the general fit, the covariance at the solution the fit last integrated) and as the point a linearization
+#: (M4) carries from. Emptied when a gyro fit ends (:func:`forget_integration`).
 _LAST: list[_Integration] = []
+_KEEP_INTEGRATIONS = 2
 _LOCK = threading.Lock()
+#: The last two evaluations' blocks (:meth:`_Trajectory.blocks`): (trajectory, parameters' bytes, blocks).
+_BLOCKS: list[tuple[_Trajectory, bytes, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]] = []
+
+
+def _integration(traj: _Trajectory, beta: NDArray[np.float64]) -> _Integration:
+    """``traj``'s recording integrated at bias ``beta`` (:class:`_Integration`), or the kept one at that bias."""
+    beta = np.asarray(beta, dtype=np.float64)
+    with _LOCK:
+        for last in _LAST:
+            if last.of(traj) and np.array_equal(last.beta, beta):
+                return last
+    mean_rates, dt, start, weights = traj.steps
+    quaternions = _rotation_quaternions(mean_rates, dt, beta, start)
+    entries = _entries(quaternions)  # (9, n): each entry's run over the samples
+    n = start.size
+    # Σ dt_j R_{j+1} J_r(φ_j) (none across a start), summed along each entry's contiguous run: a third of the
+    # time of the same sums over the (n, 3, 3) view.
+    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
+    found = _Integration(traj.w, traj.t, traj.segment, beta.copy(), quaternions, entries, running)
+    with _LOCK:  # one per recording (its rates' array), the newest last
+        _LAST[:] = [*(kept for kept in _LAST if kept.w is not traj.w), found][-_KEEP_INTEGRATIONS:]
+    return found
 
 
 def _integrated(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """R_k and the running sums of ``traj``'s recording at bias ``beta`` (:class:`_Integration`), integrated or
     reused."""
-    key = np.asarray(beta, dtype=np.float64).tobytes()
-    with _LOCK:
-        for last in _LAST:
-            if (last.w is traj.w and last.t is traj.t and last.beta == key
-                    and (last.segment is traj.segment or np.array_equal(last.segment, traj.segment))):  # fmt: skip
-                return last.turns, last.running
-    mean_rates, dt, start, weights = traj.steps
-    entries = _rotation_entries(mean_rates, dt, beta, start)  # (9, n): each entry's run over the samples
-    n = start.size
-    turns = entries.T.reshape(n, 3, 3)
-    # Σ dt_j R_{j+1} J_r(φ_j) (none across a start), summed along each entry's contiguous run: a third of the
-    # time of the same sums over the (n, 3, 3) view.
-    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
-    with _LOCK:
-        _LAST[:] = [_Integration(traj.w, traj.t, traj.segment, key, turns, running)]
-    return turns, running
+    found = _integration(traj, beta)
+    return found.turns, found.running
 
 
 def forget_integration() -> None:
@@ -314,6 +354,7 @@ def forget_integration() -> None:
     with _LOCK:
         _LAST.clear()
         _LINEAR.clear()
+        _BLOCKS.clear()
 
 
 @dataclass(frozen=True)
@@ -333,33 +374,42 @@ class _Linearization:
     reach: float
 
     def holds(self, traj: _Trajectory, beta: NDArray[np.float64]) -> bool:
-        """True for ``traj``'s recording and rows, with ``beta`` within :data:`LINEAR_TURN` of its own."""
+        """True for ``traj``'s recording and rows, with ``beta`` within its turn (``traj.turn``) of its own."""
         return (self.w is traj.w and self.t is traj.t and np.array_equal(self.segment, traj.segment)
                 and np.array_equal(self.rows, traj.rows)
-                and float(np.max(np.abs(beta - self.beta))) * self.reach <= LINEAR_TURN)  # fmt: skip
+                and float(np.max(np.abs(beta - self.beta))) * self.reach <= traj.turn)  # fmt: skip
 
 
-#: The screening fits' linearizations: the general fit's and the negated rates' (:mod:`.rates`), the last two.
+#: The screening fits' linearizations (the general fit's, the negated rates' of :mod:`.rates`, the candidates'
+#: and the kept fit's), the last :data:`_KEEP_LINEAR`: each is the size of its rows.
 _LINEAR: list[_Linearization] = []
+_KEEP_LINEAR = 6
 
 
-def _linearization(traj: _Trajectory, beta: NDArray[np.float64]) -> _Linearization:
-    """(M4)'s terms at ``beta`` from one integration over every sample."""
-    mean_rates, dt, start, weights = traj.steps
-    q = _rotation_quaternions(mean_rates, dt, beta, start)
-    entries = _entries(q)
-    n, rows = start.size, traj.rows
-    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
+def _reach(traj: _Trajectory) -> tuple[NDArray[np.bool_], NDArray[np.int64], float]:
+    """The rows that restart a chain (m,), each row's anchor (m,) and the longest interval between them (s)."""
+    rows = traj.rows
     restart = np.ones(rows.size, dtype=bool)
     restart[1:] = traj.segment[rows[1:]] != traj.segment[rows[:-1]]
     anchor = np.where(restart, traj.first[rows], np.concatenate([[0], rows[:-1]]))
+    return restart, anchor, float(np.max(traj.t[rows] - traj.t[anchor]))
+
+
+def _linearization(traj: _Trajectory, beta: NDArray[np.float64]) -> _Linearization:
+    """(M4)'s terms at ``beta`` from one integration over every sample: a kept one of the same recording when its
+    bias is within ``traj.turn`` of ``beta`` over these rows' longest interval (then (M4) is taken from there),
+    else a new one at ``beta``."""
+    restart, anchor, reach = _reach(traj)
+    with _LOCK:
+        near = [kept for kept in _LAST if kept.of(traj)
+                and float(np.max(np.abs(beta - kept.beta))) * reach <= traj.turn]  # fmt: skip
+    found = near[-1] if near else _integration(traj, beta)
+    q, entries, running, rows = found.quaternions, found.entries, found.running, traj.rows
     conjugate = q[:, anchor] * np.array([[1.0], [-1.0], [-1.0], [-1.0]])
     local = _product(conjugate, q[:, rows])  # ΔR_i = R_aᵀ R_r
     turned = entries[:, anchor].T.reshape(-1, 3, 3)
     sums = np.matmul(turned.transpose(0, 2, 1), running[rows] - running[anchor])  # ΔC_i = R_aᵀ (C_r − C_a)
-    reach = float(np.max(traj.t[rows] - traj.t[anchor]))
-    return _Linearization(traj.w, traj.t, traj.segment, rows, np.array(beta, dtype=np.float64), local, sums,
-                          restart, reach)  # fmt: skip
+    return _Linearization(traj.w, traj.t, traj.segment, rows, found.beta, local, sums, restart, reach)
 
 
 def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -370,7 +420,7 @@ def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[n
     if found is None:
         found = _linearization(traj, beta)
         with _LOCK:
-            _LINEAR[:] = [*_LINEAR[-1:], found]
+            _LINEAR[:] = [*_LINEAR[1 - _KEEP_LINEAR :], found]
     v = -np.matmul(found.sums, beta - found.beta)  # (rows, 3): exp([v]×) carries ΔR_i to β
     angle = np.sqrt(np.einsum("ki,ki->k", v, v))
     sinc = np.where(angle > 1e-12, np.sin(0.5 * angle) / np.maximum(angle, 1e-300), 0.5)
@@ -389,7 +439,8 @@ def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[n
 
 def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
                 basis: NDArray[np.float64], max_rows: int = MAX_RESIDUAL_SAMPLES,
-                gravity: _Gravity | None = None, linear: bool = False) -> _Trajectory:  # fmt: skip
+                gravity: _Gravity | None = None, linear: bool = False,
+                turn: float = LINEAR_TURN) -> _Trajectory:  # fmt: skip
     span = float(t[-1] - t[0])
     length = max(segment_s, span / MAX_SEGMENTS)
     segment = np.minimum(((t - t[0]) // length).astype(np.int64), max(int(span // length) - 1, 0))
@@ -398,27 +449,41 @@ def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.fl
     stride = max(1, math.ceil(y.shape[0] / max_rows))
     rows = np.arange(0, y.shape[0], stride)
     linear = linear and stride >= LINEAR_STRIDE
-    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity, linear)
+    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity, linear, turn)
 
 
 def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64],
            beta: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
-    """Parameters for ``traj`` from G (any scale: |b₀| = 1 rescales it), V and β; b₀ (and s) read off the
-    samples."""
+    """Parameters for ``traj`` from G (any scale: |b₀| = 1 rescales it), V and β; each stretch's b₀ the mean of
+    ``R_k H (y_k − V)`` over its rows (b₀ = R_k b_k, (M1)), which the first evaluation's rotations give, and
+    (with gravity) δ read off the samples."""
     h = np.linalg.inv(g)
-    field = np.einsum("ij,kj->ki", h, traj.y - offset)
+    field = (traj.y[traj.rows] - offset) @ h.T
     radius = float(np.median(np.linalg.norm(field, axis=1)))
-    first = np.array([field[np.argmax(traj.segment == s)] for s in range(traj.count)])
-    first /= np.linalg.norm(first, axis=1)[:, None]
+    turns = (_linearized(traj, beta) if traj.linear else _integrated_rows(traj, beta))[0]
+    first = traj._by_stretch(np.matmul(turns, field[:, :, None])[:, :, 0])
+    length = np.linalg.norm(first, axis=1)
+    if not np.all(length > 0):  # a stretch without rows: its first sample's direction (it carries no residual)
+        lone = np.array([(traj.y[np.argmax(traj.segment == s)] - offset) @ h.T for s in range(traj.count)])
+        first[length == 0] = lone[length == 0]
+        length = np.linalg.norm(first, axis=1)
+    first /= np.maximum(length, 1e-300)[:, None]
     angles = np.column_stack([np.arcsin(np.clip(first[:, 2], -1, 1)), np.arctan2(first[:, 1], first[:, 0])])
     q, *_ = np.linalg.lstsq(traj.basis, (g * radius).ravel(), rcond=None)
     head = [q, offset, beta]
     if traj.gravity is not None:
         still = traj.gravity.still
-        unit = field[still] / np.linalg.norm(field[still], axis=1)[:, None]
+        seen = (traj.y[still] - offset) @ h.T
+        unit = seen / np.linalg.norm(seen, axis=1)[:, None]
         dots = np.einsum("ki,ki->k", traj.gravity.down[still], unit)
         head.append(np.array([math.asin(float(np.clip(np.median(dots), -0.99, 0.99)))]))
     return np.concatenate([*head, angles.ravel()])
+
+
+def _integrated_rows(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """R_k and C_k at ``traj``'s rows, every sample integrated."""
+    turns, running = _integrated(traj, beta)
+    return turns[traj.rows], running[traj.rows] - running[traj.first[traj.rows]]
 
 
 def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iterations: int = 60) -> Solution:
@@ -431,7 +496,7 @@ def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iteration
         return _solve_arrow(matrix, rhs, traj.head)
 
     return levenberg_marquardt(evaluate, start, n_residuals=traj.n_residuals(), max_iterations=iterations,
-                               solve=solve)  # fmt: skip
+                               solve=solve, skip_small_steps=True)  # fmt: skip
 
 
 #: The head's Schur complement (eq. M3) is inverted only below this condition number; above it the pseudo-inverse
@@ -568,12 +633,21 @@ class _Model:
 def _fit_model(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
                name: str, g: NDArray[np.float64], offset: NDArray[np.float64], beta: NDArray[np.float64],
                max_rows: int = MAX_RESIDUAL_SAMPLES, iterations: int = 60,
-               gravity: _Gravity | None = None, linear: bool = False) -> _Model:  # fmt: skip
-    """One model of G fitted from G, V and β; ``linear``: a screening fit, whose rotations between its rows may
-    follow the bias to first order (M4)."""
+               gravity: _Gravity | None = None, linear: bool = True, turn: float = FINAL_TURN,
+               loose: bool = False) -> _Model:  # fmt: skip
+    """One model of G fitted from G, V and β; ``linear``: its rotations between rows at least
+    :data:`LINEAR_STRIDE` samples apart follow the bias by (M4) while it stays within ``turn`` (the screening's
+    :data:`LINEAR_TURN`, or :data:`FINAL_TURN` for the fit kept and the halves), else every sample is
+    integrated at every bias. ``loose``: first carried :data:`LOOSE_TURN` far (a fit whose bias moves far)."""
     basis = np.eye(9) if name == "general" else _symmetric(np.eye(3), MAPPINGS[name].T)  # G = W Pᵀ = (P S)⁻¹
-    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity, linear)
-    return _Model(name, traj, _maximum_likelihood(traj, _start(traj, g, offset, beta), iterations))
+    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity, linear, turn)
+    start = _start(traj, g, offset, beta)
+    if traj.linear and loose and turn < LOOSE_TURN:
+        # First towards the minimum with the rows' rotations carried LOOSE_TURN far (a fit whose bias moves far,
+        # as the negated rates' does, then integrates once on the way instead of every LINEAR_TURN), then on
+        # from there with the turn asked for.
+        start = _maximum_likelihood(replace(traj, turn=LOOSE_TURN), start, iterations).params
+    return _Model(name, traj, _maximum_likelihood(traj, start, iterations))
 
 
 def _parts(model: _Model) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..._validation import check_rows, check_times
 from ...errors import CalibrationError, OptionError
 from .lag import MAX_LAG_S, _delayed
-from .model import SCREEN_ROWS, _fit_model, _Model, _noise_variance
+from .model import LINEAR_TURN, SCREEN_ROWS, _fit_model, _Model, _noise_variance
 from .windows import (
     GAP_MIN_S,
     GAP_STEPS,
@@ -166,6 +166,7 @@ class _Reading:
     t: NDArray[np.float64]
     words: str = ""
     remedy: tuple[tuple[str, str], ...] = ()
+    scale: float | None = None  # the given rates times this (on the given times): their windows are the given's scaled
 
 
 def _readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Reading]:
@@ -175,12 +176,12 @@ def _readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Reading]:
     found = [
         _Reading("gyro_unit", w * (math.pi / 180.0), t,
                  "gyro= looks like degrees per second: give it in rad/s (numpy.radians(gyro))",
-                 (("gyro", "numpy.radians(gyro)"),)),
+                 (("gyro", "numpy.radians(gyro)"),), math.pi / 180.0),
         _Reading("gyro_axes", -w, t,
                  "gyro= turns the field the wrong way round: the gyro's axes are of the other handedness than the "
                  "magnetometer's (two of them swapped, or one with its sign flipped); give them in the order and "
                  "signs of the sensor's datasheet or the firmware's board rotation, right-handed",
-                 (("gyro", "the rates about right-handed axes"),)),
+                 (("gyro", "the rates about right-handed axes"),), -1.0),
     ]  # fmt: skip
     for factor, unit, minimum in ((1e-3, "milliseconds", MS_STEP), (1e-6, "microseconds", 1e3 * MS_STEP)):
         if step >= minimum:
@@ -207,13 +208,16 @@ def _lagged_readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Re
     ]  # fmt: skip
 
 
-def _windowed_share(y: NDArray[np.float64], reading: _Reading, bias: bool = True) -> float:
+def _windowed_share(y: NDArray[np.float64], reading: _Reading, bias: bool = True,
+                    given: _Windows | None = None) -> float:  # fmt: skip
     """The windowed residual of stage 1 (the bias fitted, unless ``bias`` is False) over the turning it explains,
     ``|r|² / Σ |H dy|²``; inf when only a correction that no soft iron gives fits (an axis squeezed
     :data:`MIN_SINGULAR_RATIO`: samples that move in a plane are also fitted by a rank-one H that ignores the
-    rates)."""
-    length = window_length(reading.t)
-    win = _windows(y, reading.w, reading.t, length)
+    rates). ``given``: the given rates' windows, which a reading with a ``scale`` scales (they are linear in ω)."""
+    if given is not None and reading.scale is not None:
+        win = _Windows(given.dy, reading.scale * given.M, given.Sy, reading.scale * given.Sw, given.T)
+    else:
+        win = _windows(y, reading.w, reading.t, window_length(reading.t))
     if win.T.size < 20:
         return math.inf
     try:
@@ -239,8 +243,9 @@ def _check_readings(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[n
     """Refuses inputs that the kinematics read far better another way (stage 1's windows): in degrees per
     second, in milliseconds, of the other handedness, or beyond the lag searched. Returns the candidates the
     windows left open, best first (what :func:`_check_readings_by_fit` tries when the fit is poor)."""
+    windows = _windows(y, w, t, window_length(t))
     given = _windowed_share(y, _Reading("given", w, t))
-    scored = [(_windowed_share(y, reading), reading) for reading in _readings(w, t)]
+    scored = [(_windowed_share(y, reading, given=windows), reading) for reading in _readings(w, t)]
     if not lag_given and not given < WIDE_LAG_SHARE and min(share for share, _ in scored) >= DECISIVE_SHARE:
         # The gyro explains little of the turning, read any other way too: is it late or early? The lags are
         # ranked without the bias (a tenth of the cost), the best one scored with it.
@@ -273,7 +278,7 @@ def _check_readings_by_fit(y: NDArray[np.float64], t: NDArray[np.float64], readi
             offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
             start = np.asarray(np.linalg.inv(h), dtype=np.float64)
             model = _fit_model(y, reading.w, reading.t, segment_s, "general", start, offset, beta, SCREEN_ROWS,
-                               linear=True)  # fmt: skip
+                               turn=LINEAR_TURN, loose=True)  # fmt: skip
         except np.linalg.LinAlgError:
             continue
         g = model.traj.distortion(model.solution.params)
@@ -298,7 +303,8 @@ def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray
         h, c, _ = _constrained(_design(negated, beta), np.eye(9))
         offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
         start = np.asarray(np.linalg.inv(h), dtype=np.float64)
-        mirrored = _fit_model(y, -w, t, segment_s, "general", start, offset, beta, SCREEN_ROWS, linear=True)
+        mirrored = _fit_model(y, -w, t, segment_s, "general", start, offset, beta, SCREEN_ROWS, turn=LINEAR_TURN,
+                              loose=True)  # fmt: skip
     except np.linalg.LinAlgError:
         return
     g = mirrored.traj.distortion(mirrored.solution.params)

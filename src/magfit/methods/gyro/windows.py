@@ -120,10 +120,18 @@ _LAST: list[_Frame] = []
 _LOCK = threading.Lock()
 
 
+#: The last windows of one recording's rates, and the last biases fitted on windows: the lag search, the readings'
+#: check, stage 1 and stage 3 ask for the same ones (the rates as given, with no delay).
+_WINDOWS: list[tuple[NDArray[np.float64], _Windows]] = []
+_BIASES: list[tuple[_Windows, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
+
+
 def forget_frame() -> None:
-    """Drop the kept frame (its arrays are the size of the recording)."""
+    """Drop the kept frame, windows and biases (the frame's arrays are the size of the recording)."""
     with _LOCK:
         _LAST.clear()
+        _WINDOWS.clear()
+        _BIASES.clear()
 
 
 def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Windows:
@@ -131,9 +139,18 @@ def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float
 
     Trapezoids: over a window ``[s, s + L]``, ``∫ f dt = Σ_{k=s}^{s+L−1} ½ dt_k (f_k + f_{k+1})``, summed window
     by window (each sample weighted by the half-steps beside it), not as differences of running sums. What does
-    not depend on the rates is computed once per samples and times (:func:`_frame`).
+    not depend on the rates is computed once per samples and times (:func:`_frame`), and the windows of the
+    last rates asked for are kept.
     """
-    return _frame(y, t, length).windows(w)
+    frame = _frame(y, t, length)
+    with _LOCK:
+        for rates, kept in _WINDOWS:
+            if rates is w and _LAST and _LAST[0] is frame:
+                return kept
+    win = frame.windows(w)
+    with _LOCK:
+        _WINDOWS[:] = [(w, win)]
+    return win
 
 
 def _design(win: _Windows, beta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -185,7 +202,20 @@ def _constrained(
 
 def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Gauss-Newton on the windowed residual over θ = (H, c) (on its unit sphere: the scale is free) and β,
-    from the bias-free total least-squares solution."""
+    from the bias-free total least-squares solution (the last few kept, by the windows they were fitted on)."""
+    with _LOCK:
+        for kept, result in _BIASES:
+            if kept is win and iterations == 20:
+                return result
+    result = _gauss_newton(win, iterations)
+    if iterations == 20:
+        with _LOCK:
+            _BIASES[:] = [*_BIASES[-3:], (win, result)]
+    return result
+
+
+def _gauss_newton(win: _Windows, iterations: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`_windowed_bias`, computed."""
     h, c, _ = _constrained(_design(win, np.zeros(3)), np.eye(9))
     theta = np.concatenate([h.ravel(), c])
     theta /= np.linalg.norm(theta)
