@@ -622,6 +622,7 @@ REASON_CODES: dict[str, str] = {
     "field_drift": "the field strength changed along the recording and the fit follows the change",
     "motor_weak": "the motors' term kept is weakly told from the attitude: it may be off by more than its one-sigma",
     "no_location": "the World Magnetic Model needs the place: no location given and the recording holds no GNSS fix",
+    "handedness_undetermined": "the recording does not tell the gyroscope's handedness against the magnetometer's",
     "unclassified": "a reason without a code of its own yet",
 }
 

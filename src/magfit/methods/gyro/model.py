@@ -100,18 +100,27 @@ class _Trajectory:
     @cached_property
     def steps(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
         """What every integration reuses: the steps' mean rates (n − 1, 3) and lengths (n − 1,), the stretches'
-        first samples (n,), and the weight of R_k in the running sum C (``dt_{k−1}``, 0 at a stretch's start)."""
+        first samples (n,), and the weight of R_k in the running sum C (``dt_{k−1}``, 0 at a stretch's start).
+        Shared by the trajectories of one recording and its stretches (the fits of one recording ask for them)."""
+        with _LOCK:
+            for w, t, segment, kept in _STEPS:
+                if w is self.w and t is self.t and (segment is self.segment or np.array_equal(segment, self.segment)):
+                    return kept
         dt = np.diff(self.t)
         start = np.ones(self.t.size, dtype=bool)
         start[1:] = self.segment[1:] != self.segment[:-1]
         weights = np.concatenate([[0.0], dt])
         weights[start] = 0.0
-        return 0.5 * (self.w[:-1] + self.w[1:]), dt, start, weights
+        steps = (0.5 * (self.w[:-1] + self.w[1:]), dt, start, weights)
+        with _LOCK:
+            _STEPS[:] = [*_STEPS[-1:], (self.w, self.t, self.segment, steps)]
+        return steps
 
     @cached_property
     def first(self) -> NDArray[np.int64]:
         """Each sample's stretch start (n,) (stretches ascend)."""
-        return np.searchsorted(self.segment, self.segment)
+        starts = np.flatnonzero(self.steps[2])
+        return np.repeat(starts, np.diff(np.append(starts, self.t.size)))
 
     @cached_property
     def starts(self) -> NDArray[np.int64]:
@@ -318,6 +327,10 @@ class _Integration:
 _LAST: list[_Integration] = []
 _KEEP_INTEGRATIONS = 2
 _LOCK = threading.Lock()
+#: The last two recordings' steps (:attr:`_Trajectory.steps`): (rates, times, stretches, steps).
+_STEPS: list[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], tuple[NDArray[Any], ...]]] = []
+#: The last rows' rotations carried by (M4) (:func:`_linearized`): (trajectory, bias's bytes, R_k and C_k).
+_CARRIED: list[tuple[_Trajectory, bytes, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
 #: The last two evaluations' blocks (:meth:`_Trajectory.blocks`): (trajectory, parameters' bytes, blocks).
 _BLOCKS: list[tuple[_Trajectory, bytes, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]] = []
 
@@ -355,6 +368,8 @@ def forget_integration() -> None:
         _LAST.clear()
         _LINEAR.clear()
         _BLOCKS.clear()
+        _STEPS.clear()
+        _CARRIED.clear()
 
 
 @dataclass(frozen=True)
@@ -414,7 +429,12 @@ def _linearization(traj: _Trajectory, beta: NDArray[np.float64]) -> _Linearizati
 
 def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """R_k and ``C_k`` at ``traj``'s rows (rows, 3, 3) at bias ``beta`` by (M4), from the linearization that holds
-    (or a new one)."""
+    (or a new one); the last is kept (a fit's start and its first evaluation ask for the same)."""
+    key = np.asarray(beta, dtype=np.float64).tobytes()
+    with _LOCK:
+        for kept_traj, at, carried in _CARRIED:
+            if kept_traj is traj and at == key:
+                return carried
     with _LOCK:
         found = next((kept for kept in _LINEAR if kept.holds(traj, beta)), None)
     if found is None:
@@ -434,7 +454,10 @@ def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[n
     steps = np.matmul(before, found.sums)  # R_a ΔC_i
     total = np.cumsum(steps, axis=0)
     first = traj.starts[traj.segment[traj.rows]]  # each row's stretch's first row
-    return turns, total - total[first] + steps[first]
+    carried = (turns, total - total[first] + steps[first])
+    with _LOCK:
+        _CARRIED[:] = [(traj, key, carried)]
+    return carried
 
 
 def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,

@@ -52,6 +52,11 @@ DECISIVE_SHARE = 0.05
 HANDEDNESS_RATIO = 500.0
 #: ... when the negated fit's residual sum of squares is within this factor of the samples' white noise.
 HANDEDNESS_FLOOR = 1.5
+#: The windows alone refuse the other handedness only when its windowed residual is below this share of the given
+#: reading's: a tumble's mirror image leaves 1e-3 to 1e-4 of it, a car's 0.02-0.06, but on a boat or a flight
+#: (turning mostly about one axis, about which a mirrored gyro turns the field alike) the right reading and its
+#: mirror image are within a few times of each other, either way (docs/methods.md, "gyro").
+AXES_WINDOWS_GAIN = 0.01
 #: The median time step from which time_s may be in milliseconds (a gyro-aided fit at under 5 Hz).
 MS_STEP = 0.2
 #: Lags beyond MAX_LAG_S are tried, on a grid of WIDE_LAG_STEP_S to MAX_WIDE_LAG_S, when the given reading's
@@ -218,6 +223,11 @@ def _windowed_share(y: NDArray[np.float64], reading: _Reading, bias: bool = True
         win = _Windows(given.dy, reading.scale * given.M, given.Sy, reading.scale * given.Sw, given.T)
     else:
         win = _windows(y, reading.w, reading.t, window_length(reading.t))
+    return _share(win, bias)
+
+
+def _share(win: _Windows, bias: bool = True) -> float:
+    """:func:`_windowed_share` on the windows ``win``."""
     if win.T.size < 20:
         return math.inf
     try:
@@ -255,7 +265,11 @@ def _check_readings(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[n
             best_lag = lagged[int(np.argmin(shares))]
             scored.append((_windowed_share(y, best_lag), best_lag))
     scored.sort(key=lambda pair: pair[0])
-    share, best = scored[0]
+    # The other handedness only where the windows are overwhelming: elsewhere the fit of stage 2 decides
+    # (:func:`_check_handedness`).
+    told_apart = [(share, reading) for share, reading in scored
+                  if reading.code != "gyro_axes" or share < AXES_WINDOWS_GAIN * given]  # fmt: skip
+    share, best = told_apart[0] if told_apart else scored[0]
     if share < min(READING_GAIN * given, DECISIVE_SHARE):
         told = (
             "only read so do the kinematics fit with a soft iron" if math.isinf(given)
@@ -296,8 +310,15 @@ def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray
                       segment_s: float, general: _Model) -> None:  # fmt: skip
     """The general fit of stage 2 with the rates negated (the gyro's axes of the other handedness, module
     docstring): far better by :data:`HANDEDNESS_RATIO` noise variances is refused. Where the windows cannot
-    tell (a boat's roll, a flight), this fit can (docs/methods.md, "gyro")."""
+    tell (a boat's roll, a flight), this fit can (docs/methods.md, "gyro"); where they tell the rates as given
+    :data:`AXES_WINDOWS_GAIN` apart from the negated ones (a tumble), it is not run. Where the windows prefer the
+    negated rates (:data:`READING_GAIN`) and this fit does not prefer the given ones as far, the recording
+    cannot tell the handedness: refused so, with what would tell it."""
     negated = _Windows(win.dy, -win.M, win.Sy, -win.Sw, win.T)
+    given_share, negated_share = _share(win), _share(negated)
+    if given_share < DECISIVE_SHARE and AXES_WINDOWS_GAIN * negated_share > given_share:
+        return  # the windows tell it, as they tell the other handedness (:data:`AXES_WINDOWS_GAIN`): as given
+    suspected = negated_share < min(READING_GAIN * given_share, DECISIVE_SHARE)
     try:
         _, beta = _windowed_bias(negated)
         h, c, _ = _constrained(_design(negated, beta), np.eye(9))
@@ -321,3 +342,15 @@ def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray
         reading = next(r for r in _readings(w, t) if r.code == "gyro_axes")
         _refuse_reading(reading, f"with the rates negated, the samples follow the turning {ratio:.0f} noise "
                                  "variances better")  # fmt: skip
+    told = (mirrored.rss - general.rss) / max(_noise_variance(general), 1e-300)
+    if suspected and not (told > HANDEDNESS_RATIO and general.rss < HANDEDNESS_FLOOR * floor):
+        raise CalibrationError(
+            "the samples do not support the gyro calibration: they do not tell the gyroscope's handedness against "
+            f"the magnetometer's (the windows fit the rates negated {given_share / max(negated_share, 1e-300):.1f} "
+            f"times better, the fit of every sample the rates as given {told:.0f} noise variances better, where "
+            f"{HANDEDNESS_RATIO:.0f} would tell): turning mostly about one axis, as a boat rolls or an aircraft "
+            "turns, a mirrored gyroscope turns the field alike; record a few tilts about a second axis (rolls and "
+            "pitches), or calibrate with the logged attitude and the known field (method vector or align), and "
+            "check the gyro's axes and signs against the sensor's datasheet",
+            codes=("handedness_undetermined",), remedy=(("method", "vector"),),
+        )

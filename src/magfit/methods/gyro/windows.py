@@ -47,9 +47,17 @@ class _Windows:
 
 
 def _gaps(t: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """(n − 1,) True at the steps of ``t`` that are gaps (:data:`GAP_STEPS`): nothing is integrated across them."""
+    """(n − 1,) True at the steps of ``t`` that are gaps (:data:`GAP_STEPS`): nothing is integrated across them.
+    The last times' are kept (every stretch and window of a fit asks for them)."""
+    with _LOCK:
+        for times, kept in _GAPS:
+            if times is t:
+                return kept
     steps = np.diff(t)
-    return np.asarray(steps > max(GAP_STEPS * float(np.median(steps)), GAP_MIN_S), dtype=bool)
+    gaps = np.asarray(steps > max(GAP_STEPS * float(np.median(steps)), GAP_MIN_S), dtype=bool)
+    with _LOCK:
+        _GAPS[:] = [*_GAPS[-1:], (t, gaps)]
+    return gaps
 
 
 @dataclass(frozen=True)
@@ -123,6 +131,7 @@ _LOCK = threading.Lock()
 #: The last windows of one recording's rates, and the last biases fitted on windows: the lag search, the readings'
 #: check, stage 1 and stage 3 ask for the same ones (the rates as given, with no delay).
 _WINDOWS: list[tuple[NDArray[np.float64], _Windows]] = []
+_GAPS: list[tuple[NDArray[np.float64], NDArray[np.bool_]]] = []
 _BIASES: list[tuple[_Windows, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
 
 
@@ -132,6 +141,7 @@ def forget_frame() -> None:
         _LAST.clear()
         _WINDOWS.clear()
         _BIASES.clear()
+        _GAPS.clear()
 
 
 def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Windows:
@@ -202,10 +212,12 @@ def _constrained(
 
 def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Gauss-Newton on the windowed residual over θ = (H, c) (on its unit sphere: the scale is free) and β,
-    from the bias-free total least-squares solution (the last few kept, by the windows they were fitted on)."""
+    from the bias-free total least-squares solution (the last few kept, by the windows they were fitted on: the
+    readings' check and the handedness check both negate the given rates)."""
     with _LOCK:
         for kept, result in _BIASES:
-            if kept is win and iterations == 20:
+            if iterations == 20 and (kept is win or (kept.dy is win.dy and kept.T is win.T and np.array_equal(
+                    kept.M, win.M) and np.array_equal(kept.Sw, win.Sw))):  # fmt: skip
                 return result
     result = _gauss_newton(win, iterations)
     if iterations == 20:
