@@ -98,7 +98,7 @@ class _Trajectory:
     turn: float = LINEAR_TURN
 
     @cached_property
-    def steps(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+    def steps(self) -> _Steps:
         """What every integration reuses: the steps' mean rates (n − 1, 3) and lengths (n − 1,), the stretches'
         first samples (n,), and the weight of R_k in the running sum C (``dt_{k−1}``, 0 at a stretch's start).
         Shared by the trajectories of one recording and its stretches (the fits of one recording ask for them)."""
@@ -111,7 +111,7 @@ class _Trajectory:
         start[1:] = self.segment[1:] != self.segment[:-1]
         weights = np.concatenate([[0.0], dt])
         weights[start] = 0.0
-        steps = (0.5 * (self.w[:-1] + self.w[1:]), dt, start, weights)
+        steps: _Steps = (0.5 * (self.w[:-1] + self.w[1:]), dt, start, weights)
         with _LOCK:
             _STEPS[:] = [*_STEPS[-1:], (self.w, self.t, self.segment, steps)]
         return steps
@@ -328,7 +328,8 @@ _LAST: list[_Integration] = []
 _KEEP_INTEGRATIONS = 2
 _LOCK = threading.Lock()
 #: The last two recordings' steps (:attr:`_Trajectory.steps`): (rates, times, stretches, steps).
-_STEPS: list[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], tuple[NDArray[Any], ...]]] = []
+_Steps = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]
+_STEPS: list[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], _Steps]] = []
 #: The last rows' rotations carried by (M4) (:func:`_linearized`): (trajectory, bias's bytes, R_k and C_k).
 _CARRIED: list[tuple[_Trajectory, bytes, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
 #: The last two evaluations' blocks (:meth:`_Trajectory.blocks`): (trajectory, parameters' bytes, blocks).
