@@ -71,8 +71,9 @@ LINEAR_TURN = 1e-3
 #: ... carried this far on the way to the minimum, before the fit is finished with the turn above (an error of up
 #: to 1e-4 rad moves the steps, not where they end).
 LOOSE_TURN = 1e-2
-#: ... and in the fit kept and the halves: an error of at most 1e-8 rad, a thousandth of a standard error at
-#: 20 000 rows of a magnetometer whose noise is 0.5 % of the field (docs/methods.md, "gyro").
+#: ... and in the fit kept and the halves: an error of about 1e-8 rad at most (second order in each interval, summed
+#: down a stretch), a few millionths of the noise of a magnetometer good to 0.5 % of the field (docs/methods.md,
+#: "gyro"); their bias moves far less than this from where the screening integrated.
 FINAL_TURN = 1e-4
 
 

@@ -302,8 +302,11 @@ def _check_readings_by_fit(y: NDArray[np.float64], t: NDArray[np.float64], readi
         strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
         rms = math.sqrt(model.rss / model.traj.rows.size) / strength
         if rms < residual_rms / 3.0:
-            _refuse_reading(reading, f"the samples leave {100 * residual_rms:.0f} % of the field off the turning the "
-                                     f"gyro predicts as given, {100 * rms:.1f} % read so")  # fmt: skip
+            how = f"the samples leave {100 * residual_rms:.0f} % of the field off the turning the gyro predicts"
+            if reading.code == "gyro_axes":  # the other handedness only where _check_handedness found it
+                _cannot_tell(f"{how} as given, {100 * rms:.1f} % with the rates negated, short of what tells it: "
+                             f"{HANDEDNESS_RATIO:.0f} noise variances, the negated fit at the samples' noise")
+            _refuse_reading(reading, f"{how} as given, {100 * rms:.1f} % read so")
 
 
 def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], win: _Windows,
@@ -344,13 +347,18 @@ def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray
                                  "variances better")  # fmt: skip
     told = (mirrored.rss - general.rss) / max(_noise_variance(general), 1e-300)
     if suspected and not (told > HANDEDNESS_RATIO and general.rss < HANDEDNESS_FLOOR * floor):
-        raise CalibrationError(
-            "the samples do not support the gyro calibration: they do not tell the gyroscope's handedness against "
-            f"the magnetometer's (the windows fit the rates negated {given_share / max(negated_share, 1e-300):.1f} "
-            f"times better, the fit of every sample the rates as given {told:.0f} noise variances better, where "
-            f"{HANDEDNESS_RATIO:.0f} would tell): turning mostly about one axis, as a boat rolls or an aircraft "
-            "turns, a mirrored gyroscope turns the field alike; record a few tilts about a second axis (rolls and "
-            "pitches), or calibrate with the logged attitude and the known field (method vector or align), and "
-            "check the gyro's axes and signs against the sensor's datasheet",
-            codes=("handedness_undetermined",), remedy=(("method", "vector"),),
-        )
+        _cannot_tell(f"the windows fit the rates negated {given_share / max(negated_share, 1e-300):.1f} times better, "
+                     f"the fit of every sample the rates as given {told:.0f} noise variances better, where "
+                     f"{HANDEDNESS_RATIO:.0f} would tell")  # fmt: skip
+
+
+def _cannot_tell(evidence: str) -> None:
+    """The refusal of a recording that does not tell the gyro's handedness (``evidence``: what was seen)."""
+    raise CalibrationError(
+        "the samples do not support the gyro calibration: they do not tell the gyroscope's handedness against the "
+        f"magnetometer's ({evidence}): turning mostly about one axis, as a boat rolls or an aircraft turns, a "
+        "mirrored gyroscope turns the field alike; record a few tilts about a second axis (rolls and pitches), or "
+        "calibrate with the logged attitude and the known field (method vector or align), and check the gyro's axes "
+        "and signs against the sensor's datasheet",
+        codes=("handedness_undetermined",), remedy=(("method", "vector"),),
+    )
