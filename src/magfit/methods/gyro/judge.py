@@ -126,7 +126,8 @@ def _halves(model: _Model, segment_s: float) -> tuple[float, float] | None:
             gravity = replace(gravity, down=gravity.down[half], still=gravity.still[half])
             gravity = gravity if int(np.sum(gravity.still)) >= MIN_GRAVITY_SAMPLES else None
         try:
-            fitted = _fit_model(traj.y[half], traj.w[half], t, segment_s, model.name, *_parts(model), gravity=gravity)
+            fitted = _fit_model(traj.y[half], traj.w[half], t, segment_s, model.name, *_parts(model), gravity=gravity,
+                                origin=(traj.w, traj.t, half.start))  # fmt: skip
             g_half = fitted.traj.distortion(fitted.solution.params)
             offset_half = fitted.solution.params[fitted.traj.k : fitted.traj.k + 3]
             covariance = _covariance(fitted.traj, fitted.solution.params)

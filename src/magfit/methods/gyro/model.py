@@ -97,6 +97,7 @@ class _Trajectory:
     gravity: _Gravity | None = None
     linear: bool = False
     turn: float = LINEAR_TURN
+    origin: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None  # (rates, times, first sample)
 
     @cached_property
     def steps(self) -> _Steps:
@@ -299,26 +300,35 @@ class _Trajectory:
 
 @dataclass(frozen=True)
 class _Integration:
-    """One recording integrated at one bias: the quaternions of R_k (4, n), R_k entry by entry (9, n) and the
-    running sums Σ dt_j R_{j+1} J_r(φ_j) (n, 3, 3)."""
+    """One recording integrated at one bias in one chain from its first sample, across its stretches: the
+    quaternions of ``Q_k = D_0 … D_{k−1}`` (4, n), ``Q_k`` entry by entry (9, n) and the running sums
+    ``Σ_{j<k} dt_j Q_{j+1} J_r(φ_j)`` (n, 3, 3). A stretch from sample s has ``R_k = Q_sᵀ Q_k`` and
+    ``C_k = Q_sᵀ (Σ_k − Σ_s)`` (K2 and M2 with the chain's common start left out), so one integration serves
+    every layout of stretches over the recording, the halves' too (their samples from ``offset`` on)."""
 
     w: NDArray[np.float64]
     t: NDArray[np.float64]
-    segment: NDArray[np.int64]
     beta: NDArray[np.float64]
     quaternions: NDArray[np.float64]
     entries: NDArray[np.float64]
     running: NDArray[np.float64]
 
-    def of(self, traj: _Trajectory) -> bool:
-        """True for ``traj``'s recording (the same arrays) and stretches."""
-        return (self.w is traj.w and self.t is traj.t
-                and (self.segment is traj.segment or np.array_equal(self.segment, traj.segment)))  # fmt: skip
+    def offset(self, traj: _Trajectory) -> int | None:
+        """Where ``traj``'s samples start in this recording (0 for the recording itself), or None."""
+        if self.w is traj.w and self.t is traj.t:
+            return 0
+        if traj.origin is not None and self.w is traj.origin[0] and self.t is traj.origin[1]:
+            return traj.origin[2]
+        return None
 
-    @property
-    def turns(self) -> NDArray[np.float64]:
-        """R_k (n, 3, 3)."""
-        return self.entries.T.reshape(-1, 3, 3)
+    def at_rows(self, traj: _Trajectory, rows: NDArray[np.int64],
+                offset: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
+        """R_k and C_k (k in ``rows`` of ``traj``) from their stretches' first samples, (rows, 3, 3) each."""
+        first = traj.first[rows] + offset
+        at = rows + offset
+        start = self.entries[:, first].T.reshape(-1, 3, 3).transpose(0, 2, 1)  # Q_sᵀ
+        turns = np.matmul(start, self.entries[:, at].T.reshape(-1, 3, 3))
+        return turns, np.matmul(start, self.running[at] - self.running[first])
 
 
 #: The last integration of each recording (the rates as given and, for the handedness check, negated), at most
@@ -337,31 +347,44 @@ _CARRIED: list[tuple[_Trajectory, bytes, tuple[NDArray[np.float64], NDArray[np.f
 _BLOCKS: list[tuple[_Trajectory, bytes, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]] = []
 
 
-def _integration(traj: _Trajectory, beta: NDArray[np.float64]) -> _Integration:
-    """``traj``'s recording integrated at bias ``beta`` (:class:`_Integration`), or the kept one at that bias."""
+def _integration(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[_Integration, int]:
+    """``traj``'s recording integrated at bias ``beta`` (:class:`_Integration`), or the kept one at that bias, and
+    where ``traj``'s samples start in it."""
     beta = np.asarray(beta, dtype=np.float64)
     with _LOCK:
         for last in _LAST:
-            if last.of(traj) and np.array_equal(last.beta, beta):
-                return last
-    mean_rates, dt, start, weights = traj.steps
-    quaternions = _rotation_quaternions(mean_rates, dt, beta, start)
+            offset = last.offset(traj)
+            if offset is not None and np.array_equal(last.beta, beta):
+                return last, offset
+    mean_rates, dt, _, _ = traj.steps
+    n = traj.t.size
+    chain = np.zeros(n, dtype=bool)
+    chain[0] = True  # one chain: a stretch's rotations are its quotients
+    quaternions = _rotation_quaternions(mean_rates, dt, beta, chain)
     entries = _entries(quaternions)  # (9, n): each entry's run over the samples
-    n = start.size
-    # Σ dt_j R_{j+1} J_r(φ_j) (none across a start), summed along each entry's contiguous run: a third of the
-    # time of the same sums over the (n, 3, 3) view.
-    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
-    found = _Integration(traj.w, traj.t, traj.segment, beta.copy(), quaternions, entries, running)
+    # Σ dt_j Q_{j+1} J_r(φ_j), summed along each entry's contiguous run: a third of the time of the same sums
+    # over the (n, 3, 3) view.
+    running = _jacobian_steps(entries, mean_rates, dt, beta)
+    running[:, 0] = 0.0
+    running[:, 1:] *= dt
+    np.cumsum(running, axis=1, out=running)
+    found = _Integration(traj.w, traj.t, beta.copy(), quaternions, entries, running.T.reshape(n, 3, 3))
     with _LOCK:  # one per recording (its rates' array), the newest last
         _LAST[:] = [*(kept for kept in _LAST if kept.w is not traj.w), found][-_KEEP_INTEGRATIONS:]
-    return found
+    return found, 0
 
 
 def _integrated(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """R_k and the running sums of ``traj``'s recording at bias ``beta`` (:class:`_Integration`), integrated or
-    reused."""
-    found = _integration(traj, beta)
-    return found.turns, found.running
+    """R_k and C_k of every sample of ``traj`` from its stretch's first sample (n, 3, 3) each, at bias ``beta``
+    (:class:`_Integration`), integrated or reused."""
+    found, offset = _integration(traj, beta)
+    return found.at_rows(traj, np.arange(traj.t.size), offset)
+
+
+def _integrated_rows(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """R_k and C_k at ``traj``'s rows, every sample integrated."""
+    found, offset = _integration(traj, beta)
+    return found.at_rows(traj, traj.rows, offset)
 
 
 def forget_integration() -> None:
@@ -418,15 +441,17 @@ def _linearization(traj: _Trajectory, beta: NDArray[np.float64]) -> _Linearizati
     else a new one at ``beta``."""
     restart, anchor, reach = _reach(traj)
     with _LOCK:
-        near = [kept for kept in _LAST if kept.of(traj)
+        near = [(kept, kept.offset(traj)) for kept in _LAST if kept.offset(traj) is not None
                 and float(np.max(np.abs(beta - kept.beta))) * reach <= traj.turn]  # fmt: skip
-    found = near[-1] if near else _integration(traj, beta)
-    q, entries, running, rows = found.quaternions, found.entries, found.running, traj.rows
+    found, offset = near[-1] if near else _integration(traj, beta)
+    assert offset is not None
+    q, entries, running = found.quaternions, found.entries, found.running
+    rows, anchor = traj.rows + offset, anchor + offset  # (the anchor is in its row's stretch: Q_aᵀ Q_r = R_aᵀ R_r)
     conjugate = q[:, anchor] * np.array([[1.0], [-1.0], [-1.0], [-1.0]])
     local = _product(conjugate, q[:, rows])  # ΔR_i = R_aᵀ R_r
     turned = entries[:, anchor].T.reshape(-1, 3, 3)
     sums = np.matmul(turned.transpose(0, 2, 1), running[rows] - running[anchor])  # ΔC_i = R_aᵀ (C_r − C_a)
-    return _Linearization(traj.w, traj.t, traj.segment, rows, found.beta, local, sums, restart, reach)
+    return _Linearization(traj.w, traj.t, traj.segment, traj.rows, found.beta, local, sums, restart, reach)
 
 
 def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -464,8 +489,8 @@ def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[n
 
 def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
                 basis: NDArray[np.float64], max_rows: int = MAX_RESIDUAL_SAMPLES,
-                gravity: _Gravity | None = None, linear: bool = False,
-                turn: float = LINEAR_TURN) -> _Trajectory:  # fmt: skip
+                gravity: _Gravity | None = None, linear: bool = False, turn: float = LINEAR_TURN,
+                origin: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None) -> _Trajectory:  # fmt: skip
     span = float(t[-1] - t[0])
     length = max(segment_s, span / MAX_SEGMENTS)
     segment = np.minimum(((t - t[0]) // length).astype(np.int64), max(int(span // length) - 1, 0))
@@ -474,7 +499,7 @@ def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.fl
     stride = max(1, math.ceil(y.shape[0] / max_rows))
     rows = np.arange(0, y.shape[0], stride)
     linear = linear and stride >= LINEAR_STRIDE
-    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity, linear, turn)
+    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity, linear, turn, origin)
 
 
 def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64],
@@ -503,12 +528,6 @@ def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64
         dots = np.einsum("ki,ki->k", traj.gravity.down[still], unit)
         head.append(np.array([math.asin(float(np.clip(np.median(dots), -0.99, 0.99)))]))
     return np.concatenate([*head, angles.ravel()])
-
-
-def _integrated_rows(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """R_k and C_k at ``traj``'s rows, every sample integrated."""
-    turns, running = _integrated(traj, beta)
-    return turns[traj.rows], running[traj.rows] - running[traj.first[traj.rows]]
 
 
 def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iterations: int = 60) -> Solution:
@@ -659,13 +678,16 @@ def _fit_model(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.flo
                name: str, g: NDArray[np.float64], offset: NDArray[np.float64], beta: NDArray[np.float64],
                max_rows: int = MAX_RESIDUAL_SAMPLES, iterations: int = 60,
                gravity: _Gravity | None = None, linear: bool = True, turn: float = FINAL_TURN,
-               loose: bool = False) -> _Model:  # fmt: skip
+               loose: bool = False,
+               origin: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None) -> _Model:  # fmt: skip
     """One model of G fitted from G, V and β; ``linear``: its rotations between rows at least
     :data:`LINEAR_STRIDE` samples apart follow the bias by (M4) while it stays within ``turn`` (the screening's
     :data:`LINEAR_TURN`, or :data:`FINAL_TURN` for the fit kept and the halves), else every sample is
-    integrated at every bias. ``loose``: first carried :data:`LOOSE_TURN` far (a fit whose bias moves far)."""
+    integrated at every bias. ``loose``: first carried :data:`LOOSE_TURN` far (a fit whose bias moves far).
+    ``origin``: the recording these samples are a stretch of (its rates, times, and where they start), whose
+    integration they may carry from (the halves)."""
     basis = np.eye(9) if name == "general" else _symmetric(np.eye(3), MAPPINGS[name].T)  # G = W Pᵀ = (P S)⁻¹
-    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity, linear, turn)
+    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity, linear, turn, origin)
     start = _start(traj, g, offset, beta)
     if traj.linear and loose and turn < LOOSE_TURN:
         # First towards the minimum with the rows' rotations carried LOOSE_TURN far (a fit whose bias moves far,
