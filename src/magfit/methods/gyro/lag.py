@@ -26,7 +26,11 @@ def _delayed(w: NDArray[np.float64], t: NDArray[np.float64], lag: float) -> NDAr
     """The gyro read ``lag`` seconds earlier at each sample time (linear interpolation; the ends held)."""
     if lag == 0.0:
         return w
-    return np.column_stack([np.interp(t - lag, t, w[:, axis]) for axis in range(3)])
+    at = t - lag
+    out = np.empty_like(w)
+    for axis in range(3):
+        out[:, axis] = np.interp(at, t, w[:, axis])
+    return out
 
 
 def _search_lag(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> float:

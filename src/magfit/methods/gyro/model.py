@@ -639,8 +639,9 @@ def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64
     batches = max(2, min(40, rows // 50))
     sums = np.array([s.sum(axis=0) for s in np.array_split(score, batches)])
     # Products by einsum: BLAS's threads on matrices of this size cost more than the arithmetic on shared cores.
-    middle = np.einsum("bi,bj->ij", sums, sums) * batches / (batches - 1)
-    sandwich = np.einsum("ij,jk->ik", np.einsum("ij,jk->ik", inverse, middle), inverse)
+    # I⁻¹ (Σ s sᵀ) I⁻¹ = (I⁻¹ S)(I⁻¹ S)ᵀ with S the batches' sums (p, batches): a fortieth of p³ each.
+    turned = np.einsum("ij,bj->ib", inverse, sums)
+    sandwich = np.einsum("ib,jb->ij", turned, turned) * batches / (batches - 1)
     # Never below the independent-noise covariance (a few batches can understate it by chance).
     covariance = _larger(sandwich, independent)
     if traj.gravity is not None:
@@ -658,7 +659,9 @@ def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64
 def _larger(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """``b`` plus the positive part of ``a − b``: the larger of two covariances."""
     values, vectors = _eigh_serial(a - b)
-    return b + np.einsum("ik,jk->ij", vectors * np.clip(values, 0, None), vectors)
+    positive = values > 0  # (the others add nothing)
+    kept = vectors[:, positive]
+    return b + np.einsum("ik,jk->ij", kept * values[positive], kept)
 
 
 @dataclass(frozen=True)
