@@ -17,18 +17,23 @@ The Jacobian in β follows from ``R_k = D_0 … D_{k−1}``: each step turns by 
 
     ∂b_k/∂β = −R_kᵀ [b₀]× C_k                                                     (M2)
 
-The screening fits (a stride of the recording's rows, :data:`SCREEN_ROWS`) integrate the gyro at one bias β̄ and
-carry each row's turn from the row before it (or from its stretch's start), ``ΔR_i = R_aᵀ R_r``, to a nearby
-β by the same first-order rule over that interval, with ``ΔC_i = R_aᵀ (C_r − C_a)``::
+The gyro is integrated at one bias β̄ in one chain from the recording's first sample, ``Q_k``, and a stretch
+from sample s reads ``R_k = Q_sᵀ Q_k`` and ``C_k = Q_sᵀ (Σ_k − Σ_s)`` with ``Σ_k`` the chain's running sum
+(:class:`_Integration`): one integration serves every layout of stretches (the whole fit's, each half's).
+A fit whose rows are :data:`LINEAR_STRIDE` or more samples apart carries each row's turn from the row before
+it (or from its stretch's start), ``ΔR_i = R_aᵀ R_r``, to a nearby β by the same first-order rule over that
+interval, with ``ΔC_i = R_aᵀ (C_r − C_a)``::
 
     ΔR_i(β) = exp([−ΔC_i (β − β̄)]×) ΔR_i(β̄) + O((|β − β̄| T_i)²),    R_r = R_a ΔR_i,
     C_r ≈ C_a + R_a ΔC_i(β̄)                                                                          (M4)
 
 (the rows' chain a scan over the rows, reset at each stretch; T_i an interval's length). The gyro is
-integrated again at β once ``|β − β̄| max T_i`` exceeds :data:`LINEAR_TURN`: an evaluation then costs a scan
-over the rows instead of over every sample. C enters only the Jacobian, which moves the steps, not the
-minimum. The fit that is kept, the halves and the covariance integrate every sample at every β, so the
-screening's small error only moves where the kept fit starts.
+integrated again at β once ``|β − β̄| max T_i`` exceeds the fit's turn: :data:`LINEAR_TURN` for the screening
+fits, whose small error only moves where the kept fit starts, and :data:`FINAL_TURN` for the fit kept and the
+halves, whose rotations are then within about 1e-8 rad of the integration's (the error is second order in each
+interval, summed down a stretch). An evaluation costs a scan over the rows instead of over every sample. C
+enters the Jacobian only (the steps and the covariance, to first order in ``|β − β̄|``), not the residuals
+nor so the minimum.
 
 The covariance is the sandwich ``I⁻¹ (Σ_batches s sᵀ) I⁻¹`` of the score summed over contiguous batches of the
 recording (the gyro's noise walks, so neighbouring residuals are correlated), never below the independent
