@@ -8,7 +8,10 @@ reading (:func:`_readings`, :func:`_lagged_readings`) is scored by the windowed 
 turning it explains, ``|r|² / Σ |H dy|²``, a correction that no soft iron gives (an axis squeezed
 :data:`MIN_SINGULAR_RATIO`) not counted; one far better than the given reading is refused with its own code
 and remedy. Where the windows cannot tell (a slow vehicle) and the fit leaves a large residual, stage 2's
-general fit decides (:func:`_check_readings_by_fit`, :func:`_check_handedness`).
+general fit decides (:func:`_check_readings_by_fit`, :func:`_check_handedness`). The handedness is the windows'
+to tell only by a factor of :data:`AXES_WINDOWS_GAIN`: turning mostly about one axis, a mirrored gyro turns
+the field alike, and where neither the windows nor the fit tell it the recording is refused as such
+(``handedness_undetermined``, exit 1), not as the wrong axes.
 
 A gyroscope logged at its own rate is averaged over each magnetometer sample's interval from its running
 integral (:func:`_own_rate`): the mean rate over the interval is what turns the field between two samples,

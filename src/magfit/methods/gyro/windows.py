@@ -227,15 +227,20 @@ def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.floa
 
 
 def _gauss_newton(win: _Windows, iterations: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """:func:`_windowed_bias`, computed."""
-    h, c, _ = _constrained(_design(win, np.zeros(3)), np.eye(9))
+    """:func:`_windowed_bias`, computed. The design is linear in β: built once at β = 0 and once for each axis's
+    part (the windows' β terms alone), then combined at each iterate."""
+    zero = np.zeros(3)
+    base = _design(win, zero)
+    parts = [_design(_Windows(np.zeros_like(win.dy), -axis[None, :, None] * win.Sy[:, None, :], win.Sy,
+                              -axis * win.T[:, None], win.T), zero) for axis in np.eye(3)]  # fmt: skip
+    h, c, _ = _constrained(base, np.eye(9))
     theta = np.concatenate([h.ravel(), c])
     theta /= np.linalg.norm(theta)
     beta = np.zeros(3)
     m = win.T.size
     for _ in range(iterations):
         h, c = theta[:9].reshape(3, 3), theta[9:]
-        jac_theta = _design(win, beta)
+        jac_theta = base + beta[0] * parts[0] + beta[1] * parts[1] + beta[2] * parts[2]
         # H ∫y − T c: the residual is linear in β through −β × u
         u = np.einsum("ij,mj->mi", h, win.Sy) - win.T[:, None] * c
         q, _ = np.linalg.qr(np.column_stack([theta, np.eye(12)]))
