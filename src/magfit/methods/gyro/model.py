@@ -535,8 +535,10 @@ def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64
     return np.concatenate([*head, angles.ravel()])
 
 
-def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iterations: int = 60) -> Solution:
-    """Levenberg-Marquardt on the samples' residuals (the project's solver: normal equations, k ≤ 135)."""
+def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iterations: int = 60,
+                        tolerance: float = 1e-3) -> Solution:
+    """Levenberg-Marquardt on the samples' residuals (the project's solver: normal equations, k ≤ 135), stopped
+    at a step shorter than ``tolerance`` standard errors (the solver's own 1e-3, unless said)."""
 
     def evaluate(p: NDArray[np.float64], warm: Any) -> Evaluation:
         return traj.normal_equations(p)
@@ -545,7 +547,7 @@ def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iteration
         return _solve_arrow(matrix, rhs, traj.head)
 
     return levenberg_marquardt(evaluate, start, n_residuals=traj.n_residuals(), max_iterations=iterations,
-                               solve=solve, skip_small_steps=True)  # fmt: skip
+                               solve=solve, skip_small_steps=tolerance)  # fmt: skip
 
 
 #: The head's Schur complement (eq. M3) is inverted only below this condition number; above it the pseudo-inverse
@@ -686,14 +688,15 @@ def _fit_model(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.flo
                name: str, g: NDArray[np.float64], offset: NDArray[np.float64], beta: NDArray[np.float64],
                max_rows: int = MAX_RESIDUAL_SAMPLES, iterations: int = 60,
                gravity: _Gravity | None = None, linear: bool = True, turn: float = FINAL_TURN,
-               loose: bool = False,
-               origin: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None) -> _Model:  # fmt: skip
+               loose: bool = False, origin: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None,
+               tolerance: float = 1e-3) -> _Model:  # fmt: skip
     """One model of G fitted from G, V and β; ``linear``: its rotations between rows at least
     :data:`LINEAR_STRIDE` samples apart follow the bias by (M4) while it stays within ``turn`` (the screening's
     :data:`LINEAR_TURN`, or :data:`FINAL_TURN` for the fit kept and the halves), else every sample is
     integrated at every bias. ``loose``: first carried :data:`LOOSE_TURN` far (a fit whose bias moves far).
     ``origin``: the recording these samples are a stretch of (its rates, times, and where they start), whose
-    integration they may carry from (the halves)."""
+    integration they may carry from (the halves). ``tolerance``: the step, in standard errors, below which the
+    fit stops (:func:`_maximum_likelihood`)."""
     basis = np.eye(9) if name == "general" else _symmetric(np.eye(3), MAPPINGS[name].T)  # G = W Pᵀ = (P S)⁻¹
     traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity, linear, turn, origin)
     start = _start(traj, g, offset, beta)
@@ -702,7 +705,7 @@ def _fit_model(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.flo
         # as the negated rates' does, then integrates once on the way instead of every LINEAR_TURN), then on
         # from there with the turn asked for.
         start = _maximum_likelihood(replace(traj, turn=LOOSE_TURN), start, iterations).params
-    return _Model(name, traj, _maximum_likelihood(traj, start, iterations))
+    return _Model(name, traj, _maximum_likelihood(traj, start, iterations, tolerance))
 
 
 def _parts(model: _Model) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
