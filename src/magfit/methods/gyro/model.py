@@ -392,6 +392,15 @@ def _integrated_rows(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDAr
     return found.at_rows(traj, traj.rows, offset)
 
 
+def forget_rates(w: NDArray[np.float64]) -> None:
+    """Drop what is kept for the rates ``w`` (a reading of them done with: the negated rates' check), so that
+    the recording's own integration is the only one of its size left."""
+    with _LOCK:
+        _LAST[:] = [kept for kept in _LAST if kept.w is not w]
+        _LINEAR[:] = [kept for kept in _LINEAR if kept.w is not w]
+        _STEPS[:] = [kept for kept in _STEPS if kept[0] is not w]
+
+
 def forget_integration() -> None:
     """Drop the kept integrations (their arrays are the size of the recording)."""
     with _LOCK:

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..._validation import check_rows, check_times
 from ...errors import CalibrationError, OptionError
 from .lag import MAX_LAG_S, _delayed
-from .model import LINEAR_TURN, SCREEN_ROWS, _fit_model, _Model, _noise_variance
+from .model import LINEAR_TURN, SCREEN_ROWS, _fit_model, _Model, _noise_variance, forget_rates
 from .windows import (
     GAP_MIN_S,
     GAP_STEPS,
@@ -330,8 +330,12 @@ def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray
         h, c, _ = _constrained(_design(negated, beta), np.eye(9))
         offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
         start = np.asarray(np.linalg.inv(h), dtype=np.float64)
-        mirrored = _fit_model(y, -w, t, segment_s, "general", start, offset, beta, SCREEN_ROWS, turn=LINEAR_TURN,
-                              loose=True)  # fmt: skip
+        negated_rates = -w
+        try:
+            mirrored = _fit_model(y, negated_rates, t, segment_s, "general", start, offset, beta, SCREEN_ROWS,
+                                  turn=LINEAR_TURN, loose=True)  # fmt: skip
+        finally:
+            forget_rates(negated_rates)  # (its integration is the recording's size)
     except np.linalg.LinAlgError:
         return
     g = mirrored.traj.distortion(mirrored.solution.params)
