@@ -1,5 +1,6 @@
-"""The screening fits' rotations carried to first order in the gyro bias (eq. M4 of methods/gyro/model.py):
-against the full integration, and the calibration they lead to against the one with every sample integrated."""
+"""The rows' rotations carried to first order in the gyro bias (eq. M4 of methods/gyro/model.py), by the screening
+fits and, within FINAL_TURN, by the fit kept and the halves: against the full integration, and the calibration
+they lead to against the one with every sample integrated."""
 
 from __future__ import annotations
 
@@ -75,4 +76,47 @@ def test_the_calibration_is_the_one_with_every_sample_integrated(monkeypatch: py
     np.testing.assert_allclose(carried.matrix, integrated.matrix, rtol=1e-8, atol=1e-10)
     # and both against the truth: the offset within four of its stated one-sigmas
     sigma = np.asarray(carried.details["offset_sigma"])
+    assert np.all(np.abs(carried.offset - HARD_IRON) < 4 * sigma + 1e-9)
+
+
+def test_the_fit_kept_carries_its_rotations_within_a_few_hundred_millionths_of_a_radian() -> None:
+    sim = _recording(60_000)
+    traj = model._trajectory(sim.samples, sim.gyro, sim.time_s, 10.0, np.eye(9), model.MAX_RESIDUAL_SAMPLES,
+                             linear=True, turn=model.FINAL_TURN)  # fmt: skip
+    assert traj.linear  # rows three samples apart
+    model.forget_integration()
+    try:
+        model._linearized(traj, GYRO_BIAS)
+        reach = model._LINEAR[-1].reach
+        moved = GYRO_BIAS + 0.9 * model.FINAL_TURN / reach * np.array([0.6, -0.64, 0.48])
+        turns, running = model._linearized(traj, moved)
+        assert len(model._LINEAR) == 1  # carried, not integrated again
+        exact_turns, exact_running = _exact(traj, moved)
+        assert 0 < np.max(np.abs(turns - exact_turns)) < 2e-8  # 1.1e-8 here: second order, summed down a stretch
+        # C (the Jacobian in the bias only) is carried to first order: 3.6e-5 of itself here
+        assert np.max(np.abs(running - exact_running)) < 1e-4 * np.max(np.abs(exact_running))
+    finally:
+        model.forget_integration()
+
+
+@pytest.mark.slow
+def test_a_long_recording_s_calibration_is_the_one_with_every_sample_integrated(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    sim = _recording(60_000)
+
+    def fit() -> magfit.Calibration:
+        return magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s)
+
+    carried = fit()  # the fit kept and the halves carry their rows' rotations (rows three samples apart)
+    monkeypatch.setattr(model, "LINEAR_STRIDE", 10**9)
+    integrated = fit()
+    assert carried.support is not None and integrated.support is not None
+    assert carried.support.verdict == integrated.support.verdict == "supported"
+    sigma = np.asarray(carried.details["offset_sigma"])
+    assert np.all(np.abs(carried.offset - integrated.offset) < 1e-2 * sigma)
+    np.testing.assert_allclose(carried.details["offset_sigma"], integrated.details["offset_sigma"], rtol=1e-3)
+    assert carried.gyro is not None and integrated.gyro is not None
+    stated = integrated.gyro.heading_sigma_deg
+    assert abs(carried.gyro.heading_sigma_deg - stated) < 1e-3 * stated
     assert np.all(np.abs(carried.offset - HARD_IRON) < 4 * sigma + 1e-9)

@@ -142,7 +142,6 @@ def test_gyro_calibration_states_its_heading_one_sigma(tmp_path: Path) -> None:
     assert re.search(r"^heading\s+± ", result.stdout, re.M), result.stdout
 
 
-@pytest.mark.xfail(strict=True, reason="a right-handed gyro on a boat is refused as the wrong handedness, exit 2")
 def test_gyro_on_a_boat_does_not_accuse_correct_axes(tmp_path: Path) -> None:
     path = tmp_path / "boat.csv"
     _vehicle_csv(path, "boat", 2)  # simulated: the gyro and magnetometer axes are right-handed and agree

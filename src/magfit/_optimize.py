@@ -58,6 +58,7 @@ def levenberg_marquardt(
     current: Evaluation | None = None,
     cost_tolerance: float = 1e-12,
     solve: Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]] | None = None,
+    skip_small_steps: float = 0.0,
 ) -> Solution:
     """Minimise ``½ Σ r²`` from ``params``, with Marquardt's diagonal scaling of the damping (the running
     maximum of diag(JᵀJ), as MINPACK scales).
@@ -76,6 +77,9 @@ def levenberg_marquardt(
     Stops when the gradient vanishes, when a step lowers the cost by less than ``cost_tolerance`` of
     itself, or when the step is shorter than 1e-3 standard errors of the fit in its own direction (a
     change no data could show). A non-finite starting cost returns at once with status 0.
+    ``skip_small_steps``: a step shorter than this many standard errors (1e-3: the rule above) is not
+    evaluated either (status 3 at the point it starts from): near the minimum, rounding makes such trials fail
+    and grow the damping, an evaluation each.
     """
     size = params.size
     if current is None:
@@ -96,6 +100,11 @@ def levenberg_marquardt(
             try:
                 damped = current.normal + damping * np.diag(scaling)
                 step = np.linalg.solve(damped, -current.gradient) if solve is None else solve(damped, -current.gradient)
+                length = math.sqrt(max(float(step @ current.normal @ step), 0.0))
+                if skip_small_steps > 0 and length <= skip_small_steps * residual_norm / math.sqrt(
+                        max(n_residuals - size, 1)):  # fmt: skip
+                    return Solution(params, current, 3, f"the next step is below {skip_small_steps:g} standard errors",
+                                    iteration - 1)  # fmt: skip
                 trial = evaluate(params + step, current.warm)
                 if np.isfinite(trial.cost) and trial.cost <= current.cost:
                     break

@@ -626,6 +626,7 @@ REASON_CODES: dict[str, str] = {
     "bad_option": "an option the recording cannot serve (a column, unit or method it does not hold)",
     "bad_samples": "the samples are malformed (NaN or infinite values, another shape than N rows of 3)",
     "attitude_convention": "the attitude's world is upside down against the accelerometer's gravity (ENU read as NED)",
+    "handedness_undetermined": "the recording does not tell the gyroscope's handedness against the magnetometer's",
     "unclassified": "a reason without a code of its own yet",
 }
 

@@ -25,7 +25,7 @@ from ...rotations import angle_between_deg, polar_decomposition
 from .gravity import _Gravity
 from .inclination import _weighted
 from .mapping import MAPPINGS, mapping_name
-from .model import SCREEN_ITER, SCREEN_ROWS, _fit_model, _Model, _noise_variance, _parts
+from .model import LINEAR_TURN, SCREEN_ITER, SCREEN_ROWS, _fit_model, _Model, _noise_variance, _parts
 from .rates import _check_handedness
 from .windows import _constrained, _design, _symmetric, _windowed_bias, _Windows
 
@@ -80,7 +80,7 @@ def _choose(
     # every row (up to MAX_RESIDUAL_SAMPLES) from there.
     offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
     inverse = np.asarray(np.linalg.inv(h), dtype=np.float64)
-    general = _fit_model(y, w, t, segment_s, "general", inverse, offset, beta, SCREEN_ROWS, linear=True)
+    general = _fit_model(y, w, t, segment_s, "general", inverse, offset, beta, SCREEN_ROWS, turn=LINEAR_TURN)
     _check_handedness(y, w, t, win, segment_s, general)
     if gravity is not None:
         # The weight from the kinematic fit's residuals, then once more from the fit with the gravity rows:
@@ -88,7 +88,7 @@ def _choose(
         for _ in range(2):
             gravity = _weighted(general, gravity)
             general = _fit_model(y, w, t, segment_s, "general", *_parts(general), SCREEN_ROWS, gravity=gravity,
-                                     linear=True)  # fmt: skip
+                                     turn=LINEAR_TURN)  # fmt: skip
     chosen, excess, ambiguous = general, {}, None
     if mapping != "general":
         if mapping in MAPPINGS:
@@ -98,7 +98,7 @@ def _choose(
             rotation, _ = polar_decomposition(np.linalg.inv(g) * np.sign(np.linalg.det(g)))
             names = list(dict.fromkeys([mapping_name(rotation), *_windowed_ranking(design)[:2]]))
         start = _parts(general)
-        fitted = [_fit_model(y, w, t, segment_s, name, *start, SCREEN_ROWS, SCREEN_ITER, gravity, linear=True)
+        fitted = [_fit_model(y, w, t, segment_s, name, *start, SCREEN_ROWS, SCREEN_ITER, gravity, turn=LINEAR_TURN)
                   for name in names]  # fmt: skip
         # W = G P must be definite (a soft iron; negative for a mirrored sensor): an indefinite W is P times a
         # half turn about W's eigenvectors, another mounting that this label does not stand for.

@@ -40,6 +40,10 @@ LARGE_RESIDUAL = 0.05
 #: Offset one-sigmas (fraction of the field) above which the offset is not determined / weakly determined.
 UNDETERMINED_OFFSET = 0.05
 WEAK_OFFSET = 0.01
+#: The halves' fits stop at a step shorter than this many standard errors: their headings are then within about
+#: this share of their one-sigma of their own minimum, and judged against HALVES_SIGMAS of them (docs/methods.md,
+#: "gyro": the differences and one-sigmas measured against the solver's own 1e-3).
+HALVES_STEP = 0.05
 #: Turning about the second principal axis below this share of the first: turned about one axis only.
 SINGLE_AXIS = 0.02
 #: Largest turn (degrees) of the field seen in the samples' frame below which the sensor hardly turned.
@@ -126,7 +130,8 @@ def _halves(model: _Model, segment_s: float) -> tuple[float, float] | None:
             gravity = replace(gravity, down=gravity.down[half], still=gravity.still[half])
             gravity = gravity if int(np.sum(gravity.still)) >= MIN_GRAVITY_SAMPLES else None
         try:
-            fitted = _fit_model(traj.y[half], traj.w[half], t, segment_s, model.name, *_parts(model), gravity=gravity)
+            fitted = _fit_model(traj.y[half], traj.w[half], t, segment_s, model.name, *_parts(model), gravity=gravity,
+                                origin=(traj.w, traj.t, half.start), tolerance=HALVES_STEP)  # fmt: skip
             g_half = fitted.traj.distortion(fitted.solution.params)
             offset_half = fitted.solution.params[fitted.traj.k : fitted.traj.k + 3]
             covariance = _covariance(fitted.traj, fitted.solution.params)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .windows import _constrained, _design, _windowed_bias, _windows
+from .windows import _constrained, _design, _frame, _windowed_bias, _windows
 
 #: The magnetometer's delay behind the gyroscope is searched within ± this (seconds).
 MAX_LAG_S = 0.25
@@ -26,22 +26,39 @@ def _delayed(w: NDArray[np.float64], t: NDArray[np.float64], lag: float) -> NDAr
     """The gyro read ``lag`` seconds earlier at each sample time (linear interpolation; the ends held)."""
     if lag == 0.0:
         return w
-    return np.column_stack([np.interp(t - lag, t, w[:, axis]) for axis in range(3)])
+    at = t - lag
+    out = np.empty_like(w)
+    for axis in range(3):
+        out[:, axis] = np.interp(at, t, w[:, axis])
+    return out
 
 
 def _search_lag(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> float:
     """The magnetometer's delay behind the gyroscope (s) that minimises the windowed residual of stage 1.
 
-    A grid of ±MAX_LAG_S in steps of the sample interval (at least 5 ms), the bias of no delay held; kept
-    only when it lowers the windowed residual by more than LAG_GAIN (module docstring), then refined.
+    A grid of ±MAX_LAG_S in steps of the sample interval (at least 5 ms), the bias of no delay held, scored
+    at every other lag and then beside the best; kept only when it lowers the windowed residual by more than
+    LAG_GAIN (module docstring), then refined.
     """
     step = max(float(np.median(np.diff(t))), 0.005)
     grid = np.arange(-MAX_LAG_S, MAX_LAG_S + step / 2, step)
     _, beta = _windowed_bias(_windows(y, w, t, length))
-    residual = np.array([_constrained(_design(_windows(y, _delayed(w, t, lag), t, length), beta), np.eye(9))[2]
-                         for lag in grid])  # fmt: skip
+    frame = _frame(y, t, length)  # (the delayed rates' windows are not kept: each is asked for once)
+    residual = np.full(grid.size, np.inf)
+
+    def scored(indices: list[int]) -> None:
+        for i in indices:
+            if 0 <= i < grid.size and np.isinf(residual[i]):
+                residual[i] = _constrained(_design(frame.windows(_delayed(w, t, float(grid[i]))), beta), np.eye(9))[2]
+
+    # Every other lag of the grid (with the ends and the one nearest zero), then the two beside the best: the
+    # grid's own minimum wherever it is not a second valley within a step of the first.
+    zero = int(np.argmin(np.abs(grid)))
+    scored(sorted({*range(0, grid.size, 2), grid.size - 1, zero}))
     best = int(np.argmin(residual))
-    if residual[best] > LAG_GAIN * residual[int(np.argmin(np.abs(grid)))]:
+    scored([best - 1, best + 1])
+    best = int(np.argmin(residual))
+    if residual[best] > LAG_GAIN * residual[zero]:
         return 0.0
     if best in (0, grid.size - 1):
         return float(grid[best])

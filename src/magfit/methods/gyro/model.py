@@ -17,18 +17,23 @@ The Jacobian in β follows from ``R_k = D_0 … D_{k−1}``: each step turns by 
 
     ∂b_k/∂β = −R_kᵀ [b₀]× C_k                                                     (M2)
 
-The screening fits (a stride of the recording's rows, :data:`SCREEN_ROWS`) integrate the gyro at one bias β̄ and
-carry each row's turn from the row before it (or from its stretch's start), ``ΔR_i = R_aᵀ R_r``, to a nearby
-β by the same first-order rule over that interval, with ``ΔC_i = R_aᵀ (C_r − C_a)``::
+The gyro is integrated at one bias β̄ in one chain from the recording's first sample, ``Q_k``, and a stretch
+from sample s reads ``R_k = Q_sᵀ Q_k`` and ``C_k = Q_sᵀ (Σ_k − Σ_s)`` with ``Σ_k`` the chain's running sum
+(:class:`_Integration`): one integration serves every layout of stretches (the whole fit's, each half's).
+A fit whose rows are :data:`LINEAR_STRIDE` or more samples apart carries each row's turn from the row before
+it (or from its stretch's start), ``ΔR_i = R_aᵀ R_r``, to a nearby β by the same first-order rule over that
+interval, with ``ΔC_i = R_aᵀ (C_r − C_a)``::
 
     ΔR_i(β) = exp([−ΔC_i (β − β̄)]×) ΔR_i(β̄) + O((|β − β̄| T_i)²),    R_r = R_a ΔR_i,
     C_r ≈ C_a + R_a ΔC_i(β̄)                                                                          (M4)
 
 (the rows' chain a scan over the rows, reset at each stretch; T_i an interval's length). The gyro is
-integrated again at β once ``|β − β̄| max T_i`` exceeds :data:`LINEAR_TURN`: an evaluation then costs a scan
-over the rows instead of over every sample. C enters only the Jacobian, which moves the steps, not the
-minimum. The fit that is kept, the halves and the covariance integrate every sample at every β, so the
-screening's small error only moves where the kept fit starts.
+integrated again at β once ``|β − β̄| max T_i`` exceeds the fit's turn: :data:`LINEAR_TURN` for the screening
+fits, whose small error only moves where the kept fit starts, and :data:`FINAL_TURN` for the fit kept and the
+halves, whose rotations are then within about 1e-8 rad of the integration's (the error is second order in each
+interval, summed down a stretch). An evaluation costs a scan over the rows instead of over every sample. C
+enters the Jacobian only (the steps and the covariance, to first order in ``|β − β̄|``), not the residuals
+nor so the minimum.
 
 The covariance is the sandwich ``I⁻¹ (Σ_batches s sᵀ) I⁻¹`` of the score summed over contiguous batches of the
 recording (the gyro's noise walks, so neighbouring residuals are correlated), never below the independent
@@ -39,7 +44,7 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -49,7 +54,7 @@ from numpy.typing import NDArray
 from ..._optimize import Evaluation, Solution, levenberg_marquardt
 from ...rotations import skew
 from .gravity import ACCEL_BIAS_PRIOR, _cos, _Gravity, _gravity_angle
-from .kinematics import _entries, _jacobian_steps, _product, _rotation_entries, _rotation_quaternions, _scan, _unit
+from .kinematics import _entries, _jacobian_steps, _product, _rotation_quaternions, _scan, _unit
 from .mapping import MAPPINGS
 from .windows import _gaps, _symmetric
 
@@ -62,12 +67,19 @@ SCREEN_ROWS = 3_000
 SCREEN_ITER = 40
 #: At most this many stretches (each adds two unknowns); longer recordings get longer stretches.
 MAX_SEGMENTS = 60
-#: Screening fits whose rows are at least this many samples apart carry the rotations between rows to first
-#: order in the bias (M4); closer rows integrate every sample (the saving would be small).
-LINEAR_STRIDE = 4
+#: Fits whose rows are at least this many samples apart carry the rotations between rows to first order in the
+#: bias (M4); closer rows integrate every sample (the saving would be small).
+LINEAR_STRIDE = 3
 #: ... integrating again when the bias has moved by more than this turn (radians) over the longest interval
-#: between rows: (M4)'s error is of its square (docs/scaling.md, "gyro": the error measured).
+#: between rows, in the screening fits: (M4)'s error is of its square, up to 1e-6 rad (docs/methods.md, "gyro").
 LINEAR_TURN = 1e-3
+#: ... carried this far on the way to the minimum, before the fit is finished with the turn above (an error of up
+#: to 1e-4 rad moves the steps, not where they end).
+LOOSE_TURN = 1e-2
+#: ... and in the fit kept and the halves: an error of about 1e-8 rad at most (second order in each interval, summed
+#: down a stretch), a few millionths of the noise of a magnetometer good to 0.5 % of the field (docs/methods.md,
+#: "gyro"); their bias moves far less than this from where the screening integrated.
+FINAL_TURN = 1e-4
 
 
 @dataclass(frozen=True)
@@ -89,22 +101,33 @@ class _Trajectory:
     basis: NDArray[np.float64]
     gravity: _Gravity | None = None
     linear: bool = False
+    turn: float = LINEAR_TURN
+    origin: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None  # (rates, times, first sample)
 
     @cached_property
-    def steps(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+    def steps(self) -> _Steps:
         """What every integration reuses: the steps' mean rates (n − 1, 3) and lengths (n − 1,), the stretches'
-        first samples (n,), and the weight of R_k in the running sum C (``dt_{k−1}``, 0 at a stretch's start)."""
+        first samples (n,), and the weight of R_k in the running sum C (``dt_{k−1}``, 0 at a stretch's start).
+        Shared by the trajectories of one recording and its stretches (the fits of one recording ask for them)."""
+        with _LOCK:
+            for w, t, segment, kept in _STEPS:
+                if w is self.w and t is self.t and (segment is self.segment or np.array_equal(segment, self.segment)):
+                    return kept
         dt = np.diff(self.t)
         start = np.ones(self.t.size, dtype=bool)
         start[1:] = self.segment[1:] != self.segment[:-1]
         weights = np.concatenate([[0.0], dt])
         weights[start] = 0.0
-        return 0.5 * (self.w[:-1] + self.w[1:]), dt, start, weights
+        steps: _Steps = (0.5 * (self.w[:-1] + self.w[1:]), dt, start, weights)
+        with _LOCK:
+            _STEPS[:] = [*_STEPS[-1:], (self.w, self.t, self.segment, steps)]
+        return steps
 
     @cached_property
     def first(self) -> NDArray[np.int64]:
         """Each sample's stretch start (n,) (stretches ascend)."""
-        return np.searchsorted(self.segment, self.segment)
+        starts = np.flatnonzero(self.steps[2])
+        return np.repeat(starts, np.diff(np.append(starts, self.t.size)))
 
     @cached_property
     def starts(self) -> NDArray[np.int64]:
@@ -144,9 +167,7 @@ class _Trajectory:
         if self.linear:
             turns, running = _linearized(self, p[self.k + 3 : self.k + 6])
         else:
-            turns, running = _integrated(self, p[self.k + 3 : self.k + 6])
-            running = running[self.rows] - running[self.first[self.rows]]
-            turns = turns[self.rows]
+            turns, running = _integrated_rows(self, p[self.k + 3 : self.k + 6])
         start = _unit(p[self.head :].reshape(self.count, 2))[self.segment[self.rows]]
         # (M2), R_kᵀ [b₀]× C_k: stacked 3×3 products (numpy's own loop, no threaded BLAS, far quicker than einsum)
         d_beta = -np.matmul(np.matmul(turns.transpose(0, 2, 1), skew(start)), running)
@@ -167,7 +188,7 @@ class _Trajectory:
 
     def residual(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
         """All residuals, (rows · components,): row by row, the magnetometer's three then the gravity row."""
-        return self._residual_of(p, self.field(p)[0]).ravel()
+        return self.blocks(p)[0].ravel()  # (the last evaluations' are kept)
 
     def magnetometer_residual(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
         """The samples' own residuals ``G b_k + V − y_k``, (rows, 3), in the samples' unit."""
@@ -175,7 +196,20 @@ class _Trajectory:
 
     def blocks(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """The residual (rows, C), its Jacobian in (q, V, β[, s]) (rows, C, head), and in the row's own
-        stretch's two angles (rows, C, 2): every other angle column of a row is zero. C = :attr:`components`."""
+        stretch's two angles (rows, C, 2): every other angle column of a row is zero. C = :attr:`components`.
+        The last two are kept (the solver's last evaluation is the covariance's)."""
+        key = p.tobytes()
+        with _LOCK:
+            for traj, at, kept in _BLOCKS:
+                if traj is self and at == key:
+                    return kept
+        computed = self._blocks(p)
+        with _LOCK:
+            _BLOCKS[:] = [*_BLOCKS[-1:], (self, key, computed)]
+        return computed
+
+    def _blocks(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`blocks`, computed."""
         k = self.k
         g = self.distortion(p)
         b, turns, d_beta = self.field(p)
@@ -271,42 +305,100 @@ class _Trajectory:
 
 @dataclass(frozen=True)
 class _Integration:
-    """The rotations R_k (n, 3, 3) and running sums Σ dt_j R_{j+1} J_r(φ_j) (n, 3, 3) of one recording at one bias."""
+    """One recording integrated at one bias in one chain from its first sample, across its stretches: the
+    quaternions of ``Q_k = D_0 … D_{k−1}`` (4, n), ``Q_k`` entry by entry (9, n) and the running sums
+    ``Σ_{j<k} dt_j Q_{j+1} J_r(φ_j)`` (n, 3, 3). A stretch from sample s has ``R_k = Q_sᵀ Q_k`` and
+    ``C_k = Q_sᵀ (Σ_k − Σ_s)`` (K2 and M2 with the chain's common start left out), so one integration serves
+    every layout of stretches over the recording, the halves' too (their samples from ``offset`` on)."""
 
     w: NDArray[np.float64]
     t: NDArray[np.float64]
-    segment: NDArray[np.int64]
-    beta: bytes
-    turns: NDArray[np.float64]
+    beta: NDArray[np.float64]
+    quaternions: NDArray[np.float64]
+    entries: NDArray[np.float64]
     running: NDArray[np.float64]
 
+    def offset(self, traj: _Trajectory) -> int | None:
+        """Where ``traj``'s samples start in this recording (0 for the recording itself), or None."""
+        if self.w is traj.w and self.t is traj.t:
+            return 0
+        if traj.origin is not None and self.w is traj.origin[0] and self.t is traj.origin[1]:
+            return traj.origin[2]
+        return None
 
-#: The last integration, reused while the next fit starts at the same bias on the same recording (the candidate
-#: mappings start from the general fit, the covariance and the residuals at the solution the fit last
-#: integrated): one entry, emptied when a gyro fit ends (:func:`forget_integration`).
+    def at_rows(self, traj: _Trajectory, rows: NDArray[np.int64],
+                offset: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:  # fmt: skip
+        """R_k and C_k (k in ``rows`` of ``traj``) from their stretches' first samples, (rows, 3, 3) each."""
+        first = traj.first[rows] + offset
+        at = rows + offset
+        start = self.entries[:, first].T.reshape(-1, 3, 3).transpose(0, 2, 1)  # Q_sᵀ
+        turns = np.matmul(start, self.entries[:, at].T.reshape(-1, 3, 3))
+        return turns, np.matmul(start, self.running[at] - self.running[first])
+
+
+#: The last integration of each recording (the rates as given and, for the handedness check, negated), at most
+#: :data:`_KEEP_INTEGRATIONS`: reused while a fit evaluates at the same bias (the candidate mappings start from
+#: the general fit, the covariance at the solution the fit last integrated) and as the point a linearization
+#: (M4) carries from. Emptied when a gyro fit ends (:func:`forget_integration`).
 _LAST: list[_Integration] = []
+_KEEP_INTEGRATIONS = 2
 _LOCK = threading.Lock()
+#: The last two recordings' steps (:attr:`_Trajectory.steps`): (rates, times, stretches, steps).
+_Steps = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]
+_STEPS: list[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], _Steps]] = []
+#: The last rows' rotations carried by (M4) (:func:`_linearized`): (trajectory, bias's bytes, R_k and C_k).
+_CARRIED: list[tuple[_Trajectory, bytes, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
+#: The last two evaluations' blocks (:meth:`_Trajectory.blocks`): (trajectory, parameters' bytes, blocks).
+_BLOCKS: list[tuple[_Trajectory, bytes, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]] = []
+
+
+def _integration(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[_Integration, int]:
+    """``traj``'s recording integrated at bias ``beta`` (:class:`_Integration`), or the kept one at that bias, and
+    where ``traj``'s samples start in it."""
+    beta = np.asarray(beta, dtype=np.float64)
+    with _LOCK:
+        for last in _LAST:
+            offset = last.offset(traj)
+            if offset is not None and np.array_equal(last.beta, beta):
+                return last, offset
+    mean_rates, dt, _, _ = traj.steps
+    n = traj.t.size
+    chain = np.zeros(n, dtype=bool)
+    chain[0] = True  # one chain: a stretch's rotations are its quotients
+    quaternions = _rotation_quaternions(mean_rates, dt, beta, chain)
+    entries = _entries(quaternions)  # (9, n): each entry's run over the samples
+    # Σ dt_j Q_{j+1} J_r(φ_j), summed along each entry's contiguous run: a third of the time of the same sums
+    # over the (n, 3, 3) view.
+    running = _jacobian_steps(entries, mean_rates, dt, beta)
+    running[:, 0] = 0.0
+    running[:, 1:] *= dt
+    np.cumsum(running, axis=1, out=running)
+    found = _Integration(traj.w, traj.t, beta.copy(), quaternions, entries, running.T.reshape(n, 3, 3))
+    with _LOCK:  # one per recording (its rates' array), the newest last
+        _LAST[:] = [*(kept for kept in _LAST if kept.w is not traj.w), found][-_KEEP_INTEGRATIONS:]
+    return found, 0
 
 
 def _integrated(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """R_k and the running sums of ``traj``'s recording at bias ``beta`` (:class:`_Integration`), integrated or
-    reused."""
-    key = np.asarray(beta, dtype=np.float64).tobytes()
+    """R_k and C_k of every sample of ``traj`` from its stretch's first sample (n, 3, 3) each, at bias ``beta``
+    (:class:`_Integration`), integrated or reused."""
+    found, offset = _integration(traj, beta)
+    return found.at_rows(traj, np.arange(traj.t.size), offset)
+
+
+def _integrated_rows(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """R_k and C_k at ``traj``'s rows, every sample integrated."""
+    found, offset = _integration(traj, beta)
+    return found.at_rows(traj, traj.rows, offset)
+
+
+def forget_rates(w: NDArray[np.float64]) -> None:
+    """Drop what is kept for the rates ``w`` (a reading of them done with: the negated rates' check), so that
+    the recording's own integration is the only one of its size left."""
     with _LOCK:
-        for last in _LAST:
-            if (last.w is traj.w and last.t is traj.t and last.beta == key
-                    and (last.segment is traj.segment or np.array_equal(last.segment, traj.segment))):  # fmt: skip
-                return last.turns, last.running
-    mean_rates, dt, start, weights = traj.steps
-    entries = _rotation_entries(mean_rates, dt, beta, start)  # (9, n): each entry's run over the samples
-    n = start.size
-    turns = entries.T.reshape(n, 3, 3)
-    # Σ dt_j R_{j+1} J_r(φ_j) (none across a start), summed along each entry's contiguous run: a third of the
-    # time of the same sums over the (n, 3, 3) view.
-    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
-    with _LOCK:
-        _LAST[:] = [_Integration(traj.w, traj.t, traj.segment, key, turns, running)]
-    return turns, running
+        _LAST[:] = [kept for kept in _LAST if kept.w is not w]
+        _LINEAR[:] = [kept for kept in _LINEAR if kept.w is not w]
+        _STEPS[:] = [kept for kept in _STEPS if kept[0] is not w]
 
 
 def forget_integration() -> None:
@@ -314,6 +406,9 @@ def forget_integration() -> None:
     with _LOCK:
         _LAST.clear()
         _LINEAR.clear()
+        _BLOCKS.clear()
+        _STEPS.clear()
+        _CARRIED.clear()
 
 
 @dataclass(frozen=True)
@@ -333,44 +428,60 @@ class _Linearization:
     reach: float
 
     def holds(self, traj: _Trajectory, beta: NDArray[np.float64]) -> bool:
-        """True for ``traj``'s recording and rows, with ``beta`` within :data:`LINEAR_TURN` of its own."""
+        """True for ``traj``'s recording and rows, with ``beta`` within its turn (``traj.turn``) of its own."""
         return (self.w is traj.w and self.t is traj.t and np.array_equal(self.segment, traj.segment)
                 and np.array_equal(self.rows, traj.rows)
-                and float(np.max(np.abs(beta - self.beta))) * self.reach <= LINEAR_TURN)  # fmt: skip
+                and float(np.max(np.abs(beta - self.beta))) * self.reach <= traj.turn)  # fmt: skip
 
 
-#: The screening fits' linearizations: the general fit's and the negated rates' (:mod:`.rates`), the last two.
+#: The screening fits' linearizations (the general fit's, the negated rates' of :mod:`.rates`, the candidates'
+#: and the kept fit's), the last :data:`_KEEP_LINEAR`: each is the size of its rows.
 _LINEAR: list[_Linearization] = []
+_KEEP_LINEAR = 6
 
 
-def _linearization(traj: _Trajectory, beta: NDArray[np.float64]) -> _Linearization:
-    """(M4)'s terms at ``beta`` from one integration over every sample."""
-    mean_rates, dt, start, weights = traj.steps
-    q = _rotation_quaternions(mean_rates, dt, beta, start)
-    entries = _entries(q)
-    n, rows = start.size, traj.rows
-    running = np.cumsum(_jacobian_steps(entries, mean_rates, dt, beta) * weights, axis=1).T.reshape(n, 3, 3)
+def _reach(traj: _Trajectory) -> tuple[NDArray[np.bool_], NDArray[np.int64], float]:
+    """The rows that restart a chain (m,), each row's anchor (m,) and the longest interval between them (s)."""
+    rows = traj.rows
     restart = np.ones(rows.size, dtype=bool)
     restart[1:] = traj.segment[rows[1:]] != traj.segment[rows[:-1]]
     anchor = np.where(restart, traj.first[rows], np.concatenate([[0], rows[:-1]]))
+    return restart, anchor, float(np.max(traj.t[rows] - traj.t[anchor]))
+
+
+def _linearization(traj: _Trajectory, beta: NDArray[np.float64]) -> _Linearization:
+    """(M4)'s terms at ``beta`` from one integration over every sample: a kept one of the same recording when its
+    bias is within ``traj.turn`` of ``beta`` over these rows' longest interval (then (M4) is taken from there),
+    else a new one at ``beta``."""
+    restart, anchor, reach = _reach(traj)
+    with _LOCK:
+        near = [(kept, kept.offset(traj)) for kept in _LAST if kept.offset(traj) is not None
+                and float(np.max(np.abs(beta - kept.beta))) * reach <= traj.turn]  # fmt: skip
+    found, offset = near[-1] if near else _integration(traj, beta)
+    assert offset is not None
+    q, entries, running = found.quaternions, found.entries, found.running
+    rows, anchor = traj.rows + offset, anchor + offset  # (the anchor is in its row's stretch: Q_aᵀ Q_r = R_aᵀ R_r)
     conjugate = q[:, anchor] * np.array([[1.0], [-1.0], [-1.0], [-1.0]])
     local = _product(conjugate, q[:, rows])  # ΔR_i = R_aᵀ R_r
     turned = entries[:, anchor].T.reshape(-1, 3, 3)
     sums = np.matmul(turned.transpose(0, 2, 1), running[rows] - running[anchor])  # ΔC_i = R_aᵀ (C_r − C_a)
-    reach = float(np.max(traj.t[rows] - traj.t[anchor]))
-    return _Linearization(traj.w, traj.t, traj.segment, rows, np.array(beta, dtype=np.float64), local, sums,
-                          restart, reach)  # fmt: skip
+    return _Linearization(traj.w, traj.t, traj.segment, traj.rows, found.beta, local, sums, restart, reach)
 
 
 def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """R_k and ``C_k`` at ``traj``'s rows (rows, 3, 3) at bias ``beta`` by (M4), from the linearization that holds
-    (or a new one)."""
+    (or a new one); the last is kept (a fit's start and its first evaluation ask for the same)."""
+    key = np.asarray(beta, dtype=np.float64).tobytes()
+    with _LOCK:
+        for kept_traj, at, carried in _CARRIED:
+            if kept_traj is traj and at == key:
+                return carried
     with _LOCK:
         found = next((kept for kept in _LINEAR if kept.holds(traj, beta)), None)
     if found is None:
         found = _linearization(traj, beta)
         with _LOCK:
-            _LINEAR[:] = [*_LINEAR[-1:], found]
+            _LINEAR[:] = [*_LINEAR[1 - _KEEP_LINEAR :], found]
     v = -np.matmul(found.sums, beta - found.beta)  # (rows, 3): exp([v]×) carries ΔR_i to β
     angle = np.sqrt(np.einsum("ki,ki->k", v, v))
     sinc = np.where(angle > 1e-12, np.sin(0.5 * angle) / np.maximum(angle, 1e-300), 0.5)
@@ -384,12 +495,16 @@ def _linearized(traj: _Trajectory, beta: NDArray[np.float64]) -> tuple[NDArray[n
     steps = np.matmul(before, found.sums)  # R_a ΔC_i
     total = np.cumsum(steps, axis=0)
     first = traj.starts[traj.segment[traj.rows]]  # each row's stretch's first row
-    return turns, total - total[first] + steps[first]
+    carried = (turns, total - total[first] + steps[first])
+    with _LOCK:
+        _CARRIED[:] = [(traj, key, carried)]
+    return carried
 
 
 def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
                 basis: NDArray[np.float64], max_rows: int = MAX_RESIDUAL_SAMPLES,
-                gravity: _Gravity | None = None, linear: bool = False) -> _Trajectory:  # fmt: skip
+                gravity: _Gravity | None = None, linear: bool = False, turn: float = LINEAR_TURN,
+                origin: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None) -> _Trajectory:  # fmt: skip
     span = float(t[-1] - t[0])
     length = max(segment_s, span / MAX_SEGMENTS)
     segment = np.minimum(((t - t[0]) // length).astype(np.int64), max(int(span // length) - 1, 0))
@@ -398,31 +513,41 @@ def _trajectory(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.fl
     stride = max(1, math.ceil(y.shape[0] / max_rows))
     rows = np.arange(0, y.shape[0], stride)
     linear = linear and stride >= LINEAR_STRIDE
-    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity, linear)
+    return _Trajectory(y, w, t, segment, rows, int(segment.max()) + 1, basis, gravity, linear, turn, origin)
 
 
 def _start(traj: _Trajectory, g: NDArray[np.float64], offset: NDArray[np.float64],
            beta: NDArray[np.float64]) -> NDArray[np.float64]:  # fmt: skip
-    """Parameters for ``traj`` from G (any scale: |b₀| = 1 rescales it), V and β; b₀ (and s) read off the
-    samples."""
+    """Parameters for ``traj`` from G (any scale: |b₀| = 1 rescales it), V and β; each stretch's b₀ the mean of
+    ``R_k H (y_k − V)`` over its rows (b₀ = R_k b_k, (M1)), which the first evaluation's rotations give, and
+    (with gravity) δ read off the samples."""
     h = np.linalg.inv(g)
-    field = np.einsum("ij,kj->ki", h, traj.y - offset)
+    field = (traj.y[traj.rows] - offset) @ h.T
     radius = float(np.median(np.linalg.norm(field, axis=1)))
-    first = np.array([field[np.argmax(traj.segment == s)] for s in range(traj.count)])
-    first /= np.linalg.norm(first, axis=1)[:, None]
+    turns = (_linearized(traj, beta) if traj.linear else _integrated_rows(traj, beta))[0]
+    first = traj._by_stretch(np.matmul(turns, field[:, :, None])[:, :, 0])
+    length = np.linalg.norm(first, axis=1)
+    if not np.all(length > 0):  # a stretch without rows: its first sample's direction (it carries no residual)
+        lone = np.array([(traj.y[np.argmax(traj.segment == s)] - offset) @ h.T for s in range(traj.count)])
+        first[length == 0] = lone[length == 0]
+        length = np.linalg.norm(first, axis=1)
+    first /= np.maximum(length, 1e-300)[:, None]
     angles = np.column_stack([np.arcsin(np.clip(first[:, 2], -1, 1)), np.arctan2(first[:, 1], first[:, 0])])
     q, *_ = np.linalg.lstsq(traj.basis, (g * radius).ravel(), rcond=None)
     head = [q, offset, beta]
     if traj.gravity is not None:
         still = traj.gravity.still
-        unit = field[still] / np.linalg.norm(field[still], axis=1)[:, None]
+        seen = (traj.y[still] - offset) @ h.T
+        unit = seen / np.linalg.norm(seen, axis=1)[:, None]
         dots = np.einsum("ki,ki->k", traj.gravity.down[still], unit)
         head.append(np.array([math.asin(float(np.clip(np.median(dots), -0.99, 0.99)))]))
     return np.concatenate([*head, angles.ravel()])
 
 
-def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iterations: int = 60) -> Solution:
-    """Levenberg-Marquardt on the samples' residuals (the project's solver: normal equations, k ≤ 135)."""
+def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iterations: int = 60,
+                        tolerance: float = 1e-3) -> Solution:
+    """Levenberg-Marquardt on the samples' residuals (the project's solver: normal equations, k ≤ 135), stopped
+    at a step shorter than ``tolerance`` standard errors (the solver's own 1e-3, unless said)."""
 
     def evaluate(p: NDArray[np.float64], warm: Any) -> Evaluation:
         return traj.normal_equations(p)
@@ -431,7 +556,7 @@ def _maximum_likelihood(traj: _Trajectory, start: NDArray[np.float64], iteration
         return _solve_arrow(matrix, rhs, traj.head)
 
     return levenberg_marquardt(evaluate, start, n_residuals=traj.n_residuals(), max_iterations=iterations,
-                               solve=solve)  # fmt: skip
+                               solve=solve, skip_small_steps=tolerance)  # fmt: skip
 
 
 #: The head's Schur complement (eq. M3) is inverted only below this condition number; above it the pseudo-inverse
@@ -530,8 +655,9 @@ def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64
     batches = max(2, min(40, rows // 50))
     sums = np.array([s.sum(axis=0) for s in np.array_split(score, batches)])
     # Products by einsum: BLAS's threads on matrices of this size cost more than the arithmetic on shared cores.
-    middle = np.einsum("bi,bj->ij", sums, sums) * batches / (batches - 1)
-    sandwich = np.einsum("ij,jk->ik", np.einsum("ij,jk->ik", inverse, middle), inverse)
+    # I⁻¹ (Σ s sᵀ) I⁻¹ = (I⁻¹ S)(I⁻¹ S)ᵀ with S the batches' sums (p, batches): a fortieth of p³ each.
+    turned = np.einsum("ij,bj->ib", inverse, sums)
+    sandwich = np.einsum("ib,jb->ij", turned, turned) * batches / (batches - 1)
     # Never below the independent-noise covariance (a few batches can understate it by chance).
     covariance = _larger(sandwich, independent)
     if traj.gravity is not None:
@@ -549,7 +675,9 @@ def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64
 def _larger(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """``b`` plus the positive part of ``a − b``: the larger of two covariances."""
     values, vectors = _eigh_serial(a - b)
-    return b + np.einsum("ik,jk->ij", vectors * np.clip(values, 0, None), vectors)
+    positive = values > 0  # (the others add nothing)
+    kept = vectors[:, positive]
+    return b + np.einsum("ik,jk->ij", kept * values[positive], kept)
 
 
 @dataclass(frozen=True)
@@ -568,12 +696,25 @@ class _Model:
 def _fit_model(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], segment_s: float,
                name: str, g: NDArray[np.float64], offset: NDArray[np.float64], beta: NDArray[np.float64],
                max_rows: int = MAX_RESIDUAL_SAMPLES, iterations: int = 60,
-               gravity: _Gravity | None = None, linear: bool = False) -> _Model:  # fmt: skip
-    """One model of G fitted from G, V and β; ``linear``: a screening fit, whose rotations between its rows may
-    follow the bias to first order (M4)."""
+               gravity: _Gravity | None = None, linear: bool = True, turn: float = FINAL_TURN,
+               loose: bool = False, origin: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None,
+               tolerance: float = 1e-3) -> _Model:  # fmt: skip
+    """One model of G fitted from G, V and β; ``linear``: its rotations between rows at least
+    :data:`LINEAR_STRIDE` samples apart follow the bias by (M4) while it stays within ``turn`` (the screening's
+    :data:`LINEAR_TURN`, or :data:`FINAL_TURN` for the fit kept and the halves), else every sample is
+    integrated at every bias. ``loose``: first carried :data:`LOOSE_TURN` far (a fit whose bias moves far).
+    ``origin``: the recording these samples are a stretch of (its rates, times, and where they start), whose
+    integration they may carry from (the halves). ``tolerance``: the step, in standard errors, below which the
+    fit stops (:func:`_maximum_likelihood`)."""
     basis = np.eye(9) if name == "general" else _symmetric(np.eye(3), MAPPINGS[name].T)  # G = W Pᵀ = (P S)⁻¹
-    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity, linear)
-    return _Model(name, traj, _maximum_likelihood(traj, _start(traj, g, offset, beta), iterations))
+    traj = _trajectory(y, w, t, segment_s, basis, max_rows, gravity, linear, turn, origin)
+    start = _start(traj, g, offset, beta)
+    if traj.linear and loose and turn < LOOSE_TURN:
+        # First towards the minimum with the rows' rotations carried LOOSE_TURN far (a fit whose bias moves far,
+        # as the negated rates' does, then integrates once on the way instead of every LINEAR_TURN), then on
+        # from there with the turn asked for.
+        start = _maximum_likelihood(replace(traj, turn=LOOSE_TURN), start, iterations).params
+    return _Model(name, traj, _maximum_likelihood(traj, start, iterations, tolerance))
 
 
 def _parts(model: _Model) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:

@@ -8,7 +8,10 @@ reading (:func:`_readings`, :func:`_lagged_readings`) is scored by the windowed 
 turning it explains, ``|r|² / Σ |H dy|²``, a correction that no soft iron gives (an axis squeezed
 :data:`MIN_SINGULAR_RATIO`) not counted; one far better than the given reading is refused with its own code
 and remedy. Where the windows cannot tell (a slow vehicle) and the fit leaves a large residual, stage 2's
-general fit decides (:func:`_check_readings_by_fit`, :func:`_check_handedness`).
+general fit decides (:func:`_check_readings_by_fit`, :func:`_check_handedness`). The handedness is the windows'
+to tell only by a factor of :data:`AXES_WINDOWS_GAIN`: turning mostly about one axis, a mirrored gyro turns
+the field alike, and where neither the windows nor the fit tell it the recording is refused as such
+(``handedness_undetermined``, exit 1), not as the wrong axes.
 
 A gyroscope logged at its own rate is averaged over each magnetometer sample's interval from its running
 integral (:func:`_own_rate`): the mean rate over the interval is what turns the field between two samples,
@@ -26,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..._validation import check_rows, check_times
 from ...errors import CalibrationError, OptionError
 from .lag import MAX_LAG_S, _delayed
-from .model import SCREEN_ROWS, _fit_model, _Model, _noise_variance
+from .model import LINEAR_TURN, SCREEN_ROWS, _fit_model, _Model, _noise_variance, forget_rates
 from .windows import (
     GAP_MIN_S,
     GAP_STEPS,
@@ -52,6 +55,11 @@ DECISIVE_SHARE = 0.05
 HANDEDNESS_RATIO = 500.0
 #: ... when the negated fit's residual sum of squares is within this factor of the samples' white noise.
 HANDEDNESS_FLOOR = 1.5
+#: The windows alone refuse the other handedness only when its windowed residual is below this share of the given
+#: reading's: a tumble's mirror image leaves 1e-3 to 1e-4 of it, a car's 0.02-0.06, but on a boat or a flight
+#: (turning mostly about one axis, about which a mirrored gyro turns the field alike) the right reading and its
+#: mirror image are within a few times of each other, either way (docs/methods.md, "gyro").
+AXES_WINDOWS_GAIN = 0.01
 #: The median time step from which time_s may be in milliseconds (a gyro-aided fit at under 5 Hz).
 MS_STEP = 0.2
 #: Lags beyond MAX_LAG_S are tried, on a grid of WIDE_LAG_STEP_S to MAX_WIDE_LAG_S, when the given reading's
@@ -166,6 +174,7 @@ class _Reading:
     t: NDArray[np.float64]
     words: str = ""
     remedy: tuple[tuple[str, str], ...] = ()
+    scale: float | None = None  # the given rates times this (on the given times): their windows are the given's scaled
 
 
 def _readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Reading]:
@@ -175,12 +184,12 @@ def _readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Reading]:
     found = [
         _Reading("gyro_unit", w * (math.pi / 180.0), t,
                  "gyro= looks like degrees per second: give it in rad/s (numpy.radians(gyro))",
-                 (("gyro", "numpy.radians(gyro)"),)),
+                 (("gyro", "numpy.radians(gyro)"),), math.pi / 180.0),
         _Reading("gyro_axes", -w, t,
                  "gyro= turns the field the wrong way round: the gyro's axes are of the other handedness than the "
                  "magnetometer's (two of them swapped, or one with its sign flipped); give them in the order and "
                  "signs of the sensor's datasheet or the firmware's board rotation, right-handed",
-                 (("gyro", "the rates about right-handed axes"),)),
+                 (("gyro", "the rates about right-handed axes"),), -1.0),
     ]  # fmt: skip
     for factor, unit, minimum in ((1e-3, "milliseconds", MS_STEP), (1e-6, "microseconds", 1e3 * MS_STEP)):
         if step >= minimum:
@@ -207,13 +216,21 @@ def _lagged_readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Re
     ]  # fmt: skip
 
 
-def _windowed_share(y: NDArray[np.float64], reading: _Reading, bias: bool = True) -> float:
+def _windowed_share(y: NDArray[np.float64], reading: _Reading, bias: bool = True,
+                    given: _Windows | None = None) -> float:  # fmt: skip
     """The windowed residual of stage 1 (the bias fitted, unless ``bias`` is False) over the turning it explains,
     ``|r|² / Σ |H dy|²``; inf when only a correction that no soft iron gives fits (an axis squeezed
     :data:`MIN_SINGULAR_RATIO`: samples that move in a plane are also fitted by a rank-one H that ignores the
-    rates)."""
-    length = window_length(reading.t)
-    win = _windows(y, reading.w, reading.t, length)
+    rates). ``given``: the given rates' windows, which a reading with a ``scale`` scales (they are linear in ω)."""
+    if given is not None and reading.scale is not None:
+        win = _Windows(given.dy, reading.scale * given.M, given.Sy, reading.scale * given.Sw, given.T)
+    else:
+        win = _windows(y, reading.w, reading.t, window_length(reading.t))
+    return _share(win, bias)
+
+
+def _share(win: _Windows, bias: bool = True) -> float:
+    """:func:`_windowed_share` on the windows ``win``."""
     if win.T.size < 20:
         return math.inf
     try:
@@ -239,8 +256,9 @@ def _check_readings(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[n
     """Refuses inputs that the kinematics read far better another way (stage 1's windows): in degrees per
     second, in milliseconds, of the other handedness, or beyond the lag searched. Returns the candidates the
     windows left open, best first (what :func:`_check_readings_by_fit` tries when the fit is poor)."""
+    windows = _windows(y, w, t, window_length(t))
     given = _windowed_share(y, _Reading("given", w, t))
-    scored = [(_windowed_share(y, reading), reading) for reading in _readings(w, t)]
+    scored = [(_windowed_share(y, reading, given=windows), reading) for reading in _readings(w, t)]
     if not lag_given and not given < WIDE_LAG_SHARE and min(share for share, _ in scored) >= DECISIVE_SHARE:
         # The gyro explains little of the turning, read any other way too: is it late or early? The lags are
         # ranked without the bias (a tenth of the cost), the best one scored with it.
@@ -250,7 +268,11 @@ def _check_readings(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[n
             best_lag = lagged[int(np.argmin(shares))]
             scored.append((_windowed_share(y, best_lag), best_lag))
     scored.sort(key=lambda pair: pair[0])
-    share, best = scored[0]
+    # The other handedness only where the windows are overwhelming: elsewhere the fit of stage 2 decides
+    # (:func:`_check_handedness`).
+    told_apart = [(share, reading) for share, reading in scored
+                  if reading.code != "gyro_axes" or share < AXES_WINDOWS_GAIN * given]  # fmt: skip
+    share, best = told_apart[0] if told_apart else scored[0]
     if share < min(READING_GAIN * given, DECISIVE_SHARE):
         told = (
             "only read so do the kinematics fit with a soft iron" if math.isinf(given)
@@ -273,7 +295,7 @@ def _check_readings_by_fit(y: NDArray[np.float64], t: NDArray[np.float64], readi
             offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
             start = np.asarray(np.linalg.inv(h), dtype=np.float64)
             model = _fit_model(y, reading.w, reading.t, segment_s, "general", start, offset, beta, SCREEN_ROWS,
-                               linear=True)  # fmt: skip
+                               turn=LINEAR_TURN, loose=True)  # fmt: skip
         except np.linalg.LinAlgError:
             continue
         g = model.traj.distortion(model.solution.params)
@@ -283,22 +305,37 @@ def _check_readings_by_fit(y: NDArray[np.float64], t: NDArray[np.float64], readi
         strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
         rms = math.sqrt(model.rss / model.traj.rows.size) / strength
         if rms < residual_rms / 3.0:
-            _refuse_reading(reading, f"the samples leave {100 * residual_rms:.0f} % of the field off the turning the "
-                                     f"gyro predicts as given, {100 * rms:.1f} % read so")  # fmt: skip
+            how = f"the samples leave {100 * residual_rms:.0f} % of the field off the turning the gyro predicts"
+            if reading.code == "gyro_axes":  # the other handedness only where _check_handedness found it
+                _cannot_tell(f"{how} as given, {100 * rms:.1f} % with the rates negated, short of what tells it: "
+                             f"{HANDEDNESS_RATIO:.0f} noise variances, the negated fit at the samples' noise")
+            _refuse_reading(reading, f"{how} as given, {100 * rms:.1f} % read so")
 
 
 def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], win: _Windows,
                       segment_s: float, general: _Model) -> None:  # fmt: skip
     """The general fit of stage 2 with the rates negated (the gyro's axes of the other handedness, module
     docstring): far better by :data:`HANDEDNESS_RATIO` noise variances is refused. Where the windows cannot
-    tell (a boat's roll, a flight), this fit can (docs/methods.md, "gyro")."""
+    tell (a boat's roll, a flight), this fit can (docs/methods.md, "gyro"); where they tell the rates as given
+    :data:`AXES_WINDOWS_GAIN` apart from the negated ones (a tumble), it is not run. Where the windows prefer the
+    negated rates (:data:`READING_GAIN`) and this fit does not prefer the given ones as far, the recording
+    cannot tell the handedness: refused so, with what would tell it."""
     negated = _Windows(win.dy, -win.M, win.Sy, -win.Sw, win.T)
+    given_share, negated_share = _share(win), _share(negated)
+    if given_share < DECISIVE_SHARE and AXES_WINDOWS_GAIN * negated_share > given_share:
+        return  # the windows tell it, as they tell the other handedness (:data:`AXES_WINDOWS_GAIN`): as given
+    suspected = negated_share < min(READING_GAIN * given_share, DECISIVE_SHARE)
     try:
         _, beta = _windowed_bias(negated)
         h, c, _ = _constrained(_design(negated, beta), np.eye(9))
         offset = np.asarray(np.linalg.lstsq(h, c, rcond=None)[0], dtype=np.float64)
         start = np.asarray(np.linalg.inv(h), dtype=np.float64)
-        mirrored = _fit_model(y, -w, t, segment_s, "general", start, offset, beta, SCREEN_ROWS, linear=True)
+        negated_rates = -w
+        try:
+            mirrored = _fit_model(y, negated_rates, t, segment_s, "general", start, offset, beta, SCREEN_ROWS,
+                                  turn=LINEAR_TURN, loose=True)  # fmt: skip
+        finally:
+            forget_rates(negated_rates)  # (its integration is the recording's size)
     except np.linalg.LinAlgError:
         return
     g = mirrored.traj.distortion(mirrored.solution.params)
@@ -315,3 +352,20 @@ def _check_handedness(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray
         reading = next(r for r in _readings(w, t) if r.code == "gyro_axes")
         _refuse_reading(reading, f"with the rates negated, the samples follow the turning {ratio:.0f} noise "
                                  "variances better")  # fmt: skip
+    told = (mirrored.rss - general.rss) / max(_noise_variance(general), 1e-300)
+    if suspected and not (told > HANDEDNESS_RATIO and general.rss < HANDEDNESS_FLOOR * floor):
+        _cannot_tell(f"the windows fit the rates negated {given_share / max(negated_share, 1e-300):.1f} times better, "
+                     f"the fit of every sample the rates as given {told:.0f} noise variances better, where "
+                     f"{HANDEDNESS_RATIO:.0f} would tell")  # fmt: skip
+
+
+def _cannot_tell(evidence: str) -> None:
+    """The refusal of a recording that does not tell the gyro's handedness (``evidence``: what was seen)."""
+    raise CalibrationError(
+        "the samples do not support the gyro calibration: they do not tell the gyroscope's handedness against the "
+        f"magnetometer's ({evidence}): turning mostly about one axis, as a boat rolls or an aircraft turns, a "
+        "mirrored gyroscope turns the field alike; record a few tilts about a second axis (rolls and pitches), or "
+        "calibrate with the logged attitude and the known field (method vector or align), and check the gyro's axes "
+        "and signs against the sensor's datasheet",
+        codes=("handedness_undetermined",), remedy=(("method", "vector"),),
+    )

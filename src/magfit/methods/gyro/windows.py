@@ -47,9 +47,17 @@ class _Windows:
 
 
 def _gaps(t: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """(n − 1,) True at the steps of ``t`` that are gaps (:data:`GAP_STEPS`): nothing is integrated across them."""
+    """(n − 1,) True at the steps of ``t`` that are gaps (:data:`GAP_STEPS`): nothing is integrated across them.
+    The last times' are kept (every stretch and window of a fit asks for them)."""
+    with _LOCK:
+        for times, kept in _GAPS:
+            if times is t:
+                return kept
     steps = np.diff(t)
-    return np.asarray(steps > max(GAP_STEPS * float(np.median(steps)), GAP_MIN_S), dtype=bool)
+    gaps = np.asarray(steps > max(GAP_STEPS * float(np.median(steps)), GAP_MIN_S), dtype=bool)
+    with _LOCK:
+        _GAPS[:] = [*_GAPS[-1:], (t, gaps)]
+    return gaps
 
 
 @dataclass(frozen=True)
@@ -120,10 +128,20 @@ _LAST: list[_Frame] = []
 _LOCK = threading.Lock()
 
 
+#: The last windows of one recording's rates, and the last biases fitted on windows: the lag search, the readings'
+#: check, stage 1 and stage 3 ask for the same ones (the rates as given, with no delay).
+_WINDOWS: list[tuple[NDArray[np.float64], _Windows]] = []
+_GAPS: list[tuple[NDArray[np.float64], NDArray[np.bool_]]] = []
+_BIASES: list[tuple[_Windows, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
+
+
 def forget_frame() -> None:
-    """Drop the kept frame (its arrays are the size of the recording)."""
+    """Drop the kept frame, windows and biases (the frame's arrays are the size of the recording)."""
     with _LOCK:
         _LAST.clear()
+        _WINDOWS.clear()
+        _BIASES.clear()
+        _GAPS.clear()
 
 
 def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64], length: int) -> _Windows:
@@ -131,9 +149,18 @@ def _windows(y: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float
 
     Trapezoids: over a window ``[s, s + L]``, ``∫ f dt = Σ_{k=s}^{s+L−1} ½ dt_k (f_k + f_{k+1})``, summed window
     by window (each sample weighted by the half-steps beside it), not as differences of running sums. What does
-    not depend on the rates is computed once per samples and times (:func:`_frame`).
+    not depend on the rates is computed once per samples and times (:func:`_frame`), and the windows of the
+    last rates asked for are kept.
     """
-    return _frame(y, t, length).windows(w)
+    frame = _frame(y, t, length)
+    with _LOCK:
+        for rates, kept in _WINDOWS:
+            if rates is w and _LAST and _LAST[0] is frame:
+                return kept
+    win = frame.windows(w)
+    with _LOCK:
+        _WINDOWS[:] = [(w, win)]
+    return win
 
 
 def _design(win: _Windows, beta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -185,15 +212,35 @@ def _constrained(
 
 def _windowed_bias(win: _Windows, iterations: int = 20) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Gauss-Newton on the windowed residual over θ = (H, c) (on its unit sphere: the scale is free) and β,
-    from the bias-free total least-squares solution."""
-    h, c, _ = _constrained(_design(win, np.zeros(3)), np.eye(9))
+    from the bias-free total least-squares solution (the last few kept, by the windows they were fitted on: the
+    readings' check and the handedness check both negate the given rates)."""
+    with _LOCK:
+        for kept, result in _BIASES:
+            if iterations == 20 and (kept is win or (kept.dy is win.dy and kept.T is win.T and np.array_equal(
+                    kept.M, win.M) and np.array_equal(kept.Sw, win.Sw))):  # fmt: skip
+                return result
+    result = _gauss_newton(win, iterations)
+    if iterations == 20:
+        with _LOCK:
+            _BIASES[:] = [*_BIASES[-3:], (win, result)]
+    return result
+
+
+def _gauss_newton(win: _Windows, iterations: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`_windowed_bias`, computed. The design is linear in β: built once at β = 0 and once for each axis's
+    part (the windows' β terms alone), then combined at each iterate."""
+    zero = np.zeros(3)
+    base = _design(win, zero)
+    parts = [_design(_Windows(np.zeros_like(win.dy), -axis[None, :, None] * win.Sy[:, None, :], win.Sy,
+                              -axis * win.T[:, None], win.T), zero) for axis in np.eye(3)]  # fmt: skip
+    h, c, _ = _constrained(base, np.eye(9))
     theta = np.concatenate([h.ravel(), c])
     theta /= np.linalg.norm(theta)
     beta = np.zeros(3)
     m = win.T.size
     for _ in range(iterations):
         h, c = theta[:9].reshape(3, 3), theta[9:]
-        jac_theta = _design(win, beta)
+        jac_theta = base + beta[0] * parts[0] + beta[1] * parts[1] + beta[2] * parts[2]
         # H ∫y − T c: the residual is linear in β through −β × u
         u = np.einsum("ij,mj->mi", h, win.Sy) - win.T[:, None] * c
         q, _ = np.linalg.qr(np.column_stack([theta, np.eye(12)]))
