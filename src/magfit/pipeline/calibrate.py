@@ -230,6 +230,7 @@ def calibrate_file(
     elif place is None and importlib.util.find_spec("pygeomag") is not None and source.position is not None:
         place = FROM_LOG  # a log that knows where it was: the fitted field is checked against the model's there
     model = _model(path, source, place, date)
+    fitted_source = _placed(source, location)  # the vector method's reference field: the place given, without fixes
     chosen = [sensor] if sensor is not None else _usable(source)
     compasses: list[CompassCalibration] = []
     failures: list[CompassFailure] = []
@@ -242,7 +243,8 @@ def calibrate_file(
             compass_options["field_strength"] = field_strength
         try:
             compass = _calibrate_compass(
-                source, magnetometer, method, compass_options, unit, even, say, date, motor, max_samples=max_samples
+                fitted_source, magnetometer, method, compass_options, unit, even, say, date, motor,
+                max_samples=max_samples,
             )
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
@@ -258,6 +260,18 @@ def calibrate_file(
     order = [m.id for m in source.magnetometers]
     sensors = tuple(sorted(tried, key=lambda sensor_id: order.index(sensor_id) if sensor_id in order else len(order)))
     return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors, source.position, source.identity)
+
+
+def _placed(source: Source, location: tuple[float, float, float] | Literal["log"] | None) -> Source:
+    """``source`` with the place given as its position when the log holds no 3-D GNSS fix of its own: the
+    World Magnetic Model's field there is the reference of the methods that need one (``vector``). A log's own
+    fixes are kept (they follow the vehicle; the place given is checked against them by the model's field)."""
+    if location is None or location == FROM_LOG or source.position is not None:
+        return source
+    from ..sources.position import Position
+
+    lat, lon, alt_km = location
+    return replace(source, position=Position(lat, lon, alt_km, float("nan"), 0))
 
 
 def _with_model_field(compass: CompassCalibration, model: ModelField | None) -> CompassCalibration:
