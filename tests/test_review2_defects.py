@@ -242,7 +242,6 @@ def test_align_refusal_names_only_options_align_or_the_named_command_has(tmp_pat
                 assert match.group() in flags, f"{match.group()} is no option of magfit align"
 
 
-@pytest.mark.xfail(strict=True, reason="calibrate (auto) ignores a car CSV's attitude, reference and gyro: exit 1")
 def test_default_calibrate_of_a_car_uses_the_attitude_and_gyro_it_holds(tmp_path: Path) -> None:
     sim, columns = _car()
     path, cal = tmp_path / "car.csv", tmp_path / "cal.json"
