@@ -121,16 +121,17 @@ def best(attempts: Sequence[Attempt]) -> Attempt | None:
 def rescue_note(where: str, refused: CalibrationError, attempts: Sequence[Attempt], chosen: Attempt) -> str:
     """The note of a rescued default fit: which method, why the magnitude-only fit was not enough, and what
     each method tried found."""
+    from ..findings import REASON_CODES
     from ..remedy import option
 
-    codes = ", ".join(refused.codes) or "refused"
+    why = "; ".join(f"{code}: {REASON_CODES.get(code, code)}" for code in refused.codes) or "refused"
     others = "; ".join(a.found() for a in attempts if a is not chosen)
     return (
-        f"{where}: the magnitude-only fit ({option('method', 'auto')}) cannot calibrate this recording ({codes}): "
-        "the field's magnitude alone leaves part of the model undetermined (turns about one axis, as a vehicle "
-        f"makes, do not fix it); the recording's own {_READS[chosen.method]} do: calibrated by the {chosen.method} "
-        f"method ({chosen.verdict}, level heading one-sigma ±{chosen.heading_sigma_deg:.2g}°, the best determined of "
-        "those tried)" + (f"; also tried: {others}" if others else "")
+        f"{where}: the magnitude-only fit ({option('method', 'auto')}) cannot calibrate this recording ({why}): "
+        "the field's magnitude alone does not fix it from turns about one axis mostly, as a vehicle makes; the "
+        f"recording's own {_READS[chosen.method]} do: calibrated by the {chosen.method} method ({chosen.verdict}, "
+        f"level heading one-sigma ±{chosen.heading_sigma_deg:.2g}°, the best determined of those tried)"
+        + (f"; also tried: {others}" if others else "")
     )
 
 
