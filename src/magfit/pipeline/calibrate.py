@@ -277,8 +277,7 @@ def calibrate_file(
             except RefusedWithAdvice as error:  # a compass that turned: the log's own streams may determine it
                 if not by_default or force:
                     raise
-                rescue = {key: value for key, value in options.items() if key != "field_strength"}
-                compass = _log_rescue(fitted_source, magnetometer, error, rescue, unit, say, date, motor, max_samples)
+                compass = _log_rescue(fitted_source, magnetometer, error, unit, say, date, motor, max_samples)
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
@@ -313,18 +312,18 @@ def _log_rescue(
     source: Source,
     magnetometer: Magnetometer,
     refused: CalibrationError,
-    options: Mapping[str, Any],
     unit: str | None,
     say: Callable[[str], None],
     date: datetime.date | str | None,
     motor: str,
     max_samples: int | None,
 ) -> CompassCalibration:
-    """A log's compass the default refused: the vehicle methods on the log's own streams (:func:`_rescued`)."""
+    """A log's compass the default refused: the vehicle methods on the log's own streams (:func:`_rescued`),
+    with their own options only (auto's, a field strength among them, are not theirs)."""
 
     def fit_one(name: str, note: Callable[[str], None]) -> CompassCalibration:
         return _calibrate_compass(
-            source, magnetometer, name, options, unit, False, note, date, motor, max_samples=max_samples
+            source, magnetometer, name, {}, unit, False, note, date, motor, max_samples=max_samples
         )
 
     return _rescued(f"{source.path} ({magnetometer.id})", refused, attempt_all(VEHICLE_METHODS, fit_one), say)

@@ -128,10 +128,10 @@ def rescue_note(where: str, refused: CalibrationError, attempts: Sequence[Attemp
     others = "; ".join(a.found() for a in attempts if a is not chosen)
     return (
         f"{where}: the magnitude-only fit ({option('method', 'auto')}) cannot calibrate this recording ({why}): "
-        "the field's magnitude alone does not fix it from turns about one axis mostly, as a vehicle makes; the "
-        f"recording's own {_READS[chosen.method]} do: calibrated by the {chosen.method} method ({chosen.verdict}, "
-        f"level heading one-sigma ±{chosen.heading_sigma_deg:.2g}°, the best determined of those tried)"
-        + (f"; also tried: {others}" if others else "")
+        "the field's magnitude alone does not fix it from turns about one axis mostly, as a vehicle makes; what "
+        f"the recording also holds ({_READS[chosen.method]}) does: calibrated by the {chosen.method} method "
+        f"({chosen.verdict}, level heading one-sigma ±{chosen.heading_sigma_deg:.2g}°, the best determined of "
+        "those tried)" + (f"; also tried: {others}" if others else "")
     )
 
 
