@@ -80,7 +80,7 @@ def test_the_command_line_names_the_vehicle_methods_once_with_the_files_own_colu
     path = tmp_path / "boat.csv"
     rows = np.column_stack([simulation.time_s, simulation.samples, angles, np.tile(simulation.field_world, (6000, 1))])
     np.savetxt(path, rows, delimiter=",", header="time,mx,my,mz,roll,pitch,yaw,ref_n,ref_e,ref_d", comments="")
-    refused = CliRunner().invoke(cli, ["calibrate", str(path)])
+    refused = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "auto"])  # (the default fits it: vector)
     assert refused.exit_code == 1, refused.output
     assert refused.output.count("--method vector") == 1 and refused.output.count("--method gyro") == 1, refused.output
     vector = CliRunner().invoke(cli, ["calibrate", str(path), "--method", "vector", "-o", str(tmp_path / "cal.json")])

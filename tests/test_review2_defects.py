@@ -238,7 +238,6 @@ def test_align_refusal_names_only_options_align_or_the_named_command_has(tmp_pat
                 assert match.group() in flags, f"{match.group()} is no option of magfit align"
 
 
-@pytest.mark.xfail(strict=True, reason="calibrate (auto) ignores a car CSV's attitude, reference and gyro: exit 1")
 def test_default_calibrate_of_a_car_uses_the_attitude_and_gyro_it_holds(tmp_path: Path) -> None:
     sim, columns = _car()
     path, cal = tmp_path / "car.csv", tmp_path / "cal.json"
@@ -277,7 +276,6 @@ def test_apply_to_a_log_says_when_the_corrected_samples_are_far_from_the_calibra
     assert result.exit_code != 0 or result.stderr.count("warning") > baseline.stderr.count("warning"), result.output
 
 
-@pytest.mark.xfail(strict=True, reason="vector on a log without GNSS: --location is ignored, exit 2 'no 3-D GNSS fix'")
 def test_vector_on_a_log_without_gnss_takes_the_location_given() -> None:
     with pytest.raises(magfit.MagfitError) as refused:
         magfit.calibrate_file(_TLOG, method="vector", sensor="RAW_IMU", location=(37.24, -115.8, 0.14))

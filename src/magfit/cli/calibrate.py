@@ -424,7 +424,8 @@ def calibrate_command(
         raise click.UsageError("--date goes with --location: the World Magnetic Model needs the place too")
     if location is None and field_strength == "wmm" and not is_log:
         raise click.UsageError("--field-strength wmm needs --location LAT,LON[,ALT] (where the recording was made)")
-    method = method or default_method()
+    # No --method: the library's default (auto, then a vehicle's own streams when auto refuses it).
+    by_default, method = method is None, method or default_method()
     if output is not None and export_format is not None and str(output) != STDOUT:
         _check_extension(output, export_format)
     asked: dict[str, Any] = dict(
@@ -434,7 +435,7 @@ def calibrate_command(
         gyro_unit=gyro_unit, motor=motor,
     )  # fmt: skip
     try:
-        result = _calibrate(file, method, model_date=model_date, **asked)
+        result = _calibrate(file, None if by_default and method == "auto" else method, model_date=model_date, **asked)
     except StreamsMissing as error:
         raise CommandError(
             f"{one_line(error.text)}; on the command line: {command_line('calibrate', file, error.remedy)}"
@@ -499,7 +500,7 @@ def calibrate_command(
         raise CalibrationError(f"{file}: {_failed(result)}; the warnings above say why")
 
 
-def _calibrate(file: Path, method: str, *, model_date: datetime.date | None, **options: Any) -> FileCalibration:
+def _calibrate(file: Path, method: str | None, *, model_date: datetime.date | None, **options: Any) -> FileCalibration:
     """:func:`calibrate_file` with the progress bar and the notes as warnings, each said once: a note the
     refusal of its compass repeats (a log's low-rate note, which the library appends for callers not told the
     notes) is left to the refusal, which names the remedy where the failure is; a note of the whole log (a

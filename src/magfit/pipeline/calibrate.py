@@ -37,6 +37,7 @@ from .streaming import (
     samples_for_fit,
 )
 from .table import StreamSpec
+from .vehicle import VEHICLE_METHODS, attempt_all, best, held_by_samples_file, refusal, rescue_note, with_rescue
 
 if TYPE_CHECKING:
     pass  # (imported when used: the wmm extra)
@@ -49,7 +50,7 @@ FROM_LOG: Literal["log"] = "log"
 
 def calibrate_file(
     path: str | os.PathLike[str],
-    method: str = "auto",
+    method: str | None = None,
     *,
     sensor: str | None = None,
     columns: Sequence[str | int] | None = None,
@@ -80,8 +81,13 @@ def calibrate_file(
     ----------
     path : str or path-like
         The recording (compressed files and ``"-"`` for standard input as :func:`magfit.io.read_samples`).
-    method : str
-        A name in :data:`magfit.METHODS`.
+    method : str or None
+        A name in :data:`magfit.METHODS`. None (the default, ``magfit calibrate`` without ``--method``):
+        ``auto``, and when it refuses the recording and the recording holds a vehicle's streams, the methods
+        that use them (``vector``: attitude with the reference field; ``gyro``: gyroscope and time), the
+        best-determined of those that fit returned, a note saying which and why
+        (:mod:`magfit.pipeline.vehicle`); their refusals added to auto's when none fits. A name, ``"auto"``
+        included, is that method alone.
     sensor : str or None
         A log's compass (its id or device id, as :func:`magfit.sources.open_source` lists them). None fits
         every compass of a log that holds several (each one's failure in ``failures``), or the only one.
@@ -150,6 +156,8 @@ def calibrate_file(
         Unknown method or option; ``field_strength="wmm"`` without a place or without a physical unit.
     """
     path = Path(path)
+    by_default = method is None  # auto, then the vehicle methods on the recording's own streams
+    method = "auto" if method is None else method
     get_method(method)  # an unknown method, before the file is read
     if motor not in ("auto", "none"):  # the default needs no check, nor the motors' modules imported for it
         from .motor import check_motor
@@ -215,7 +223,18 @@ def calibrate_file(
         try:
             compass = _calibrate_samples(path, method, columns, nonfinite, unit, even, max_samples, options, progress)
         except CalibrationError as error:
-            raise _with_vehicle_advice(path, error, columns, unit, method, nonfinite) from None
+            refused = _with_vehicle_advice(path, error, columns, unit, method, nonfinite)
+            placed = location not in (None, FROM_LOG)
+            held = held_by_samples_file(path, given, placed) if by_default and not force else ()
+            if not held:
+                raise refused from None
+            where = location if location is not None and location != FROM_LOG else None
+
+            def fit_one(name: str, note: Callable[[str], None]) -> CompassCalibration:
+                return _calibrate_samples_streams(path, name, columns, spec, unit, where, date, {}, note, nonfinite)
+
+            compass = _rescued(str(path), refused, attempt_all(held, fit_one), say)
+            return FileCalibration(path, (_with_model_field(compass, model),), model_field=model)
         compass = _vehicle_weak(compass, columns, nonfinite, unit, method)
         return FileCalibration(path, (_with_model_field(compass, model),), model_field=model)
     if columns is not None:
@@ -230,6 +249,7 @@ def calibrate_file(
     elif place is None and importlib.util.find_spec("pygeomag") is not None and source.position is not None:
         place = FROM_LOG  # a log that knows where it was: the fitted field is checked against the model's there
     model = _model(path, source, place, date)
+    fitted_source = _placed(source, location)  # the vector method's reference field: the place given, without fixes
     chosen = [sensor] if sensor is not None else _usable(source)
     compasses: list[CompassCalibration] = []
     failures: list[CompassFailure] = []
@@ -241,9 +261,23 @@ def calibrate_file(
         elif field_strength is not None:
             compass_options["field_strength"] = field_strength
         try:
-            compass = _calibrate_compass(
-                source, magnetometer, method, compass_options, unit, even, say, date, motor, max_samples=max_samples
-            )
+            try:
+                compass = _calibrate_compass(
+                    fitted_source,
+                    magnetometer,
+                    method,
+                    compass_options,
+                    unit,
+                    even,
+                    say,
+                    date,
+                    motor,
+                    max_samples=max_samples,
+                )
+            except RefusedWithAdvice as error:  # a compass that turned: the log's own streams may determine it
+                if not by_default or force:
+                    raise
+                compass = _log_rescue(fitted_source, magnetometer, error, unit, say, date, motor, max_samples)
         except (CalibrationError, DataFileError) as error:
             if len(chosen) == 1:
                 raise
@@ -258,6 +292,53 @@ def calibrate_file(
     order = [m.id for m in source.magnetometers]
     sensors = tuple(sorted(tried, key=lambda sensor_id: order.index(sensor_id) if sensor_id in order else len(order)))
     return FileCalibration(path, tuple(compasses), tuple(failures), model, sensors, source.position, source.identity)
+
+
+def _rescued(
+    where: str, refused: CalibrationError, attempts: Sequence[Any], say: Callable[[str], None]
+) -> CompassCalibration:
+    """The best-determined fit of the vehicle methods tried after the default's refusal, its notes told and
+    the rescue's note first (:mod:`magfit.pipeline.vehicle`); the refusal with what each found when none fits."""
+    chosen = best(attempts)
+    if chosen is None or chosen.compass is None:
+        raise refusal(refused, attempts) from None
+    note = rescue_note(where, refused, attempts, chosen)
+    for said in (*chosen.notes, note):
+        say(said)
+    return with_rescue(chosen.compass, note)
+
+
+def _log_rescue(
+    source: Source,
+    magnetometer: Magnetometer,
+    refused: CalibrationError,
+    unit: str | None,
+    say: Callable[[str], None],
+    date: datetime.date | str | None,
+    motor: str,
+    max_samples: int | None,
+) -> CompassCalibration:
+    """A log's compass the default refused: the vehicle methods on the log's own streams (:func:`_rescued`),
+    with their own options only (auto's, a field strength among them, are not theirs)."""
+
+    def fit_one(name: str, note: Callable[[str], None]) -> CompassCalibration:
+        return _calibrate_compass(
+            source, magnetometer, name, {}, unit, False, note, date, motor, max_samples=max_samples
+        )
+
+    return _rescued(f"{source.path} ({magnetometer.id})", refused, attempt_all(VEHICLE_METHODS, fit_one), say)
+
+
+def _placed(source: Source, location: tuple[float, float, float] | Literal["log"] | None) -> Source:
+    """``source`` with the place given as its position when the log holds no 3-D GNSS fix of its own: the
+    World Magnetic Model's field there is the reference of the methods that need one (``vector``). A log's own
+    fixes are kept (they follow the vehicle; the place given is checked against them by the model's field)."""
+    if location is None or location == FROM_LOG or source.position is not None:
+        return source
+    from ..sources.position import Position
+
+    lat, lon, alt_km = location
+    return replace(source, position=Position(lat, lon, alt_km, float("nan"), 0))
 
 
 def _with_model_field(compass: CompassCalibration, model: ModelField | None) -> CompassCalibration:
@@ -385,12 +466,14 @@ def _calibrate_compass(
         chosen = magnetometer.id if several else None
         vehicle = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
     calibration = replace(calibration, sensor=sensor, source=SampleSource(path.name, calibration.unit))
+    evaluation = evaluate(replace(calibration, motor=None), outcome.evaluation_samples)
+    calibration = _stated_uncertainty(calibration, evaluation.std)
     times = read.time_s[np.isfinite(read.time_s)]
     span = f"{magnetometer.span_s:.1f} s" if np.isfinite(magnetometer.span_s) else "no time stamps"
     return CompassCalibration(
         path=path,
         calibration=calibration,
-        evaluation=evaluate(replace(calibration, motor=None), outcome.evaluation_samples),
+        evaluation=evaluation,
         columns=read.columns,
         n_rows=len(read.samples),
         n_skipped=0,
@@ -407,6 +490,24 @@ def _calibrate_compass(
         advice=vehicle,
         statistics=kept_statistics(calibration, read.samples),
     )
+
+
+def _stated_uncertainty(calibration: Calibration, residual_sigma: float) -> Calibration:
+    """``calibration`` with the one-sigma its method states in its own facts (the gyro method's level heading
+    one-sigma, :class:`magfit.facts.GyroFacts`: RMS over eight level headings, the field dipping 60°) in
+    ``diagnostics.uncertainty`` too, where every reader of a calibration looks for it; unchanged otherwise."""
+    diagnostics, gyro = calibration.diagnostics, calibration.gyro
+    if diagnostics is None or diagnostics.uncertainty is not None or gyro is None or gyro.heading_sigma_deg is None:
+        return calibration
+    from ..findings import Uncertainty
+
+    stated = Uncertainty(
+        offset_sigma=None, scale_sigma=None, field_strength_sigma=None, heading_sigma_deg=gyro.heading_sigma_deg,
+        heading_sigma_max_deg=None, inclination_deg=60.0, residual_sigma=float(residual_sigma),
+        n_samples=int(calibration.n_samples or diagnostics.n_samples),
+    )  # fmt: skip
+    details = {**calibration.details, "diagnostics": replace(diagnostics, uncertainty=stated).to_dict()}
+    return replace(calibration, details=details)
 
 
 def _unit_warnings(field_strength: float, unit: str | None) -> tuple[Reason, ...]:
@@ -590,10 +691,12 @@ def _calibrate_samples_streams(
         read.header, read.n_columns, tuple(note.split(": ", 1)[1] for note in notes[1:]),
     )  # fmt: skip
     calibration = replace(calibration, source=fitted_on)
+    evaluation = evaluate(calibration, streams.samples)
+    calibration = _stated_uncertainty(calibration, evaluation.std)
     return CompassCalibration(
         path=path,
         calibration=calibration,
-        evaluation=evaluate(calibration, streams.samples),
+        evaluation=evaluation,
         columns=tuple(chosen.description.split(", ")),
         n_rows=read.n_rows,
         n_skipped=read.n_dropped,
