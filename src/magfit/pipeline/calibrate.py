@@ -448,7 +448,8 @@ def _calibrate_compass(
             works = vehicle_advice(path, is_log=True, streams=streams_held, unit=unit, method=method, sensor=chosen)
             if not turned(fitted):  # a compass never turned: only recording again helps
                 raise CalibrationError(f"{where}: {error}{advice}", codes=error.codes, remedy=error.remedy) from None
-            raise RefusedWithAdvice(path, f"{where}: {error}{advice}", works, codes=error.codes) from None
+            said = error.without_general_advice() if works else str(error)  # the log's own advice replaces it
+            raise RefusedWithAdvice(path, f"{where}: {said}{advice}", works, codes=error.codes) from None
         outcome = rescued
     for note in outcome.notes:
         say(note)

@@ -154,5 +154,7 @@ def refusal(error: CalibrationError, attempts: Sequence[Attempt]) -> Calibration
         )
         text = f"{error.text}; the recording's own streams were tried too: {tried}"
         return RefusedWithAdvice(error.path, text, advice, codes=codes)
-    message = f"{error}; the recording's own streams were tried too: {tried}"
+    # The magnitude-only fit's general words ("on a vehicle, ... --method vector ... --method gyro") would name
+    # the methods just tried: what each of them found replaces them.
+    message = f"{error.without_general_advice()}; the recording's own streams were tried too: {tried}"
     return CalibrationError(message, codes=codes, remedy=error.remedy)
