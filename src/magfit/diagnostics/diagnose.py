@@ -32,7 +32,7 @@ from .uncertainty import (
     covering,
     level_heading_difference_deg,
 )
-from .verdict import NO_ELLIPSOID_RMS, Evidence, judge
+from .verdict import NO_ELLIPSOID_RMS, Evidence, halves_apart, judge, mirrored_offset, two_solutions
 
 __all__ = ["MAX_SAMPLES", "Refit", "diagnose", "diagnose_statistics", "flat_axis", "model_kind"]
 
@@ -209,6 +209,8 @@ def diagnose(
     if uncertainty.offset_sigma is not None and not pinned:  # a field strength changing along the recording
         drifting = compare_with_drift(rows, kind, calibration, uncertainty, inclination_deg)
     uncertainty = covering(uncertainty, comparison, check, drifting)  # the heading one-sigma covers known biases too
+    if halves is not None and halves_apart(halves)[2]:  # the sensor changed along the recording: by how much is known
+        uncertainty = _with_halves_change(uncertainty, halves[0], calibration)
     if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion
         uncertainty = replace(
             uncertainty,
@@ -238,6 +240,8 @@ def diagnose(
         clipping=clipping if clipping.n_clipped else None,
         comparison=comparison,
         drifting=drifting,
+        mirror=mirrored_offset(np.asarray(calibration.offset), *_mean_and_covariance(raw, weights)) if pinned else None,
+        offset=tuple(float(v) for v in calibration.offset) if pinned else None,  # type: ignore[arg-type]
     )
     support = judge(evidence)
     return Diagnostics(
@@ -255,15 +259,27 @@ def diagnose(
     )
 
 
+def _mean_and_covariance(
+    raw: NDArray[np.float64], weights: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Weighted mean (3,) and covariance (3, 3) of the samples."""
+    return np.average(raw, axis=0, weights=weights), np.cov(raw.T, aweights=weights)
+
+
 #: Samples whose smallest principal spread is below this share of the largest lie close to a plane.
 FLAT_RATIO = 0.25
 
 
 def flat_axis(raw: NDArray[np.float64], weights: NDArray[np.float64] | None = None) -> tuple[str, float] | None:
     """The axis raw samples hardly extend along and their spread along it over the largest, when below 0.25."""
+    return flat_axis_of(np.cov(raw.T, aweights=weights))
+
+
+def flat_axis_of(covariance: NDArray[np.float64]) -> tuple[str, float] | None:
+    """:func:`flat_axis` from the samples' covariance (3, 3)."""
     from ..geometry.frame import axis_words
 
-    spreads, directions = np.linalg.eigh(np.cov(raw.T, aweights=weights))
+    spreads, directions = np.linalg.eigh(covariance)
     ratio = float(np.sqrt(max(spreads[0], 0.0) / spreads[2])) if spreads[2] > 0 else 0.0
     if ratio > FLAT_RATIO:
         return None
@@ -357,6 +373,36 @@ def _with_block_jackknife(
     return widened
 
 
+def _with_halves_change(
+    uncertainty: Uncertainty, difference: tuple[float, float, float], calibration: Calibration
+) -> Uncertainty:
+    """``uncertainty`` widened by the change between the two halves of the recording, when they disagree.
+
+    Offsets fitted on the halves differ by ΔV; the whole recording's fit lies between them. A sensor that
+    changes steadily (an offset creeping as it warms up) is at the halves' centres (a quarter and three quarters
+    of the way) ±ΔV/2 from the whole fit, and at the ends of the recording ±ΔV: that is where the user's next
+    readings are (the end state) and where they were (the start), and no noise figure holds it. So, in
+    quadrature, as :func:`~magfit.diagnostics.uncertainty.covering` counts a known error,
+
+        σ_V,i² ← σ_V,i² + ΔV_i²,    σ_ψ² ← σ_ψ² + Δψ²                                                    (H)
+
+    Δψ the RMS level-heading difference of the calibration with its offset moved by ΔV. A step change (a magnet
+    moved halfway) is ΔV/2 from the whole fit at either end: (H) then covers it twice over.
+    """
+    if uncertainty.offset_sigma is None or uncertainty.heading_sigma_deg is None:
+        return uncertainty
+    change = np.asarray(difference, dtype=np.float64)
+    moved = replace(calibration, offset=np.asarray(calibration.offset, dtype=np.float64) + change)
+    turn = level_heading_difference_deg(moved, calibration, uncertainty.inclination_deg)
+    offset = np.hypot(np.asarray(uncertainty.offset_sigma, dtype=np.float64), change)
+    return replace(
+        uncertainty,
+        offset_sigma=(float(offset[0]), float(offset[1]), float(offset[2])),
+        heading_sigma_deg=math.hypot(uncertainty.heading_sigma_deg, turn),
+        heading_sigma_max_deg=math.hypot(uncertainty.heading_sigma_max_deg or uncertainty.heading_sigma_deg, turn),
+    )
+
+
 def _halves(
     rows: NDArray[np.float64], refit: Refit, uncertainty: Uncertainty, total: int | None = None
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
@@ -403,7 +449,14 @@ def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Dia
     observability, mean, std = analyse_statistics(statistics, calibration, model_kind(calibration))
     refusals = ReasonList()
     undetermined = [w.description for w in observability.weak if not w.determined]
-    if undetermined:
+    known = calibration.known_field
+    flat = flat_axis_of(statistics.covariance)
+    if undetermined and known is not None and known.pinned and flat is not None:
+        # The field strength was given: what is open is the sign of the field's component along the turning axis.
+        mirror = mirrored_offset(np.asarray(calibration.offset), statistics.centre, statistics.covariance)
+        label = f" {calibration.unit}" if calibration.unit else ""
+        refusals.add("undetermined", two_solutions(calibration.offset, mirror, flat[0], label))
+    elif undetermined:
         words = "; ".join(undetermined)
         refusals.add("undetermined", f"the samples do not determine {words}: those numbers would be noise")
     if std > NO_ELLIPSOID_RMS:
