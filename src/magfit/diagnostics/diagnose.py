@@ -209,7 +209,8 @@ def diagnose(
     if uncertainty.offset_sigma is not None and not pinned:  # a field strength changing along the recording
         drifting = compare_with_drift(rows, kind, calibration, uncertainty, inclination_deg)
     uncertainty = covering(uncertainty, comparison, check, drifting)  # the heading one-sigma covers known biases too
-    if halves is not None and halves_apart(halves)[2]:  # the sensor changed along the recording: by how much is known
+    if halves is not None and halves_apart(halves)[2] and offset_trend_p_value(rows, kind, calibration) < TREND_LEVEL:
+        # The sensor changed along the recording (not only the directions each half saw): by how much is known.
         uncertainty = _with_halves_change(uncertainty, halves[0], calibration)
     if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion
         uncertainty = replace(
@@ -371,6 +372,50 @@ def _with_block_jackknife(
         largest = max(widened.heading_sigma_max_deg or heading, heading)
         widened = replace(widened, heading_sigma_deg=heading, heading_sigma_max_deg=largest)
     return widened
+
+
+#: p-value of the offset-trend F test (:func:`offset_trend_p_value`) below which halves that disagree are a change
+#: in time, counted in the one-sigmas.
+TREND_LEVEL = 1e-3
+
+
+def offset_trend_p_value(rows: NDArray[np.float64], kind: str, calibration: Calibration) -> float:
+    """p-value of an offset that moves linearly along the recording, against ``calibration``'s constant one.
+
+    Halves of a recording can disagree because each saw other directions (a sensor held in a few attitudes in
+    turn: each half's fit extrapolates over the other's clusters) or because the sensor changed. Only the
+    second leaves the whole recording's fit a trend to explain: with ``τ`` the time from the middle, in
+    [−½, ½], and the distances' Jacobian J (N, k) at the calibration (the corrected frame), an offset
+    ``V + τ c`` adds the columns ``τ J_V`` (J_V its three offset columns). Projected off J (the constant
+    model is at its optimum), the F test of nested least squares with 3 and N − k − 3 degrees of freedom:
+
+        F = (ΔRSS / 3) / (RSS₁ / (N − k − 3))                                                        (T)
+
+    ``rows`` in recording order. Noise correlated in time inflates F: the test only tells the halves' kind
+    of disagreement, never names one by itself.
+    """
+    from scipy.stats import f as f_distribution
+
+    from ..geometry.frame import PARAMETER_NAMES, distance_jacobian
+
+    z = Frame.corrected(calibration).normalise(rows)
+    names = PARAMETER_NAMES[kind]
+    p = np.array([1.0 if name.startswith("scale") else 0.0 for name in names])  # the identity: the fit itself
+    jac = distance_jacobian(p, z, kind)
+    residual = np.linalg.norm(z, axis=1) - 1.0
+    n, k = jac.shape
+    if n < k + 3 + 10:
+        return 1.0
+    tau = np.linspace(-0.5, 0.5, n)[:, None]
+    basis = np.linalg.qr(jac)[0]
+    trend = tau * jac[:, :3]
+    trend = trend - basis @ (basis.T @ trend)
+    residual = residual - basis @ (basis.T @ residual)
+    explained = trend @ np.linalg.lstsq(trend, residual, rcond=None)[0]
+    reduction = float(explained @ explained)
+    remaining = max(float(residual @ residual) - reduction, 1e-300)
+    statistic = (reduction / 3.0) / (remaining / (n - k - 3))
+    return float(f_distribution.sf(statistic, 3, n - k - 3))
 
 
 def _with_halves_change(
