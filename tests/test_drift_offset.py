@@ -49,3 +49,17 @@ def test_a_steady_sensor_s_halves_agree(seed: int) -> None:
     assert fitted.support is not None and fitted.support.verdict == "supported", fitted.support
     stated = fitted.diagnostics.uncertainty.heading_sigma_deg
     assert heading_error_deg(fitted, sim) <= 3 * stated
+
+
+def test_the_offset_trend_tells_a_changed_sensor_from_halves_that_saw_other_directions() -> None:
+    from magfit.diagnostics.diagnose import TREND_LEVEL, offset_trend_p_value
+
+    rng = np.random.default_rng(7)
+    centres = rng.uniform(-180.0, 180.0, (6, 3)) * np.array([1.0, 0.5, 1.0])
+    attitudes = np.repeat(centres, 200, axis=0) + rng.normal(0.0, 3.0, (1200, 3))  # each attitude held in turn
+    sim = magfit.simulate(1200, hard_iron=[0.3, -0.2, 0.1], noise=0.01, orientations=attitudes, seed=7)
+    held = magfit.fit(sim.samples, method="ellipsoid")
+    assert offset_trend_p_value(sim.samples, "full", held) > TREND_LEVEL
+    # Ground truth: the same attitudes with the offset creeping 3 % of the field along the recording.
+    creeping = sim.samples + np.linspace(0.0, 1.0, 1200)[:, None] * np.array([0.03, -0.02, 0.0])
+    assert offset_trend_p_value(creeping, "full", magfit.fit(creeping, method="ellipsoid")) < TREND_LEVEL
