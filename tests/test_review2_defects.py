@@ -306,9 +306,6 @@ def test_the_advised_pinned_sphere_works_on_level_turns(tmp_path: Path) -> None:
     assert followed.exit_code == 0, followed.output
 
 
-@pytest.mark.xfail(
-    strict=True, reason="offset drifting 3 % of the field over the recording: 'supported', 1.75 deg/±0.33"
-)
 def test_a_drifting_offset_is_not_a_supported_calibration_short_of_its_error(tmp_path: Path) -> None:
     import dataclasses
 

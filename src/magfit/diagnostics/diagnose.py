@@ -32,7 +32,7 @@ from .uncertainty import (
     covering,
     level_heading_difference_deg,
 )
-from .verdict import NO_ELLIPSOID_RMS, Evidence, judge
+from .verdict import NO_ELLIPSOID_RMS, Evidence, halves_apart, judge, mirrored_offset, two_solutions
 
 __all__ = ["MAX_SAMPLES", "Refit", "diagnose", "diagnose_statistics", "flat_axis", "model_kind"]
 
@@ -209,6 +209,9 @@ def diagnose(
     if uncertainty.offset_sigma is not None and not pinned:  # a field strength changing along the recording
         drifting = compare_with_drift(rows, kind, calibration, uncertainty, inclination_deg)
     uncertainty = covering(uncertainty, comparison, check, drifting)  # the heading one-sigma covers known biases too
+    if halves is not None and halves_apart(halves)[2] and offset_trend_p_value(rows, kind, calibration) < TREND_LEVEL:
+        # The sensor changed along the recording (not only the directions each half saw): by how much is known.
+        uncertainty = _with_halves_change(uncertainty, halves[0], calibration)
     if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion
         uncertainty = replace(
             uncertainty,
@@ -238,6 +241,8 @@ def diagnose(
         clipping=clipping if clipping.n_clipped else None,
         comparison=comparison,
         drifting=drifting,
+        mirror=mirrored_offset(np.asarray(calibration.offset), *_mean_and_covariance(raw, weights)) if pinned else None,
+        offset=tuple(float(v) for v in calibration.offset) if pinned else None,  # type: ignore[arg-type]
     )
     support = judge(evidence)
     return Diagnostics(
@@ -255,15 +260,27 @@ def diagnose(
     )
 
 
+def _mean_and_covariance(
+    raw: NDArray[np.float64], weights: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Weighted mean (3,) and covariance (3, 3) of the samples."""
+    return np.average(raw, axis=0, weights=weights), np.cov(raw.T, aweights=weights)
+
+
 #: Samples whose smallest principal spread is below this share of the largest lie close to a plane.
 FLAT_RATIO = 0.25
 
 
 def flat_axis(raw: NDArray[np.float64], weights: NDArray[np.float64] | None = None) -> tuple[str, float] | None:
     """The axis raw samples hardly extend along and their spread along it over the largest, when below 0.25."""
+    return flat_axis_of(np.cov(raw.T, aweights=weights))
+
+
+def flat_axis_of(covariance: NDArray[np.float64]) -> tuple[str, float] | None:
+    """:func:`flat_axis` from the samples' covariance (3, 3)."""
     from ..geometry.frame import axis_words
 
-    spreads, directions = np.linalg.eigh(np.cov(raw.T, aweights=weights))
+    spreads, directions = np.linalg.eigh(covariance)
     ratio = float(np.sqrt(max(spreads[0], 0.0) / spreads[2])) if spreads[2] > 0 else 0.0
     if ratio > FLAT_RATIO:
         return None
@@ -347,6 +364,12 @@ def _with_block_jackknife(
     stated = np.maximum(np.asarray(uncertainty.offset_sigma) ** 2, 1e-300)
     factor = float(np.mean(variance / stated))
     widened = uncertainty.scaled(math.sqrt(factor)) if factor > 1.0 else uncertainty
+    # The mean ratio leaves an axis the recording pins worse than the others short (a tilt cone's axis, where the
+    # offset trades with the scale: full models 8.5 offset one-sigmas off in the campaign): each offset one-sigma
+    # is at least its own axis's jackknife one-sigma.
+    assert widened.offset_sigma is not None
+    own = np.maximum(np.asarray(widened.offset_sigma, dtype=np.float64), np.sqrt(variance))
+    widened = replace(widened, offset_sigma=(float(own[0]), float(own[1]), float(own[2])))
     # The same for the level heading itself, each replicate against the whole fit (for the mean of the
     # replicates: a little wider): a drift along a flight moves the heading more than the offsets' mean ratio says.
     scale = series.shape[0] / (total or m)
@@ -355,6 +378,80 @@ def _with_block_jackknife(
         largest = max(widened.heading_sigma_max_deg or heading, heading)
         widened = replace(widened, heading_sigma_deg=heading, heading_sigma_max_deg=largest)
     return widened
+
+
+#: p-value of the offset-trend F test (:func:`offset_trend_p_value`) below which halves that disagree are a change
+#: in time, counted in the one-sigmas.
+TREND_LEVEL = 1e-3
+
+
+def offset_trend_p_value(rows: NDArray[np.float64], kind: str, calibration: Calibration) -> float:
+    """p-value of an offset that moves linearly along the recording, against ``calibration``'s constant one.
+
+    Halves of a recording can disagree because each saw other directions (a sensor held in a few attitudes in
+    turn: each half's fit extrapolates over the other's clusters) or because the sensor changed. Only the
+    second leaves the whole recording's fit a trend to explain: with ``τ`` the time from the middle, in
+    [−½, ½], and the distances' Jacobian J (N, k) at the calibration (the corrected frame), an offset
+    ``V + τ c`` adds the columns ``τ J_V`` (J_V its three offset columns). Projected off J (the constant
+    model is at its optimum), the F test of nested least squares with 3 and N − k − 3 degrees of freedom:
+
+        F = (ΔRSS / 3) / (RSS₁ / (N − k − 3))                                                        (T)
+
+    ``rows`` in recording order. Noise correlated in time inflates F: the test only tells the halves' kind
+    of disagreement, never names one by itself.
+    """
+    from scipy.stats import f as f_distribution
+
+    from ..geometry.frame import PARAMETER_NAMES, distance_jacobian
+
+    z = Frame.corrected(calibration).normalise(rows)
+    names = PARAMETER_NAMES[kind]
+    p = np.array([1.0 if name.startswith("scale") else 0.0 for name in names])  # the identity: the fit itself
+    jac = distance_jacobian(p, z, kind)
+    residual = np.linalg.norm(z, axis=1) - 1.0
+    n, k = jac.shape
+    if n < k + 3 + 10:
+        return 1.0
+    tau = np.linspace(-0.5, 0.5, n)[:, None]
+    basis = np.linalg.qr(jac)[0]
+    trend = tau * jac[:, :3]
+    trend = trend - basis @ (basis.T @ trend)
+    residual = residual - basis @ (basis.T @ residual)
+    explained = trend @ np.linalg.lstsq(trend, residual, rcond=None)[0]
+    reduction = float(explained @ explained)
+    remaining = max(float(residual @ residual) - reduction, 1e-300)
+    statistic = (reduction / 3.0) / (remaining / (n - k - 3))
+    return float(f_distribution.sf(statistic, 3, n - k - 3))
+
+
+def _with_halves_change(
+    uncertainty: Uncertainty, difference: tuple[float, float, float], calibration: Calibration
+) -> Uncertainty:
+    """``uncertainty`` widened by the change between the two halves of the recording, when they disagree.
+
+    Offsets fitted on the halves differ by ΔV; the whole recording's fit lies between them. A sensor that
+    changes steadily (an offset creeping as it warms up) is at the halves' centres (a quarter and three quarters
+    of the way) ±ΔV/2 from the whole fit, and at the ends of the recording ±ΔV: that is where the user's next
+    readings are (the end state) and where they were (the start), and no noise figure holds it. So, in
+    quadrature, as :func:`~magfit.diagnostics.uncertainty.covering` counts a known error,
+
+        σ_V,i² ← σ_V,i² + ΔV_i²,    σ_ψ² ← σ_ψ² + Δψ²                                                    (H)
+
+    Δψ the RMS level-heading difference of the calibration with its offset moved by ΔV. A step change (a magnet
+    moved halfway) is ΔV/2 from the whole fit at either end: (H) then covers it twice over.
+    """
+    if uncertainty.offset_sigma is None or uncertainty.heading_sigma_deg is None:
+        return uncertainty
+    change = np.asarray(difference, dtype=np.float64)
+    moved = replace(calibration, offset=np.asarray(calibration.offset, dtype=np.float64) + change)
+    turn = level_heading_difference_deg(moved, calibration, uncertainty.inclination_deg)
+    offset = np.hypot(np.asarray(uncertainty.offset_sigma, dtype=np.float64), change)
+    return replace(
+        uncertainty,
+        offset_sigma=(float(offset[0]), float(offset[1]), float(offset[2])),
+        heading_sigma_deg=math.hypot(uncertainty.heading_sigma_deg, turn),
+        heading_sigma_max_deg=math.hypot(uncertainty.heading_sigma_max_deg or uncertainty.heading_sigma_deg, turn),
+    )
 
 
 def _halves(
@@ -403,7 +500,14 @@ def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Dia
     observability, mean, std = analyse_statistics(statistics, calibration, model_kind(calibration))
     refusals = ReasonList()
     undetermined = [w.description for w in observability.weak if not w.determined]
-    if undetermined:
+    known = calibration.known_field
+    flat = flat_axis_of(statistics.covariance)
+    if undetermined and known is not None and known.pinned and flat is not None:
+        # The field strength was given: what is open is the sign of the field's component along the turning axis.
+        mirror = mirrored_offset(np.asarray(calibration.offset), statistics.centre, statistics.covariance)
+        label = f" {calibration.unit}" if calibration.unit else ""
+        refusals.add("undetermined", two_solutions(calibration.offset, mirror, flat[0], label))
+    elif undetermined:
         words = "; ".join(undetermined)
         refusals.add("undetermined", f"the samples do not determine {words}: those numbers would be noise")
     if std > NO_ELLIPSOID_RMS:

@@ -59,6 +59,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
 from ..findings import Consistency, Coverage, Goodness, Observability, ReasonList, Support, Uncertainty
 from ..remedy import option
 from ..saturation import Clipping
@@ -70,7 +73,10 @@ __all__ = [
     "NO_ELLIPSOID_RMS",
     "USELESS_BOUND_DEG",
     "Evidence",
+    "halves_apart",
     "judge",
+    "mirrored_offset",
+    "two_solutions",
     "unit_mixup",
 ]
 
@@ -104,6 +110,19 @@ USELESS_BOUND_DEG = 10.0
 #: the real Betaflight recording of shared/data/real whose halves are 5 of their own one-sigmas apart lies
 #: between 3 and 3.5 here. A reference fit's halves have their own bound (:mod:`magfit.diagnostics.reference`).
 HALVES_SIGMAS = 3.0
+#: The same test on all three axes at once (:func:`halves_apart`): the root sum of squares of the axes' distances
+#: is √χ²₃ for a clean recording, beyond this in 0.8 % of fits (√χ²₃ at 0.992, the largest axis's rate). An offset
+#: that creeps along every axis a little (a sensor warming up) passes each axis's bound and not this one.
+HALVES_RSS_SIGMAS = 3.44
+
+
+def halves_apart(halves: tuple[tuple[float, float, float], tuple[float, float, float]]) -> tuple[float, float, bool]:
+    """(largest axis's, root-sum-square) distance of the halves' offsets in their combined one-sigmas, and whether
+    either exceeds its bound (:data:`HALVES_SIGMAS`, :data:`HALVES_RSS_SIGMAS`): the halves disagree."""
+    difference, sigma = halves
+    ratios = [abs(d) / max(s, 1e-300) for d, s in zip(difference, sigma, strict=True)]
+    largest, rss = max(ratios), math.sqrt(sum(r * r for r in ratios))
+    return largest, rss, largest > HALVES_SIGMAS or rss > HALVES_RSS_SIGMAS
 
 _RECORD_ADVICE = (
     "record again turning the sensor slowly through all attitudes (every face pointing up and down in turn, "
@@ -154,6 +173,9 @@ class Evidence:
     drifting : DriftComparison or None
         The same model with a field strength that changes along the recording; ``uncertainty`` already
         covers its heading difference when it widens it.
+    mirror, offset : tuple of 3 float or None
+        For a sphere pinned to a known field strength: its offset and that offset's mirror image across the
+        plane the samples spread least in (:func:`mirrored_offset`), the other centre level turns allow.
     """
 
     kind: str
@@ -175,6 +197,36 @@ class Evidence:
     clipping: Clipping | None = None
     comparison: ModelComparison | None = None
     drifting: DriftComparison | None = None
+    mirror: tuple[float, float, float] | None = None
+    offset: tuple[float, float, float] | None = None
+
+
+def mirrored_offset(
+    offset: NDArray[np.float64], mean: NDArray[np.float64], covariance: NDArray[np.float64]
+) -> tuple[float, float, float]:
+    """The offset's mirror image across the plane the samples spread in least (normal n: the covariance's
+    eigenvector of the smallest eigenvalue), through their mean m̄: ``V' = V + 2 ((m̄ − V)·n) n``.
+
+    Samples of level turns lie on a circle about n. A sphere of a given radius B through that circle has its
+    centre on the circle's axis at ``±√(B² − ρ²)`` from its plane (ρ the circle's radius): V and V' fit the
+    samples alike, and the field strength fixes the vertical component's size, not its sign.
+    """
+    normal = np.linalg.eigh(covariance)[1][:, 0]
+    mirror = offset + 2.0 * float((mean - offset) @ normal) * normal
+    return float(mirror[0]), float(mirror[1]), float(mirror[2])
+
+
+def two_solutions(offset: ArrayLike, mirror: ArrayLike, axis: str, label: str) -> str:
+    """Why a sphere pinned to a known field strength leaves the offset along a turning axis open: in words."""
+    shown = [", ".join(f"{v:.4g}" for v in np.asarray(point, dtype=np.float64)) for point in (offset, mirror)]
+    return (
+        f"the sensor only turned about {axis}, so its samples lie on a circle, and the sphere of the given field "
+        f"strength passes through that circle with its centre on either side of the circle's plane: the offset is "
+        f"({shown[0]}){label} or ({shown[1]}){label}, the field's component along {axis} positive or negative, and "
+        "the samples fit both alike (the field strength fixes that component's size, not its sign); level turns "
+        "with the field strength cannot choose: the vehicle's attitude with the reference field can (the vector "
+        "or tilt method), or tilting the sensor a few tens of degrees while recording"
+    )
 
 
 def judge(evidence: Evidence) -> Support:
@@ -224,6 +276,9 @@ def judge(evidence: Evidence) -> Support:
     if not band and observability.turn_axis is not None:
         band.append(observability.turn_axis.lstrip("+"))
     for axis in band:
+        if evidence.mirror is not None and evidence.offset is not None:
+            refusals.add("single_axis", two_solutions(evidence.offset, evidence.mirror, axis, label))
+            continue
         refusals.add("single_axis",
             f"the sensor only turned about {axis}: the field was never seen near +{axis} or −{axis}, so the offset "
             f"and scale along {axis} are fixed by nothing in the samples; tilt the sensor so that both ends of {axis} "
@@ -348,14 +403,18 @@ def judge(evidence: Evidence) -> Support:
             "ml or als method is not"
         )
     if evidence.halves is not None:
-        difference, sigma = evidence.halves
-        distance = max(abs(d) / max(s, 1e-300) for d, s in zip(difference, sigma, strict=True))
-        if distance > HALVES_SIGMAS:
+        difference, _ = evidence.halves
+        largest, rss, apart = halves_apart(evidence.halves)
+        if apart:
             shown = ", ".join(f"{d:+.3g}" for d in difference)
+            counted = "" if heading is None else f" (counted in the heading uncertainty of ±{heading:.2g}°)"
             weak.add("inconsistent_halves",
-                f"the two halves of the recording give offsets that differ by ({shown}){label}, {distance:.0f} times "
-                "their one-sigma: the distortion or the field changed while recording (a magnet moved, motors, "
-                "temperature); calibrate on a recording where nothing near the sensor changes"
+                f"the two halves of the recording give offsets that differ by ({shown}){label}, "
+                f"{max(largest, rss):.1f} times their one-sigma: the distortion or the field changed while recording "
+                "(a sensor warming up creeps its offset, a magnet moved, motors); this fit is the recording's average, "
+                f"and the sensor at either end of it is about that difference away from it{counted}; let the sensor "
+                "warm up (powered a few minutes) and record again where nothing near it changes, or, where the file "
+                "has a temperature column, calibrate on the rows at the working temperature"
             )
     drifting = evidence.drifting
     if drifting is not None and drifting.named:

@@ -4,8 +4,9 @@
 :func:`vehicle_advice`: for a recording that looks like a vehicle's (a flight log, or samples that turn
 about one axis more than they tilt: level with turns), the methods that work for it: ``vector`` with the
 file's or log's attitude and reference field, ``tilt`` with its roll and pitch where it has an attitude (its
-yaw may be steered by the compass being calibrated), ``gyro`` with its gyroscope, and the sphere pinned to the
-known field. Never only "tumble it": a vehicle cannot.
+yaw may be steered by the compass being calibrated), ``gyro`` with its gyroscope, and, unless the samples lie on
+a circle (level turns only: :func:`level_only`), the sphere pinned to the known field. Never only "tumble it": a
+vehicle cannot.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ __all__ = [
     "STREAM_ARGUMENTS",
     "RefusedWithAdvice",
     "StreamsMissing",
+    "level_only",
     "looks_like_vehicle",
     "python_call",
     "vehicle_advice",
@@ -86,6 +88,23 @@ def _turned(largest_spread: float, mean_square: float) -> bool:
     return bool(largest_spread > TURNED_SHARE * np.sqrt(max(mean_square, 0.0)))
 
 
+#: Samples whose smallest principal spread is below this share of their largest lie on a circle: level turns,
+#: tilted less than a few degrees (a tilt of ±δ spreads the field's horizontal part H by about H sin δ across the
+#: circle's plane; ±6° on the campaign's level flights is 0.1 of the spread in the plane).
+LEVEL_ONLY_SHARE = 0.05
+
+
+def level_only(covariance: NDArray[np.float64]) -> bool:
+    """Whether samples of this covariance (3, 3) lie on a circle (:data:`LEVEL_ONLY_SHARE`): level turns only.
+
+    A sphere of a known radius B through a circle of radius ρ has its centre on the circle's axis at
+    ``±√(B² − ρ²)`` from its plane: two offsets fit the samples alike, so the sphere pinned to the field
+    strength cannot calibrate them (:func:`magfit.diagnostics.verdict.mirrored_offset`).
+    """
+    spreads = np.sqrt(np.maximum(np.linalg.eigvalsh(covariance), 0.0))
+    return bool(spreads[0] < LEVEL_ONLY_SHARE * spreads[-1])
+
+
 def vehicle_advice(
     path: Path,
     *,
@@ -94,19 +113,21 @@ def vehicle_advice(
     unit: str | None,
     method: str,
     sensor: str | None = None,
+    level: bool = False,
 ) -> tuple[Reason, ...]:
     """The methods that work for a vehicle's recording, each a :class:`Reason` with its remedy (the arguments
     of :func:`magfit.calibrate_file` / the command line's options). ``streams``: those the file or log holds
     (``attitude``, ``reference``, ``place``, ``gyro``, ``time``); ``sensor``: the log's compass, named in
-    each remedy (a log holding several)."""
+    each remedy (a log holding several); ``level``: the samples lie on a circle (:func:`level_only`), where the
+    sphere pinned to the field strength has two solutions and is not named."""
     advice = [
         Reason(reason.text, reason.code, reason.remedy + ((("sensor", sensor),) if sensor is not None else ()))
-        for reason in _advice(is_log=is_log, streams=streams, unit=unit, method=method)
+        for reason in _advice(is_log=is_log, streams=streams, unit=unit, method=method, level=level)
     ]
     return tuple(advice)
 
 
-def _advice(*, is_log: bool, streams: Sequence[str], unit: str | None, method: str) -> list[Reason]:
+def _advice(*, is_log: bool, streams: Sequence[str], unit: str | None, method: str, level: bool) -> list[Reason]:
     advice = []
     physical = unit not in (None, "", "counts")
     unit_pair = (("unit", unit or "UNIT"),)  # the samples' unit: the user's, or a place to give it
@@ -147,12 +168,15 @@ def _advice(*, is_log: bool, streams: Sequence[str], unit: str | None, method: s
             "the gyroscope's rates pin the distortion the turns cannot (the gyro method, rates in rad/s)",
             "vehicle_methods", tuple(remedy),
         ))  # fmt: skip
-    if unit is None or unit == "" or physical:  # the model's field has a physical unit: raw counts have none
+    # Not on level turns only: the field strength fixes the size of the field's vertical part, not its sign, and
+    # the offset along the turning axis has two values that fit alike (level_only).
+    if not level and (unit is None or unit == "" or physical):  # a physical field strength: raw counts have none
         remedy = [("method", "sphere"), ("field_strength", "wmm")]
         if not is_log:
             remedy += [("location", "LAT,LON,ALT_KM"), *unit_pair]
         advice.append(Reason(
-            "the sphere pinned to the World Magnetic Model's field strength: offsets only, which level turns "
-            "determine", "vehicle_methods", tuple(remedy),
+            "the sphere pinned to the World Magnetic Model's field strength: offsets only, where the vehicle also "
+            "banked or pitched (a few tens of degrees); on level turns only the offset along the turning axis has "
+            "two values the field strength cannot choose between", "vehicle_methods", tuple(remedy),
         ))  # fmt: skip
     return advice
