@@ -6,7 +6,7 @@
   its reader refuses with what is missing (:func:`is_headless_dataflash`);
 - MAVLink telemetry logs (``.tlog``: each record an 8-byte big-endian UNIX time in microseconds and a MAVLink
   frame, :func:`is_tlog`);
-- the text ``mavlogdump.py log.bin`` prints (:func:`magfit.sources.mavlogdump.is_mavlogdump`);
+- the text ``mavlogdump.py log.bin`` prints (:func:`is_mavlogdump`);
 - ROS 1 bags, MCAP, ROS 2 SQLite bags and bag folders (:func:`magfit.sources.rosbag.bag_kind`);
 - anything else is a samples file for :mod:`magfit.io` (None).
 """
@@ -14,8 +14,17 @@
 from __future__ import annotations
 
 import os
+import re
 
-__all__ = ["DATAFLASH_MAGIC", "TLOG_STAMP_RANGE", "ULOG_MAGIC", "is_headless_dataflash", "is_tlog", "log_kind"]
+__all__ = [
+    "DATAFLASH_MAGIC",
+    "TLOG_STAMP_RANGE",
+    "ULOG_MAGIC",
+    "is_headless_dataflash",
+    "is_mavlogdump",
+    "is_tlog",
+    "log_kind",
+]
 
 #: First bytes of a PX4 ULog file (the version byte and the timestamp follow).
 ULOG_MAGIC = b"ULog\x01\x12\x35"
@@ -46,8 +55,6 @@ def log_kind(path: str | os.PathLike[str]) -> str | None:
         return "dataflash"
     if is_tlog(head):
         return "tlog"
-    from .mavlogdump import is_mavlogdump
-
     if is_mavlogdump(head):
         return "mavlogdump"
     from .rosbag import bag_kind  # its own magic numbers (ROS 1, MCAP, SQLite); the module imports no extra
@@ -104,3 +111,15 @@ def is_tlog(head: bytes) -> bool:
         pos += 8 + size
         records += 1
     return records == 3 or pos + 10 > len(head)  # or the records run to the end: a short or cut-short file
+
+
+#: The date mavlogdump puts before each message, then the message's name and the opening of its fields.
+_MAVLOGDUMP_HEAD = re.compile(rb"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d(?:\.\d+)?: [A-Z][A-Z0-9_]{0,15} \{")
+
+
+def is_mavlogdump(head: bytes) -> bool:
+    """True when the first non-empty line of ``head`` (the file's first bytes) is a mavlogdump message line."""
+    for line in head.splitlines():
+        if line.strip():
+            return bool(_MAVLOGDUMP_HEAD.match(line.lstrip(b"\xef\xbb\xbf")))
+    return False

@@ -27,25 +27,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataFileError
+from .detect import is_mavlogdump  # the format's sniffing lives with the others'
 from .types import Source
 
 __all__ = ["MavlogdumpLog", "is_mavlogdump", "open_mavlogdump"]
 
 #: The date mavlogdump puts before each message, then the message's name and its fields.
 _LINE = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d(?:\.\d+)?: ([A-Z][A-Z0-9_]{0,15}) \{(.*)\}\s*$")
-_HEAD = re.compile(rb"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d(?:\.\d+)?: [A-Z][A-Z0-9_]{0,15} \{")
 #: The messages whose fields are read; the others are only counted (a MSG's text may hold ", " and " : ").
 _READ = frozenset({"MAG", "MAG2", "MAG3", "PARM", "ATT", "AHR2", "XKQ", "IMU", "GPS"})
 #: What precedes each value in a message's body: the start or ", ", a field name, " : ".
 _FIELD = re.compile(r"(?:^|, )[A-Za-z_][A-Za-z0-9_]* : ")
-
-
-def is_mavlogdump(head: bytes) -> bool:
-    """True when the first non-empty line of ``head`` (the file's first bytes) is a mavlogdump message line."""
-    for line in head.splitlines():
-        if line.strip():
-            return bool(_HEAD.match(line.lstrip(b"\xef\xbb\xbf")))
-    return False
 
 
 def _number(text: str) -> float:
