@@ -287,8 +287,10 @@ def test_vector_on_a_log_without_gnss_takes_the_location_given() -> None:
     assert result.exit_code == 1, result.output  # 27 samples cannot support the fit: exit 1, not a usage error
 
 
-@pytest.mark.xfail(strict=True, reason="level turns: the advised 'sphere pinned to the field strength' is refused too")
-def test_the_advised_pinned_sphere_works_on_level_turns(tmp_path: Path) -> None:
+def test_level_turns_are_not_advised_a_pinned_sphere_that_cannot_choose(tmp_path: Path) -> None:
+    """Level turns with the field strength known: a sphere of that radius through the samples' circle has its
+    centre on either side of the circle's plane, two offsets alike. The default's refusal must not advise it;
+    given anyway, the refusal names both offsets, the truth one of them."""
     import re
 
     sim = magfit.simulate(
@@ -298,12 +300,13 @@ def test_the_advised_pinned_sphere_works_on_level_turns(tmp_path: Path) -> None:
     _write(path, sim.samples)
     refused = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT"])
     assert refused.exit_code == 1, refused.output
-    assert re.search(r"--method sphere --field-strength", refused.stderr), refused.stderr  # the advice
-    # Followed with the true field strength (the World Magnetic Model's would be the same number here).
+    assert not re.search(r"--method sphere --field-strength", refused.stderr), refused.stderr
     followed = CliRunner().invoke(
         cli, ["calibrate", str(path), "--unit", "uT", "-m", "sphere", "--field-strength", "50"]
     )
-    assert followed.exit_code == 0, followed.output
+    assert followed.exit_code == 1, followed.output
+    offsets = re.findall(r"\(([-\d.]+), ([-\d.]+), ([-\d.]+)\)", followed.stderr)
+    assert any(np.allclose([float(v) for v in o], [10, -5, 20], atol=0.5) for o in offsets), followed.stderr
 
 
 def test_a_drifting_offset_is_not_a_supported_calibration_short_of_its_error(tmp_path: Path) -> None:

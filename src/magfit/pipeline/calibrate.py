@@ -24,7 +24,7 @@ from ..outliers import kept_statistics
 from ..remedy import option
 from ..sources import Magnetometer, Source, log_kind, open_source
 from ..units import field_unit_reason, get_unit
-from .advice import RefusedWithAdvice, StreamsMissing, looks_like_vehicle, turned, vehicle_advice
+from .advice import RefusedWithAdvice, StreamsMissing, level_only, looks_like_vehicle, turned, vehicle_advice
 from .results import CompassCalibration, CompassFailure, FileCalibration, ModelField
 from .streaming import (
     Nonfinite,
@@ -545,7 +545,8 @@ def _samples_file_advice(
     if not looks_like_vehicle(covariance, float(np.trace(outer)) / count):
         return ()
     streams = tuple(find_stream_columns(header)) if header is not None else ()
-    return vehicle_advice(path, is_log=False, streams=streams, unit=unit, method=method)
+    level = level_only(covariance)  # level turns: the pinned sphere has two solutions and is not advised
+    return vehicle_advice(path, is_log=False, streams=streams, unit=unit, method=method, level=level)
 
 
 def _with_vehicle_advice(
