@@ -47,7 +47,7 @@ from ...rotations import angle_between_deg, axis_words, polar_decomposition
 from ..registry import FitInput, fit_input, register
 from .choice import LIKELIHOOD_RATIO, _choose
 from .gravity import _accel, _gravity
-from .inclination import _dip, _gravity_residual, _inclination_disagreement
+from .inclination import _dip, _field_sense, _gravity_residual, _inclination_disagreement
 from .judge import _ADVICE, HALVES_SIGMAS, LARGE_RESIDUAL, SINGLE_AXIS, _halves, _heading_sigma, _support
 from .lag import _delayed, _search_lag
 from .mapping import MAPPINGS, mapping_name
@@ -128,7 +128,10 @@ def fit_gyro(
         gyro= or time_s= missing, of the wrong shape, not finite, not increasing, or in degrees per second;
         gyro_time_s= likewise, not covering the samples, or spanning more than 10 times or less than a tenth
         of time_s= (another unit); accel= of the wrong shape, not finite, or a row of zeros; inclination_deg
-        ±90 or beyond.
+        ±90 or beyond. With accel=, a field that comes out pointing up against the accelerometer's down (or
+        against the sign of inclination_deg= when given): a magnetometer left-handed against the gyroscope,
+        which the kinematics calibrate with the field reversed (``mag_handedness``, naming the axis to negate
+        or the two to swap; :func:`.inclination._field_sense`).
     CalibrationError
         Too short a recording, or one that turned about one axis only (named).
     """
@@ -312,6 +315,10 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
     traj, solution = model.traj, model.solution
     k = traj.k
     g, offset, beta, covariance, strength, matrix = _correction(model, gravity_facts)
+    if aligned.a is not None:  # the field's sense, which the kinematics leave free, from the accelerometer
+        reversed_field = _field_sense(y, _delayed(aligned.a, aligned.t, lag), offset, matrix, inputs.inclination)
+        if reversed_field is not None:
+            raise OptionError(f"the gyro calibration is refused: {reversed_field}", codes=("mag_handedness",))
     rotation, symmetric = polar_decomposition(matrix)
     nearest = mapping_name(rotation)
     angle = angle_between_deg(MAPPINGS[nearest], rotation)
@@ -333,7 +340,8 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
     solver = SolverStatus(iterations=solution.iterations, message=solution.message)
     details: dict[str, Any] = {  # free-form figures no other code reads
         "mapping_likelihood_ratios": excess,
-        "mirror": "not determined by the kinematics: the magnetometer is taken to be right-handed",
+        "mirror": "not determined by the kinematics: the magnetometer is taken to be right-handed (checked against "
+        "the accelerometer's down when given)",
         "offset_sigma": diagonal[k : k + 3].tolist(),
         "residual_rms": residual_rms,
         "turns_deg": turns_deg.tolist(),

@@ -1,0 +1,63 @@
+"""The gyro method on recordings with one thing wrong: a mirrored magnetometer (left-handed against the gyro)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import magfit
+from magfit.vehicle import VehicleSimulation, simulate_vehicle
+
+
+def _vehicle(motion: str, seed: int, inclination_deg: float = 60.0) -> VehicleSimulation:
+    rng = np.random.default_rng(seed)
+    w = np.eye(3) + rng.normal(0, 0.08, (3, 3))
+    return simulate_vehicle(
+        3000, motion, soft_iron=(w + w.T) / 2, hard_iron=rng.normal(0, 0.5, 3) * 50,
+        mounting=Rotation.from_euler("xyz", rng.normal(0, 5, 3), degrees=True).as_matrix(), field_strength=50.0,
+        inclination_deg=inclination_deg, declination_deg=5, noise=0.3, attitude_noise_deg=0.5, gyro_noise=0.002,
+        gyro_bias=[0.01, -0.005, 0.003], accel_noise=0.05, seed=seed,
+    )  # fmt: skip
+
+
+def _heading_error_deg(cal: magfit.Calibration, sim: VehicleSimulation, raw: np.ndarray) -> float:
+    """RMS heading error over the recording with the true attitude (the calibration is in the gyro's axes)."""
+    world = np.einsum("kij,kj->ki", sim.attitude, cal.apply(raw))
+    truth = np.arctan2(sim.field_world[1], sim.field_world[0])
+    wrapped = (np.degrees(np.arctan2(world[:, 1], world[:, 0]) - truth) + 180.0) % 360.0 - 180.0
+    return float(np.sqrt(np.mean(wrapped**2)))
+
+
+@pytest.mark.parametrize(("motion", "columns", "signs", "fix"), [
+    ("car", [1, 0, 2], [1, 1, 1], "swap mx and my"),
+    ("tumble", [0, 1, 2], [1, 1, -1], "negate mz"),
+    ("boat", [0, 1, 2], [-1, 1, 1], "negate mx"),
+])  # fmt: skip
+def test_a_left_handed_magnetometer_is_refused_naming_the_axis(motion: str, columns: list[int], signs: list[int],
+                                                               fix: str) -> None:  # fmt: skip
+    sim = _vehicle(motion, 1)
+    mirrored = sim.samples[:, columns] * signs
+    with pytest.raises(magfit.OptionError) as refused:
+        magfit.fit(mirrored, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel)
+    assert refused.value.codes == ("mag_handedness",)
+    assert fix in str(refused.value)
+    # Ground truth: the axes fixed as told, the same recording calibrates with the field's sense right (its
+    # error a degree or so, not 180°).
+    cal = magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel)
+    assert _heading_error_deg(cal, sim, sim.samples) < 5.0
+
+
+def test_the_southern_hemisphere_is_calibrated_when_its_inclination_is_given() -> None:
+    sim = _vehicle("tumble", 3, inclination_deg=-55.0)
+    with pytest.raises(magfit.OptionError) as refused:  # the field points up: a mirror, or the south
+        magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel)
+    assert refused.value.codes == ("mag_handedness",)
+    cal = magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel,
+                     inclination_deg=-55.0)  # fmt: skip
+    assert _heading_error_deg(cal, sim, sim.samples) < 5.0  # the field's sense right, not 180° off
+    # ... and a mirrored magnetometer there is refused against the given inclination.
+    with pytest.raises(magfit.OptionError) as mirrored:
+        magfit.fit(sim.samples * [1, 1, -1], method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel,
+                   inclination_deg=-55.0)  # fmt: skip
+    assert mirrored.value.codes == ("mag_handedness",)
