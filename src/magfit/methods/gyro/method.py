@@ -52,7 +52,7 @@ from .judge import _ADVICE, HALVES_SIGMAS, LARGE_RESIDUAL, SINGLE_AXIS, _halves,
 from .lag import _delayed, _search_lag
 from .mapping import MAPPINGS, mapping_name
 from .model import _covariance, _Model, forget_integration
-from .rates import _check_gyro, _check_readings, _check_readings_by_fit, _motion, _own_rate, _Reading
+from .rates import _check_gyro, _check_readings, _check_readings_by_fit, _held, _motion, _own_rate, _Reading
 from .windows import WINDOW_S, _turn_axes, _windowed_bias, _Windows, _windows, forget_frame, window_length
 
 
@@ -163,7 +163,8 @@ def _fit_gyro(data: FitInput, *, gyro: ArrayLike | None, time_s: ArrayLike | Non
 @dataclass(frozen=True)
 class _Inputs:
     """The checked inputs: samples ``y``, rates ``w``, times ``t``, accelerometer ``a`` (those in the gyro's gaps
-    dropped, noted in ``gap_notes``) and the given inclination."""
+    dropped, noted in ``gap_notes``), the given inclination, and the note on a held compass's repeats (only its
+    fresh samples kept, :func:`.rates._held`)."""
 
     y: NDArray[np.float64]
     w: NDArray[np.float64]
@@ -171,6 +172,7 @@ class _Inputs:
     a: NDArray[np.float64] | None
     gap_notes: list[str]
     inclination: float | None
+    held: str | None = None
 
 
 def _inputs(data: FitInput, gyro: ArrayLike | None, time_s: ArrayLike | None, accel: ArrayLike | None,
@@ -187,13 +189,20 @@ def _inputs(data: FitInput, gyro: ArrayLike | None, time_s: ArrayLike | None, ac
         kept = ~dropped
     w, t = _motion(gyro, time_s, n)
     a = None if accel is None else _accel(accel, n)
+    held = _held(y) if gyro_time_s is None else None
+    note = None
+    if held is not None:  # the fresh samples at their own times, the gyro (logged on every row) at its own
+        fresh, note = held
+        w, dropped, gap_notes = _own_rate(w, t, t[fresh])
+        y, t, a = y[fresh], t[fresh], None if a is None else a[fresh]
+        kept = ~dropped
     if not kept.all():  # samples the gyro never saw turning: dropped, the stretches restart after them
         y, w, t = y[kept], w[kept], t[kept]
         a = None if a is None else a[kept]
         if y.shape[0] < 50:
             raise CalibrationError(
                 f"the samples do not support the gyro calibration: {y.shape[0]} samples are left once those in the "
-                f"gyro's gaps are dropped; {_ADVICE}",
+                f"gyro's gaps (or repeating the one before) are dropped; {_ADVICE}",
                 codes=("too_few_samples",),
             )
     if mapping not in ("search", "general") and mapping not in MAPPINGS:
@@ -204,7 +213,7 @@ def _inputs(data: FitInput, gyro: ArrayLike | None, time_s: ArrayLike | None, ac
         raise OptionError(f"segment_s must be positive, got {segment_s!r}")
     if inclination_deg is not None:
         inclination_deg = check_inclination(inclination_deg)
-    return _Inputs(y, w, t, a, gap_notes, inclination_deg)
+    return _Inputs(y, w, t, a, gap_notes, inclination_deg, note)
 
 
 @dataclass(frozen=True)
@@ -351,6 +360,8 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
     }
     if gap_notes:
         details["gyro_gaps"] = gap_notes
+    if inputs.held is not None:
+        details["held_samples"] = inputs.held
     return Calibration(
         "gyro", offset, matrix, strength, n_samples=int(y.shape[0]), details=details, frame="vehicle",
         support=support, solver=solver, gyro=facts,
