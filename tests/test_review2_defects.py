@@ -141,17 +141,9 @@ _IMPERFECT = {
     "car, gyro scale 2 % off, 0.89 deg for +-0.20 deg supported": (
         "car", 2, lambda s: (s.samples, s.clean, s.gyro * 1.02)),
 }  # fmt: skip
-#: The cases the gyro method now refuses or covers.
-_IMPERFECT_FIXED = {name for name in _IMPERFECT if "left-handed" in name or "held" in name or "40 ms late" in name}
 
 
-@pytest.mark.parametrize(
-    "case",
-    [
-        pytest.param(name, marks=() if name in _IMPERFECT_FIXED else pytest.mark.xfail(strict=True, reason=name))
-        for name in _IMPERFECT
-    ],
-)
+@pytest.mark.parametrize("case", list(_IMPERFECT))
 def test_gyro_one_sigma_covers_its_error_on_an_imperfect_recording(case: str, tmp_path: Path) -> None:
     motion, seed, change = _IMPERFECT[case]
     sim = _vehicle(motion, seed)

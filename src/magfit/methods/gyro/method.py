@@ -51,7 +51,7 @@ from .inclination import _dip, _field_sense, _gravity_residual, _inclination_dis
 from .judge import _ADVICE, HALVES_SIGMAS, LARGE_RESIDUAL, SINGLE_AXIS, _halves, _heading_sigma, _support
 from .lag import _delayed, _search_lag
 from .mapping import MAPPINGS, mapping_name
-from .model import _covariance, _Model, forget_integration
+from .model import _covariance, _gyro_scale, _Model, forget_integration
 from .rates import _check_gyro, _check_readings, _check_readings_by_fit, _held, _motion, _own_rate, _Reading
 from .windows import WINDOW_S, _turn_axes, _windowed_bias, _Windows, _windows, forget_frame, window_length
 
@@ -323,7 +323,7 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
     model, excess, gravity_facts = fitted.model, fitted.excess, fitted.gravity_facts
     traj, solution = model.traj, model.solution
     k = traj.k
-    g, offset, beta, covariance, strength, matrix = _correction(model, gravity_facts)
+    g, offset, beta, covariance, strength, matrix, scale_facts = _correction(model, gravity_facts)
     if aligned.a is not None:  # the field's sense, which the kinematics leave free, from the accelerometer
         reversed_field = _field_sense(y, _delayed(aligned.a, aligned.t, lag), offset, matrix, inputs.inclination)
         if reversed_field is not None:
@@ -357,6 +357,7 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
         "segments": traj.count,
         "window_samples": length,
         "solver_status": solution.status,
+        **scale_facts,
     }
     if gap_notes:
         details["gyro_gaps"] = gap_notes
@@ -372,16 +373,24 @@ def _rows(matrix: NDArray[np.float64]) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(float(v) for v in row) for row in matrix)
 
 
-def _correction(model: _Model, gravity_facts: dict[str, Any]) -> tuple[NDArray[np.float64], NDArray[np.float64],
-                NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64]]:  # fmt: skip
-    """G, V, β, the covariance of p, the field's magnitude ``|det G|^⅓`` and the proper correction
-    ``matrix = ±G⁻¹ |det G|^⅓``; the gravity rows' fit goes to ``gravity_facts``."""
+_Correction = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float,
+                    NDArray[np.float64], dict[str, list[float]]]  # fmt: skip
+
+
+def _correction(model: _Model, gravity_facts: dict[str, Any]) -> _Correction:
+    """G, V, β, the covariance of p, the field's magnitude ``|det G|^⅓``, the proper correction
+    ``matrix = ±G⁻¹ |det G|^⅓`` and the gyro's scale (:func:`.model._gyro_scale`: p corrected for a scale error
+    the recording determines, the covariance widened by what it leaves unknown); the gravity rows' fit goes to
+    ``gravity_facts``."""
     traj, solution = model.traj, model.solution
-    p = solution.params
     k = traj.k
+    covariance = _covariance(traj, solution.params)
+    p, added, scale, scale_covariance = _gyro_scale(traj, solution.params)
+    covariance = covariance + added
+    scale_facts = {"gyro_scale_correction": scale.tolist(),
+                   "gyro_scale_sigma": np.sqrt(np.clip(np.diag(scale_covariance), 0, None)).tolist()}  # fmt: skip
     g = traj.distortion(p)
     offset, beta = p[k : k + 3], p[k + 3 : k + 6]
-    covariance = _covariance(traj, p)
 
     strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
     matrix = np.linalg.inv(g) * strength
@@ -394,7 +403,7 @@ def _correction(model: _Model, gravity_facts: dict[str, Any]) -> tuple[NDArray[n
             "residual_rms_deg": math.degrees(float(np.sqrt(np.mean(gravity_residual**2)))),
             **_dip(model, covariance),
         })  # fmt: skip
-    return g, offset, beta, covariance, strength, matrix
+    return g, offset, beta, covariance, strength, matrix, scale_facts
 
 
 def _verdict(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg: NDArray[np.float64],

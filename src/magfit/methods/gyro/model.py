@@ -58,6 +58,12 @@ from .kinematics import _entries, _jacobian_steps, _product, _rotation_quaternio
 from .mapping import MAPPINGS
 from .windows import _gaps, _symmetric
 
+#: A MEMS gyroscope's scale error per axis, one-sigma, taken as unknown (:func:`_gyro_scale`): datasheets bound
+#: the sensitivity after the factory trim by ±0.5-3 %; a bound taken as 3 one-sigmas (docs/methods.md, "gyro").
+GYRO_SCALE_PRIOR = 0.005
+#: ... and corrected for (:func:`_gyro_scale`) only where an axis's estimate exceeds this many of its one-sigmas.
+SCALE_SIGMAS = 3.0
+
 #: At most this many samples enter the maximum-likelihood residuals (a regular stride of the recording);
 #: the gyro is integrated at every sample all the same.
 MAX_RESIDUAL_SAMPLES = 20_000
@@ -670,6 +676,51 @@ def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64
         shift = -np.einsum("ij,jk->ik", inverse, traj.times(dense, angular, tilt))
         covariance = covariance + (ACCEL_BIAS_PRIOR / 9.81) ** 2 * np.einsum("ik,jk->ij", shift, shift)
     return covariance
+
+
+def _gyro_scale(
+    traj: _Trajectory, p: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The gyroscope's scale error per axis ``s`` estimated from the fit, its one-sigma, and what it does to p:
+    ``(p corrected, covariance to add, s, its covariance)``.
+
+    A rate read ``(1 + s_i)`` times too large about axis i turns every ``R_k`` too far, which a fit at s = 0
+    absorbs into G, V and the stretches' fields. Linearised at the fit, ``r ≈ r₀ + J δp + K s`` (``K = ∂r/∂s``
+    by a finite difference of the residual with one axis's rates scaled; each scaled recording's integration
+    dropped once used, :func:`forget_rates`); p re-optimised for a given s moves by ``δp = −(JᵀJ)⁻¹ JᵀK s``
+    and leaves the projected ``K̃ = (I − J (JᵀJ)⁻¹ Jᵀ) K``. With s taken as unknown within
+    :data:`GYRO_SCALE_PRIOR` (a prior ``N(0, σ_s² I)``) and the residuals' variance σ²::
+
+        ŝ = −(K̃ᵀK̃ / σ² + I / σ_s²)⁻¹ K̃ᵀ r₀ / σ²,    Σ_s = (K̃ᵀK̃ / σ² + I / σ_s²)⁻¹               (S1)
+
+    so a recording that determines the scale corrects for it (p moves by ``δp(ŝ)``) and adds little, and
+    one that does not adds the prior's worth, ``(∂p/∂s) Σ_s (∂p/∂s)ᵀ``, to the covariance.
+    """
+    residual, dense, angular = traj.blocks(p)
+    information = traj.information(dense, angular)
+    structured = _inverse_arrow(information, traj.head)
+    inverse = np.asarray(np.linalg.pinv(information) if structured is None else structured, dtype=np.float64)
+    step = 1e-3
+    change = np.zeros((*residual.shape, 3))
+    for axis in range(3):
+        scaled = traj.w.copy()
+        scaled[:, axis] *= 1.0 + step
+        other = replace(traj, w=scaled, origin=None)
+        try:
+            change[:, :, axis] = (other._residual_of(p, other.field(p)[0]) - residual) / step
+        finally:
+            forget_rates(scaled)
+    crossed = traj.times(dense, angular, change)  # JᵀK, (p, 3)
+    moved = -np.einsum("ij,jk->ik", inverse, crossed)  # ∂p/∂s
+    projected = np.einsum("kim,kin->mn", change, change) + np.einsum("pm,pn->mn", crossed, moved)  # K̃ᵀK̃
+    dof = max(traj.n_residuals() - p.size, 1)
+    variance = max(float(np.sum(residual**2)) / dof, 1e-300)
+    posterior = np.linalg.inv(projected / variance + np.eye(3) / GYRO_SCALE_PRIOR**2)
+    estimate = -posterior @ np.einsum("kim,ki->m", change, residual) / variance
+    added = np.einsum("pm,mn,qn->pq", moved, posterior, moved)
+    if not np.any(np.abs(estimate) > SCALE_SIGMAS * np.sqrt(np.diag(posterior))):
+        return p, np.asarray(added, dtype=np.float64), np.zeros(3), posterior
+    return p + moved @ estimate, np.asarray(added, dtype=np.float64), estimate, posterior
 
 
 def _larger(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
