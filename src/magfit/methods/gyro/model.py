@@ -678,6 +678,41 @@ def _covariance(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64
     return covariance
 
 
+def _scale_jacobian(traj: _Trajectory, p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``K = ∂r/∂s`` (rows, C, 3): the residuals' change with the gyro's scale per axis, ``ω̄ → (1 + s) ω̄``.
+
+    Each step then turns by ``δφ_j = dt_j ω̄_{j,m} δs_m e_m`` more, so, as (M2) for the bias (``δφ_j = −dt_j δβ``),
+    ``δR_k = [S_k δs]× R_k`` with ``S_k = Σ_{j<k} dt_j R_{j+1} J_r(φ_j) diag(ω̄_j)`` and ``∂b_k/∂s = R_kᵀ [b₀]× S_k``:
+    the bias's running sum with each column weighted by its axis's rate, from the recording's integration
+    (:class:`_Integration`, stretch by stretch as there; the kept one, at the fit's bias or near it).
+    """
+    k = traj.k
+    with _LOCK:  # the recording's kept integration, at the fit's bias or the linearization's (M4) beside it
+        kept = [(last, where) for last in _LAST if (where := last.offset(traj)) is not None]
+    found, offset = kept[-1] if kept else _integration(traj, p[k + 3 : k + 6])
+    mean_rates, dt, _, _ = traj.steps
+    weighted = _jacobian_steps(found.entries, mean_rates, dt, found.beta)
+    weighted[:, 0] = 0.0
+    for row in range(3):
+        weighted[3 * row : 3 * row + 3, 1:] *= (mean_rates * dt[:, None]).T
+    np.cumsum(weighted, axis=1, out=weighted)
+    sums = weighted.T.reshape(-1, 3, 3)
+    first, at = traj.first[traj.rows] + offset, traj.rows + offset
+    start = found.entries[:, first].T.reshape(-1, 3, 3).transpose(0, 2, 1)  # Q_sᵀ
+    turns = np.matmul(start, found.entries[:, at].T.reshape(-1, 3, 3))
+    running = np.matmul(start, sums[at] - sums[first])
+    del weighted, sums
+    field = _unit(p[traj.head :].reshape(traj.count, 2))[traj.segment[traj.rows]]
+    d_scale = np.matmul(np.matmul(turns.transpose(0, 2, 1), skew(field)), running)  # R_kᵀ [b₀]× S_k
+    change = np.zeros((traj.rows.size, traj.components, 3))
+    change[:, :3] = np.matmul(traj.distortion(p), d_scale)
+    if traj.gravity is not None:
+        down, weight = traj._gravity_rows()
+        across = weight / _cos(float(p[k + 6]))
+        change[:, 3] = across[:, None] * np.einsum("ki,kim->km", down, d_scale)
+    return change
+
+
 def _gyro_scale(
     traj: _Trajectory, p: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -685,9 +720,8 @@ def _gyro_scale(
     ``(p corrected, covariance to add, s, its covariance)``.
 
     A rate read ``(1 + s_i)`` times too large about axis i turns every ``R_k`` too far, which a fit at s = 0
-    absorbs into G, V and the stretches' fields. Linearised at the fit, ``r ≈ r₀ + J δp + K s`` (``K = ∂r/∂s``
-    by a finite difference of the residual with one axis's rates scaled; each scaled recording's integration
-    dropped once used, :func:`forget_rates`); p re-optimised for a given s moves by ``δp = −(JᵀJ)⁻¹ JᵀK s``
+    absorbs into G, V and the stretches' fields. Linearised at the fit, ``r ≈ r₀ + J δp + K s``
+    (:func:`_scale_jacobian`); p re-optimised for a given s moves by ``δp = −(JᵀJ)⁻¹ JᵀK s``
     and leaves the projected ``K̃ = (I − J (JᵀJ)⁻¹ Jᵀ) K``. With s taken as unknown within
     :data:`GYRO_SCALE_PRIOR` (a prior ``N(0, σ_s² I)``) and the residuals' variance σ²::
 
@@ -700,16 +734,7 @@ def _gyro_scale(
     information = traj.information(dense, angular)
     structured = _inverse_arrow(information, traj.head)
     inverse = np.asarray(np.linalg.pinv(information) if structured is None else structured, dtype=np.float64)
-    step = 1e-3
-    change = np.zeros((*residual.shape, 3))
-    for axis in range(3):
-        scaled = traj.w.copy()
-        scaled[:, axis] *= 1.0 + step
-        other = replace(traj, w=scaled, origin=None)
-        try:
-            change[:, :, axis] = (other._residual_of(p, other.field(p)[0]) - residual) / step
-        finally:
-            forget_rates(scaled)
+    change = _scale_jacobian(traj, p)
     crossed = traj.times(dense, angular, change)  # JᵀK, (p, 3)
     moved = -np.einsum("ij,jk->ik", inverse, crossed)  # ∂p/∂s
     projected = np.einsum("kim,kin->mn", change, change) + np.einsum("pm,pn->mn", crossed, moved)  # K̃ᵀK̃
