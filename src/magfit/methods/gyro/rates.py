@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..._validation import check_rows, check_times
 from ...errors import CalibrationError, OptionError
+from ...timeunits import time_readings
 from .lag import MAX_LAG_S, _delayed
 from .model import LINEAR_TURN, SCREEN_ROWS, _fit_model, _Model, _noise_variance, forget_rates
 from .windows import (
@@ -60,8 +61,6 @@ HANDEDNESS_FLOOR = 1.5
 #: (turning mostly about one axis, about which a mirrored gyro turns the field alike) the right reading and its
 #: mirror image are within a few times of each other, either way (docs/methods.md, "gyro").
 AXES_WINDOWS_GAIN = 0.01
-#: The median time step from which time_s may be in milliseconds (a gyro-aided fit at under 5 Hz).
-MS_STEP = 0.2
 #: Share of the rows repeating the one before exactly above which the compass is taken as held (:func:`_held`).
 HELD_SHARE = 0.2
 #: Lags beyond MAX_LAG_S are tried, on a grid of WIDE_LAG_STEP_S to MAX_WIDE_LAG_S, when the given reading's
@@ -212,14 +211,13 @@ def _readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Reading]:
                  "signs of the sensor's datasheet or the firmware's board rotation, right-handed",
                  (("gyro", "the rates about right-handed axes"),), -1.0),
     ]  # fmt: skip
-    for factor, unit, minimum in ((1e-3, "milliseconds", MS_STEP), (1e-6, "microseconds", 1e3 * MS_STEP)):
-        if step >= minimum:
-            divisor = f"{1 / factor:.0f}"
-            found.append(_Reading(
-                "time_unit", w, t * factor,
-                f"time_s= looks like {unit}: its steps are a median {step:.3g} units apart, and the gyro explains "
-                f"the samples' turning only with them divided by {divisor}; give it in seconds (time_s / {divisor})",
-                (("time_s", f"time_s / {divisor}"),)))  # fmt: skip
+    for reading in time_readings(t):  # the one rule of magfit.timeunits, vector's too
+        divisor = reading.divisor
+        found.append(_Reading(
+            "time_unit", w, t * reading.factor,
+            f"time_s= looks like {reading.unit}: its steps are a median {step:.3g} units apart, and the gyro explains "
+            f"the samples' turning only with them divided by {divisor}; give it in seconds (time_s / {divisor})",
+            (("time_s", f"time_s / {divisor}"),)))  # fmt: skip
     return found
 
 
