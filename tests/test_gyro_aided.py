@@ -201,10 +201,12 @@ def test_a_boat_rolling_on_one_heading_is_pinned_by_the_accelerometer() -> None:
     assert gravity["inclination_deg"] == pytest.approx(64.0, abs=max(1.5, 3 * gravity["inclination_sigma_deg"]))
     assert gravity["residual_rms_deg"] < 1.0  # the accelerometer's noise: 0.05 / 9.81 rad = 0.3° per sample
     assert aided.options["accel"] == "an array of 3000 rows"
-    # An accelerometer that reports gravity (the specific force's negative) fits alike: only the dip's sign turns.
-    flipped = _fit(sim, accel=-sim.accel, allow_undetermined=True)
-    assert np.allclose(flipped.offset, aided.offset, atol=1e-6)
-    assert flipped.gyro.gravity["inclination_deg"] == pytest.approx(-gravity["inclination_deg"], abs=1e-4)
+    # An accelerometer that reports gravity (the specific force's negative) puts the field pointing up, as a
+    # mirrored magnetometer does (whose field the kinematics reverse): refused, naming both.
+    with pytest.raises(magfit.OptionError) as flipped:
+        _fit(sim, accel=-sim.accel, allow_undetermined=True)
+    assert flipped.value.codes == ("mag_handedness",)
+    assert "reports gravity" in str(flipped.value)
 
 
 def test_an_accelerometer_that_never_sees_gravity_alone_leaves_the_fit_as_without_it() -> None:

@@ -627,6 +627,7 @@ REASON_CODES: dict[str, str] = {
     "bad_samples": "the samples are malformed (NaN or infinite values, another shape than N rows of 3)",
     "attitude_convention": "the attitude's world is upside down against the accelerometer's gravity (ENU read as NED)",
     "handedness_undetermined": "the recording does not tell the gyroscope's handedness against the magnetometer's",
+    "mag_handedness": "the magnetometer's axes are left-handed against the gyroscope's: its field comes out reversed",
     "unclassified": "a reason without a code of its own yet",
 }
 

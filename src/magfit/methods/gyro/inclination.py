@@ -86,3 +86,62 @@ def _inclination_disagreement(model: _Model, given_deg: float) -> str | None:
         f"inclination_deg= says {abs(given_deg):.1f}° ({difference:+.1f}°, beyond the {allowed:.1f}° allowed): its "
         "calibration (a bias) or its alignment to the gyroscope is off, so its rows were not used"
     )
+
+
+#: The field's dip against the accelerometer's down (the sine of it, the median over the samples) that tells
+#: the field's sense: nearer the horizontal (within about 15°) its sign is not read.
+HANDEDNESS_MIN_SINE = 0.26
+#: ... and the share of samples whose sine must have the median's sign (a vehicle's accelerations aside).
+HANDEDNESS_AGREEMENT = 0.8
+
+
+def _mirror_fix(matrix: NDArray[np.float64]) -> str:
+    """The one change of the magnetometer's columns (an axis negated, or two swapped) that makes a mirrored
+    correction ``−matrix`` nearest the gyroscope's own axes: what to tell the user to do."""
+    from .mapping import MAPPINGS, mapping_name
+
+    mirrored = -MAPPINGS[mapping_name(matrix)]
+    changes: dict[str, NDArray[np.float64]] = {}
+    for i in range(3):
+        flip = np.eye(3)
+        flip[i, i] = -1.0
+        changes[f"negate m{'xyz'[i]}"] = flip
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        swap = np.eye(3)[:, [j if k == i else i if k == j else k for k in range(3)]]
+        changes[f"swap m{'xyz'[i]} and m{'xyz'[j]}"] = swap
+    return min(changes, key=lambda name: float(np.linalg.norm(mirrored @ changes[name] - np.eye(3))))
+
+
+def _field_sense(y: NDArray[np.float64], a: NDArray[np.float64], offset: NDArray[np.float64],
+                 matrix: NDArray[np.float64], given_deg: float | None) -> str | None:  # fmt: skip
+    """Why the calibrated field points the wrong way (a mirrored magnetometer), or None.
+
+    The kinematics fit ``H`` and ``−H`` alike (:mod:`.method`), so a magnetometer whose axes are left-handed
+    against the gyroscope's (two swapped, one negated) is calibrated as the proper correction with the field
+    reversed: every heading 180° off. The accelerometer's down ``d_k = −a_k/|a_k|`` (its specific force: up at
+    rest) tells the field's sense: ``d_k · b_k = sin δ``, positive where the field points down (the northern
+    hemisphere) and of the sign of ``inclination_deg=`` when given. The median over all samples, not only the
+    still ones: a vehicle's accelerations tilt ``d`` by tens of degrees, not across the horizontal.
+    """
+    field = (y - offset) @ matrix.T
+    field /= np.linalg.norm(field, axis=1)[:, None]
+    down = -a / np.linalg.norm(a, axis=1)[:, None]
+    sine = np.einsum("ki,ki->k", down, field)
+    median = float(np.median(sine))
+    if abs(median) < HANDEDNESS_MIN_SINE or np.mean(np.sign(sine) == np.sign(median)) < HANDEDNESS_AGREEMENT:
+        return None
+    expected = 1.0 if given_deg is None else math.copysign(1.0, given_deg)
+    if given_deg is not None and abs(given_deg) < math.degrees(math.asin(HANDEDNESS_MIN_SINE)):
+        return None
+    if median * expected > 0:
+        return None
+    dip = math.degrees(math.asin(median))
+    told = (f"inclination_deg= says {given_deg:+.0f}°" if given_deg is not None
+            else "no inclination_deg= was given, so the northern hemisphere's (positive, down) is taken")  # fmt: skip
+    south = "" if given_deg is not None else "; from the southern hemisphere, give inclination_deg= (negative there)"
+    return (
+        f"the calibrated field's dip against the accelerometer's down is {dip:+.0f}° where {told}: the "
+        "magnetometer's axes are left-handed against the gyroscope's (the kinematics then fit the field reversed, "
+        f"every heading 180° off); {_mirror_fix(matrix)} (or give the axes in the datasheet's order and signs), "
+        f"then fit again. If the accelerometer reports gravity rather than the specific force, negate it{south}"
+    )

@@ -47,12 +47,12 @@ from ...rotations import angle_between_deg, axis_words, polar_decomposition
 from ..registry import FitInput, fit_input, register
 from .choice import LIKELIHOOD_RATIO, _choose
 from .gravity import _accel, _gravity
-from .inclination import _dip, _gravity_residual, _inclination_disagreement
+from .inclination import _dip, _field_sense, _gravity_residual, _inclination_disagreement
 from .judge import _ADVICE, HALVES_SIGMAS, LARGE_RESIDUAL, SINGLE_AXIS, _halves, _heading_sigma, _support
 from .lag import _delayed, _search_lag
 from .mapping import MAPPINGS, mapping_name
-from .model import _covariance, _Model, forget_integration
-from .rates import _check_gyro, _check_readings, _check_readings_by_fit, _motion, _own_rate, _Reading
+from .model import _covariance, _gyro_scale, _Model, forget_integration
+from .rates import _check_gyro, _check_readings, _check_readings_by_fit, _held, _motion, _own_rate, _Reading
 from .windows import WINDOW_S, _turn_axes, _windowed_bias, _Windows, _windows, forget_frame, window_length
 
 
@@ -128,7 +128,10 @@ def fit_gyro(
         gyro= or time_s= missing, of the wrong shape, not finite, not increasing, or in degrees per second;
         gyro_time_s= likewise, not covering the samples, or spanning more than 10 times or less than a tenth
         of time_s= (another unit); accel= of the wrong shape, not finite, or a row of zeros; inclination_deg
-        ±90 or beyond.
+        ±90 or beyond. With accel=, a field that comes out pointing up against the accelerometer's down (or
+        against the sign of inclination_deg= when given): a magnetometer left-handed against the gyroscope,
+        which the kinematics calibrate with the field reversed (``mag_handedness``, naming the axis to negate
+        or the two to swap; :func:`.inclination._field_sense`).
     CalibrationError
         Too short a recording, or one that turned about one axis only (named).
     """
@@ -160,7 +163,8 @@ def _fit_gyro(data: FitInput, *, gyro: ArrayLike | None, time_s: ArrayLike | Non
 @dataclass(frozen=True)
 class _Inputs:
     """The checked inputs: samples ``y``, rates ``w``, times ``t``, accelerometer ``a`` (those in the gyro's gaps
-    dropped, noted in ``gap_notes``) and the given inclination."""
+    dropped, noted in ``gap_notes``), the given inclination, and the note on a held compass's repeats (only its
+    fresh samples kept, :func:`.rates._held`)."""
 
     y: NDArray[np.float64]
     w: NDArray[np.float64]
@@ -168,6 +172,7 @@ class _Inputs:
     a: NDArray[np.float64] | None
     gap_notes: list[str]
     inclination: float | None
+    held: str | None = None
 
 
 def _inputs(data: FitInput, gyro: ArrayLike | None, time_s: ArrayLike | None, accel: ArrayLike | None,
@@ -184,13 +189,20 @@ def _inputs(data: FitInput, gyro: ArrayLike | None, time_s: ArrayLike | None, ac
         kept = ~dropped
     w, t = _motion(gyro, time_s, n)
     a = None if accel is None else _accel(accel, n)
+    held = _held(y) if gyro_time_s is None else None
+    note = None
+    if held is not None:  # the fresh samples at their own times, the gyro (logged on every row) at its own
+        fresh, note = held
+        w, dropped, gap_notes = _own_rate(w, t, t[fresh])
+        y, t, a = y[fresh], t[fresh], None if a is None else a[fresh]
+        kept = ~dropped
     if not kept.all():  # samples the gyro never saw turning: dropped, the stretches restart after them
         y, w, t = y[kept], w[kept], t[kept]
         a = None if a is None else a[kept]
         if y.shape[0] < 50:
             raise CalibrationError(
                 f"the samples do not support the gyro calibration: {y.shape[0]} samples are left once those in the "
-                f"gyro's gaps are dropped; {_ADVICE}",
+                f"gyro's gaps (or repeating the one before) are dropped; {_ADVICE}",
                 codes=("too_few_samples",),
             )
     if mapping not in ("search", "general") and mapping not in MAPPINGS:
@@ -201,7 +213,7 @@ def _inputs(data: FitInput, gyro: ArrayLike | None, time_s: ArrayLike | None, ac
         raise OptionError(f"segment_s must be positive, got {segment_s!r}")
     if inclination_deg is not None:
         inclination_deg = check_inclination(inclination_deg)
-    return _Inputs(y, w, t, a, gap_notes, inclination_deg)
+    return _Inputs(y, w, t, a, gap_notes, inclination_deg, note)
 
 
 @dataclass(frozen=True)
@@ -311,7 +323,11 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
     model, excess, gravity_facts = fitted.model, fitted.excess, fitted.gravity_facts
     traj, solution = model.traj, model.solution
     k = traj.k
-    g, offset, beta, covariance, strength, matrix = _correction(model, gravity_facts)
+    g, offset, beta, covariance, strength, matrix, scale_facts = _correction(model, gravity_facts)
+    if aligned.a is not None:  # the field's sense, which the kinematics leave free, from the accelerometer
+        reversed_field = _field_sense(y, _delayed(aligned.a, aligned.t, lag), offset, matrix, inputs.inclination)
+        if reversed_field is not None:
+            raise OptionError(f"the gyro calibration is refused: {reversed_field}", codes=("mag_handedness",))
     rotation, symmetric = polar_decomposition(matrix)
     nearest = mapping_name(rotation)
     angle = angle_between_deg(MAPPINGS[nearest], rotation)
@@ -333,16 +349,20 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
     solver = SolverStatus(iterations=solution.iterations, message=solution.message)
     details: dict[str, Any] = {  # free-form figures no other code reads
         "mapping_likelihood_ratios": excess,
-        "mirror": "not determined by the kinematics: the magnetometer is taken to be right-handed",
+        "mirror": "not determined by the kinematics: the magnetometer is taken to be right-handed (checked against "
+        "the accelerometer's down when given)",
         "offset_sigma": diagonal[k : k + 3].tolist(),
         "residual_rms": residual_rms,
         "turns_deg": turns_deg.tolist(),
         "segments": traj.count,
         "window_samples": length,
         "solver_status": solution.status,
+        **scale_facts,
     }
     if gap_notes:
         details["gyro_gaps"] = gap_notes
+    if inputs.held is not None:
+        details["held_samples"] = inputs.held
     return Calibration(
         "gyro", offset, matrix, strength, n_samples=int(y.shape[0]), details=details, frame="vehicle",
         support=support, solver=solver, gyro=facts,
@@ -353,16 +373,24 @@ def _rows(matrix: NDArray[np.float64]) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(float(v) for v in row) for row in matrix)
 
 
-def _correction(model: _Model, gravity_facts: dict[str, Any]) -> tuple[NDArray[np.float64], NDArray[np.float64],
-                NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64]]:  # fmt: skip
-    """G, V, β, the covariance of p, the field's magnitude ``|det G|^⅓`` and the proper correction
-    ``matrix = ±G⁻¹ |det G|^⅓``; the gravity rows' fit goes to ``gravity_facts``."""
+_Correction = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float,
+                    NDArray[np.float64], dict[str, list[float]]]  # fmt: skip
+
+
+def _correction(model: _Model, gravity_facts: dict[str, Any]) -> _Correction:
+    """G, V, β, the covariance of p, the field's magnitude ``|det G|^⅓``, the proper correction
+    ``matrix = ±G⁻¹ |det G|^⅓`` and the gyro's scale (:func:`.model._gyro_scale`: p corrected for a scale error
+    the recording determines, the covariance widened by what it leaves unknown); the gravity rows' fit goes to
+    ``gravity_facts``."""
     traj, solution = model.traj, model.solution
-    p = solution.params
     k = traj.k
+    covariance = _covariance(traj, solution.params)
+    p, added, scale, scale_covariance = _gyro_scale(traj, solution.params)
+    covariance = covariance + added
+    scale_facts = {"gyro_scale_correction": scale.tolist(),
+                   "gyro_scale_sigma": np.sqrt(np.clip(np.diag(scale_covariance), 0, None)).tolist()}  # fmt: skip
     g = traj.distortion(p)
     offset, beta = p[k : k + 3], p[k + 3 : k + 6]
-    covariance = _covariance(traj, p)
 
     strength = abs(float(np.linalg.det(g))) ** (1.0 / 3.0)
     matrix = np.linalg.inv(g) * strength
@@ -375,7 +403,7 @@ def _correction(model: _Model, gravity_facts: dict[str, Any]) -> tuple[NDArray[n
             "residual_rms_deg": math.degrees(float(np.sqrt(np.mean(gravity_residual**2)))),
             **_dip(model, covariance),
         })  # fmt: skip
-    return g, offset, beta, covariance, strength, matrix
+    return g, offset, beta, covariance, strength, matrix, scale_facts
 
 
 def _verdict(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg: NDArray[np.float64],

@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..._validation import check_rows, check_times
 from ...errors import CalibrationError, OptionError
+from ...timeunits import time_readings
 from .lag import MAX_LAG_S, _delayed
 from .model import LINEAR_TURN, SCREEN_ROWS, _fit_model, _Model, _noise_variance, forget_rates
 from .windows import (
@@ -60,8 +61,8 @@ HANDEDNESS_FLOOR = 1.5
 #: (turning mostly about one axis, about which a mirrored gyro turns the field alike) the right reading and its
 #: mirror image are within a few times of each other, either way (docs/methods.md, "gyro").
 AXES_WINDOWS_GAIN = 0.01
-#: The median time step from which time_s may be in milliseconds (a gyro-aided fit at under 5 Hz).
-MS_STEP = 0.2
+#: Share of the rows repeating the one before exactly above which the compass is taken as held (:func:`_held`).
+HELD_SHARE = 0.2
 #: Lags beyond MAX_LAG_S are tried, on a grid of WIDE_LAG_STEP_S to MAX_WIDE_LAG_S, when the given reading's
 #: windowed residual is over WIDE_LAG_SHARE of the turning it explains (the gyro explains little of it).
 WIDE_LAG_STEP_S = 0.25
@@ -81,6 +82,25 @@ def _motion(
         raise OptionError("method 'gyro' needs time_s=: the sample times in seconds, shape (N,)")
     w = check_rows(gyro, "gyro", n, "body rates in rad/s, one row per magnetometer sample")
     return w, check_times(time_s, "time_s", n)
+
+
+def _held(y: NDArray[np.float64]) -> tuple[NDArray[np.bool_], str] | None:
+    """The fresh samples (True where a row differs from the one before) and a note, when at least
+    :data:`HELD_SHARE` of the rows repeat the one before exactly: a compass read more slowly than the rows are
+    logged (10 Hz in a 50 Hz log), its last reading held. The held rows are the same field at later times: the
+    kinematics (1) of :mod:`.method` read them as a field that stopped turning and then jumped. None otherwise
+    (noise makes two readings of a turning field differ)."""
+    if y.shape[0] < 2:
+        return None
+    repeated = np.all(y[1:] == y[:-1], axis=1)
+    share = float(np.mean(repeated))
+    if share < HELD_SHARE:
+        return None
+    fresh = np.concatenate([[True], ~repeated])
+    note = (f"{100 * share:.0f} % of the samples repeat the one before exactly (the compass read more slowly than "
+            f"the rows were logged, its reading held): the {int(fresh.sum())} fresh samples are fitted at their own "
+            "times, with the gyro's mean rate over each one's interval")  # fmt: skip
+    return fresh, note
 
 
 def _own_rate(gyro: ArrayLike | None, gyro_time_s: ArrayLike,
@@ -191,14 +211,13 @@ def _readings(w: NDArray[np.float64], t: NDArray[np.float64]) -> list[_Reading]:
                  "signs of the sensor's datasheet or the firmware's board rotation, right-handed",
                  (("gyro", "the rates about right-handed axes"),), -1.0),
     ]  # fmt: skip
-    for factor, unit, minimum in ((1e-3, "milliseconds", MS_STEP), (1e-6, "microseconds", 1e3 * MS_STEP)):
-        if step >= minimum:
-            divisor = f"{1 / factor:.0f}"
-            found.append(_Reading(
-                "time_unit", w, t * factor,
-                f"time_s= looks like {unit}: its steps are a median {step:.3g} units apart, and the gyro explains "
-                f"the samples' turning only with them divided by {divisor}; give it in seconds (time_s / {divisor})",
-                (("time_s", f"time_s / {divisor}"),)))  # fmt: skip
+    for reading in time_readings(t):  # the one rule of magfit.timeunits, vector's too
+        divisor = reading.divisor
+        found.append(_Reading(
+            "time_unit", w, t * reading.factor,
+            f"time_s= looks like {reading.unit}: its steps are a median {step:.3g} units apart, and the gyro explains "
+            f"the samples' turning only with them divided by {divisor}; give it in seconds (time_s / {divisor})",
+            (("time_s", f"time_s / {divisor}"),)))  # fmt: skip
     return found
 
 
