@@ -145,13 +145,15 @@ def test_failed_methods_show_their_reason_and_set_the_exit_status(
 
 
 def test_some_methods_failing_is_still_success(tmp_path: Path) -> None:
-    # The 6 axis points of a sphere: enough for sphere and minmax (4 samples), too few for the ellipsoid (9).
-    directions = np.vstack([np.eye(3), -np.eye(3)])
-    path = _write_csv(tmp_path / "six.csv", 40.0 * directions + [10.0, -5.0, 3.0])
+    # The 6 axis points of a sphere and 4 cube corners: enough for the sphere's 4 numbers and the 5 samples beyond
+    # them that measure the noise (9), too few for the ellipsoid's 9 and 5 (14).
+    corners = np.array([[1.0, 1, 1], [-1, -1, 1], [-1, 1, -1], [1, -1, -1]]) / np.sqrt(3.0)
+    directions = np.vstack([np.eye(3), -np.eye(3), corners])
+    path = _write_csv(tmp_path / "ten.csv", 40.0 * directions + [10.0, -5.0, 3.0])
     result = CliRunner().invoke(cli, ["compare", str(path), "--format", "csv"])
     assert result.exit_code == 0, result.output
     rows = {row["method"]: row for row in csv.DictReader(io.StringIO(result.stdout))}
-    assert rows["ellipsoid"]["status"] == "failed" and "needs at least 9 samples" in rows["ellipsoid"]["error"]
+    assert rows["ellipsoid"]["status"] == "failed" and "at least 14 are needed" in rows["ellipsoid"]["error"]
     assert rows["sphere"]["status"] == "ok"
     assert [float(rows["sphere"][f"offset_{a}"]) for a in "xyz"] == pytest.approx([10.0, -5.0, 3.0])
     assert float(rows["sphere"]["field_strength"]) == pytest.approx(40.0)

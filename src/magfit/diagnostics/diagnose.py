@@ -32,7 +32,15 @@ from .uncertainty import (
     covering,
     level_heading_difference_deg,
 )
-from .verdict import NO_ELLIPSOID_RMS, Evidence, halves_apart, judge, mirrored_offset, two_solutions
+from .verdict import (
+    NO_ELLIPSOID_RMS,
+    Evidence,
+    halves_apart,
+    judge,
+    mirrored_offset,
+    too_few_for_the_noise,
+    two_solutions,
+)
 
 __all__ = ["MAX_SAMPLES", "Refit", "diagnose", "diagnose_statistics", "flat_axis", "model_kind"]
 
@@ -243,6 +251,7 @@ def diagnose(
         drifting=drifting,
         mirror=mirrored_offset(np.asarray(calibration.offset), *_mean_and_covariance(raw, weights)) if pinned else None,
         offset=tuple(float(v) for v in calibration.offset) if pinned else None,  # type: ignore[arg-type]
+        n_samples=total,
     )
     support = judge(evidence)
     return Diagnostics(
@@ -499,6 +508,8 @@ def diagnose_statistics(calibration: Calibration, statistics: Statistics) -> Dia
 
     observability, mean, std = analyse_statistics(statistics, calibration, model_kind(calibration))
     refusals = ReasonList()
+    if few := too_few_for_the_noise(statistics.n, model_kind(calibration)):
+        refusals.add("too_few_samples", few)
     undetermined = [w.description for w in observability.weak if not w.determined]
     known = calibration.known_field
     flat = flat_axis_of(statistics.covariance)

@@ -279,7 +279,9 @@ def _weak_directions(
             variance = residual_variance / (total * float(eigenvalues[i]))
             if excess is not None:
                 variance += max(float(vector @ excess @ vector), 0.0)
-            sigma = math.sqrt(variance)
+            # No residual degrees of freedom (as many samples as parameters): no variance to state, so the
+            # direction counts as undetermined rather than as known exactly.
+            sigma = math.sqrt(variance) if math.isfinite(variance) and variance > 0 else None
         weak.append(
             WeakDirection(
                 description=describe_parameter_direction(vector, kind),

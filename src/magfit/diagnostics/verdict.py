@@ -76,6 +76,7 @@ __all__ = [
     "halves_apart",
     "judge",
     "mirrored_offset",
+    "too_few_for_the_noise",
     "two_solutions",
     "unit_mixup",
 ]
@@ -114,6 +115,25 @@ HALVES_SIGMAS = 3.0
 #: is √χ²₃ for a clean recording, beyond this in 0.8 % of fits (√χ²₃ at 0.992, the largest axis's rate). An offset
 #: that creeps along every axis a little (a sensor warming up) passes each axis's bound and not this one.
 HALVES_RSS_SIGMAS = 3.44
+#: Samples beyond the model's numbers needed to measure the noise the one-sigmas scale by: with ν residual
+#: degrees of freedom the estimated variance is σ² χ²_ν / ν, below a ninth of σ² (a one-sigma three times too
+#: small) with probability 1 % at ν = 5 and 8 % at ν = 1; with none (as many samples as numbers) the fit passes
+#: through every sample and states a one-sigma of zero.
+MIN_RESIDUAL_DOF = 5
+#: The numbers each model fits (eq. 4's centre and scales: the sphere's 4, six for an axis-aligned ellipsoid,
+#: nine for the full one up to its scale).
+MODEL_PARAMETERS = {"sphere": 4, "diag": 6, "full": 9}
+
+
+def too_few_for_the_noise(n_samples: int, kind: str) -> str | None:
+    """Why ``n_samples`` cannot support a ``kind`` fit's one-sigmas (:data:`MIN_RESIDUAL_DOF`), or None."""
+    needed = MODEL_PARAMETERS.get(kind, 9) + MIN_RESIDUAL_DOF
+    if n_samples >= needed:
+        return None
+    return (
+        f"{n_samples} samples for the {MODEL_PARAMETERS.get(kind, 9)} numbers of the {kind} model leave too few to "
+        f"measure the noise, and so any one-sigma (at least {needed} are needed); record more while turning the sensor"
+    )
 
 
 def halves_apart(halves: tuple[tuple[float, float, float], tuple[float, float, float]]) -> tuple[float, float, bool]:
@@ -198,6 +218,7 @@ class Evidence:
     comparison: ModelComparison | None = None
     drifting: DriftComparison | None = None
     mirror: tuple[float, float, float] | None = None
+    n_samples: int | None = None
     offset: tuple[float, float, float] | None = None
 
 
@@ -234,6 +255,8 @@ def judge(evidence: Evidence) -> Support:
     refusals = ReasonList()
     if evidence.solver_problem:
         refusals.add("solver", evidence.solver_problem)
+    if evidence.n_samples is not None and (few := too_few_for_the_noise(evidence.n_samples, evidence.kind)):
+        refusals.add("too_few_samples", few)
     weak = ReasonList()
     cover, observability, uncertainty = evidence.coverage, evidence.observability, evidence.uncertainty
     label = f" {evidence.unit}" if evidence.unit else ""
