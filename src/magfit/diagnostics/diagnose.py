@@ -217,7 +217,12 @@ def diagnose(
     if uncertainty.offset_sigma is not None and not pinned:  # a field strength changing along the recording
         drifting = compare_with_drift(rows, kind, calibration, uncertainty, inclination_deg)
     uncertainty = covering(uncertainty, comparison, check, drifting)  # the heading one-sigma covers known biases too
-    if halves is not None and halves_apart(halves)[2] and offset_trend_p_value(rows, kind, calibration) < TREND_LEVEL:
+    if (
+        halves is not None
+        and halves_apart(halves)[2]
+        and _halves_saw_alike(rows, calibration)
+        and offset_trend_p_value(rows, kind, calibration) < TREND_LEVEL
+    ):
         # The sensor changed along the recording (not only the directions each half saw): by how much is known.
         uncertainty = _with_halves_change(uncertainty, halves[0], calibration)
     if model_error_heading_deg > 0 and uncertainty.heading_sigma_deg is not None:  # auto's left-out distortion
@@ -392,6 +397,27 @@ def _with_block_jackknife(
 #: p-value of the offset-trend F test (:func:`offset_trend_p_value`) below which halves that disagree are a change
 #: in time, counted in the one-sigmas.
 TREND_LEVEL = 1e-3
+
+
+#: Halves that share less than this fraction of the directions either reached (cells of the sphere both reached,
+#: over those either reached) saw other directions: their disagreement, and a trend in time that follows the
+#: directions, tells the directions apart, not a changed sensor.
+HALVES_SHARED_DIRECTIONS = 0.5
+
+
+def _halves_saw_alike(rows: NDArray[np.float64], calibration: Calibration) -> bool:
+    """Whether the first and second half of ``rows`` (recording order) reached mostly the same directions
+    (:data:`HALVES_SHARED_DIRECTIONS`). A tumble whose offset creeps has halves that saw the same sphere; a
+    recording parked in one attitude and then turned, or one that turned through one region and then another
+    (a half-covered recording), has halves that disagree because each extrapolates over what the other saw."""
+    from ..geometry.cells import partition
+
+    z = Frame.corrected(calibration).normalise(rows)
+    middle = z.shape[0] // 2
+    cells = partition(100)
+    first, second = (set(np.unique(cells.cell(half)).tolist()) for half in (z[:middle], z[middle:]))
+    either = first | second
+    return bool(either) and len(first & second) >= HALVES_SHARED_DIRECTIONS * len(either)
 
 
 def offset_trend_p_value(rows: NDArray[np.float64], kind: str, calibration: Calibration) -> float:
