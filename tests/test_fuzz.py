@@ -230,10 +230,12 @@ def test_fit_with_a_reference_or_gyro_gives_a_checked_calibration_or_a_magfit_er
     samples = VEHICLE.samples[:cut] * scale
     samples[[i for i in spikes if i < cut], 0] = value
     streams: dict[str, Any] = {"time_s": VEHICLE.time_s[:cut]}
-    if method == "vector":
+    if method in ("vector", "tilt"):
         streams["reference"] = VEHICLE.reference[:cut] * scale
     else:
         streams["gyro"] = VEHICLE.gyro[:cut]
+    if method == "tilt":  # the logged attitude's vertical in the vehicle frame (attitude: vehicle -> north-east-down)
+        streams = {"reference": streams["reference"], "down": VEHICLE.attitude_measured[:cut, 2, :]}
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         calibration = outcome(lambda: magfit.fit(samples, method=method, **streams))
