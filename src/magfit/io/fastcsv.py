@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -85,6 +86,20 @@ def _blank_line(data: bytes, end: int) -> bool:
     return bool(np.any((length == 0) | ((length == 1) & (codes[np.maximum(ends - 1, 0)] == 13))))
 
 
+def _fill_column(out: NDArray[np.float64], chunk: Any) -> None:
+    """Write a pyarrow float64 array into ``out``, a missing value as NaN, straight from its buffers.
+
+    (``Array.to_numpy`` imports pandas, even for a copy it need not make: a sixth of a second, once.)
+    The values buffer holds anything at a missing value's place; the validity bitmap (bit ``i``, least
+    significant first, counted from the array's offset) tells which those are.
+    """
+    validity, data = chunk.buffers()
+    out[:] = np.frombuffer(data, dtype=np.float64, count=len(chunk), offset=chunk.offset * 8)
+    if validity is not None and chunk.null_count:
+        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
+        out[~bits[chunk.offset : chunk.offset + len(chunk)].astype(bool)] = np.nan
+
+
 def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
     """pyarrow's reader, strict about field counts itself; empty lines are kept (and such a block refused:
     :func:`_blank_line`) so that every row is one line."""
@@ -123,8 +138,8 @@ def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
         values = np.empty((table.num_rows, len(used)))
         for column in range(len(used)):
             row = 0
-            for chunk in table.column(column).chunks:  # (a ChunkedArray's own to_numpy copies once more)
-                values[row : row + len(chunk), column] = chunk.to_numpy(zero_copy_only=False)
+            for chunk in table.column(column).chunks:
+                _fill_column(values[row : row + len(chunk), column], chunk)
                 row += len(chunk)
         if all(table.column(column).null_count for column in range(len(used))):  # a row may be a blank line
             if np.isnan(values).all(axis=1).any() and _blank_line(data, end):
