@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from test_csv_reader_fast import VALUES, assert_same, both_ways, lines, write
 
 pytest.importorskip("pyarrow")
