@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -85,6 +86,20 @@ def _blank_line(data: bytes, end: int) -> bool:
     return bool(np.any((length == 0) | ((length == 1) & (codes[np.maximum(ends - 1, 0)] == 13))))
 
 
+def _fill_column(out: NDArray[np.float64], chunk: Any) -> None:
+    """Write a pyarrow float64 array into ``out``, a missing value as NaN, straight from its buffers.
+
+    (``Array.to_numpy`` imports pandas, even for a copy it need not make: a sixth of a second, once.)
+    The values buffer holds anything at a missing value's place; the validity bitmap (bit ``i``, least
+    significant first, counted from the array's offset) tells which those are.
+    """
+    validity, data = chunk.buffers()
+    out[:] = np.frombuffer(data, dtype=np.float64, count=len(chunk), offset=chunk.offset * 8)
+    if validity is not None and chunk.null_count:
+        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
+        out[~bits[chunk.offset : chunk.offset + len(chunk)].astype(bool)] = np.nan
+
+
 def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
     """pyarrow's reader, strict about field counts itself; empty lines are kept (and such a block refused:
     :func:`_blank_line`) so that every row is one line."""
@@ -94,13 +109,23 @@ def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
     assert fmt.delimiter is not None
     names = [f"c{index}" for index in range(fmt.n_columns)]
     parse_options = pyarrow.csv.ParseOptions(delimiter=fmt.delimiter, ignore_empty_lines=False)
-    convert_options = pyarrow.csv.ConvertOptions(
-        include_columns=[names[index] for index in used],
-        column_types={names[index]: pyarrow.float64() for index in used},
-        null_values=list(NA_VALUES),
-        strings_can_be_null=False,
-        quoted_strings_can_be_null=True,
-    )
+
+    def convert_options(null_values: Sequence[str]) -> pyarrow.csv.ConvertOptions:
+        return pyarrow.csv.ConvertOptions(
+            include_columns=[names[index] for index in used],
+            column_types={names[index]: pyarrow.float64() for index in used},
+            null_values=list(null_values),
+            strings_can_be_null=False,
+            quoted_strings_can_be_null=True,
+        )
+
+    # Every cell is matched against the missing-value words before it is converted: with all of NA_VALUES a
+    # fifth of the parse. pyarrow converts the NaN words ("nan", "NaN", "NAN", "-nan", "-NaN") to NaN itself,
+    # the value a missing one gets here, so a block is first parsed with only the empty cell as missing; a
+    # block that holds another word ("NA", "null", ...) fails that conversion and is parsed again with every
+    # word, as are the blocks after it (the file writes its missing values so).
+    tries = [convert_options([""]), convert_options(NA_VALUES)]
+    tried = [0]  # the first of ``tries`` to use
     pool = pyarrow.system_memory_pool()  # a block's memory goes back to the system (jemalloc's would stay)
 
     def parse(data: bytes, end: int) -> NDArray[np.float64] | None:
@@ -108,23 +133,28 @@ def _arrow_parser(fmt: FileFormat, used: Sequence[int]) -> BlockParser:
             return None
         quoted = data.find(b'"', 0, end) >= 0
         read_options = pyarrow.csv.ReadOptions(column_names=names, use_threads=False, block_size=end + 1)
-        try:
-            table = pyarrow.csv.read_csv(
-                pyarrow.py_buffer(memoryview(data)[:end]),
-                read_options=read_options,
-                parse_options=parse_options,
-                convert_options=convert_options,
-                memory_pool=pool,
-            )
-        except (pyarrow.ArrowInvalid, pyarrow.ArrowNotImplementedError):
+        table = None
+        for first in range(tried[0], len(tries)):
+            try:
+                table = pyarrow.csv.read_csv(
+                    pyarrow.py_buffer(memoryview(data)[:end]),
+                    read_options=read_options,
+                    parse_options=parse_options,
+                    convert_options=tries[first],
+                    memory_pool=pool,
+                )
+                break
+            except (pyarrow.ArrowInvalid, pyarrow.ArrowNotImplementedError):
+                tried[0] = len(tries) - 1  # every word from now on (the same value from any thread)
+        if table is None:
             return None
         if quoted and table.num_rows != _n_lines(data, end):  # a quoted cell held a line end
             return None
         values = np.empty((table.num_rows, len(used)))
         for column in range(len(used)):
             row = 0
-            for chunk in table.column(column).chunks:  # (a ChunkedArray's own to_numpy copies once more)
-                values[row : row + len(chunk), column] = chunk.to_numpy(zero_copy_only=False)
+            for chunk in table.column(column).chunks:
+                _fill_column(values[row : row + len(chunk), column], chunk)
                 row += len(chunk)
         if all(table.column(column).null_count for column in range(len(used))):  # a row may be a blank line
             if np.isnan(values).all(axis=1).any() and _blank_line(data, end):
