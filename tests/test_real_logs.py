@@ -363,4 +363,7 @@ def test_forced_the_halves_of_a_real_flight_agree_or_the_forced_output_names_the
     named = list(whole.support.codes)
     assert apart <= HALVES_SIGMAS or "inconsistent_halves" in named, (apart, named)
     if sensor == "MAG/1":  # the case that must be named (a test that can fail)
-        assert apart > HALVES_SIGMAS and "inconsistent_halves" in named, (apart, named)
+        # Each half's offset one-sigma now carries the known biases its heading one-sigma carries (the richer
+        # model's distance, diagnostics eq. C), which covers most of their disagreement (1.2 combined one-sigmas
+        # apart, was 18); the whole log's own halves, compared on its stride, still name it.
+        assert "inconsistent_halves" in named, (apart, named)
