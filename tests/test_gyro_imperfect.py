@@ -40,8 +40,14 @@ def test_a_left_handed_magnetometer_is_refused_naming_the_axis(motion: str, colu
                                                                fix: str) -> None:  # fmt: skip
     sim = _vehicle(motion, 1)
     mirrored = sim.samples[:, columns] * signs
-    with pytest.raises(magfit.OptionError) as refused:
+    # Without the inclination, a field pointing up is a mirror or the southern hemisphere: cannot tell (exit 1).
+    with pytest.raises(magfit.CalibrationError) as undetermined:
         magfit.fit(mirrored, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel)
+    assert undetermined.value.codes == ("handedness_undetermined",)
+    assert fix in str(undetermined.value) and "southern hemisphere" in str(undetermined.value)
+    # With it (+60°, the simulation's), the mirror is told, naming the axis.
+    with pytest.raises(magfit.OptionError) as refused:
+        magfit.fit(mirrored, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel, inclination_deg=60.0)
     assert refused.value.codes == ("mag_handedness",)
     assert fix in str(refused.value)
     # Ground truth: the axes fixed as told, the same recording calibrates within its one-sigma.
@@ -52,9 +58,9 @@ def test_a_left_handed_magnetometer_is_refused_naming_the_axis(motion: str, colu
 
 def test_the_southern_hemisphere_is_calibrated_when_its_inclination_is_given() -> None:
     sim = _vehicle("tumble", 3, inclination_deg=-55.0)
-    with pytest.raises(magfit.OptionError) as refused:  # the field points up: a mirror, or the south
+    with pytest.raises(magfit.CalibrationError) as refused:  # the field points up: a mirror, or the south
         magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel)
-    assert refused.value.codes == ("mag_handedness",)
+    assert refused.value.codes == ("handedness_undetermined",)  # no accusation: exit 1, the inclination asked
     cal = magfit.fit(sim.samples, method="gyro", gyro=sim.gyro, time_s=sim.time_s, accel=sim.accel,
                      inclination_deg=-55.0)  # fmt: skip
     assert cal.gyro is not None

@@ -136,12 +136,20 @@ def _field_sense(y: NDArray[np.float64], a: NDArray[np.float64], offset: NDArray
     if median * expected > 0:
         return None
     dip = math.degrees(math.asin(median))
-    told = (f"inclination_deg= says {given_deg:+.0f}°" if given_deg is not None
-            else "no inclination_deg= was given, so the northern hemisphere's (positive, down) is taken")  # fmt: skip
-    south = "" if given_deg is not None else "; from the southern hemisphere, give inclination_deg= (negative there)"
+    mirrored = (
+        "the magnetometer's axes are left-handed against the gyroscope's (the kinematics then fit the field reversed, "
+        f"every heading 180° off); {_mirror_fix(matrix)} (or give the axes in the datasheet's order and signs), then "
+        "fit again"
+    )
+    if given_deg is None:  # the field up: a mirror in the north, or a right-handed sensor in the south
+        return (
+            f"the calibrated field's dip against the accelerometer's down is {dip:+.0f}° (the field points up) and no "
+            f"inclination_deg= was given to tell the hemisphere: either {mirrored}, or the recording was made in the "
+            "southern hemisphere, where the field points up: give inclination_deg= (negative there; the World "
+            "Magnetic Model's at the place). If the accelerometer reports gravity rather than the specific force, "
+            "negate it"
+        )
     return (
-        f"the calibrated field's dip against the accelerometer's down is {dip:+.0f}° where {told}: the "
-        "magnetometer's axes are left-handed against the gyroscope's (the kinematics then fit the field reversed, "
-        f"every heading 180° off); {_mirror_fix(matrix)} (or give the axes in the datasheet's order and signs), "
-        f"then fit again. If the accelerometer reports gravity rather than the specific force, negate it{south}"
+        f"the calibrated field's dip against the accelerometer's down is {dip:+.0f}° where inclination_deg= says "
+        f"{given_deg:+.0f}°: {mirrored}. If the accelerometer reports gravity rather than the specific force, negate it"
     )

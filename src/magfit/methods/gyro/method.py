@@ -326,7 +326,10 @@ def _calibration(inputs: _Inputs, aligned: _Aligned, fitted: _Fitted, turns_deg:
     g, offset, beta, covariance, strength, matrix, scale_facts = _correction(model, gravity_facts)
     if aligned.a is not None:  # the field's sense, which the kinematics leave free, from the accelerometer
         reversed_field = _field_sense(y, _delayed(aligned.a, aligned.t, lag), offset, matrix, inputs.inclination)
-        if reversed_field is not None:
+        if reversed_field is not None and inputs.inclination is None:  # a mirror, or the southern hemisphere
+            raise CalibrationError(f"the gyro calibration is refused: {reversed_field}",
+                                   codes=("handedness_undetermined",))  # fmt: skip
+        if reversed_field is not None:  # against the inclination given: the magnetometer's axes are mirrored
             raise OptionError(f"the gyro calibration is refused: {reversed_field}", codes=("mag_handedness",))
     rotation, symmetric = polar_decomposition(matrix)
     nearest = mapping_name(rotation)
