@@ -202,11 +202,16 @@ def test_a_boat_rolling_on_one_heading_is_pinned_by_the_accelerometer() -> None:
     assert gravity["residual_rms_deg"] < 1.0  # the accelerometer's noise: 0.05 / 9.81 rad = 0.3° per sample
     assert aided.options["accel"] == "an array of 3000 rows"
     # An accelerometer that reports gravity (the specific force's negative) puts the field pointing up, as a
-    # mirrored magnetometer does (whose field the kinematics reverse): refused, naming both.
-    with pytest.raises(magfit.OptionError) as flipped:
+    # mirrored magnetometer does (whose field the kinematics reverse): refused, naming both; without the
+    # inclination it may also be the southern hemisphere (exit 1), against the inclination given a mirror (exit 2).
+    with pytest.raises(magfit.CalibrationError) as flipped:
         _fit(sim, accel=-sim.accel, allow_undetermined=True)
-    assert flipped.value.codes == ("mag_handedness",)
+    assert flipped.value.codes == ("handedness_undetermined",)
     assert "reports gravity" in str(flipped.value)
+    with pytest.raises(magfit.OptionError) as told:
+        _fit(sim, accel=-sim.accel, allow_undetermined=True, inclination_deg=64.0)
+    assert told.value.codes == ("mag_handedness",)
+    assert "reports gravity" in str(told.value)
 
 
 def test_an_accelerometer_that_never_sees_gravity_alone_leaves_the_fit_as_without_it() -> None:
