@@ -16,10 +16,12 @@ from click.testing import CliRunner
 
 import magfit
 from magfit.cli import cli
-from magfit.vehicle import VehicleSimulation, simulate_vehicle
+from magfit.vehicle import VehicleSimulation
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from _common import heading_error_deg
+
+from vehicle_recordings import save_columns, simulated_vehicle, vehicle_recording
 
 
 def _write(path: Path, samples: np.ndarray) -> None:
@@ -75,28 +77,8 @@ def test_fleet_combines_each_compass_of_a_vehicle_apart(tmp_path: Path) -> None:
 
 
 def _car(seed: int = 1) -> tuple[VehicleSimulation, dict[str, np.ndarray]]:
-    """A car's recording (simulated, field 50 µT, inclination 60°): its truth and its columns (time s, mx..mz µT,
-    roll/pitch/yaw degrees body to NED, reference N/E/D, gyro rad/s, accel m/s²)."""
-    from scipy.spatial.transform import Rotation
-
-    rng = np.random.default_rng(seed)
-    w = np.eye(3) + rng.normal(0, 0.08, (3, 3))
-    sim = simulate_vehicle(
-        3000, "car", soft_iron=(w + w.T) / 2, hard_iron=rng.normal(0, 0.5, 3) * 50,
-        mounting=Rotation.from_euler("xyz", rng.normal(0, 5, 3), degrees=True).as_matrix(), field_strength=50.0,
-        inclination_deg=60, declination_deg=5, noise=0.3, attitude_noise_deg=0.5, gyro_noise=0.002,
-        gyro_bias=[0.01, -0.005, 0.003], accel_noise=0.05, lag_s=0.02, seed=seed,
-    )  # fmt: skip
-    ypr = Rotation.from_matrix(sim.attitude_measured).as_euler("ZYX", degrees=True)
-    ref = np.tile(sim.field_world, (len(sim.samples), 1))
-    names = "time mx my mz roll pitch yaw ref_n ref_e ref_d gx gy gz ax ay az".split()
-    values = [sim.time_s, *sim.samples.T, ypr[:, 2], ypr[:, 1], ypr[:, 0], *ref.T, *sim.gyro.T, *sim.accel.T]
-    return sim, dict(zip(names, values, strict=True))
-
-
-def _save(path: Path, columns: dict[str, np.ndarray]) -> None:
-    np.savetxt(path, np.column_stack(list(columns.values())), fmt="%.6f", delimiter=",", header=",".join(columns),
-               comments="")  # fmt: skip
+    """A car's recording (simulated, field 50 µT, inclination 60°) and its columns (:mod:`vehicle_recordings`)."""
+    return vehicle_recording("car", seed)
 
 
 def _heading_error_on_recording(cal: magfit.Calibration, sim: VehicleSimulation, raw: np.ndarray) -> float:
@@ -107,20 +89,6 @@ def _heading_error_on_recording(cal: magfit.Calibration, sim: VehicleSimulation,
     truth = np.arctan2(sim.field_world[1], sim.field_world[0])
     wrapped = (np.degrees(np.arctan2(world[:, 1], world[:, 0]) - truth) + 180.0) % 360.0 - 180.0
     return float(np.sqrt(np.mean(wrapped**2)))
-
-
-def _vehicle(motion: str, seed: int) -> VehicleSimulation:
-    """:func:`_car`'s vehicle in another motion (field 50 µT, inclination 60°, gyro bias, 20 ms attitude lag)."""
-    from scipy.spatial.transform import Rotation
-
-    rng = np.random.default_rng(seed)
-    w = np.eye(3) + rng.normal(0, 0.08, (3, 3))
-    return simulate_vehicle(
-        3000, motion, soft_iron=(w + w.T) / 2, hard_iron=rng.normal(0, 0.5, 3) * 50,
-        mounting=Rotation.from_euler("xyz", rng.normal(0, 5, 3), degrees=True).as_matrix(), field_strength=50.0,
-        inclination_deg=60, declination_deg=5, noise=0.3, attitude_noise_deg=0.5, gyro_noise=0.002,
-        gyro_bias=[0.01, -0.005, 0.003], accel_noise=0.05, lag_s=0.02, seed=seed,
-    )  # fmt: skip
 
 
 def _hold(samples: np.ndarray, every: int) -> np.ndarray:
@@ -146,10 +114,10 @@ _IMPERFECT = {
 @pytest.mark.parametrize("case", list(_IMPERFECT))
 def test_gyro_one_sigma_covers_its_error_on_an_imperfect_recording(case: str, tmp_path: Path) -> None:
     motion, seed, change = _IMPERFECT[case]
-    sim = _vehicle(motion, seed)
+    sim = simulated_vehicle(motion, seed)
     mag, scored, gyro = change(sim)
     path, cal = tmp_path / "imu.csv", tmp_path / "cal.json"
-    _save(path, {"time": sim.time_s, "mx": mag[:, 0], "my": mag[:, 1], "mz": mag[:, 2], "gx": gyro[:, 0],
+    save_columns(path, {"time": sim.time_s, "mx": mag[:, 0], "my": mag[:, 1], "mz": mag[:, 2], "gx": gyro[:, 0],
                  "gy": gyro[:, 1], "gz": gyro[:, 2], "ax": sim.accel[:, 0], "ay": sim.accel[:, 1],
                  "az": sim.accel[:, 2]})  # fmt: skip
     result = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "--method", "gyro", "-o", str(cal)])
@@ -166,7 +134,7 @@ def test_vector_with_time_in_milliseconds_names_the_time_column(tmp_path: Path) 
     _, columns = _car()
     columns["time"] = columns["time"] * 1000.0  # the logger's milliseconds in a column named 'time'
     path = tmp_path / "car.csv"
-    _save(path, columns)
+    save_columns(path, columns)
     result = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "--method", "vector"])
     assert result.exit_code == 2, result.output
     with pytest.raises(magfit.MagfitError) as refused:
@@ -188,7 +156,7 @@ def test_vector_on_a_ros_recording_without_its_convention_is_not_confidently_mir
     for axis in ("gy", "gz", "ay", "az"):  # the IMU in the body's forward-left-up axes
         columns[axis] = -columns[axis]
     path, cal = tmp_path / "ros.csv", tmp_path / "cal.json"
-    _save(path, columns)
+    save_columns(path, columns)
     enu = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "-m", "vector", "--attitude-convention",
                                    "enu", "-o", str(cal)])  # fmt: skip
     assert enu.exit_code == 0, enu.output  # told the convention: the right calibration
@@ -207,7 +175,7 @@ def test_align_uses_the_attitude_and_reference_it_finds_by_name(tmp_path: Path) 
 
     sim, columns = _car()
     path = tmp_path / "car.csv"
-    _save(path, columns)
+    save_columns(path, columns)
     given = ["--attitude", "roll,pitch,yaw", "--reference", "ref_n,ref_e,ref_d"]
     told = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT", *given])
     assert told.exit_code == 0, told.output  # the same columns named: the vector fit gives the mount
@@ -224,7 +192,7 @@ def test_align_refusal_names_only_options_align_or_the_named_command_has(tmp_pat
 
     _, columns = _car()
     path = tmp_path / "car.csv"
-    _save(path, {name: values for name, values in columns.items() if not name.startswith("ref_")})  # no reference
+    save_columns(path, {name: values for name, values in columns.items() if not name.startswith("ref_")})  # no ref_*
     result = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT"])
     assert result.exit_code == 1, result.output
     align = cli.get_command(click.Context(cli), "align")
@@ -239,7 +207,7 @@ def test_align_refusal_names_only_options_align_or_the_named_command_has(tmp_pat
 def test_default_calibrate_of_a_car_uses_the_attitude_and_gyro_it_holds(tmp_path: Path) -> None:
     sim, columns = _car()
     path, cal = tmp_path / "car.csv", tmp_path / "cal.json"
-    _save(path, columns)
+    save_columns(path, columns)
     vector = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "--method", "vector"])
     assert vector.exit_code == 0, vector.output  # the data hold an answer
     result = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "-o", str(cal)])

@@ -11,38 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from scipy.spatial.transform import Rotation
 
 import magfit
 from magfit.cli import cli
-from magfit.vehicle import VehicleSimulation, simulate_vehicle
+from magfit.vehicle import VehicleSimulation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-
-def _recording(motion: str, seed: int, n: int = 3000) -> tuple[VehicleSimulation, dict[str, np.ndarray]]:
-    """A vehicle's recording (field 50 µT, inclination 60°, soft and hard iron, a mounting of a few degrees, gyro
-    bias, 20 ms attitude lag): its truth and its columns (time, mx..mz µT, roll/pitch/yaw degrees, reference
-    N/E/D, gyro rad/s, accel m/s²)."""
-    rng = np.random.default_rng(seed)
-    w = np.eye(3) + rng.normal(0, 0.08, (3, 3))
-    sim = simulate_vehicle(
-        n, motion, soft_iron=(w + w.T) / 2, hard_iron=rng.normal(0, 0.5, 3) * 50,
-        mounting=Rotation.from_euler("xyz", rng.normal(0, 5, 3), degrees=True).as_matrix(), field_strength=50.0,
-        inclination_deg=60, declination_deg=5, noise=0.3, attitude_noise_deg=0.5, gyro_noise=0.002,
-        gyro_bias=[0.01, -0.005, 0.003], accel_noise=0.05, lag_s=0.02, seed=seed,
-    )  # fmt: skip
-    ypr = Rotation.from_matrix(sim.attitude_measured).as_euler("ZYX", degrees=True)
-    ref = np.tile(sim.field_world, (len(sim.samples), 1))
-    names = "time mx my mz roll pitch yaw ref_n ref_e ref_d gx gy gz ax ay az".split()
-    values = [sim.time_s, *sim.samples.T, ypr[:, 2], ypr[:, 1], ypr[:, 0], *ref.T, *sim.gyro.T, *sim.accel.T]
-    return sim, dict(zip(names, values, strict=True))
-
-
-def _save(path: Path, columns: dict[str, np.ndarray]) -> Path:
-    np.savetxt(path, np.column_stack(list(columns.values())), fmt="%.6f", delimiter=",", header=",".join(columns),
-               comments="")  # fmt: skip
-    return path
+from vehicle_recordings import save_columns, vehicle_recording
 
 
 def _heading_error(cal: magfit.Calibration, sim: VehicleSimulation) -> float:
@@ -66,8 +41,8 @@ def _stated(cal: magfit.Calibration) -> float:
 def test_the_default_fits_a_vehicle_s_own_streams_within_its_stated_one_sigma(
     tmp_path: Path, motion: str, seed: int
 ) -> None:
-    sim, columns = _recording(motion, seed)
-    path = _save(tmp_path / f"{motion}.csv", columns)
+    sim, columns = vehicle_recording(motion, seed)
+    path = save_columns(tmp_path / f"{motion}.csv", columns)
     with pytest.raises(magfit.CalibrationError) as alone:  # auto alone cannot: the tilt is too small
         magfit.calibrate_file(path, "auto", unit="uT")
     assert {"undetermined", "model_inadequate"} & set(alone.value.codes)
@@ -81,8 +56,8 @@ def test_the_default_fits_a_vehicle_s_own_streams_within_its_stated_one_sigma(
 
 
 def test_the_best_determined_of_the_vehicle_methods_is_returned(tmp_path: Path) -> None:
-    sim, columns = _recording("car", 1)
-    path = _save(tmp_path / "car.csv", columns)
+    sim, columns = vehicle_recording("car", 1)
+    path = save_columns(tmp_path / "car.csv", columns)
     stated = {}
     for method in ("vector", "gyro"):
         fitted = magfit.calibrate_file(path, method, unit="uT").compasses[0].calibration
@@ -93,8 +68,8 @@ def test_the_best_determined_of_the_vehicle_methods_is_returned(tmp_path: Path) 
 
 
 def test_the_command_line_default_says_which_method_and_writes_it(tmp_path: Path) -> None:
-    sim, columns = _recording("car", 1)
-    path, out = _save(tmp_path / "car.csv", columns), tmp_path / "cal.json"
+    sim, columns = vehicle_recording("car", 1)
+    path, out = save_columns(tmp_path / "car.csv", columns), tmp_path / "cal.json"
     explicit = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "--method", "auto"])
     assert explicit.exit_code == 1, explicit.output  # --method auto given: auto alone
     result = CliRunner().invoke(cli, ["calibrate", str(path), "--unit", "uT", "-o", str(out)])
@@ -105,8 +80,8 @@ def test_the_command_line_default_says_which_method_and_writes_it(tmp_path: Path
 
 
 def test_when_every_method_refuses_the_refusal_says_what_each_found(tmp_path: Path) -> None:
-    _, columns = _recording("yaw", 0)  # level turns only: nothing determines the offset along the vertical
-    path = _save(tmp_path / "level.csv", columns)
+    _, columns = vehicle_recording("yaw", 0)  # level turns only: nothing determines the offset along the vertical
+    path = save_columns(tmp_path / "level.csv", columns)
     with pytest.raises(magfit.CalibrationError) as alone:
         magfit.calibrate_file(path, "auto", unit="uT")
     with pytest.raises(magfit.CalibrationError) as refused:
@@ -119,15 +94,15 @@ def test_when_every_method_refuses_the_refusal_says_what_each_found(tmp_path: Pa
 
 
 def test_a_tumble_is_fitted_by_auto_as_before(tmp_path: Path) -> None:
-    sim, columns = _recording("tumble", 0)
-    path = _save(tmp_path / "tumble.csv", columns)
+    sim, columns = vehicle_recording("tumble", 0)
+    path = save_columns(tmp_path / "tumble.csv", columns)
     cal = magfit.calibrate_file(path, unit="uT").compasses[0].calibration
     assert cal.method == "auto" and cal.support.verdict == "supported"
     assert _heading_error(cal, sim) <= 3 * _stated(cal)
 
 
 def test_a_plain_samples_file_is_refused_as_auto_refuses_it(tmp_path: Path) -> None:
-    sim, _ = _recording("car", 1)
+    sim, _ = vehicle_recording("car", 1)
     path = tmp_path / "mag.csv"
     np.savetxt(path, sim.samples, fmt="%.6f", delimiter=",", header="mx,my,mz", comments="")
     with pytest.raises(magfit.CalibrationError) as alone:
@@ -138,8 +113,8 @@ def test_a_plain_samples_file_is_refused_as_auto_refuses_it(tmp_path: Path) -> N
 
 
 def test_force_keeps_auto_s_own_forced_fit(tmp_path: Path) -> None:
-    _, columns = _recording("car", 1)
-    path = _save(tmp_path / "car.csv", columns)
+    _, columns = vehicle_recording("car", 1)
+    path = save_columns(tmp_path / "car.csv", columns)
     cal = magfit.calibrate_file(path, unit="uT", force=True).compasses[0].calibration
     assert cal.method == "auto" and cal.support.verdict == "refused"
 
