@@ -256,6 +256,32 @@ def run(kinds: list[str], methods: list[str], seeds: list[int], progress: bool =
     return outcomes
 
 
+def _grid(
+    outcomes: list[Outcome], kinds: list[str], methods: list[str], cell: Callable[[list[Outcome]], str]
+) -> list[str]:
+    """A table's rows: one per kind, a ``cell`` of that kind's fits per method."""
+    return [
+        f"| {kind} | "
+        + " | ".join(cell([o for o in outcomes if o.kind == kind and o.method == method]) for method in methods)
+        + " |"
+        for kind in kinds
+    ]
+
+
+def _heading_cell(mine: list[Outcome]) -> str:
+    """Accepted / fits, then those exceeding (the worst ratio of true heading error to stated one-sigma)."""
+    ok = [o for o in mine if o.verdict != "refused"]
+    ratios = [o.error_deg / o.stated_deg for o in ok if o.error_deg is not None and o.stated_deg]
+    worst = f" ({max(ratios):.1f}x)" if ratios else ""
+    return f"{len(ok)}/{len(mine)}, {sum(o.exceeds for o in ok)}{worst}"
+
+
+def _offset_cell(mine: list[Outcome]) -> str:
+    """Fits whose worst offset axis is beyond COVER one-sigmas / fits with an offset one-sigma (the worst ratio)."""
+    zs = [o.offset_z for o in mine if o.offset_z is not None]
+    return f"{sum(z > COVER for z in zs)}/{len(zs)} ({max(zs):.1f})" if zs else "—"
+
+
 def report(outcomes: list[Outcome], command: str, seconds: float) -> str:
     kinds = list(dict.fromkeys(o.kind for o in outcomes))
     methods = list(dict.fromkeys(o.method for o in outcomes))
@@ -277,15 +303,7 @@ def report(outcomes: list[Outcome], command: str, seconds: float) -> str:
         "| kind | " + " | ".join(methods) + " |",
         "|---|" + "---|" * len(methods),
     ]
-    for kind in kinds:
-        cells = []
-        for method in methods:
-            mine = [o for o in outcomes if o.kind == kind and o.method == method]
-            ok = [o for o in mine if o.verdict != "refused"]
-            ratios = [o.error_deg / o.stated_deg for o in ok if o.error_deg is not None and o.stated_deg]
-            worst = f" ({max(ratios):.1f}x)" if ratios else ""
-            cells.append(f"{len(ok)}/{len(mine)}, {sum(o.exceeds for o in ok)}{worst}")
-        lines.append(f"| {kind} | " + " | ".join(cells) + " |")
+    lines += _grid(outcomes, kinds, methods, _heading_cell)
     offsets = [o.offset_z for o in accepted if o.offset_z is not None]
     lines += [
         "",
@@ -303,12 +321,7 @@ def report(outcomes: list[Outcome], command: str, seconds: float) -> str:
         "| kind | " + " | ".join(methods) + " |",
         "|---|" + "---|" * len(methods),
     ]
-    for kind in kinds:
-        cells = []
-        for method in methods:
-            zs = [o.offset_z for o in outcomes if o.kind == kind and o.method == method and o.offset_z is not None]
-            cells.append(f"{sum(z > COVER for z in zs)}/{len(zs)} ({max(zs):.1f})" if zs else "—")
-        lines.append(f"| {kind} | " + " | ".join(cells) + " |")
+    lines += _grid(outcomes, kinds, methods, _offset_cell)
     lines += ["", "## Exceeding fits", ""]
     if not exceeding:
         lines.append("None.")
