@@ -111,12 +111,12 @@ def test_the_fleet_report_shows_each_compass_combined_with_its_device_id(
 def car(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Path, Path]:
     """A car's recording (simulated; mount a few degrees off the body axes): its truth, the file with accel,
     attitude and reference N/E/D columns, and the same file without the reference columns."""
-    from test_review2_defects import _car, _save
+    from vehicle_recordings import save_columns, vehicle_recording
 
-    sim, columns = _car()
+    sim, columns = vehicle_recording("car", 1)
     folder = tmp_path_factory.mktemp("align_car")
-    _save(folder / "car.csv", columns)
-    _save(folder / "car_no_reference.csv", {k: v for k, v in columns.items() if not k.startswith("ref_")})
+    save_columns(folder / "car.csv", columns)
+    save_columns(folder / "car_no_reference.csv", {k: v for k, v in columns.items() if not k.startswith("ref_")})
     return sim, folder / "car.csv", folder / "car_no_reference.csv"
 
 
@@ -199,11 +199,11 @@ def test_align_says_the_call_that_would_run_as_align(tmp_path: Path) -> None:
     from click.testing import CliRunner
 
     from magfit.cli import cli
-    from test_review2_defects import _car, _save
+    from vehicle_recordings import save_columns, vehicle_recording
 
-    _, columns = _car()
+    _, columns = vehicle_recording("car", 1)
     path = tmp_path / "attitude_only.csv"  # the attitude by name, no accelerometer, no reference field
-    _save(path, {k: v for k, v in columns.items() if not k.startswith(("ref_", "a"))})
+    save_columns(path, {k: v for k, v in columns.items() if not k.startswith(("ref_", "a"))})
     result = CliRunner().invoke(cli, ["align", str(path), "--unit", "uT"])
     assert result.exit_code == 2, result.output
     assert f"magfit align {path} --unit uT --reference N,E,D" in result.stderr
